@@ -1,0 +1,46 @@
+//! `dpctl`: the command line of the PROFIBUS-DP stack. Thin: it parses
+//! arguments, builds library objects, runs them and prints.
+//!
+//! Exit status: 0 success, 2 usage error, 1 any other failure with a
+//! one-line reason on stderr.
+
+mod decode;
+mod describe;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// PROFIBUS-DP master, slave emulator and bus tools.
+#[derive(Parser)]
+#[command(name = "dpctl", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Decode telegram bytes given in hex.
+    Decode(decode::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("DPCTL_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match cli.command {
+        Command::Decode(a) => decode::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dpctl: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

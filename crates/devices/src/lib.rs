@@ -1,0 +1,1 @@
+//! `profibus-devices`: device profiles.

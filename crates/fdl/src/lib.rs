@@ -1,0 +1,28 @@
+//! `profibus-fdl`: PROFIBUS FDL, the data link layer (IEC 61158-4-3 /
+//! EN 50170 part 2).
+//!
+//! How the parts fit:
+//!
+//! - [`wire`]: zero-copy telegram parsing and emitting (SD1/SD2/SD3, token,
+//!   short acknowledge), FC decoding, FCS. No I/O, no allocation.
+//! - [`codec`]: frames telegrams out of a byte stream that arrives in
+//!   arbitrary fragments, resynchronises after garbage and counts errors.
+//! - [`timing`]: baud rates, bus parameters (TSL, TSDR, TID1/TID2, TTR …)
+//!   and the bit-time arithmetic every timer is built on.
+//! - [`time`]: the [`time::Instant`] the sans-IO cores take as "now".
+//!
+//! Protocol state machines above this layer are sans-IO: they take received
+//! telegrams and the current time and return bytes to send and the next
+//! deadline; thin tokio drivers connect them to a transport.
+
+pub mod codec;
+pub mod time;
+pub mod timing;
+pub mod wire;
+
+pub use codec::{CodecStats, FdlCodec, Framer, RawTelegram};
+pub use time::Instant;
+pub use timing::{Baud, BusParams};
+pub use wire::{
+    DataTelegram, FunctionCode, ParseError, RequestKind, ResponseStatus, StationType, Telegram,
+};
