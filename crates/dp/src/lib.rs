@@ -2,5 +2,8 @@
 //! `profibus-fdl`.
 //!
 //! - [`sap`]: the service access points of the DP services.
+//! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
+//!   decoded into I/O lengths.
 
+pub mod cfg;
 pub mod sap;
