@@ -305,7 +305,8 @@ mod tests {
             if b & 0x30 == 0 {
                 continue;
             }
-            let id = identifiers(&[b]).next().unwrap().unwrap();
+            let one = [b];
+            let id = identifiers(&one).next().unwrap().unwrap();
             let l = id.input.or(id.output).unwrap();
             let dir = match (id.input.is_some(), id.output.is_some()) {
                 (true, false) => Direction::Input,
