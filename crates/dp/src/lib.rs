@@ -4,6 +4,15 @@
 //! - [`sap`]: the service access points of the DP services.
 //! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
 //!   decoded into I/O lengths.
+//! - [`prm`]: the Set_Prm data unit.
+//! - [`diag`]: Slave_Diag, the station status bytes and extended
+//!   diagnosis blocks, with words for people.
+//! - [`control`]: Global_Control and Set_Slave_Add.
+//! - [`dpv1`]: DP-V1 class-1 read/write/alarm PDUs and error decoding.
 
 pub mod cfg;
+pub mod control;
+pub mod diag;
+pub mod dpv1;
+pub mod prm;
 pub mod sap;
