@@ -10,12 +10,16 @@
 //! - [`timing`]: baud rates, bus parameters (TSL, TSDR, TID1/TID2, TTR …)
 //!   and the bit-time arithmetic every timer is built on.
 //! - [`time`]: the [`time::Instant`] the sans-IO cores take as "now".
+//! - [`station`]: sans-IO FDL stations behind the byte-level
+//!   [`station::Station`] trait: the passive responder (DP slave side) and
+//!   the active station (token ring, GAP, requester; DP master side).
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
 //! telegrams and the current time and return bytes to send and the next
 //! deadline; thin tokio drivers connect them to a transport.
 
 pub mod codec;
+pub mod station;
 pub mod time;
 pub mod timing;
 pub mod wire;
