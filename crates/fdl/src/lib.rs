@@ -14,11 +14,14 @@
 //!   [`station::Station`] trait: the passive responder (DP slave side) and
 //!   the active station (token ring, GAP, requester; DP master side).
 //!
+//! - [`driver`]: the thin tokio shell that runs a station on a byte stream.
+//!
 //! Protocol state machines above this layer are sans-IO: they take received
 //! telegrams and the current time and return bytes to send and the next
 //! deadline; thin tokio drivers connect them to a transport.
 
 pub mod codec;
+pub mod driver;
 pub mod station;
 pub mod time;
 pub mod timing;
