@@ -10,12 +10,18 @@
 //! - [`timing`]: baud rates, bus parameters (TSL, TSDR, TID1/TID2, TTR …)
 //!   and the bit-time arithmetic every timer is built on.
 //! - [`time`]: the [`time::Instant`] the sans-IO cores take as "now".
+//! - [`medium`]: a sans-IO model of the RS-485 line (broadcast, pacing at
+//!   the baud rate, collisions, fault injection) shared by `dpctl bus` and
+//!   the in-process simulator.
+//! - [`rng`]: the small seeded generator behind fault injection.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
 //! telegrams and the current time and return bytes to send and the next
 //! deadline; thin tokio drivers connect them to a transport.
 
 pub mod codec;
+pub mod medium;
+pub mod rng;
 pub mod time;
 pub mod timing;
 pub mod wire;
