@@ -13,6 +13,7 @@
 //! - [`medium`]: a sans-IO model of the RS-485 line (broadcast, pacing at
 //!   the baud rate, collisions, fault injection) shared by `dpctl bus` and
 //!   the in-process simulator.
+//! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
 //! - [`rng`]: the small seeded generator behind fault injection.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
@@ -21,6 +22,7 @@
 
 pub mod codec;
 pub mod medium;
+pub mod pcap;
 pub mod rng;
 pub mod time;
 pub mod timing;
