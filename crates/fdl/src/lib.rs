@@ -14,6 +14,8 @@
 //!   the baud rate, collisions, fault injection) shared by `dpctl bus` and
 //!   the in-process simulator.
 //! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
+//! - `transport` (feature `transport`, on by default; tokio): serial
+//!   ports and ptys as one async byte stream, `transport::Port`.
 //! - [`rng`]: the small seeded generator behind fault injection.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
@@ -26,6 +28,8 @@ pub mod pcap;
 pub mod rng;
 pub mod time;
 pub mod timing;
+#[cfg(feature = "transport")]
+pub mod transport;
 pub mod wire;
 
 pub use codec::{CodecStats, FdlCodec, Framer, RawTelegram};
