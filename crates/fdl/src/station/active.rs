@@ -515,6 +515,11 @@ impl<A: MasterApp> Station for ActiveStation<A> {
 
     fn poll_timeout(&self) -> Option<Instant> {
         let c = &self.core;
+        if self.rx.receiving() {
+            // Every state timer waits for the line to be quiet; the receive
+            // path's idle deadline comes first.
+            return earliest(c.tx_at, self.rx.idle_deadline());
+        }
         let state = match c.state {
             State::Offline => None,
             State::ListenToken | State::ActiveIdle => {
@@ -525,7 +530,7 @@ impl<A: MasterApp> Station for ActiveStation<A> {
             | State::AwaitStatus { deadline, .. }
             | State::CheckTokenPass { deadline, .. } => Some(deadline),
         };
-        earliest(earliest(c.tx_at, self.rx.idle_deadline()), state)
+        earliest(c.tx_at, state)
     }
 }
 
@@ -793,14 +798,10 @@ impl Core {
     fn listen_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, _app: &mut A) {
         match *t {
             Telegram::Token { da, sa } => {
-                if da == self.ts() {
-                    // Invited (or the claimant knew us): take part.
-                    self.state = State::ActiveIdle;
-                    self.las_valid = true;
-                    self.las[sa as usize] = true;
-                    self.token_received(now, sa);
-                    return;
-                }
+                // A token for our address while we listen is not ours to
+                // take: we enter the ring only through the predecessor's
+                // FDL Status invitation (it may also belong to another
+                // station with our address, which we are about to detect).
                 self.observe_pass(sa, da);
                 let l = &mut self.listen;
                 match l.first_sa {
