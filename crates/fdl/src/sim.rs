@@ -23,7 +23,8 @@
 //! let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
 //! let m = bus.add(ActiveStation::new(ActiveConfig::new(2, params), Idle));
 //! bus.run_for(Duration::from_millis(20));
-//! assert!(bus.station::<ActiveStation<Idle>>(m).stats().tokens > 10);
+//! let tokens = bus.station::<ActiveStation<Idle>>(m).stats().tokens;
+//! assert!(tokens > 10, "{tokens}");
 //! ```
 
 use crate::medium::{Medium, MediumConfig, MediumStats};

@@ -189,7 +189,7 @@ fn ring_forms_in_address_order_and_everyone_gets_through() {
     }
     for i in 0..3 {
         let m = p.master(i);
-        assert_eq!(m.ring_state() != RingState::ListenToken, true);
+        assert!(m.ring_state() != RingState::ListenToken);
         assert!(m.app().answered > 50, "master {i} got through");
         assert_eq!(m.app().unanswered, 0);
         assert_eq!(m.las().collect::<Vec<_>>(), vec![2, 5, 9]);

@@ -361,6 +361,7 @@ struct Core {
     last_token: Option<Instant>,
     hold_until: Instant,
     cycles_this_visit: u32,
+    gap_polled_this_visit: bool,
     gap_next: u8,
     gap_wait: u8,
     collisions_in_row: u8,
@@ -402,6 +403,7 @@ impl<A: MasterApp> ActiveStation<A> {
                 last_token: None,
                 hold_until: Instant::ZERO,
                 cycles_this_visit: 0,
+                gap_polled_this_visit: false,
                 gap_next: next_addr(ts, cfg.params.hsa),
                 gap_wait: 0,
                 collisions_in_row: 0,
@@ -908,6 +910,7 @@ impl Core {
         }
         self.last_token = Some(now);
         self.cycles_this_visit = 0;
+        self.gap_polled_this_visit = false;
         self.line_free_at = now + self.bits(self.p().tid1());
         self.state = State::UseToken {
             wake: self.line_free_at,
@@ -1015,8 +1018,11 @@ impl Core {
                 return;
             }
         }
-        if time_left && self.gap_wait == 0 {
+        if self.gap_polled_this_visit {
+            // One GAP poll per token visit.
+        } else if time_left && self.gap_wait == 0 {
             if let Some(address) = self.next_gap_address() {
+                self.gap_polled_this_visit = true;
                 self.stats.gap_polls += 1;
                 let ts = self.ts();
                 let end = self.send(
