@@ -4,8 +4,10 @@
 //! Exit status: 0 success, 2 usage error, 1 any other failure with a
 //! one-line reason on stderr.
 
+mod common;
 mod decode;
 mod describe;
+mod scan;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -22,6 +24,8 @@ struct Cli {
 enum Command {
     /// Decode telegram bytes given in hex.
     Decode(decode::Args),
+    /// Live list: join the bus as a master and list the stations.
+    Scan(scan::Args),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +39,7 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
+        Command::Scan(a) => scan::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

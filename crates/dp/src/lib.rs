@@ -12,6 +12,7 @@
 //! - [`master`]: the DP master core (start-up sequence, poll cycle,
 //!   Global_Control, class-2 services, DP-V1 read/write), the application
 //!   of an FDL active station.
+//! - [`scan`]: the live-list scanner behind `dpctl scan`.
 
 pub mod cfg;
 pub mod control;
@@ -20,3 +21,4 @@ pub mod dpv1;
 pub mod master;
 pub mod prm;
 pub mod sap;
+pub mod scan;
