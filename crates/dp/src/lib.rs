@@ -9,10 +9,13 @@
 //!   diagnosis blocks, with words for people.
 //! - [`control`]: Global_Control and Set_Slave_Add.
 //! - [`dpv1`]: DP-V1 class-1 read/write/alarm PDUs and error decoding.
+//! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
+//!   module selection → Chk_Cfg / User_Prm_Data, writer.
 
 pub mod cfg;
 pub mod control;
 pub mod diag;
 pub mod dpv1;
+pub mod gsd;
 pub mod prm;
 pub mod sap;
