@@ -41,7 +41,11 @@ impl<'a> Iterator for PhysicalLines<'a> {
         self.line += 1;
         let rest = &self.text.as_bytes()[self.pos..];
         let window = &rest[..rest.len().min(MAX_LINE_LEN + 1)];
-        let (len, next) = match window.iter().position(|&b| b == b'\n') {
+        // A line ends at LF, CR LF, or a lone CR (old Mac files).
+        let (len, next) = match window.iter().position(|&b| b == b'\n' || b == b'\r') {
+            Some(n) if window[n] == b'\r' && rest.get(n + 1) == Some(&b'\n') => {
+                (n, self.pos + n + 2)
+            }
             Some(n) => (n, self.pos + n + 1),
             None if rest.len() <= MAX_LINE_LEN => (rest.len(), self.text.len()),
             None => {
@@ -49,28 +53,32 @@ impl<'a> Iterator for PhysicalLines<'a> {
                 return Some(Err(self.line));
             }
         };
-        let mut line = &self.text[self.pos..self.pos + len];
-        if let Some(l) = line.strip_suffix('\r') {
-            line = l;
-        }
+        let line = &self.text[self.pos..self.pos + len];
         self.pos = next;
         Some(Ok((self.line, line)))
     }
 }
 
 /// `line` without its comment: everything from the first `;` that is not
-/// inside a `"…"` (or `'…'`) string.
+/// inside a `"…"` string, or inside a `'…'` string that starts a value
+/// (right after `=`, as in the Omega board's `Modules='…'`; an apostrophe
+/// elsewhere is an ordinary character).
 pub(crate) fn strip_comment(line: &str) -> &str {
     let mut quote: Option<u8> = None;
+    let mut prev: u8 = 0;
     for (i, &b) in line.as_bytes().iter().enumerate() {
         match quote {
             Some(q) if b == q => quote = None,
             Some(_) => {}
             None => match b {
                 b';' => return &line[..i],
-                b'"' | b'\'' => quote = Some(b),
+                b'"' => quote = Some(b),
+                b'\'' if prev == b'=' => quote = Some(b),
                 _ => {}
             },
+        }
+        if b != b' ' && b != b'\t' {
+            prev = b;
         }
     }
     line
@@ -125,12 +133,17 @@ impl<'a> LogicalLine<'a> {
         text.push_str(content);
     }
 
-    /// Remove trailing blanks (after the final continuation).
+    /// Remove trailing blanks and stray trailing `\\` (after the final
+    /// continuation; a statement cannot end in a backslash).
     pub(crate) fn trim_end(&mut self) {
+        let trim = |s: &str| {
+            s.trim_end_matches(|c: char| c.is_whitespace() || c == '\\')
+                .len()
+        };
         match &mut self.text {
-            Cow::Borrowed(s) => *s = s.trim_end(),
+            Cow::Borrowed(s) => *s = &s[..trim(s)],
             Cow::Owned(s) => {
-                let n = s.trim_end().len();
+                let n = trim(s);
                 s.truncate(n);
             }
         }
@@ -196,10 +209,12 @@ impl<'t> Cursor<'t> {
         self.i
     }
 
-    /// The unread rest (blanks skipped).
-    pub(crate) fn rest(&mut self) -> &'t str {
+    /// Consume and return the rest of the line (blanks skipped).
+    pub(crate) fn take_rest(&mut self) -> &'t str {
         self.ws();
-        &self.s[self.i..]
+        let rest = &self.s[self.i..];
+        self.i = self.s.len();
+        rest
     }
 
     /// Skip blanks.
@@ -411,6 +426,8 @@ mod tests {
         assert_eq!(strip_comment("A=\"x;y\" ;c"), "A=\"x;y\" ");
         assert_eq!(strip_comment("M='a;b' 0x10;"), "M='a;b' 0x10");
         assert_eq!(strip_comment(";#Profibus_DP"), "");
+        assert_eq!(strip_comment("M = 'a;b' 0x10"), "M = 'a;b' 0x10");
+        assert_eq!(strip_comment("F=1@it's;c"), "F=1@it's");
     }
 
     #[test]

@@ -345,8 +345,9 @@ impl Parser {
 
     fn finish(mut self) -> Result<Parsed, Failure> {
         self.validate();
-        self.errors.sort_by_key(|d| d.pos);
-        self.warnings.sort_by_key(|d| d.pos);
+        // File order; remarks about the file as a whole (line 0) last.
+        self.errors.sort_by_key(|d| (d.pos.line == 0, d.pos));
+        self.warnings.sort_by_key(|d| (d.pos.line == 0, d.pos));
         self.fold_repeated_quirks();
         if self.errors.is_empty() {
             Ok(Parsed {
@@ -399,7 +400,7 @@ impl Parser {
             !drop[i - 1]
         });
         self.warnings.extend(summaries);
-        self.warnings.sort_by_key(|d| d.pos);
+        self.warnings.sort_by_key(|d| (d.pos.line == 0, d.pos));
     }
 
     // ---- statements ----
@@ -466,11 +467,7 @@ impl Parser {
     }
 
     /// Key, optional `(index)` and whether `=` follows.
-    fn head<'t>(
-        &mut self,
-        ll: &LogicalLine<'_>,
-        c: &mut Cursor<'t>,
-    ) -> Option<Head<'t>> {
+    fn head<'t>(&mut self, ll: &LogicalLine<'_>, c: &mut Cursor<'t>) -> Option<Head<'t>> {
         let Some(word) = c.word() else {
             let found = c.found();
             self.quirk(
@@ -575,13 +572,7 @@ impl Parser {
         }
     }
 
-    fn need_index(
-        &self,
-        word: &str,
-        index: Index,
-        lo: i64,
-        hi: i64,
-    ) -> Result<i64, ScanError> {
+    fn need_index(&self, word: &str, index: Index, lo: i64, hi: i64) -> Result<i64, ScanError> {
         match index {
             None => Err(ScanError {
                 at: word.len(),
@@ -665,7 +656,7 @@ impl Parser {
             }
             Some(_) if to_end => {
                 let at = c.at();
-                let text = c.rest().to_string();
+                let text = c.take_rest().to_string();
                 self.quirk(
                     ll.pos(at),
                     Quirk::UnquotedString,
@@ -727,10 +718,10 @@ impl Parser {
             "revision" => text!(revision),
             "revision_number" => int!(revision_number, u8),
             "ident_number" => {
+                self.ident_seen = true;
                 self.no_index(word, index)?;
                 let v = self.int_value(ll, c, word, key, 0, 0xFFFF)?;
                 self.gsd.ident_number = v as u16;
-                self.ident_seen = true;
             }
             "protocol_ident" => {
                 self.no_index(word, index)?;
@@ -788,8 +779,9 @@ impl Parser {
             "manufacturer_specific_alarm_supp" => flag!(manufacturer_specific_alarm_supp),
             "slave_family" => {
                 self.no_index(word, index)?;
-                let rest = c.rest();
+                c.ws();
                 let at = c.at();
+                let rest = c.take_rest();
                 let mut parts = rest.split('@');
                 let main = parts.next().unwrap_or("").trim();
                 let mut mc = Cursor::new(main);
@@ -1279,11 +1271,15 @@ impl Parser {
         let allowed = if c.at_end() {
             Allowed::Any
         } else {
+            let at = c.at();
             let a = c.int("the allowed values (`min-max` or `a,b,c`)")?;
             if c.eat('-') {
                 let b = c.int("the maximum")?;
                 if b < a {
-                    return Err(c.error(format!("the range {a}-{b} is empty")));
+                    return Err(ScanError {
+                        at,
+                        msg: format!("the range {a}-{b} is empty"),
+                    });
                 }
                 Allowed::Range(a, b)
             } else {
@@ -1446,7 +1442,12 @@ impl Parser {
             State::DiagArea { start, .. } => {
                 ("`Unit_Diag_Area` block", start, "Unit_Diag_Area_End")
             }
-            State::Raw { end, start, .. } => ("block", start, end),
+            State::Raw { end, start, owner } => {
+                // Close the copied block so that writing `other` back
+                // keeps it apart from what follows.
+                self.push_other(owner, end.to_string());
+                ("block", start, end)
+            }
         };
         self.quirk(
             start,
