@@ -156,7 +156,12 @@ fn baud_name(b: Baud) -> String {
 fn param_text(g: &Gsd, p: &ParamInstance<'_>, base: usize) -> String {
     let d = p.definition;
     let mut s = format!(
-        "byte {}: \"{}\" {} default {}",
+        "{} {}: \"{}\" {} default {}",
+        if p.position.is_some() {
+            "module byte"
+        } else {
+            "byte"
+        },
         p.offset - base,
         d.name,
         d.data_type.gsd_name(),
@@ -298,7 +303,7 @@ fn show_text(file: &Path, g: &Gsd) -> String {
         let base = g.user_prm_data(&[], &[]).map_or(0, |d| d.len());
         if let Ok(params) = g.parameters(&[i]) {
             for p in params.iter().filter(|p| p.position.is_some()) {
-                line(format!("        parameter {}", param_text(g, p, base)));
+                line(format!("        parameter at {}", param_text(g, p, base)));
             }
         }
     }
