@@ -7,6 +7,7 @@
 mod common;
 mod decode;
 mod describe;
+mod gsd;
 mod scan;
 
 use clap::{Parser, Subcommand};
@@ -26,6 +27,8 @@ enum Command {
     Decode(decode::Args),
     /// Live list: join the bus as a master and list the stations.
     Scan(scan::Args),
+    /// Show or check a GSD file.
+    Gsd(gsd::Args),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +43,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
         Command::Scan(a) => scan::run(a),
+        Command::Gsd(a) => gsd::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

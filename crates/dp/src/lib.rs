@@ -13,11 +13,14 @@
 //!   Global_Control, class-2 services, DP-V1 read/write), the application
 //!   of an FDL active station.
 //! - [`scan`]: the live-list scanner behind `dpctl scan`.
+//! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
+//!   module selection → Chk_Cfg / User_Prm_Data, writer.
 
 pub mod cfg;
 pub mod control;
 pub mod diag;
 pub mod dpv1;
+pub mod gsd;
 pub mod master;
 pub mod prm;
 pub mod sap;
