@@ -1,6 +1,7 @@
 //! `profibus-dp`: DP services (layer 7 of PROFIBUS-DP) on top of
 //! `profibus-fdl`.
 //!
+//! - [`busfile`]: the TOML bus file of a master, built on GSD files.
 //! - [`sap`]: the service access points of the DP services.
 //! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
 //!   decoded into I/O lengths.
@@ -16,6 +17,7 @@
 //! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
 //!   module selection → Chk_Cfg / User_Prm_Data, writer.
 
+pub mod busfile;
 pub mod cfg;
 pub mod control;
 pub mod diag;
