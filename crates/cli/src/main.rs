@@ -8,6 +8,7 @@ mod common;
 mod decode;
 mod describe;
 mod gsd;
+mod master;
 mod scan;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +28,8 @@ enum Command {
     Decode(decode::Args),
     /// Live list: join the bus as a master and list the stations.
     Scan(scan::Args),
+    /// Run a DP master from a bus file.
+    Master(master::Args),
     /// Show or check a GSD file.
     Gsd(gsd::Args),
 }
@@ -43,6 +46,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
         Command::Scan(a) => scan::run(a),
+        Command::Master(a) => master::run(a),
         Command::Gsd(a) => gsd::run(a),
     };
     match result {
