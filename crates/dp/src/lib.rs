@@ -9,6 +9,8 @@
 //!   diagnosis blocks, with words for people.
 //! - [`control`]: Global_Control and Set_Slave_Add.
 //! - [`dpv1`]: DP-V1 class-1 read/write/alarm PDUs and error decoding.
+//! - [`slave`]: the DP slave core (state machine, every slave service)
+//!   and the [`slave::Device`] trait device profiles implement.
 
 pub mod cfg;
 pub mod control;
@@ -16,3 +18,4 @@ pub mod diag;
 pub mod dpv1;
 pub mod prm;
 pub mod sap;
+pub mod slave;

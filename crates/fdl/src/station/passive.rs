@@ -159,8 +159,9 @@ impl<R: Responder> PassiveStation<R> {
     }
 
     fn process(&mut self, now: Instant) {
-        let addr = self.app.address();
         while let Some(t) = self.rx.next_telegram() {
+            // Asked per telegram: a request may change the address.
+            let addr = self.app.address();
             let Telegram::Data(d) = t else { continue };
             let FunctionCode::Request { kind, fcb, fcv } = d.fc else {
                 continue;
