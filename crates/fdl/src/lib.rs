@@ -35,6 +35,7 @@ pub mod driver;
 pub mod medium;
 pub mod pcap;
 pub mod rng;
+pub mod sim;
 pub mod station;
 pub mod time;
 pub mod timing;

@@ -361,6 +361,7 @@ struct Core {
     last_token: Option<Instant>,
     hold_until: Instant,
     cycles_this_visit: u32,
+    gap_polled_this_visit: bool,
     gap_next: u8,
     gap_wait: u8,
     collisions_in_row: u8,
@@ -402,6 +403,7 @@ impl<A: MasterApp> ActiveStation<A> {
                 last_token: None,
                 hold_until: Instant::ZERO,
                 cycles_this_visit: 0,
+                gap_polled_this_visit: false,
                 gap_next: next_addr(ts, cfg.params.hsa),
                 gap_wait: 0,
                 collisions_in_row: 0,
@@ -515,6 +517,11 @@ impl<A: MasterApp> Station for ActiveStation<A> {
 
     fn poll_timeout(&self) -> Option<Instant> {
         let c = &self.core;
+        if self.rx.receiving() {
+            // Every state timer waits for the line to be quiet; the receive
+            // path's idle deadline comes first.
+            return earliest(c.tx_at, self.rx.idle_deadline());
+        }
         let state = match c.state {
             State::Offline => None,
             State::ListenToken | State::ActiveIdle => {
@@ -525,7 +532,7 @@ impl<A: MasterApp> Station for ActiveStation<A> {
             | State::AwaitStatus { deadline, .. }
             | State::CheckTokenPass { deadline, .. } => Some(deadline),
         };
-        earliest(earliest(c.tx_at, self.rx.idle_deadline()), state)
+        earliest(c.tx_at, state)
     }
 }
 
@@ -793,14 +800,10 @@ impl Core {
     fn listen_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, _app: &mut A) {
         match *t {
             Telegram::Token { da, sa } => {
-                if da == self.ts() {
-                    // Invited (or the claimant knew us): take part.
-                    self.state = State::ActiveIdle;
-                    self.las_valid = true;
-                    self.las[sa as usize] = true;
-                    self.token_received(now, sa);
-                    return;
-                }
+                // A token for our address while we listen is not ours to
+                // take: we enter the ring only through the predecessor's
+                // FDL Status invitation (it may also belong to another
+                // station with our address, which we are about to detect).
                 self.observe_pass(sa, da);
                 let l = &mut self.listen;
                 match l.first_sa {
@@ -907,6 +910,7 @@ impl Core {
         }
         self.last_token = Some(now);
         self.cycles_this_visit = 0;
+        self.gap_polled_this_visit = false;
         self.line_free_at = now + self.bits(self.p().tid1());
         self.state = State::UseToken {
             wake: self.line_free_at,
@@ -1014,8 +1018,11 @@ impl Core {
                 return;
             }
         }
-        if time_left && self.gap_wait == 0 {
+        if self.gap_polled_this_visit {
+            // One GAP poll per token visit.
+        } else if time_left && self.gap_wait == 0 {
             if let Some(address) = self.next_gap_address() {
+                self.gap_polled_this_visit = true;
                 self.stats.gap_polls += 1;
                 let ts = self.ts();
                 let end = self.send(
