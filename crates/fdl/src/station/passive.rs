@@ -143,6 +143,12 @@ impl<R: Responder> PassiveStation<R> {
         &mut self.app
     }
 
+    /// The application, taking the station apart (e.g. to run it again
+    /// at another baud rate).
+    pub fn into_app(self) -> R {
+        self.app
+    }
+
     /// Bus parameters.
     pub fn params(&self) -> &BusParams {
         &self.params
