@@ -1,1 +1,3 @@
 //! `profibus-devices`: device profiles.
+
+pub mod generic;

@@ -16,6 +16,8 @@
 //! - [`scan`]: the live-list scanner behind `dpctl scan`.
 //! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
 //!   module selection → Chk_Cfg / User_Prm_Data, writer.
+//! - [`slave`]: the DP slave core (state machine, every slave service)
+//!   and the [`slave::Device`] trait device profiles implement.
 
 pub mod busfile;
 pub mod cfg;
@@ -27,3 +29,4 @@ pub mod master;
 pub mod prm;
 pub mod sap;
 pub mod scan;
+pub mod slave;
