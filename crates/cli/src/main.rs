@@ -6,6 +6,7 @@
 
 mod decode;
 mod describe;
+mod gsd;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -22,6 +23,8 @@ struct Cli {
 enum Command {
     /// Decode telegram bytes given in hex.
     Decode(decode::Args),
+    /// Show or check a GSD file.
+    Gsd(gsd::Args),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
+        Command::Gsd(a) => gsd::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -14,11 +14,14 @@
 //!   of an FDL active station.
 //! - [`slave`]: the DP slave core (state machine, every slave service)
 //!   and the [`slave::Device`] trait device profiles implement.
+//! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
+//!   module selection → Chk_Cfg / User_Prm_Data, writer.
 
 pub mod cfg;
 pub mod control;
 pub mod diag;
 pub mod dpv1;
+pub mod gsd;
 pub mod master;
 pub mod prm;
 pub mod sap;
