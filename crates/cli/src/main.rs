@@ -7,6 +7,7 @@
 mod decode;
 mod describe;
 mod gsd;
+mod slave;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -25,6 +26,8 @@ enum Command {
     Decode(decode::Args),
     /// Show or check a GSD file.
     Gsd(gsd::Args),
+    /// Emulate a DP slave (a device profile or any GSD-described device).
+    Slave(slave::Args),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
         Command::Gsd(a) => gsd::run(a),
+        Command::Slave(a) => slave::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -634,7 +634,11 @@ EndModule
         assert_eq!(d.check_prm(&SetPrm::parse(&good).unwrap()), Ok(()));
         let bad = mk(&[0x80, 0, 0, 4, 0xFF, 0x9C]);
         let e = d.check_prm(&SetPrm::parse(&bad).unwrap()).unwrap_err();
-        assert!(e.as_str().contains("`Mode` (User_Prm_Data byte 3) = 4, allowed 0..=3"), "{e}");
+        assert!(
+            e.as_str()
+                .contains("`Mode` (User_Prm_Data byte 3) = 4, allowed 0..=3"),
+            "{e}"
+        );
         let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x18]); // -1000 - 1000 = -1000: ok
         assert_eq!(d.check_prm(&SetPrm::parse(&bad).unwrap()), Ok(()));
         let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x17]); // -1001

@@ -466,11 +466,7 @@ impl Parser {
     }
 
     /// Key, optional `(index)` and whether `=` follows.
-    fn head<'t>(
-        &mut self,
-        ll: &LogicalLine<'_>,
-        c: &mut Cursor<'t>,
-    ) -> Option<Head<'t>> {
+    fn head<'t>(&mut self, ll: &LogicalLine<'_>, c: &mut Cursor<'t>) -> Option<Head<'t>> {
         let Some(word) = c.word() else {
             let found = c.found();
             self.quirk(
@@ -575,13 +571,7 @@ impl Parser {
         }
     }
 
-    fn need_index(
-        &self,
-        word: &str,
-        index: Index,
-        lo: i64,
-        hi: i64,
-    ) -> Result<i64, ScanError> {
+    fn need_index(&self, word: &str, index: Index, lo: i64, hi: i64) -> Result<i64, ScanError> {
         match index {
             None => Err(ScanError {
                 at: word.len(),
