@@ -449,7 +449,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         slave = station.into_app();
         match result {
             Err(e) => {
-                return Err(e).with_context(|| format!("{path}"));
+                return Err(e).with_context(|| path.clone());
             }
             Ok(Stop::Shutdown) => break,
             Ok(Stop::Done) if research => {
