@@ -10,6 +10,7 @@ mod describe;
 mod gsd;
 mod master;
 mod scan;
+mod slave;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -32,6 +33,8 @@ enum Command {
     Master(master::Args),
     /// Show or check a GSD file.
     Gsd(gsd::Args),
+    /// Emulate a DP slave (a device profile or any GSD-described device).
+    Slave(slave::Args),
 }
 
 fn main() -> ExitCode {
@@ -48,6 +51,7 @@ fn main() -> ExitCode {
         Command::Scan(a) => scan::run(a),
         Command::Master(a) => master::run(a),
         Command::Gsd(a) => gsd::run(a),
+        Command::Slave(a) => slave::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -15,6 +15,7 @@
 //! - Set_Slave_Add (when supported): the address can be persisted in a
 //!   small text file ([`AddressStore`]).
 
+use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
     expect_cfg, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
@@ -131,6 +132,40 @@ impl AddressStore {
     }
 }
 
+/// Why a GSD file and module list do not make a device.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GenericError {
+    /// A module name matches no module, or several.
+    #[error(transparent)]
+    Module(#[from] LookupError),
+    /// The selection's configuration or parameters cannot be built.
+    #[error(transparent)]
+    Selection(#[from] SelectionError),
+    /// The selection breaks the file's limits.
+    #[error("the module list does not fit the GSD file: {0}")]
+    Limits(String),
+}
+
+/// The value of a parameter of type `t` at `at` (big-endian; signed
+/// types sign-extended; `Bit`/`BitArea` only their bits). `None` when the
+/// data end before the parameter.
+pub fn prm_value(data: &[u8], at: usize, t: PrmDataType) -> Option<i64> {
+    let b = data.get(at..at + t.size())?;
+    Some(match t {
+        PrmDataType::Unsigned8 => b[0] as i64,
+        PrmDataType::Signed8 => b[0] as i8 as i64,
+        PrmDataType::Unsigned16 => u16::from_be_bytes([b[0], b[1]]) as i64,
+        PrmDataType::Signed16 => i16::from_be_bytes([b[0], b[1]]) as i64,
+        PrmDataType::Unsigned32 => u32::from_be_bytes([b[0], b[1], b[2], b[3]]) as i64,
+        PrmDataType::Signed32 => i32::from_be_bytes([b[0], b[1], b[2], b[3]]) as i64,
+        PrmDataType::Bit(n) => ((b[0] >> (n & 7)) & 1) as i64,
+        PrmDataType::BitArea(first, last) => {
+            let width = (last.saturating_sub(first) + 1).min(8);
+            ((b[0] as u16 >> (first & 7)) & ((1u16 << width) - 1)) as i64
+        }
+    })
+}
+
 /// The generic device; see the module docs.
 pub struct GenericDevice {
     name: String,
@@ -190,6 +225,67 @@ impl GenericDevice {
             new_diag: false,
             events: VecDeque::new(),
         }
+    }
+
+    /// The device a GSD file describes with the modules `modules` (names,
+    /// matched approximately; empty for a compact station's fixed
+    /// configuration): its ident number and features, the modules'
+    /// configuration, and the User_Prm_Data length and parameter ranges
+    /// of that selection.
+    pub fn from_gsd<S: AsRef<str>>(gsd: &Gsd, modules: &[S]) -> Result<Self, GenericError> {
+        let selection = if modules.is_empty() {
+            gsd.default_selection()
+        } else {
+            gsd.select(modules)?
+        };
+        let problems = gsd.check_selection(&selection);
+        if !problems.is_empty() {
+            let words: Vec<String> = problems.iter().map(ToString::to_string).collect();
+            return Err(GenericError::Limits(words.join("; ")));
+        }
+        let cfg = gsd.chk_cfg(&selection)?;
+        let user_prm_len = gsd.user_prm_data(&selection, &[])?.len();
+        let mut checks: Vec<PrmCheck> = vec![];
+        for p in gsd.parameters(&selection)? {
+            let def = p.definition;
+            let (name, at, t, allowed) = (
+                def.name.clone(),
+                p.offset,
+                def.data_type,
+                def.allowed.clone(),
+            );
+            let (lo, hi) = t.limits();
+            checks.push(Box::new(move |data: &[u8]| match prm_value(data, at, t) {
+                Some(v) if v >= lo && v <= hi && allowed.contains(v) => Ok(()),
+                Some(v) => Err(format!(
+                    "parameter `{name}` (User_Prm_Data byte {at}) = {v}, allowed {allowed}"
+                )
+                .into()),
+                None => Err(format!("parameter `{name}` at byte {at} is missing").into()),
+            }));
+        }
+        let features = Features {
+            sync: gsd.sync_mode_supp,
+            freeze: gsd.freeze_mode_supp,
+            set_slave_add: gsd.set_slave_add_supp,
+            dpv1: gsd.dpv1_slave,
+            c1_read_write: gsd.dpv1_slave && gsd.c1_read_write_supp,
+            alarms: gsd.dpv1_slave
+                && (gsd.diagnostic_alarm_supp
+                    || gsd.process_alarm_supp
+                    || gsd.pull_plug_alarm_supp
+                    || gsd.status_alarm_supp
+                    || gsd.update_alarm_supp
+                    || gsd.manufacturer_specific_alarm_supp),
+            fail_safe: gsd.fail_safe,
+            max_diag_len: gsd.max_diag_data_len.unwrap_or(244).clamp(6, 244),
+        };
+        let name = gsd
+            .model_name
+            .clone()
+            .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number));
+        Ok(GenericDevice::new(name, gsd.ident_number, cfg, features)
+            .with_user_prm(user_prm_len, checks))
     }
 
     /// Require User_Prm_Data of exactly `len` bytes (for DP-V1 slaves
@@ -471,6 +567,105 @@ mod tests {
             Dpv1Outcome::Error(_)
         ));
         assert_eq!(d.poll_event().unwrap().kind, "record");
+    }
+
+    const GSD: &str = r#"#Profibus_DP
+GSD_Revision=3
+Vendor_Name="t"
+Model_Name="gen test"
+Revision="1"
+Ident_Number=0x0DCE
+Protocol_Ident=0
+Station_Type=0
+Hardware_Release="1"
+Software_Release="1"
+9.6_supp=1
+MaxTsdr_9.6=60
+Implementation_Type="sw"
+Freeze_Mode_supp=1
+Sync_Mode_supp=0
+Set_Slave_Add_supp=1
+Min_Slave_Intervall=1
+Max_Diag_Data_Len=32
+Modular_Station=1
+Max_Module=4
+Max_Input_Len=64
+Max_Output_Len=64
+Max_Data_Len=128
+DPV1_Slave=1
+C1_Read_Write_supp=1
+PrmText=1
+Text(0)="off"
+Text(1)="on"
+EndPrmText
+ExtUserPrmData=1 "Mode"
+Unsigned8 1 0-3
+Prm_Text_Ref=1
+EndExtUserPrmData
+ExtUserPrmData=2 "Offset"
+Signed16 -100 -1000-1000
+EndExtUserPrmData
+Max_User_Prm_Data_Len=16
+Ext_User_Prm_Data_Const(0)=0x80,0x00,0x00,0x01,0xFF,0x9C
+Ext_User_Prm_Data_Ref(3)=1
+Ext_User_Prm_Data_Ref(4)=2
+Module="1 byte in" 0x10
+1
+EndModule
+Module="2 words in/out" 0x71
+2
+EndModule
+"#;
+
+    #[test]
+    fn from_gsd_checks_what_the_file_says() {
+        let gsd = profibus_dp::gsd::Gsd::parse(GSD, Default::default())
+            .unwrap()
+            .gsd;
+        let mut d = GenericDevice::from_gsd(&gsd, &["2 words", "1 byte in"]).unwrap();
+        assert_eq!(d.ident_number(), 0x0DCE);
+        assert_eq!(d.real_cfg(), &[0x71, 0x10]);
+        let f = d.features();
+        assert!(f.freeze && !f.sync && f.set_slave_add && f.dpv1 && f.c1_read_write);
+        assert!(!f.alarms && !f.fail_safe);
+        assert_eq!(f.max_diag_len, 32);
+        let mk = |user: &[u8]| [vec![0x80, 1, 1, 11, 0x0D, 0xCE, 0], user.to_vec()].concat();
+        let good = mk(&[0x80, 0, 0, 1, 0xFF, 0x9C]);
+        assert_eq!(d.check_prm(&SetPrm::parse(&good).unwrap()), Ok(()));
+        let bad = mk(&[0x80, 0, 0, 4, 0xFF, 0x9C]);
+        let e = d.check_prm(&SetPrm::parse(&bad).unwrap()).unwrap_err();
+        assert!(
+            e.as_str()
+                .contains("`Mode` (User_Prm_Data byte 3) = 4, allowed 0..=3"),
+            "{e}"
+        );
+        let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x18]); // -1000 - 1000 = -1000: ok
+        assert_eq!(d.check_prm(&SetPrm::parse(&bad).unwrap()), Ok(()));
+        let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x17]); // -1001
+        assert!(d.check_prm(&SetPrm::parse(&bad).unwrap()).is_err());
+        let short = mk(&[0x80, 0, 0, 1]);
+        assert!(d.check_prm(&SetPrm::parse(&short).unwrap()).is_err());
+        assert!(matches!(
+            GenericDevice::from_gsd(&gsd, &["no such module at all"]),
+            Err(GenericError::Module(_))
+        ));
+        assert!(matches!(
+            GenericDevice::from_gsd(&gsd, &["1 byte in"; 5]),
+            Err(GenericError::Limits(_))
+        ));
+    }
+
+    #[test]
+    fn prm_values() {
+        let d = [0x81, 0xFF, 0x9C, 0x12, 0x34, 0x56, 0x78];
+        assert_eq!(prm_value(&d, 0, PrmDataType::Unsigned8), Some(0x81));
+        assert_eq!(prm_value(&d, 0, PrmDataType::Signed8), Some(-127));
+        assert_eq!(prm_value(&d, 1, PrmDataType::Signed16), Some(-100));
+        assert_eq!(prm_value(&d, 3, PrmDataType::Unsigned32), Some(0x12345678));
+        assert_eq!(prm_value(&d, 0, PrmDataType::Bit(7)), Some(1));
+        assert_eq!(prm_value(&d, 0, PrmDataType::BitArea(0, 2)), Some(1));
+        assert_eq!(prm_value(&d, 3, PrmDataType::BitArea(4, 7)), Some(1));
+        assert_eq!(prm_value(&d, 5, PrmDataType::Unsigned32), None);
     }
 
     #[test]

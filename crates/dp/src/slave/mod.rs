@@ -172,6 +172,8 @@ pub struct DpSlave<D> {
     /// Outputs delivered to the device (Rd_Outp).
     applied: [u8; MAX_IO_LEN],
     frozen: [u8; MAX_IO_LEN],
+    /// Inputs of the last Data_Exchange response.
+    last_inputs: [u8; MAX_IO_LEN],
     last_gc: Option<(u8, u8)>,
     /// New diagnosis to be announced with DH.
     diag_pending: bool,
@@ -211,6 +213,7 @@ impl<D: Device> DpSlave<D> {
             received: [0; MAX_IO_LEN],
             applied: [0; MAX_IO_LEN],
             frozen: [0; MAX_IO_LEN],
+            last_inputs: [0; MAX_IO_LEN],
             last_gc: None,
             diag_pending: false,
             stat_diag: false,
@@ -250,6 +253,11 @@ impl<D: Device> DpSlave<D> {
     /// The outputs last delivered to the device.
     pub fn outputs(&self) -> &[u8] {
         &self.applied[..self.layout.outputs]
+    }
+
+    /// The inputs sent with the last Data_Exchange response.
+    pub fn inputs(&self) -> &[u8] {
+        &self.last_inputs[..self.layout.inputs]
     }
 
     /// Sync mode is active (a Sync command was received).
@@ -433,7 +441,8 @@ impl<D: Device> DpSlave<D> {
         if out.len() < n {
             return Reply::Silence;
         }
-        self.inputs(now, &mut out[..n]);
+        self.produce_inputs(now, &mut out[..n]);
+        self.last_inputs[..n].copy_from_slice(&out[..n]);
         if self.device.take_new_diag() {
             self.diag_pending = true;
         }
@@ -463,7 +472,7 @@ impl<D: Device> DpSlave<D> {
     }
 
     /// The inputs as Data_Exchange reports them (frozen or live).
-    fn inputs(&mut self, now: Instant, out: &mut [u8]) {
+    fn produce_inputs(&mut self, now: Instant, out: &mut [u8]) {
         if self.freeze_mode {
             out.copy_from_slice(&self.frozen[..out.len()]);
         } else {
@@ -1062,7 +1071,7 @@ impl<D: Device> Responder for DpSlave<D> {
                         return Reply::Silence;
                     }
                     if dsap == sap::RD_INP {
-                        self.inputs(now, &mut out[..len]);
+                        self.produce_inputs(now, &mut out[..len]);
                     } else {
                         out[..len].copy_from_slice(&self.applied[..len]);
                     }

@@ -299,6 +299,7 @@ fn start_up_sequence_like_a_master() {
     assert_eq!(a, Ans::Data(ResponseStatus::Dl, None, None, vec![1, 1, 1]));
     assert_eq!(b.slave.device().outputs, vec![0xAB, 0xCD]);
     assert_eq!(b.slave.outputs(), &[0xAB, 0xCD]);
+    assert_eq!(b.slave.inputs(), &[1, 1, 1]);
     assert_eq!(b.slave.stats().data_exchanges, 1);
     let ev = b.events();
     assert!(ev.contains(&SlaveEvent::State {
