@@ -531,6 +531,12 @@ mod tests {
     }
 }
 
+fn has_unit_diag(g: &crate::gsd::Gsd) -> bool {
+    !g.unit_diag_bits.is_empty()
+        || !g.unit_diag_not_bits.is_empty()
+        || !g.unit_diag_areas.is_empty()
+}
+
 /// A whole Slave_Diag response in words: the station status bits, the
 /// parameterising master, the ident number and every extended diagnosis
 /// block. With the slave's GSD, bits of the device-related diagnosis are
@@ -553,10 +559,7 @@ pub fn describe(du: &[u8], gsd: Option<&crate::gsd::Gsd>, dpv1: bool) -> Vec<Str
     for b in ext_blocks(d.ext_diag) {
         match (b, gsd) {
             (ExtDiagBlock::Device { data }, Some(g))
-                if !(dpv1 && data.len() >= 3)
-                    && (!g.unit_diag_bits.is_empty()
-                        || !g.unit_diag_not_bits.is_empty()
-                        || !g.unit_diag_areas.is_empty()) =>
+                if !(dpv1 && data.len() >= 3) && has_unit_diag(g) =>
             {
                 let bit = |n: u32| {
                     data.get(n as usize / 8)
