@@ -16,6 +16,8 @@
 //! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
 //! - `transport` (feature `transport`, on by default; tokio): serial
 //!   ports and ptys as one async byte stream, `transport::Port`.
+//! - [`tap`]: passive framing of a timed byte stream into telegrams and
+//!   skipped bytes (bus monitors, pcap recording).
 //! - [`rng`]: the small seeded generator behind fault injection.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
@@ -26,6 +28,7 @@ pub mod codec;
 pub mod medium;
 pub mod pcap;
 pub mod rng;
+pub mod tap;
 pub mod time;
 pub mod timing;
 #[cfg(feature = "transport")]
