@@ -4,6 +4,7 @@
 //! Exit status: 0 success, 2 usage error, 1 any other failure with a
 //! one-line reason on stderr.
 
+mod bus;
 mod decode;
 mod describe;
 
@@ -22,6 +23,8 @@ struct Cli {
 enum Command {
     /// Decode telegram bytes given in hex.
     Decode(decode::Args),
+    /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
+    Bus(bus::Args),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
+        Command::Bus(a) => bus::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
