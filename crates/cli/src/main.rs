@@ -7,6 +7,7 @@
 mod bus;
 mod decode;
 mod describe;
+mod sniff;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -25,6 +26,8 @@ enum Command {
     Decode(decode::Args),
     /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
     Bus(bus::Args),
+    /// Listen passively on a line and print every telegram.
+    Sniff(sniff::Args),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
         Command::Bus(a) => bus::run(a),
+        Command::Sniff(a) => sniff::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
