@@ -9,10 +9,14 @@
 //!   diagnosis blocks, with words for people.
 //! - [`control`]: Global_Control and Set_Slave_Add.
 //! - [`dpv1`]: DP-V1 class-1 read/write/alarm PDUs and error decoding.
+//! - [`master`]: the DP master core (start-up sequence, poll cycle,
+//!   Global_Control, class-2 services, DP-V1 read/write), the application
+//!   of an FDL active station.
 
 pub mod cfg;
 pub mod control;
 pub mod diag;
 pub mod dpv1;
+pub mod master;
 pub mod prm;
 pub mod sap;
