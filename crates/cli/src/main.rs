@@ -11,6 +11,8 @@ mod gsd;
 mod master;
 mod scan;
 mod slave;
+mod bus;
+mod sniff;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -35,6 +37,10 @@ enum Command {
     Gsd(gsd::Args),
     /// Emulate a DP slave (a device profile or any GSD-described device).
     Slave(slave::Args),
+    /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
+    Bus(bus::Args),
+    /// Listen passively on a line and print every telegram.
+    Sniff(sniff::Args),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +58,8 @@ fn main() -> ExitCode {
         Command::Master(a) => master::run(a),
         Command::Gsd(a) => gsd::run(a),
         Command::Slave(a) => slave::run(a),
+        Command::Bus(a) => bus::run(a),
+        Command::Sniff(a) => sniff::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

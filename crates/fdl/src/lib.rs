@@ -19,6 +19,8 @@
 //! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
 //! - `transport` (feature `transport`, on by default; tokio): serial
 //!   ports and ptys as one async byte stream, `transport::Port`.
+//! - [`tap`]: passive framing of a timed byte stream into telegrams and
+//!   skipped bytes (bus monitors, pcap recording).
 //! - [`rng`]: the small seeded generator behind fault injection.
 //! - [`sim`]: the in-process simulated bus on virtual time (stations on a
 //!   [`medium`]).
@@ -38,6 +40,7 @@ pub mod pcap;
 pub mod rng;
 pub mod sim;
 pub mod station;
+pub mod tap;
 pub mod time;
 pub mod timing;
 #[cfg(feature = "transport")]
