@@ -18,7 +18,7 @@ pub struct LineArgs {
     #[arg(long, default_value = "19200", value_name = "B")]
     pub baud: Baud,
     /// Extra milliseconds added to the slot time and token timeouts for the
-    /// transport's latency (default: 10 on a pty, 20 on a serial adapter).
+    /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     pub latency: Option<f64>,
 }
@@ -29,14 +29,24 @@ impl LineArgs {
         match self.latency {
             Some(ms) if ms >= 0.0 && ms.is_finite() => Ok(Duration::from_secs_f64(ms / 1000.0)),
             Some(ms) => anyhow::bail!("--latency {ms} must be a non-negative number"),
-            None if is_pty(&self.port) => Ok(Duration::from_millis(10)),
-            None => Ok(Duration::from_millis(20)),
+            None => Ok(default_latency(&self.port)),
         }
     }
 
     /// Open the port.
     pub fn open(&self) -> Result<Port> {
         Port::open(&self.port, self.baud).with_context(|| format!("opening {}", self.port))
+    }
+}
+
+/// Latency allowance when none is given: ptys answer within a
+/// millisecond even on a loaded machine; USB serial adapters buffer for up
+/// to 16 ms (the FTDI latency timer).
+pub fn default_latency(port: &str) -> Duration {
+    if is_pty(port) {
+        Duration::from_millis(5)
+    } else {
+        Duration::from_millis(20)
     }
 }
 

@@ -4,6 +4,7 @@
 //! Exit status: 0 success, 2 usage error, 1 any other failure with a
 //! one-line reason on stderr.
 
+mod bus;
 mod common;
 mod decode;
 mod describe;
@@ -11,7 +12,6 @@ mod gsd;
 mod master;
 mod scan;
 mod slave;
-mod bus;
 mod sniff;
 
 use clap::{Parser, Subcommand};

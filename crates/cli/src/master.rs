@@ -50,7 +50,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1000, value_name = "MS")]
     interval: u64,
     /// Extra milliseconds on the slot time and token timeouts for the
-    /// transport's latency (default: 10 on a pty, 20 on a serial adapter).
+    /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
     /// Start in the clear state (outputs zero) instead of operate.
@@ -325,10 +325,28 @@ fn drain_events(m: &mut DpMaster, bus: &BusFile, view: &mut View) {
                     ),
                 );
             }
-            MasterEvent::Ring(e) => view.event(
-                json!({"event": "ring", "what": format!("{e:?}")}),
-                format!("token ring: {e:?}"),
-            ),
+            MasterEvent::Ring(e) => {
+                use profibus_fdl::station::active::FdlEvent as F;
+                let text = match e {
+                    F::GapStatus { station: None, .. } => continue,
+                    F::GapStatus {
+                        address,
+                        station: Some(t),
+                    } => format!("station {address} found: {}", t.describe()),
+                    F::EnteredRing => "in the token ring".into(),
+                    F::LeftRing => "left the token ring".into(),
+                    F::TokenClaimed => "claimed the token".into(),
+                    F::StationJoined(a) => format!("master {a} joined the ring"),
+                    F::StationRemoved(a) => format!("master {a} left the ring"),
+                    F::AddressInUse => "another station uses this address: offline".into(),
+                    F::AddressCollision => "address collision".into(),
+                    F::DuplicateToken => "duplicate token dropped".into(),
+                };
+                view.event(
+                    json!({"event": "ring", "what": text}),
+                    format!("ring: {text}"),
+                )
+            }
         }
     }
 }
@@ -340,8 +358,7 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     let latency = match args.latency {
         Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
         Some(ms) => bail!("--latency {ms} must be a non-negative number"),
-        None if common::is_pty(&args.port) => Duration::from_millis(10),
-        None => Duration::from_millis(20),
+        None => common::default_latency(&args.port),
     };
     let mut dp = DpMaster::new(&bus.master)?;
     if args.clear {
