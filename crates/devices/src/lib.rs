@@ -7,6 +7,7 @@
 //! `dpctl slave --device NAME` builds from.
 
 pub mod generic;
+pub mod gsd_files;
 
 use profibus_dp::slave::Device;
 

@@ -41,7 +41,7 @@ use profibus_fdl::station::active::{
     CycleResult, FdlEvent, MasterApp, Outcome, Request, Service, TokenContext,
 };
 use profibus_fdl::time::Instant;
-use profibus_fdl::wire::{consts, ResponseStatus};
+use profibus_fdl::wire::{consts, ResponseStatus, StationType};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -372,6 +372,7 @@ pub struct DpMaster {
     events: VecDeque<MasterEvent>,
     events_dropped: u64,
     job_sent_this_visit: bool,
+    live: [Option<StationType>; 128],
     zeros: [u8; 244],
     req: [u8; 248],
 }
@@ -448,6 +449,7 @@ impl DpMaster {
             events: VecDeque::with_capacity(EVENT_LIMIT),
             events_dropped: 0,
             job_sent_this_visit: false,
+            live: [None; 128],
             zeros: [0; 244],
             req: [0; 248],
         })
@@ -580,6 +582,15 @@ impl DpMaster {
     /// Whether jobs are queued or running.
     pub fn jobs_pending(&self) -> bool {
         !self.jobs.is_empty() || self.active_job.is_some()
+    }
+
+    /// Stations found by the GAP polls of this master's station (the part
+    /// of the live list between this master and its successor).
+    pub fn live_list(&self) -> impl Iterator<Item = (u8, StationType)> + '_ {
+        self.live
+            .iter()
+            .enumerate()
+            .filter_map(|(a, t)| t.map(|t| (a as u8, t)))
     }
 
     /// The next event.
@@ -1092,6 +1103,18 @@ impl MasterApp for DpMaster {
     }
 
     fn on_event(&mut self, _now: Instant, event: FdlEvent) {
+        // GAP polls repeat every sweep: report only what changed.
+        if let FdlEvent::GapStatus { address, station } = event {
+            let slot = &mut self.live[address as usize & 0x7F];
+            if *slot == station {
+                return;
+            }
+            let was_known = slot.is_some();
+            *slot = station;
+            if station.is_none() && !was_known {
+                return;
+            }
+        }
         self.emit(MasterEvent::Ring(event));
     }
 }
