@@ -613,6 +613,11 @@ impl DpMaster {
         self.cycle_stats
     }
 
+    /// Start the poll-cycle statistics afresh (e.g. after start-up).
+    pub fn reset_cycle_stats(&mut self) {
+        self.cycle_stats = CycleStats::default();
+    }
+
     /// Operating state.
     pub fn operating_state(&self) -> OperatingState {
         self.state
