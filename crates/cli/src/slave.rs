@@ -338,7 +338,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let clock = Clock::start();
     let printer = Printer {
         json: args.json,
-        clock,
+        clock: clock.clone(),
     };
     let path = args.port.clone().expect("clap requires --port");
     let mut addr = args.addr.expect("clap requires --addr");
@@ -386,7 +386,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let mut last_outputs: Vec<u8> = vec![];
     loop {
         let baud = if search {
-            match search_baud(&mut port, clock, &printer, &stop_requested).await? {
+            match search_baud(&mut port, clock.clone(), &printer, &stop_requested).await? {
                 Some(b) => b,
                 None => break,
             }
@@ -399,7 +399,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         let result = driver::run(
             &mut station,
             &mut port,
-            clock,
+            clock.clone(),
             async {
                 stop_signal().await;
                 stop_requested.set(true);
