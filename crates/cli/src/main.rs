@@ -4,9 +4,15 @@
 //! Exit status: 0 success, 2 usage error, 1 any other failure with a
 //! one-line reason on stderr.
 
+mod bus;
+mod common;
 mod decode;
 mod describe;
 mod gsd;
+mod master;
+mod scan;
+mod slave;
+mod sniff;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -23,8 +29,18 @@ struct Cli {
 enum Command {
     /// Decode telegram bytes given in hex.
     Decode(decode::Args),
+    /// Live list: join the bus as a master and list the stations.
+    Scan(scan::Args),
+    /// Run a DP master from a bus file.
+    Master(master::Args),
     /// Show or check a GSD file.
     Gsd(gsd::Args),
+    /// Emulate a DP slave (a device profile or any GSD-described device).
+    Slave(slave::Args),
+    /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
+    Bus(bus::Args),
+    /// Listen passively on a line and print every telegram.
+    Sniff(sniff::Args),
 }
 
 fn main() -> ExitCode {
@@ -38,7 +54,12 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
+        Command::Scan(a) => scan::run(a),
+        Command::Master(a) => master::run(a),
         Command::Gsd(a) => gsd::run(a),
+        Command::Slave(a) => slave::run(a),
+        Command::Bus(a) => bus::run(a),
+        Command::Sniff(a) => sniff::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

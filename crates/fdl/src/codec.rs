@@ -124,6 +124,12 @@ impl Framer {
         }
     }
 
+    /// Count an incomplete candidate that the caller abandons (its own
+    /// idle handling instead of [`Framer::line_idle`]).
+    pub fn note_abandoned(&mut self) {
+        self.stats.truncated += 1;
+    }
+
     fn count(&mut self, e: ParseError) {
         match e {
             ParseError::BadStartDelimiter(_) => self.stats.garbage_bytes += 1,

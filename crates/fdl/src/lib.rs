@@ -10,14 +10,41 @@
 //! - [`timing`]: baud rates, bus parameters (TSL, TSDR, TID1/TID2, TTR …)
 //!   and the bit-time arithmetic every timer is built on.
 //! - [`time`]: the [`time::Instant`] the sans-IO cores take as "now".
+//! - [`station`]: sans-IO FDL stations behind the byte-level
+//!   [`station::Station`] trait: the passive responder (DP slave side) and
+//!   the active station (token ring, GAP, requester; DP master side).
+//! - [`medium`]: a sans-IO model of the RS-485 line (broadcast, pacing at
+//!   the baud rate, collisions, fault injection) shared by `dpctl bus` and
+//!   the in-process simulator.
+//! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
+//! - `transport` (feature `transport`, on by default; tokio): serial
+//!   ports and ptys as one async byte stream, `transport::Port`.
+//! - [`tap`]: passive framing of a timed byte stream into telegrams and
+//!   skipped bytes (bus monitors, pcap recording).
+//! - [`rng`]: the small seeded generator behind fault injection.
+//! - [`sim`]: the in-process simulated bus on virtual time (stations on a
+//!   [`medium`]).
+//! - `driver` (feature `transport`): the thin tokio shell that runs a
+//!   station on a byte stream.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
 //! telegrams and the current time and return bytes to send and the next
 //! deadline; thin tokio drivers connect them to a transport.
 
+pub mod autobaud;
 pub mod codec;
+#[cfg(feature = "transport")]
+pub mod driver;
+pub mod medium;
+pub mod pcap;
+pub mod rng;
+pub mod sim;
+pub mod station;
+pub mod tap;
 pub mod time;
 pub mod timing;
+#[cfg(feature = "transport")]
+pub mod transport;
 pub mod wire;
 
 pub use codec::{CodecStats, FdlCodec, Framer, RawTelegram};

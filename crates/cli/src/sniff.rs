@@ -1,0 +1,266 @@
+//! `dpctl sniff`: a passive bus monitor.
+//!
+//! Reads a serial line or pty (never writes), frames what it sees and
+//! prints one line per telegram: the time in µs since the start and the
+//! telegram as `dpctl decode` describes it. Bytes the framer had to skip
+//! (garbage, a bad FCS, a broken length) are printed on lines starting
+//! with `!! `, with their hex and the errors they raised. `--json` prints
+//! the same as JSON lines (`"error"` marks the skipped bytes); `--pcap`
+//! records the telegrams. On Ctrl-C / SIGTERM it prints a summary line
+//! with the codec counters and stops.
+
+use crate::describe;
+use anyhow::{Context, Result};
+use profibus_fdl::codec::CodecStats;
+use profibus_fdl::pcap::PcapWriter;
+use profibus_fdl::tap::{Tap, TapEvent};
+use profibus_fdl::transport::Port;
+use profibus_fdl::wire::Telegram;
+use profibus_fdl::{Baud, BusParams, Instant};
+use serde_json::json;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio::io::AsyncReadExt;
+use tokio::signal::unix::{signal, SignalKind};
+
+/// Listen passively on a line and print every telegram.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Serial port or pty to listen on (e.g. /dev/ttyUSB0, a `dpctl bus`
+    /// link).
+    #[arg(long, value_name = "PATH")]
+    pub port: String,
+    /// Baud rate of the line (9600 … 12M); irrelevant on a pty.
+    #[arg(long, value_name = "B", default_value = "19200")]
+    pub baud: Baud,
+    /// Print one JSON object per line.
+    #[arg(long)]
+    pub json: bool,
+    /// Record the telegrams to FILE (pcapng, link type 257 PROFIBUS DL).
+    #[arg(long, value_name = "FILE")]
+    pub pcap: Option<PathBuf>,
+    /// Quiet time in ms after which an incomplete telegram is given up
+    /// (default: 5 on a pty; on a serial line twice TSYN, at least 2).
+    #[arg(long, value_name = "MS")]
+    pub idle_ms: Option<f64>,
+}
+
+fn hex(bytes: &[u8]) -> String {
+    let mut s = String::with_capacity(bytes.len() * 3);
+    for (i, b) in bytes.iter().enumerate() {
+        if i > 0 {
+            s.push(' ');
+        }
+        s.push_str(&format!("{b:02X}"));
+    }
+    s
+}
+
+/// The kinds of error in `e`, for humans.
+fn error_text(e: &CodecStats, skipped: usize) -> String {
+    let mut parts = vec![];
+    for (n, what) in [
+        (e.bad_fcs, "bad FCS"),
+        (e.bad_length, "bad length"),
+        (e.bad_end_delimiter, "missing end delimiter"),
+        (e.bad_format, "bad format"),
+        (e.truncated, "truncated"),
+    ] {
+        if n > 0 {
+            parts.push(if n == 1 {
+                what.to_string()
+            } else {
+                format!("{n}× {what}")
+            });
+        }
+    }
+    if e.garbage_bytes > 0 {
+        parts.push(format!("{} garbage bytes", e.garbage_bytes));
+    }
+    if parts.is_empty() {
+        parts.push(format!("{skipped} bytes skipped"));
+    }
+    parts.join(", ")
+}
+
+fn is_pty(path: &str) -> bool {
+    let real = std::fs::canonicalize(path).unwrap_or_else(|_| PathBuf::from(path));
+    let s = real.to_string_lossy();
+    s.starts_with("/dev/pts/") || s.starts_with("/dev/pty") || s == "/dev/ptmx"
+}
+
+struct Printer {
+    json: bool,
+    out: BufWriter<std::io::Stdout>,
+    pcap: Option<PcapWriter<BufWriter<File>>>,
+}
+
+impl Printer {
+    fn event(&mut self, ev: TapEvent) -> Result<()> {
+        match ev {
+            TapEvent::Telegram { at, bytes } => {
+                let us = at.as_nanos() / 1000;
+                // The tap only yields telegrams that parse.
+                let Ok((t, _)) = Telegram::parse(&bytes) else {
+                    return Ok(());
+                };
+                if self.json {
+                    let mut v = describe::json(&t, &bytes);
+                    if let Some(o) = v.as_object_mut() {
+                        o.insert("t_us".into(), us.into());
+                    }
+                    writeln!(self.out, "{v}")?;
+                } else {
+                    writeln!(self.out, "{us:>12} {}", describe::line(&t))?;
+                }
+                if let Some(p) = self.pcap.as_mut() {
+                    p.write_telegram(at, &bytes)
+                        .context("writing the pcap file")?;
+                }
+            }
+            TapEvent::Skipped { at, bytes, errors } => {
+                let us = at.as_nanos() / 1000;
+                let what = error_text(&errors, bytes.len());
+                if self.json {
+                    let v = json!({
+                        "t_us": us,
+                        "error": what,
+                        "skipped": bytes.len(),
+                        "raw": hex(&bytes),
+                        "garbage_bytes": errors.garbage_bytes,
+                        "bad_fcs": errors.bad_fcs,
+                        "bad_length": errors.bad_length,
+                        "bad_end_delimiter": errors.bad_end_delimiter,
+                        "bad_format": errors.bad_format,
+                        "truncated": errors.truncated,
+                    });
+                    writeln!(self.out, "{v}")?;
+                } else {
+                    writeln!(
+                        self.out,
+                        "!! {us:>9} {what}: {} bytes skipped: {}",
+                        bytes.len(),
+                        hex(&bytes)
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn summary(&mut self, s: &CodecStats) -> Result<()> {
+        if self.json {
+            let v = json!({"summary": {
+                "telegrams": s.telegrams,
+                "garbage_bytes": s.garbage_bytes,
+                "bad_fcs": s.bad_fcs,
+                "bad_length": s.bad_length,
+                "bad_end_delimiter": s.bad_end_delimiter,
+                "bad_format": s.bad_format,
+                "truncated": s.truncated,
+            }});
+            writeln!(self.out, "{v}")?;
+        } else {
+            writeln!(
+                self.out,
+                "summary: {} telegrams, {} garbage bytes, {} bad FCS, {} bad length, {} missing end delimiter, {} bad format, {} truncated",
+                s.telegrams,
+                s.garbage_bytes,
+                s.bad_fcs,
+                s.bad_length,
+                s.bad_end_delimiter,
+                s.bad_format,
+                s.truncated
+            )?;
+        }
+        self.out.flush()?;
+        Ok(())
+    }
+}
+
+/// Listen until Ctrl-C / SIGTERM (or until the line goes away).
+pub fn run(args: Args) -> Result<()> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    rt.block_on(sniff(args))
+}
+
+async fn sniff(args: Args) -> Result<()> {
+    let mut port = Port::open(&args.port, args.baud)?;
+    let idle = match args.idle_ms {
+        Some(ms) if ms > 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
+        Some(ms) => {
+            eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
+            std::process::exit(2)
+        }
+        None if is_pty(&args.port) => Duration::from_millis(5),
+        None => (BusParams::defaults(args.baud).bits(33) * 2).max(Duration::from_millis(2)),
+    };
+    let clock = std::time::Instant::now();
+    let epoch = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    let pcap = match &args.pcap {
+        Some(path) => {
+            let f =
+                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+            Some(PcapWriter::new(BufWriter::new(f), epoch)?)
+        }
+        None => None,
+    };
+    let mut printer = Printer {
+        json: args.json,
+        out: BufWriter::new(std::io::stdout()),
+        pcap,
+    };
+    let mut int = signal(SignalKind::interrupt())?;
+    let mut term = signal(SignalKind::terminate())?;
+    let mut tap = Tap::new();
+    let mut buf = [0u8; 4096];
+    let mut failure = None;
+    loop {
+        let wait = async {
+            if tap.pending() > 0 {
+                tokio::time::timeout(idle, port.read(&mut buf)).await
+            } else {
+                Ok(port.read(&mut buf).await)
+            }
+        };
+        tokio::select! {
+            _ = int.recv() => break,
+            _ = term.recv() => break,
+            r = wait => match r {
+                Err(_elapsed) => tap.line_idle(),
+                Ok(Ok(0)) => break,
+                Ok(Ok(n)) => {
+                    let at = Instant::from_nanos(clock.elapsed().as_nanos() as u64);
+                    tap.push(at, &buf[..n]);
+                }
+                Ok(Err(e)) => {
+                    failure = Some(anyhow::Error::new(e).context(format!("reading {}", args.port)));
+                    break;
+                }
+            },
+        }
+        while let Some(ev) = tap.poll() {
+            printer.event(ev)?;
+        }
+        printer.out.flush()?;
+    }
+    tap.line_idle();
+    while let Some(ev) = tap.poll() {
+        printer.event(ev)?;
+    }
+    printer.summary(&tap.stats())?;
+    if let Some(p) = printer.pcap.take() {
+        p.into_inner().context("writing the pcap file")?;
+    }
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}

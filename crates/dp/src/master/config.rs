@@ -1,0 +1,203 @@
+//! Configuration of a DP master and of each slave it polls.
+
+use crate::cfg::{self, CfgError};
+use crate::prm::{PrmStationStatus, SetPrm};
+use profibus_fdl::timing::BusParams;
+use std::time::Duration;
+
+/// How a slave is to be parameterised and configured.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SlaveParams {
+    /// Station address (0..=125).
+    pub address: u8,
+    /// A name for people (from the bus file).
+    pub name: String,
+    /// The slave's ident number (Set_Prm bytes 4-5).
+    pub ident_number: u16,
+    /// Watchdog time; `None` switches the watchdog off.
+    pub watchdog: Option<Duration>,
+    /// Group_Ident bits (bit n = group n+1).
+    pub group: u8,
+    /// Operate the slave in sync mode.
+    pub sync: bool,
+    /// Operate the slave in freeze mode.
+    pub freeze: bool,
+    /// min TSDR the slave is to keep (bit times; 0 = keep its value).
+    pub min_tsdr: u8,
+    /// User_Prm_Data (for DP-V1 slaves starting with DPV1_Status_1..3).
+    pub user_prm_data: Vec<u8>,
+    /// The Chk_Cfg identifier bytes.
+    pub cfg: Vec<u8>,
+    /// DP-V1 slave: WD_Base_1ms may be used, MSAC_C1 allowed.
+    pub dpv1: bool,
+    /// Fail_Safe: in the clear state the slave gets Data_Exchange
+    /// telegrams without outputs instead of zeroed outputs.
+    pub fail_safe: bool,
+    /// Shortest time between two polls of this slave (GSD
+    /// Min_Slave_Intervall × 100 µs).
+    pub min_slave_interval: Duration,
+    /// Outputs sent until the application writes others.
+    pub initial_outputs: Vec<u8>,
+    /// Time a DP-V1 read/write may take (GSD C1_Response_Timeout).
+    pub dpv1_timeout: Duration,
+}
+
+impl SlaveParams {
+    /// A slave at `address` with ident number `ident` and configuration
+    /// `cfg`; watchdog 1 s, group 0, no sync/freeze, no user parameters.
+    pub fn new(address: u8, ident_number: u16, cfg: Vec<u8>) -> SlaveParams {
+        SlaveParams {
+            address,
+            name: format!("slave {address}"),
+            ident_number,
+            watchdog: Some(Duration::from_secs(1)),
+            group: 0,
+            sync: false,
+            freeze: false,
+            min_tsdr: 0,
+            user_prm_data: Vec::new(),
+            cfg,
+            dpv1: false,
+            fail_safe: false,
+            min_slave_interval: Duration::ZERO,
+            initial_outputs: Vec::new(),
+            dpv1_timeout: Duration::from_secs(1),
+        }
+    }
+
+    /// Input and output bytes of the configuration.
+    pub fn io_lengths(&self) -> Result<(usize, usize), CfgError> {
+        let t = cfg::totals(&self.cfg)?;
+        Ok((t.input_bytes, t.output_bytes))
+    }
+
+    /// The watchdog factors for `watchdog`: 10 ms base, or 1 ms base for a
+    /// DP-V1 slave (whose User_Prm_Data carries DPV1_Status_1) when the
+    /// time is short or not a multiple of 10 ms.
+    /// Returns (WD_Fact_1, WD_Fact_2, base_1ms).
+    pub fn watchdog_factors(&self) -> Option<(u8, u8, bool)> {
+        let wd = self.watchdog?;
+        let ms = wd.as_millis().max(1);
+        let can_1ms = self.dpv1 && self.user_prm_data.len() >= 3;
+        let (units, base_1ms) = if can_1ms && (ms < 100 || ms % 10 != 0) && ms <= 65025 {
+            (ms, true)
+        } else {
+            (ms.div_ceil(10).min(65025), false)
+        };
+        let f1 = units.div_ceil(255).max(1);
+        let f2 = units.div_ceil(f1).clamp(1, 255);
+        Some((f1 as u8, f2 as u8, base_1ms))
+    }
+
+    /// The Set_Prm data unit this master sends: Lock_Req, WD_On with the
+    /// watchdog factors, Sync/Freeze_Req, min TSDR, ident, group, then
+    /// User_Prm_Data (with WD_Base_1ms set in DPV1_Status_1 when needed).
+    pub fn set_prm(&self) -> Vec<u8> {
+        let mut status = PrmStationStatus::LOCK_REQ;
+        let (f1, f2, base_1ms) = match self.watchdog_factors() {
+            Some(f) => {
+                status |= PrmStationStatus::WD_ON;
+                f
+            }
+            None => (1, 1, false),
+        };
+        if self.sync {
+            status |= PrmStationStatus::SYNC_REQ;
+        }
+        if self.freeze {
+            status |= PrmStationStatus::FREEZE_REQ;
+        }
+        let mut user = self.user_prm_data.clone();
+        if self.dpv1 && !user.is_empty() {
+            if base_1ms {
+                user[0] |= crate::prm::Dpv1Status1::WD_BASE_1MS.bits();
+            } else {
+                user[0] &= !crate::prm::Dpv1Status1::WD_BASE_1MS.bits();
+            }
+        }
+        let prm = SetPrm {
+            station_status: status,
+            wd_fact_1: f1,
+            wd_fact_2: f2,
+            min_tsdr: self.min_tsdr,
+            ident_number: self.ident_number,
+            group_ident: self.group,
+            user_prm_data: &user,
+        };
+        let mut out = vec![0u8; prm.len()];
+        prm.emit(&mut out);
+        out
+    }
+}
+
+/// Behaviour of the master's poll cycle.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MasterOptions {
+    /// Consecutive cycles without answer before a slave counts as lost.
+    pub lost_after: u8,
+    /// How often a lost slave is probed with Slave_Diag.
+    pub reprobe_interval: Duration,
+    /// Read every slave's diagnosis this often even without DH.
+    pub diag_interval: Option<Duration>,
+    /// Repeat the operate/clear Global_Control this often (the standard's
+    /// Data_Control_Time announcement); `None`: only on changes.
+    pub global_control_interval: Option<Duration>,
+    /// Cycles a slave may stay Station_Not_Ready after Chk_Cfg before it
+    /// is parameterised again.
+    pub not_ready_limit: u16,
+}
+
+impl Default for MasterOptions {
+    fn default() -> Self {
+        MasterOptions {
+            lost_after: 3,
+            reprobe_interval: Duration::from_millis(100),
+            diag_interval: None,
+            global_control_interval: None,
+            not_ready_limit: 100,
+        }
+    }
+}
+
+/// A DP master's configuration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MasterConfig {
+    /// The master's station address.
+    pub address: u8,
+    /// Bus parameters.
+    pub params: BusParams,
+    /// The slaves, polled in this order.
+    pub slaves: Vec<SlaveParams>,
+    /// Poll-cycle behaviour.
+    pub options: MasterOptions,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn watchdog_factors() {
+        let mut s = SlaveParams::new(5, 0x0008, vec![0x73]);
+        s.watchdog = Some(Duration::from_millis(300));
+        assert_eq!(s.watchdog_factors(), Some((1, 30, false)));
+        s.watchdog = Some(Duration::from_secs(100));
+        let (f1, f2, _) = s.watchdog_factors().unwrap();
+        assert!(f1 as u32 * f2 as u32 * 10 >= 100_000);
+        s.dpv1 = true;
+        s.user_prm_data = vec![0x80, 0, 0];
+        s.watchdog = Some(Duration::from_millis(25));
+        assert_eq!(s.watchdog_factors(), Some((1, 25, true)));
+    }
+
+    #[test]
+    fn set_prm_bytes() {
+        let mut s = SlaveParams::new(5, 0x0A35, vec![0x10]);
+        s.watchdog = Some(Duration::from_millis(300));
+        s.sync = true;
+        s.group = 1;
+        s.user_prm_data = vec![0x82, 0, 0];
+        let p = s.set_prm();
+        assert_eq!(p, vec![0xA8, 1, 30, 0, 0x0A, 0x35, 1, 0x82, 0, 0]);
+    }
+}

@@ -1,0 +1,1100 @@
+//! The DP master (DPM1, with class-2 services and DP-V1 class-1
+//! read/write), as a sans-IO core.
+//!
+//! [`DpMaster`] is the application of an FDL active station
+//! ([`profibus_fdl::station::active::ActiveStation`]): it runs inside the
+//! token hold time, so a master shares its bus with other masters.
+//!
+//! Per slave it walks the start-up sequence of the standard (reference
+//! §11): **Slave_Diag → Set_Prm → Chk_Cfg → Slave_Diag** (until the slave
+//! reports no Station_Not_Ready, Cfg_Fault, Prm_Fault, Prm_Req or
+//! Stat_Diag and names this master in Master_Add) **→ Data_Exchange**.
+//! Faults send it back to the right step: Prm_Req or an RS answer to
+//! Data_Exchange to Set_Prm; Prm_Fault/Cfg_Fault are reported in words and
+//! the slave is parameterised again; a slave locked by another master is
+//! left alone and watched. A slave that stops answering for
+//! [`MasterOptions::lost_after`] cycles is *lost*: it is probed with
+//! Slave_Diag every [`MasterOptions::reprobe_interval`] and parameterised
+//! again as soon as it answers. A "data high" (DH) answer to
+//! Data_Exchange makes the next poll of that slave a Slave_Diag.
+//!
+//! One **poll cycle** is one pass over all slaves; a pass that the token
+//! hold time cuts short continues at the next token visit. After the pass
+//! the master sends at most one acyclic request per token visit: queued
+//! Global_Control commands, class-2 services ([`Job`]) and DP-V1
+//! MSAC_C1 read/write, which is polled until the slave's answer is ready.
+//!
+//! The master owns the process images: [`DpMaster::inputs`] and
+//! [`DpMaster::set_outputs`] read and write them between calls; nothing is
+//! allocated per cycle in the steady state. What changes is reported as
+//! [`MasterEvent`]s ([`DpMaster::poll_event`]).
+
+mod config;
+
+pub use config::{MasterConfig, MasterOptions, SlaveParams};
+
+use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
+use crate::diag::SlaveDiag;
+use crate::dpv1::{Dpv1Error, Pdu};
+use crate::sap;
+use profibus_fdl::station::active::{
+    CycleResult, FdlEvent, MasterApp, Outcome, Request, Service, TokenContext,
+};
+use profibus_fdl::time::Instant;
+use profibus_fdl::wire::{consts, ResponseStatus};
+use std::collections::VecDeque;
+use std::time::Duration;
+
+/// Where a slave is in the master's start-up sequence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SlaveState {
+    /// Not answering; probed with Slave_Diag now and then.
+    Offline,
+    /// First Slave_Diag of the start-up sequence.
+    Diag,
+    /// Set_Prm sent next.
+    SetPrm,
+    /// Chk_Cfg sent next.
+    ChkCfg,
+    /// Slave_Diag until the slave is ready for data exchange.
+    CheckDiag,
+    /// Cyclic Data_Exchange.
+    DataExchange,
+    /// Parameterised by another master; watched with Slave_Diag.
+    Locked,
+}
+
+impl SlaveState {
+    /// Name for people and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            SlaveState::Offline => "offline",
+            SlaveState::Diag => "diag",
+            SlaveState::SetPrm => "set_prm",
+            SlaveState::ChkCfg => "chk_cfg",
+            SlaveState::CheckDiag => "check_diag",
+            SlaveState::DataExchange => "data_exchange",
+            SlaveState::Locked => "locked",
+        }
+    }
+}
+
+/// Operating state of the master (DPM1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum OperatingState {
+    /// No data exchange; slaves are only parameterised and watched.
+    Stop,
+    /// Data exchange with outputs cleared (zero, or no outputs for
+    /// Fail_Safe slaves); Global_Control announces Clear_Data.
+    Clear,
+    /// Data exchange with the application's outputs.
+    Operate,
+}
+
+/// A class-2 service or DP-V1 request for one slave.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Job {
+    /// Slave_Diag of any slave.
+    ReadDiag {
+        /// Station address.
+        address: u8,
+    },
+    /// Get_Cfg: the slave's real configuration.
+    GetCfg {
+        /// Station address.
+        address: u8,
+    },
+    /// Rd_Inp: the slave's inputs.
+    RdInp {
+        /// Station address.
+        address: u8,
+    },
+    /// Rd_Outp: the slave's outputs.
+    RdOutp {
+        /// Station address.
+        address: u8,
+    },
+    /// Set_Slave_Add: give the slave at `address` a new address.
+    SetSlaveAdd {
+        /// Current station address.
+        address: u8,
+        /// New address.
+        new_address: u8,
+        /// The slave's ident number.
+        ident_number: u16,
+        /// Forbid further address changes.
+        no_add_chg: bool,
+    },
+    /// DP-V1 MSAC_C1 Read (slave must be in Data_Exchange with us).
+    Dpv1Read {
+        /// Station address.
+        address: u8,
+        /// Slot.
+        slot: u8,
+        /// Index.
+        index: u8,
+        /// Bytes wanted.
+        length: u8,
+    },
+    /// DP-V1 MSAC_C1 Write.
+    Dpv1Write {
+        /// Station address.
+        address: u8,
+        /// Slot.
+        slot: u8,
+        /// Index.
+        index: u8,
+        /// Data.
+        data: Vec<u8>,
+    },
+}
+
+impl Job {
+    /// The slave the job is for.
+    pub fn address(&self) -> u8 {
+        match *self {
+            Job::ReadDiag { address }
+            | Job::GetCfg { address }
+            | Job::RdInp { address }
+            | Job::RdOutp { address }
+            | Job::SetSlaveAdd { address, .. }
+            | Job::Dpv1Read { address, .. }
+            | Job::Dpv1Write { address, .. } => address,
+        }
+    }
+}
+
+/// Identifies a submitted [`Job`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct JobId(pub u32);
+
+/// How a [`Job`] ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum JobResult {
+    /// Data returned (diagnosis, configuration, inputs, outputs, DP-V1
+    /// read data).
+    Data(Vec<u8>),
+    /// Done without data (Set_Slave_Add, DP-V1 write).
+    Done,
+    /// The slave answered with a negative acknowledge.
+    Refused(ResponseStatus),
+    /// DP-V1 error response.
+    Dpv1Error(Dpv1Error),
+    /// No answer.
+    NoResponse,
+    /// The DP-V1 answer did not come within the timeout.
+    Timeout,
+    /// The job needs the slave in Data_Exchange with this master.
+    NotInDataExchange,
+    /// The answer could not be decoded.
+    BadResponse(String),
+}
+
+impl JobResult {
+    /// The result in words.
+    pub fn describe(&self) -> String {
+        match self {
+            JobResult::Data(d) => format!("{} bytes", d.len()),
+            JobResult::Done => "done".into(),
+            JobResult::Refused(s) => format!("refused by the slave ({})", s.mnemonic()),
+            JobResult::Dpv1Error(e) => e.describe(),
+            JobResult::NoResponse => "no response".into(),
+            JobResult::Timeout => "timeout".into(),
+            JobResult::NotInDataExchange => "slave not in data exchange with this master".into(),
+            JobResult::BadResponse(s) => format!("bad response: {s}"),
+        }
+    }
+}
+
+/// What the master reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// A slave changed state.
+    StateChanged {
+        /// Station address.
+        address: u8,
+        /// Previous state.
+        from: SlaveState,
+        /// New state.
+        to: SlaveState,
+    },
+    /// A slave's diagnosis changed; read it with [`DpMaster::diag`].
+    Diag {
+        /// Station address.
+        address: u8,
+    },
+    /// A slave reported a parameterisation or configuration fault.
+    Fault {
+        /// Station address.
+        address: u8,
+        /// The fault in words.
+        reason: String,
+    },
+    /// A job ended; take its result with [`DpMaster::take_result`].
+    JobDone(JobId),
+    /// The token ring changed.
+    Ring(FdlEvent),
+}
+
+/// Counters of one slave.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SlaveStats {
+    /// Data_Exchange cycles completed.
+    pub data_exchanges: u64,
+    /// Request repetitions at layer 2.
+    pub retries: u64,
+    /// Requests that got no answer.
+    pub errors: u64,
+    /// Times the start-up sequence began again.
+    pub restarts: u64,
+    /// Slave_Diag reads.
+    pub diag_reads: u64,
+}
+
+/// Poll-cycle statistics.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CycleStats {
+    /// Completed cycles.
+    pub cycles: u64,
+    /// Shortest cycle (ns).
+    pub min_ns: u64,
+    /// Longest cycle (ns).
+    pub max_ns: u64,
+    /// Sum of cycle times (ns).
+    pub sum_ns: u64,
+}
+
+impl CycleStats {
+    /// Average cycle time.
+    pub fn avg(&self) -> Duration {
+        Duration::from_nanos(self.sum_ns.checked_div(self.cycles).unwrap_or(0))
+    }
+}
+
+#[derive(Debug)]
+struct Slave {
+    p: SlaveParams,
+    prm: Vec<u8>,
+    input_len: usize,
+    output_len: usize,
+    state: SlaveState,
+    inputs: Vec<u8>,
+    outputs: Vec<u8>,
+    diag: Vec<u8>,
+    need_diag: bool,
+    fails: u8,
+    not_ready: u16,
+    next_probe: Instant,
+    last_poll: Option<Instant>,
+    last_diag: Instant,
+    stats: SlaveStats,
+}
+
+/// What the request in flight was for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Inflight {
+    Slave(usize, Step),
+    GlobalControl,
+    Job,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    Diag,
+    SetPrm,
+    ChkCfg,
+    DataExchange,
+}
+
+#[derive(Debug)]
+struct ActiveJob {
+    id: JobId,
+    job: Job,
+    /// DP-V1: request accepted, polling for the answer since this time.
+    polling_since: Option<Instant>,
+    buf: Vec<u8>,
+}
+
+/// Error building a master from its configuration.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MasterConfigError {
+    /// Two slaves share an address.
+    #[error("two slaves use address {0}")]
+    DuplicateAddress(u8),
+    /// A slave address is out of range or the master's own.
+    #[error("slave address {0} is invalid (0..=125, not the master's own)")]
+    BadAddress(u8),
+    /// The configuration bytes of a slave cannot be decoded.
+    #[error("slave {address}: {error}")]
+    Cfg {
+        /// Station address.
+        address: u8,
+        /// The error.
+        error: crate::cfg::CfgError,
+    },
+    /// A slave's I/O exceeds 244 bytes in one direction.
+    #[error("slave {address}: {input} input / {output} output bytes exceed 244")]
+    TooLong {
+        /// Station address.
+        address: u8,
+        /// Input bytes.
+        input: usize,
+        /// Output bytes.
+        output: usize,
+    },
+    /// The Set_Prm data unit would exceed 244 bytes.
+    #[error("slave {0}: Set_Prm exceeds 244 bytes")]
+    PrmTooLong(u8),
+}
+
+const EVENT_LIMIT: usize = 1024;
+const JOB_LIMIT: usize = 64;
+
+/// The DP master core; see the module docs.
+#[derive(Debug)]
+pub struct DpMaster {
+    address: u8,
+    options: MasterOptions,
+    slaves: Vec<Slave>,
+    index: [u8; 128],
+    cursor: usize,
+    cycle_start: Option<Instant>,
+    cycle_stats: CycleStats,
+    state: OperatingState,
+    inflight: Option<Inflight>,
+    gc_queue: VecDeque<GlobalControl>,
+    gc_bytes: [u8; 2],
+    next_gc: Option<Instant>,
+    jobs: VecDeque<(JobId, Job)>,
+    active_job: Option<ActiveJob>,
+    results: Vec<(JobId, JobResult)>,
+    next_job_id: u32,
+    events: VecDeque<MasterEvent>,
+    events_dropped: u64,
+    job_sent_this_visit: bool,
+    zeros: [u8; 244],
+    req: [u8; 248],
+}
+
+const NO_SLAVE: u8 = 0xFF;
+
+impl DpMaster {
+    /// A master polling the slaves of `cfg`, starting in [`OperatingState::Operate`].
+    pub fn new(cfg: &MasterConfig) -> Result<DpMaster, MasterConfigError> {
+        let mut index = [NO_SLAVE; 128];
+        let mut slaves = Vec::with_capacity(cfg.slaves.len());
+        for (i, p) in cfg.slaves.iter().enumerate() {
+            if p.address > 125 || p.address == cfg.address {
+                return Err(MasterConfigError::BadAddress(p.address));
+            }
+            if index[p.address as usize] != NO_SLAVE {
+                return Err(MasterConfigError::DuplicateAddress(p.address));
+            }
+            index[p.address as usize] = i as u8;
+            let (input_len, output_len) =
+                p.io_lengths().map_err(|error| MasterConfigError::Cfg {
+                    address: p.address,
+                    error,
+                })?;
+            if input_len > 244 || output_len > 244 {
+                return Err(MasterConfigError::TooLong {
+                    address: p.address,
+                    input: input_len,
+                    output: output_len,
+                });
+            }
+            let prm = p.set_prm();
+            if prm.len() > 244 {
+                return Err(MasterConfigError::PrmTooLong(p.address));
+            }
+            let mut outputs = vec![0u8; output_len];
+            let n = p.initial_outputs.len().min(output_len);
+            outputs[..n].copy_from_slice(&p.initial_outputs[..n]);
+            slaves.push(Slave {
+                p: p.clone(),
+                prm,
+                input_len,
+                output_len,
+                state: SlaveState::Diag,
+                inputs: vec![0u8; input_len],
+                outputs,
+                diag: Vec::with_capacity(244),
+                need_diag: false,
+                fails: 0,
+                not_ready: 0,
+                next_probe: Instant::ZERO,
+                last_poll: None,
+                last_diag: Instant::ZERO,
+                stats: SlaveStats::default(),
+            });
+        }
+        Ok(DpMaster {
+            address: cfg.address,
+            options: cfg.options.clone(),
+            slaves,
+            index,
+            cursor: 0,
+            cycle_start: None,
+            cycle_stats: CycleStats::default(),
+            state: OperatingState::Operate,
+            inflight: None,
+            gc_queue: VecDeque::with_capacity(16),
+            gc_bytes: [0; 2],
+            next_gc: None,
+            jobs: VecDeque::with_capacity(JOB_LIMIT),
+            active_job: None,
+            results: Vec::new(),
+            next_job_id: 1,
+            events: VecDeque::with_capacity(EVENT_LIMIT),
+            events_dropped: 0,
+            job_sent_this_visit: false,
+            zeros: [0; 244],
+            req: [0; 248],
+        })
+    }
+
+    /// The master's own address.
+    pub fn address(&self) -> u8 {
+        self.address
+    }
+
+    /// Addresses of the configured slaves, in poll order.
+    pub fn slave_addresses(&self) -> impl Iterator<Item = u8> + '_ {
+        self.slaves.iter().map(|s| s.p.address)
+    }
+
+    fn slave(&self, address: u8) -> Option<&Slave> {
+        let i = *self.index.get(address as usize)?;
+        self.slaves.get(i as usize)
+    }
+
+    /// The configuration of a slave.
+    pub fn slave_params(&self, address: u8) -> Option<&SlaveParams> {
+        self.slave(address).map(|s| &s.p)
+    }
+
+    /// A slave's state.
+    pub fn slave_state(&self, address: u8) -> Option<SlaveState> {
+        self.slave(address).map(|s| s.state)
+    }
+
+    /// A slave's input image (the last inputs received).
+    pub fn inputs(&self, address: u8) -> Option<&[u8]> {
+        self.slave(address).map(|s| &s.inputs[..])
+    }
+
+    /// A slave's output image.
+    pub fn outputs(&self, address: u8) -> Option<&[u8]> {
+        self.slave(address).map(|s| &s.outputs[..])
+    }
+
+    /// Write a slave's outputs (copied into its image; shorter data leave
+    /// the rest unchanged, longer data are cut). Returns false for an
+    /// unknown slave.
+    pub fn set_outputs(&mut self, address: u8, data: &[u8]) -> bool {
+        let Some(&i) = self.index.get(address as usize) else {
+            return false;
+        };
+        let Some(s) = self.slaves.get_mut(i as usize) else {
+            return false;
+        };
+        let n = data.len().min(s.output_len);
+        s.outputs[..n].copy_from_slice(&data[..n]);
+        true
+    }
+
+    /// The last diagnosis read from a slave (empty before the first).
+    pub fn diag(&self, address: u8) -> Option<&[u8]> {
+        self.slave(address).map(|s| &s.diag[..])
+    }
+
+    /// A slave's counters.
+    pub fn slave_stats(&self, address: u8) -> Option<SlaveStats> {
+        self.slave(address).map(|s| s.stats)
+    }
+
+    /// Poll-cycle statistics.
+    pub fn cycle_stats(&self) -> CycleStats {
+        self.cycle_stats
+    }
+
+    /// Operating state.
+    pub fn operating_state(&self) -> OperatingState {
+        self.state
+    }
+
+    /// Change the operating state; Clear and Operate are announced with a
+    /// Global_Control to all slaves.
+    pub fn set_operating_state(&mut self, state: OperatingState) {
+        if state == self.state {
+            return;
+        }
+        self.state = state;
+        let command = if state == OperatingState::Clear {
+            ControlCommand::CLEAR_DATA
+        } else {
+            ControlCommand::empty()
+        };
+        if state != OperatingState::Stop {
+            self.global_control(command, 0);
+        }
+    }
+
+    /// Queue a Global_Control (sync/unsync, freeze/unfreeze, clear) for
+    /// the groups in `group_select` (0 = all). The Clear_Data bit follows
+    /// the operating state. Returns false when the queue is full.
+    pub fn global_control(&mut self, command: ControlCommand, group_select: u8) -> bool {
+        if self.gc_queue.len() >= 16 {
+            return false;
+        }
+        let mut command = command;
+        command.set(
+            ControlCommand::CLEAR_DATA,
+            self.state == OperatingState::Clear,
+        );
+        self.gc_queue.push_back(GlobalControl {
+            command,
+            group_select,
+        });
+        true
+    }
+
+    /// Queue a class-2 service or DP-V1 request. `None` when the queue is
+    /// full.
+    pub fn submit(&mut self, job: Job) -> Option<JobId> {
+        if self.jobs.len() >= JOB_LIMIT {
+            return None;
+        }
+        let id = JobId(self.next_job_id);
+        self.next_job_id = self.next_job_id.wrapping_add(1);
+        self.jobs.push_back((id, job));
+        Some(id)
+    }
+
+    /// Take the result of a finished job.
+    pub fn take_result(&mut self, id: JobId) -> Option<JobResult> {
+        let i = self.results.iter().position(|(j, _)| *j == id)?;
+        Some(self.results.swap_remove(i).1)
+    }
+
+    /// Whether jobs are queued or running.
+    pub fn jobs_pending(&self) -> bool {
+        !self.jobs.is_empty() || self.active_job.is_some()
+    }
+
+    /// The next event.
+    pub fn poll_event(&mut self) -> Option<MasterEvent> {
+        self.events.pop_front()
+    }
+
+    /// Events lost because nobody fetched them (the queue holds 1024).
+    pub fn events_dropped(&self) -> u64 {
+        self.events_dropped
+    }
+
+    fn emit(&mut self, e: MasterEvent) {
+        if self.events.len() >= EVENT_LIMIT {
+            self.events.pop_front();
+            self.events_dropped += 1;
+        }
+        self.events.push_back(e);
+    }
+
+    fn set_state(&mut self, i: usize, to: SlaveState) {
+        let from = self.slaves[i].state;
+        if from == to {
+            return;
+        }
+        let s = &mut self.slaves[i];
+        s.state = to;
+        if to == SlaveState::Diag && from != SlaveState::Offline {
+            s.stats.restarts += 1;
+        }
+        if to != SlaveState::DataExchange {
+            s.need_diag = false;
+        }
+        let address = s.p.address;
+        tracing::debug!(address, from = from.name(), to = to.name(), "slave state");
+        self.emit(MasterEvent::StateChanged { address, from, to });
+    }
+
+    /// Whether slave `i` is to be polled in this pass at `now`.
+    fn due(&self, i: usize, now: Instant) -> bool {
+        let s = &self.slaves[i];
+        if s.state == SlaveState::Offline || s.state == SlaveState::Locked {
+            return now >= s.next_probe;
+        }
+        match s.last_poll {
+            Some(t) => now >= t + s.p.min_slave_interval,
+            None => true,
+        }
+    }
+
+    fn slave_request(&mut self, i: usize, now: Instant) -> Request<'_> {
+        let periodic_diag = self
+            .options
+            .diag_interval
+            .is_some_and(|d| now >= self.slaves[i].last_diag + d);
+        let stop = self.state == OperatingState::Stop;
+        let s = &mut self.slaves[i];
+        s.last_poll = Some(now);
+        let da = s.p.address;
+        let diag = |da| Request {
+            da,
+            service: Service::SrdHigh,
+            dsap: Some(sap::SLAVE_DIAG),
+            ssap: Some(sap::MASTER),
+            data: &[],
+        };
+        let (step, req) = match s.state {
+            SlaveState::Offline | SlaveState::Diag | SlaveState::CheckDiag | SlaveState::Locked => {
+                (Step::Diag, diag(da))
+            }
+            SlaveState::DataExchange if s.need_diag || periodic_diag || stop => {
+                (Step::Diag, diag(da))
+            }
+            SlaveState::SetPrm => (
+                Step::SetPrm,
+                Request {
+                    da,
+                    service: Service::SrdHigh,
+                    dsap: Some(sap::SET_PRM),
+                    ssap: Some(sap::MASTER),
+                    data: &s.prm,
+                },
+            ),
+            SlaveState::ChkCfg => (
+                Step::ChkCfg,
+                Request {
+                    da,
+                    service: Service::SrdHigh,
+                    dsap: Some(sap::CHK_CFG),
+                    ssap: Some(sap::MASTER),
+                    data: &s.p.cfg,
+                },
+            ),
+            SlaveState::DataExchange => {
+                let data: &[u8] = match self.state {
+                    OperatingState::Operate => &s.outputs,
+                    _ if s.p.fail_safe => &[],
+                    _ => &self.zeros[..s.output_len],
+                };
+                (
+                    Step::DataExchange,
+                    Request {
+                        da,
+                        service: Service::SrdHigh,
+                        dsap: None,
+                        ssap: None,
+                        data,
+                    },
+                )
+            }
+        };
+        self.inflight = Some(Inflight::Slave(i, step));
+        req
+    }
+
+    fn slave_failed(&mut self, i: usize, now: Instant) {
+        let lost_after = self.options.lost_after.max(1);
+        let reprobe = self.options.reprobe_interval;
+        let s = &mut self.slaves[i];
+        s.stats.errors += 1;
+        s.fails = s.fails.saturating_add(1);
+        match s.state {
+            SlaveState::Offline | SlaveState::Locked => s.next_probe = now + reprobe,
+            _ if s.fails >= lost_after => {
+                s.next_probe = now + reprobe;
+                self.set_state(i, SlaveState::Offline);
+            }
+            _ => {}
+        }
+    }
+
+    fn slave_result(&mut self, i: usize, step: Step, now: Instant, r: &CycleResult<'_>) {
+        self.slaves[i].stats.retries += r.retries as u64;
+        let acked = matches!(
+            r.outcome,
+            Outcome::ShortAck
+                | Outcome::Response {
+                    status: ResponseStatus::Ok,
+                    ..
+                }
+        );
+        match (step, r.outcome) {
+            (_, Outcome::NoResponse) => self.slave_failed(i, now),
+            (Step::Diag, Outcome::Response { data, status, .. }) if !status.is_negative() => {
+                self.slaves[i].fails = 0;
+                self.on_diag(i, data, now);
+            }
+            (Step::SetPrm, _) if acked => {
+                self.slaves[i].fails = 0;
+                self.set_state(i, SlaveState::ChkCfg);
+            }
+            (Step::ChkCfg, _) if acked => {
+                self.slaves[i].fails = 0;
+                self.slaves[i].not_ready = 0;
+                self.set_state(i, SlaveState::CheckDiag);
+            }
+            (
+                Step::DataExchange,
+                Outcome::Response {
+                    status: status @ (ResponseStatus::Dl | ResponseStatus::Dh),
+                    data,
+                    ..
+                },
+            ) => {
+                let s = &mut self.slaves[i];
+                s.fails = 0;
+                s.stats.data_exchanges += 1;
+                let n = data.len().min(s.input_len);
+                s.inputs[..n].copy_from_slice(&data[..n]);
+                if status == ResponseStatus::Dh {
+                    s.need_diag = true;
+                }
+            }
+            (Step::DataExchange, Outcome::ShortAck) => {
+                let s = &mut self.slaves[i];
+                s.fails = 0;
+                s.stats.data_exchanges += 1;
+            }
+            (_, Outcome::Response { status, .. }) => {
+                // A negative answer: the slave is not in the state we
+                // thought (e.g. RS to Data_Exchange after a restart).
+                let address = self.slaves[i].p.address;
+                self.slaves[i].fails = 0;
+                tracing::info!(
+                    address,
+                    status = status.mnemonic(),
+                    ?step,
+                    "negative answer"
+                );
+                self.set_state(i, SlaveState::Diag);
+            }
+            (_, Outcome::ShortAck | Outcome::Sent) => {
+                // SC to Slave_Diag: no diagnosis data; ask again.
+                self.slaves[i].fails = 0;
+            }
+        }
+    }
+
+    fn on_diag(&mut self, i: usize, data: &[u8], now: Instant) {
+        let me = self.address;
+        let s = &mut self.slaves[i];
+        s.stats.diag_reads += 1;
+        s.last_diag = now;
+        s.need_diag = false;
+        let changed = s.diag != data;
+        if changed {
+            s.diag.clear();
+            s.diag.extend_from_slice(&data[..data.len().min(244)]);
+        }
+        let address = s.p.address;
+        if changed {
+            self.emit(MasterEvent::Diag { address });
+        }
+        let Ok(d) = SlaveDiag::parse(data) else {
+            self.emit(MasterEvent::Fault {
+                address,
+                reason: format!("diagnosis of {} bytes is too short", data.len()),
+            });
+            self.set_state(i, SlaveState::Diag);
+            return;
+        };
+        use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
+        let state = self.slaves[i].state;
+        let ident = self.slaves[i].p.ident_number;
+        let locked_by_other = d.master_address != crate::diag::NO_MASTER
+            && d.master_address != me
+            && !d.status2.contains(S2::PRM_REQ);
+        match state {
+            SlaveState::Offline | SlaveState::Diag | SlaveState::Locked => {
+                if locked_by_other {
+                    // Parameterised by another master: hands off.
+                    let reprobe = self.options.reprobe_interval;
+                    self.slaves[i].next_probe = now + reprobe;
+                    self.set_state(i, SlaveState::Locked);
+                } else {
+                    if d.ident_number != ident {
+                        self.emit(MasterEvent::Fault {
+                            address,
+                            reason: format!(
+                                "slave reports ident number 0x{:04X}, the configuration expects 0x{ident:04X}",
+                                d.ident_number
+                            ),
+                        });
+                    }
+                    if state == SlaveState::Offline || state == SlaveState::Locked {
+                        self.set_state(i, SlaveState::Diag);
+                    }
+                    self.set_state(i, SlaveState::SetPrm);
+                }
+            }
+            SlaveState::CheckDiag => {
+                if d.ready_for(me) {
+                    self.set_state(i, SlaveState::DataExchange);
+                } else if d
+                    .status1
+                    .intersects(S1::PRM_FAULT | S1::CFG_FAULT | S1::NOT_SUPPORTED)
+                {
+                    self.emit(MasterEvent::Fault {
+                        address,
+                        reason: d.status_words(),
+                    });
+                    self.set_state(i, SlaveState::Diag);
+                } else if d.status2.contains(S2::PRM_REQ) || locked_by_other {
+                    self.set_state(i, SlaveState::Diag);
+                } else {
+                    let limit = self.options.not_ready_limit;
+                    let s = &mut self.slaves[i];
+                    s.not_ready += 1;
+                    if s.not_ready > limit {
+                        self.set_state(i, SlaveState::Diag);
+                    }
+                }
+            }
+            SlaveState::DataExchange => {
+                if !d.ready_for(me) && !d.status2.contains(S2::STAT_DIAG) {
+                    if d.status1.intersects(S1::PRM_FAULT | S1::CFG_FAULT) {
+                        self.emit(MasterEvent::Fault {
+                            address,
+                            reason: d.status_words(),
+                        });
+                    }
+                    self.set_state(i, SlaveState::Diag);
+                } else if d.status2.contains(S2::STAT_DIAG) {
+                    // Static diagnosis: keep reading it, no data exchange.
+                    self.slaves[i].need_diag = true;
+                }
+            }
+            SlaveState::SetPrm | SlaveState::ChkCfg => {}
+        }
+    }
+
+    fn job_request(&mut self) -> Option<Request<'_>> {
+        if self.active_job.is_none() {
+            let (id, job) = self.jobs.pop_front()?;
+            // DP-V1 needs the slave in data exchange with us.
+            if matches!(job, Job::Dpv1Read { .. } | Job::Dpv1Write { .. })
+                && self.slave_state(job.address()) != Some(SlaveState::DataExchange)
+            {
+                self.finish_job(id, JobResult::NotInDataExchange);
+                return None;
+            }
+            self.active_job = Some(ActiveJob {
+                id,
+                job,
+                polling_since: None,
+                buf: Vec::new(),
+            });
+        }
+        let j = self.active_job.as_mut()?;
+        let da = j.job.address();
+        let (dsap, ssap, len) = match (&j.job, j.polling_since) {
+            (Job::ReadDiag { .. }, _) => (sap::SLAVE_DIAG, sap::MASTER, 0),
+            (Job::GetCfg { .. }, _) => (sap::GET_CFG, sap::MASTER, 0),
+            (Job::RdInp { .. }, _) => (sap::RD_INP, sap::MASTER, 0),
+            (Job::RdOutp { .. }, _) => (sap::RD_OUTP, sap::MASTER, 0),
+            (
+                Job::SetSlaveAdd {
+                    new_address,
+                    ident_number,
+                    no_add_chg,
+                    ..
+                },
+                _,
+            ) => {
+                let n = SetSlaveAdd {
+                    new_address: *new_address,
+                    ident_number: *ident_number,
+                    no_add_chg: *no_add_chg,
+                    rem_slave_data: &[],
+                }
+                .emit(&mut self.req)
+                .unwrap_or(0);
+                (sap::SET_SLAVE_ADD, sap::MASTER, n)
+            }
+            (Job::Dpv1Read { .. } | Job::Dpv1Write { .. }, Some(_)) => {
+                (sap::MSAC_C1, sap::MSAC_C1, 0)
+            }
+            (
+                Job::Dpv1Read {
+                    slot,
+                    index,
+                    length,
+                    ..
+                },
+                None,
+            ) => {
+                let n = Pdu::ReadReq {
+                    slot: *slot,
+                    index: *index,
+                    length: *length,
+                }
+                .emit(&mut self.req)
+                .unwrap_or(0);
+                (sap::MSAC_C1, sap::MSAC_C1, n)
+            }
+            (
+                Job::Dpv1Write {
+                    slot, index, data, ..
+                },
+                None,
+            ) => {
+                let n = Pdu::WriteReq {
+                    slot: *slot,
+                    index: *index,
+                    data,
+                }
+                .emit(&mut self.req)
+                .unwrap_or(0);
+                (sap::MSAC_C1, sap::MSAC_C1, n)
+            }
+        };
+        self.inflight = Some(Inflight::Job);
+        Some(Request {
+            da,
+            service: Service::SrdHigh,
+            dsap: Some(dsap),
+            ssap: Some(ssap),
+            data: &self.req[..len],
+        })
+    }
+
+    fn finish_job(&mut self, id: JobId, result: JobResult) {
+        if self.results.len() >= JOB_LIMIT {
+            self.results.remove(0);
+        }
+        self.results.push((id, result));
+        self.emit(MasterEvent::JobDone(id));
+    }
+
+    fn job_result(&mut self, now: Instant, r: &CycleResult<'_>) {
+        let Some(mut j) = self.active_job.take() else {
+            return;
+        };
+        let dpv1 = matches!(j.job, Job::Dpv1Read { .. } | Job::Dpv1Write { .. });
+        let result = match r.outcome {
+            Outcome::NoResponse => Some(JobResult::NoResponse),
+            Outcome::Sent => Some(JobResult::NoResponse),
+            Outcome::ShortAck if dpv1 => {
+                // Accepted; the answer is not ready yet: poll on.
+                let since = *j.polling_since.get_or_insert(now);
+                let timeout = self
+                    .slave(j.job.address())
+                    .map_or(Duration::from_secs(1), |s| s.p.dpv1_timeout);
+                (now >= since + timeout).then_some(JobResult::Timeout)
+            }
+            Outcome::ShortAck => Some(match j.job {
+                Job::SetSlaveAdd { .. } => JobResult::Done,
+                _ => JobResult::Data(Vec::new()),
+            }),
+            Outcome::Response { status, data, .. } => Some(if status.is_negative() {
+                JobResult::Refused(status)
+            } else if dpv1 {
+                match Pdu::parse_response(data) {
+                    Ok(Pdu::ReadRes { data, .. }) => JobResult::Data(data.to_vec()),
+                    Ok(Pdu::WriteRes { .. }) => JobResult::Done,
+                    Ok(Pdu::Error(e)) => JobResult::Dpv1Error(e),
+                    Ok(other) => JobResult::BadResponse(format!("unexpected {other:?}")),
+                    Err(e) => JobResult::BadResponse(e.to_string()),
+                }
+            } else if let Job::SetSlaveAdd { .. } = j.job {
+                JobResult::Done
+            } else {
+                j.buf.clear();
+                j.buf.extend_from_slice(data);
+                JobResult::Data(std::mem::take(&mut j.buf))
+            }),
+        };
+        match result {
+            Some(res) => self.finish_job(j.id, res),
+            None => self.active_job = Some(j),
+        }
+    }
+
+    fn start_visit(&mut self, now: Instant) {
+        self.job_sent_this_visit = false;
+        if self.cursor >= self.slaves.len() {
+            self.cursor = 0;
+            if let Some(start) = self.cycle_start {
+                let ns = (now - start).as_nanos() as u64;
+                let c = &mut self.cycle_stats;
+                c.min_ns = if c.cycles == 0 { ns } else { c.min_ns.min(ns) };
+                c.max_ns = c.max_ns.max(ns);
+                c.sum_ns += ns;
+                c.cycles += 1;
+            }
+            self.cycle_start = Some(now);
+        }
+        if let Some(iv) = self.options.global_control_interval {
+            if self.state != OperatingState::Stop
+                && self.next_gc.is_none_or(|t| now >= t)
+                && self.gc_queue.is_empty()
+            {
+                self.next_gc = Some(now + iv);
+                let command = if self.state == OperatingState::Clear {
+                    ControlCommand::CLEAR_DATA
+                } else {
+                    ControlCommand::empty()
+                };
+                self.gc_queue.push_back(GlobalControl {
+                    command,
+                    group_select: 0,
+                });
+            }
+        }
+    }
+}
+
+impl MasterApp for DpMaster {
+    fn poll_request(&mut self, ctx: &TokenContext) -> Option<Request<'_>> {
+        let now = ctx.now;
+        if ctx.cycles == 0 {
+            self.start_visit(now);
+        }
+        // Global_Control first: broadcast SDN.
+        if let Some(gc) = self.gc_queue.pop_front() {
+            self.gc_bytes = gc.to_bytes();
+            self.inflight = Some(Inflight::GlobalControl);
+            return Some(Request {
+                da: consts::BROADCAST,
+                service: Service::SdnHigh,
+                dsap: Some(sap::GLOBAL_CONTROL),
+                ssap: Some(sap::MASTER),
+                data: &self.gc_bytes,
+            });
+        }
+        while self.cursor < self.slaves.len() {
+            let i = self.cursor;
+            self.cursor += 1;
+            if self.due(i, now) {
+                return Some(self.slave_request(i, now));
+            }
+        }
+        if ctx.high_only {
+            return None;
+        }
+        // After the pass: at most one acyclic request per visit.
+        if self.job_sent_this_visit {
+            return None;
+        }
+        self.job_sent_this_visit = true;
+        self.job_request()
+    }
+
+    fn on_result(&mut self, now: Instant, r: &CycleResult<'_>) {
+        match self.inflight.take() {
+            Some(Inflight::Slave(i, step)) => self.slave_result(i, step, now, r),
+            Some(Inflight::Job) => self.job_result(now, r),
+            Some(Inflight::GlobalControl) | None => {}
+        }
+    }
+
+    fn on_event(&mut self, _now: Instant, event: FdlEvent) {
+        self.emit(MasterEvent::Ring(event));
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,263 @@
+//! Unit tests of the master core driven directly through `MasterApp`.
+
+use super::*;
+use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
+use profibus_fdl::timing::{Baud, BusParams};
+use profibus_fdl::wire::StationType;
+
+fn master() -> DpMaster {
+    let mut s = SlaveParams::new(8, 0x1234, vec![0x11, 0x21]); // 2 in, 2 out
+    s.initial_outputs = vec![0xA0, 0xA1];
+    DpMaster::new(&MasterConfig {
+        address: 2,
+        params: BusParams::defaults(Baud::B1500000),
+        slaves: vec![s],
+        options: MasterOptions::default(),
+    })
+    .unwrap()
+}
+
+fn ctx(now: u64, cycles: u32) -> TokenContext {
+    TokenContext {
+        now: Instant::from_nanos(now),
+        high_only: false,
+        hold_until: Instant::from_nanos(u64::MAX),
+        cycles,
+    }
+}
+
+/// The next request of a fresh token visit, as (dsap, data).
+fn next(m: &mut DpMaster, now: u64) -> Option<(Option<u8>, Vec<u8>)> {
+    m.poll_request(&ctx(now, 0))
+        .map(|r| (r.dsap, r.data.to_vec()))
+}
+
+fn answer(m: &mut DpMaster, now: u64, outcome: Outcome<'_>) {
+    m.on_result(
+        Instant::from_nanos(now),
+        &CycleResult {
+            da: 8,
+            service: Service::SrdHigh,
+            outcome,
+            retries: 0,
+        },
+    );
+}
+
+fn diag_resp(data: &[u8]) -> Outcome<'_> {
+    Outcome::Response {
+        status: ResponseStatus::Dl,
+        station: StationType::Passive,
+        dsap: Some(sap::MASTER),
+        ssap: Some(sap::SLAVE_DIAG),
+        data,
+    }
+}
+
+fn states(m: &mut DpMaster) -> Vec<SlaveState> {
+    let mut v = vec![];
+    while let Some(e) = m.poll_event() {
+        if let MasterEvent::StateChanged { to, .. } = e {
+            v.push(to);
+        }
+    }
+    v
+}
+
+const FRESH: [u8; 6] = [0x02, 0x05, 0x00, 0xFF, 0x12, 0x34];
+const READY: [u8; 6] = [0x00, 0x0C, 0x00, 0x02, 0x12, 0x34];
+
+fn bring_up(m: &mut DpMaster) {
+    assert_eq!(next(m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(m, 1, diag_resp(&FRESH));
+    let (dsap, prm) = next(m, 2).unwrap();
+    assert_eq!(dsap, Some(sap::SET_PRM));
+    assert_eq!(&prm[4..6], &[0x12, 0x34]);
+    answer(m, 2, Outcome::ShortAck);
+    assert_eq!(next(m, 3).unwrap(), (Some(sap::CHK_CFG), vec![0x11, 0x21]));
+    answer(m, 3, Outcome::ShortAck);
+    assert_eq!(next(m, 4).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(m, 4, diag_resp(&READY));
+}
+
+#[test]
+fn start_up_sequence_reaches_data_exchange() {
+    let mut m = master();
+    bring_up(&mut m);
+    assert_eq!(
+        states(&mut m),
+        vec![
+            SlaveState::SetPrm,
+            SlaveState::ChkCfg,
+            SlaveState::CheckDiag,
+            SlaveState::DataExchange
+        ]
+    );
+    let (dsap, out) = next(&mut m, 5).unwrap();
+    assert_eq!((dsap, out), (None, vec![0xA0, 0xA1]));
+    answer(
+        &mut m,
+        5,
+        Outcome::Response {
+            status: ResponseStatus::Dl,
+            station: StationType::Passive,
+            dsap: None,
+            ssap: None,
+            data: &[7, 9],
+        },
+    );
+    assert_eq!(m.inputs(8), Some(&[7u8, 9][..]));
+    assert!(m.set_outputs(8, &[1, 2]));
+    assert_eq!(next(&mut m, 6).unwrap().1, vec![1, 2]);
+}
+
+#[test]
+fn data_high_triggers_diag_read_and_prm_req_restarts() {
+    let mut m = master();
+    bring_up(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(
+        &mut m,
+        5,
+        Outcome::Response {
+            status: ResponseStatus::Dh,
+            station: StationType::Passive,
+            dsap: None,
+            ssap: None,
+            data: &[0, 0],
+        },
+    );
+    assert_eq!(next(&mut m, 6).unwrap().0, Some(sap::SLAVE_DIAG));
+    // The slave lost its parameters (watchdog): Prm_Req.
+    answer(&mut m, 6, diag_resp(&[0x02, 0x05, 0x00, 0xFF, 0x12, 0x34]));
+    states(&mut m);
+    assert_eq!(m.slave_state(8), Some(SlaveState::Diag));
+    assert_eq!(m.slave_stats(8).unwrap().restarts, 1);
+}
+
+#[test]
+fn cfg_fault_is_reported_in_words() {
+    let mut m = master();
+    next(&mut m, 1).unwrap();
+    answer(&mut m, 1, diag_resp(&FRESH));
+    next(&mut m, 2).unwrap();
+    answer(&mut m, 2, Outcome::ShortAck);
+    next(&mut m, 3).unwrap();
+    answer(&mut m, 3, Outcome::ShortAck);
+    next(&mut m, 4).unwrap();
+    let fault = [
+        (S1::CFG_FAULT | S1::STATION_NOT_READY).bits(),
+        (S2::ALWAYS_ONE | S2::PRM_REQ).bits(),
+        0,
+        0xFF,
+        0x12,
+        0x34,
+    ];
+    answer(&mut m, 4, diag_resp(&fault));
+    let mut reasons = vec![];
+    while let Some(e) = m.poll_event() {
+        if let MasterEvent::Fault { reason, .. } = e {
+            reasons.push(reason);
+        }
+    }
+    assert_eq!(
+        reasons,
+        vec!["Station_Not_Ready, Cfg_Fault, Prm_Req".to_string()]
+    );
+    assert_eq!(m.slave_state(8), Some(SlaveState::Diag));
+}
+
+#[test]
+fn lost_slave_is_reprobed_and_reparameterised() {
+    let mut m = master();
+    bring_up(&mut m);
+    for k in 0..3 {
+        next(&mut m, 10 + k).unwrap();
+        answer(&mut m, 10 + k, Outcome::NoResponse);
+    }
+    assert_eq!(m.slave_state(8), Some(SlaveState::Offline));
+    // Not probed again before the reprobe interval.
+    let t = 13 + 1;
+    assert!(next(&mut m, t).is_none());
+    let later = t + MasterOptions::default().reprobe_interval.as_nanos() as u64;
+    assert_eq!(next(&mut m, later).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, later, diag_resp(&FRESH));
+    assert_eq!(next(&mut m, later + 1).unwrap().0, Some(sap::SET_PRM));
+}
+
+#[test]
+fn clear_state_sends_zero_outputs_and_global_control() {
+    let mut m = master();
+    bring_up(&mut m);
+    m.set_operating_state(OperatingState::Clear);
+    let r = m.poll_request(&ctx(5, 0)).unwrap();
+    assert_eq!(
+        (r.da, r.service, r.dsap, r.data.to_vec()),
+        (
+            127,
+            Service::SdnHigh,
+            Some(sap::GLOBAL_CONTROL),
+            vec![0x02, 0x00]
+        )
+    );
+    m.on_result(
+        Instant::from_nanos(5),
+        &CycleResult {
+            da: 127,
+            service: Service::SdnHigh,
+            outcome: Outcome::Sent,
+            retries: 0,
+        },
+    );
+    let r = m.poll_request(&ctx(6, 1)).unwrap();
+    assert_eq!(r.data, &[0, 0]);
+}
+
+#[test]
+fn dpv1_read_polls_until_the_answer() {
+    let mut m = master();
+    bring_up(&mut m);
+    let id = m
+        .submit(Job::Dpv1Read {
+            address: 8,
+            slot: 1,
+            index: 2,
+            length: 4,
+        })
+        .unwrap();
+    // Visit: data exchange first, then the job.
+    next(&mut m, 5).unwrap();
+    answer(&mut m, 5, Outcome::ShortAck);
+    let r = m.poll_request(&ctx(6, 1)).unwrap();
+    assert_eq!((r.dsap, r.data.to_vec()), (Some(51), vec![0x5E, 1, 2, 4]));
+    answer(&mut m, 6, Outcome::ShortAck);
+    assert!(
+        m.poll_request(&ctx(7, 2)).is_none(),
+        "one job request per visit"
+    );
+    next(&mut m, 8).unwrap();
+    answer(&mut m, 8, Outcome::ShortAck);
+    let r = m.poll_request(&ctx(9, 1)).unwrap();
+    assert_eq!((r.dsap, r.data.len()), (Some(51), 0), "empty poll");
+    answer(
+        &mut m,
+        9,
+        Outcome::Response {
+            status: ResponseStatus::Dl,
+            station: StationType::Passive,
+            dsap: Some(51),
+            ssap: Some(51),
+            data: &[0x5E, 1, 2, 2, 0xBE, 0xEF],
+        },
+    );
+    assert_eq!(m.take_result(id), Some(JobResult::Data(vec![0xBE, 0xEF])));
+}
+
+#[test]
+fn locked_by_another_master_is_left_alone() {
+    let mut m = master();
+    next(&mut m, 1).unwrap();
+    answer(&mut m, 1, diag_resp(&[0x00, 0x0C, 0x00, 0x05, 0x12, 0x34]));
+    assert_eq!(m.slave_state(8), Some(SlaveState::Locked));
+    assert!(next(&mut m, 2).is_none());
+}

@@ -1,0 +1,1343 @@
+//! The active station (master side of layer 2): logical token ring,
+//! GAP polling, token claiming, collision handling and the requester.
+//!
+//! States and rules (IEC 61158-4-3 §8 "MAC"; summarised in the Felser
+//! PROFIBUS manual's state-machine chapter and in
+//! `shared/reference/profibus-dp.md` §11–§12; where the standard's exact
+//! rule was not available the source is named):
+//!
+//! - **Offline**: does nothing (entered after an address collision).
+//! - **Listen_Token**: watches token telegrams and learns the list of
+//!   active stations (LAS): one full rotation (the same sender seen twice),
+//!   verified by a second identical rotation (profirust's procedure).
+//!   Answers FDL Status "not ready" (FC 0x10) until the LAS is valid and
+//!   the request comes from its predecessor PS; then "ready for ring"
+//!   (0x20) and goes to Active_Idle, where the token will reach it. Two
+//!   token telegrams *sent from its own address* mean the address is in
+//!   use: the station goes Offline (standard: duplicate address in
+//!   Listen_Token).
+//! - **Active_Idle**: in the ring; answers FDL Status with 0x30; keeps the
+//!   LAS up to date from observed token passes (stations strictly between
+//!   sender and receiver are not in the ring); a token addressed to it
+//!   starts Use_Token. A frame from another station carrying its own
+//!   address as source is an address collision: it leaves the ring and
+//!   listens again (profirust leaves the ring; the second time in a row it
+//!   goes Offline).
+//! - **Claim_Token**: after TTO = 6·TSL + 2·n·TSL of silence (n = own
+//!   address, so the lowest address claims first; profirust) the station
+//!   sends the token to itself twice and uses it. The LAS learnt so far
+//!   stays valid.
+//! - **Use_Token**: the token hold time is TTH = TTR − TRR, where TRR is
+//!   the real rotation time measured from the previous arrival. While TTH
+//!   remains, the application's message cycles run; when the token arrives
+//!   late, exactly one high-priority cycle is still allowed. Every cycle
+//!   starts after the idle time TID1 (TID2 after an unacknowledged
+//!   request).
+//! - **Await_Data_Response**: the slot timer runs TSL from the end of the
+//!   request. No start of a reply, or a corrupt one, means a retry with the
+//!   same FCB, up to the retry limit; then "no response", and the remote
+//!   station counts as non-operational: its next request is a first frame
+//!   (FCV = 0, FCB = 1) without retries until it answers again
+//!   (IEC 61158-4-3; reference §11).
+//! - **GAP update**: with time left after the cycles, one FDL Status
+//!   request per token visit to the next address between this station and
+//!   its successor NS (wrapping at HSA). A station answering "ready for
+//!   ring" or "in ring" becomes the new NS. After a whole sweep the station
+//!   waits G rotations (GAP factor) before sweeping again.
+//! - **Pass_Token / Check_Token_Pass**: the token telegram `DC NS TS`; NS
+//!   must start transmitting within TSL. The pass is repeated up to
+//!   `token_retry` times, then NS is removed from the LAS and the next
+//!   station in the LAS is tried. A lone master passes the token to itself
+//!   (Felser).
+//! - **Duplicate token**: a frame from another station arriving while this
+//!   station holds the token (other than the awaited reply) means a second
+//!   token exists; this station drops its token and goes Active_Idle.
+//!
+//! Timeouts get an extra `latency_allowance` for transports that add
+//! latency (ptys, USB adapters); on the simulator it is zero.
+
+use super::{earliest, RxPath, Station};
+use crate::time::Instant;
+use crate::timing::BusParams;
+use crate::wire::{
+    consts, DataTelegram, FunctionCode, RequestKind, ResponseStatus, StationType, Telegram,
+};
+use std::time::Duration;
+
+/// Configuration of an active station.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ActiveConfig {
+    /// This station's address TS (0..=125).
+    pub address: u8,
+    /// Bus parameters.
+    pub params: BusParams,
+    /// Added to the slot time, token-pass check and token-lost timeout to
+    /// cover the latency of the transport; zero on the simulator.
+    pub latency_allowance: Duration,
+    /// Repetitions of a token pass the successor does not take before it
+    /// is removed from the LAS.
+    pub token_retry: u8,
+}
+
+impl ActiveConfig {
+    /// Configuration with default token retry (1) and no latency allowance.
+    pub fn new(address: u8, params: BusParams) -> Self {
+        ActiveConfig {
+            address,
+            params,
+            latency_allowance: Duration::ZERO,
+            token_retry: 1,
+        }
+    }
+}
+
+/// FDL service of a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Service {
+    /// Send and Request Data, high priority.
+    SrdHigh,
+    /// Send and Request Data, low priority.
+    SrdLow,
+    /// Send Data with Acknowledge, high priority.
+    SdaHigh,
+    /// Send Data with Acknowledge, low priority.
+    SdaLow,
+    /// Send Data with No acknowledge, high priority.
+    SdnHigh,
+    /// Send Data with No acknowledge, low priority.
+    SdnLow,
+    /// Request FDL Status.
+    FdlStatus,
+}
+
+impl Service {
+    fn kind(self) -> RequestKind {
+        match self {
+            Service::SrdHigh => RequestKind::SrdHigh,
+            Service::SrdLow => RequestKind::SrdLow,
+            Service::SdaHigh => RequestKind::SdaHigh,
+            Service::SdaLow => RequestKind::SdaLow,
+            Service::SdnHigh => RequestKind::SdnHigh,
+            Service::SdnLow => RequestKind::SdnLow,
+            Service::FdlStatus => RequestKind::FdlStatus,
+        }
+    }
+
+    /// Whether the service has high priority.
+    pub fn is_high(self) -> bool {
+        matches!(self, Service::SrdHigh | Service::SdaHigh | Service::SdnHigh)
+    }
+}
+
+/// A request the application wants sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Request<'a> {
+    /// Destination (127 = broadcast, never answered).
+    pub da: u8,
+    /// FDL service.
+    pub service: Service,
+    /// Destination SAP (None = default SAP).
+    pub dsap: Option<u8>,
+    /// Source SAP.
+    pub ssap: Option<u8>,
+    /// Data unit.
+    pub data: &'a [u8],
+}
+
+/// How a message cycle ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome<'a> {
+    /// A response telegram.
+    Response {
+        /// Response status (DL, DH, RS, UE, …).
+        status: ResponseStatus,
+        /// Responder's station type.
+        station: StationType,
+        /// DSAP of the response.
+        dsap: Option<u8>,
+        /// SSAP of the response.
+        ssap: Option<u8>,
+        /// Data unit, borrowed from the receive buffer.
+        data: &'a [u8],
+    },
+    /// A short acknowledge (SC).
+    ShortAck,
+    /// An unacknowledged request (SDN, broadcast) went out.
+    Sent,
+    /// No valid reply after all retries.
+    NoResponse,
+}
+
+/// Result of one message cycle, handed to [`MasterApp::on_result`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CycleResult<'a> {
+    /// The destination of the request.
+    pub da: u8,
+    /// The service requested.
+    pub service: Service,
+    /// How it ended.
+    pub outcome: Outcome<'a>,
+    /// Retries it took.
+    pub retries: u8,
+}
+
+/// What the station tells its application about the ring.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FdlEvent {
+    /// The station took part in the ring for the first time (or again).
+    EnteredRing,
+    /// The station left the ring (collision, duplicate token).
+    LeftRing,
+    /// The station claimed a lost token.
+    TokenClaimed,
+    /// A master joined after a GAP poll; it is the new successor.
+    StationJoined(u8),
+    /// The successor did not take the token and was removed from the LAS.
+    StationRemoved(u8),
+    /// Another station uses this station's address; the station is now
+    /// Offline.
+    AddressInUse,
+    /// A frame from another station with this station's source address.
+    AddressCollision,
+    /// A second token was detected; this station dropped its own.
+    DuplicateToken,
+    /// Answer to a GAP poll (`None`: nobody answered).
+    GapStatus {
+        /// Address polled.
+        address: u8,
+        /// Station type of the answer.
+        station: Option<StationType>,
+    },
+}
+
+/// What the application may do with the token at the moment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TokenContext {
+    /// Now.
+    pub now: Instant,
+    /// The token came late: only one high-priority cycle is allowed.
+    pub high_only: bool,
+    /// End of the token hold time.
+    pub hold_until: Instant,
+    /// Cycles already done in this token visit.
+    pub cycles: u32,
+}
+
+/// The application behind an active station (the DP master core, a live
+/// list scanner, …).
+pub trait MasterApp {
+    /// The station holds the token and may start a message cycle. Return
+    /// the next request, or `None` to end this token visit.
+    fn poll_request(&mut self, ctx: &TokenContext) -> Option<Request<'_>>;
+
+    /// A message cycle ended.
+    fn on_result(&mut self, now: Instant, result: &CycleResult<'_>);
+
+    /// Something happened to the ring.
+    fn on_event(&mut self, _now: Instant, _event: FdlEvent) {}
+}
+
+/// Externally visible state of the station.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RingState {
+    /// Not taking part.
+    Offline,
+    /// Learning the LAS.
+    ListenToken,
+    /// In the ring, waiting for the token.
+    ActiveIdle,
+    /// Holding the token.
+    UseToken,
+    /// Claiming a lost token.
+    ClaimToken,
+    /// Checking that the successor took the token.
+    CheckTokenPass,
+}
+
+/// Counters of an active station.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ActiveStats {
+    /// Tokens received (including passes to itself).
+    pub tokens: u64,
+    /// Token passes sent (including repeats).
+    pub token_passes: u64,
+    /// Message cycles completed (any outcome).
+    pub cycles: u64,
+    /// Request repetitions.
+    pub retries: u64,
+    /// Cycles that ended without response.
+    pub no_response: u64,
+    /// GAP polls sent.
+    pub gap_polls: u64,
+    /// Tokens claimed.
+    pub claims: u64,
+    /// Address collisions detected.
+    pub collisions: u64,
+    /// Duplicate tokens detected.
+    pub duplicate_tokens: u64,
+    /// Replies that came after the slot time and were ignored.
+    pub late_replies: u64,
+    /// Shortest real rotation time (ns).
+    pub rotation_min_ns: u64,
+    /// Longest real rotation time (ns).
+    pub rotation_max_ns: u64,
+    /// Sum of real rotation times (ns), for the average.
+    pub rotation_sum_ns: u64,
+    /// Rotations measured.
+    pub rotations: u64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Offline,
+    ListenToken,
+    ActiveIdle,
+    UseToken { wake: Instant },
+    AwaitResponse { deadline: Instant },
+    AwaitStatus { address: u8, deadline: Instant },
+    CheckTokenPass { attempts: u8, deadline: Instant },
+    ClaimToken { sent: u8, wake: Instant },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Remote {
+    /// FCB to send next.
+    fcb: bool,
+    /// Whether FCV is set (false: the next request is a first frame).
+    fcv: bool,
+    /// Whether the station answered its last request (retries allowed).
+    operational: bool,
+}
+
+const REMOTE_INIT: Remote = Remote {
+    fcb: true,
+    fcv: false,
+    operational: true,
+};
+
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    da: u8,
+    service: Service,
+    attempts: u8,
+    max_retries: u8,
+    len: usize,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Listen {
+    first_sa: Option<u8>,
+    seen: [bool; 128],
+    candidate: Option<[bool; 128]>,
+    own_tokens: u8,
+}
+
+impl Default for Listen {
+    fn default() -> Self {
+        Listen {
+            first_sa: None,
+            seen: [false; 128],
+            candidate: None,
+            own_tokens: 0,
+        }
+    }
+}
+
+#[derive(Debug)]
+struct Core {
+    cfg: ActiveConfig,
+    state: State,
+    las: [bool; 128],
+    las_valid: bool,
+    ns: u8,
+    ps: u8,
+    listen: Listen,
+    tx: [u8; consts::MAX_TELEGRAM_LEN],
+    tx_len: usize,
+    tx_at: Option<Instant>,
+    req: [u8; consts::MAX_TELEGRAM_LEN],
+    pending: Option<Pending>,
+    remote: [Remote; 128],
+    line_free_at: Instant,
+    last_activity: Instant,
+    last_token: Option<Instant>,
+    hold_until: Instant,
+    cycles_this_visit: u32,
+    gap_polled_this_visit: bool,
+    gap_next: u8,
+    gap_wait: u8,
+    collisions_in_row: u8,
+    was_in_ring: bool,
+    stats: ActiveStats,
+}
+
+/// An active FDL station driving a [`MasterApp`]; see the module docs.
+#[derive(Debug)]
+pub struct ActiveStation<A> {
+    rx: RxPath,
+    core: Core,
+    app: A,
+}
+
+impl<A: MasterApp> ActiveStation<A> {
+    /// A station that starts listening for the token at time zero.
+    pub fn new(cfg: ActiveConfig, app: A) -> Self {
+        let slack = cfg.params.slot_duration() + cfg.latency_allowance;
+        let ts = cfg.address.min(125);
+        ActiveStation {
+            rx: RxPath::new(cfg.params.baud, slack),
+            core: Core {
+                cfg: ActiveConfig { address: ts, ..cfg },
+                state: State::ListenToken,
+                las: [false; 128],
+                las_valid: false,
+                ns: ts,
+                ps: ts,
+                listen: Listen::default(),
+                tx: [0; consts::MAX_TELEGRAM_LEN],
+                tx_len: 0,
+                tx_at: None,
+                req: [0; consts::MAX_TELEGRAM_LEN],
+                pending: None,
+                remote: [REMOTE_INIT; 128],
+                line_free_at: Instant::ZERO,
+                last_activity: Instant::ZERO,
+                last_token: None,
+                hold_until: Instant::ZERO,
+                cycles_this_visit: 0,
+                gap_polled_this_visit: false,
+                gap_next: next_addr(ts, cfg.params.hsa),
+                gap_wait: 0,
+                collisions_in_row: 0,
+                was_in_ring: false,
+                stats: ActiveStats::default(),
+            },
+            app,
+        }
+    }
+
+    /// Restart listening for the token at `now` (e.g. after Offline).
+    pub fn restart(&mut self, now: Instant) {
+        let c = &mut self.core;
+        c.state = State::ListenToken;
+        c.listen = Listen::default();
+        c.las = [false; 128];
+        c.las_valid = false;
+        c.last_activity = now;
+        c.pending = None;
+        c.tx_at = None;
+    }
+
+    /// The application.
+    pub fn app(&self) -> &A {
+        &self.app
+    }
+
+    /// The application, mutable.
+    pub fn app_mut(&mut self) -> &mut A {
+        &mut self.app
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ActiveConfig {
+        &self.core.cfg
+    }
+
+    /// Where the station is in the ring.
+    pub fn ring_state(&self) -> RingState {
+        match self.core.state {
+            State::Offline => RingState::Offline,
+            State::ListenToken => RingState::ListenToken,
+            State::ActiveIdle => RingState::ActiveIdle,
+            State::UseToken { .. } | State::AwaitResponse { .. } | State::AwaitStatus { .. } => {
+                RingState::UseToken
+            }
+            State::CheckTokenPass { .. } => RingState::CheckTokenPass,
+            State::ClaimToken { .. } => RingState::ClaimToken,
+        }
+    }
+
+    /// The list of active stations as this station knows it.
+    pub fn las(&self) -> impl Iterator<Item = u8> + '_ {
+        (0..=126u8).filter(|&a| self.core.las[a as usize])
+    }
+
+    /// The successor NS.
+    pub fn next_station(&self) -> u8 {
+        self.core.ns
+    }
+
+    /// The predecessor PS.
+    pub fn previous_station(&self) -> u8 {
+        self.core.ps
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> ActiveStats {
+        self.core.stats
+    }
+
+    /// Codec error counters of the receive path.
+    pub fn codec_stats(&self) -> crate::codec::CodecStats {
+        self.rx.stats()
+    }
+
+    fn process(&mut self, now: Instant) {
+        while let Some(t) = self.rx.next_telegram() {
+            self.core.on_telegram(now, &t, &mut self.app);
+        }
+    }
+}
+
+impl<A: MasterApp> Station for ActiveStation<A> {
+    fn handle_rx(&mut self, now: Instant, bytes: &[u8]) {
+        if matches!(self.core.state, State::Offline) {
+            return;
+        }
+        self.core.last_activity = self.core.last_activity.max(now);
+        self.rx.push(now, bytes);
+        self.process(now);
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.rx.handle_idle(now);
+        self.process(now);
+        let receiving = self.rx.receiving();
+        self.core.on_timeout(now, receiving, &mut self.app);
+    }
+
+    fn poll_transmit(&mut self, now: Instant) -> Option<&[u8]> {
+        let c = &mut self.core;
+        match c.tx_at {
+            Some(t) if t <= now && c.tx_len > 0 => {
+                c.tx_at = None;
+                Some(&c.tx[..c.tx_len])
+            }
+            _ => None,
+        }
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        let c = &self.core;
+        if self.rx.receiving() {
+            // Every state timer waits for the line to be quiet; the receive
+            // path's idle deadline comes first.
+            return earliest(c.tx_at, self.rx.idle_deadline());
+        }
+        let state = match c.state {
+            State::Offline => None,
+            State::ListenToken | State::ActiveIdle => {
+                Some(c.last_activity + c.token_lost_timeout())
+            }
+            State::UseToken { wake } | State::ClaimToken { wake, .. } => Some(wake),
+            State::AwaitResponse { deadline }
+            | State::AwaitStatus { deadline, .. }
+            | State::CheckTokenPass { deadline, .. } => Some(deadline),
+        };
+        earliest(c.tx_at, state)
+    }
+}
+
+/// The address after `a`, wrapping after HSA to 0.
+fn next_addr(a: u8, hsa: u8) -> u8 {
+    if a >= hsa {
+        0
+    } else {
+        a + 1
+    }
+}
+
+impl Core {
+    fn ts(&self) -> u8 {
+        self.cfg.address
+    }
+
+    fn p(&self) -> &BusParams {
+        &self.cfg.params
+    }
+
+    fn bits(&self, n: u32) -> Duration {
+        self.cfg.params.bits(n as u64)
+    }
+
+    fn slot(&self) -> Duration {
+        self.bits(self.p().slot_time) + self.cfg.latency_allowance
+    }
+
+    fn token_lost_timeout(&self) -> Duration {
+        self.bits(self.p().token_lost_timeout(self.ts())) + self.cfg.latency_allowance
+    }
+
+    /// Distance from `from` to `to` going up and wrapping after HSA.
+    fn dist(&self, from: u8, to: u8) -> u32 {
+        let m = self.p().hsa.max(self.ts()) as u32 + 1;
+        (to as u32 + m - from as u32) % m
+    }
+
+    fn next_in_las(&self, from: u8) -> u8 {
+        let mut a = next_addr(from, self.p().hsa.max(self.ts()));
+        while a != self.ts() {
+            if self.las[a as usize] {
+                return a;
+            }
+            if a == from {
+                break;
+            }
+            a = next_addr(a, self.p().hsa.max(self.ts()));
+        }
+        self.ts()
+    }
+
+    fn prev_in_las(&self) -> u8 {
+        let mut best = self.ts();
+        let mut best_d = 0;
+        for a in 0..=126u8 {
+            if self.las[a as usize] && a != self.ts() {
+                let d = self.dist(a, self.ts());
+                if best == self.ts() || d < best_d {
+                    best = a;
+                    best_d = d;
+                }
+            }
+        }
+        best
+    }
+
+    /// Queue a telegram for transmission at `at`; returns when its last
+    /// character will have left.
+    fn send(&mut self, at: Instant, t: Telegram<'_>) -> Instant {
+        self.tx_len = t.emit(&mut self.tx).unwrap_or(0);
+        self.tx_at = Some(at);
+        let end = at + self.p().baud.chars_to_duration(self.tx_len as u64);
+        self.last_activity = self.last_activity.max(end);
+        end
+    }
+
+    fn send_req_buffer(&mut self, at: Instant, len: usize) -> Instant {
+        self.tx[..len].copy_from_slice(&self.req[..len]);
+        self.tx_len = len;
+        self.tx_at = Some(at);
+        let end = at + self.p().baud.chars_to_duration(len as u64);
+        self.last_activity = self.last_activity.max(end);
+        end
+    }
+
+    fn fdl_status_reply_type(&self, sa: u8) -> Option<StationType> {
+        match self.state {
+            State::Offline => None,
+            State::ListenToken => Some(if self.las_valid && sa == self.ps {
+                StationType::ActiveReady
+            } else {
+                StationType::ActiveNotReady
+            }),
+            _ => Some(StationType::ActiveInRing),
+        }
+    }
+
+    fn on_telegram<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
+        self.last_activity = self.last_activity.max(now);
+        let ts = self.ts();
+        let sa = match t {
+            Telegram::Data(d) => Some(d.sa),
+            Telegram::Token { sa, .. } => Some(*sa),
+            Telegram::ShortAck => None,
+        };
+        // Our own address as the source of a frame we did not send.
+        if sa == Some(ts) {
+            match self.state {
+                State::Offline => {}
+                State::ListenToken => {
+                    if matches!(t, Telegram::Token { .. }) {
+                        self.listen.own_tokens += 1;
+                        if self.listen.own_tokens >= 2 {
+                            tracing::warn!(address = ts, "address in use, going offline");
+                            self.state = State::Offline;
+                            self.stats.collisions += 1;
+                            app.on_event(now, FdlEvent::AddressInUse);
+                        }
+                    }
+                }
+                _ => {
+                    self.stats.collisions += 1;
+                    self.collisions_in_row += 1;
+                    app.on_event(now, FdlEvent::AddressCollision);
+                    self.drop_pending(now, app);
+                    if self.collisions_in_row >= 2 {
+                        self.state = State::Offline;
+                        app.on_event(now, FdlEvent::AddressInUse);
+                    } else {
+                        self.state = State::ListenToken;
+                        self.listen = Listen::default();
+                        self.las_valid = false;
+                        app.on_event(now, FdlEvent::LeftRing);
+                    }
+                }
+            }
+            return;
+        }
+        match self.state {
+            State::Offline => {}
+            State::ListenToken => self.listen_token(now, t, app),
+            State::ActiveIdle => self.active_idle(now, t, app),
+            State::ClaimToken { .. } => {
+                // Someone else is active: give up the claim.
+                self.state = State::ActiveIdle;
+                self.active_idle(now, t, app);
+            }
+            State::CheckTokenPass { .. } => {
+                // The successor (or someone) started transmitting.
+                self.state = State::ActiveIdle;
+                self.active_idle(now, t, app);
+            }
+            State::AwaitResponse { .. } => {
+                let p = self.pending.expect("pending request while awaiting");
+                let outcome = match t {
+                    Telegram::ShortAck => Some(Outcome::ShortAck),
+                    Telegram::Data(d) if !d.fc.is_request() && d.da == ts && d.sa == p.da => {
+                        let FunctionCode::Response { status, station } = d.fc else {
+                            unreachable!()
+                        };
+                        Some(Outcome::Response {
+                            status,
+                            station,
+                            dsap: d.dsap,
+                            ssap: d.ssap,
+                            data: d.data,
+                        })
+                    }
+                    _ => None,
+                };
+                match outcome {
+                    Some(o) => self.complete(now, o, app),
+                    None => self.duplicate_token(now, t, app),
+                }
+            }
+            State::AwaitStatus { address, .. } => match t {
+                Telegram::Data(d) if !d.fc.is_request() && d.da == ts && d.sa == address => {
+                    let FunctionCode::Response { station, .. } = d.fc else {
+                        unreachable!()
+                    };
+                    app.on_event(
+                        now,
+                        FdlEvent::GapStatus {
+                            address,
+                            station: Some(station),
+                        },
+                    );
+                    if matches!(
+                        station,
+                        StationType::ActiveReady | StationType::ActiveInRing
+                    ) {
+                        self.las[address as usize] = true;
+                        self.ns = address;
+                        app.on_event(now, FdlEvent::StationJoined(address));
+                    }
+                    self.line_free_at = now + self.bits(self.p().tid1());
+                    self.state = State::UseToken {
+                        wake: self.line_free_at,
+                    };
+                }
+                _ => self.duplicate_token(now, t, app),
+            },
+            State::UseToken { .. } => self.duplicate_token(now, t, app),
+        }
+    }
+
+    /// A frame arrived that is not the awaited reply while this station
+    /// holds the token. A late reply addressed to this station (after its
+    /// slot time ran out, e.g. on a slow transport) or a stray short
+    /// acknowledge is ignored and counted; a token or a request from
+    /// another station, or a reply to another master, means a second
+    /// token exists.
+    fn duplicate_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
+        let late_reply = match t {
+            Telegram::ShortAck => true,
+            Telegram::Data(d) => !d.fc.is_request() && d.da == self.ts(),
+            Telegram::Token { .. } => false,
+        };
+        if late_reply {
+            self.stats.late_replies += 1;
+            tracing::debug!(address = self.ts(), "late reply ignored");
+            return;
+        }
+        tracing::warn!(address = self.ts(), "duplicate token: dropping ours");
+        self.stats.duplicate_tokens += 1;
+        app.on_event(now, FdlEvent::DuplicateToken);
+        self.drop_pending(now, app);
+        self.state = State::ActiveIdle;
+        self.active_idle(now, t, app);
+    }
+
+    fn drop_pending<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
+        if let Some(p) = self.pending.take() {
+            self.stats.cycles += 1;
+            self.stats.no_response += 1;
+            app.on_result(
+                now,
+                &CycleResult {
+                    da: p.da,
+                    service: p.service,
+                    outcome: Outcome::NoResponse,
+                    retries: p.attempts,
+                },
+            );
+        }
+        self.tx_at = None;
+    }
+
+    /// Answer an FDL Status request (or refuse other services) addressed
+    /// to this station. Returns whether the telegram was such a request.
+    fn answer_request(&mut self, now: Instant, d: &DataTelegram<'_>) -> Option<StationType> {
+        let FunctionCode::Request { kind, .. } = d.fc else {
+            return None;
+        };
+        if d.da != self.ts() || !kind.expects_reply() {
+            return None;
+        }
+        let station = self.fdl_status_reply_type(d.sa)?;
+        let status = if kind == RequestKind::FdlStatus {
+            ResponseStatus::Ok
+        } else {
+            ResponseStatus::Rs
+        };
+        let at = now + self.bits(self.p().min_tsdr);
+        self.send(
+            at,
+            Telegram::Data(DataTelegram {
+                da: d.sa,
+                sa: self.ts(),
+                fc: FunctionCode::Response { status, station },
+                dsap: d.ssap,
+                ssap: d.dsap,
+                data: &[],
+            }),
+        );
+        (kind == RequestKind::FdlStatus).then_some(station)
+    }
+
+    fn listen_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, _app: &mut A) {
+        match *t {
+            Telegram::Token { da, sa } => {
+                // A token for our address while we listen is not ours to
+                // take: we enter the ring only through the predecessor's
+                // FDL Status invitation (it may also belong to another
+                // station with our address, which we are about to detect).
+                self.observe_pass(sa, da);
+                let l = &mut self.listen;
+                match l.first_sa {
+                    None => {
+                        l.first_sa = Some(sa);
+                        l.seen = [false; 128];
+                        l.seen[sa as usize] = true;
+                    }
+                    Some(first) if first == sa => {
+                        // One rotation complete.
+                        let seen = l.seen;
+                        if l.candidate == Some(seen) {
+                            self.las = seen;
+                            self.las_valid = true;
+                            self.ps = self.prev_in_las();
+                            self.ns = self.next_in_las(self.ts());
+                        } else {
+                            l.candidate = Some(seen);
+                        }
+                        let l = &mut self.listen;
+                        l.seen = [false; 128];
+                        l.seen[sa as usize] = true;
+                    }
+                    Some(_) => l.seen[sa as usize] = true,
+                }
+                if self.las_valid {
+                    self.las[sa as usize] = true;
+                    self.las[da as usize] = true;
+                    self.ps = self.prev_in_las();
+                }
+            }
+            Telegram::Data(ref d) => {
+                if let Some(StationType::ActiveReady) = self.answer_request(now, d) {
+                    // Ready for the ring: the predecessor passes the token next.
+                    self.state = State::ActiveIdle;
+                }
+            }
+            Telegram::ShortAck => {}
+        }
+    }
+
+    /// A token passed from `sa` to `da` by other stations: both are in the
+    /// ring, stations strictly between them are not.
+    fn observe_pass(&mut self, sa: u8, da: u8) {
+        if !self.las_valid {
+            return;
+        }
+        self.las[sa as usize] = true;
+        self.las[da as usize] = true;
+        let span = self.dist(sa, da);
+        let mut a = sa;
+        for _ in 1..span {
+            a = next_addr(a, self.p().hsa.max(self.ts()));
+            if a != self.ts() {
+                self.las[a as usize] = false;
+            }
+        }
+    }
+
+    fn active_idle<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, _app: &mut A) {
+        match *t {
+            Telegram::Token { da, sa } => {
+                if da == self.ts() {
+                    self.las[sa as usize] = true;
+                    self.token_received(now, sa);
+                } else {
+                    self.observe_pass(sa, da);
+                }
+            }
+            Telegram::Data(ref d) => {
+                self.answer_request(now, d);
+            }
+            Telegram::ShortAck => {}
+        }
+    }
+
+    fn token_received(&mut self, now: Instant, from: u8) {
+        self.ps = from;
+        self.las[self.ts() as usize] = true;
+        if !self.las[self.ns as usize] || self.ns == self.ts() {
+            self.ns = self.next_in_las(self.ts());
+        }
+        self.begin_token_use(now);
+    }
+
+    fn begin_token_use(&mut self, now: Instant) {
+        self.stats.tokens += 1;
+        self.collisions_in_row = 0;
+        let ttr = self.bits(self.p().ttr);
+        if let Some(prev) = self.last_token {
+            let trr = (now - prev).as_nanos() as u64;
+            let s = &mut self.stats;
+            s.rotation_min_ns = if s.rotations == 0 {
+                trr
+            } else {
+                s.rotation_min_ns.min(trr)
+            };
+            s.rotation_max_ns = s.rotation_max_ns.max(trr);
+            s.rotation_sum_ns += trr;
+            s.rotations += 1;
+            self.hold_until = prev + ttr;
+        } else {
+            self.hold_until = now + ttr;
+        }
+        self.last_token = Some(now);
+        self.cycles_this_visit = 0;
+        self.gap_polled_this_visit = false;
+        self.line_free_at = now + self.bits(self.p().tid1());
+        self.state = State::UseToken {
+            wake: self.line_free_at,
+        };
+    }
+
+    fn on_timeout<A: MasterApp>(&mut self, now: Instant, receiving: bool, app: &mut A) {
+        match self.state {
+            State::Offline => {}
+            State::ListenToken | State::ActiveIdle => {
+                if !receiving && now >= self.last_activity + self.token_lost_timeout() {
+                    tracing::debug!(address = self.ts(), "token lost, claiming");
+                    if !self.las_valid {
+                        self.las = [false; 128];
+                        self.las_valid = true;
+                    }
+                    self.state = State::ClaimToken { sent: 0, wake: now };
+                    self.on_timeout(now, receiving, app);
+                }
+            }
+            State::ClaimToken { sent, wake } => {
+                if now < wake {
+                    return;
+                }
+                let ts = self.ts();
+                let end = self.send(now, Telegram::Token { da: ts, sa: ts });
+                if sent == 0 {
+                    self.state = State::ClaimToken {
+                        sent: 1,
+                        wake: end + self.bits(self.p().tid1()),
+                    };
+                } else {
+                    self.stats.claims += 1;
+                    self.las[ts as usize] = true;
+                    self.ns = self.next_in_las(ts);
+                    app.on_event(now, FdlEvent::TokenClaimed);
+                    self.begin_token_use(end);
+                }
+            }
+            State::UseToken { wake } => {
+                if now >= wake {
+                    if !self.was_in_ring {
+                        self.was_in_ring = true;
+                        app.on_event(now, FdlEvent::EnteredRing);
+                    }
+                    self.next_action(now, app);
+                }
+            }
+            State::AwaitResponse { deadline } => {
+                if now >= deadline && !receiving {
+                    self.attempt_failed(now, app);
+                }
+            }
+            State::AwaitStatus { address, deadline } => {
+                if now >= deadline && !receiving {
+                    app.on_event(
+                        now,
+                        FdlEvent::GapStatus {
+                            address,
+                            station: None,
+                        },
+                    );
+                    self.state = State::UseToken { wake: now };
+                    self.next_action(now, app);
+                }
+            }
+            State::CheckTokenPass { attempts, deadline } => {
+                if now >= deadline && !receiving {
+                    if attempts < self.cfg.token_retry {
+                        self.pass_token(now, attempts + 1);
+                    } else {
+                        let dead = self.ns;
+                        tracing::info!(
+                            address = self.ts(),
+                            dead,
+                            "successor does not take the token"
+                        );
+                        self.las[dead as usize] = false;
+                        app.on_event(now, FdlEvent::StationRemoved(dead));
+                        self.ns = self.next_in_las(dead);
+                        self.pass_token(now, 0);
+                    }
+                }
+            }
+        }
+    }
+
+    fn next_action<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
+        let time_left = now < self.hold_until;
+        let high_only = !time_left && self.cycles_this_visit == 0;
+        if time_left || high_only {
+            let ctx = TokenContext {
+                now,
+                high_only,
+                hold_until: self.hold_until,
+                cycles: self.cycles_this_visit,
+            };
+            let sent = app
+                .poll_request(&ctx)
+                .map(|req| self.start_request(now, req));
+            if let Some(sent) = sent {
+                if let Some(result) = sent {
+                    app.on_result(now, &result);
+                }
+                return;
+            }
+        }
+        if self.gap_polled_this_visit {
+            // One GAP poll per token visit.
+        } else if time_left && self.gap_wait == 0 {
+            if let Some(address) = self.next_gap_address() {
+                self.gap_polled_this_visit = true;
+                self.stats.gap_polls += 1;
+                let ts = self.ts();
+                let end = self.send(
+                    now,
+                    Telegram::Data(DataTelegram {
+                        da: address,
+                        sa: ts,
+                        fc: FunctionCode::request(RequestKind::FdlStatus),
+                        dsap: None,
+                        ssap: None,
+                        data: &[],
+                    }),
+                );
+                self.state = State::AwaitStatus {
+                    address,
+                    deadline: end + self.slot(),
+                };
+                return;
+            }
+        } else if self.gap_wait > 0 {
+            self.gap_wait -= 1;
+        }
+        self.pass_token(now, 0);
+    }
+
+    /// The next address of the GAP sweep, or `None` when the sweep ended
+    /// (then the GAP factor starts counting).
+    fn next_gap_address(&mut self) -> Option<u8> {
+        let hsa = self.p().hsa.max(self.ts());
+        let gap = if self.ns == self.ts() {
+            hsa as u32 + 1
+        } else {
+            self.dist(self.ts(), self.ns)
+        };
+        let d = self.dist(self.ts(), self.gap_next);
+        if d == 0 || d >= gap {
+            self.gap_next = next_addr(self.ts(), hsa);
+            self.gap_wait = self.p().gap_factor;
+            return None;
+        }
+        let a = self.gap_next;
+        self.gap_next = next_addr(a, hsa);
+        Some(a)
+    }
+
+    /// Send a request; returns the result at once for a request without
+    /// reply.
+    fn start_request(&mut self, now: Instant, req: Request<'_>) -> Option<CycleResult<'static>> {
+        let kind = req.service.kind();
+        let reply = kind.expects_reply() && req.da != consts::BROADCAST;
+        let r = self.remote[req.da as usize & 0x7F];
+        let fc = if kind.uses_fcb() && reply {
+            FunctionCode::Request {
+                kind,
+                fcb: r.fcb,
+                fcv: r.fcv,
+            }
+        } else {
+            FunctionCode::request(kind)
+        };
+        let t = Telegram::Data(DataTelegram {
+            da: req.da,
+            sa: self.ts(),
+            fc,
+            dsap: req.dsap,
+            ssap: req.ssap,
+            data: req.data,
+        });
+        let len = match t.emit(&mut self.req) {
+            Ok(n) => n,
+            Err(e) => {
+                tracing::warn!("request not sent: {e}");
+                self.state = State::UseToken { wake: now };
+                return None;
+            }
+        };
+        let (service, da) = (req.service, req.da);
+        let end = self.send_req_buffer(now, len);
+        if reply {
+            self.pending = Some(Pending {
+                da,
+                service,
+                attempts: 0,
+                max_retries: if r.operational { self.p().max_retry } else { 0 },
+                len,
+            });
+            self.state = State::AwaitResponse {
+                deadline: end + self.slot(),
+            };
+            None
+        } else {
+            self.stats.cycles += 1;
+            self.cycles_this_visit += 1;
+            self.line_free_at = end + self.bits(self.p().tid2());
+            self.state = State::UseToken {
+                wake: self.line_free_at,
+            };
+            Some(CycleResult {
+                da,
+                service,
+                outcome: Outcome::Sent,
+                retries: 0,
+            })
+        }
+    }
+
+    fn complete<A: MasterApp>(&mut self, now: Instant, outcome: Outcome<'_>, app: &mut A) {
+        let p = self.pending.take().expect("pending");
+        let r = &mut self.remote[p.da as usize & 0x7F];
+        if p.service.kind().uses_fcb() {
+            r.fcb = !r.fcb;
+            r.fcv = true;
+        }
+        r.operational = true;
+        self.stats.cycles += 1;
+        self.cycles_this_visit += 1;
+        self.line_free_at = now + self.bits(self.p().tid1());
+        self.state = State::UseToken {
+            wake: self.line_free_at,
+        };
+        app.on_result(
+            now,
+            &CycleResult {
+                da: p.da,
+                service: p.service,
+                outcome,
+                retries: p.attempts,
+            },
+        );
+    }
+
+    fn attempt_failed<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
+        let Some(mut p) = self.pending else {
+            self.state = State::UseToken { wake: now };
+            return;
+        };
+        if p.attempts < p.max_retries {
+            p.attempts += 1;
+            self.stats.retries += 1;
+            self.pending = Some(p);
+            let end = self.send_req_buffer(now, p.len);
+            self.state = State::AwaitResponse {
+                deadline: end + self.slot(),
+            };
+            return;
+        }
+        self.pending = None;
+        self.remote[p.da as usize & 0x7F] = Remote {
+            operational: false,
+            ..REMOTE_INIT
+        };
+        self.stats.cycles += 1;
+        self.stats.no_response += 1;
+        self.cycles_this_visit += 1;
+        self.line_free_at = now;
+        self.state = State::UseToken { wake: now };
+        app.on_result(
+            now,
+            &CycleResult {
+                da: p.da,
+                service: p.service,
+                outcome: Outcome::NoResponse,
+                retries: p.attempts,
+            },
+        );
+    }
+
+    fn pass_token(&mut self, now: Instant, attempts: u8) {
+        let ts = self.ts();
+        let ns = self.ns;
+        self.stats.token_passes += 1;
+        let end = self.send(now, Telegram::Token { da: ns, sa: ts });
+        if ns == ts {
+            self.begin_token_use(end);
+        } else {
+            self.state = State::CheckTokenPass {
+                attempts,
+                deadline: end + self.slot(),
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::timing::Baud;
+
+    #[derive(Default)]
+    struct Recorder {
+        events: Vec<FdlEvent>,
+        results: Vec<(u8, &'static str, u8)>,
+        queue: Vec<(u8, Service)>,
+    }
+
+    impl MasterApp for Recorder {
+        fn poll_request(&mut self, _ctx: &TokenContext) -> Option<Request<'_>> {
+            let (da, service) = self.queue.first().copied()?;
+            self.queue.remove(0);
+            Some(Request {
+                da,
+                service,
+                dsap: None,
+                ssap: None,
+                data: &[],
+            })
+        }
+        fn on_result(&mut self, _now: Instant, r: &CycleResult<'_>) {
+            let o = match r.outcome {
+                Outcome::Response { .. } => "response",
+                Outcome::ShortAck => "ack",
+                Outcome::Sent => "sent",
+                Outcome::NoResponse => "none",
+            };
+            self.results.push((r.da, o, r.retries));
+        }
+        fn on_event(&mut self, _now: Instant, e: FdlEvent) {
+            self.events.push(e);
+        }
+    }
+
+    fn step(st: &mut ActiveStation<Recorder>) -> (Instant, Option<Vec<u8>>) {
+        let t = st.poll_timeout().unwrap();
+        st.handle_timeout(t);
+        (t, st.poll_transmit(t).map(|b| b.to_vec()))
+    }
+
+    #[test]
+    fn lone_master_claims_and_retries_with_same_fcb() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        // Silence for TTO = 6·100 + 2·3·100 = 1200 bit: claim, token to self twice.
+        let (t, tx) = step(&mut st);
+        assert_eq!(t, Instant::ZERO + params.bits(1200));
+        assert_eq!(tx.unwrap(), vec![0xDC, 3, 3]);
+        let (_, tx) = step(&mut st);
+        assert_eq!(tx.unwrap(), vec![0xDC, 3, 3]);
+        assert!(st.app().events.contains(&FdlEvent::TokenClaimed));
+        // Use token: the request as a first frame (FCB=1, FCV=0): 0x6D.
+        let (_, tx) = step(&mut st);
+        let first = tx.unwrap();
+        assert_eq!(first[..4], [0x10, 8, 3, 0x6D]);
+        // No answer within TSL: the same telegram again (same FCB).
+        let (t1, tx) = step(&mut st);
+        assert_eq!(tx.unwrap(), first);
+        // No answer again: no response, station non-operational.
+        let (t2, _) = step(&mut st);
+        assert_eq!(t2 - t1, params.bits(6 * 11 + 100));
+        assert_eq!(st.app().results, vec![(8, "none", 1)]);
+        assert_eq!(st.stats().retries, 1);
+    }
+
+    #[test]
+    fn fcb_alternates_after_answers() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        for _ in 0..3 {
+            st.app_mut().queue.push((8, Service::SrdHigh));
+        }
+        step(&mut st);
+        step(&mut st);
+        let mut fcs = vec![];
+        for _ in 0..3 {
+            let (t, tx) = step(&mut st);
+            let tx = tx.unwrap();
+            fcs.push(tx[3]);
+            // Slave answers with SC after TSDR.
+            st.handle_rx(t + params.bits(6 * 11 + 11), &[0xE5]);
+        }
+        assert_eq!(fcs, vec![0x6D, 0x5D, 0x7D]);
+        assert_eq!(st.app().results.len(), 3);
+        assert!(st.app().results.iter().all(|r| r.1 == "ack"));
+    }
+
+    #[test]
+    fn listener_answers_not_ready_then_goes_offline_on_own_address() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(5, params), Recorder::default());
+        let mut b = [0u8; 6];
+        let n = Telegram::Data(DataTelegram {
+            da: 5,
+            sa: 2,
+            fc: FunctionCode::request(RequestKind::FdlStatus),
+            dsap: None,
+            ssap: None,
+            data: &[],
+        })
+        .emit(&mut b)
+        .unwrap();
+        st.handle_rx(Instant::ZERO, &b[..n]);
+        let (t, _) = (st.poll_timeout().unwrap(), ());
+        let tx = st.poll_transmit(t).unwrap().to_vec();
+        assert_eq!(tx[3], 0x10, "not ready while the LAS is unknown");
+        st.handle_rx(t, &[0xDC, 7, 5]);
+        st.handle_rx(t, &[0xDC, 7, 5]);
+        assert_eq!(st.ring_state(), RingState::Offline);
+        assert!(st.app().events.contains(&FdlEvent::AddressInUse));
+    }
+}

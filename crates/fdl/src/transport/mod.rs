@@ -1,0 +1,362 @@
+//! Byte-stream transports for FDL stations (tokio).
+//!
+//! [`Port`] is the one async byte stream the station drivers use: an
+//! RS-485 adapter (via `tokio-serial`) or any tty path, including the pty
+//! ends made by `socat` or by `dpctl bus`. It is configured 8E1 (8 data
+//! bits, even parity, 1 stop bit) in raw mode (no echo, no line
+//! discipline) at a PROFIBUS [`Baud`] rate; a rate the adapter refuses is
+//! a [`TransportError::BaudRefused`] naming it. On a pty the rate only
+//! matters to the peer: ptys carry bytes, not bits, and no parity.
+//!
+//! Framing never depends on inter-character timing: wrap the port in
+//! `tokio_util::codec::Framed` with [`crate::FdlCodec`].
+//!
+//! Optional RTS direction control ([`RtsControl`]) drives the transmit
+//! enable of adapters without automatic direction switching: RTS is
+//! asserted while sending and released once the last bit has left. On
+//! Linux the kernel does this when the driver supports RS-485 mode
+//! (`TIOCSRS485`); otherwise the port toggles RTS itself around writes and
+//! waits with `tcdrain` in [`tokio::io::AsyncWriteExt::flush`], so a
+//! driver must flush after each telegram.
+//!
+//! The in-process simulated bus is not a `Port`: it is the sans-IO
+//! [`crate::medium::Medium`] driven on virtual time.
+
+mod rs485;
+
+use crate::timing::Baud;
+use std::future::Future;
+use std::io;
+use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
+use std::pin::Pin;
+use std::task::{ready, Context, Poll};
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::task::JoinHandle;
+use tokio_serial::{
+    DataBits, FlowControl, Parity, SerialPort, SerialPortBuilderExt, SerialStream, StopBits,
+};
+
+/// How the port drives RTS for the transceiver's transmit enable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RtsControl {
+    /// RTS is left alone (adapters with automatic direction control,
+    /// ptys).
+    #[default]
+    Off,
+    /// RTS asserted while sending: by the kernel's RS-485 mode when the
+    /// driver supports it, else toggled by the port around writes.
+    OnSend,
+}
+
+/// Which mechanism drives RTS on an open [`Port`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RtsMechanism {
+    /// RTS is not driven.
+    None,
+    /// The kernel's RS-485 mode (`TIOCSRS485`).
+    Kernel,
+    /// The port toggles RTS around writes and `tcdrain`.
+    Manual,
+}
+
+/// Options for [`Port::open_with`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PortOptions {
+    /// Bit rate.
+    pub baud: Baud,
+    /// RTS direction control.
+    pub rts: RtsControl,
+}
+
+impl PortOptions {
+    /// `baud`, no RTS control.
+    pub fn new(baud: Baud) -> Self {
+        PortOptions {
+            baud,
+            rts: RtsControl::Off,
+        }
+    }
+}
+
+/// Why a port could not be opened or configured.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The path could not be opened as a tty.
+    #[error("cannot open {path}: {source}")]
+    Open {
+        /// The path.
+        path: String,
+        /// The cause.
+        source: io::Error,
+    },
+    /// The adapter does not accept the baud rate (or runs at another).
+    #[error("{path} does not support {baud} ({detail})")]
+    BaudRefused {
+        /// The path.
+        path: String,
+        /// The requested rate.
+        baud: Baud,
+        /// What the adapter said.
+        detail: String,
+    },
+    /// RTS control could not be set up.
+    #[error("{path}: RTS direction control failed: {source}")]
+    Rts {
+        /// The path.
+        path: String,
+        /// The cause.
+        source: io::Error,
+    },
+}
+
+fn serial_err(e: tokio_serial::Error) -> io::Error {
+    io::Error::from(e)
+}
+
+/// An async byte stream to an FDL medium; see the module docs.
+#[derive(Debug)]
+pub struct Port {
+    stream: SerialStream,
+    name: String,
+    baud: Baud,
+    rts: RtsMechanism,
+    /// Manual RTS: asserted since the last completed flush.
+    rts_raised: bool,
+    /// Manual RTS: `tcdrain` running on a duplicate of the fd.
+    drain: Option<JoinHandle<io::Result<()>>>,
+}
+
+impl Port {
+    /// Open `path` at `baud`, 8E1, raw, without RTS control.
+    pub fn open(path: &str, baud: Baud) -> Result<Port, TransportError> {
+        Self::open_with(path, PortOptions::new(baud))
+    }
+
+    /// Open `path` with `opts`.
+    pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
+        let open_err = |source| TransportError::Open {
+            path: path.to_string(),
+            source,
+        };
+        // Open at a standard rate first so that a refused PROFIBUS rate is
+        // reported as such, not as a failure to open.
+        let stream = tokio_serial::new(path, 9600)
+            .data_bits(DataBits::Eight)
+            .parity(Parity::Even)
+            .stop_bits(StopBits::One)
+            .flow_control(FlowControl::None)
+            .open_native_async()
+            .map_err(|e| open_err(serial_err(e)))?;
+        let mut port = Port {
+            stream,
+            name: path.to_string(),
+            baud: opts.baud,
+            rts: RtsMechanism::None,
+            rts_raised: false,
+            drain: None,
+        };
+        port.check_parity_on_input().map_err(open_err)?;
+        port.set_baud(opts.baud)?;
+        if opts.rts == RtsControl::OnSend {
+            port.rts = match rs485::enable(port.fd()) {
+                Ok(()) => RtsMechanism::Kernel,
+                Err(e) => {
+                    tracing::debug!(path, error = %e, "no kernel RS-485 mode; toggling RTS around writes");
+                    port.stream
+                        .write_request_to_send(false)
+                        .map_err(|e| TransportError::Rts {
+                            path: path.to_string(),
+                            source: serial_err(e),
+                        })?;
+                    RtsMechanism::Manual
+                }
+            };
+        }
+        Ok(port)
+    }
+
+    /// Both ends of a new pty pair, raw, as ports (for tests: bytes
+    /// written to one end are read from the other).
+    pub fn pty_pair(baud: Baud) -> io::Result<(Port, Port)> {
+        let (a, b) = SerialStream::pair().map_err(serial_err)?;
+        let wrap = |stream, name: &str| Port {
+            stream,
+            name: name.to_string(),
+            baud,
+            rts: RtsMechanism::None,
+            rts_raised: false,
+            drain: None,
+        };
+        Ok((wrap(a, "pty master"), wrap(b, "pty slave")))
+    }
+
+    /// The path the port was opened from.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The configured rate.
+    pub fn baud(&self) -> Baud {
+        self.baud
+    }
+
+    /// How RTS is driven.
+    pub fn rts_mechanism(&self) -> RtsMechanism {
+        self.rts
+    }
+
+    /// Change the rate; fails with [`TransportError::BaudRefused`] when the
+    /// adapter refuses it or reports another rate afterwards (more than 2 %
+    /// off).
+    pub fn set_baud(&mut self, baud: Baud) -> Result<(), TransportError> {
+        let refused = |detail: String| TransportError::BaudRefused {
+            path: self.name.clone(),
+            baud,
+            detail,
+        };
+        self.stream
+            .set_baud_rate(baud.bps())
+            .map_err(|e| refused(e.to_string()))?;
+        match self.stream.baud_rate() {
+            Ok(actual) => {
+                let want = baud.bps() as u64;
+                let diff = (actual as u64).abs_diff(want);
+                if diff * 50 > want {
+                    return Err(refused(format!("the port runs at {actual} bit/s")));
+                }
+            }
+            Err(e) => {
+                tracing::debug!(path = %self.name, error = %e, "cannot read back the baud rate")
+            }
+        }
+        self.baud = baud;
+        Ok(())
+    }
+
+    fn fd(&self) -> BorrowedFd<'_> {
+        // SAFETY: the fd belongs to `self.stream`, which outlives the
+        // returned borrow (tied to `&self`).
+        unsafe { BorrowedFd::borrow_raw(self.stream.as_raw_fd()) }
+    }
+
+    /// Let the UART check parity (INPCK): a character with a parity error
+    /// reads as 0x00, which the FCS and framing checks then reject. Ptys
+    /// carry no parity; there this changes nothing.
+    fn check_parity_on_input(&mut self) -> io::Result<()> {
+        use nix::sys::termios::{tcgetattr, tcsetattr, InputFlags, SetArg};
+        let mut t = tcgetattr(self.fd()).map_err(io::Error::from)?;
+        t.input_flags |= InputFlags::INPCK;
+        t.input_flags &= !(InputFlags::IGNPAR | InputFlags::PARMRK);
+        tcsetattr(self.fd(), SetArg::TCSANOW, &t).map_err(io::Error::from)
+    }
+}
+
+impl AsyncRead for Port {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.stream).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for Port {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        if self.rts == RtsMechanism::Manual && !self.rts_raised {
+            self.stream
+                .write_request_to_send(true)
+                .map_err(serial_err)?;
+            self.rts_raised = true;
+        }
+        Pin::new(&mut self.stream).poll_write(cx, buf)
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        ready!(Pin::new(&mut self.stream).poll_flush(cx))?;
+        if self.rts != RtsMechanism::Manual || !self.rts_raised {
+            return Poll::Ready(Ok(()));
+        }
+        if self.drain.is_none() {
+            // tcdrain blocks until the last bit has left the UART; run it
+            // on a duplicate fd so that dropping the port cannot close the
+            // fd under it.
+            let fd: OwnedFd = self.fd().try_clone_to_owned()?;
+            self.drain = Some(tokio::task::spawn_blocking(move || {
+                nix::sys::termios::tcdrain(&fd).map_err(io::Error::from)
+            }));
+        }
+        let drain = self.drain.as_mut().expect("set above");
+        let res = ready!(Pin::new(drain).poll(cx));
+        self.drain = None;
+        res.map_err(io::Error::other)??;
+        self.stream
+            .write_request_to_send(false)
+            .map_err(serial_err)?;
+        self.rts_raised = false;
+        Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        ready!(self.as_mut().poll_flush(cx))?;
+        Pin::new(&mut self.stream).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    #[tokio::test]
+    async fn pty_pair_carries_bytes_raw() {
+        let (mut a, mut b) = Port::pty_pair(Baud::B12000000).unwrap();
+        // Bytes a line discipline would alter: CR, LF, ^C, ^D, DEL, 0xFF.
+        let data = [0x0D, 0x0A, 0x03, 0x04, 0x7F, 0xFF, 0x68, 0x11];
+        a.write_all(&data).await.unwrap();
+        a.flush().await.unwrap();
+        let mut got = [0u8; 8];
+        b.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, data);
+        b.write_all(&data).await.unwrap();
+        a.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, data);
+    }
+
+    #[tokio::test]
+    async fn opens_a_pty_path_at_every_profibus_rate() {
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let path = nix::unistd::ttyname(&pty.slave).unwrap();
+        drop(pty.slave);
+        let path = path.to_str().unwrap();
+        let mut port = Port::open(path, Baud::B9600).unwrap();
+        for b in Baud::ALL {
+            port.set_baud(b).unwrap();
+            assert_eq!(port.baud(), b);
+        }
+        assert_eq!(port.rts_mechanism(), RtsMechanism::None);
+    }
+
+    #[tokio::test]
+    async fn rts_control_on_a_pty_is_a_clear_error() {
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let path = nix::unistd::ttyname(&pty.slave).unwrap();
+        let opts = PortOptions {
+            baud: Baud::B1500000,
+            rts: RtsControl::OnSend,
+        };
+        let e = Port::open_with(path.to_str().unwrap(), opts).unwrap_err();
+        assert!(matches!(e, TransportError::Rts { .. }), "{e}");
+        assert!(e.to_string().contains("RTS"), "{e}");
+    }
+
+    #[tokio::test]
+    async fn open_errors_name_the_path() {
+        let e = Port::open("/nonexistent/tty", Baud::B19200).unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/tty"), "{e}");
+    }
+}
