@@ -451,24 +451,6 @@ fn corpus_user_prm_data() {
     assert_eq!(g.slots.len(), 1);
     assert_eq!(g.unit_diag_areas.len(), 3);
     assert_eq!(g.unit_diag_areas[0].values.len(), 202);
-    // Diagnosis texts: bit 33 set, bits 40-47 = 0x85 (frame error rate
-    // 5 %), stations x = y = 0 (bits 48-63 clear), bit 112 set.
-    let mut diag = [0u8; 15];
-    diag[4] = 0b10;
-    diag[5] = 0x85;
-    diag[14] = 0x01;
-    assert_eq!(
-        g.unit_diag_texts(&diag),
-        [
-            "Segment deactivated",
-            "Fault location, cause unknown",
-            "Frame error rate: 5%",
-            "Station x: 0!",
-            "Station y: 0!"
-        ]
-    );
-    // Bits beyond the data give no text.
-    assert_eq!(g.unit_diag_texts(&diag[..5]), ["Segment deactivated"]);
     assert!(g
         .other
         .iter()

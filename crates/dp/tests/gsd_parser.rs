@@ -337,3 +337,17 @@ fn module_lookup() {
         "{e}"
     );
 }
+
+#[test]
+fn continuation_after_an_empty_piece() {
+    // Found by the fuzzer: ` \` followed by an indented line used to keep
+    // the indentation, so the line read differently once written back.
+    let text = "#Profibus_DP\nIdent_Number=1\n \\\n    Vendor_Key=\"x\"\n\
+                Module=\"m\" 0x10\n \\\n  7\nEndModule\n";
+    let p = strict(text);
+    assert_eq!(p.gsd.other, ["Vendor_Key=\"x\""]);
+    assert_eq!(p.gsd.modules[0].reference, Some(7));
+    assert_eq!(p.warnings[0].pos.line, 4);
+    assert_eq!(p.warnings[0].pos.col, 5);
+    assert_eq!(strict(&p.gsd.write()).gsd, p.gsd);
+}

@@ -275,14 +275,14 @@ impl Parser {
             continued = cont;
             if !cont {
                 let mut ll = current.take().expect("a line was started");
-                ll.trim_end();
+                ll.trim();
                 if !ll.text.is_empty() {
                     self.statement(&ll);
                 }
             }
         }
         if let Some(mut ll) = current.take() {
-            ll.trim_end();
+            ll.trim();
             if !ll.text.is_empty() {
                 self.statement(&ll);
             }

@@ -530,48 +530,6 @@ impl Gsd {
             .map(|t| t.text.as_str())
     }
 
-    /// The texts the file gives for device-related diagnosis `data` (the
-    /// bytes after the block's header byte, bit n = bit n mod 8 of byte
-    /// n / 8): `Unit_Diag_Bit` texts of set bits, `Unit_Diag_Not_Bit`
-    /// texts of clear bits, and the `Unit_Diag_Area` text of each area's
-    /// value (bit `first` the least significant). Bits beyond `data` are
-    /// left out. The bit numbering is the common reading of the standard
-    /// (unverified against a device).
-    pub fn unit_diag_texts(&self, data: &[u8]) -> Vec<&str> {
-        let bit = |n: u32| -> Option<bool> {
-            data.get((n / 8) as usize).map(|b| b & (1 << (n % 8)) != 0)
-        };
-        let mut out = Vec::new();
-        for t in &self.unit_diag_bits {
-            if bit(t.bit) == Some(true) {
-                out.push(t.text.as_str());
-            }
-        }
-        for t in &self.unit_diag_not_bits {
-            if bit(t.bit) == Some(false) {
-                out.push(t.text.as_str());
-            }
-        }
-        for a in &self.unit_diag_areas {
-            if a.last - a.first >= 63 {
-                continue;
-            }
-            let mut v: i64 = 0;
-            let mut complete = true;
-            for (i, n) in (a.first..=a.last).enumerate() {
-                match bit(n) {
-                    Some(true) => v |= 1 << i,
-                    Some(false) => {}
-                    None => complete = false,
-                }
-            }
-            if let Some(t) = a.values.iter().find(|t| complete && t.value == v) {
-                out.push(t.text.as_str());
-            }
-        }
-        out
-    }
-
     fn selected(&self, selection: &[usize]) -> Result<Vec<&Module>, SelectionError> {
         selection
             .iter()
