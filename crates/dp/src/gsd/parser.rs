@@ -82,7 +82,6 @@ const KNOWN_EXTRA: &[&str] = &[
     "channel_diag_help",
     "unit_diag_bit_help",
     "unit_diag_not_bit_help",
-    "diag_update_delay",
     "family_name",
     "web_server_supp",
 ];
