@@ -7,6 +7,7 @@
 //! `dpctl slave --device NAME` builds from.
 
 pub mod generic;
+pub mod pkw;
 
 use profibus_dp::slave::Device;
 
