@@ -10,6 +10,7 @@ mod decode;
 mod describe;
 mod gsd;
 mod master;
+mod pkw;
 mod scan;
 mod slave;
 mod sniff;
@@ -41,6 +42,8 @@ enum Command {
     Bus(bus::Args),
     /// Listen passively on a line and print every telegram.
     Sniff(sniff::Args),
+    /// Read or write a parameter over a slave's PKW channel.
+    Pkw(pkw::Args),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
         Command::Slave(a) => slave::run(a),
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
+        Command::Pkw(a) => pkw::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -696,7 +696,7 @@ impl Bm4 {
     fn set_led(&mut self, led: Led) {
         if self.led != led {
             self.led = led;
-            self.note("led", format!("status: {}", led.as_str()));
+            self.note("led", led.as_str().to_string());
         }
     }
 

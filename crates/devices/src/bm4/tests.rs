@@ -169,7 +169,7 @@ fn pkw_error_numbers() {
     Pkw::new(1, 4, 0, 0).emit(&mut out);
     let i = cycle(&mut d, T0, &out, l.inputs);
     assert_eq!(Pkw::parse(&i).unwrap().to_string(), "7004 0000 0000 000B");
-    assert_eq!(D.error_text(0x0B), "variable does not exist");
+    assert!(D.error_text(0x0B).starts_with("variable does not exist"));
 }
 
 #[test]
@@ -294,9 +294,6 @@ fn led_states_follow_the_bus() {
         .collect();
     assert_eq!(
         texts,
-        [
-            "status: data exchange (H1 green)",
-            "status: bus error / watchdog (H2 red)"
-        ]
+        ["data exchange (H1 green)", "bus error / watchdog (H2 red)"]
     );
 }

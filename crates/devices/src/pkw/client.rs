@@ -311,7 +311,7 @@ mod tests {
             r.unwrap_err(),
             PkwError::Refused {
                 code: 0x0B,
-                text: "variable does not exist"
+                text: BM4.error_text(0x0B)
             }
         );
     }

@@ -258,7 +258,10 @@ pub const BM4: Dialect = Dialect {
             0x0005,
             "incorrect type (the variable's format is not the command's)",
         ),
-        (0x000B, "variable does not exist"),
+        (
+            0x000B,
+            "variable does not exist (or is configured as cyclic process data)",
+        ),
         (0x0016, "unknown command code"),
     ],
 };
@@ -514,6 +517,27 @@ impl PkwEngine {
     }
 }
 
+/// The PKW dialect of a slave with ident number `ident` configured with
+/// `cfg`, when the configuration has the PKW module: the BM4-O-PRO-01
+/// (0x0008, PKW module 0x73 first) or the Omega board (0x00D0, service
+/// data module first or a block-consistent module).
+pub fn dialect_for(ident: u16, cfg: &[u8]) -> Result<&'static Dialect, String> {
+    match ident {
+        crate::bm4::IDENT if cfg.first() == Some(&PKW_MODULE) => Ok(&BM4),
+        crate::omega::IDENT
+            if crate::omega::check_configuration(cfg).is_ok_and(|l| l.pkw) =>
+        {
+            Ok(&OMEGA)
+        }
+        crate::bm4::IDENT | crate::omega::IDENT => Err(format!(
+            "the configuration of ident 0x{ident:04X} has no PKW module (configure the service data module first)"
+        )),
+        _ => Err(format!(
+            "ident 0x{ident:04X} has no known PKW channel (known: 0x0008 BM4-O-PRO-01, 0x00D0 Omega Drive-Line II)"
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -575,7 +599,7 @@ mod tests {
             Some(Err(0x82))
         );
         assert_eq!(OMEGA.error_text(0x82), "error reading actual value");
-        assert_eq!(BM4.error_text(0x0B), "variable does not exist");
+        assert!(BM4.error_text(0x0B).starts_with("variable does not exist"));
         assert_eq!(BM4.request(1, Command::Describe(1)), None);
     }
 
