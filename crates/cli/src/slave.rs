@@ -422,7 +422,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the runtime")?;
-    rt.block_on(run_async(args))
+    let result = rt.block_on(run_async(args));
+    // A --control reader may be blocked on stdin: do not wait for it.
+    rt.shutdown_background();
+    result
 }
 
 async fn run_async(args: Args) -> anyhow::Result<()> {
