@@ -449,6 +449,7 @@ fn omega_configurations_a_b_c_give_the_same_layout() {
 
 /// pyprofibus drives the profile with `modules` from `gsd` and runs one
 /// PKW job by hand.
+#[allow(clippy::too_many_arguments)]
 fn pyprofibus_pkw(
     r: &Rig,
     py: &Path,
