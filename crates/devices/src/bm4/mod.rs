@@ -962,8 +962,7 @@ impl Device for Bm4 {
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        let inbox = self.inbox.as_ref().map(|_| self.next_inbox);
-        profibus_fdl::station::earliest(inbox, self.engine.poll_timeout())
+        self.inbox.as_ref().map(|_| self.next_inbox)
     }
 
     fn handle_timeout(&mut self, now: Instant) {
