@@ -84,8 +84,10 @@ fn job(
             result = Some(r);
         }
         dp.set_outputs(addr, &outputs);
-        if result.is_some() && client.is_idle() {
-            return result.unwrap();
+        if client.is_idle() {
+            if let Some(r) = result.take() {
+                return r;
+            }
         }
     }
     panic!("the job did not end");
