@@ -7,6 +7,7 @@
 mod bus;
 mod common;
 mod decode;
+mod demo;
 mod describe;
 mod gsd;
 mod master;
@@ -14,6 +15,7 @@ mod pkw;
 mod scan;
 mod slave;
 mod sniff;
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -34,6 +36,9 @@ enum Command {
     Scan(scan::Args),
     /// Run a DP master from a bus file.
     Master(master::Args),
+    /// A whole virtual plant in one process: master and emulated slaves
+    /// on a simulated bus.
+    Demo(demo::Args),
     /// Show or check a GSD file.
     Gsd(gsd::Args),
     /// Emulate a DP slave (a device profile or any GSD-described device).
@@ -59,6 +64,7 @@ fn main() -> ExitCode {
         Command::Decode(a) => decode::run(a),
         Command::Scan(a) => scan::run(a),
         Command::Master(a) => master::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Gsd(a) => gsd::run(a),
         Command::Slave(a) => slave::run(a),
         Command::Bus(a) => bus::run(a),

@@ -1,20 +1,19 @@
 //! `dpctl master`: run a DP master from a bus file.
 
 use crate::common;
+use crate::view::{drain_events, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_dp::busfile::BusFile;
 use profibus_dp::control::ControlCommand;
-use profibus_dp::diag;
-use profibus_dp::master::{DpMaster, Job, MasterEvent, OperatingState, SlaveState};
+use profibus_dp::master::{DpMaster, Job, OperatingState, SlaveState};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::Instant;
 use serde_json::{json, Value};
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
-use tokio::io::AsyncBufReadExt;
 
 /// Poll the slaves of a bus file: parameterise, configure and exchange
 /// data with them, print their state, data and diagnosis.
@@ -61,13 +60,6 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let bus = BusFile::load(&args.config)?;
     common::runtime()?.block_on(master(args, bus))
-}
-
-fn hex(b: &[u8]) -> String {
-    b.iter()
-        .map(|x| format!("{x:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 fn parse_bytes(v: &Value) -> Result<Vec<u8>> {
@@ -185,172 +177,6 @@ pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
     Ok(Some(format!("job {} queued", id.0)))
 }
 
-struct View {
-    json: bool,
-    tty: bool,
-    log: Vec<String>,
-    last_print: Option<Instant>,
-    interval: Duration,
-}
-
-impl View {
-    fn event(&mut self, v: Value, text: String) {
-        if self.json {
-            println!("{v}");
-        } else if self.tty {
-            self.log.push(text);
-            let n = self.log.len();
-            if n > 12 {
-                self.log.drain(..n - 12);
-            }
-        } else {
-            println!("{text}");
-        }
-    }
-
-    fn status(&mut self, m: &DpMaster, bus: &BusFile, now: Instant, force: bool) {
-        if !force && self.last_print.is_some_and(|t| now < t + self.interval) {
-            return;
-        }
-        self.last_print = Some(now);
-        let c = m.cycle_stats();
-        let slaves: Vec<Value> = bus
-            .slaves
-            .iter()
-            .map(|s| {
-                let a = s.params.address;
-                let st = m.slave_stats(a).unwrap_or_default();
-                json!({
-                    "address": a,
-                    "name": s.params.name,
-                    "state": m.slave_state(a).map(|x| x.name()),
-                    "inputs": hex(m.inputs(a).unwrap_or(&[])),
-                    "outputs": hex(m.outputs(a).unwrap_or(&[])),
-                    "data_exchanges": st.data_exchanges,
-                    "retries": st.retries,
-                    "errors": st.errors,
-                    "restarts": st.restarts,
-                })
-            })
-            .collect();
-        if self.json {
-            println!(
-                "{}",
-                json!({
-                    "event": "status",
-                    "cycles": c.cycles,
-                    "cycle_us": {
-                        "min": c.min_ns / 1000,
-                        "avg": c.avg().as_micros() as u64,
-                        "max": c.max_ns / 1000,
-                    },
-                    "operating": format!("{:?}", m.operating_state()).to_lowercase(),
-                    "slaves": slaves,
-                })
-            );
-            return;
-        }
-        let mut out = String::new();
-        if self.tty {
-            out.push_str("\x1b[H\x1b[2J");
-        }
-        out.push_str(&format!(
-            "master {} at {}  {:?}  cycles {}  cycle min/avg/max {}/{}/{} µs\n",
-            m.address(),
-            bus.master.params.baud,
-            m.operating_state(),
-            c.cycles,
-            c.min_ns / 1000,
-            c.avg().as_micros(),
-            c.max_ns / 1000
-        ));
-        for s in &slaves {
-            out.push_str(&format!(
-                "  {:3} {:<20} {:<13} in: {}  out: {}  (errors {}, retries {})\n",
-                s["address"],
-                s["name"].as_str().unwrap_or(""),
-                s["state"].as_str().unwrap_or(""),
-                s["inputs"].as_str().unwrap_or(""),
-                s["outputs"].as_str().unwrap_or(""),
-                s["errors"],
-                s["retries"],
-            ));
-        }
-        if self.tty {
-            for l in &self.log {
-                out.push_str(l);
-                out.push('\n');
-            }
-        }
-        print!("{out}");
-        let _ = std::io::stdout().flush();
-    }
-}
-
-fn drain_events(m: &mut DpMaster, bus: &BusFile, view: &mut View) {
-    while let Some(e) = m.poll_event() {
-        match e {
-            MasterEvent::StateChanged { address, from, to } => view.event(
-                json!({"event": "state", "slave": address, "from": from.name(), "to": to.name()}),
-                format!("slave {address}: {} → {}", from.name(), to.name()),
-            ),
-            MasterEvent::Diag { address } => {
-                let raw = m.diag(address).unwrap_or(&[]).to_vec();
-                let s = bus.slaves.iter().find(|s| s.params.address == address);
-                let words =
-                    diag::describe(&raw, s.map(|s| &s.gsd), s.is_some_and(|s| s.params.dpv1));
-                view.event(
-                    json!({"event": "diag", "slave": address, "raw": hex(&raw), "words": words}),
-                    format!("slave {address} diagnosis: {}", words.join("; ")),
-                );
-            }
-            MasterEvent::Fault { address, reason } => view.event(
-                json!({"event": "fault", "slave": address, "reason": reason}),
-                format!("slave {address} fault: {reason}"),
-            ),
-            MasterEvent::JobDone(id) => {
-                let r = m.take_result(id);
-                let (data, words) = match &r {
-                    Some(profibus_dp::master::JobResult::Data(d)) => (Some(hex(d)), "ok".into()),
-                    Some(other) => (None, other.describe()),
-                    None => (None, "lost".into()),
-                };
-                view.event(
-                    json!({"event": "job", "id": id.0, "data": data, "result": words}),
-                    format!(
-                        "job {}: {}{}",
-                        id.0,
-                        words,
-                        data.map(|d| format!(" [{d}]")).unwrap_or_default()
-                    ),
-                );
-            }
-            MasterEvent::Ring(e) => {
-                use profibus_fdl::station::active::FdlEvent as F;
-                let text = match e {
-                    F::GapStatus { station: None, .. } => continue,
-                    F::GapStatus {
-                        address,
-                        station: Some(t),
-                    } => format!("station {address} found: {}", t.describe()),
-                    F::EnteredRing => "in the token ring".into(),
-                    F::LeftRing => "left the token ring".into(),
-                    F::TokenClaimed => "claimed the token".into(),
-                    F::StationJoined(a) => format!("master {a} joined the ring"),
-                    F::StationRemoved(a) => format!("master {a} left the ring"),
-                    F::AddressInUse => "another station uses this address: offline".into(),
-                    F::AddressCollision => "address collision".into(),
-                    F::DuplicateToken => "duplicate token dropped".into(),
-                };
-                view.event(
-                    json!({"event": "ring", "what": text}),
-                    format!("ring: {text}"),
-                )
-            }
-        }
-    }
-}
-
 async fn master(args: Args, bus: BusFile) -> Result<()> {
     for w in &bus.warnings {
         eprintln!("dpctl master: warning: {w}");
@@ -370,36 +196,44 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     let mut port = profibus_fdl::transport::Port::open(&args.port, bus.master.params.baud)
         .with_context(|| format!("opening {}", args.port))?;
 
+    // Commands come from a plain thread: a blocking read of stdin must not
+    // keep the runtime from shutting down on Ctrl-C / SIGTERM.
     let (tx, mut rx) = tokio::sync::mpsc::channel::<String>(256);
     if let Some(input) = args.input.clone() {
-        tokio::spawn(async move {
-            let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if input == "-" {
-                Box::new(tokio::io::stdin())
-            } else {
-                match tokio::fs::File::open(&input).await {
-                    Ok(f) => Box::new(f),
-                    Err(e) => {
-                        eprintln!("dpctl master: cannot open {input}: {e}");
-                        return;
-                    }
-                }
-            };
-            let mut lines = tokio::io::BufReader::new(reader).lines();
-            while let Ok(Some(l)) = lines.next_line().await {
-                if !l.trim().is_empty() && tx.send(l).await.is_err() {
+        let reader: Box<dyn std::io::Read + Send> = if input == "-" {
+            Box::new(std::io::stdin())
+        } else {
+            Box::new(std::fs::File::open(&input).with_context(|| format!("cannot open {input}"))?)
+        };
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for l in std::io::BufReader::new(reader)
+                .lines()
+                .map_while(Result::ok)
+            {
+                if !l.trim().is_empty() && tx.blocking_send(l).is_err() {
                     break;
                 }
             }
         });
     }
 
-    let mut view = View {
-        json: args.json,
-        tty: !args.json && std::io::stdout().is_terminal(),
-        log: Vec::new(),
-        last_print: None,
-        interval: Duration::from_millis(args.interval.max(10)),
-    };
+    let mut view = View::new(
+        args.json,
+        !args.json && std::io::stdout().is_terminal(),
+        Duration::from_millis(args.interval.max(10)),
+    );
+    let info: Vec<SlaveInfo> = bus
+        .slaves
+        .iter()
+        .map(|s| SlaveInfo {
+            address: s.params.address,
+            name: s.params.name.clone(),
+            gsd: Some(s.gsd.clone()),
+            dpv1: s.params.dpv1,
+        })
+        .collect();
+    let baud = bus.master.params.baud;
     let cycles = args.cycles;
     let result = driver::run(
         &mut station,
@@ -420,8 +254,8 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
                     ),
                 }
             }
-            drain_events(m, &bus, &mut view);
-            view.status(m, &bus, now, false);
+            drain_events(m, &info, &mut view);
+            view.status(m, &info, baud, now, false);
             match cycles {
                 Some(n) if m.cycle_stats().cycles >= n => ControlFlow::Break(()),
                 _ => ControlFlow::Continue(()),
@@ -430,8 +264,8 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     )
     .await;
     let m = station.app_mut();
-    drain_events(m, &bus, &mut view);
-    view.status(m, &bus, Instant::ZERO, true);
+    drain_events(m, &info, &mut view);
+    view.status(m, &info, baud, Instant::ZERO, true);
     result.with_context(|| format!("on {}", args.port))?;
     let stuck: Vec<u8> = bus
         .slaves

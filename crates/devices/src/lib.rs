@@ -8,6 +8,7 @@
 
 pub mod bm4;
 pub mod generic;
+pub mod gsd_files;
 pub mod omega;
 pub mod pkw;
 

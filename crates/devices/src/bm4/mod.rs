@@ -79,7 +79,7 @@ use vars::{IecType, VarModule, VarTable, Variable};
 pub const IDENT: u16 = 0x0008;
 
 /// The default GSD file `BM4OPRO1.GSD` as printed in the manual (Latin-1).
-pub const DEFAULT_GSD: &[u8] = include_bytes!("../../../../gsd/BM4OPRO1.GSD");
+pub const DEFAULT_GSD: &[u8] = crate::gsd_files::BM4OPRO1;
 
 /// Length of the User_Prm_Data (GSD `User_Prm_Data_Len=3`).
 pub const USER_PRM_LEN: usize = 3;

@@ -92,7 +92,7 @@ use std::time::Duration;
 pub const IDENT: u16 = 0x00D0;
 
 /// `BNF_00D0.GSD` as printed in the manual (Latin-1, with its quirks).
-pub const GSD: &[u8] = include_bytes!("../../../../gsd/BNF_00D0.GSD");
+pub const GSD: &[u8] = crate::gsd_files::BNF_00D0;
 
 /// Length of the User_Prm_Data (GSD `User_Prm_Data_Len=5`).
 pub const USER_PRM_LEN: usize = 5;
