@@ -102,6 +102,9 @@ impl Rig {
     }
 
     fn stop(mut self) -> Vec<Value> {
+        // dpctl slave installs its SIGTERM handler after printing `start`;
+        // give it time to do so (a stop right after start is a race).
+        std::thread::sleep(Duration::from_millis(300));
         let st = self.slave.terminate(Duration::from_secs(10));
         assert!(st.success(), "dpctl slave exited with {st}");
         self.out

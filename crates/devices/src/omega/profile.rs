@@ -11,7 +11,7 @@ pub const PROFILE: Profile = Profile {
     summary: "Baumüller Omega Drive-Line II option board PBDP-01 (ident 0x00D0): setpoints/actual values, PKW to a V-controller parameter set",
     options_help: "--params FILE.toml (V-controller parameter set; default: the shipped table), \
 --setpoints N / --actual-values N (si_NR_WR_VALUE / si_NR_RD_VALUE, 1..8; default: any valid configuration), \
---switch N (rotary switches S40/S41, hex allowed, instead of --addr), --pkw-delay-ms MS (default 5), \
+--switch N (rotary switches S40/S41, hex allowed, instead of --addr), --device-opt pkw-delay-ms=MS (PKW processing delay, default 5), \
 --control FILE|- (commands: status, quit, get P)",
     build,
 };
