@@ -8,8 +8,9 @@ use crate::view::{drain_events, hex, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
+use profibus_devices::pkw::{self, client::PkwClient};
 use profibus_dp::gsd::Gsd;
-use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
+use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
 use profibus_dp::slave::{Device, DpSlave};
 use profibus_fdl::medium::MediumConfig;
 use profibus_fdl::pcap::PcapWriter;
@@ -205,6 +206,11 @@ async fn demo(args: Args) -> Result<()> {
     let step = Duration::from_millis(20);
     let mut ramp: u16 = 0;
     let mut next_output = Instant::ZERO;
+    // The parameter channels: a round of PKW jobs on each drive/PLC.
+    let mut pkw = [
+        DemoPkw::new(6, &pkw::BM4, &BM4_JOBS),
+        DemoPkw::new(25, &pkw::OMEGA, &OMEGA_JOBS),
+    ];
     loop {
         let target = if args.fast {
             bus.now() + step
@@ -221,6 +227,11 @@ async fn demo(args: Args) -> Result<()> {
             let r = ramp.to_be_bytes();
             m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
             m.set_outputs(4, &[0, 0, r[0], r[1]]);
+        }
+        for p in pkw.iter_mut() {
+            if let Some((text, v)) = p.step(m, now, ramp) {
+                view.event(v, text);
+            }
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);
@@ -268,6 +279,103 @@ async fn demo(args: Args) -> Result<()> {
         w.flush()?;
     }
     Ok(())
+}
+
+/// PKW jobs the demo runs in turn: (PNU, command, what it is).
+type Job = (u16, fn(u16) -> pkw::Command, &'static str);
+
+/// BM4-O-PRO-01 example variables by parameter number (the 4th identifier
+/// byte): di_MyReadVar3 = PNU 4, ud_MyWriteVar1 = PNU 2.
+const BM4_JOBS: [Job; 3] = [
+    (4, |_| pkw::Command::Read, "di_MyReadVar3"),
+    (
+        2,
+        |r| pkw::Command::WriteDword(0x1234_0000 | r as u32),
+        "ud_MyWriteVar1",
+    ),
+    (2, |_| pkw::Command::Read, "ud_MyWriteVar1"),
+];
+
+/// Omega V-controller parameter P003 and the DINT array at PNU 1000.
+const OMEGA_JOBS: [Job; 3] = [
+    (3, |_| pkw::Command::Read, "P003"),
+    (
+        1000,
+        |r| pkw::Command::WriteDword(r as u32 * 1000),
+        "DINT[1000]",
+    ),
+    (1000, |_| pkw::Command::Read, "DINT[1000]"),
+];
+
+/// Runs a round of PKW jobs on one slave through the master's process
+/// images, as a PLC program would.
+struct DemoPkw {
+    address: u8,
+    client: PkwClient,
+    jobs: &'static [Job],
+    next: usize,
+    due: Instant,
+}
+
+impl DemoPkw {
+    fn new(address: u8, dialect: &'static pkw::Dialect, jobs: &'static [Job]) -> DemoPkw {
+        DemoPkw {
+            address,
+            client: PkwClient::new(dialect, Duration::from_millis(500)),
+            jobs,
+            next: 0,
+            due: Instant::ZERO,
+        }
+    }
+
+    fn step(
+        &mut self,
+        m: &mut DpMaster,
+        now: Instant,
+        ramp: u16,
+    ) -> Option<(String, serde_json::Value)> {
+        let h = m.handle(self.address)?;
+        let view = m.slave(h);
+        if view.state != SlaveState::DataExchange {
+            return None;
+        }
+        let (cycle, inputs) = (view.stats.data_exchanges, view.inputs);
+        let mut inbuf = [0u8; 244];
+        let n = inputs.len().min(244);
+        inbuf[..n].copy_from_slice(&inputs[..n]);
+        let done = self.client.poll(now, cycle, &inbuf[..n], m.outputs_mut(h));
+        let mut report = None;
+        if let Some(r) = done {
+            let (pnu, _, name) = self.jobs[(self.next + self.jobs.len() - 1) % self.jobs.len()];
+            let text = match &r {
+                Ok(a) => format!(
+                    "pkw slave {}: {name} (PNU {pnu}) → {} (0x{:X})  [request {} / response {}]",
+                    self.address,
+                    a.reply.value(),
+                    a.reply.value(),
+                    a.request,
+                    a.response
+                ),
+                Err(e) => format!("pkw slave {}: {name} (PNU {pnu}) failed: {e}", self.address),
+            };
+            let v = serde_json::json!({
+                "event": "pkw",
+                "slave": self.address,
+                "pnu": pnu,
+                "name": name,
+                "value": r.as_ref().ok().map(|a| a.reply.value()),
+                "error": r.as_ref().err().map(|e| e.to_string()),
+            });
+            report = Some((text, v));
+            self.due = now + Duration::from_millis(300);
+        }
+        if self.client.is_idle() && now >= self.due {
+            let (pnu, cmd, _) = self.jobs[self.next];
+            self.next = (self.next + 1) % self.jobs.len();
+            let _ = self.client.start(now, pnu, cmd(ramp));
+        }
+        report
+    }
 }
 
 /// Whether the shutdown future completed, without waiting.

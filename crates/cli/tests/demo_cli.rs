@@ -12,7 +12,7 @@ fn dpctl(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
-    let o = dpctl(&["demo", "--fast", "--cycles", "500", "--json"]);
+    let o = dpctl(&["demo", "--fast", "--cycles", "3000", "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let lines: Vec<Value> = String::from_utf8(o.stdout)
         .unwrap()
@@ -37,6 +37,17 @@ fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
     // The counter slave counts.
     let counter = &status["slaves"][1];
     assert_ne!(counter["inputs"], "00 00 00 00");
+    // The parameter channels of the BM4 PLC module and the Omega drive:
+    // the manual's example value di_MyReadVar3 = 3000, written values read
+    // back.
+    let pkw: Vec<&Value> = lines.iter().filter(|v| v["event"] == "pkw").collect();
+    assert!(
+        pkw.iter()
+            .any(|v| v["name"] == "di_MyReadVar3" && v["value"] == 3000),
+        "{pkw:?}"
+    );
+    assert!(pkw.iter().any(|v| v["slave"] == 25 && v["name"] == "P003"));
+    assert!(pkw.iter().all(|v| v["error"].is_null()), "{pkw:?}");
     let summary = lines.last().unwrap();
     assert_eq!(summary["event"], "summary");
     assert!(summary["telegrams"].as_u64().unwrap() > 1000);
