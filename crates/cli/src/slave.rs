@@ -12,8 +12,11 @@
 //! without a valid telegram). A pty carries bytes, not bits, so there the
 //! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
 //! `--baud` names a rate (the rate sets the bit times of min TSDR and of
-//! the receive timeouts).
+//! the receive timeouts). `--latency` (default 5 ms on a pty, 20 ms on a
+//! serial adapter) lengthens the time an incomplete telegram may take to
+//! arrive, for transports that deliver bytes late.
 
+use crate::common;
 use anyhow::{bail, Context};
 use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
 use profibus_devices::{BoxedDevice, ProfileOptions, PROFILES};
@@ -28,7 +31,7 @@ use serde_json::{json, Value};
 use std::cell::Cell;
 use std::io::Write;
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 /// Emulate a PROFIBUS-DP slave.
@@ -80,6 +83,11 @@ pub struct Args {
     /// Stop after this many Data_Exchange cycles (0: run until Ctrl-C).
     #[arg(long, value_name = "N", default_value_t = 0)]
     cycles: u64,
+    /// Extra milliseconds an incomplete telegram may take to arrive, for
+    /// the transport's latency (default: 5 on a pty, 20 on a serial
+    /// adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
     /// Print one JSON object per line.
     #[arg(long)]
     json: bool,
@@ -97,13 +105,6 @@ fn parse_baud(s: &str) -> anyhow::Result<BaudChoice> {
         return Ok(BaudChoice::Auto);
     }
     Ok(BaudChoice::Fixed(s.parse::<Baud>()?))
-}
-
-/// Whether `path` is a pseudo terminal (socat links point into /dev/pts).
-fn is_pty(path: &str) -> bool {
-    std::fs::canonicalize(path)
-        .map(|p| p.starts_with("/dev/pts") || p == Path::new("/dev/ptmx"))
-        .unwrap_or(false)
 }
 
 /// Nominal rate on a pty with `--baud auto`.
@@ -299,39 +300,12 @@ fn list_devices() {
     }
 }
 
-/// Ctrl-C or SIGTERM.
-async fn stop_signal() {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {}
-                    _ = term.recv() => {}
-                }
-            }
-            Err(_) => {
-                let _ = tokio::signal::ctrl_c().await;
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = tokio::signal::ctrl_c().await;
-    }
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.list_devices {
         list_devices();
         return Ok(());
     }
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("cannot start the runtime")?;
-    rt.block_on(run_async(args))
+    common::runtime()?.block_on(run_async(args))
 }
 
 async fn run_async(args: Args) -> anyhow::Result<()> {
@@ -352,7 +326,12 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             addr = s.address;
         }
     }
-    let pty = is_pty(&path);
+    let pty = common::is_pty(&path);
+    let latency = match args.latency {
+        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
+        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
+        None => common::default_latency(&path),
+    };
     let search = choice == BaudChoice::Auto && !pty;
     let first = match choice {
         BaudChoice::Fixed(b) => b,
@@ -393,7 +372,8 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             port.baud()
         };
-        let mut station = PassiveStation::new(slave, BusParams::defaults(baud));
+        let mut station =
+            PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
         let mut research = false;
         let mut seen = (0u64, clock.now());
         let result = driver::run(
@@ -401,7 +381,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             &mut port,
             clock,
             async {
-                stop_signal().await;
+                common::shutdown().await;
                 stop_requested.set(true);
             },
             |st, now| {
@@ -495,7 +475,7 @@ async fn search_baud(
     let mut ab = AutoBaud::new(clock.now());
     port.set_baud(ab.baud())?;
     let mut buf = [0u8; 512];
-    let stop = stop_signal();
+    let stop = common::shutdown();
     tokio::pin!(stop);
     loop {
         let due = ab.poll_timeout().expect("searching");
