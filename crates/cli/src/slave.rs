@@ -46,7 +46,9 @@ pub struct Args {
           required_unless_present = "list_devices")]
     addr: Option<u8>,
     /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
-    /// traffic on a serial line (on a pty: nominal 19.2 kbit/s).
+    /// traffic on a serial line (on a pty: nominal 19.2 kbit/s), or
+    /// `search` to search even on a pty (where every rate passes the
+    /// bytes, so it locks at the first rate that sees a valid telegram).
     #[arg(long, value_name = "B", default_value = "auto")]
     baud: String,
     /// GSD file of the device to emulate (the generic device).
@@ -97,12 +99,18 @@ pub struct Args {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum BaudChoice {
     Fixed(Baud),
+    /// Search on a serial line, nominal rate on a pty.
     Auto,
+    /// Search even on a pty.
+    Search,
 }
 
 fn parse_baud(s: &str) -> anyhow::Result<BaudChoice> {
     if s.eq_ignore_ascii_case("auto") {
         return Ok(BaudChoice::Auto);
+    }
+    if s.eq_ignore_ascii_case("search") {
+        return Ok(BaudChoice::Search);
     }
     Ok(BaudChoice::Fixed(s.parse::<Baud>()?))
 }
@@ -332,11 +340,11 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         Some(ms) => bail!("--latency {ms} must be a non-negative number"),
         None => common::default_latency(&path),
     };
-    let search = choice == BaudChoice::Auto && !pty;
+    let search = choice == BaudChoice::Search || (choice == BaudChoice::Auto && !pty);
     let first = match choice {
         BaudChoice::Fixed(b) => b,
         BaudChoice::Auto if pty => PTY_NOMINAL,
-        BaudChoice::Auto => profibus_fdl::autobaud::SEARCH_ORDER[0],
+        BaudChoice::Auto | BaudChoice::Search => profibus_fdl::autobaud::SEARCH_ORDER[0],
     };
     let mut port = Port::open(&path, first)?;
     let mut slave = DpSlave::new(device, addr);
