@@ -390,12 +390,7 @@ impl<D: Device> DpSlave<D> {
     fn data_exchange(&mut self, now: Instant, from: u8, du: &[u8], out: &mut [u8]) -> Reply {
         if self.state != SlaveState::DataExch {
             self.refuse(from, "Data_Exchange", "not in Data_Exch");
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         if !self.is_owner(from) {
             self.refuse(
@@ -403,12 +398,7 @@ impl<D: Device> DpSlave<D> {
                 "Data_Exchange",
                 "the slave is locked to another master",
             );
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         let want = self.layout.outputs;
         if du.len() == want {
@@ -432,12 +422,7 @@ impl<D: Device> DpSlave<D> {
                 }),
             });
             self.enter(now, SlaveState::WaitPrm, ClearReason::LeftDataExchange);
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         let n = self.layout.inputs;
         if out.len() < n {
@@ -824,12 +809,7 @@ impl<D: Device> DpSlave<D> {
         if ok {
             Reply::ShortAck
         } else {
-            Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            }
+            NEGATIVE_RS
         }
     }
 
