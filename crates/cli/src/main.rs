@@ -42,7 +42,7 @@ enum Command {
     /// Show or check a GSD file.
     Gsd(gsd::Args),
     /// Emulate a DP slave (a device profile or any GSD-described device).
-    Slave(slave::Args),
+    Slave(Box<slave::Args>),
     /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
     Bus(bus::Args),
     /// Listen passively on a line and print every telegram.
@@ -66,7 +66,7 @@ fn main() -> ExitCode {
         Command::Master(a) => master::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Gsd(a) => gsd::run(a),
-        Command::Slave(a) => slave::run(a),
+        Command::Slave(a) => slave::run(*a),
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
         Command::Pkw(a) => pkw::run(a),

@@ -12,8 +12,11 @@
 //! without a valid telegram). A pty carries bytes, not bits, so there the
 //! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
 //! `--baud` names a rate (the rate sets the bit times of min TSDR and of
-//! the receive timeouts).
+//! the receive timeouts). `--latency` (default 5 ms on a pty, 20 ms on a
+//! serial adapter) lengthens the time an incomplete telegram may take to
+//! arrive, for transports that deliver bytes late.
 
+use crate::common;
 use anyhow::{bail, Context};
 use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
 use profibus_devices::{BoxedDevice, ControlInbox, ProfileOptions, PROFILES};
@@ -28,7 +31,7 @@ use serde_json::{json, Value};
 use std::cell::Cell;
 use std::io::Write;
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 /// Emulate a PROFIBUS-DP slave.
@@ -45,7 +48,9 @@ pub struct Args {
           required_unless_present_any = ["list_devices", "us_device", "switch"])]
     addr: Option<u8>,
     /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
-    /// traffic on a serial line (on a pty: nominal 19.2 kbit/s).
+    /// traffic on a serial line (on a pty: nominal 19.2 kbit/s), or
+    /// `search` to search even on a pty (where every rate passes the
+    /// bytes, so it locks at the first rate that sees a valid telegram).
     #[arg(long, value_name = "B", default_value = "auto")]
     baud: String,
     /// GSD file of the device to emulate (the generic device).
@@ -122,6 +127,11 @@ pub struct Args {
     /// Stop after this many Data_Exchange cycles (0: run until Ctrl-C).
     #[arg(long, value_name = "N", default_value_t = 0)]
     cycles: u64,
+    /// Extra milliseconds an incomplete telegram may take to arrive, for
+    /// the transport's latency (default: 5 on a pty, 20 on a serial
+    /// adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
     /// Print one JSON object per line.
     #[arg(long)]
     json: bool,
@@ -131,21 +141,20 @@ pub struct Args {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum BaudChoice {
     Fixed(Baud),
+    /// Search on a serial line, nominal rate on a pty.
     Auto,
+    /// Search even on a pty.
+    Search,
 }
 
 fn parse_baud(s: &str) -> anyhow::Result<BaudChoice> {
     if s.eq_ignore_ascii_case("auto") {
         return Ok(BaudChoice::Auto);
     }
+    if s.eq_ignore_ascii_case("search") {
+        return Ok(BaudChoice::Search);
+    }
     Ok(BaudChoice::Fixed(s.parse::<Baud>()?))
-}
-
-/// Whether `path` is a pseudo terminal (socat links point into /dev/pts).
-fn is_pty(path: &str) -> bool {
-    std::fs::canonicalize(path)
-        .map(|p| p.starts_with("/dev/pts") || p == Path::new("/dev/ptmx"))
-        .unwrap_or(false)
 }
 
 /// Nominal rate on a pty with `--baud auto`.
@@ -390,38 +399,12 @@ fn list_devices() {
     }
 }
 
-/// Ctrl-C or SIGTERM.
-async fn stop_signal() {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {}
-                    _ = term.recv() => {}
-                }
-            }
-            Err(_) => {
-                let _ = tokio::signal::ctrl_c().await;
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = tokio::signal::ctrl_c().await;
-    }
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.list_devices {
         list_devices();
         return Ok(());
     }
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("cannot start the runtime")?;
+    let rt = common::runtime()?;
     let result = rt.block_on(run_async(args));
     // A --control reader may be blocked on stdin: do not wait for it.
     rt.shutdown_background();
@@ -449,12 +432,17 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             addr = s.address;
         }
     }
-    let pty = is_pty(&path);
-    let search = choice == BaudChoice::Auto && !pty;
+    let pty = common::is_pty(&path);
+    let latency = match args.latency {
+        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
+        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
+        None => common::default_latency(&path),
+    };
+    let search = choice == BaudChoice::Search || (choice == BaudChoice::Auto && !pty);
     let first = match choice {
         BaudChoice::Fixed(b) => b,
         BaudChoice::Auto if pty => PTY_NOMINAL,
-        BaudChoice::Auto => profibus_fdl::autobaud::SEARCH_ORDER[0],
+        BaudChoice::Auto | BaudChoice::Search => profibus_fdl::autobaud::SEARCH_ORDER[0],
     };
     let mut port = Port::open(&path, first)?;
     let mut slave = DpSlave::new(device, addr);
@@ -490,7 +478,8 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             port.baud()
         };
-        let mut station = PassiveStation::new(slave, BusParams::defaults(baud));
+        let mut station =
+            PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
         let mut research = false;
         let mut seen = (0u64, clock.now());
         let result = driver::run(
@@ -498,7 +487,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             &mut port,
             clock.clone(),
             async {
-                stop_signal().await;
+                common::shutdown().await;
                 stop_requested.set(true);
             },
             |st, now| {
@@ -592,7 +581,7 @@ async fn search_baud(
     let mut ab = AutoBaud::new(clock.now());
     port.set_baud(ab.baud())?;
     let mut buf = [0u8; 512];
-    let stop = stop_signal();
+    let stop = common::shutdown();
     tokio::pin!(stop);
     loop {
         let due = ab.poll_timeout().expect("searching");

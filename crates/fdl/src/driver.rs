@@ -95,6 +95,10 @@ where
     let mut buf = vec![0u8; 4096];
     tokio::pin!(shutdown);
     loop {
+        // A deadline about to come counts as reached before anything is
+        // sent: a response due after min TSDR goes out in this pass, not
+        // after another round through the port's read and the runtime.
+        warp(station, &clock);
         let now = clock.now();
         while let Some(bytes) = station.poll_transmit(now) {
             port.write_all(bytes).await?;
@@ -103,13 +107,8 @@ where
         if tick(station, now).is_break() {
             return Ok(Stop::Done);
         }
-        let mut deadline = station.poll_timeout();
-        if let Some(d) = deadline.filter(|&d| d > clock.now()) {
-            if d.saturating_duration_since(clock.now()) < WARP_BELOW {
-                clock.jump_to(d);
-                deadline = Some(d);
-            }
-        }
+        warp(station, &clock);
+        let deadline = station.poll_timeout();
         let wait = deadline.map(|d| d.saturating_duration_since(clock.now()));
         tokio::select! {
             biased;
@@ -124,6 +123,17 @@ where
             _ = wait_for(&clock, deadline, wait) => {
                 station.handle_timeout(clock.now());
             }
+        }
+    }
+}
+
+/// Jump the clock to the station's deadline when it is less than
+/// [`WARP_BELOW`] away.
+fn warp<S: Station + ?Sized>(station: &S, clock: &Clock) {
+    if let Some(d) = station.poll_timeout() {
+        let now = clock.now();
+        if d > now && d.saturating_duration_since(now) < WARP_BELOW {
+            clock.jump_to(d);
         }
     }
 }

@@ -44,6 +44,8 @@
 //!   ready".
 //! - **Unknown SAPs** and SAPs of unsupported services (MSAC_C2, DP-V1
 //!   without DPV1_Enable, Set_Slave_Add when not supported) get **RS**.
+//!   A negative acknowledge carries no data and no SAP bytes: it is an
+//!   SD1 frame (`10 DA SA 03 FCS 16`), as in the trace.
 //! - A **Data_Exchange with the wrong output length** is not applied: the
 //!   slave clears its outputs, returns to Wait_Prm (Prm_Req) and answers
 //!   RS. A fail-safe master (DPV1_Status_1 Fail_Safe) may send no outputs
@@ -388,12 +390,7 @@ impl<D: Device> DpSlave<D> {
     fn data_exchange(&mut self, now: Instant, from: u8, du: &[u8], out: &mut [u8]) -> Reply {
         if self.state != SlaveState::DataExch {
             self.refuse(from, "Data_Exchange", "not in Data_Exch");
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         if !self.is_owner(from) {
             self.refuse(
@@ -401,12 +398,7 @@ impl<D: Device> DpSlave<D> {
                 "Data_Exchange",
                 "the slave is locked to another master",
             );
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         let want = self.layout.outputs;
         if du.len() == want {
@@ -430,12 +422,7 @@ impl<D: Device> DpSlave<D> {
                 }),
             });
             self.enter(now, SlaveState::WaitPrm, ClearReason::LeftDataExchange);
-            return Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            };
+            return NEGATIVE_RS;
         }
         let n = self.layout.inputs;
         if out.len() < n {
@@ -822,12 +809,7 @@ impl<D: Device> DpSlave<D> {
         if ok {
             Reply::ShortAck
         } else {
-            Reply::Data {
-                status: ResponseStatus::Rs,
-                dsap: None,
-                ssap: None,
-                len: 0,
-            }
+            NEGATIVE_RS
         }
     }
 
@@ -998,10 +980,18 @@ impl<D: Device> DpSlave<D> {
     }
 }
 
-/// RS with the request's SAPs swapped.
-fn rs(req: &DataTelegram<'_>) -> Reply {
-    Reply::status_only(req, ResponseStatus::Rs)
+/// RS ("SAP not activated"): a negative acknowledge without data and
+/// without SAP bytes (an SD1 frame, as in trace [TR19]).
+fn rs(_req: &DataTelegram<'_>) -> Reply {
+    NEGATIVE_RS
 }
+
+const NEGATIVE_RS: Reply = Reply::Data {
+    status: ResponseStatus::Rs,
+    dsap: None,
+    ssap: None,
+    len: 0,
+};
 
 impl<D: Device> Responder for DpSlave<D> {
     fn address(&self) -> u8 {
@@ -1086,10 +1076,7 @@ impl<D: Device> Responder for DpSlave<D> {
                     self.refuse(from, sap::name(dsap).unwrap_or("?"), "not in Data_Exch");
                     rs(req)
                 }
-                sap::SET_SLAVE_ADD => match self.set_slave_add(from, req.data) {
-                    Reply::Data { status, .. } => Reply::status_only(req, status),
-                    r => r,
-                },
+                sap::SET_SLAVE_ADD => self.set_slave_add(from, req.data),
                 sap::MSAC_C1 => self.msac_c1(now, req, out).unwrap_or_else(|| rs(req)),
                 sap::ALARM_ACK => self.alarm_ack(now, req, out).unwrap_or_else(|| rs(req)),
                 _ => {

@@ -120,7 +120,19 @@ pub struct PassiveStation<R> {
 impl<R: Responder> PassiveStation<R> {
     /// A passive station with bus parameters `params`.
     pub fn new(app: R, params: BusParams) -> Self {
-        let slack = params.slot_duration();
+        Self::with_latency_allowance(app, params, std::time::Duration::ZERO)
+    }
+
+    /// A passive station on a transport that adds latency (ptys, USB
+    /// adapters): an incomplete telegram is abandoned only when its
+    /// missing characters are `allowance` later than the slot time after
+    /// they were due.
+    pub fn with_latency_allowance(
+        app: R,
+        params: BusParams,
+        allowance: std::time::Duration,
+    ) -> Self {
+        let slack = params.slot_duration() + allowance;
         PassiveStation {
             app,
             params,
