@@ -26,17 +26,41 @@ pub struct LineArgs {
 impl LineArgs {
     /// The latency allowance for this port.
     pub fn latency(&self) -> Result<Duration> {
-        match self.latency {
-            Some(ms) if ms >= 0.0 && ms.is_finite() => Ok(Duration::from_secs_f64(ms / 1000.0)),
-            Some(ms) => anyhow::bail!("--latency {ms} must be a non-negative number"),
-            None => Ok(default_latency(&self.port)),
-        }
+        latency(self.latency, &self.port)
     }
 
     /// Open the port.
     pub fn open(&self) -> Result<Port> {
         Port::open(&self.port, self.baud).with_context(|| format!("opening {}", self.port))
     }
+}
+
+/// The latency allowance from a `--latency MS` option, or the default
+/// for `port`.
+pub fn latency(ms: Option<f64>, port: &str) -> Result<Duration> {
+    match ms {
+        Some(ms) if ms >= 0.0 && ms.is_finite() => Ok(Duration::from_secs_f64(ms / 1000.0)),
+        Some(ms) => anyhow::bail!("--latency {ms} must be a non-negative number"),
+        None => Ok(default_latency(port)),
+    }
+}
+
+/// The FDL master station of a bus file (running `dp`) and its port.
+pub fn master_station(
+    port: &str,
+    bus: &profibus_dp::busfile::BusFile,
+    dp: profibus_dp::master::DpMaster,
+    latency_ms: Option<f64>,
+) -> Result<(
+    profibus_fdl::station::active::ActiveStation<profibus_dp::master::DpMaster>,
+    Port,
+)> {
+    use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
+    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
+    cfg.latency_allowance = latency(latency_ms, port)?;
+    let port_ =
+        Port::open(port, bus.master.params.baud).with_context(|| format!("opening {port}"))?;
+    Ok((ActiveStation::new(cfg, dp), port_))
 }
 
 /// Latency allowance when none is given: ptys answer within a

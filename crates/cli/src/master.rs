@@ -7,7 +7,6 @@ use profibus_dp::busfile::BusFile;
 use profibus_dp::control::ControlCommand;
 use profibus_dp::master::{DpMaster, Job, OperatingState, SlaveState};
 use profibus_fdl::driver::{self, Clock};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::Instant;
 use serde_json::{json, Value};
 use std::io::IsTerminal;
@@ -181,20 +180,11 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     for w in &bus.warnings {
         eprintln!("dpctl master: warning: {w}");
     }
-    let latency = match args.latency {
-        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
-        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
-        None => common::default_latency(&args.port),
-    };
     let mut dp = DpMaster::new(&bus.master)?;
     if args.clear {
         dp.set_operating_state(OperatingState::Clear);
     }
-    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
-    cfg.latency_allowance = latency;
-    let mut station = ActiveStation::new(cfg, dp);
-    let mut port = profibus_fdl::transport::Port::open(&args.port, bus.master.params.baud)
-        .with_context(|| format!("opening {}", args.port))?;
+    let (mut station, mut port) = common::master_station(&args.port, &bus, dp, args.latency)?;
 
     // Commands come from a plain thread: a blocking read of stdin must not
     // keep the runtime from shutting down on Ctrl-C / SIGTERM.

@@ -14,7 +14,6 @@ use profibus_devices::pkw::{dialect_for, Command, Dialect, Reply};
 use profibus_dp::busfile::{BusFile, BusSlave};
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_fdl::driver::{self, Clock, Stop};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::Instant;
 use serde_json::json;
 use std::ops::ControlFlow;
@@ -287,17 +286,8 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("slave {}: {e}", args.slave))?;
     let (param, mut steps) = plan(&args.op, &slave, dialect)?;
     steps.reverse();
-    let latency = match args.latency {
-        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
-        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
-        None => common::default_latency(&args.port),
-    };
-    let dp = DpMaster::new(&bus.master)?;
-    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
-    cfg.latency_allowance = latency;
-    let mut station = ActiveStation::new(cfg, dp);
-    let mut port = profibus_fdl::transport::Port::open(&args.port, bus.master.params.baud)
-        .with_context(|| format!("opening {}", args.port))?;
+    let (mut station, mut port) =
+        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
 
     let addr = args.slave;
     let mut client = PkwClient::new(dialect, Duration::from_millis(args.timeout.max(1)));
