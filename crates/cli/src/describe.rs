@@ -5,7 +5,8 @@ use profibus_dp::sap;
 use profibus_fdl::wire::{Format, FunctionCode, Telegram};
 use serde_json::{json, Value};
 
-fn hex(bytes: &[u8]) -> String {
+/// Bytes as space-separated upper-case hex (`01 0A FF`).
+pub fn hex(bytes: &[u8]) -> String {
     let mut s = String::with_capacity(bytes.len() * 3);
     for (i, b) in bytes.iter().enumerate() {
         if i > 0 {

@@ -1,6 +1,7 @@
 //! `dpctl gsd show FILE` and `dpctl gsd check FILE`: what a GSD file
 //! describes, and what is wrong with it.
 
+use crate::describe::hex;
 use anyhow::bail;
 use profibus_dp::cfg::IoLen;
 use profibus_dp::gsd::{
@@ -96,14 +97,6 @@ fn kind_name(k: DiagKind) -> String {
         DiagKind::UnknownKeyword => "unknown-keyword".into(),
         DiagKind::Semantic => "semantic".into(),
     }
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|b| format!("{b:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 fn fail(file: &Path, e: &GsdError) -> anyhow::Error {

@@ -10,6 +10,7 @@
 //! with the codec counters and stops.
 
 use crate::describe;
+use crate::describe::hex;
 use anyhow::{Context, Result};
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::pcap::PcapWriter;
@@ -45,17 +46,6 @@ pub struct Args {
     /// (default: 5 on a pty; on a serial line twice TSYN, at least 2).
     #[arg(long, value_name = "MS")]
     pub idle_ms: Option<f64>,
-}
-
-fn hex(bytes: &[u8]) -> String {
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        s.push_str(&format!("{b:02X}"));
-    }
-    s
 }
 
 /// The kinds of error in `e`, for humans.

@@ -1,6 +1,7 @@
 //! The live view shared by `dpctl master` and `dpctl demo`: events as
 //! lines or JSON, a refreshing table of the slaves on a terminal.
 
+pub use crate::describe::hex;
 use profibus_dp::diag;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterEvent};
@@ -19,13 +20,6 @@ pub struct SlaveInfo {
     pub gsd: Option<Gsd>,
     /// DP-V1 slave.
     pub dpv1: bool,
-}
-
-pub fn hex(b: &[u8]) -> String {
-    b.iter()
-        .map(|x| format!("{x:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 impl View {
