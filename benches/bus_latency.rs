@@ -151,12 +151,12 @@ fn main() {
 
     // socat pty pair.
     let dir = TempDir::new("bench");
-    let (pa, pb) = (dir.join("a"), dir.join("b"));
+    let (pa, pb) = (dir.path("a"), dir.path("b"));
     let socat = || {
         let mut cmd = Command::new("socat");
         cmd.arg(format!("pty,raw,echo=0,link={}", pa.display()))
             .arg(format!("pty,raw,echo=0,link={}", pb.display()));
-        let p = Proc::spawn(cmd);
+        let p = Proc::spawn_captured(cmd);
         common::wait_for("socat", Duration::from_secs(10), || {
             pa.exists() && pb.exists()
         });
@@ -208,10 +208,16 @@ fn main() {
     for l in listeners {
         let _ = l.join();
     }
-    report("dpctl bus, 8 stations (6 listening), unpaced", &h8, f64::NAN);
+    report(
+        "dpctl bus, 8 stations (6 listening), unpaced",
+        &h8,
+        f64::NAN,
+    );
 
     println!();
-    let added = |x: Duration, base: Duration| x.as_nanos() as f64 / 1000.0 - base.as_nanos() as f64 / 1000.0;
+    let added = |x: Duration, base: Duration| {
+        x.as_nanos() as f64 / 1000.0 - base.as_nanos() as f64 / 1000.0
+    };
     println!(
         "hub added to a round trip vs socat: p50 {:+.1} µs, p99 {:+.1} µs; vs a bare pty pair: p50 {:+.1} µs, p99 {:+.1} µs (target: ≤ 20 µs at p99)",
         added(h.p50, s.p50),

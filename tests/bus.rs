@@ -116,7 +116,7 @@ fn links_are_removed_on_sigint_and_sigterm() {
             .starts_with("/dev/pts"));
         bus.proc.signal(sig);
         let Bus { proc, .. } = bus;
-        let out = proc.wait(Duration::from_secs(10));
+        let out = proc.finish(Duration::from_secs(10));
         assert!(out.status.success(), "signal {sig}: {out:?}");
         assert!(
             out.stderr.contains("dpctl bus: transmissions"),
@@ -136,9 +136,9 @@ fn links_are_removed_on_sigint_and_sigterm() {
 #[test]
 fn bad_arguments_exit_2_with_one_line() {
     let dir = TempDir::new("args");
-    let file = dir.join("st0");
+    let file = dir.path("st0");
     std::fs::write(&file, b"precious").unwrap();
-    let prefix = dir.join("st");
+    let prefix = dir.path("st");
     let prefix = prefix.to_str().unwrap();
     for (args, expect) in [
         (
@@ -188,14 +188,14 @@ fn bad_arguments_exit_2_with_one_line() {
 #[tokio::test]
 async fn stale_links_are_replaced() {
     let dir = TempDir::new("stale");
-    let prefix = dir.join("st");
-    std::os::unix::fs::symlink("/dev/pts/nonexistent", dir.join("st0")).unwrap();
+    let prefix = dir.path("st");
+    std::os::unix::fs::symlink("/dev/pts/nonexistent", dir.path("st0")).unwrap();
     let mut cmd = Command::new(common::dpctl());
     cmd.args(["bus", "--stations", "2", "--link"]).arg(&prefix);
-    let proc = Proc::spawn(cmd);
+    let proc = Proc::spawn_captured(cmd);
     common::wait_for("links", Duration::from_secs(20), || {
-        std::fs::read_link(dir.join("st0")).is_ok_and(|t| t.starts_with("/dev/pts") && t.exists())
-            && dir.join("st1").exists()
+        std::fs::read_link(dir.path("st0")).is_ok_and(|t| t.starts_with("/dev/pts") && t.exists())
+            && dir.path("st1").exists()
     });
     let out = proc.stop();
     assert!(out.status.success(), "{out:?}");
@@ -316,13 +316,13 @@ async fn pacing_makes_the_bus_as_slow_as_the_wire() {
 async fn pcap_files_are_read_by_tshark() {
     require("tshark");
     let files = TempDir::new("pcap");
-    let hub_pcap = files.join("hub.pcapng");
-    let sniff_pcap = files.join("sniff.pcapng");
+    let hub_pcap = files.path("hub.pcapng");
+    let sniff_pcap = files.path("sniff.pcapng");
     let bus = Bus::start(3, &["--pcap", hub_pcap.to_str().unwrap()]);
     let mut cmd = Command::new(common::dpctl());
     cmd.args(["sniff", "--port", &bus.link_str(2), "--json", "--pcap"])
         .arg(&sniff_pcap);
-    let sniff = Proc::spawn(cmd);
+    let sniff = Proc::spawn_captured(cmd);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
     tokio::time::sleep(Duration::from_millis(100)).await;
@@ -387,7 +387,7 @@ async fn sniff_marks_errors_for_humans() {
     let bus = Bus::start(2, &[]);
     let mut cmd = Command::new(common::dpctl());
     cmd.args(["sniff", "--port", &bus.link_str(1)]);
-    let sniff = Proc::spawn(cmd);
+    let sniff = Proc::spawn_captured(cmd);
     let mut a = open(&bus, 0);
     tokio::time::sleep(Duration::from_millis(100)).await;
     let mut bad = fdl_status(3, 1);
@@ -442,7 +442,7 @@ while True:
 "#;
     let mut cmd = Command::new("python3");
     cmd.arg("-c").arg(responder).arg(bus.link(1));
-    let _peer = Proc::spawn(cmd);
+    let _peer = Proc::spawn_captured(cmd);
     let mut master = open(&bus, 0);
     let mut listener = open(&bus, 2);
     // Wait until the responder runs and the hub has seen it open its pty.
@@ -482,11 +482,11 @@ while True:
 async fn port_works_on_a_socat_pty_pair() {
     require("socat");
     let dir = TempDir::new("socat");
-    let (pa, pb) = (dir.join("a"), dir.join("b"));
+    let (pa, pb) = (dir.path("a"), dir.path("b"));
     let mut cmd = Command::new("socat");
     cmd.arg(format!("pty,raw,echo=0,link={}", pa.display()))
         .arg(format!("pty,raw,echo=0,link={}", pb.display()));
-    let _socat = Proc::spawn(cmd);
+    let _socat = Proc::spawn_captured(cmd);
     common::wait_for("socat links", Duration::from_secs(10), || {
         pa.exists() && pb.exists()
     });

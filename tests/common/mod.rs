@@ -1,21 +1,23 @@
-//! Helpers for end-to-end tests of real `dpctl` processes.
+//! Helpers for end-to-end tests: the `dpctl` binary (built on first use),
+//! socat pty pairs, `dpctl bus` in a temp dir, the Python venv with
+//! pyprofibus, child processes that are stopped and cleaned up even when a
+//! test fails.
 //!
-//! - [`dpctl`]: the path of a fresh `dpctl` binary (built once per test
-//!   binary with the same cargo and profile as the tests).
-//! - [`TempDir`]: a scratch directory removed on drop.
-//! - [`Proc`]: a child process killed on drop, with its output collected.
-//! - [`Bus`]: a running `dpctl bus` with links in a temp dir.
-//! - [`require`]: fail (never skip) when an external tool is missing.
-//!
-//! Each test file uses a subset, hence the `dead_code` allowance.
+//! Missing peers (socat, the venv) make a test FAIL with a message that
+//! says how to install them (`scripts/setup-test-env`); they never skip.
+
 #![allow(dead_code)]
 
-use std::io::Read;
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
 
 /// Path of the `dpctl` binary, built on first use.
 ///
@@ -66,42 +68,56 @@ pub fn dpctl() -> PathBuf {
     .clone()
 }
 
+/// Fail with how to set up the test environment.
+pub fn need(what: &str) -> ! {
+    panic!("{what} is missing: run scripts/setup-test-env (scripts/test does it)");
+}
+
 /// Fail the test with a clear message when `tool` is not installed.
 /// External peers are never skipped silently.
 pub fn require(tool: &str) {
     let found = std::env::var_os("PATH")
         .map(|p| std::env::split_paths(&p).any(|d| d.join(tool).is_file()))
         .unwrap_or(false);
-    assert!(
-        found,
-        "`{tool}` is required by this test but not installed; run scripts/setup-test-env"
-    );
+    if !found {
+        need(&format!("`{tool}` (required by this test)"));
+    }
 }
 
-/// A scratch directory, removed with its contents on drop.
-pub struct TempDir(PathBuf);
+/// The venv's Python with pyprofibus and pyserial importable.
+pub fn python() -> PathBuf {
+    let py = repo().join(".venv/bin/python");
+    if !py.exists() {
+        need(".venv with pyprofibus");
+    }
+    let ok = Command::new(&py)
+        .args(["-c", "import pyprofibus, serial"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    if !ok {
+        need("pyprofibus/pyserial in .venv");
+    }
+    py
+}
+
+/// A temporary directory removed on drop.
+pub struct TempDir(pub PathBuf);
 
 impl TempDir {
-    /// A new empty directory under the system temp dir.
     pub fn new(tag: &str) -> TempDir {
-        static N: AtomicU32 = AtomicU32::new(0);
         let p = std::env::temp_dir().join(format!(
-            "dpctl-test-{tag}-{}-{}",
+            "dpctl-{tag}-{}-{}",
             std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_nanos()
         ));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("create temp dir");
+        std::fs::create_dir_all(&p).unwrap();
         TempDir(p)
     }
-
-    /// The directory.
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-
-    /// A path inside the directory.
-    pub fn join(&self, name: &str) -> PathBuf {
+    pub fn path(&self, name: &str) -> PathBuf {
         self.0.join(name)
     }
 }
@@ -123,34 +139,37 @@ pub struct Output {
     pub stderr: String,
 }
 
-/// A child process that is killed when dropped.
+/// A child process killed (by its pid) on drop.
 pub struct Proc {
-    child: Option<Child>,
-    name: String,
+    pub child: Option<Child>,
+    pub name: String,
 }
 
 impl Proc {
-    /// Spawn `cmd` with piped stdout and stderr.
-    pub fn spawn(mut cmd: Command) -> Proc {
-        let name = format!("{cmd:?}");
+    pub fn spawn(name: &str, cmd: &mut Command) -> Proc {
         let child = cmd
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
             .spawn()
             .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
         Proc {
             child: Some(child),
-            name,
+            name: name.to_string(),
         }
     }
 
-    /// The process id.
     pub fn pid(&self) -> u32 {
-        self.child.as_ref().expect("running").id()
+        self.child.as_ref().unwrap().id()
     }
 
-    /// Send a signal (`libc` number, e.g. 15 for SIGTERM).
+    /// Spawn `cmd` with stdout and stderr captured (see [`Proc::finish`]).
+    pub fn spawn_captured(mut cmd: Command) -> Proc {
+        let name = format!("{cmd:?}");
+        cmd.stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        Proc::spawn(&name, &mut cmd)
+    }
+
+    /// Send signal number `sig` (e.g. 2 SIGINT, 15 SIGTERM).
     pub fn signal(&self, sig: i32) {
         let ok = Command::new("kill")
             .arg(format!("-{sig}"))
@@ -168,9 +187,9 @@ impl Proc {
             .is_none_or(|c| c.try_wait().ok().flatten().is_some())
     }
 
-    /// Wait for the process to end (at most `timeout`, then kill it and
-    /// fail) and collect its output.
-    pub fn wait(mut self, timeout: Duration) -> Output {
+    /// Wait for the end (at most `timeout`, then kill and fail) and collect
+    /// the captured output.
+    pub fn finish(mut self, timeout: Duration) -> Output {
         let mut child = self.child.take().expect("running");
         let deadline = Instant::now() + timeout;
         let status = loop {
@@ -199,10 +218,36 @@ impl Proc {
         }
     }
 
-    /// SIGTERM, then wait.
+    /// SIGTERM, then [`Proc::finish`] within 10 s.
     pub fn stop(self) -> Output {
         self.signal(15);
-        self.wait(Duration::from_secs(10))
+        self.finish(Duration::from_secs(10))
+    }
+
+    /// Send SIGTERM and wait up to `timeout` for the exit status.
+    pub fn terminate(&mut self, timeout: Duration) -> std::process::ExitStatus {
+        let pid = self.pid().to_string();
+        let _ = Command::new("kill").args(["-TERM", &pid]).status();
+        self.wait(timeout)
+    }
+
+    /// Wait up to `timeout` for the exit status (kill after that).
+    pub fn wait(&mut self, timeout: Duration) -> std::process::ExitStatus {
+        let child = self.child.as_mut().unwrap();
+        let end = Instant::now() + timeout;
+        loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                self.child = None;
+                return s;
+            }
+            if Instant::now() > end {
+                let _ = child.kill();
+                let _ = child.wait();
+                self.child = None;
+                panic!("{} did not exit within {timeout:?}", self.name);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 }
 
@@ -215,11 +260,82 @@ impl Drop for Proc {
     }
 }
 
+/// A socat pty pair linked at `a` and `b`.
+pub fn pty_pair(a: &Path, b: &Path) -> Proc {
+    if Command::new("socat")
+        .arg("-V")
+        .stdout(Stdio::null())
+        .status()
+        .is_err()
+    {
+        need("socat");
+    }
+    let p = Proc::spawn(
+        "socat",
+        Command::new("socat")
+            .arg(format!("pty,raw,echo=0,link={}", a.display()))
+            .arg(format!("pty,raw,echo=0,link={}", b.display()))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    let end = Instant::now() + Duration::from_secs(5);
+    while !(a.exists() && b.exists()) {
+        assert!(Instant::now() < end, "socat made no pty pair");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    p
+}
+
+/// Lines of a child's stdout, collected on a thread.
+pub struct Lines(std::sync::mpsc::Receiver<String>, pub Vec<String>);
+
+impl Lines {
+    pub fn from(child: &mut Proc) -> Lines {
+        let out = child.child.as_mut().unwrap().stdout.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                if tx.send(l).is_err() {
+                    break;
+                }
+            }
+        });
+        Lines(rx, vec![])
+    }
+
+    /// Wait until a line contains `needle`; true when it came in time.
+    pub fn wait_for(&mut self, needle: &str, timeout: Duration) -> bool {
+        if self.1.iter().any(|l| l.contains(needle)) {
+            return true;
+        }
+        let end = Instant::now() + timeout;
+        while let Ok(l) = self
+            .0
+            .recv_timeout(end.saturating_duration_since(Instant::now()))
+        {
+            let hit = l.contains(needle);
+            self.1.push(l);
+            if hit {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Everything until the child closed its stdout.
+    pub fn rest(&mut self) -> &[String] {
+        while let Ok(l) = self.0.recv_timeout(Duration::from_secs(10)) {
+            self.1.push(l);
+        }
+        &self.1
+    }
+}
+
 /// Run `dpctl` with `args` to completion (at most 30 s).
 pub fn run_dpctl(args: &[&str]) -> Output {
     let mut cmd = Command::new(dpctl());
     cmd.args(args);
-    Proc::spawn(cmd).wait(Duration::from_secs(30))
+    Proc::spawn_captured(cmd).finish(Duration::from_secs(30))
 }
 
 /// Wait until `cond` holds, polling every 5 ms; panic after `timeout`.
@@ -247,14 +363,14 @@ impl Bus {
     /// arguments and wait until every link exists.
     pub fn start(stations: usize, extra: &[&str]) -> Bus {
         let dir = TempDir::new("bus");
-        let prefix = dir.join("st");
+        let prefix = dir.path("st");
         let mut cmd = Command::new(dpctl());
         cmd.arg("bus")
             .args(["--stations", &stations.to_string()])
             .arg("--link")
             .arg(&prefix)
             .args(extra);
-        let mut proc = Proc::spawn(cmd);
+        let mut proc = Proc::spawn_captured(cmd);
         let bus_links: Vec<PathBuf> = (0..stations)
             .map(|i| PathBuf::from(format!("{}{i}", prefix.display())))
             .collect();

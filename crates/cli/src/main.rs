@@ -5,9 +5,16 @@
 //! one-line reason on stderr.
 
 mod bus;
+mod common;
 mod decode;
+mod demo;
 mod describe;
+mod gsd;
+mod master;
+mod scan;
+mod slave;
 mod sniff;
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -24,6 +31,17 @@ struct Cli {
 enum Command {
     /// Decode telegram bytes given in hex.
     Decode(decode::Args),
+    /// Live list: join the bus as a master and list the stations.
+    Scan(scan::Args),
+    /// Run a DP master from a bus file.
+    Master(master::Args),
+    /// A whole virtual plant in one process: master and emulated slaves
+    /// on a simulated bus.
+    Demo(demo::Args),
+    /// Show or check a GSD file.
+    Gsd(gsd::Args),
+    /// Emulate a DP slave (a device profile or any GSD-described device).
+    Slave(slave::Args),
     /// Virtual RS-485 bus of N ptys (links PREFIX0 … PREFIX{N-1}).
     Bus(bus::Args),
     /// Listen passively on a line and print every telegram.
@@ -41,6 +59,11 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
+        Command::Scan(a) => scan::run(a),
+        Command::Master(a) => master::run(a),
+        Command::Demo(a) => demo::run(a),
+        Command::Gsd(a) => gsd::run(a),
+        Command::Slave(a) => slave::run(a),
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
     };

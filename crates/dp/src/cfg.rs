@@ -15,7 +15,10 @@
 //!   length − 1 (1..=64 units).
 //!
 //! [`CfgIter`] walks a configuration without allocating; [`Identifier`]
-//! is one decoded identifier with its I/O lengths.
+//! is one decoded identifier with its I/O lengths; its `Display` says it
+//! in words.
+
+use std::fmt;
 
 /// Length of the data in one direction of an identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -80,6 +83,49 @@ impl Identifier<'_> {
     /// Whether this identifier uses the special format.
     pub fn is_special(&self) -> bool {
         self.raw[0] & 0x30 == 0
+    }
+}
+
+impl fmt::Display for IoLen {
+    /// `4 words`, `1 byte`, with ` (consistent)` when consistent over the
+    /// whole length.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let unit = match (self.words, self.units) {
+            (true, 1) => "word",
+            (true, _) => "words",
+            (false, 1) => "byte",
+            (false, _) => "bytes",
+        };
+        write!(f, "{} {unit}", self.units)?;
+        if self.consistent {
+            f.write_str(" (consistent)")?;
+        }
+        Ok(())
+    }
+}
+
+impl fmt::Display for Identifier<'_> {
+    /// The identifier in words: `4 words in+out`, `2 words (consistent)
+    /// in; manufacturer bytes 02 04`, `18 words out + 4 words in`,
+    /// `empty slot`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (self.input, self.output) {
+            (None, None) => f.write_str("empty slot")?,
+            (Some(i), None) => write!(f, "{i} in")?,
+            (None, Some(o)) => write!(f, "{o} out")?,
+            (Some(i), Some(o)) if !self.is_special() => {
+                debug_assert_eq!(i, o);
+                write!(f, "{i} in+out")?
+            }
+            (Some(i), Some(o)) => write!(f, "{o} out + {i} in")?,
+        }
+        if !self.manufacturer.is_empty() {
+            f.write_str("; manufacturer bytes")?;
+            for b in self.manufacturer {
+                write!(f, " {b:02X}")?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -278,6 +324,20 @@ mod tests {
             .unwrap();
         assert!(v[0].is_empty_slot());
         assert_eq!((v[1].input_bytes(), v[2].output_bytes()), (1, 1));
+    }
+
+    #[test]
+    fn described_in_words() {
+        let d = |b: &[u8]| identifiers(b).next().unwrap().unwrap().to_string();
+        assert_eq!(d(&[0x73]), "4 words in+out");
+        assert_eq!(d(&[0x10]), "1 byte in");
+        assert_eq!(d(&[0x2F]), "16 bytes out");
+        assert_eq!(
+            d(&[0x42, 0xC1, 0x02, 0x04]),
+            "2 words (consistent) in; manufacturer bytes 02 04"
+        );
+        assert_eq!(d(&[0xC0, 0x51, 0x43]), "18 words out + 4 words in");
+        assert_eq!(d(&[0x00]), "empty slot");
     }
 
     #[test]

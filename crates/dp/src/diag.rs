@@ -530,3 +530,104 @@ mod tests {
         }
     }
 }
+
+fn has_unit_diag(g: &crate::gsd::Gsd) -> bool {
+    !g.unit_diag_bits.is_empty()
+        || !g.unit_diag_not_bits.is_empty()
+        || !g.unit_diag_areas.is_empty()
+}
+
+/// A whole Slave_Diag response in words: the station status bits, the
+/// parameterising master, the ident number and every extended diagnosis
+/// block. With the slave's GSD, bits of the device-related diagnosis are
+/// named by its `Unit_Diag_Bit` / `Unit_Diag_Not_Bit` / `Unit_Diag_Area`
+/// texts; bit 0 is bit 0 of the first byte after the block's header byte
+/// (this stack's reading of the GSD specification; the manuals at hand
+/// do not say). `dpv1` reads device-related blocks of DP-V1 slaves as
+/// alarm/status blocks.
+pub fn describe(du: &[u8], gsd: Option<&crate::gsd::Gsd>, dpv1: bool) -> Vec<String> {
+    let d = match SlaveDiag::parse(du) {
+        Ok(d) => d,
+        Err(e) => return vec![e.to_string()],
+    };
+    let mut out = vec![format!("station status: {}", d.status_words())];
+    out.push(match d.master_address {
+        NO_MASTER => "not parameterised by any master".to_string(),
+        m => format!("parameterised by master {m}"),
+    });
+    out.push(format!("ident number 0x{:04X}", d.ident_number));
+    for b in ext_blocks(d.ext_diag) {
+        match (b, gsd) {
+            (ExtDiagBlock::Device { data }, Some(g))
+                if !(dpv1 && data.len() >= 3) && has_unit_diag(g) =>
+            {
+                let bit = |n: u32| {
+                    data.get(n as usize / 8)
+                        .is_some_and(|byte| byte & (1 << (n % 8)) != 0)
+                };
+                let mut named = false;
+                let total = data.len() as u32 * 8;
+                for n in 0..total {
+                    if bit(n) {
+                        if let Some(t) = g.unit_diag_bit_text(n) {
+                            out.push(format!("device: {t}"));
+                            named = true;
+                        }
+                    } else if let Some(t) = g.unit_diag_not_bit_text(n) {
+                        out.push(format!("device: {t}"));
+                        named = true;
+                    }
+                }
+                for area in &g.unit_diag_areas {
+                    if area.last >= total || area.first > area.last || area.last - area.first > 31 {
+                        continue;
+                    }
+                    let mut v = 0i64;
+                    for n in (area.first..=area.last).rev() {
+                        v = v << 1 | bit(n) as i64;
+                    }
+                    if let Some(t) = area.values.iter().find(|x| x.value == v) {
+                        out.push(format!("device: {}", t.text));
+                        named = true;
+                    }
+                }
+                if !named {
+                    out.push(b.describe(dpv1));
+                }
+            }
+            _ => out.push(b.describe(dpv1)),
+        }
+    }
+    if d.status3.contains(StationStatus3::EXT_DIAG_OVERFLOW) {
+        out.push("more diagnosis than fits into one telegram (Ext_Diag_Overflow)".into());
+    }
+    out
+}
+
+#[cfg(test)]
+mod describe_tests {
+    use super::*;
+    use crate::gsd::{Gsd, ParseOptions};
+
+    #[test]
+    fn unit_diag_texts_from_the_gsd() {
+        let text =
+            "#Profibus_DP\nGSD_Revision=1\nIdent_Number=0x1234\nProtocol_Ident=0\nStation_Type=0\n\
+            Unit_Diag_Bit(0)=\"Sensor missing\"\nUnit_Diag_Bit(9)=\"Overtemperature\"\n\
+            Unit_Diag_Not_Bit(1)=\"Supply off\"\n";
+        let g = Gsd::parse(text, ParseOptions { lenient: true })
+            .unwrap()
+            .gsd;
+        // Ext_Diag, device block of 3 bytes: header 03, bits 0 and 9 set, bit 1 clear.
+        let du = [0x08, 0x0C, 0, 2, 0x12, 0x34, 0x03, 0x01, 0x02];
+        let words = describe(&du, Some(&g), false);
+        assert_eq!(words[0], "station status: Ext_Diag, WD_On");
+        assert!(
+            words.contains(&"device: Sensor missing".to_string()),
+            "{words:?}"
+        );
+        assert!(words.contains(&"device: Overtemperature".to_string()));
+        assert!(words.contains(&"device: Supply off".to_string()));
+        assert_eq!(words[1], "parameterised by master 2");
+    }
+}

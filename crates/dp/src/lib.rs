@@ -1,6 +1,7 @@
 //! `profibus-dp`: DP services (layer 7 of PROFIBUS-DP) on top of
 //! `profibus-fdl`.
 //!
+//! - [`busfile`]: the TOML bus file of a master, built on GSD files.
 //! - [`sap`]: the service access points of the DP services.
 //! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
 //!   decoded into I/O lengths.
@@ -12,11 +13,20 @@
 //! - [`master`]: the DP master core (start-up sequence, poll cycle,
 //!   Global_Control, class-2 services, DP-V1 read/write), the application
 //!   of an FDL active station.
+//! - [`scan`]: the live-list scanner behind `dpctl scan`.
+//! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
+//!   module selection → Chk_Cfg / User_Prm_Data, writer.
+//! - [`slave`]: the DP slave core (state machine, every slave service)
+//!   and the [`slave::Device`] trait device profiles implement.
 
+pub mod busfile;
 pub mod cfg;
 pub mod control;
 pub mod diag;
 pub mod dpv1;
+pub mod gsd;
 pub mod master;
 pub mod prm;
 pub mod sap;
+pub mod scan;
+pub mod slave;

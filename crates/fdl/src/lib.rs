@@ -31,6 +31,7 @@
 //! telegrams and the current time and return bytes to send and the next
 //! deadline; thin tokio drivers connect them to a transport.
 
+pub mod autobaud;
 pub mod codec;
 #[cfg(feature = "transport")]
 pub mod driver;

@@ -28,6 +28,52 @@
 //! [`DpMaster::set_outputs`] read and write them between calls; nothing is
 //! allocated per cycle in the steady state. What changes is reported as
 //! [`MasterEvent`]s ([`DpMaster::poll_event`]).
+//!
+//! # A gateway loop
+//!
+//! A gateway copies the inputs of a slave somewhere else and writes
+//! outputs it got from elsewhere, between two events of the driver, with
+//! no locks and no allocation:
+//!
+//! ```no_run
+//! use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
+//! use profibus_fdl::driver::{run, Clock};
+//! use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
+//! use profibus_fdl::transport::Port;
+//! use profibus_fdl::{Baud, BusParams};
+//! use std::ops::ControlFlow;
+//!
+//! # async fn gateway() -> Result<(), Box<dyn std::error::Error>> {
+//! let params = BusParams::defaults(Baud::B1500000);
+//! let cfg = MasterConfig {
+//!     address: 1,
+//!     params,
+//!     // Slave 8: 2 bytes in, 2 bytes out (identifiers 0x11, 0x21).
+//!     slaves: vec![SlaveParams::new(8, 0x0DCE, vec![0x11, 0x21])],
+//!     options: MasterOptions::default(),
+//! };
+//! let master = DpMaster::new(&cfg)?;
+//! let valve = master.handle(8).expect("configured");
+//! let mut station = ActiveStation::new(ActiveConfig::new(1, params), master);
+//! let mut port = Port::open("/dev/ttyUSB0", Baud::B1500000)?;
+//! let mut setpoint: u16 = 0;
+//! run(&mut station, &mut port, Clock::start(), std::future::pending(), |st, _now| {
+//!     let m = st.app_mut();
+//!     let view = m.slave(valve);
+//!     if view.state == SlaveState::DataExchange {
+//!         let level = u16::from_be_bytes([view.inputs[0], view.inputs[1]]);
+//!         setpoint = if level < 500 { 1000 } else { 0 };
+//!     }
+//!     m.outputs_mut(valve).copy_from_slice(&setpoint.to_be_bytes());
+//!     while let Some(event) = m.poll_event() {
+//!         eprintln!("{event:?}"); // state changes, diagnosis, faults
+//!     }
+//!     ControlFlow::Continue(())
+//! })
+//! .await?;
+//! # Ok(())
+//! # }
+//! ```
 
 mod config;
 
@@ -41,9 +87,32 @@ use profibus_fdl::station::active::{
     CycleResult, FdlEvent, MasterApp, Outcome, Request, Service, TokenContext,
 };
 use profibus_fdl::time::Instant;
-use profibus_fdl::wire::{consts, ResponseStatus};
+use profibus_fdl::wire::{consts, ResponseStatus, StationType};
 use std::collections::VecDeque;
 use std::time::Duration;
+
+/// A slave of a [`DpMaster`], resolved once from its address
+/// ([`DpMaster::handle`]) so that a gateway loop reaches its process image
+/// without a lookup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SlaveHandle(u8);
+
+/// A view of one slave: state, process images, diagnosis, counters.
+#[derive(Debug, Clone, Copy)]
+pub struct SlaveView<'a> {
+    /// Station address.
+    pub address: u8,
+    /// Where it is in the start-up sequence.
+    pub state: SlaveState,
+    /// The last inputs received.
+    pub inputs: &'a [u8],
+    /// The outputs sent.
+    pub outputs: &'a [u8],
+    /// The last diagnosis read (empty before the first).
+    pub diag: &'a [u8],
+    /// Counters.
+    pub stats: SlaveStats,
+}
 
 /// Where a slave is in the master's start-up sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -372,6 +441,7 @@ pub struct DpMaster {
     events: VecDeque<MasterEvent>,
     events_dropped: u64,
     job_sent_this_visit: bool,
+    live: [Option<StationType>; 128],
     zeros: [u8; 244],
     req: [u8; 248],
 }
@@ -448,6 +518,7 @@ impl DpMaster {
             events: VecDeque::with_capacity(EVENT_LIMIT),
             events_dropped: 0,
             job_sent_this_visit: false,
+            live: [None; 128],
             zeros: [0; 244],
             req: [0; 248],
         })
@@ -463,29 +534,53 @@ impl DpMaster {
         self.slaves.iter().map(|s| s.p.address)
     }
 
-    fn slave(&self, address: u8) -> Option<&Slave> {
+    fn by_address(&self, address: u8) -> Option<&Slave> {
         let i = *self.index.get(address as usize)?;
         self.slaves.get(i as usize)
     }
 
     /// The configuration of a slave.
     pub fn slave_params(&self, address: u8) -> Option<&SlaveParams> {
-        self.slave(address).map(|s| &s.p)
+        self.by_address(address).map(|s| &s.p)
+    }
+
+    /// The handle of the slave at `address`.
+    pub fn handle(&self, address: u8) -> Option<SlaveHandle> {
+        let i = *self.index.get(address as usize)?;
+        (i != NO_SLAVE).then_some(SlaveHandle(i))
+    }
+
+    /// Everything about one slave.
+    pub fn slave(&self, h: SlaveHandle) -> SlaveView<'_> {
+        let s = &self.slaves[h.0 as usize];
+        SlaveView {
+            address: s.p.address,
+            state: s.state,
+            inputs: &s.inputs,
+            outputs: &s.outputs,
+            diag: &s.diag,
+            stats: s.stats,
+        }
+    }
+
+    /// The output image of a slave, to write in place.
+    pub fn outputs_mut(&mut self, h: SlaveHandle) -> &mut [u8] {
+        &mut self.slaves[h.0 as usize].outputs
     }
 
     /// A slave's state.
     pub fn slave_state(&self, address: u8) -> Option<SlaveState> {
-        self.slave(address).map(|s| s.state)
+        self.by_address(address).map(|s| s.state)
     }
 
     /// A slave's input image (the last inputs received).
     pub fn inputs(&self, address: u8) -> Option<&[u8]> {
-        self.slave(address).map(|s| &s.inputs[..])
+        self.by_address(address).map(|s| &s.inputs[..])
     }
 
     /// A slave's output image.
     pub fn outputs(&self, address: u8) -> Option<&[u8]> {
-        self.slave(address).map(|s| &s.outputs[..])
+        self.by_address(address).map(|s| &s.outputs[..])
     }
 
     /// Write a slave's outputs (copied into its image; shorter data leave
@@ -505,17 +600,22 @@ impl DpMaster {
 
     /// The last diagnosis read from a slave (empty before the first).
     pub fn diag(&self, address: u8) -> Option<&[u8]> {
-        self.slave(address).map(|s| &s.diag[..])
+        self.by_address(address).map(|s| &s.diag[..])
     }
 
     /// A slave's counters.
     pub fn slave_stats(&self, address: u8) -> Option<SlaveStats> {
-        self.slave(address).map(|s| s.stats)
+        self.by_address(address).map(|s| s.stats)
     }
 
     /// Poll-cycle statistics.
     pub fn cycle_stats(&self) -> CycleStats {
         self.cycle_stats
+    }
+
+    /// Start the poll-cycle statistics afresh (e.g. after start-up).
+    pub fn reset_cycle_stats(&mut self) {
+        self.cycle_stats = CycleStats::default();
     }
 
     /// Operating state.
@@ -580,6 +680,15 @@ impl DpMaster {
     /// Whether jobs are queued or running.
     pub fn jobs_pending(&self) -> bool {
         !self.jobs.is_empty() || self.active_job.is_some()
+    }
+
+    /// Stations found by the GAP polls of this master's station (the part
+    /// of the live list between this master and its successor).
+    pub fn live_list(&self) -> impl Iterator<Item = (u8, StationType)> + '_ {
+        self.live
+            .iter()
+            .enumerate()
+            .filter_map(|(a, t)| t.map(|t| (a as u8, t)))
     }
 
     /// The next event.
@@ -981,7 +1090,7 @@ impl DpMaster {
                 // Accepted; the answer is not ready yet: poll on.
                 let since = *j.polling_since.get_or_insert(now);
                 let timeout = self
-                    .slave(j.job.address())
+                    .by_address(j.job.address())
                     .map_or(Duration::from_secs(1), |s| s.p.dpv1_timeout);
                 (now >= since + timeout).then_some(JobResult::Timeout)
             }
@@ -1092,6 +1201,18 @@ impl MasterApp for DpMaster {
     }
 
     fn on_event(&mut self, _now: Instant, event: FdlEvent) {
+        // GAP polls repeat every sweep: report only what changed.
+        if let FdlEvent::GapStatus { address, station } = event {
+            let slot = &mut self.live[address as usize & 0x7F];
+            if *slot == station {
+                return;
+            }
+            let was_known = slot.is_some();
+            *slot = station;
+            if station.is_none() && !was_known {
+                return;
+            }
+        }
         self.emit(MasterEvent::Ring(event));
     }
 }

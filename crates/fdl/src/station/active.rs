@@ -275,6 +275,8 @@ pub struct ActiveStats {
     pub collisions: u64,
     /// Duplicate tokens detected.
     pub duplicate_tokens: u64,
+    /// Replies that came after the slot time and were ignored.
+    pub late_replies: u64,
     /// Shortest real rotation time (ns).
     pub rotation_min_ns: u64,
     /// Longest real rotation time (ns).
@@ -741,7 +743,23 @@ impl Core {
         }
     }
 
+    /// A frame arrived that is not the awaited reply while this station
+    /// holds the token. A late reply addressed to this station (after its
+    /// slot time ran out, e.g. on a slow transport) or a stray short
+    /// acknowledge is ignored and counted; a token or a request from
+    /// another station, or a reply to another master, means a second
+    /// token exists.
     fn duplicate_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
+        let late_reply = match t {
+            Telegram::ShortAck => true,
+            Telegram::Data(d) => !d.fc.is_request() && d.da == self.ts(),
+            Telegram::Token { .. } => false,
+        };
+        if late_reply {
+            self.stats.late_replies += 1;
+            tracing::debug!(address = self.ts(), "late reply ignored");
+            return;
+        }
         tracing::warn!(address = self.ts(), "duplicate token: dropping ours");
         self.stats.duplicate_tokens += 1;
         app.on_event(now, FdlEvent::DuplicateToken);

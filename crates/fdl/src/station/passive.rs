@@ -143,6 +143,12 @@ impl<R: Responder> PassiveStation<R> {
         &mut self.app
     }
 
+    /// The application, taking the station apart (e.g. to run it again
+    /// at another baud rate).
+    pub fn into_app(self) -> R {
+        self.app
+    }
+
     /// Bus parameters.
     pub fn params(&self) -> &BusParams {
         &self.params
@@ -159,8 +165,9 @@ impl<R: Responder> PassiveStation<R> {
     }
 
     fn process(&mut self, now: Instant) {
-        let addr = self.app.address();
         while let Some(t) = self.rx.next_telegram() {
+            // Asked per telegram: a request may change the address.
+            let addr = self.app.address();
             let Telegram::Data(d) = t else { continue };
             let FunctionCode::Request { kind, fcb, fcv } = d.fc else {
                 continue;

@@ -269,35 +269,76 @@ impl<'a> Telegram<'a> {
     /// Parse and validate the telegram at the start of `buf`. On success
     /// returns the telegram and the number of bytes it occupies; bytes after
     /// it are ignored.
+    #[inline]
     pub fn parse(buf: &'a [u8]) -> Result<(Telegram<'a>, usize), ParseError> {
-        let len = frame_len(buf)?;
-        if buf.len() < len {
-            return Err(ParseError::Truncated {
-                needed: len,
-                available: buf.len(),
-            });
-        }
-        let t = match buf[0] {
-            SC => Telegram::ShortAck,
+        let truncated = |needed: usize| ParseError::Truncated {
+            needed,
+            available: buf.len(),
+        };
+        let Some(&sd) = buf.first() else {
+            return Err(truncated(1));
+        };
+        // `body` start (DA) and total length.
+        let (start, len) = match sd {
+            SC => return Ok((Telegram::ShortAck, 1)),
             SD4 => {
-                let (da, sa) = (buf[1], buf[2]);
+                let [_, da, sa, ..] = *buf else {
+                    return Err(truncated(3));
+                };
                 if da > MAX_STATION_ADDRESS || sa > MAX_STATION_ADDRESS {
                     return Err(ParseError::BadTokenAddress { da, sa });
                 }
-                Telegram::Token { da, sa }
+                return Ok((Telegram::Token { da, sa }, 3));
             }
-            SD1 => Telegram::Data(parse_fields(&buf[1..4], &buf[4..6], &[])?),
-            SD3 => Telegram::Data(parse_fields(&buf[1..4], &buf[12..14], &buf[4..12])?),
-            _ => {
-                // SD2; frame_len checked LE == LEr and its range.
+            SD1 => (1, 6),
+            SD3 => (1, 6 + SD3_DATA_FIELD),
+            SD2 => {
+                let len = frame_len(buf)?;
+                if buf.len() < 4 {
+                    return Err(truncated(len));
+                }
                 if buf[3] != SD2 {
                     return Err(ParseError::BadRepeatedDelimiter(buf[3]));
                 }
-                let end = len - 2;
-                Telegram::Data(parse_fields(&buf[4..7], &buf[end..len], &buf[7..end])?)
+                (4, len)
             }
+            other => return Err(ParseError::BadStartDelimiter(other)),
         };
-        Ok((t, len))
+        if buf.len() < len {
+            return Err(truncated(len));
+        }
+        let body = &buf[start..len - 2];
+        let (received, ed) = (buf[len - 2], buf[len - 1]);
+        let computed = fcs(body);
+        if received != computed {
+            return Err(ParseError::FcsMismatch { received, computed });
+        }
+        if ed != ED {
+            return Err(ParseError::MissingEndDelimiter(ed));
+        }
+        let (da, sa, fc) = (body[0], body[1], body[2]);
+        let mut i = 3;
+        let mut sap = |present: bool| -> Result<Option<u8>, ParseError> {
+            if !present {
+                return Ok(None);
+            }
+            let b = *body.get(i).ok_or(ParseError::MissingAddressExtension)?;
+            i += 1;
+            Ok(Some(b))
+        };
+        let dsap = sap(da & ADDRESS_EXTENSION != 0)?;
+        let ssap = sap(sa & ADDRESS_EXTENSION != 0)?;
+        Ok((
+            Telegram::Data(DataTelegram {
+                da: da & !ADDRESS_EXTENSION,
+                sa: sa & !ADDRESS_EXTENSION,
+                fc: FunctionCode::from_byte(fc),
+                dsap,
+                ssap,
+                data: &body[i..],
+            }),
+            len,
+        ))
     }
 
     /// Parse a buffer that must hold exactly one telegram; trailing bytes
@@ -426,49 +467,6 @@ impl<'a> Telegram<'a> {
             _ => None,
         }
     }
-}
-
-/// `head` = DA SA FC, `tail` = FCS ED, `field` = SAP bytes + data unit.
-#[inline]
-fn parse_fields<'a>(
-    head: &[u8],
-    tail: &[u8],
-    field: &'a [u8],
-) -> Result<DataTelegram<'a>, ParseError> {
-    let computed = fcs(head).wrapping_add(fcs(field));
-    if tail[0] != computed {
-        return Err(ParseError::FcsMismatch {
-            received: tail[0],
-            computed,
-        });
-    }
-    if tail[1] != ED {
-        return Err(ParseError::MissingEndDelimiter(tail[1]));
-    }
-    let (da, sa, fc) = (head[0], head[1], head[2]);
-    let mut rest = field;
-    let mut take = |present: bool| -> Result<Option<u8>, ParseError> {
-        if !present {
-            return Ok(None);
-        }
-        match rest.split_first() {
-            Some((&b, r)) => {
-                rest = r;
-                Ok(Some(b))
-            }
-            None => Err(ParseError::MissingAddressExtension),
-        }
-    };
-    let dsap = take(da & ADDRESS_EXTENSION != 0)?;
-    let ssap = take(sa & ADDRESS_EXTENSION != 0)?;
-    Ok(DataTelegram {
-        da: da & !ADDRESS_EXTENSION,
-        sa: sa & !ADDRESS_EXTENSION,
-        fc: FunctionCode::from_byte(fc),
-        dsap,
-        ssap,
-        data: rest,
-    })
 }
 
 #[cfg(test)]

@@ -1,0 +1,81 @@
+//! What several subcommands share: the runtime, shutdown signals, opening
+//! a port with the line options every station command takes.
+
+use anyhow::{Context, Result};
+use profibus_fdl::transport::Port;
+use profibus_fdl::Baud;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Line options of every command that runs a station.
+#[derive(clap::Args, Debug, Clone)]
+pub struct LineArgs {
+    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link).
+    #[arg(long, value_name = "PATH")]
+    pub port: String,
+    /// Baud rate: 9600 … 12000000, or 1.5M, 187.5k, … (on a pty the rate
+    /// only sets the bus timing).
+    #[arg(long, default_value = "19200", value_name = "B")]
+    pub baud: Baud,
+    /// Extra milliseconds added to the slot time and token timeouts for the
+    /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    pub latency: Option<f64>,
+}
+
+impl LineArgs {
+    /// The latency allowance for this port.
+    pub fn latency(&self) -> Result<Duration> {
+        match self.latency {
+            Some(ms) if ms >= 0.0 && ms.is_finite() => Ok(Duration::from_secs_f64(ms / 1000.0)),
+            Some(ms) => anyhow::bail!("--latency {ms} must be a non-negative number"),
+            None => Ok(default_latency(&self.port)),
+        }
+    }
+
+    /// Open the port.
+    pub fn open(&self) -> Result<Port> {
+        Port::open(&self.port, self.baud).with_context(|| format!("opening {}", self.port))
+    }
+}
+
+/// Latency allowance when none is given: ptys answer within a
+/// millisecond even on a loaded machine; USB serial adapters buffer for up
+/// to 16 ms (the FTDI latency timer).
+pub fn default_latency(port: &str) -> Duration {
+    if is_pty(port) {
+        Duration::from_millis(5)
+    } else {
+        Duration::from_millis(20)
+    }
+}
+
+/// Whether `path` (after following links) is a pseudo terminal.
+pub fn is_pty(path: &str) -> bool {
+    let real = std::fs::canonicalize(path).unwrap_or_else(|_| PathBuf::from(path));
+    let s = real.to_string_lossy();
+    s.starts_with("/dev/pts/") || s.starts_with("/dev/pty") || s == "/dev/ptmx"
+}
+
+/// A single-threaded tokio runtime for one command.
+pub fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")
+}
+
+/// Completes on SIGINT (Ctrl-C) or SIGTERM.
+pub async fn shutdown() {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (Ok(mut int), Ok(mut term)) = (
+        signal(SignalKind::interrupt()),
+        signal(SignalKind::terminate()),
+    ) else {
+        return std::future::pending().await;
+    };
+    tokio::select! {
+        _ = int.recv() => {}
+        _ = term.recv() => {}
+    }
+}

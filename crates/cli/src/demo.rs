@@ -1,0 +1,256 @@
+//! `dpctl demo`: a whole virtual plant in one process, no hardware and no
+//! files: an in-process simulated PROFIBUS line at 1.5 Mbit/s (paced on
+//! virtual time that follows the wall clock), a DP master and emulated
+//! slaves, shown live.
+
+use crate::common;
+use crate::view::{drain_events, hex, SlaveInfo, View};
+use anyhow::{Context, Result};
+use profibus_devices::generic::{GenericDevice, InputPattern};
+use profibus_devices::gsd_files;
+use profibus_dp::gsd::Gsd;
+use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
+use profibus_dp::slave::{Device, DpSlave};
+use profibus_fdl::medium::MediumConfig;
+use profibus_fdl::pcap::PcapWriter;
+use profibus_fdl::sim::SimBus;
+use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
+use profibus_fdl::station::passive::PassiveStation;
+use profibus_fdl::tap::{Tap, TapEvent};
+use profibus_fdl::{Baud, BusParams, Instant};
+use std::cell::RefCell;
+use std::io::IsTerminal;
+use std::rc::Rc;
+use std::time::Duration;
+
+/// Run a virtual plant: a DP master and emulated slaves on an in-process
+/// simulated bus, with live process data. No hardware, no files.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Stop after this many poll cycles of the master.
+    #[arg(long, value_name = "N")]
+    cycles: Option<u64>,
+    /// Run on virtual time as fast as the computer can, instead of in
+    /// step with the clock.
+    #[arg(long)]
+    fast: bool,
+    /// Print JSON lines instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Record every telegram on the simulated line into a pcap file
+    /// (link type 257, readable by Wireshark/tshark).
+    #[arg(long, value_name = "FILE")]
+    pcap: Option<std::path::PathBuf>,
+    /// Milliseconds between status prints (JSON or non-terminal output).
+    #[arg(long, default_value_t = 1000, value_name = "MS")]
+    interval: u64,
+}
+
+type Slave = PassiveStation<DpSlave<Box<dyn Device + Send>>>;
+type Master = ActiveStation<DpMaster>;
+
+/// A slave of the demo plant.
+struct PlantSlave {
+    address: u8,
+    name: String,
+    gsd: Gsd,
+    modules: Vec<&'static str>,
+    device: Box<dyn Device + Send>,
+}
+
+fn generic(
+    gsd: &Gsd,
+    address: u8,
+    name: &str,
+    modules: &[&'static str],
+    inputs: InputPattern,
+) -> Result<PlantSlave> {
+    let dev = GenericDevice::from_gsd(gsd, modules)
+        .with_context(|| format!("building {name}"))?
+        .with_inputs(inputs);
+    Ok(PlantSlave {
+        address,
+        name: name.into(),
+        gsd: gsd.clone(),
+        modules: modules.to_vec(),
+        device: Box::new(dev),
+    })
+}
+
+/// The plant's slaves.
+fn plant() -> Result<Vec<PlantSlave>> {
+    let gen = gsd_files::parse(gsd_files::DPCTL_GEN)?;
+    Ok(vec![
+        generic(
+            &gen,
+            3,
+            "echo (generic)",
+            &["2 words in/out", "8 bytes in consistent"],
+            InputPattern::Echo,
+        )?,
+        generic(
+            &gen,
+            4,
+            "counter (generic)",
+            &["2 words in/out"],
+            InputPattern::Counter,
+        )?,
+    ])
+}
+
+fn master_config(params: BusParams, slaves: &[PlantSlave]) -> Result<MasterConfig> {
+    let mut out = Vec::new();
+    for s in slaves {
+        let sel = s.gsd.select(&s.modules)?;
+        let mut p = SlaveParams::new(s.address, s.gsd.ident_number, s.gsd.chk_cfg(&sel)?);
+        p.name = s.name.clone();
+        p.user_prm_data = s.gsd.user_prm_data(&sel, &[])?;
+        p.dpv1 = s.gsd.dpv1_slave;
+        p.watchdog = Some(Duration::from_millis(200));
+        out.push(p);
+    }
+    Ok(MasterConfig {
+        address: 1,
+        params,
+        slaves: out,
+        options: MasterOptions::default(),
+    })
+}
+
+pub fn run(args: Args) -> Result<()> {
+    common::runtime()?.block_on(demo(args))
+}
+
+async fn demo(args: Args) -> Result<()> {
+    let baud = Baud::B1500000;
+    let params = BusParams::defaults(baud);
+    let slaves = plant()?;
+    let cfg = master_config(params, &slaves)?;
+    let info: Vec<SlaveInfo> = slaves
+        .iter()
+        .map(|s| SlaveInfo {
+            address: s.address,
+            name: s.name.clone(),
+            gsd: Some(s.gsd.clone()),
+            dpv1: s.gsd.dpv1_slave,
+        })
+        .collect();
+
+    let mut bus = SimBus::new(MediumConfig::paced(baud));
+    let master = bus.add(ActiveStation::new(
+        ActiveConfig::new(1, params),
+        DpMaster::new(&cfg)?,
+    ));
+    for s in slaves {
+        bus.add(Slave::new(DpSlave::new(s.device, s.address), params));
+    }
+    let telegrams = Rc::new(RefCell::new(0u64));
+    let pcap = match &args.pcap {
+        Some(path) => {
+            let f = std::fs::File::create(path)
+                .with_context(|| format!("cannot create {}", path.display()))?;
+            Some(PcapWriter::new(std::io::BufWriter::new(f), Duration::ZERO)?)
+        }
+        None => None,
+    };
+    let pcap = Rc::new(RefCell::new(pcap));
+    {
+        let (count, pcap) = (telegrams.clone(), pcap.clone());
+        let mut tap = Tap::new();
+        bus.set_tap(Box::new(move |at, _from, bytes| {
+            tap.push(at, bytes);
+            while let Some(ev) = tap.poll() {
+                if let TapEvent::Telegram { at, bytes } = ev {
+                    *count.borrow_mut() += 1;
+                    if let Some(w) = pcap.borrow_mut().as_mut() {
+                        let _ = w.write_telegram(at, &bytes);
+                    }
+                }
+            }
+        }));
+    }
+
+    let mut view = View::new(
+        args.json,
+        !args.json && std::io::stdout().is_terminal(),
+        Duration::from_millis(args.interval.max(10)),
+    );
+    let start = tokio::time::Instant::now();
+    let shutdown = common::shutdown();
+    tokio::pin!(shutdown);
+    let step = Duration::from_millis(20);
+    let mut ramp: u16 = 0;
+    let mut next_output = Instant::ZERO;
+    loop {
+        let target = if args.fast {
+            bus.now() + step
+        } else {
+            Instant::from_nanos(start.elapsed().as_nanos() as u64)
+        };
+        bus.run_until(target);
+        let now = bus.now();
+        let m = bus.station_mut::<Master>(master).app_mut();
+        // The "application": a ramp on the echo slave's outputs.
+        if now >= next_output {
+            next_output = now + Duration::from_millis(100);
+            ramp = ramp.wrapping_add(1);
+            let r = ramp.to_be_bytes();
+            m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
+            m.set_outputs(4, &[0, 0, r[0], r[1]]);
+        }
+        drain_events(m, &info, &mut view);
+        view.status(m, &info, baud, now, false);
+        if args.cycles.is_some_and(|n| m.cycle_stats().cycles >= n) {
+            break;
+        }
+        if !args.fast {
+            tokio::select! {
+                _ = &mut shutdown => break,
+                _ = tokio::time::sleep(step) => {}
+            }
+        } else if futures_ready(&mut shutdown).await {
+            break;
+        }
+    }
+    let now = bus.now();
+    let m = bus.station_mut::<Master>(master).app_mut();
+    drain_events(m, &info, &mut view);
+    view.status(m, &info, baud, now, true);
+    let c = m.cycle_stats();
+    let summary = format!(
+        "demo: {} cycles in {:.3} s of bus time, cycle min/avg/max {}/{}/{} µs, {} telegrams on the line",
+        c.cycles,
+        now.as_nanos() as f64 / 1e9,
+        c.min_ns / 1000,
+        c.avg().as_micros(),
+        c.max_ns / 1000,
+        telegrams.borrow()
+    );
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "event": "summary",
+                "cycles": c.cycles,
+                "bus_time_s": now.as_nanos() as f64 / 1e9,
+                "telegrams": *telegrams.borrow(),
+                "inputs": info.iter().map(|s| (s.address.to_string(), serde_json::Value::from(hex(m.inputs(s.address).unwrap_or(&[]))))).collect::<serde_json::Map<_, _>>(),
+            })
+        );
+    } else {
+        println!("{summary}");
+    }
+    if let Some(mut w) = pcap.borrow_mut().take() {
+        w.flush()?;
+    }
+    Ok(())
+}
+
+/// Whether the shutdown future completed, without waiting.
+async fn futures_ready(f: &mut std::pin::Pin<&mut impl std::future::Future<Output = ()>>) -> bool {
+    tokio::select! {
+        biased;
+        _ = f.as_mut() => true,
+        _ = std::future::ready(()) => false,
+    }
+}

@@ -1,0 +1,282 @@
+//! `dpctl master`: run a DP master from a bus file.
+
+use crate::common;
+use crate::view::{drain_events, SlaveInfo, View};
+use anyhow::{bail, Context, Result};
+use profibus_dp::busfile::BusFile;
+use profibus_dp::control::ControlCommand;
+use profibus_dp::master::{DpMaster, Job, OperatingState, SlaveState};
+use profibus_fdl::driver::{self, Clock};
+use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
+use profibus_fdl::Instant;
+use serde_json::{json, Value};
+use std::io::IsTerminal;
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio::io::AsyncBufReadExt;
+
+/// Poll the slaves of a bus file: parameterise, configure and exchange
+/// data with them, print their state, data and diagnosis.
+///
+/// Commands for scripting come as JSON lines from `--input` (a file, or
+/// `-` for stdin), one per line:
+///   {"slave": 8, "outputs": "01 02"}          write outputs (hex or [1, 2])
+///   {"operating": "clear"}                    operate | clear | stop
+///   {"global_control": ["sync"], "group": 1}  sync, unsync, freeze, unfreeze
+///   {"read_diag": 8} / {"get_cfg": 8} / {"rd_inp": 8} / {"rd_outp": 8}
+///   {"dpv1_read": 8, "slot": 0, "index": 1, "length": 4}
+///   {"dpv1_write": 8, "slot": 0, "index": 1, "data": "0A 0B"}
+///   {"set_slave_add": 126, "new_address": 7, "ident": "0x0008", "no_add_chg": false}
+#[derive(clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// Serial device or pty path.
+    #[arg(long, value_name = "PATH")]
+    port: String,
+    /// Bus file (TOML; see the profibus-dp busfile docs).
+    #[arg(long, value_name = "BUS.toml")]
+    config: PathBuf,
+    /// Stop after this many poll cycles.
+    #[arg(long, value_name = "N")]
+    cycles: Option<u64>,
+    /// Print JSON lines instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Read commands (JSON lines) from this file, or `-` for stdin.
+    #[arg(long, value_name = "FILE")]
+    input: Option<String>,
+    /// Milliseconds between status prints (JSON/non-terminal output).
+    #[arg(long, default_value_t = 1000, value_name = "MS")]
+    interval: u64,
+    /// Extra milliseconds on the slot time and token timeouts for the
+    /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
+    /// Start in the clear state (outputs zero) instead of operate.
+    #[arg(long)]
+    clear: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let bus = BusFile::load(&args.config)?;
+    common::runtime()?.block_on(master(args, bus))
+}
+
+fn parse_bytes(v: &Value) -> Result<Vec<u8>> {
+    match v {
+        Value::String(s) => crate::decode::parse_hex(std::slice::from_ref(s)),
+        Value::Array(a) => a
+            .iter()
+            .map(|x| {
+                x.as_u64()
+                    .filter(|&n| n <= 255)
+                    .map(|n| n as u8)
+                    .context("byte values must be 0..=255")
+            })
+            .collect(),
+        _ => bail!("bytes must be a hex string or an array of numbers"),
+    }
+}
+
+fn addr(v: &Value) -> Result<u8> {
+    v.as_u64()
+        .filter(|&a| a <= 126)
+        .map(|a| a as u8)
+        .context("a station address must be 0..=126")
+}
+
+/// Apply one command line to the master; returns a reply for the log.
+pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
+    let v: Value = serde_json::from_str(line).context("not a JSON object")?;
+    if let Some(s) = v.get("slave") {
+        let a = addr(s)?;
+        let data = parse_bytes(v.get("outputs").context("`outputs` missing")?)?;
+        if !m.set_outputs(a, &data) {
+            bail!("slave {a} is not in the bus file");
+        }
+        return Ok(None);
+    }
+    if let Some(s) = v.get("operating").and_then(|s| s.as_str()) {
+        let st = match s {
+            "operate" => OperatingState::Operate,
+            "clear" => OperatingState::Clear,
+            "stop" => OperatingState::Stop,
+            other => bail!("unknown operating state `{other}`"),
+        };
+        m.set_operating_state(st);
+        return Ok(Some(format!("operating state {s}")));
+    }
+    if let Some(cmds) = v.get("global_control") {
+        let mut c = ControlCommand::empty();
+        let list: Vec<&str> = match cmds {
+            Value::String(s) => vec![s.as_str()],
+            Value::Array(a) => a.iter().filter_map(|x| x.as_str()).collect(),
+            _ => bail!("`global_control` takes a name or a list of names"),
+        };
+        for name in list {
+            c |= match name {
+                "sync" => ControlCommand::SYNC,
+                "unsync" => ControlCommand::UNSYNC,
+                "freeze" => ControlCommand::FREEZE,
+                "unfreeze" => ControlCommand::UNFREEZE,
+                other => bail!("unknown Global_Control command `{other}`"),
+            };
+        }
+        let group = v.get("group").and_then(|g| g.as_u64()).unwrap_or(0) as u8;
+        if !m.global_control(c, group) {
+            bail!("Global_Control queue full");
+        }
+        return Ok(None);
+    }
+    let job = if let Some(a) = v.get("read_diag") {
+        Job::ReadDiag { address: addr(a)? }
+    } else if let Some(a) = v.get("get_cfg") {
+        Job::GetCfg { address: addr(a)? }
+    } else if let Some(a) = v.get("rd_inp") {
+        Job::RdInp { address: addr(a)? }
+    } else if let Some(a) = v.get("rd_outp") {
+        Job::RdOutp { address: addr(a)? }
+    } else if let Some(a) = v.get("dpv1_read") {
+        let n = |k: &str| v.get(k).and_then(|x| x.as_u64()).unwrap_or(0) as u8;
+        Job::Dpv1Read {
+            address: addr(a)?,
+            slot: n("slot"),
+            index: n("index"),
+            length: n("length"),
+        }
+    } else if let Some(a) = v.get("dpv1_write") {
+        let n = |k: &str| v.get(k).and_then(|x| x.as_u64()).unwrap_or(0) as u8;
+        Job::Dpv1Write {
+            address: addr(a)?,
+            slot: n("slot"),
+            index: n("index"),
+            data: parse_bytes(v.get("data").context("`data` missing")?)?,
+        }
+    } else if let Some(a) = v.get("set_slave_add") {
+        let ident = match v.get("ident") {
+            Some(Value::String(s)) => {
+                u16::from_str_radix(s.trim_start_matches("0x").trim_start_matches("0X"), 16)
+                    .context("ident must be hex like \"0x0008\"")?
+            }
+            Some(Value::Number(n)) => n.as_u64().unwrap_or(0) as u16,
+            _ => bail!("`ident` missing"),
+        };
+        Job::SetSlaveAdd {
+            address: addr(a)?,
+            new_address: addr(v.get("new_address").context("`new_address` missing")?)?,
+            ident_number: ident,
+            no_add_chg: v
+                .get("no_add_chg")
+                .and_then(|b| b.as_bool())
+                .unwrap_or(false),
+        }
+    } else {
+        bail!("unknown command");
+    };
+    let id = m.submit(job).context("job queue full")?;
+    Ok(Some(format!("job {} queued", id.0)))
+}
+
+async fn master(args: Args, bus: BusFile) -> Result<()> {
+    for w in &bus.warnings {
+        eprintln!("dpctl master: warning: {w}");
+    }
+    let latency = match args.latency {
+        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
+        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
+        None => common::default_latency(&args.port),
+    };
+    let mut dp = DpMaster::new(&bus.master)?;
+    if args.clear {
+        dp.set_operating_state(OperatingState::Clear);
+    }
+    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
+    cfg.latency_allowance = latency;
+    let mut station = ActiveStation::new(cfg, dp);
+    let mut port = profibus_fdl::transport::Port::open(&args.port, bus.master.params.baud)
+        .with_context(|| format!("opening {}", args.port))?;
+
+    let (tx, mut rx) = tokio::sync::mpsc::channel::<String>(256);
+    if let Some(input) = args.input.clone() {
+        tokio::spawn(async move {
+            let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if input == "-" {
+                Box::new(tokio::io::stdin())
+            } else {
+                match tokio::fs::File::open(&input).await {
+                    Ok(f) => Box::new(f),
+                    Err(e) => {
+                        eprintln!("dpctl master: cannot open {input}: {e}");
+                        return;
+                    }
+                }
+            };
+            let mut lines = tokio::io::BufReader::new(reader).lines();
+            while let Ok(Some(l)) = lines.next_line().await {
+                if !l.trim().is_empty() && tx.send(l).await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+
+    let mut view = View::new(
+        args.json,
+        !args.json && std::io::stdout().is_terminal(),
+        Duration::from_millis(args.interval.max(10)),
+    );
+    let info: Vec<SlaveInfo> = bus
+        .slaves
+        .iter()
+        .map(|s| SlaveInfo {
+            address: s.params.address,
+            name: s.params.name.clone(),
+            gsd: Some(s.gsd.clone()),
+            dpv1: s.params.dpv1,
+        })
+        .collect();
+    let baud = bus.master.params.baud;
+    let cycles = args.cycles;
+    let result = driver::run(
+        &mut station,
+        &mut port,
+        Clock::start(),
+        common::shutdown(),
+        |st, now| {
+            let m = st.app_mut();
+            while let Ok(line) = rx.try_recv() {
+                match apply_command(m, &line) {
+                    Ok(Some(reply)) => {
+                        view.event(json!({"event": "command", "result": reply}), reply)
+                    }
+                    Ok(None) => {}
+                    Err(e) => view.event(
+                        json!({"event": "error", "line": line, "error": format!("{e:#}")}),
+                        format!("bad command `{line}`: {e:#}"),
+                    ),
+                }
+            }
+            drain_events(m, &info, &mut view);
+            view.status(m, &info, baud, now, false);
+            match cycles {
+                Some(n) if m.cycle_stats().cycles >= n => ControlFlow::Break(()),
+                _ => ControlFlow::Continue(()),
+            }
+        },
+    )
+    .await;
+    let m = station.app_mut();
+    drain_events(m, &info, &mut view);
+    view.status(m, &info, baud, Instant::ZERO, true);
+    result.with_context(|| format!("on {}", args.port))?;
+    let stuck: Vec<u8> = bus
+        .slaves
+        .iter()
+        .map(|s| s.params.address)
+        .filter(|&a| m.slave_state(a) != Some(SlaveState::DataExchange))
+        .collect();
+    if cycles.is_some() && !stuck.is_empty() {
+        tracing::info!(?stuck, "slaves not in data exchange at the end");
+    }
+    Ok(())
+}

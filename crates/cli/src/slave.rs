@@ -1,0 +1,527 @@
+//! `dpctl slave`: emulate a DP slave on a serial line or pty.
+//!
+//! The device is a profile (`--device NAME`) or the generic device a GSD
+//! file describes (`--gsd FILE --module NAME …`). The slave runs as
+//! `PassiveStation<DpSlave<…>>` on the port through the tokio driver and
+//! prints its state changes, faults and Global_Control commands (one JSON
+//! object per line with `--json`).
+//!
+//! Baud rate: `--baud auto` (the default) searches on a serial line like
+//! a real slave with `Auto_Baud_supp` (fastest rate first, lock on the
+//! first valid telegram, search again after a watchdog expiry or 10 s
+//! without a valid telegram). A pty carries bytes, not bits, so there the
+//! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
+//! `--baud` names a rate (the rate sets the bit times of min TSDR and of
+//! the receive timeouts).
+
+use anyhow::{bail, Context};
+use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
+use profibus_devices::{BoxedDevice, ProfileOptions, PROFILES};
+use profibus_dp::gsd::{Gsd, ParseOptions};
+use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
+use profibus_fdl::autobaud::AutoBaud;
+use profibus_fdl::driver::{self, Clock, Stop};
+use profibus_fdl::station::passive::PassiveStation;
+use profibus_fdl::transport::Port;
+use profibus_fdl::{Baud, BusParams, Instant};
+use serde_json::{json, Value};
+use std::cell::Cell;
+use std::io::Write;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Emulate a PROFIBUS-DP slave.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Serial port or pty path (e.g. /dev/ttyUSB0, or one end of a socat
+    /// pty pair).
+    #[arg(long, value_name = "PATH", required_unless_present = "list_devices")]
+    port: Option<String>,
+    /// Station address of the slave (0..=126).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=126),
+          required_unless_present = "list_devices")]
+    addr: Option<u8>,
+    /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
+    /// traffic on a serial line (on a pty: nominal 19.2 kbit/s).
+    #[arg(long, value_name = "B", default_value = "auto")]
+    baud: String,
+    /// GSD file of the device to emulate (the generic device).
+    #[arg(long, value_name = "FILE", conflicts_with = "device")]
+    gsd: Option<PathBuf>,
+    /// A module of the GSD file, in slot order (repeat for each module;
+    /// names match approximately). None: the file's fixed configuration.
+    #[arg(long = "module", value_name = "NAME", requires = "gsd")]
+    modules: Vec<String>,
+    /// Accept known vendor quirks in the GSD file (with a warning).
+    #[arg(long, requires = "gsd")]
+    lenient: bool,
+    /// Input pattern of the generic device: `echo` (the outputs) or
+    /// `counter` (a 32-bit counter, one step per Data_Exchange).
+    #[arg(long, value_name = "PATTERN", default_value = "echo")]
+    inputs: InputPattern,
+    /// Device profile to emulate (see --list-devices).
+    #[arg(long, value_name = "NAME")]
+    device: Option<String>,
+    /// An option of the device profile, KEY=VALUE (repeatable).
+    #[arg(long = "device-opt", value_name = "KEY=VALUE", requires = "device")]
+    device_opts: Vec<String>,
+    /// List the device profiles and exit.
+    #[arg(long)]
+    list_devices: bool,
+    /// File in which the generic device keeps an address set by
+    /// Set_Slave_Add (`address=N`, `no_add_chg=0|1`); when it exists its
+    /// address overrides --addr.
+    #[arg(long, value_name = "FILE", requires = "gsd")]
+    address_file: Option<PathBuf>,
+    /// Print the process data whenever the outputs change.
+    #[arg(long)]
+    show_data: bool,
+    /// Stop after this many Data_Exchange cycles (0: run until Ctrl-C).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    cycles: u64,
+    /// Print one JSON object per line.
+    #[arg(long)]
+    json: bool,
+}
+
+/// How the baud rate is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BaudChoice {
+    Fixed(Baud),
+    Auto,
+}
+
+fn parse_baud(s: &str) -> anyhow::Result<BaudChoice> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(BaudChoice::Auto);
+    }
+    Ok(BaudChoice::Fixed(s.parse::<Baud>()?))
+}
+
+/// Whether `path` is a pseudo terminal (socat links point into /dev/pts).
+fn is_pty(path: &str) -> bool {
+    std::fs::canonicalize(path)
+        .map(|p| p.starts_with("/dev/pts") || p == Path::new("/dev/ptmx"))
+        .unwrap_or(false)
+}
+
+/// Nominal rate on a pty with `--baud auto`.
+const PTY_NOMINAL: Baud = Baud::B19200;
+
+/// Search again after this long without a valid telegram (auto-baud on a
+/// serial line).
+const RELISTEN_AFTER: Duration = Duration::from_secs(10);
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02X}")).collect()
+}
+
+/// Prints events as text or JSON lines.
+struct Printer {
+    json: bool,
+    clock: Clock,
+}
+
+impl Printer {
+    fn emit(&self, now: Instant, v: Value, text: String) {
+        let t = now.as_nanos() as f64 / 1e9;
+        let mut out = std::io::stdout().lock();
+        let _ = if self.json {
+            let mut v = v;
+            if let Value::Object(m) = &mut v {
+                m.insert("t".into(), json!((t * 1e6).round() / 1e6));
+            }
+            writeln!(out, "{v}")
+        } else {
+            writeln!(out, "[{t:>11.6}] {text}")
+        };
+        let _ = out.flush();
+    }
+
+    fn now(&self) -> Instant {
+        self.clock.now()
+    }
+
+    fn event(&self, now: Instant, e: &SlaveEvent) {
+        let mut v = json!({ "event": e.kind(), "text": e.to_string() });
+        let m = v.as_object_mut().expect("object");
+        match e {
+            SlaveEvent::State { from, to } => {
+                m.insert("from".into(), json!(from.as_str()));
+                m.insert("to".into(), json!(to.as_str()));
+            }
+            SlaveEvent::PrmAccepted {
+                master,
+                locked,
+                watchdog,
+                min_tsdr,
+                group_ident,
+            } => {
+                m.insert("master".into(), json!(master));
+                m.insert("locked".into(), json!(locked));
+                m.insert(
+                    "watchdog_ms".into(),
+                    json!(watchdog.map(|d| d.as_millis() as u64)),
+                );
+                m.insert("min_tsdr".into(), json!(min_tsdr));
+                m.insert("group_ident".into(), json!(group_ident));
+            }
+            SlaveEvent::Unlocked { master } => {
+                m.insert("master".into(), json!(master));
+            }
+            SlaveEvent::PrmFault {
+                master,
+                reason,
+                not_supported,
+            } => {
+                m.insert("master".into(), json!(master));
+                m.insert("reason".into(), json!(reason.as_str()));
+                m.insert("not_supported".into(), json!(not_supported));
+            }
+            SlaveEvent::CfgAccepted {
+                master,
+                inputs,
+                outputs,
+            } => {
+                m.insert("master".into(), json!(master));
+                m.insert("inputs".into(), json!(inputs));
+                m.insert("outputs".into(), json!(outputs));
+            }
+            SlaveEvent::CfgFault { master, reason } => {
+                m.insert("master".into(), json!(master));
+                m.insert("reason".into(), json!(reason.as_str()));
+            }
+            SlaveEvent::WatchdogExpired { master, after } => {
+                m.insert("master".into(), json!(master));
+                m.insert("after_ms".into(), json!(after.as_millis() as u64));
+            }
+            SlaveEvent::OutputsCleared { reason } => {
+                m.insert("reason".into(), json!(reason.as_str()));
+            }
+            SlaveEvent::AddressChanged {
+                old,
+                new,
+                no_add_chg,
+            } => {
+                m.insert("old".into(), json!(old));
+                m.insert("new".into(), json!(new));
+                m.insert("no_add_chg".into(), json!(no_add_chg));
+            }
+            SlaveEvent::GlobalControl {
+                master,
+                command,
+                group_select,
+            } => {
+                m.insert("master".into(), json!(master));
+                m.insert("command".into(), json!(control_words(*command)));
+                m.insert("group_select".into(), json!(group_select));
+            }
+            SlaveEvent::Refused {
+                master,
+                service,
+                reason,
+            } => {
+                m.insert("master".into(), json!(master));
+                m.insert("service".into(), json!(service));
+                m.insert("reason".into(), json!(reason.as_str()));
+            }
+            SlaveEvent::Device(d) => {
+                m.insert("kind".into(), json!(d.kind));
+            }
+            SlaveEvent::Lost(n) => {
+                m.insert("count".into(), json!(n));
+            }
+        }
+        self.emit(now, v, e.to_string());
+    }
+}
+
+/// The device to emulate, with its name for people.
+fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<(BoxedDevice, String)> {
+    if let Some(name) = &args.device {
+        let Some(p) = profibus_devices::profile(name) else {
+            let names: Vec<&str> = PROFILES.iter().map(|p| p.name).collect();
+            bail!(
+                "no device profile `{name}` (available: {}; or use --gsd FILE)",
+                if names.is_empty() {
+                    "none yet".to_string()
+                } else {
+                    names.join(", ")
+                }
+            );
+        };
+        let mut opts = ProfileOptions::default();
+        for o in &args.device_opts {
+            let (k, v) = o
+                .split_once('=')
+                .with_context(|| format!("--device-opt `{o}` is not KEY=VALUE"))?;
+            opts.options
+                .push((k.trim().to_string(), v.trim().to_string()));
+        }
+        let dev = (p.build)(&opts).map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
+        return Ok((dev, p.name.to_string()));
+    }
+    let Some(path) = &args.gsd else {
+        bail!("give --gsd FILE (with --module NAME …) or --device NAME");
+    };
+    let opts = if args.lenient {
+        ParseOptions::LENIENT
+    } else {
+        ParseOptions::STRICT
+    };
+    let parsed = Gsd::from_file(path, opts).map_err(|e| anyhow::anyhow!("{e}"))?;
+    for w in &parsed.warnings {
+        let now = printer.now();
+        printer.emit(
+            now,
+            json!({"event": "gsd_warning", "text": w.to_string()}),
+            format!("{}: warning: {w}", path.display()),
+        );
+    }
+    let mut dev = GenericDevice::from_gsd(&parsed.gsd, &args.modules)
+        .with_context(|| format!("{}", path.display()))?
+        .with_inputs(args.inputs);
+    if let Some(f) = &args.address_file {
+        dev = dev.with_address_store(AddressStore::new(f));
+    }
+    let name = dev.name().to_string();
+    Ok((Box::new(dev), name))
+}
+
+fn list_devices() {
+    println!("generic  any device a GSD file describes: --gsd FILE --module NAME ...");
+    for p in PROFILES {
+        println!("{:<8} {}", p.name, p.summary);
+        if !p.options_help.is_empty() {
+            println!("         options: {}", p.options_help);
+        }
+    }
+}
+
+/// Ctrl-C or SIGTERM.
+async fn stop_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.list_devices {
+        list_devices();
+        return Ok(());
+    }
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the runtime")?;
+    rt.block_on(run_async(args))
+}
+
+async fn run_async(args: Args) -> anyhow::Result<()> {
+    let clock = Clock::start();
+    let printer = Printer {
+        json: args.json,
+        clock,
+    };
+    let path = args.port.clone().expect("clap requires --port");
+    let mut addr = args.addr.expect("clap requires --addr");
+    let choice = parse_baud(&args.baud)?;
+    let (device, name) = build_device(&args, &printer)?;
+    if let Some(f) = &args.address_file {
+        if let Some(s) = AddressStore::new(f)
+            .load()
+            .with_context(|| format!("address file {}", f.display()))?
+        {
+            addr = s.address;
+        }
+    }
+    let pty = is_pty(&path);
+    let search = choice == BaudChoice::Auto && !pty;
+    let first = match choice {
+        BaudChoice::Fixed(b) => b,
+        BaudChoice::Auto if pty => PTY_NOMINAL,
+        BaudChoice::Auto => profibus_fdl::autobaud::SEARCH_ORDER[0],
+    };
+    let mut port = Port::open(&path, first)?;
+    let mut slave = DpSlave::new(device, addr);
+    {
+        let ident = slave.device().ident_number();
+        let now = printer.now();
+        let baud_text = if search {
+            "auto-baud".to_string()
+        } else if pty {
+            format!("{first}, pty")
+        } else {
+            first.to_string()
+        };
+        printer.emit(
+            now,
+            json!({"event": "start", "device": name, "ident": format!("0x{ident:04X}"),
+                   "address": addr, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
+                   "pty": pty}),
+            format!(
+                "{name} (ident 0x{ident:04X}) at address {addr} on {path} ({baud_text})"
+            ),
+        );
+    }
+
+    let stop_requested = Cell::new(false);
+    let mut last_outputs: Vec<u8> = vec![];
+    loop {
+        let baud = if search {
+            match search_baud(&mut port, clock, &printer, &stop_requested).await? {
+                Some(b) => b,
+                None => break,
+            }
+        } else {
+            port.baud()
+        };
+        let mut station = PassiveStation::new(slave, BusParams::defaults(baud));
+        let mut research = false;
+        let mut seen = (0u64, clock.now());
+        let result = driver::run(
+            &mut station,
+            &mut port,
+            clock,
+            async {
+                stop_signal().await;
+                stop_requested.set(true);
+            },
+            |st, now| {
+                while let Some(e) = st.app_mut().poll_event() {
+                    if search && matches!(e, SlaveEvent::WatchdogExpired { .. }) {
+                        research = true;
+                    }
+                    printer.event(now, &e);
+                }
+                let app = st.app();
+                if args.show_data && app.outputs() != last_outputs.as_slice() {
+                    last_outputs.clear();
+                    last_outputs.extend_from_slice(app.outputs());
+                    printer.emit(
+                        now,
+                        json!({"event": "data", "outputs": hex(app.outputs()), "inputs": hex(app.inputs()),
+                               "cycle": app.stats().data_exchanges}),
+                        format!(
+                            "data: outputs {} inputs {} (cycle {})",
+                            hex(app.outputs()),
+                            hex(app.inputs()),
+                            app.stats().data_exchanges
+                        ),
+                    );
+                }
+                if args.cycles > 0 && app.stats().data_exchanges >= args.cycles {
+                    return ControlFlow::Break(());
+                }
+                if search {
+                    let n = st.codec_stats().telegrams;
+                    if n != seen.0 {
+                        seen = (n, now);
+                    } else if now.saturating_duration_since(seen.1) >= RELISTEN_AFTER {
+                        research = true;
+                    }
+                }
+                if research {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            },
+        )
+        .await;
+        slave = station.into_app();
+        match result {
+            Err(e) => {
+                return Err(e).with_context(|| path.clone());
+            }
+            Ok(Stop::Shutdown) => break,
+            Ok(Stop::Done) if research => {
+                let now = printer.now();
+                printer.emit(
+                    now,
+                    json!({"event": "baud_search", "text": "searching the baud rate again"}),
+                    "searching the baud rate again".into(),
+                );
+                continue;
+            }
+            Ok(Stop::Done) => break,
+        }
+    }
+    let s = slave.stats();
+    let now = printer.now();
+    printer.emit(
+        now,
+        json!({"event": "stopped", "state": slave.state().as_str(), "data_exchanges": s.data_exchanges,
+               "diag_requests": s.diag_requests, "refused": s.refused,
+               "watchdog_expiries": s.watchdog_expiries}),
+        format!(
+            "stopped in {}: {} Data_Exchange cycles, {} Slave_Diag, {} refused, {} watchdog expiries",
+            slave.state(),
+            s.data_exchanges,
+            s.diag_requests,
+            s.refused,
+            s.watchdog_expiries
+        ),
+    );
+    Ok(())
+}
+
+/// Listen at each rate until a valid telegram decodes; `None` when a stop
+/// was requested.
+async fn search_baud(
+    port: &mut Port,
+    clock: Clock,
+    printer: &Printer,
+    stop_requested: &Cell<bool>,
+) -> anyhow::Result<Option<Baud>> {
+    use tokio::io::AsyncReadExt;
+    let mut ab = AutoBaud::new(clock.now());
+    port.set_baud(ab.baud())?;
+    let mut buf = [0u8; 512];
+    let stop = stop_signal();
+    tokio::pin!(stop);
+    loop {
+        let due = ab.poll_timeout().expect("searching");
+        let wait = due.saturating_duration_since(clock.now());
+        tokio::select! {
+            _ = &mut stop => {
+                stop_requested.set(true);
+                return Ok(None);
+            }
+            r = port.read(&mut buf) => {
+                let n = r.context("reading the port")?;
+                if n == 0 {
+                    bail!("{}: port closed", port.name());
+                }
+                if let Some(b) = ab.handle_rx(clock.now(), &buf[..n]) {
+                    let now = clock.now();
+                    printer.emit(now, json!({"event": "baud_locked", "baud": b.bps()}),
+                                 format!("baud rate {b} found"));
+                    return Ok(Some(b));
+                }
+            }
+            _ = tokio::time::sleep(wait) => {
+                if let Some(b) = ab.handle_timeout(clock.now()) {
+                    port.set_baud(b)?;
+                }
+            }
+        }
+    }
+}

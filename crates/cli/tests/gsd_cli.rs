@@ -1,0 +1,146 @@
+//! `dpctl gsd show` and `dpctl gsd check` as a user runs them.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn gsd(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../gsd")
+        .join(name)
+}
+
+fn dpctl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dpctl"))
+        .args(args)
+        .output()
+        .expect("run dpctl")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8(o.stdout.clone()).unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8(o.stderr.clone()).unwrap()
+}
+
+#[test]
+fn show_prints_identity_bauds_modules_and_parameters() {
+    let f = gsd("DPCTL_GEN.GSD");
+    let o = dpctl(&["gsd", "show", f.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    for want in [
+        "Ident number:  0x0DCE",
+        "  12Mbit/s         800",
+        "User_Prm_Data: 6 byte(s) for the station: 80 00 00 01 FF 9C",
+        "byte 4: \"Offset\" Signed16 default -100, allowed -1000..=1000",
+        "\"2 words in consistent (special format)\" 40 C1",
+        "2 words (consistent) in",
+        "parameter at module byte 0: \"Filter\" Unsigned8 default 5",
+    ] {
+        assert!(out.contains(want), "missing `{want}` in\n{out}");
+    }
+}
+
+#[test]
+fn show_json_is_one_object() {
+    let f = gsd("BNF_00D0.GSD");
+    let o = dpctl(&["gsd", "show", "--json", f.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert_eq!(out.lines().count(), 1);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["ident"], "0x00D0");
+    assert_eq!(v["modules"].as_array().unwrap().len(), 32);
+    assert_eq!(v["modules"][5]["cfg"], "C0 51 43");
+    assert_eq!(v["modules"][5]["input_bytes"], 8);
+    assert_eq!(v["modules"][5]["output_bytes"], 36);
+    assert_eq!(v["bauds"][8]["max_tsdr"], 800);
+    // Lenient by default: the quirks are warnings, on stderr and in the
+    // object.
+    assert!(
+        stderr(&o).contains("BNF_00D0.GSD:49:1: warning: expected `MaxTsdr_…`, found `MaxTsd_9.6`")
+    );
+    assert!(!v["warnings"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn strict_show_and_check_fail_on_quirks() {
+    let f = gsd("BNF_00D0.GSD");
+    let o = dpctl(&["gsd", "show", "--strict", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let o = dpctl(&["gsd", "check", "--strict", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stdout(&o).contains("BNF_00D0.GSD:91:1: error: expected `Module`, found `Modules`"));
+    let err = stderr(&o);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with("dpctl: ") && err.contains("73 error(s)"),
+        "{err}"
+    );
+    // Lenient check: warnings only, exit 0.
+    let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
+    assert!(o.status.success());
+    assert!(stdout(&o).contains("ok, 32 module(s)"));
+}
+
+#[test]
+fn check_reports_errors_with_positions() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("gsd_cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("broken.gsd");
+    std::fs::write(
+        &f,
+        "#Profibus_DP\nIdent_Number=0x10\nMax_Module=x\nModule=\"m\" 0x10,300\nEndModule\n",
+    )
+    .unwrap();
+    let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let out = stdout(&o);
+    let p = f.display();
+    assert!(
+        out.contains(&format!(
+            "{p}:3:12: error: expected a number for `Max_Module`, found `x`"
+        )),
+        "{out}"
+    );
+    assert!(
+        out.contains(&format!(
+            "{p}:4:17: error: an identifier byte of the module 300 is outside 0..=255"
+        )),
+        "{out}"
+    );
+    // JSON: one object per diagnostic.
+    let o = dpctl(&["gsd", "check", "--json", f.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(lines
+        .iter()
+        .any(|v| v["line"] == 3 && v["col"] == 12 && v["severity"] == "error"));
+    // A missing file: one line on stderr, exit 1.
+    let o = dpctl(&["gsd", "show", dir.join("nope.gsd").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("cannot read the file"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn check_reports_selection_problems_of_modules() {
+    let f = gsd("MyGSDFile.gsd");
+    let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
+    assert!(o.status.success());
+    assert!(
+        stdout(&o).contains(
+            "module 0 `Bedarfsdaten PKW` alone: 8 output bytes; the limit is 6 (Max_Output_Len)"
+        ),
+        "{}",
+        stdout(&o)
+    );
+}

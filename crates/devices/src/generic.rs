@@ -1,0 +1,693 @@
+//! A generic DP slave built from a description (usually a GSD file and a
+//! module list): what `dpctl slave --gsd FILE --module NAME …` emulates.
+//!
+//! - Configuration: the selected modules' identifier bytes, exactly
+//!   (Get_Cfg answers them, Chk_Cfg must match them byte for byte).
+//! - Parameters: the User_Prm_Data must have the length the description
+//!   gives, and every described parameter (`ExtUserPrmData`) must hold an
+//!   allowed value.
+//! - Inputs: an echo of the outputs, or a counter ([`InputPattern`]), so a
+//!   master sees data move.
+//! - DP-V1 (when the description says `C1_Read_Write_supp`): a small
+//!   record store; any slot/index can be written (up to 240 bytes,
+//!   [`MAX_RECORDS`] records) and read back; reading a record never
+//!   written is "invalid index".
+//! - Set_Slave_Add (when supported): the address can be persisted in a
+//!   small text file ([`AddressStore`]).
+
+use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
+use profibus_dp::prm::SetPrm;
+use profibus_dp::slave::{
+    expect_cfg, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
+    Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX,
+};
+use profibus_fdl::Instant;
+use std::collections::{BTreeMap, VecDeque};
+use std::path::{Path, PathBuf};
+
+/// Most DP-V1 records the generic device stores.
+pub const MAX_RECORDS: usize = 16;
+
+/// What the inputs of the generic device carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum InputPattern {
+    /// Inputs repeat the outputs received with the same Data_Exchange
+    /// (byte i of the inputs = byte i of the outputs; inputs beyond the
+    /// outputs are 0).
+    #[default]
+    Echo,
+    /// A 32-bit counter, big-endian, incremented with every
+    /// Data_Exchange and repeated over the input bytes.
+    Counter,
+}
+
+impl std::str::FromStr for InputPattern {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "echo" => Ok(InputPattern::Echo),
+            "counter" => Ok(InputPattern::Counter),
+            _ => Err(format!("unknown input pattern `{s}` (echo, counter)")),
+        }
+    }
+}
+
+/// A check of the User_Prm_Data beyond its length: `Err` names the
+/// parameter and what is wrong.
+pub type PrmCheck = Box<dyn Fn(&[u8]) -> Result<(), Reason> + Send>;
+
+/// Where the generic device keeps an address set by Set_Slave_Add: a text
+/// file with `address=N` and `no_add_chg=0|1` lines.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AddressStore {
+    path: PathBuf,
+}
+
+/// What an [`AddressStore`] holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StoredAddress {
+    /// The persisted address.
+    pub address: u8,
+    /// No further changes through the bus.
+    pub no_add_chg: bool,
+}
+
+impl AddressStore {
+    /// A store at `path` (created on the first change).
+    pub fn new(path: impl Into<PathBuf>) -> AddressStore {
+        AddressStore { path: path.into() }
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The stored address, if the file exists. A file that exists but
+    /// cannot be read or understood is an error.
+    pub fn load(&self) -> std::io::Result<Option<StoredAddress>> {
+        let text = match std::fs::read_to_string(&self.path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let bad = |what: &str| {
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("{}: {what}", self.path.display()),
+            )
+        };
+        let mut address = None;
+        let mut no_add_chg = false;
+        for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
+            match line.split_once('=') {
+                Some(("address", v)) => {
+                    address = Some(
+                        v.trim()
+                            .parse::<u8>()
+                            .ok()
+                            .filter(|a| *a <= 125)
+                            .ok_or_else(|| bad("address must be 0..=125"))?,
+                    )
+                }
+                Some(("no_add_chg", v)) => no_add_chg = v.trim() == "1",
+                _ => return Err(bad(&format!("unexpected line `{line}`"))),
+            }
+        }
+        let address = address.ok_or_else(|| bad("no `address=` line"))?;
+        Ok(Some(StoredAddress {
+            address,
+            no_add_chg,
+        }))
+    }
+
+    /// Persist `s` (written to a temporary file, then renamed).
+    pub fn save(&self, s: StoredAddress) -> std::io::Result<()> {
+        let tmp = self.path.with_extension("tmp");
+        std::fs::write(
+            &tmp,
+            format!("address={}\nno_add_chg={}\n", s.address, s.no_add_chg as u8),
+        )?;
+        std::fs::rename(&tmp, &self.path)
+    }
+}
+
+/// Why a GSD file and module list do not make a device.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GenericError {
+    /// A module name matches no module, or several.
+    #[error(transparent)]
+    Module(#[from] LookupError),
+    /// The selection's configuration or parameters cannot be built.
+    #[error(transparent)]
+    Selection(#[from] SelectionError),
+    /// The selection breaks the file's limits.
+    #[error("the module list does not fit the GSD file: {0}")]
+    Limits(String),
+}
+
+/// The value of a parameter of type `t` at `at` (big-endian; signed
+/// types sign-extended; `Bit`/`BitArea` only their bits). `None` when the
+/// data end before the parameter.
+pub fn prm_value(data: &[u8], at: usize, t: PrmDataType) -> Option<i64> {
+    let b = data.get(at..at + t.size())?;
+    Some(match t {
+        PrmDataType::Unsigned8 => b[0] as i64,
+        PrmDataType::Signed8 => b[0] as i8 as i64,
+        PrmDataType::Unsigned16 => u16::from_be_bytes([b[0], b[1]]) as i64,
+        PrmDataType::Signed16 => i16::from_be_bytes([b[0], b[1]]) as i64,
+        PrmDataType::Unsigned32 => u32::from_be_bytes([b[0], b[1], b[2], b[3]]) as i64,
+        PrmDataType::Signed32 => i32::from_be_bytes([b[0], b[1], b[2], b[3]]) as i64,
+        PrmDataType::Bit(n) => ((b[0] >> (n & 7)) & 1) as i64,
+        PrmDataType::BitArea(first, last) => {
+            let width = (last.saturating_sub(first) + 1).min(8);
+            ((b[0] as u16 >> (first & 7)) & ((1u16 << width) - 1)) as i64
+        }
+    })
+}
+
+/// The generic device; see the module docs.
+pub struct GenericDevice {
+    name: String,
+    ident: u16,
+    cfg: Vec<u8>,
+    features: Features,
+    user_prm_len: Option<usize>,
+    prm_checks: Vec<PrmCheck>,
+    pattern: InputPattern,
+    layout: IoLayout,
+    outputs: [u8; 244],
+    counter: u32,
+    records: BTreeMap<(u8, u8), Vec<u8>>,
+    store: Option<AddressStore>,
+    ext_diag: Vec<u8>,
+    ext_diag_fault: bool,
+    static_diag: bool,
+    new_diag: bool,
+    events: VecDeque<DeviceEvent>,
+}
+
+impl std::fmt::Debug for GenericDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GenericDevice")
+            .field("name", &self.name)
+            .field("ident", &format_args!("0x{:04X}", self.ident))
+            .field("cfg", &self.cfg)
+            .field("features", &self.features)
+            .field("user_prm_len", &self.user_prm_len)
+            .field("prm_checks", &self.prm_checks.len())
+            .field("pattern", &self.pattern)
+            .finish_non_exhaustive()
+    }
+}
+
+impl GenericDevice {
+    /// A device named `name` with ident number `ident`, expecting the
+    /// configuration `cfg`, with `features`. Any User_Prm_Data is accepted
+    /// until [`GenericDevice::with_user_prm`] says otherwise.
+    pub fn new(name: impl Into<String>, ident: u16, cfg: Vec<u8>, features: Features) -> Self {
+        GenericDevice {
+            name: name.into(),
+            ident,
+            cfg,
+            features,
+            user_prm_len: None,
+            prm_checks: vec![],
+            pattern: InputPattern::Echo,
+            layout: IoLayout::default(),
+            outputs: [0; 244],
+            counter: 0,
+            records: BTreeMap::new(),
+            store: None,
+            ext_diag: vec![],
+            ext_diag_fault: false,
+            static_diag: false,
+            new_diag: false,
+            events: VecDeque::new(),
+        }
+    }
+
+    /// The device a GSD file describes with the modules `modules` (names,
+    /// matched approximately; empty for a compact station's fixed
+    /// configuration): its ident number and features, the modules'
+    /// configuration, and the User_Prm_Data length and parameter ranges
+    /// of that selection.
+    pub fn from_gsd<S: AsRef<str>>(gsd: &Gsd, modules: &[S]) -> Result<Self, GenericError> {
+        let selection = if modules.is_empty() {
+            gsd.default_selection()
+        } else {
+            gsd.select(modules)?
+        };
+        let problems = gsd.check_selection(&selection);
+        if !problems.is_empty() {
+            let words: Vec<String> = problems.iter().map(ToString::to_string).collect();
+            return Err(GenericError::Limits(words.join("; ")));
+        }
+        let cfg = gsd.chk_cfg(&selection)?;
+        let user_prm_len = gsd.user_prm_data(&selection, &[])?.len();
+        let mut checks: Vec<PrmCheck> = vec![];
+        for p in gsd.parameters(&selection)? {
+            let def = p.definition;
+            let (name, at, t, allowed) = (
+                def.name.clone(),
+                p.offset,
+                def.data_type,
+                def.allowed.clone(),
+            );
+            let (lo, hi) = t.limits();
+            checks.push(Box::new(move |data: &[u8]| match prm_value(data, at, t) {
+                Some(v) if v >= lo && v <= hi && allowed.contains(v) => Ok(()),
+                Some(v) => Err(format!(
+                    "parameter `{name}` (User_Prm_Data byte {at}) = {v}, allowed {allowed}"
+                )
+                .into()),
+                None => Err(format!("parameter `{name}` at byte {at} is missing").into()),
+            }));
+        }
+        let features = Features {
+            sync: gsd.sync_mode_supp,
+            freeze: gsd.freeze_mode_supp,
+            set_slave_add: gsd.set_slave_add_supp,
+            dpv1: gsd.dpv1_slave,
+            c1_read_write: gsd.dpv1_slave && gsd.c1_read_write_supp,
+            alarms: gsd.dpv1_slave
+                && (gsd.diagnostic_alarm_supp
+                    || gsd.process_alarm_supp
+                    || gsd.pull_plug_alarm_supp
+                    || gsd.status_alarm_supp
+                    || gsd.update_alarm_supp
+                    || gsd.manufacturer_specific_alarm_supp),
+            fail_safe: gsd.fail_safe,
+            max_diag_len: gsd.max_diag_data_len.unwrap_or(244).clamp(6, 244),
+        };
+        let name = gsd
+            .model_name
+            .clone()
+            .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number));
+        Ok(GenericDevice::new(name, gsd.ident_number, cfg, features)
+            .with_user_prm(user_prm_len, checks))
+    }
+
+    /// Require User_Prm_Data of exactly `len` bytes (for DP-V1 slaves
+    /// including the 3 DPV1_Status bytes) that pass `checks`.
+    pub fn with_user_prm(mut self, len: usize, checks: Vec<PrmCheck>) -> Self {
+        self.user_prm_len = Some(len);
+        self.prm_checks = checks;
+        self
+    }
+
+    /// Choose the input pattern.
+    pub fn with_inputs(mut self, pattern: InputPattern) -> Self {
+        self.pattern = pattern;
+        self
+    }
+
+    /// Persist Set_Slave_Add in `store`.
+    pub fn with_address_store(mut self, store: AddressStore) -> Self {
+        self.store = Some(store);
+        self
+    }
+
+    /// The device's name (model name of the GSD).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The expected configuration.
+    pub fn cfg(&self) -> &[u8] {
+        &self.cfg
+    }
+
+    /// The outputs last received.
+    pub fn outputs(&self) -> &[u8] {
+        &self.outputs[..self.layout.outputs]
+    }
+
+    /// The DP-V1 record at `slot`/`index`.
+    pub fn record(&self, slot: u8, index: u8) -> Option<&[u8]> {
+        self.records.get(&(slot, index)).map(Vec::as_slice)
+    }
+
+    /// Set the extended diagnosis: a device-related block with `data`
+    /// (empty: none), `fault` sets Ext_Diag, `static_diag` Stat_Diag. The
+    /// slave announces the change with "data high".
+    pub fn set_diagnosis(&mut self, data: &[u8], fault: bool, static_diag: bool) {
+        self.ext_diag = data.to_vec();
+        self.ext_diag_fault = fault;
+        self.static_diag = static_diag;
+        self.new_diag = true;
+    }
+
+    fn note(&mut self, kind: &'static str, text: String) {
+        if self.events.len() < 64 {
+            self.events.push_back(DeviceEvent { kind, text });
+        }
+    }
+}
+
+impl Device for GenericDevice {
+    fn ident_number(&self) -> u16 {
+        self.ident
+    }
+
+    fn real_cfg(&self) -> &[u8] {
+        &self.cfg
+    }
+
+    fn features(&self) -> Features {
+        self.features
+    }
+
+    fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        let data = prm.user_prm_data;
+        if let Some(len) = self.user_prm_len {
+            if data.len() != len {
+                return Err(format!(
+                    "User_Prm_Data has {} bytes, the GSD gives {len}",
+                    data.len()
+                )
+                .into());
+            }
+        }
+        for check in &self.prm_checks {
+            check(data)?;
+        }
+        Ok(())
+    }
+
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        let layout = expect_cfg(&self.cfg, cfg)?;
+        self.layout = layout;
+        Ok(layout)
+    }
+
+    fn write_outputs(&mut self, _now: Instant, outputs: &[u8]) {
+        let n = outputs.len().min(self.outputs.len());
+        self.outputs[..n].copy_from_slice(&outputs[..n]);
+    }
+
+    fn read_inputs(&mut self, _now: Instant, inputs: &mut [u8]) {
+        match self.pattern {
+            InputPattern::Echo => {
+                let n = inputs.len().min(self.layout.outputs);
+                inputs[..n].copy_from_slice(&self.outputs[..n]);
+                inputs[n..].fill(0);
+            }
+            InputPattern::Counter => {
+                self.counter = self.counter.wrapping_add(1);
+                let c = self.counter.to_be_bytes();
+                for (i, b) in inputs.iter_mut().enumerate() {
+                    *b = c[i % 4];
+                }
+            }
+        }
+    }
+
+    fn clear_outputs(&mut self, _now: Instant, _why: ClearReason) {
+        self.outputs.fill(0);
+    }
+
+    fn diagnosis(&mut self, _now: Instant, diag: &mut DiagWriter<'_>) {
+        if !self.ext_diag.is_empty() {
+            diag.device(&self.ext_diag);
+        }
+        if self.ext_diag_fault {
+            diag.set_ext_diag();
+        }
+        if self.static_diag {
+            diag.set_stat_diag();
+        }
+    }
+
+    fn take_new_diag(&mut self) -> bool {
+        std::mem::take(&mut self.new_diag)
+    }
+
+    fn dpv1_read(&mut self, _now: Instant, slot: u8, index: u8, out: &mut [u8]) -> Dpv1Outcome {
+        match self.records.get(&(slot, index)) {
+            Some(r) => {
+                let n = r.len().min(out.len());
+                out[..n].copy_from_slice(&r[..n]);
+                Dpv1Outcome::Done(n)
+            }
+            None => Dpv1Outcome::read_error(ERR_CLASS_ACCESS, ERR_INVALID_INDEX),
+        }
+    }
+
+    fn dpv1_write(&mut self, _now: Instant, slot: u8, index: u8, data: &[u8]) -> Dpv1Outcome {
+        if !self.records.contains_key(&(slot, index)) && self.records.len() >= MAX_RECORDS {
+            // Resource class: "write constraint conflict".
+            return Dpv1Outcome::write_error(ERR_CLASS_RESOURCE, 1);
+        }
+        self.records.insert((slot, index), data.to_vec());
+        self.note(
+            "record",
+            format!(
+                "DP-V1 write slot {slot} index {index}: {} bytes",
+                data.len()
+            ),
+        );
+        Dpv1Outcome::Done(data.len())
+    }
+
+    fn set_address(
+        &mut self,
+        new_address: u8,
+        no_add_chg: bool,
+        _rem_slave_data: &[u8],
+    ) -> Result<(), Reason> {
+        let Some(store) = &self.store else {
+            return Ok(());
+        };
+        if let Ok(Some(s)) = store.load() {
+            if s.no_add_chg {
+                return Err(format!(
+                    "{} holds No_Add_Chg: the address cannot be changed through the bus",
+                    store.path().display()
+                )
+                .into());
+            }
+        }
+        let saved = StoredAddress {
+            address: new_address,
+            no_add_chg,
+        };
+        store
+            .save(saved)
+            .map_err(|e| Reason::from(format!("cannot store the address: {e}")))?;
+        let text = format!("address {new_address} stored in {}", store.path().display());
+        self.note("address", text);
+        Ok(())
+    }
+
+    fn poll_event(&mut self) -> Option<DeviceEvent> {
+        self.events.pop_front()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dev() -> GenericDevice {
+        GenericDevice::new("test", 0x0C0B, vec![0x21, 0x13], Features::default())
+    }
+
+    fn prm(user: &[u8]) -> Vec<u8> {
+        [vec![0x80, 1, 1, 11, 0x0C, 0x0B, 0], user.to_vec()].concat()
+    }
+
+    #[test]
+    fn echo_and_counter() {
+        let mut d = dev();
+        assert_eq!(
+            d.check_cfg(&[0x21, 0x13]),
+            Ok(IoLayout {
+                inputs: 4,
+                outputs: 2
+            })
+        );
+        d.write_outputs(Instant::ZERO, &[1, 2]);
+        let mut i = [9u8; 4];
+        d.read_inputs(Instant::ZERO, &mut i);
+        assert_eq!(i, [1, 2, 0, 0]);
+        let mut d = dev().with_inputs(InputPattern::Counter);
+        d.check_cfg(&[0x21, 0x13]).unwrap();
+        d.read_inputs(Instant::ZERO, &mut i);
+        d.read_inputs(Instant::ZERO, &mut i);
+        assert_eq!(i, [0, 0, 0, 2]);
+        assert!(d.check_cfg(&[0x21]).is_err());
+    }
+
+    #[test]
+    fn user_prm_length_and_checks() {
+        let check: PrmCheck = Box::new(|d: &[u8]| {
+            if d[1] > 5 {
+                Err(format!("parameter `Speed` = {}, allowed 0..=5", d[1]).into())
+            } else {
+                Ok(())
+            }
+        });
+        let mut d = dev().with_user_prm(2, vec![check]);
+        let p = prm(&[0, 3]);
+        assert!(d.check_prm(&SetPrm::parse(&p).unwrap()).is_ok());
+        let p = prm(&[0, 6]);
+        let e = d.check_prm(&SetPrm::parse(&p).unwrap()).unwrap_err();
+        assert!(e.as_str().contains("Speed"));
+        let p = prm(&[0]);
+        let e = d.check_prm(&SetPrm::parse(&p).unwrap()).unwrap_err();
+        assert!(e.as_str().contains("1 bytes, the GSD gives 2"));
+    }
+
+    #[test]
+    fn record_store() {
+        let mut d = dev();
+        assert!(matches!(
+            d.dpv1_read(Instant::ZERO, 0, 1, &mut [0; 4]),
+            Dpv1Outcome::Error(_)
+        ));
+        assert_eq!(
+            d.dpv1_write(Instant::ZERO, 0, 1, &[5, 6, 7]),
+            Dpv1Outcome::Done(3)
+        );
+        let mut b = [0u8; 2];
+        assert_eq!(
+            d.dpv1_read(Instant::ZERO, 0, 1, &mut b),
+            Dpv1Outcome::Done(2)
+        );
+        assert_eq!(b, [5, 6]);
+        for i in 2..=MAX_RECORDS as u8 {
+            assert_eq!(
+                d.dpv1_write(Instant::ZERO, 0, i, &[1]),
+                Dpv1Outcome::Done(1)
+            );
+        }
+        assert!(matches!(
+            d.dpv1_write(Instant::ZERO, 9, 9, &[1]),
+            Dpv1Outcome::Error(_)
+        ));
+        assert_eq!(d.poll_event().unwrap().kind, "record");
+    }
+
+    const GSD: &str = r#"#Profibus_DP
+GSD_Revision=3
+Vendor_Name="t"
+Model_Name="gen test"
+Revision="1"
+Ident_Number=0x0DCE
+Protocol_Ident=0
+Station_Type=0
+Hardware_Release="1"
+Software_Release="1"
+9.6_supp=1
+MaxTsdr_9.6=60
+Implementation_Type="sw"
+Freeze_Mode_supp=1
+Sync_Mode_supp=0
+Set_Slave_Add_supp=1
+Min_Slave_Intervall=1
+Max_Diag_Data_Len=32
+Modular_Station=1
+Max_Module=4
+Max_Input_Len=64
+Max_Output_Len=64
+Max_Data_Len=128
+DPV1_Slave=1
+C1_Read_Write_supp=1
+PrmText=1
+Text(0)="off"
+Text(1)="on"
+EndPrmText
+ExtUserPrmData=1 "Mode"
+Unsigned8 1 0-3
+Prm_Text_Ref=1
+EndExtUserPrmData
+ExtUserPrmData=2 "Offset"
+Signed16 -100 -1000-1000
+EndExtUserPrmData
+Max_User_Prm_Data_Len=16
+Ext_User_Prm_Data_Const(0)=0x80,0x00,0x00,0x01,0xFF,0x9C
+Ext_User_Prm_Data_Ref(3)=1
+Ext_User_Prm_Data_Ref(4)=2
+Module="1 byte in" 0x10
+1
+EndModule
+Module="2 words in/out" 0x71
+2
+EndModule
+"#;
+
+    #[test]
+    fn from_gsd_checks_what_the_file_says() {
+        let gsd = profibus_dp::gsd::Gsd::parse(GSD, Default::default())
+            .unwrap()
+            .gsd;
+        let mut d = GenericDevice::from_gsd(&gsd, &["2 words", "1 byte in"]).unwrap();
+        assert_eq!(d.ident_number(), 0x0DCE);
+        assert_eq!(d.real_cfg(), &[0x71, 0x10]);
+        let f = d.features();
+        assert!(f.freeze && !f.sync && f.set_slave_add && f.dpv1 && f.c1_read_write);
+        assert!(!f.alarms && !f.fail_safe);
+        assert_eq!(f.max_diag_len, 32);
+        let mk = |user: &[u8]| [vec![0x80, 1, 1, 11, 0x0D, 0xCE, 0], user.to_vec()].concat();
+        let good = mk(&[0x80, 0, 0, 1, 0xFF, 0x9C]);
+        assert_eq!(d.check_prm(&SetPrm::parse(&good).unwrap()), Ok(()));
+        let bad = mk(&[0x80, 0, 0, 4, 0xFF, 0x9C]);
+        let e = d.check_prm(&SetPrm::parse(&bad).unwrap()).unwrap_err();
+        assert!(
+            e.as_str()
+                .contains("`Mode` (User_Prm_Data byte 3) = 4, allowed 0..=3"),
+            "{e}"
+        );
+        let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x18]); // -1000 - 1000 = -1000: ok
+        assert_eq!(d.check_prm(&SetPrm::parse(&bad).unwrap()), Ok(()));
+        let bad = mk(&[0x80, 0, 0, 1, 0xFC, 0x17]); // -1001
+        assert!(d.check_prm(&SetPrm::parse(&bad).unwrap()).is_err());
+        let short = mk(&[0x80, 0, 0, 1]);
+        assert!(d.check_prm(&SetPrm::parse(&short).unwrap()).is_err());
+        assert!(matches!(
+            GenericDevice::from_gsd(&gsd, &["no such module at all"]),
+            Err(GenericError::Module(_))
+        ));
+        assert!(matches!(
+            GenericDevice::from_gsd(&gsd, &["1 byte in"; 5]),
+            Err(GenericError::Limits(_))
+        ));
+    }
+
+    #[test]
+    fn prm_values() {
+        let d = [0x81, 0xFF, 0x9C, 0x12, 0x34, 0x56, 0x78];
+        assert_eq!(prm_value(&d, 0, PrmDataType::Unsigned8), Some(0x81));
+        assert_eq!(prm_value(&d, 0, PrmDataType::Signed8), Some(-127));
+        assert_eq!(prm_value(&d, 1, PrmDataType::Signed16), Some(-100));
+        assert_eq!(prm_value(&d, 3, PrmDataType::Unsigned32), Some(0x12345678));
+        assert_eq!(prm_value(&d, 0, PrmDataType::Bit(7)), Some(1));
+        assert_eq!(prm_value(&d, 0, PrmDataType::BitArea(0, 2)), Some(1));
+        assert_eq!(prm_value(&d, 3, PrmDataType::BitArea(4, 7)), Some(1));
+        assert_eq!(prm_value(&d, 5, PrmDataType::Unsigned32), None);
+    }
+
+    #[test]
+    fn address_store_round_trip_and_no_add_chg() {
+        let dir = std::env::temp_dir().join(format!("dpctl-addr-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("addr.txt");
+        let _ = std::fs::remove_file(&path);
+        let store = AddressStore::new(&path);
+        assert_eq!(store.load().unwrap(), None);
+        let mut d = dev().with_address_store(store.clone());
+        d.set_address(17, true, &[]).unwrap();
+        assert_eq!(
+            store.load().unwrap(),
+            Some(StoredAddress {
+                address: 17,
+                no_add_chg: true
+            })
+        );
+        assert!(d.set_address(18, false, &[]).is_err());
+        std::fs::write(&path, "address=300\n").unwrap();
+        assert!(store.load().is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

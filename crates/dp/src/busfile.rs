@@ -1,0 +1,549 @@
+//! Bus files: a DP master's configuration in TOML, built on the slaves'
+//! GSD files.
+//!
+//! ```toml
+//! [master]
+//! address = 1            # the master's station address
+//! baud = "1.5M"          # 9600 … 12M
+//!
+//! [bus]                  # optional: bus parameters in bit times
+//! slot_time = 300        # TSL; default from the baud rate
+//! ttr = 32436            # target rotation time
+//! # also: min_tsdr, max_tsdr, tset, tqui, gap_factor, hsa, max_retry
+//!
+//! [options]              # optional: poll-cycle behaviour
+//! lost_after = 3         # cycles without answer before a slave is lost
+//! reprobe_ms = 100       # how often a lost slave is probed
+//! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
+//! global_control_ms = 0  # repeat operate/clear Global_Control (0 = on change)
+//!
+//! [[slave]]
+//! address = 8
+//! name = "coupler"                       # optional
+//! gsd = "../gsd/BK30BECF.GSD"            # relative to this file
+//! modules = ["KL1002 2 digital inputs"]  # GSD module names
+//! params = { "Diagnosis" = "on" }        # ExtUserPrmData by name ("2:Name" for module 2)
+//! watchdog_ms = 1000                     # 0 switches it off
+//! group = 1                              # Group_Ident bits
+//! sync = false
+//! freeze = false
+//! initial_outputs = [0, 0]               # optional
+//! ```
+//!
+//! [`BusFile::load`] parses the file, reads every GSD, selects the modules,
+//! builds Chk_Cfg and User_Prm_Data, checks the selection against the
+//! GSD's limits, and derives the bus parameters: defaults from
+//! [`BusParams::defaults`], raised to the largest `MaxTsdr` of the slaves
+//! for the baud rate (with TSL = max TSDR + 15 at least) unless the file
+//! sets them. Every error names the file and line and says what is wrong.
+
+use crate::gsd::{Gsd, ParseOptions, PrmValue};
+use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+use profibus_fdl::timing::{Baud, BusParams};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use toml::Spanned;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    master: Spanned<RawMaster>,
+    #[serde(default)]
+    bus: Option<Spanned<RawBus>>,
+    #[serde(default)]
+    options: Option<RawOptions>,
+    #[serde(default)]
+    slave: Vec<Spanned<RawSlave>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaster {
+    address: Spanned<u8>,
+    baud: Spanned<BaudValue>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum BaudValue {
+    Number(u32),
+    Text(String),
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawBus {
+    slot_time: Option<u32>,
+    min_tsdr: Option<u32>,
+    max_tsdr: Option<u32>,
+    tset: Option<u32>,
+    tqui: Option<u32>,
+    gap_factor: Option<u8>,
+    hsa: Option<u8>,
+    max_retry: Option<u8>,
+    ttr: Option<u32>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawOptions {
+    lost_after: Option<u8>,
+    reprobe_ms: Option<u64>,
+    diag_interval_ms: Option<u64>,
+    global_control_ms: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSlave {
+    address: Spanned<u8>,
+    name: Option<String>,
+    gsd: Spanned<String>,
+    #[serde(default)]
+    modules: Vec<Spanned<String>>,
+    #[serde(default)]
+    params: BTreeMap<String, Spanned<toml::Value>>,
+    watchdog_ms: Option<u64>,
+    group: Option<u8>,
+    sync: Option<Spanned<bool>>,
+    freeze: Option<Spanned<bool>>,
+    initial_outputs: Option<Spanned<Vec<u8>>>,
+    dpv1: Option<bool>,
+}
+
+/// One configured slave with its GSD.
+#[derive(Debug, Clone)]
+pub struct BusSlave {
+    /// What the master sends it.
+    pub params: SlaveParams,
+    /// The GSD file it was built from.
+    pub gsd_path: PathBuf,
+    /// The parsed GSD (for diagnosis texts and `dpctl gsd`).
+    pub gsd: Gsd,
+    /// The selected module names, in order.
+    pub modules: Vec<String>,
+}
+
+/// A loaded bus file.
+#[derive(Debug, Clone)]
+pub struct BusFile {
+    /// The file.
+    pub path: PathBuf,
+    /// The master's configuration.
+    pub master: MasterConfig,
+    /// The slaves with their GSD data, in the order of `master.slaves`.
+    pub slaves: Vec<BusSlave>,
+    /// Warnings (GSD quirks, adjusted bus parameters).
+    pub warnings: Vec<String>,
+}
+
+/// What is wrong with a bus file, with its position.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BusFileError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line (0 when unknown).
+    pub line: usize,
+    /// 1-based column (0 when unknown).
+    pub column: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for BusFileError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line > 0 {
+            write!(
+                f,
+                "{}:{}:{}: {}",
+                self.path.display(),
+                self.line,
+                self.column,
+                self.message
+            )
+        } else {
+            write!(f, "{}: {}", self.path.display(), self.message)
+        }
+    }
+}
+
+impl std::error::Error for BusFileError {}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(
+        &self,
+        span: Option<std::ops::Range<usize>>,
+        message: impl Into<String>,
+    ) -> BusFileError {
+        let (line, column) = match span {
+            Some(r) => {
+                let upto = &self.text[..r.start.min(self.text.len())];
+                let line = upto.matches('\n').count() + 1;
+                let column = upto.len() - upto.rfind('\n').map_or(0, |i| i + 1) + 1;
+                (line, column)
+            }
+            None => (0, 0),
+        };
+        BusFileError {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+}
+
+const MAX_BUS_FILE: u64 = 4 << 20;
+
+impl BusFile {
+    /// Read and check a bus file; see the module docs.
+    pub fn load(path: impl AsRef<Path>) -> Result<BusFile, BusFileError> {
+        let path = path.as_ref();
+        let io = |m: String| BusFileError {
+            path: path.to_path_buf(),
+            line: 0,
+            column: 0,
+            message: m,
+        };
+        let meta = std::fs::metadata(path).map_err(|e| io(format!("cannot read: {e}")))?;
+        if meta.len() > MAX_BUS_FILE {
+            return Err(io(format!(
+                "{} bytes is too large for a bus file",
+                meta.len()
+            )));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| io(format!("cannot read: {e}")))?;
+        Self::parse(path, &text)
+    }
+
+    /// Check the text of a bus file; GSD paths are relative to `path`'s
+    /// directory.
+    pub fn parse(path: &Path, text: &str) -> Result<BusFile, BusFileError> {
+        let cx = Ctx { path, text };
+        let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
+        let mut warnings = Vec::new();
+
+        let m = raw.master.get_ref();
+        let address = *m.address.get_ref();
+        if address > 125 {
+            return Err(cx.err(
+                Some(m.address.span()),
+                format!("master address {address} is outside 0..=125"),
+            ));
+        }
+        let baud = match m.baud.get_ref() {
+            BaudValue::Number(n) => Baud::from_bps(*n).ok_or_else(|| {
+                cx.err(
+                    Some(m.baud.span()),
+                    format!("{n} is not a PROFIBUS baud rate"),
+                )
+            })?,
+            BaudValue::Text(s) => s
+                .parse::<Baud>()
+                .map_err(|e| cx.err(Some(m.baud.span()), e.to_string()))?,
+        };
+
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let mut slaves = Vec::new();
+        let mut seen = [false; 128];
+        let mut max_tsdr_needed = 0u32;
+        for rs in &raw.slave {
+            let s = rs.get_ref();
+            let addr = *s.address.get_ref();
+            if addr > 125 || addr == address {
+                return Err(cx.err(
+                    Some(s.address.span()),
+                    format!(
+                        "slave address {addr} is invalid (0..=125 and not the master's {address})"
+                    ),
+                ));
+            }
+            if std::mem::replace(&mut seen[addr as usize], true) {
+                return Err(cx.err(
+                    Some(s.address.span()),
+                    format!("a second slave with address {addr}"),
+                ));
+            }
+            let gsd_path = dir.join(s.gsd.get_ref());
+            let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
+                .map_err(|e| cx.err(Some(s.gsd.span()), format!("GSD file: {e}")))?;
+            for w in &parsed.warnings {
+                warnings.push(format!("{}:{w}", gsd_path.display()));
+            }
+            let gsd = parsed.gsd;
+            if !gsd.supports_baud(baud) {
+                return Err(cx.err(
+                    Some(s.gsd.span()),
+                    format!("{} does not support {baud}", gsd_path.display()),
+                ));
+            }
+            if let Some(t) = gsd.max_tsdr(baud) {
+                max_tsdr_needed = max_tsdr_needed.max(t);
+            }
+            let mut selection = Vec::new();
+            let mut names = Vec::new();
+            for m in &s.modules {
+                let i = gsd.find_module_index(m.get_ref()).map_err(|e| {
+                    cx.err(Some(m.span()), format!("{e} in {}", gsd_path.display()))
+                })?;
+                selection.push(i);
+                names.push(gsd.modules[i].name.clone());
+            }
+            if s.modules.is_empty() {
+                selection = gsd.default_selection();
+                names = selection
+                    .iter()
+                    .map(|&i| gsd.modules[i].name.clone())
+                    .collect();
+            }
+            let problems = gsd.check_selection(&selection);
+            if let Some(p) = problems.first() {
+                let span = s.modules.first().map(|m| m.span()).unwrap_or(rs.span());
+                let all: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
+                let _ = p;
+                return Err(cx.err(Some(span), format!("slave {addr}: {}", all.join("; "))));
+            }
+            let cfg = gsd
+                .chk_cfg(&selection)
+                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
+            let mut values = Vec::new();
+            for (name, v) in &s.params {
+                let text = match v.get_ref() {
+                    toml::Value::Integer(i) => i.to_string(),
+                    toml::Value::String(t) => t.clone(),
+                    toml::Value::Boolean(b) => (*b as u8).to_string(),
+                    other => {
+                        return Err(cx.err(
+                            Some(v.span()),
+                            format!("parameter `{name}`: {other} is neither a number nor a text"),
+                        ))
+                    }
+                };
+                let pv: PrmValue = format!("{name}={text}").parse().map_err(
+                    |e: crate::gsd::PrmValueParseError| cx.err(Some(v.span()), e.to_string()),
+                )?;
+                values.push(pv);
+            }
+            let user_prm_data = gsd
+                .user_prm_data(&selection, &values)
+                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
+            let flag = |f: &Option<Spanned<bool>>| f.as_ref().is_some_and(|v| *v.get_ref());
+            let span = |f: &Option<Spanned<bool>>| f.as_ref().map(|v| v.span());
+            if flag(&s.sync) && !gsd.sync_mode_supp {
+                return Err(cx.err(
+                    span(&s.sync),
+                    format!("slave {addr}: the GSD says the device has no sync mode"),
+                ));
+            }
+            if flag(&s.freeze) && !gsd.freeze_mode_supp {
+                return Err(cx.err(
+                    span(&s.freeze),
+                    format!("slave {addr}: the GSD says the device has no freeze mode"),
+                ));
+            }
+            let mut p = SlaveParams::new(addr, gsd.ident_number, cfg);
+            p.name = s.name.clone().unwrap_or_else(|| {
+                gsd.model_name
+                    .clone()
+                    .unwrap_or_else(|| format!("slave {addr}"))
+            });
+            p.watchdog = match s.watchdog_ms {
+                Some(0) => None,
+                Some(ms) => Some(Duration::from_millis(ms)),
+                None => Some(Duration::from_secs(1)),
+            };
+            p.group = s.group.unwrap_or(0);
+            p.sync = flag(&s.sync);
+            p.freeze = flag(&s.freeze);
+            p.user_prm_data = user_prm_data;
+            p.dpv1 = s.dpv1.unwrap_or(gsd.dpv1_slave);
+            p.fail_safe = gsd.fail_safe;
+            p.min_slave_interval =
+                Duration::from_micros(100 * gsd.min_slave_intervall.unwrap_or(0) as u64);
+            p.dpv1_timeout = Duration::from_millis(
+                10 * gsd.c1_response_timeout.map_or(100, |t| t.max(1)) as u64,
+            );
+            let (_, output_len) = p
+                .io_lengths()
+                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
+            if let Some(io) = &s.initial_outputs {
+                if io.get_ref().len() > output_len {
+                    return Err(cx.err(
+                        Some(io.span()),
+                        format!(
+                            "slave {addr}: {} initial output bytes, the modules have {output_len}",
+                            io.get_ref().len()
+                        ),
+                    ));
+                }
+                p.initial_outputs = io.get_ref().clone();
+            }
+            if p.set_prm().len() > 244 {
+                return Err(cx.err(
+                    Some(rs.span()),
+                    format!("slave {addr}: Set_Prm would exceed 244 bytes"),
+                ));
+            }
+            slaves.push(BusSlave {
+                params: p,
+                gsd_path,
+                gsd,
+                modules: names,
+            });
+        }
+
+        let mut params = BusParams::defaults(baud);
+        let b = raw.bus.as_ref().map(|b| b.get_ref());
+        let set = |v: Option<u32>, d: &mut u32| {
+            if let Some(v) = v {
+                *d = v;
+            }
+        };
+        if let Some(b) = b {
+            set(b.slot_time, &mut params.slot_time);
+            set(b.min_tsdr, &mut params.min_tsdr);
+            set(b.max_tsdr, &mut params.max_tsdr);
+            set(b.tset, &mut params.tset);
+            set(b.tqui, &mut params.tqui);
+            set(b.ttr, &mut params.ttr);
+            params.gap_factor = b.gap_factor.unwrap_or(params.gap_factor);
+            params.hsa = b.hsa.unwrap_or(params.hsa);
+            params.max_retry = b.max_retry.unwrap_or(params.max_retry);
+        }
+        if max_tsdr_needed > params.max_tsdr {
+            if b.is_some_and(|b| b.max_tsdr.is_some()) {
+                return Err(cx.err(
+                    raw.bus.as_ref().map(|b| b.span()),
+                    format!(
+                        "max_tsdr {} is below the slaves' MaxTsdr of {max_tsdr_needed} at {baud}",
+                        params.max_tsdr
+                    ),
+                ));
+            }
+            warnings.push(format!(
+                "max TSDR raised from {} to {max_tsdr_needed} bit for the slaves' GSD MaxTsdr",
+                params.max_tsdr
+            ));
+            params.max_tsdr = max_tsdr_needed;
+        }
+        if params.slot_time < params.max_tsdr + 15 {
+            if b.is_some_and(|b| b.slot_time.is_some()) {
+                return Err(cx.err(
+                    raw.bus.as_ref().map(|b| b.span()),
+                    format!(
+                        "slot_time {} must be at least max TSDR + 15 = {}",
+                        params.slot_time,
+                        params.max_tsdr + 15
+                    ),
+                ));
+            }
+            params.slot_time = params.max_tsdr + 15;
+        }
+        params
+            .validate()
+            .map_err(|e| cx.err(raw.bus.as_ref().map(|b| b.span()), e.to_string()))?;
+
+        let o = raw.options.unwrap_or_default();
+        let d = MasterOptions::default();
+        let ms = |v: Option<u64>| v.filter(|&x| x > 0).map(Duration::from_millis);
+        let options = MasterOptions {
+            lost_after: o.lost_after.unwrap_or(d.lost_after).max(1),
+            reprobe_interval: o
+                .reprobe_ms
+                .map(Duration::from_millis)
+                .unwrap_or(d.reprobe_interval),
+            diag_interval: ms(o.diag_interval_ms),
+            global_control_interval: ms(o.global_control_ms),
+            not_ready_limit: d.not_ready_limit,
+        };
+        Ok(BusFile {
+            path: path.to_path_buf(),
+            master: MasterConfig {
+                address,
+                params,
+                slaves: slaves.iter().map(|s| s.params.clone()).collect(),
+                options,
+            },
+            slaves,
+            warnings,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gsd_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml")
+    }
+
+    fn load(text: &str) -> Result<BusFile, BusFileError> {
+        BusFile::parse(&gsd_dir(), text)
+    }
+
+    #[test]
+    fn omega_board_from_its_gsd() {
+        let b = load(
+            r#"
+[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 5
+gsd = "BNF_00D0.GSD"
+modules = ["Service data module", "Status / control module", "8 cycl. actual values (16 AI)", "8 cycl. setpoints (16 AO)"]
+watchdog_ms = 300
+"#,
+        );
+        let b = match b {
+            Ok(b) => b,
+            Err(e) => panic!("{e}"),
+        };
+        let s = &b.master.slaves[0];
+        assert_eq!(s.ident_number, 0x00D0);
+        assert_eq!(s.io_lengths().unwrap(), (44, 44));
+        assert_eq!(b.master.params.baud, Baud::B1500000);
+        assert_eq!(b.master.address, 2);
+    }
+
+    #[test]
+    fn errors_name_line_and_what_is_wrong() {
+        let e = load(
+            r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 5
+gsd = "BNF_00D0.GSD"
+modules = ["no such module"]
+"#,
+        )
+        .unwrap_err();
+        assert_eq!(e.line, 8, "{e}");
+        assert!(e.to_string().contains("no such module"), "{e}");
+
+        let e = load("[master]\naddress = 2\nbaud = 115200\n").unwrap_err();
+        assert_eq!(e.line, 3);
+        assert!(e.message.contains("not a PROFIBUS baud rate"));
+
+        let e = load("[master]\naddress = 2\nbaud = \"1.5M\"\nfoo = 1\n").unwrap_err();
+        assert_eq!(e.line, 4, "{e}");
+
+        let e = load(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 2\ngsd = \"BNF_00D0.GSD\"\n",
+        )
+        .unwrap_err();
+        assert!(e.message.contains("not the master's"), "{e}");
+    }
+}

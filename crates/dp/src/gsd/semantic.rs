@@ -1,0 +1,896 @@
+//! What a GSD means for a master and a slave: module I/O sizes, module
+//! lookup, the Chk_Cfg and User_Prm_Data of a module selection, checks of
+//! a selection against the file's limits, MaxTsdr per baud rate.
+//!
+//! A *selection* is a list of indices into [`Gsd::modules`], in slot
+//! order (what the master configures and sends in Chk_Cfg). Build it from
+//! names with [`Gsd::select`]; a compact station's fixed configuration is
+//! [`Gsd::default_selection`].
+//!
+//! User_Prm_Data follows the standard: when the station-level
+//! `Ext_User_Prm_Data_Const`/`Ext_User_Prm_Data_Ref` lines exist they
+//! define the station part and the legacy `User_Prm_Data` is not
+//! evaluated (ISO 15745-3 / the GSD specification); otherwise the
+//! station part is `User_Prm_Data`, padded or cut to
+//! `User_Prm_Data_Len`. Each selected module appends its
+//! `Ext_Module_Prm_Data_Len` bytes built from its own `Const`/`Ref`
+//! lines. Parameters (`ExtUserPrmData`) take their default unless a
+//! [`PrmValue`] names them. The result excludes the 7 standard Set_Prm
+//! bytes; for a DP-V1 slave its first 3 bytes are the DPV1 status bytes
+//! as the file gives them.
+
+use super::model::*;
+use crate::cfg::{self, CfgError, CfgTotals};
+use profibus_fdl::timing::Baud;
+use std::str::FromStr;
+
+/// The most configuration bytes a Chk_Cfg telegram carries.
+pub const MAX_CFG_LEN: usize = 244;
+
+/// The most User_Prm_Data bytes a Set_Prm telegram carries (244 − 7).
+pub const MAX_USER_PRM_LEN: usize = 237;
+
+/// The most input or output bytes of one DP slave.
+pub const MAX_IO_LEN: usize = 244;
+
+/// A module name that matches no module, or several.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LookupError {
+    /// No module has a name like this.
+    #[error("no module named `{name}`{}", suggestion.as_ref().map(|s| format!("; did you mean `{s}`?")).unwrap_or_default())]
+    NotFound {
+        /// The name looked for.
+        name: String,
+        /// The closest module name, if any is close.
+        suggestion: Option<String>,
+    },
+    /// Several modules match equally well.
+    #[error("`{name}` matches several modules: {}", candidates.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", "))]
+    Ambiguous {
+        /// The name looked for.
+        name: String,
+        /// The modules it matches.
+        candidates: Vec<String>,
+    },
+}
+
+/// A selection or parameter setting that cannot be turned into Chk_Cfg or
+/// User_Prm_Data.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SelectionError {
+    /// A module index beyond the file's modules.
+    #[error("module index {index} is out of range; the file has {count} modules")]
+    NoSuchModule {
+        /// The index.
+        index: usize,
+        /// Number of modules in the file.
+        count: usize,
+    },
+    /// A module's identifier bytes do not decode.
+    #[error("module `{module}`: {error}")]
+    BadIdentifier {
+        /// The module name.
+        module: String,
+        /// What is wrong.
+        error: CfgError,
+    },
+    /// A named parameter that the selection does not have.
+    #[error("no parameter `{name}`{} in this configuration{}", position.map(|p| format!(" at module position {p}")).unwrap_or_default(), suggestion.as_ref().map(|s| format!("; did you mean `{s}`?")).unwrap_or_default())]
+    UnknownParameter {
+        /// The name given.
+        name: String,
+        /// The module position given, if any.
+        position: Option<usize>,
+        /// The closest parameter name, if any is close.
+        suggestion: Option<String>,
+    },
+    /// A value the parameter does not allow.
+    #[error("parameter `{name}`: {value} is not allowed; allowed: {allowed}")]
+    NotAllowed {
+        /// The parameter.
+        name: String,
+        /// The value given.
+        value: i64,
+        /// What is allowed (its range or values, within its data type).
+        allowed: String,
+    },
+    /// A text that names no value of the parameter.
+    #[error("parameter `{name}`: `{text}` is none of its texts ({})", texts.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", "))]
+    UnknownText {
+        /// The parameter.
+        name: String,
+        /// The text given.
+        text: String,
+        /// Its texts.
+        texts: Vec<String>,
+    },
+    /// User_Prm_Data would reach beyond what Set_Prm can carry.
+    #[error("User_Prm_Data would need {needed} bytes; Set_Prm carries at most {MAX_USER_PRM_LEN}")]
+    PrmTooLong {
+        /// Bytes needed.
+        needed: usize,
+    },
+}
+
+/// Something wrong with a module selection, in words.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Problem {
+    /// A module index beyond the file's modules.
+    #[error("module index {index} is out of range; the file has {count} modules")]
+    NoSuchModule {
+        /// The index.
+        index: usize,
+        /// Number of modules.
+        count: usize,
+    },
+    /// A modular station with no modules selected.
+    #[error("no modules are selected; a modular station needs at least one")]
+    Empty,
+    /// A compact station configured otherwise than with its modules.
+    #[error(
+        "this is a compact station (Modular_Station=0): its configuration is fixed to {expected}"
+    )]
+    FixedConfiguration {
+        /// The fixed configuration, as module names.
+        expected: String,
+    },
+    /// More modules than `Max_Module`.
+    #[error("{count} modules selected; the device takes at most {max} (Max_Module)")]
+    TooManyModules {
+        /// Modules selected.
+        count: usize,
+        /// `Max_Module`.
+        max: usize,
+    },
+    /// More input bytes than allowed.
+    #[error("{bytes} input bytes; the limit is {max} ({limit})")]
+    InputTooLong {
+        /// Input bytes of the selection.
+        bytes: usize,
+        /// The limit.
+        max: usize,
+        /// Where the limit comes from.
+        limit: &'static str,
+    },
+    /// More output bytes than allowed.
+    #[error("{bytes} output bytes; the limit is {max} ({limit})")]
+    OutputTooLong {
+        /// Output bytes of the selection.
+        bytes: usize,
+        /// The limit.
+        max: usize,
+        /// Where the limit comes from.
+        limit: &'static str,
+    },
+    /// More input plus output bytes than `Max_Data_Len`.
+    #[error(
+        "{bytes} input and output bytes together; the device takes at most {max} (Max_Data_Len)"
+    )]
+    DataTooLong {
+        /// Input plus output bytes.
+        bytes: usize,
+        /// `Max_Data_Len`.
+        max: usize,
+    },
+    /// A Chk_Cfg longer than a telegram carries.
+    #[error("{bytes} configuration bytes; Chk_Cfg carries at most {MAX_CFG_LEN}")]
+    CfgTooLong {
+        /// Identifier bytes of the selection.
+        bytes: usize,
+    },
+    /// User_Prm_Data longer than allowed.
+    #[error("{bytes} bytes of User_Prm_Data; the limit is {max} ({limit})")]
+    PrmTooLong {
+        /// Bytes of the selection's User_Prm_Data.
+        bytes: usize,
+        /// The limit.
+        max: usize,
+        /// Where the limit comes from.
+        limit: &'static str,
+    },
+    /// A module whose identifiers do not decode, or parameters that cannot
+    /// be built.
+    #[error("{0}")]
+    Selection(SelectionError),
+}
+
+/// A value for a named parameter: `[position:]name=value`, where the
+/// optional position (0-based index in the module selection) limits it
+/// to one module and the value is a number or one of the parameter's
+/// texts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PrmValue {
+    /// Module position in the selection (0-based); `None` for every
+    /// occurrence of the name (station and modules).
+    pub position: Option<usize>,
+    /// The parameter name (`ExtUserPrmData` name; case and repeated
+    /// blanks do not matter).
+    pub name: String,
+    /// The value.
+    pub value: PrmInput,
+}
+
+/// The value of a [`PrmValue`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PrmInput {
+    /// A number.
+    Int(i64),
+    /// A text from the parameter's `PrmText`.
+    Text(String),
+}
+
+/// A `[position:]name=value` string that does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` is no parameter setting; expected `name=value` or `position:name=value`")]
+pub struct PrmValueParseError(pub String);
+
+impl FromStr for PrmValue {
+    type Err = PrmValueParseError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = || PrmValueParseError(s.to_string());
+        let (left, right) = s.split_once('=').ok_or_else(err)?;
+        let (position, name) = match left.split_once(':') {
+            Some((p, n)) if p.trim().parse::<usize>().is_ok() => {
+                (Some(p.trim().parse().map_err(|_| err())?), n)
+            }
+            _ => (None, left),
+        };
+        let name = name.trim();
+        let right = right.trim();
+        if name.is_empty() || right.is_empty() {
+            return Err(err());
+        }
+        Ok(PrmValue {
+            position,
+            name: name.to_string(),
+            value: parse_int(right)
+                .map_or_else(|| PrmInput::Text(right.to_string()), PrmInput::Int),
+        })
+    }
+}
+
+fn parse_int(s: &str) -> Option<i64> {
+    let (neg, body) = match s.strip_prefix('-') {
+        Some(b) => (true, b),
+        None => (false, s),
+    };
+    let v = match body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
+        Some(h) => i64::from_str_radix(h, 16).ok()?,
+        None => body.parse::<i64>().ok()?,
+    };
+    Some(if neg { -v } else { v })
+}
+
+/// One parameter of a selection: where its value goes in the
+/// User_Prm_Data and how it is defined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParamInstance<'g> {
+    /// Module position in the selection, or `None` for a station
+    /// parameter.
+    pub position: Option<usize>,
+    /// Byte offset in the User_Prm_Data.
+    pub offset: usize,
+    /// The definition.
+    pub definition: &'g ExtUserPrmData,
+}
+
+/// Input and output sizes of a module; see [`Module::io`].
+pub type ModuleIo = CfgTotals;
+
+impl Module {
+    /// The module's identifiers, decoded.
+    pub fn identifiers(&self) -> cfg::CfgIter<'_> {
+        cfg::identifiers(&self.cfg)
+    }
+
+    /// Total input and output bytes of the module.
+    pub fn io(&self) -> Result<ModuleIo, CfgError> {
+        cfg::totals(&self.cfg)
+    }
+}
+
+/// Lower case with runs of blanks folded to one space and no blanks at
+/// the ends.
+fn normalize(s: &str) -> String {
+    s.split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+        .to_lowercase()
+}
+
+/// Edit distance between two strings in characters, counting a swap of
+/// two neighbours as one edit (optimal string alignment).
+fn levenshtein(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().collect();
+    let b: Vec<char> = b.chars().collect();
+    let w = b.len() + 1;
+    let mut d = vec![0usize; (a.len() + 1) * w];
+    for i in 0..=a.len() {
+        d[i * w] = i;
+    }
+    for (j, v) in d.iter_mut().enumerate().take(w) {
+        *v = j;
+    }
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut v = (d[(i - 1) * w + j] + 1)
+                .min(d[i * w + j - 1] + 1)
+                .min(d[(i - 1) * w + j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                v = v.min(d[(i - 2) * w + j - 2] + 1);
+            }
+            d[i * w + j] = v;
+        }
+    }
+    d[a.len() * w + b.len()]
+}
+
+/// Find `name` among `names`: exact, then equal after normalizing, then
+/// a unique prefix, then a unique substring, then the unique closest by
+/// edit distance if close enough.
+fn lookup<'a>(
+    name: &str,
+    names: impl Iterator<Item = &'a str> + Clone,
+) -> Result<usize, LookupError> {
+    if let Some(i) = names.clone().position(|n| n == name) {
+        return Ok(i);
+    }
+    let want = normalize(name);
+    let normalized: Vec<String> = names.clone().map(normalize).collect();
+    let steps: [&dyn Fn(&str) -> bool; 3] = [
+        &|n: &str| n == want,
+        &|n: &str| n.starts_with(&want),
+        &|n: &str| n.contains(&want),
+    ];
+    for pred in steps {
+        let hits: Vec<usize> = (0..normalized.len())
+            .filter(|&i| pred(&normalized[i]))
+            .collect();
+        match hits.as_slice() {
+            [] => continue,
+            [i] => return Ok(*i),
+            [first, rest @ ..] => {
+                if rest.iter().all(|&i| normalized[i] == normalized[*first]) {
+                    return Ok(*first);
+                }
+                let all: Vec<&str> = names.clone().collect();
+                return Err(LookupError::Ambiguous {
+                    name: name.to_string(),
+                    candidates: hits.iter().map(|&i| all[i].to_string()).collect(),
+                });
+            }
+        }
+    }
+    let dists: Vec<usize> = normalized.iter().map(|n| levenshtein(&want, n)).collect();
+    let best = dists.iter().copied().min();
+    let all: Vec<&str> = names.collect();
+    match best {
+        Some(d) => {
+            let hits: Vec<usize> = (0..dists.len()).filter(|&i| dists[i] == d).collect();
+            let close = d <= (want.chars().count() / 4).max(2);
+            if close && hits.len() == 1 {
+                Ok(hits[0])
+            } else {
+                Err(LookupError::NotFound {
+                    name: name.to_string(),
+                    suggestion: (d <= (want.chars().count() / 2).max(3))
+                        .then(|| all[hits[0]].to_string()),
+                })
+            }
+        }
+        None => Err(LookupError::NotFound {
+            name: name.to_string(),
+            suggestion: None,
+        }),
+    }
+}
+
+/// Write `v` as type `t` at `at` (big-endian for 16/32 bits; Bit and
+/// BitArea change only their bits).
+fn put(data: &mut [u8], at: usize, t: PrmDataType, v: i64) {
+    match t {
+        PrmDataType::Unsigned8 | PrmDataType::Signed8 => data[at] = v as u8,
+        PrmDataType::Unsigned16 | PrmDataType::Signed16 => {
+            data[at..at + 2].copy_from_slice(&(v as u16).to_be_bytes())
+        }
+        PrmDataType::Unsigned32 | PrmDataType::Signed32 => {
+            data[at..at + 4].copy_from_slice(&(v as u32).to_be_bytes())
+        }
+        PrmDataType::Bit(n) => {
+            if v & 1 != 0 {
+                data[at] |= 1 << n;
+            } else {
+                data[at] &= !(1 << n);
+            }
+        }
+        PrmDataType::BitArea(a, b) => {
+            let mask = (((1u16 << (b - a + 1)) - 1) << a) as u8;
+            data[at] = (data[at] & !mask) | (((v as u16) << a) as u8 & mask);
+        }
+    }
+}
+
+/// Copy `bytes` into `data` at `offset`, growing it; fails beyond the
+/// Set_Prm limit.
+fn write_at(
+    data: &mut Vec<u8>,
+    base: usize,
+    offset: usize,
+    bytes: &[u8],
+) -> Result<(), SelectionError> {
+    let end = base + offset + bytes.len();
+    if end > MAX_USER_PRM_LEN {
+        return Err(SelectionError::PrmTooLong { needed: end });
+    }
+    if data.len() < end {
+        data.resize(end, 0);
+    }
+    data[base + offset..end].copy_from_slice(bytes);
+    Ok(())
+}
+
+impl Gsd {
+    /// `MaxTsdr_<baud>` in bit times, if the file gives it.
+    pub fn max_tsdr(&self, baud: Baud) -> Option<u32> {
+        self.baud_rates[baud_index(baud)].max_tsdr.map(u32::from)
+    }
+
+    /// Whether `<baud>_supp = 1`.
+    pub fn supports_baud(&self, baud: Baud) -> bool {
+        self.baud_rates[baud_index(baud)].supported
+    }
+
+    /// The supported baud rates, slowest first.
+    pub fn supported_bauds(&self) -> Vec<Baud> {
+        Baud::ALL
+            .iter()
+            .copied()
+            .filter(|&b| self.supports_baud(b))
+            .collect()
+    }
+
+    /// The module with exactly this name (the first, if several).
+    pub fn module(&self, name: &str) -> Option<&Module> {
+        self.modules.iter().find(|m| m.name == name)
+    }
+
+    /// The index of the module with exactly this name.
+    pub fn module_index(&self, name: &str) -> Option<usize> {
+        self.modules.iter().position(|m| m.name == name)
+    }
+
+    /// The index of the module best matching `name`: the exact name,
+    /// else the same name ignoring case and blanks, else a unique prefix,
+    /// else a unique substring, else a unique name within a few typing
+    /// errors.
+    pub fn find_module_index(&self, name: &str) -> Result<usize, LookupError> {
+        lookup(name, self.modules.iter().map(|m| m.name.as_str()))
+    }
+
+    /// The module best matching `name` (see
+    /// [`find_module_index`](Self::find_module_index)).
+    pub fn find_module(&self, name: &str) -> Result<&Module, LookupError> {
+        self.find_module_index(name).map(|i| &self.modules[i])
+    }
+
+    /// A selection from module names (approximate matching).
+    pub fn select<S: AsRef<str>>(&self, names: &[S]) -> Result<Vec<usize>, LookupError> {
+        names
+            .iter()
+            .map(|n| self.find_module_index(n.as_ref()))
+            .collect()
+    }
+
+    /// The selection a configurator starts from: for a compact station
+    /// every module (its fixed configuration), for a modular station the
+    /// `Preset` modules.
+    pub fn default_selection(&self) -> Vec<usize> {
+        (0..self.modules.len())
+            .filter(|&i| !self.modular_station || self.modules[i].preset)
+            .collect()
+    }
+
+    /// The `ExtUserPrmData` block with this reference number (the first,
+    /// if several).
+    pub fn prm_definition(&self, reference: u16) -> Option<&ExtUserPrmData> {
+        self.ext_user_prm_data
+            .iter()
+            .find(|p| p.reference == reference)
+    }
+
+    /// The `PrmText` block with this reference number.
+    pub fn prm_text(&self, reference: u16) -> Option<&PrmText> {
+        self.prm_texts.iter().find(|t| t.reference == reference)
+    }
+
+    /// The text of value `v` of parameter `p`, if it has one.
+    pub fn value_text(&self, p: &ExtUserPrmData, v: i64) -> Option<&str> {
+        let t = self.prm_text(p.prm_text_ref?)?;
+        t.texts
+            .iter()
+            .find(|t| t.value == v)
+            .map(|t| t.text.as_str())
+    }
+
+    /// `Unit_Diag_Bit(bit)` text.
+    pub fn unit_diag_bit_text(&self, bit: u32) -> Option<&str> {
+        self.unit_diag_bits
+            .iter()
+            .find(|t| t.bit == bit)
+            .map(|t| t.text.as_str())
+    }
+
+    /// `Unit_Diag_Not_Bit(bit)` text.
+    pub fn unit_diag_not_bit_text(&self, bit: u32) -> Option<&str> {
+        self.unit_diag_not_bits
+            .iter()
+            .find(|t| t.bit == bit)
+            .map(|t| t.text.as_str())
+    }
+
+    fn selected(&self, selection: &[usize]) -> Result<Vec<&Module>, SelectionError> {
+        selection
+            .iter()
+            .map(|&i| {
+                self.modules.get(i).ok_or(SelectionError::NoSuchModule {
+                    index: i,
+                    count: self.modules.len(),
+                })
+            })
+            .collect()
+    }
+
+    /// Chk_Cfg bytes of a selection: the modules' identifier bytes in
+    /// order.
+    pub fn chk_cfg(&self, selection: &[usize]) -> Result<Vec<u8>, SelectionError> {
+        let mut out = Vec::new();
+        for m in self.selected(selection)? {
+            m.io().map_err(|error| SelectionError::BadIdentifier {
+                module: m.name.clone(),
+                error,
+            })?;
+            out.extend_from_slice(&m.cfg);
+        }
+        Ok(out)
+    }
+
+    /// The User_Prm_Data bytes with every parameter at its default, and
+    /// where the parameters are.
+    fn prm_layout(
+        &self,
+        selection: &[usize],
+    ) -> Result<(Vec<u8>, Vec<ParamInstance<'_>>), SelectionError> {
+        let modules = self.selected(selection)?;
+        let mut data = Vec::new();
+        let mut params = Vec::new();
+        let mut add_refs = |data: &mut Vec<u8>,
+                            base: usize,
+                            limit: Option<usize>,
+                            refs: &[PrmRef],
+                            position: Option<usize>|
+         -> Result<(), SelectionError> {
+            for r in refs {
+                let Some(def) = self.prm_definition(r.reference) else {
+                    continue;
+                };
+                let size = def.data_type.size();
+                if limit.is_some_and(|l| r.offset as usize + size > l) {
+                    continue;
+                }
+                let offset = base + r.offset as usize;
+                if offset + size > MAX_USER_PRM_LEN {
+                    return Err(SelectionError::PrmTooLong {
+                        needed: offset + size,
+                    });
+                }
+                if data.len() < offset + size {
+                    data.resize(offset + size, 0);
+                }
+                params.push(ParamInstance {
+                    position,
+                    offset,
+                    definition: def,
+                });
+            }
+            Ok(())
+        };
+        if self.ext_user_prm_data_const.is_empty() && self.ext_user_prm_data_ref.is_empty() {
+            data = self.user_prm_data.clone().unwrap_or_default();
+            if let Some(n) = self.user_prm_data_len {
+                data.resize(n as usize, 0);
+            }
+            if data.len() > MAX_USER_PRM_LEN {
+                return Err(SelectionError::PrmTooLong { needed: data.len() });
+            }
+        } else {
+            for c in &self.ext_user_prm_data_const {
+                write_at(&mut data, 0, c.offset as usize, &c.data)?;
+            }
+            add_refs(&mut data, 0, None, &self.ext_user_prm_data_ref, None)?;
+        }
+        for (pos, m) in modules.iter().enumerate() {
+            let base = data.len();
+            let limit = m.ext_module_prm_data_len.map(usize::from);
+            let mut block = vec![0u8; limit.unwrap_or(0)];
+            if base + block.len() > MAX_USER_PRM_LEN {
+                return Err(SelectionError::PrmTooLong {
+                    needed: base + block.len(),
+                });
+            }
+            for c in &m.ext_user_prm_data_const {
+                let bytes = match limit {
+                    Some(l) => &c.data[..c.data.len().min(l.saturating_sub(c.offset as usize))],
+                    None => &c.data[..],
+                };
+                if bytes.is_empty() {
+                    continue;
+                }
+                if base + c.offset as usize + bytes.len() > MAX_USER_PRM_LEN {
+                    return Err(SelectionError::PrmTooLong {
+                        needed: base + c.offset as usize + bytes.len(),
+                    });
+                }
+                let end = c.offset as usize + bytes.len();
+                if block.len() < end {
+                    block.resize(end, 0);
+                }
+                block[c.offset as usize..end].copy_from_slice(bytes);
+            }
+            data.extend_from_slice(&block);
+            add_refs(&mut data, base, limit, &m.ext_user_prm_data_ref, Some(pos))?;
+        }
+        for p in &params {
+            put(
+                &mut data,
+                p.offset,
+                p.definition.data_type,
+                p.definition.default,
+            );
+        }
+        Ok((data, params))
+    }
+
+    /// The parameters of a selection, in User_Prm_Data order of their
+    /// references (station parameters first).
+    pub fn parameters(
+        &self,
+        selection: &[usize],
+    ) -> Result<Vec<ParamInstance<'_>>, SelectionError> {
+        self.prm_layout(selection).map(|(_, p)| p)
+    }
+
+    /// The User_Prm_Data of a selection (without the 7 standard Set_Prm
+    /// bytes), with the named parameter values and every other parameter
+    /// at its default.
+    pub fn user_prm_data(
+        &self,
+        selection: &[usize],
+        values: &[PrmValue],
+    ) -> Result<Vec<u8>, SelectionError> {
+        let (mut data, params) = self.prm_layout(selection)?;
+        for v in values {
+            let want = normalize(&v.name);
+            let mut hit = false;
+            for p in &params {
+                if normalize(&p.definition.name) != want
+                    || v.position.is_some_and(|pos| p.position != Some(pos))
+                {
+                    continue;
+                }
+                hit = true;
+                let def = p.definition;
+                let value = match &v.value {
+                    PrmInput::Int(i) => *i,
+                    PrmInput::Text(t) => {
+                        let texts = def.prm_text_ref.and_then(|r| self.prm_text(r));
+                        let t_norm = normalize(t);
+                        match texts
+                            .and_then(|ts| ts.texts.iter().find(|x| normalize(&x.text) == t_norm))
+                        {
+                            Some(x) => x.value,
+                            None => {
+                                return Err(SelectionError::UnknownText {
+                                    name: def.name.clone(),
+                                    text: t.clone(),
+                                    texts: texts
+                                        .map(|ts| ts.texts.iter().map(|x| x.text.clone()).collect())
+                                        .unwrap_or_default(),
+                                });
+                            }
+                        }
+                    }
+                };
+                let (lo, hi) = def.data_type.limits();
+                if value < lo || value > hi || !def.allowed.contains(value) {
+                    let allowed = match &def.allowed {
+                        Allowed::Any => format!("{lo}..={hi} ({})", def.data_type.gsd_name()),
+                        a => a.to_string(),
+                    };
+                    return Err(SelectionError::NotAllowed {
+                        name: def.name.clone(),
+                        value,
+                        allowed,
+                    });
+                }
+                put(&mut data, p.offset, def.data_type, value);
+            }
+            if !hit {
+                let names: Vec<&str> = params.iter().map(|p| p.definition.name.as_str()).collect();
+                let suggestion = match lookup(&v.name, names.iter().copied()) {
+                    Ok(i) => Some(names[i].to_string()),
+                    Err(LookupError::NotFound { suggestion, .. }) => suggestion,
+                    Err(LookupError::Ambiguous { candidates, .. }) => candidates.into_iter().next(),
+                };
+                return Err(SelectionError::UnknownParameter {
+                    name: v.name.clone(),
+                    position: v.position,
+                    suggestion,
+                });
+            }
+        }
+        Ok(data)
+    }
+
+    /// Everything wrong with a selection: module count, I/O lengths,
+    /// configuration and parameter lengths against the file's `Max_*`
+    /// keywords and the protocol's limits. Empty when the selection is
+    /// fine.
+    pub fn check_selection(&self, selection: &[usize]) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        let modules = match self.selected(selection) {
+            Ok(m) => m,
+            Err(SelectionError::NoSuchModule { index, count }) => {
+                return vec![Problem::NoSuchModule { index, count }];
+            }
+            Err(e) => return vec![Problem::Selection(e)],
+        };
+        if modules.is_empty() && self.modular_station {
+            problems.push(Problem::Empty);
+        }
+        if !self.modular_station && selection != self.default_selection().as_slice() {
+            let expected = self
+                .modules
+                .iter()
+                .map(|m| format!("`{}`", m.name))
+                .collect::<Vec<_>>()
+                .join(", ");
+            problems.push(Problem::FixedConfiguration { expected });
+        }
+        if let Some(max) = self.max_module.map(usize::from) {
+            if modules.len() > max {
+                problems.push(Problem::TooManyModules {
+                    count: modules.len(),
+                    max,
+                });
+            }
+        }
+        let (mut input, mut output, mut cfg_len) = (0, 0, 0);
+        for m in &modules {
+            cfg_len += m.cfg.len();
+            match m.io() {
+                Ok(t) => {
+                    input += t.input_bytes;
+                    output += t.output_bytes;
+                }
+                Err(error) => problems.push(Problem::Selection(SelectionError::BadIdentifier {
+                    module: m.name.clone(),
+                    error,
+                })),
+            }
+        }
+        let limit = |v: Option<u8>, key: &'static str| match v {
+            Some(v) if usize::from(v) < MAX_IO_LEN => (usize::from(v), key),
+            _ => (MAX_IO_LEN, "the protocol's limit"),
+        };
+        let (max, lim) = limit(self.max_input_len, "Max_Input_Len");
+        if input > max {
+            problems.push(Problem::InputTooLong {
+                bytes: input,
+                max,
+                limit: lim,
+            });
+        }
+        let (max, lim) = limit(self.max_output_len, "Max_Output_Len");
+        if output > max {
+            problems.push(Problem::OutputTooLong {
+                bytes: output,
+                max,
+                limit: lim,
+            });
+        }
+        if let Some(max) = self.max_data_len.map(usize::from) {
+            if input + output > max {
+                problems.push(Problem::DataTooLong {
+                    bytes: input + output,
+                    max,
+                });
+            }
+        }
+        if cfg_len > MAX_CFG_LEN {
+            problems.push(Problem::CfgTooLong { bytes: cfg_len });
+        }
+        match self.user_prm_data(selection, &[]) {
+            Ok(prm) => {
+                let (max, lim) = match self.max_user_prm_data_len {
+                    Some(m) if usize::from(m) < MAX_USER_PRM_LEN => {
+                        (usize::from(m), "Max_User_Prm_Data_Len")
+                    }
+                    _ => (MAX_USER_PRM_LEN, "Set_Prm's limit"),
+                };
+                if prm.len() > max {
+                    problems.push(Problem::PrmTooLong {
+                        bytes: prm.len(),
+                        max,
+                        limit: lim,
+                    });
+                }
+            }
+            Err(e) => problems.push(Problem::Selection(e)),
+        }
+        problems
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edit_distance() {
+        assert_eq!(levenshtein("kitten", "sitting"), 3);
+        assert_eq!(levenshtein("", "abc"), 3);
+        assert_eq!(levenshtein("abc", "abc"), 0);
+        assert_eq!(levenshtein("bytse", "bytes"), 1);
+    }
+
+    #[test]
+    fn lookup_steps() {
+        let names = ["1 byte in", "1 byte out", "2 words in/out", "16 bytes out"];
+        let f = |n: &str| lookup(n, names.iter().copied());
+        assert_eq!(f("1 byte in"), Ok(0));
+        assert_eq!(f("1  BYTE   OUT"), Ok(1));
+        assert_eq!(f("2 words"), Ok(2));
+        assert_eq!(f("16 bytes"), Ok(3));
+        assert_eq!(f("16 bytse out"), Ok(3));
+        assert!(
+            matches!(f("1 byte"), Err(LookupError::Ambiguous { candidates, .. }) if candidates.len() == 2)
+        );
+        assert!(matches!(
+            f("completely else"),
+            Err(LookupError::NotFound { .. })
+        ));
+    }
+
+    #[test]
+    fn put_types() {
+        let mut d = [0u8; 4];
+        put(&mut d, 0, PrmDataType::Signed16, -100);
+        assert_eq!(&d[..2], &[0xFF, 0x9C]);
+        put(&mut d, 0, PrmDataType::Unsigned32, 0x0102_0304);
+        assert_eq!(d, [1, 2, 3, 4]);
+        let mut d = [0xFFu8];
+        put(&mut d, 0, PrmDataType::BitArea(2, 4), 0b010);
+        assert_eq!(d[0], 0b1110_1011);
+        put(&mut d, 0, PrmDataType::Bit(0), 0);
+        assert_eq!(d[0], 0b1110_1010);
+        put(&mut d, 0, PrmDataType::BitArea(0, 7), 0x5A);
+        assert_eq!(d[0], 0x5A);
+    }
+
+    #[test]
+    fn prm_value_syntax() {
+        let v: PrmValue = "Mode=2".parse().unwrap();
+        assert_eq!(
+            (v.position, v.name.as_str(), v.value),
+            (None, "Mode", PrmInput::Int(2))
+        );
+        let v: PrmValue = "3: Offset = -0x10".parse().unwrap();
+        assert_eq!((v.position, v.value), (Some(3), PrmInput::Int(-16)));
+        let v: PrmValue = "Mode=fast".parse().unwrap();
+        assert_eq!(v.value, PrmInput::Text("fast".into()));
+        assert!("Mode".parse::<PrmValue>().is_err());
+        assert!("=3".parse::<PrmValue>().is_err());
+    }
+}

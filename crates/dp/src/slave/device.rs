@@ -1,0 +1,663 @@
+//! The [`Device`] trait: what a device profile implements so that
+//! [`DpSlave`](super::DpSlave) can run it, and the small types it uses.
+//!
+//! The slave core keeps the DP state machine (Wait_Prm → Wait_Cfg →
+//! Data_Exch), the watchdog, ownership, sync/freeze, the diagnosis header
+//! and the DP-V1 polling protocol. The device decides everything that is
+//! specific to a product: its ident number and features, which parameters
+//! and configurations it accepts, what its outputs do, what its inputs
+//! are, its extended diagnosis and its DP-V1 records.
+
+use crate::diag::ChannelIo;
+use crate::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
+use crate::prm::SetPrm;
+use profibus_fdl::Instant;
+use std::borrow::Cow;
+use std::fmt;
+
+/// Why a device refused something (a parameter or configuration telegram,
+/// an address change), in words for people. It appears in the slave's
+/// events; the master sees only the fault bit.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct Reason(pub Cow<'static, str>);
+
+impl Reason {
+    /// A reason from a static or owned string.
+    pub fn new(text: impl Into<Cow<'static, str>>) -> Reason {
+        Reason(text.into())
+    }
+
+    /// The reason in words.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for Reason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl From<&'static str> for Reason {
+    fn from(s: &'static str) -> Reason {
+        Reason(Cow::Borrowed(s))
+    }
+}
+
+impl From<String> for Reason {
+    fn from(s: String) -> Reason {
+        Reason(Cow::Owned(s))
+    }
+}
+
+/// The optional DP functions a device supports (the matching GSD keys in
+/// brackets). The slave core refuses what is not supported: a Set_Prm
+/// asking for sync or freeze gets Not_Supported, a Set_Slave_Add is
+/// refused, the DP-V1 SAPs stay deactivated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Features {
+    /// Sync mode (`Sync_Mode_supp`).
+    pub sync: bool,
+    /// Freeze mode (`Freeze_Mode_supp`).
+    pub freeze: bool,
+    /// Set_Slave_Add (`Set_Slave_Add_supp`).
+    pub set_slave_add: bool,
+    /// A DP-V1 slave (`DPV1_Slave`): User_Prm_Data starts with the three
+    /// DPV1_Status bytes, WD_Base_1ms is honoured.
+    pub dpv1: bool,
+    /// MSAC_C1 read/write (`C1_Read_Write_supp`); needs `dpv1`.
+    pub c1_read_write: bool,
+    /// DP-V1 alarms with Alarm_Ack (any `*_Alarm_supp`); needs `dpv1`.
+    pub alarms: bool,
+    /// Fail-safe (`Fail_Safe`): in the master's clear state Data_Exchange
+    /// carries no output data.
+    pub fail_safe: bool,
+    /// Longest Slave_Diag response (`Max_Diag_Data_Len`, 6..=244).
+    pub max_diag_len: u8,
+}
+
+impl Default for Features {
+    /// A plain DP-V0 slave: nothing optional, 244 bytes of diagnosis.
+    fn default() -> Features {
+        Features {
+            sync: false,
+            freeze: false,
+            set_slave_add: false,
+            dpv1: false,
+            c1_read_write: false,
+            alarms: false,
+            fail_safe: false,
+            max_diag_len: 244,
+        }
+    }
+}
+
+/// The cyclic data layout a device learned from an accepted Chk_Cfg.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct IoLayout {
+    /// Input bytes (slave → master) of every Data_Exchange response.
+    pub inputs: usize,
+    /// Output bytes (master → slave) of every Data_Exchange request.
+    pub outputs: usize,
+}
+
+/// Why the outputs go to their safe state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ClearReason {
+    /// The watchdog expired.
+    Watchdog,
+    /// The slave left Data_Exch (new Set_Prm, fault, unlock, bad
+    /// Data_Exchange).
+    LeftDataExchange,
+    /// Global_Control Clear_Data: the master is in its clear state.
+    ClearData,
+    /// A fail-safe master sent a Data_Exchange without output data.
+    FailSafe,
+}
+
+impl ClearReason {
+    /// Words for people.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ClearReason::Watchdog => "watchdog expired",
+            ClearReason::LeftDataExchange => "left Data_Exch",
+            ClearReason::ClearData => "Global_Control Clear_Data",
+            ClearReason::FailSafe => "fail-safe Data_Exchange without outputs",
+        }
+    }
+}
+
+/// Result of a DP-V1 class-1 read or write handed to the device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dpv1Outcome {
+    /// Done. For a read: the number of bytes written into the buffer. For a
+    /// write: the number of bytes written (the response's length byte).
+    Done(usize),
+    /// Not ready yet: the slave answers the master's polls with a short
+    /// acknowledge and asks again through [`Device::dpv1_poll`].
+    Pending,
+    /// Refused with a DP-V1 error (see [`Dpv1Error::dpv1`]).
+    Error(Dpv1Error),
+}
+
+impl Dpv1Outcome {
+    /// Refusal of a read with `class`/`code` (reference §9).
+    pub fn read_error(class: u8, code: u8) -> Dpv1Outcome {
+        Dpv1Outcome::Error(Dpv1Error::dpv1(FN_READ, class, code))
+    }
+
+    /// Refusal of a write with `class`/`code`.
+    pub fn write_error(class: u8, code: u8) -> Dpv1Outcome {
+        Dpv1Outcome::Error(Dpv1Error::dpv1(FN_WRITE, class, code))
+    }
+}
+
+/// Error class "application" (Error_Code_1 high nibble 0xA).
+pub const ERR_CLASS_APPLICATION: u8 = 0xA;
+/// Error class "access" (0xB).
+pub const ERR_CLASS_ACCESS: u8 = 0xB;
+/// Error class "resource" (0xC).
+pub const ERR_CLASS_RESOURCE: u8 = 0xC;
+/// Application error code "feature not supported".
+pub const ERR_FEATURE_NOT_SUPPORTED: u8 = 9;
+/// Access error code "invalid index".
+pub const ERR_INVALID_INDEX: u8 = 0;
+/// Access error code "write length error".
+pub const ERR_WRITE_LENGTH: u8 = 1;
+/// Access error code "invalid slot".
+pub const ERR_INVALID_SLOT: u8 = 2;
+/// Access error code "state conflict".
+pub const ERR_STATE_CONFLICT: u8 = 5;
+/// Access error code "invalid range".
+pub const ERR_INVALID_RANGE: u8 = 7;
+
+/// Something a device reports for people (e.g. "PKW job done"); the slave
+/// passes it on as [`SlaveEvent::Device`](super::SlaveEvent::Device).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceEvent {
+    /// A short machine-readable kind, e.g. `"pkw"`.
+    pub kind: &'static str,
+    /// What happened, in words.
+    pub text: String,
+}
+
+/// Collects the extended diagnosis blocks of a Slave_Diag response for
+/// [`Device::diagnosis`]. Blocks that do not fit into the device's
+/// `max_diag_len` are dropped and set Ext_Diag_Overflow.
+#[derive(Debug)]
+pub struct DiagWriter<'a> {
+    buf: &'a mut [u8],
+    len: usize,
+    overflow: bool,
+    ext_diag: bool,
+    stat_diag: bool,
+}
+
+impl<'a> DiagWriter<'a> {
+    /// A writer filling `buf` (the space after the 6 standard bytes).
+    pub fn new(buf: &'a mut [u8]) -> DiagWriter<'a> {
+        DiagWriter {
+            buf,
+            len: 0,
+            overflow: false,
+            ext_diag: false,
+            stat_diag: false,
+        }
+    }
+
+    /// Append a raw block (header included). Returns false and sets
+    /// Ext_Diag_Overflow when it does not fit.
+    pub fn block(&mut self, bytes: &[u8]) -> bool {
+        self.with(bytes.len(), |b| b.copy_from_slice(bytes))
+    }
+
+    fn with(&mut self, n: usize, fill: impl FnOnce(&mut [u8])) -> bool {
+        if self.overflow || self.len + n > self.buf.len() {
+            self.overflow = true;
+            return false;
+        }
+        fill(&mut self.buf[self.len..self.len + n]);
+        self.len += n;
+        true
+    }
+
+    /// Append a device-related block (header `00` + length) with `data`
+    /// (at most 62 bytes).
+    pub fn device(&mut self, data: &[u8]) -> bool {
+        self.headed(0x00, &[], data)
+    }
+
+    /// Append an identifier-related block (header `01` + length): bit n of
+    /// `bits` set = identifier (module) n faulty.
+    pub fn identifier(&mut self, bits: &[u8]) -> bool {
+        self.headed(0x40, &[], bits)
+    }
+
+    /// Append a channel-related block (3 bytes): `identifier` 0..=63,
+    /// `channel` 0..=63, `channel_type` 0..=7 (1 bit … 6 two words),
+    /// `error_type` 0..=31 (1 short circuit … 9 error, 16..=31 vendor).
+    pub fn channel(
+        &mut self,
+        identifier: u8,
+        channel: u8,
+        io: ChannelIo,
+        channel_type: u8,
+        error_type: u8,
+    ) -> bool {
+        let dir = match io {
+            ChannelIo::Reserved => 0,
+            ChannelIo::Input => 1,
+            ChannelIo::Output => 2,
+            ChannelIo::InOut => 3,
+        };
+        self.block(&[
+            0x80 | (identifier & 0x3F),
+            (dir << 6) | (channel & 0x3F),
+            ((channel_type & 0x07) << 5) | (error_type & 0x1F),
+        ])
+    }
+
+    /// Append a DP-V1 alarm or status block: a device-related block
+    /// `header, type, slot, specifier, data…` (type bit 7 clear = alarm,
+    /// set = status; reference §7).
+    pub fn dpv1_block(&mut self, block_type: u8, slot: u8, specifier: u8, data: &[u8]) -> bool {
+        self.headed(0x00, &[block_type, slot, specifier], data)
+    }
+
+    fn headed(&mut self, kind: u8, head: &[u8], data: &[u8]) -> bool {
+        let n = 1 + head.len() + data.len();
+        if n > 63 {
+            self.overflow = true;
+            return false;
+        }
+        self.with(n, |b| {
+            b[0] = kind | n as u8;
+            b[1..1 + head.len()].copy_from_slice(head);
+            b[1 + head.len()..].copy_from_slice(data);
+        })
+    }
+
+    /// Set Ext_Diag in Station_Status_1: the blocks describe a fault.
+    pub fn set_ext_diag(&mut self) {
+        self.ext_diag = true;
+    }
+
+    /// Set Stat_Diag in Station_Status_2: the master is to keep fetching
+    /// diagnosis instead of exchanging data until the bit clears.
+    pub fn set_stat_diag(&mut self) {
+        self.stat_diag = true;
+    }
+
+    /// Set Ext_Diag_Overflow: the device has more diagnosis than it sent.
+    pub fn set_overflow(&mut self) {
+        self.overflow = true;
+    }
+
+    /// Bytes written so far.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether no block was written.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Bytes still free.
+    pub fn remaining(&self) -> usize {
+        self.buf.len() - self.len
+    }
+
+    /// (length, Ext_Diag, Stat_Diag, Ext_Diag_Overflow).
+    pub(crate) fn finish(&self) -> (usize, bool, bool, bool) {
+        (self.len, self.ext_diag, self.stat_diag, self.overflow)
+    }
+}
+
+/// A product that a [`DpSlave`](super::DpSlave) emulates: its identity,
+/// which parameters and configurations it accepts, its process data, its
+/// diagnosis and its DP-V1 records.
+///
+/// Every method except the first five has a default, so a simple device
+/// is short:
+///
+/// ```
+/// use profibus_dp::prm::SetPrm;
+/// use profibus_dp::slave::{Device, IoLayout, Reason, expect_cfg};
+/// use profibus_fdl::Instant;
+///
+/// /// 2 bytes out, 2 bytes in; the inputs echo the outputs inverted.
+/// struct Inverter { last: [u8; 2] }
+///
+/// impl Device for Inverter {
+///     fn ident_number(&self) -> u16 { 0x1234 }
+///     fn real_cfg(&self) -> &[u8] { &[0x31] } // 2 bytes in + out
+///     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+///         if prm.user_prm_data.is_empty() { Ok(()) } else { Err("no User_Prm_Data expected".into()) }
+///     }
+///     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+///         expect_cfg(self.real_cfg(), cfg)
+///     }
+///     fn write_outputs(&mut self, _now: Instant, outputs: &[u8]) {
+///         self.last.copy_from_slice(outputs);
+///     }
+///     fn read_inputs(&mut self, _now: Instant, inputs: &mut [u8]) {
+///         inputs[0] = !self.last[0];
+///         inputs[1] = !self.last[1];
+///     }
+///     fn clear_outputs(&mut self, _now: Instant, _why: profibus_dp::slave::ClearReason) {
+///         self.last = [0; 2];
+///     }
+/// }
+/// ```
+pub trait Device {
+    /// The ident number (GSD `Ident_Number`); a Set_Prm with another one
+    /// is a parameter fault.
+    fn ident_number(&self) -> u16;
+
+    /// The real configuration, answered to Get_Cfg. A modular device
+    /// returns what it learned from the last accepted Chk_Cfg.
+    fn real_cfg(&self) -> &[u8];
+
+    /// Check a Set_Prm the core found valid (ident number, lengths, lock
+    /// bits, watchdog, sync/freeze support and DP-V1 status bytes are
+    /// checked already). Look at `prm.user_prm_data` (for DP-V1 devices
+    /// it starts with the three DPV1_Status bytes) and keep what the
+    /// device needs. `Err` sets Prm_Fault and keeps the slave in Wait_Prm.
+    fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason>;
+
+    /// Check the configuration of a Chk_Cfg and learn the cyclic layout.
+    /// A device may accept several equivalent configurations. `Err` sets
+    /// Cfg_Fault and returns the slave to Wait_Prm. [`expect_cfg`] does
+    /// the common exact comparison.
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason>;
+
+    /// Outputs from the master, as many bytes as the accepted
+    /// configuration has, after the sync semantics (in sync mode they
+    /// arrive at the Sync command, not with each Data_Exchange).
+    fn write_outputs(&mut self, now: Instant, outputs: &[u8]);
+
+    /// Produce the inputs (the buffer has the configured length). Called
+    /// for each Data_Exchange response and Rd_Inp, and once at each Freeze
+    /// command (the frozen values are then repeated by the core).
+    fn read_inputs(&mut self, now: Instant, inputs: &mut [u8]);
+
+    /// The optional functions the device supports. Default: none.
+    fn features(&self) -> Features {
+        Features::default()
+    }
+
+    /// The outputs go to their safe state (watchdog, clear, leaving
+    /// Data_Exch, fail-safe). The device decides what that means for it
+    /// (typically all zero). Default: nothing.
+    fn clear_outputs(&mut self, _now: Instant, _why: ClearReason) {}
+
+    /// Write the extended diagnosis (the bytes after the 6 standard ones)
+    /// for a Slave_Diag response, and set Ext_Diag / Stat_Diag / overflow
+    /// as needed. Default: none.
+    fn diagnosis(&mut self, _now: Instant, _diag: &mut DiagWriter<'_>) {}
+
+    /// Whether the diagnosis changed since the last call. When it returns
+    /// true, the slave answers Data_Exchange with "data high" (DH) until
+    /// the master has fetched the diagnosis. Polled once per
+    /// Data_Exchange; must not allocate. Default: never.
+    fn take_new_diag(&mut self) -> bool {
+        false
+    }
+
+    /// MSAC_C1 Read of `out.len()` bytes (the requested length, at most
+    /// 240) from `slot`/`index`. Default: "feature not supported".
+    fn dpv1_read(&mut self, _now: Instant, _slot: u8, _index: u8, _out: &mut [u8]) -> Dpv1Outcome {
+        Dpv1Outcome::read_error(ERR_CLASS_APPLICATION, ERR_FEATURE_NOT_SUPPORTED)
+    }
+
+    /// MSAC_C1 Write of `data` to `slot`/`index`. Default: "feature not
+    /// supported".
+    fn dpv1_write(&mut self, _now: Instant, _slot: u8, _index: u8, _data: &[u8]) -> Dpv1Outcome {
+        Dpv1Outcome::write_error(ERR_CLASS_APPLICATION, ERR_FEATURE_NOT_SUPPORTED)
+    }
+
+    /// Called for each poll of the master while a read or write answered
+    /// [`Dpv1Outcome::Pending`]; `out` is the read buffer again (ignored
+    /// for writes). Default: "state conflict" (a device that never answers
+    /// `Pending` is never asked).
+    fn dpv1_poll(&mut self, _now: Instant, _out: &mut [u8]) -> Dpv1Outcome {
+        Dpv1Outcome::read_error(ERR_CLASS_ACCESS, ERR_STATE_CONFLICT)
+    }
+
+    /// MSAC_C1 Alarm_Ack of the alarm `alarm_type` in `slot` with sequence
+    /// number `seq` (0..=31). Default: refused ("feature not supported").
+    fn alarm_ack(
+        &mut self,
+        _now: Instant,
+        _slot: u8,
+        _alarm_type: u8,
+        _seq: u8,
+    ) -> Result<(), Dpv1Error> {
+        Err(Dpv1Error::dpv1(
+            crate::dpv1::FN_ALARM_ACK,
+            ERR_CLASS_APPLICATION,
+            ERR_FEATURE_NOT_SUPPORTED,
+        ))
+    }
+
+    /// Set_Slave_Add accepted by the core (supported, in Wait_Prm, ident
+    /// number right, No_Add_Chg not set before): persist `new_address`
+    /// (and `no_add_chg`, and the optional `rem_slave_data`) where the
+    /// device keeps it, or refuse. Default: accept without persisting.
+    fn set_address(
+        &mut self,
+        _new_address: u8,
+        _no_add_chg: bool,
+        _rem_slave_data: &[u8],
+    ) -> Result<(), Reason> {
+        Ok(())
+    }
+
+    /// Something for people (polled after every request and timeout).
+    fn poll_event(&mut self) -> Option<DeviceEvent> {
+        None
+    }
+
+    /// When the device next needs [`Device::handle_timeout`].
+    fn poll_timeout(&self) -> Option<Instant> {
+        None
+    }
+
+    /// Time has advanced (device-internal timers).
+    fn handle_timeout(&mut self, _now: Instant) {}
+}
+
+impl<D: Device + ?Sized> Device for Box<D> {
+    fn ident_number(&self) -> u16 {
+        (**self).ident_number()
+    }
+    fn real_cfg(&self) -> &[u8] {
+        (**self).real_cfg()
+    }
+    fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        (**self).check_prm(prm)
+    }
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        (**self).check_cfg(cfg)
+    }
+    fn write_outputs(&mut self, now: Instant, outputs: &[u8]) {
+        (**self).write_outputs(now, outputs)
+    }
+    fn read_inputs(&mut self, now: Instant, inputs: &mut [u8]) {
+        (**self).read_inputs(now, inputs)
+    }
+    fn features(&self) -> Features {
+        (**self).features()
+    }
+    fn clear_outputs(&mut self, now: Instant, why: ClearReason) {
+        (**self).clear_outputs(now, why)
+    }
+    fn diagnosis(&mut self, now: Instant, diag: &mut DiagWriter<'_>) {
+        (**self).diagnosis(now, diag)
+    }
+    fn take_new_diag(&mut self) -> bool {
+        (**self).take_new_diag()
+    }
+    fn dpv1_read(&mut self, now: Instant, slot: u8, index: u8, out: &mut [u8]) -> Dpv1Outcome {
+        (**self).dpv1_read(now, slot, index, out)
+    }
+    fn dpv1_write(&mut self, now: Instant, slot: u8, index: u8, data: &[u8]) -> Dpv1Outcome {
+        (**self).dpv1_write(now, slot, index, data)
+    }
+    fn dpv1_poll(&mut self, now: Instant, out: &mut [u8]) -> Dpv1Outcome {
+        (**self).dpv1_poll(now, out)
+    }
+    fn alarm_ack(
+        &mut self,
+        now: Instant,
+        slot: u8,
+        alarm_type: u8,
+        seq: u8,
+    ) -> Result<(), Dpv1Error> {
+        (**self).alarm_ack(now, slot, alarm_type, seq)
+    }
+    fn set_address(
+        &mut self,
+        new_address: u8,
+        no_add_chg: bool,
+        rem_slave_data: &[u8],
+    ) -> Result<(), Reason> {
+        (**self).set_address(new_address, no_add_chg, rem_slave_data)
+    }
+    fn poll_event(&mut self) -> Option<DeviceEvent> {
+        (**self).poll_event()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        (**self).poll_timeout()
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        (**self).handle_timeout(now)
+    }
+}
+
+/// Compare a Chk_Cfg configuration with the one a device expects, byte for
+/// byte, and return the layout. The reason names the first difference.
+pub fn expect_cfg(expected: &[u8], got: &[u8]) -> Result<IoLayout, Reason> {
+    if let Some(i) = expected.iter().zip(got).position(|(a, b)| a != b) {
+        return Err(format!(
+            "configuration byte {i} is 0x{:02X}, expected 0x{:02X} (expected {}, got {})",
+            got[i],
+            expected[i],
+            hex(expected),
+            hex(got)
+        )
+        .into());
+    }
+    if expected.len() != got.len() {
+        return Err(format!(
+            "configuration has {} bytes, expected {} (expected {}, got {})",
+            got.len(),
+            expected.len(),
+            hex(expected),
+            hex(got)
+        )
+        .into());
+    }
+    layout_of(got)
+}
+
+/// The cyclic layout of a configuration (sum of its identifiers), or why
+/// it cannot be decoded or exceeds 244 bytes in a direction.
+pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
+    let t = crate::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
+    if t.input_bytes > super::MAX_IO_LEN || t.output_bytes > super::MAX_IO_LEN {
+        return Err(format!(
+            "configuration has {} input and {} output bytes, at most 244 each way",
+            t.input_bytes, t.output_bytes
+        )
+        .into());
+    }
+    Ok(IoLayout {
+        inputs: t.input_bytes,
+        outputs: t.output_bytes,
+    })
+}
+
+pub(crate) fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::with_capacity(bytes.len() * 3);
+    for (i, b) in bytes.iter().enumerate() {
+        if i > 0 {
+            s.push(' ');
+        }
+        let _ = write!(s, "{b:02X}");
+    }
+    if s.is_empty() {
+        s.push_str("(none)");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diag::{ext_blocks, ExtDiagBlock};
+
+    #[test]
+    fn diag_writer_blocks_and_overflow() {
+        let mut buf = [0u8; 10];
+        let mut w = DiagWriter::new(&mut buf);
+        assert!(w.device(&[0xAA, 0xBB]));
+        assert!(w.channel(3, 2, ChannelIo::Input, 5, 6));
+        assert!(
+            !w.identifier(&[1, 2, 3, 4]),
+            "5 bytes do not fit into 4 left"
+        );
+        assert!(!w.device(&[]), "nothing after an overflow");
+        let (len, ext, stat, ovf) = w.finish();
+        assert_eq!((len, ext, stat, ovf), (6, false, false, true));
+        let blocks: Vec<_> = ext_blocks(&buf[..len]).collect();
+        assert_eq!(
+            blocks[0],
+            ExtDiagBlock::Device {
+                data: &[0xAA, 0xBB]
+            }
+        );
+        assert!(matches!(
+            blocks[1],
+            ExtDiagBlock::Channel {
+                identifier: 3,
+                channel: 2,
+                io: ChannelIo::Input,
+                channel_type: 5,
+                error_type: 6
+            }
+        ));
+    }
+
+    #[test]
+    fn dpv1_block_layout() {
+        let mut buf = [0u8; 32];
+        let mut w = DiagWriter::new(&mut buf);
+        w.dpv1_block(0x01, 2, 0x0D, &[9]);
+        assert_eq!(w.len(), 5);
+        assert_eq!(&buf[..5], &[0x05, 0x01, 0x02, 0x0D, 0x09]);
+    }
+
+    #[test]
+    fn expect_cfg_words() {
+        assert_eq!(
+            expect_cfg(&[0x31, 0x20], &[0x31, 0x20]),
+            Ok(IoLayout {
+                inputs: 2,
+                outputs: 3
+            })
+        );
+        let e = expect_cfg(&[0x31, 0x20], &[0x31, 0x21]).unwrap_err();
+        assert!(e
+            .as_str()
+            .starts_with("configuration byte 1 is 0x21, expected 0x20"));
+        let e = expect_cfg(&[0x31], &[0x31, 0x21]).unwrap_err();
+        assert!(e
+            .as_str()
+            .starts_with("configuration has 2 bytes, expected 1"));
+        assert!(layout_of(&[0x42]).is_err());
+    }
+}

@@ -1,0 +1,306 @@
+//! The slave's DP state and the events it reports to its application.
+
+use super::device::{ClearReason, DeviceEvent, Reason};
+use crate::control::ControlCommand;
+use std::collections::VecDeque;
+use std::fmt;
+use std::time::Duration;
+
+/// The DP state of a slave (EN 50170 part 3; reference §10).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SlaveState {
+    /// Wait_Prm: waits for a valid Set_Prm (after power-on, a watchdog
+    /// expiry, a fault or an unlock). Prm_Req is set.
+    WaitPrm,
+    /// Wait_Cfg: parameterised, waits for a matching Chk_Cfg.
+    WaitCfg,
+    /// Data_Exch: cyclic data exchange with the master that parameterised
+    /// the slave.
+    DataExch,
+}
+
+impl SlaveState {
+    /// The standard's name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SlaveState::WaitPrm => "Wait_Prm",
+            SlaveState::WaitCfg => "Wait_Cfg",
+            SlaveState::DataExch => "Data_Exch",
+        }
+    }
+}
+
+impl fmt::Display for SlaveState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Something the slave reports to its application (the CLI prints them).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SlaveEvent {
+    /// The DP state changed.
+    State {
+        /// Previous state.
+        from: SlaveState,
+        /// New state.
+        to: SlaveState,
+    },
+    /// A Set_Prm was accepted.
+    PrmAccepted {
+        /// The master that sent it (and now owns the slave if `locked`).
+        master: u8,
+        /// The slave is locked to `master`.
+        locked: bool,
+        /// Watchdog time, if on.
+        watchdog: Option<Duration>,
+        /// min TSDR in force (bit times).
+        min_tsdr: u8,
+        /// Group_Ident.
+        group_ident: u8,
+    },
+    /// A Set_Prm with Unlock_Req released the slave (Wait_Prm).
+    Unlocked {
+        /// The master that released it.
+        master: u8,
+    },
+    /// A Set_Prm was rejected: Prm_Fault (and Not_Supported when
+    /// `not_supported`) is set, the slave stays in Wait_Prm.
+    PrmFault {
+        /// The master that sent it.
+        master: u8,
+        /// Why, in words.
+        reason: Reason,
+        /// The fault is an unsupported function (Not_Supported).
+        not_supported: bool,
+    },
+    /// A Chk_Cfg matched; the cyclic layout is fixed.
+    CfgAccepted {
+        /// The master that sent it.
+        master: u8,
+        /// Input bytes.
+        inputs: usize,
+        /// Output bytes.
+        outputs: usize,
+    },
+    /// A Chk_Cfg did not match: Cfg_Fault is set.
+    CfgFault {
+        /// The master that sent it.
+        master: u8,
+        /// Why, in words.
+        reason: Reason,
+    },
+    /// The watchdog expired: outputs cleared, back to Wait_Prm.
+    WatchdogExpired {
+        /// The master that stopped talking.
+        master: u8,
+        /// The watchdog time.
+        after: Duration,
+    },
+    /// The outputs went to their safe state.
+    OutputsCleared {
+        /// Why.
+        reason: ClearReason,
+    },
+    /// Set_Slave_Add changed the address.
+    AddressChanged {
+        /// Old address.
+        old: u8,
+        /// New address.
+        new: u8,
+        /// No further changes through the bus.
+        no_add_chg: bool,
+    },
+    /// A Global_Control from the owning master was executed (only
+    /// reported when its command or group differs from the previous one).
+    GlobalControl {
+        /// The master.
+        master: u8,
+        /// The command bits.
+        command: ControlCommand,
+        /// Group_Select.
+        group_select: u8,
+    },
+    /// A request was refused (answered negatively or ignored), e.g.
+    /// because another master owns the slave.
+    Refused {
+        /// The master that sent it.
+        master: u8,
+        /// The DP service.
+        service: &'static str,
+        /// Why, in words.
+        reason: Reason,
+    },
+    /// The device reported something.
+    Device(DeviceEvent),
+    /// Events were dropped because nobody drained the queue.
+    Lost(u64),
+}
+
+impl SlaveEvent {
+    /// A short machine-readable name of the event.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            SlaveEvent::State { .. } => "state",
+            SlaveEvent::PrmAccepted { .. } => "prm_ok",
+            SlaveEvent::Unlocked { .. } => "unlocked",
+            SlaveEvent::PrmFault { .. } => "prm_fault",
+            SlaveEvent::CfgAccepted { .. } => "cfg_ok",
+            SlaveEvent::CfgFault { .. } => "cfg_fault",
+            SlaveEvent::WatchdogExpired { .. } => "watchdog",
+            SlaveEvent::OutputsCleared { .. } => "outputs_cleared",
+            SlaveEvent::AddressChanged { .. } => "address",
+            SlaveEvent::GlobalControl { .. } => "global_control",
+            SlaveEvent::Refused { .. } => "refused",
+            SlaveEvent::Device(_) => "device",
+            SlaveEvent::Lost(_) => "lost",
+        }
+    }
+}
+
+/// Words for a Control_Command, e.g. `"Sync, Freeze"` or `"Operate"`.
+pub fn control_words(c: ControlCommand) -> String {
+    let mut v = vec![];
+    for (f, n) in [
+        (ControlCommand::CLEAR_DATA, "Clear_Data"),
+        (ControlCommand::SYNC, "Sync"),
+        (ControlCommand::UNSYNC, "Unsync"),
+        (ControlCommand::FREEZE, "Freeze"),
+        (ControlCommand::UNFREEZE, "Unfreeze"),
+    ] {
+        if c.contains(f) {
+            v.push(n);
+        }
+    }
+    if v.is_empty() {
+        "Operate".into()
+    } else {
+        v.join(", ")
+    }
+}
+
+impl fmt::Display for SlaveEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SlaveEvent::State { from, to } => write!(f, "state {from} -> {to}"),
+            SlaveEvent::PrmAccepted {
+                master,
+                locked,
+                watchdog,
+                min_tsdr,
+                group_ident,
+            } => {
+                write!(f, "Set_Prm from master {master} accepted")?;
+                if *locked {
+                    write!(f, ", locked")?;
+                }
+                match watchdog {
+                    Some(d) => write!(f, ", watchdog {} ms", d.as_millis())?,
+                    None => write!(f, ", watchdog off")?,
+                }
+                write!(f, ", min TSDR {min_tsdr} bit")?;
+                if *group_ident != 0 {
+                    write!(f, ", groups 0x{group_ident:02X}")?;
+                }
+                Ok(())
+            }
+            SlaveEvent::Unlocked { master } => {
+                write!(f, "Set_Prm from master {master}: Unlock_Req, slave released")
+            }
+            SlaveEvent::PrmFault {
+                master,
+                reason,
+                not_supported,
+            } => {
+                write!(f, "Prm_Fault (Set_Prm from master {master}): {reason}")?;
+                if *not_supported {
+                    write!(f, " [Not_Supported]")?;
+                }
+                Ok(())
+            }
+            SlaveEvent::CfgAccepted {
+                master,
+                inputs,
+                outputs,
+            } => write!(
+                f,
+                "Chk_Cfg from master {master} accepted: {inputs} input bytes, {outputs} output bytes"
+            ),
+            SlaveEvent::CfgFault { master, reason } => {
+                write!(f, "Cfg_Fault (Chk_Cfg from master {master}): {reason}")
+            }
+            SlaveEvent::WatchdogExpired { master, after } => write!(
+                f,
+                "watchdog expired: no telegram from master {master} for {} ms",
+                after.as_millis()
+            ),
+            SlaveEvent::OutputsCleared { reason } => {
+                write!(f, "outputs cleared: {}", reason.as_str())
+            }
+            SlaveEvent::AddressChanged {
+                old,
+                new,
+                no_add_chg,
+            } => {
+                write!(f, "address changed {old} -> {new}")?;
+                if *no_add_chg {
+                    write!(f, " (No_Add_Chg: no further changes)")?;
+                }
+                Ok(())
+            }
+            SlaveEvent::GlobalControl {
+                master,
+                command,
+                group_select,
+            } => write!(
+                f,
+                "Global_Control from master {master}: {} (groups 0x{group_select:02X})",
+                control_words(*command)
+            ),
+            SlaveEvent::Refused {
+                master,
+                service,
+                reason,
+            } => write!(f, "{service} from master {master} refused: {reason}"),
+            SlaveEvent::Device(e) => write!(f, "{}: {}", e.kind, e.text),
+            SlaveEvent::Lost(n) => write!(f, "{n} events lost (queue full)"),
+        }
+    }
+}
+
+/// Bounded event queue; allocated once, so pushing never allocates.
+#[derive(Debug)]
+pub(crate) struct EventQueue {
+    q: VecDeque<SlaveEvent>,
+    lost: u64,
+}
+
+/// Events kept before the oldest are dropped.
+pub(crate) const EVENT_CAPACITY: usize = 64;
+
+impl EventQueue {
+    pub(crate) fn new() -> EventQueue {
+        EventQueue {
+            q: VecDeque::with_capacity(EVENT_CAPACITY),
+            lost: 0,
+        }
+    }
+
+    pub(crate) fn push(&mut self, e: SlaveEvent) {
+        tracing::debug!(event = %e, "dp slave");
+        if self.q.len() >= EVENT_CAPACITY {
+            self.q.pop_front();
+            self.lost += 1;
+        }
+        self.q.push_back(e);
+    }
+
+    pub(crate) fn pop(&mut self) -> Option<SlaveEvent> {
+        if self.lost > 0 {
+            let n = self.lost;
+            self.lost = 0;
+            return Some(SlaveEvent::Lost(n));
+        }
+        self.q.pop_front()
+    }
+}

@@ -1,0 +1,341 @@
+//! GSD parser behaviour: syntax, errors with positions, strict and lenient
+//! mode, limits on input size.
+
+use profibus_dp::gsd::{
+    Allowed, DiagKind, Gsd, GsdError, ParseOptions, Parsed, PrmDataType, Quirk, MAX_FILE_LEN,
+    MAX_LINE_LEN,
+};
+use std::time::Instant;
+
+const HEAD: &str =
+    "#Profibus_DP\nGSD_Revision=3\nVendor_Name=\"V\"\nModel_Name=\"M\"\nIdent_Number=0x1234\n";
+
+fn lenient(text: &str) -> Parsed {
+    Gsd::parse(text, ParseOptions::LENIENT).unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+fn strict(text: &str) -> Parsed {
+    Gsd::parse(text, ParseOptions::STRICT).unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+fn strict_err(text: &str) -> GsdError {
+    Gsd::parse(text, ParseOptions::STRICT).expect_err("expected an error")
+}
+
+#[test]
+fn keywords_numbers_strings_comments_continuations() {
+    let text = format!(
+        "{HEAD}ident_number = 0X00d0 ; comment\n\
+         FREEZE_MODE_SUPP=1\n\
+         Info_Text = \"a ; not a comment\" ; a comment\n\
+         MaxTsdr_1.5M=150\n1.5m_SUPP = 1\n\
+         Module = \"m\" 0xC0,\\\n   81, 0x51 ; decimal 81 after hex\n\
+         EndModule\n"
+    );
+    let g = strict(&text).gsd;
+    assert_eq!(g.ident_number, 0x00D0);
+    assert!(g.freeze_mode_supp);
+    assert_eq!(g.info_text.as_deref(), Some("a ; not a comment"));
+    assert_eq!(g.max_tsdr(profibus_fdl::timing::Baud::B1500000), Some(150));
+    assert_eq!(g.supported_bauds(), [profibus_fdl::timing::Baud::B1500000]);
+    assert_eq!(g.modules[0].cfg, [0xC0, 81, 0x51]);
+}
+
+#[test]
+fn signed_parameters_and_bit_areas() {
+    // profirust's parser rejects a negative Signed16 default; we read it.
+    let text = format!(
+        "{HEAD}ExtUserPrmData=1 \"Offset\"\nSigned16 -100 -1000-1000\nEndExtUserPrmData\n\
+         ExtUserPrmData=2 \"Neg\"\nSigned8 -5 -128--1\nEndExtUserPrmData\n\
+         ExtUserPrmData=3 \"Area\"\nBitArea( 2 - 4 ) 3 1,3,5\nEndExtUserPrmData\n\
+         ExtUserPrmData=4 \"Big\"\nUnsigned32 0xFFFFFFFF\nEndExtUserPrmData\n\
+         Ext_User_Prm_Data_Const(0)=0x00,0x00,0x00\n\
+         Ext_User_Prm_Data_Ref(0)=1\nExt_User_Prm_Data_Ref(2)=2\n"
+    );
+    let g = strict(&text).gsd;
+    let p = &g.ext_user_prm_data;
+    assert_eq!(
+        (p[0].data_type, p[0].default),
+        (PrmDataType::Signed16, -100)
+    );
+    assert_eq!(p[0].allowed, Allowed::Range(-1000, 1000));
+    assert_eq!(p[1].allowed, Allowed::Range(-128, -1));
+    assert_eq!(p[2].data_type, PrmDataType::BitArea(2, 4));
+    assert_eq!(p[2].allowed, Allowed::Values(vec![1, 3, 5]));
+    assert_eq!(
+        (p[3].default, p[3].allowed.clone()),
+        (0xFFFF_FFFF, Allowed::Any)
+    );
+    assert_eq!(g.user_prm_data(&[], &[]).unwrap(), [0xFF, 0x9C, 0xFB]);
+}
+
+#[test]
+fn errors_carry_line_column_and_expectation() {
+    let e = strict_err(&format!("{HEAD}Max_Module=x\n"));
+    let d = e.first();
+    assert_eq!((d.pos.line, d.pos.col), (6, 12));
+    assert_eq!(d.kind, DiagKind::Syntax);
+    assert_eq!(d.message, "expected a number for `Max_Module`, found `x`");
+
+    let e = strict_err(&format!("{HEAD}Module=\"m\" 0x10,0x1FF\nEndModule\n"));
+    assert_eq!((e.first().pos.line, e.first().pos.col), (6, 17));
+    assert!(
+        e.first().message.contains("outside 0..=255"),
+        "{}",
+        e.first()
+    );
+
+    let e = strict_err(&format!("{HEAD}Vendor_Name=\"open\n"));
+    assert!(e.first().message.contains("not closed"), "{}", e.first());
+
+    let e = strict_err(&format!(
+        "{HEAD}ExtUserPrmData=1 \"p\"\nUnsigned8 1 5-2\nEndExtUserPrmData\n"
+    ));
+    let d = e
+        .errors
+        .iter()
+        .find(|d| d.kind == DiagKind::Syntax)
+        .unwrap();
+    assert_eq!((d.pos.line, d.pos.col), (7, 13));
+    assert_eq!(d.message, "the range 5-2 is empty");
+
+    // Several errors are all reported, in file order; Display names the
+    // first and counts the rest.
+    let e = strict_err(&format!(
+        "{HEAD}Max_Module=300\nMax_Input_Len=-1\nSync_Mode_supp=\n"
+    ));
+    assert_eq!(e.errors.len(), 3);
+    assert_eq!(
+        e.to_string(),
+        "6:12: a number for `Max_Module` 300 is outside 0..=255 (and 2 more errors)"
+    );
+    // A continuation line maps positions back to its own line.
+    let e = strict_err(&format!("{HEAD}Module=\"m\" 0x10,\\\n  0xZZ\nEndModule\n"));
+    assert_eq!((e.first().pos.line, e.first().pos.col), (7, 3));
+
+    let e = strict_err("#Profibus_DP\nGSD_Revision=1\n");
+    assert_eq!(e.first().message, "the file has no `Ident_Number`");
+}
+
+#[test]
+fn quirks_are_warnings_when_lenient_and_errors_when_strict() {
+    let cases: &[(&str, Quirk)] = &[
+        (";#Profibus_DP\nIdent_Number=1\n", Quirk::CommentedSectionHeader),
+        ("Ident_Number=1\n", Quirk::MissingSectionHeader),
+        ("#Profibus_DP\nIdent_Number=1\nMaxTsd_12M=800\n", Quirk::MaxTsdSpelling),
+        ("#Profibus_DP\nIdent_Number=1\nModules=\"a\" 0x10\nEndModule\n", Quirk::ModulesKeyword),
+        ("#Profibus_DP\nIdent_Number=1\nModule='a' 0x10\nEndModule\n", Quirk::SingleQuotes),
+        ("#Profibus_DP\nIdent_Number=1\nVendor_Name=ACME GmbH\n", Quirk::UnquotedString),
+        ("#Profibus_DP\nIdent_Number=1\n=====\n", Quirk::StrayText),
+        ("#Profibus_DP\nIdent_Number=1\nModule=\"a\" 0x10\n", Quirk::MissingEnd),
+        ("#Profibus_DP\nIdent_Number=1\nModule=\"a\" 0x10\nModule=\"b\" 0x20\nEndModule\n", Quirk::MissingEnd),
+        ("#Profibus_DP\nIdent_Number=1\nEndModule\n", Quirk::UnmatchedEnd),
+        ("#Profibus_DP\nIdent_Number=1\nSync_Mode_supp=2\n", Quirk::BadBoolean),
+        ("#Profibus_DP\nIdent_Number=1\nExt_User_Prm_Data_Ref(0)=7\n", Quirk::DanglingReference),
+        ("#Profibus_DP\nIdent_Number=1\nModule=\"a\" 0x4F\nEndModule\n", Quirk::BadIdentifier),
+        ("#Profibus_DP\nIdent_Number=1\nExtUserPrmData=1 \"x\"\nFloat32 1\nEndExtUserPrmData\n", Quirk::BadParameter),
+        ("#Profibus_DP\nIdent_Number=1\nExtUserPrmData=1 \"x\"\nUnsigned8 300\nEndExtUserPrmData\n", Quirk::BadParameter),
+    ];
+    for (text, quirk) in cases {
+        let p = Gsd::parse(text, ParseOptions::LENIENT)
+            .unwrap_or_else(|e| panic!("lenient {quirk:?}: {e}"));
+        assert!(
+            p.warnings.iter().any(|w| w.kind == DiagKind::Quirk(*quirk)),
+            "{quirk:?}: {:?}",
+            p.warnings
+        );
+        let e = Gsd::parse(text, ParseOptions::STRICT).expect_err(&format!("strict {quirk:?}"));
+        assert!(
+            e.errors.iter().any(|d| d.kind == DiagKind::Quirk(*quirk)),
+            "{quirk:?}: {:?}",
+            e.errors
+        );
+    }
+    // What lenient mode makes of the quirks.
+    let g = lenient("Modules = 'a b' 0x10\nEndModule\nIdent_Number=7\nMaxTsd_12M=800\n").gsd;
+    assert_eq!((g.modules[0].name.as_str(), g.ident_number), ("a b", 7));
+    assert_eq!(g.max_tsdr(profibus_fdl::timing::Baud::B12000000), Some(800));
+    let g = lenient("#Profibus_DP\nIdent_Number=1\nModule=\"a\" 0x10\nModule=\"b\" 0x20\n").gsd;
+    assert_eq!(g.modules.len(), 2);
+}
+
+#[test]
+fn repeated_quirks_fold_into_one_warning() {
+    let mut text = String::from("#Profibus_DP\nIdent_Number=1\n");
+    for i in 0..10 {
+        text.push_str(&format!("Modules=\"m{i}\" 0x10\nEndModule\n"));
+    }
+    let p = lenient(&text);
+    let q: Vec<_> = p
+        .warnings
+        .iter()
+        .filter(|w| w.kind == DiagKind::Quirk(Quirk::ModulesKeyword))
+        .collect();
+    assert_eq!(q.len(), 4);
+    assert!(
+        q[3].message.contains("7 more line(s): 9, 11, 13"),
+        "{}",
+        q[3].message
+    );
+    assert_eq!(p.gsd.modules.len(), 10);
+}
+
+#[test]
+fn unknown_keywords_and_blocks_are_kept() {
+    let text = format!(
+        "{HEAD}Vendor_Specific_Thing=42\n\
+         UnitDiagType=5\nX_Unit_Diag_Bit(3)=\"x\"\nEndUnitDiagType\n\
+         Module=\"m\" 0x10\n7\nData_Area_Beg\nArea_Name=\"a\"\nData_Area_End\nSomething_Else=1\nEndModule\n\
+         Unit_Diag_Bit(3)=\"real\"\n"
+    );
+    let p = strict(&text);
+    let g = &p.gsd;
+    assert_eq!(
+        g.other,
+        [
+            "Vendor_Specific_Thing=42",
+            "UnitDiagType=5",
+            "X_Unit_Diag_Bit(3)=\"x\"",
+            "EndUnitDiagType"
+        ]
+    );
+    assert_eq!(
+        g.unit_diag_bits.len(),
+        1,
+        "the block's lines are not read as station keywords"
+    );
+    assert_eq!(g.modules[0].reference, Some(7));
+    assert_eq!(
+        g.modules[0].other,
+        [
+            "Data_Area_Beg",
+            "Area_Name=\"a\"",
+            "Data_Area_End",
+            "Something_Else=1"
+        ]
+    );
+    let unknown: Vec<_> = p
+        .warnings
+        .iter()
+        .filter(|w| w.kind == DiagKind::UnknownKeyword)
+        .map(|w| w.pos.line)
+        .collect();
+    assert_eq!(unknown, [6, 15]);
+    // Written back and read again: the same model.
+    assert_eq!(strict(&g.write()).gsd, *g);
+}
+
+#[test]
+fn section_boundaries() {
+    // Text before the header is not read; another section ends this one.
+    let p = strict("junk = \"x\n#Profibus_DP\nIdent_Number=1\n#Profibus_PA\nIdent_Number=2\n");
+    assert_eq!(p.gsd.ident_number, 1);
+    assert!(p
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("another section")));
+    // Lone CR line ends (old Mac files) and a UTF-8 byte order mark.
+    let p = strict("\u{FEFF}#Profibus_DP\rIdent_Number=3\rModule=\"m\" 0x10\rEndModule\r");
+    assert_eq!((p.gsd.ident_number, p.gsd.modules.len()), (3, 1));
+}
+
+#[test]
+fn latin1_files() {
+    let dir = std::env::temp_dir().join(format!("gsd-latin1-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("x.gsd");
+    let mut bytes = b"#Profibus_DP\r\nIdent_Number=1\r\nVendor_Name=\"Baum".to_vec();
+    bytes.push(0xFC); // ü in Latin-1
+    bytes.extend_from_slice(b"ller\"\r\n");
+    std::fs::write(&path, &bytes).unwrap();
+    let g = Gsd::from_file(&path, ParseOptions::STRICT).unwrap().gsd;
+    assert_eq!(g.vendor_name.as_deref(), Some("Baumüller"));
+    assert!(g.write_latin1().windows(9).any(|w| w == b"Baum\xFCller"));
+    // Errors name the file.
+    std::fs::write(&path, b"#Profibus_DP\nIdent_Number=zz\n").unwrap();
+    let e = Gsd::from_file(&path, ParseOptions::STRICT).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with(&format!("{}:2:14: ", path.display())),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn oversized_input_is_refused_quickly() {
+    // A 100 MB file (sparse: nothing is written) is refused from its
+    // length, without being read.
+    let dir = std::env::temp_dir().join(format!("gsd-big-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("big.gsd");
+    std::fs::File::create(&path)
+        .unwrap()
+        .set_len(100 << 20)
+        .unwrap();
+    let t = Instant::now();
+    let e = Gsd::from_file(&path, ParseOptions::LENIENT).unwrap_err();
+    assert_eq!(e.first().kind, DiagKind::TooLarge);
+    assert!(t.elapsed().as_millis() < 1000, "{:?}", t.elapsed());
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    // Text in memory: over the file limit, refused before parsing.
+    let big = "a".repeat(MAX_FILE_LEN + 1);
+    let e = Gsd::parse(&big, ParseOptions::LENIENT).unwrap_err();
+    assert_eq!(e.first().kind, DiagKind::TooLarge);
+
+    // One line of 10 MB in a text under the file limit cannot exist, so
+    // test a line just over the line limit, and a 10 MB line given as
+    // text (refused by the file limit).
+    let long = format!(
+        "#Profibus_DP\nIdent_Number=1\nInfo_Text=\"{}\"\n",
+        "x".repeat(MAX_LINE_LEN)
+    );
+    let e = Gsd::parse(&long, ParseOptions::LENIENT).unwrap_err();
+    assert_eq!(
+        (e.first().kind, e.first().pos.line),
+        (DiagKind::TooLarge, 3)
+    );
+    let line10m = format!("#Profibus_DP\n{}", "y".repeat(10 << 20));
+    assert_eq!(
+        Gsd::parse(&line10m, ParseOptions::LENIENT)
+            .unwrap_err()
+            .first()
+            .kind,
+        DiagKind::TooLarge
+    );
+    // Continuations cannot build a logical line over the limit either.
+    let mut cont = String::from("#Profibus_DP\nIdent_Number=1\nUser_Prm_Data=0x00");
+    for _ in 0..(MAX_LINE_LEN / 8 + 10) {
+        cont.push_str(",\\\n0x01,0x02");
+    }
+    let e = Gsd::parse(&cont, ParseOptions::LENIENT).unwrap_err();
+    assert_eq!(e.first().kind, DiagKind::TooLarge);
+}
+
+#[test]
+fn module_lookup() {
+    let g = strict(&format!(
+        "{HEAD}Module=\"INPUT (consistent) : 4 words\" 0xD3\nEndModule\n\
+         Module=\"INPUT : 4 words\" 0x53\nEndModule\nModule=\"OUTPUT : 4 words\" 0x63\nEndModule\n"
+    ))
+    .gsd;
+    assert_eq!(g.module("INPUT : 4 words").unwrap().cfg, [0x53]);
+    assert!(g.module("input : 4 words").is_none());
+    assert_eq!(g.find_module("input : 4 words").unwrap().cfg, [0x53]);
+    assert_eq!(g.find_module("OUTPUT").unwrap().cfg, [0x63]);
+    assert_eq!(
+        g.find_module("INPUT (consistnet) : 4 words").unwrap().cfg,
+        [0xD3]
+    );
+    let e = g.find_module("INPUT").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "`INPUT` matches several modules: `INPUT (consistent) : 4 words`, `INPUT : 4 words`"
+    );
+    let e = g.find_module("temperature").unwrap_err();
+    assert!(
+        e.to_string().starts_with("no module named `temperature`"),
+        "{e}"
+    );
+}

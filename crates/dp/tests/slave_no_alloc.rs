@@ -1,0 +1,196 @@
+//! The slave handles Data_Exchange without allocating: a counting global
+//! allocator watches 1000 cycles through the passive station (receive,
+//! framing, the slave core, the device, the response) on this thread.
+
+use profibus_dp::prm::SetPrm;
+use profibus_dp::slave::{expect_cfg, Device, DpSlave, Features, IoLayout, Reason, SlaveState};
+use profibus_fdl::station::passive::PassiveStation;
+use profibus_fdl::station::Station;
+use profibus_fdl::{Baud, BusParams, DataTelegram, FunctionCode, Instant, RequestKind, Telegram};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::time::Duration;
+
+struct Counting;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note() {
+    // `try_with`: thread-locals may be gone while a thread exits.
+    let _ = ARMED.try_with(|a| {
+        if a.get() {
+            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+        }
+    });
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        note();
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        note();
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// 244 bytes each way; inputs echo the outputs plus a counter.
+struct Echo {
+    out: [u8; 244],
+    n: u8,
+}
+
+/// 7 × 32 + 2 × 10 = 244 bytes each way.
+const CFG: [u8; 9] = [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x39, 0x39];
+
+impl Device for Echo {
+    fn ident_number(&self) -> u16 {
+        0x0B0B
+    }
+    fn real_cfg(&self) -> &[u8] {
+        &CFG
+    }
+    fn features(&self) -> Features {
+        Features {
+            sync: true,
+            freeze: true,
+            ..Features::default()
+        }
+    }
+    fn check_prm(&mut self, _: &SetPrm<'_>) -> Result<(), Reason> {
+        Ok(())
+    }
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        expect_cfg(&CFG, cfg)
+    }
+    fn write_outputs(&mut self, _: Instant, outputs: &[u8]) {
+        self.out[..outputs.len()].copy_from_slice(outputs);
+    }
+    fn read_inputs(&mut self, _: Instant, inputs: &mut [u8]) {
+        self.n = self.n.wrapping_add(1);
+        let n = inputs.len();
+        inputs.copy_from_slice(&self.out[..n]);
+        inputs[0] = self.n;
+    }
+}
+
+fn emit(buf: &mut [u8], da: u8, fc: FunctionCode, saps: Option<(u8, u8)>, data: &[u8]) -> usize {
+    Telegram::Data(DataTelegram {
+        da,
+        sa: 2,
+        fc,
+        dsap: saps.map(|s| s.0),
+        ssap: saps.map(|s| s.1),
+        data,
+    })
+    .emit(buf)
+    .unwrap()
+}
+
+fn exchange(st: &mut PassiveStation<DpSlave<Echo>>, now: &mut Instant, req: &[u8]) -> usize {
+    st.handle_rx(*now, req);
+    let mut n = 0;
+    while let Some(t) = st.poll_timeout() {
+        if t > *now + Duration::from_millis(1) {
+            break;
+        }
+        *now = t;
+        st.handle_timeout(t);
+        if let Some(b) = st.poll_transmit(t) {
+            n = b.len();
+            break;
+        }
+    }
+    *now += Duration::from_micros(100);
+    n
+}
+
+#[test]
+fn data_exchange_does_not_allocate() {
+    let mut st = PassiveStation::new(
+        DpSlave::new(
+            Echo {
+                out: [0; 244],
+                n: 0,
+            },
+            8,
+        ),
+        BusParams::defaults(Baud::B12000000),
+    );
+    let mut now = Instant::from_nanos(1_000_000);
+    let mut buf = [0u8; 300];
+    let srd = |fcb| FunctionCode::Request {
+        kind: RequestKind::SrdHigh,
+        fcb,
+        fcv: true,
+    };
+    let n = emit(
+        &mut buf,
+        8,
+        FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb: true,
+            fcv: false,
+        },
+        Some((61, 62)),
+        &[0xB8, 100, 1, 11, 0x0B, 0x0B, 0],
+    );
+    assert_eq!(exchange(&mut st, &mut now, &buf[..n]), 1);
+    let n = emit(&mut buf, 8, srd(false), Some((62, 62)), &CFG);
+    assert_eq!(exchange(&mut st, &mut now, &buf[..n]), 1);
+    assert_eq!(
+        st.app().state(),
+        SlaveState::DataExch,
+        "{:?}",
+        std::iter::from_fn(|| st.app_mut().poll_event()).collect::<Vec<_>>()
+    );
+    while st.app_mut().poll_event().is_some() {}
+
+    // Prepare the requests up front: outputs change every cycle, FCB
+    // toggles, a Global_Control (Operate) follows every Data_Exchange.
+    let mut reqs = vec![];
+    for i in 0..1000u32 {
+        let mut b = vec![0u8; 300];
+        let outputs: Vec<u8> = (0..244).map(|k| (k as u32 + i) as u8).collect();
+        let n = emit(&mut b, 8, srd(i % 2 == 0), None, &outputs);
+        b.truncate(n);
+        let mut g = vec![0u8; 32];
+        let m = emit(
+            &mut g,
+            127,
+            FunctionCode::request(RequestKind::SdnHigh),
+            Some((58, 62)),
+            &[0x00, 0x00],
+        );
+        g.truncate(m);
+        reqs.push((b, g, outputs));
+    }
+
+    ARMED.with(|a| a.set(true));
+    let mut lens = 0usize;
+    for (dx, gc, _) in &reqs {
+        lens += exchange(&mut st, &mut now, dx);
+        exchange(&mut st, &mut now, gc);
+    }
+    ARMED.with(|a| a.set(false));
+    let allocations = COUNT.with(|c| c.get());
+
+    // The cycles really ran: 244 inputs in SD2 (244 + 9 bytes) each.
+    assert_eq!(lens, 1000 * (244 + 9));
+    assert_eq!(st.app().stats().data_exchanges, 1000);
+    assert_eq!(st.app().outputs(), &reqs[999].2[..]);
+    assert_eq!(allocations, 0, "allocations while handling Data_Exchange");
+}
