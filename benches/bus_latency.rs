@@ -5,7 +5,9 @@
 //! release mode; needs socat). A round trip is: this process writes a
 //! 6-byte SD1 telegram to end A, an echo thread reads it completely from
 //! end B and writes it back, this process reads it completely from A.
-//! Through the hub and socat the telegram crosses the relay twice.
+//! Through the hub and socat the telegram crosses the relay twice. The
+//! paths are measured interleaved (one round trip on each in turn), so
+//! that on a shared machine they all see the same load.
 //!
 //! Environment: `ROUNDS` (default 20000) round trips after 1000 warm-up
 //! ones; `MBYTES` (default 8) for the throughput run.
@@ -58,22 +60,7 @@ struct Stats {
     mean: Duration,
 }
 
-fn round_trips(mut a: File, b: File, rounds: usize) -> Stats {
-    let warm = 1000;
-    let echo = spawn_echo(b, warm + rounds);
-    let mut buf = [0u8; TELEGRAM.len()];
-    let mut times = Vec::with_capacity(rounds);
-    for i in 0..warm + rounds {
-        let t0 = Instant::now();
-        a.write_all(&TELEGRAM).unwrap();
-        a.read_exact(&mut buf).unwrap();
-        let dt = t0.elapsed();
-        assert_eq!(buf, TELEGRAM);
-        if i >= warm {
-            times.push(dt);
-        }
-    }
-    echo.join().unwrap();
+fn stats(mut times: Vec<Duration>) -> Stats {
     times.sort();
     let pct = |p: f64| times[((times.len() as f64 * p) as usize).min(times.len() - 1)];
     Stats {
@@ -82,6 +69,36 @@ fn round_trips(mut a: File, b: File, rounds: usize) -> Stats {
         p999: pct(0.999),
         mean: times.iter().sum::<Duration>() / times.len() as u32,
     }
+}
+
+/// Round trips on every path in turn (path 0, 1, 2, …, 0, 1, …), so that
+/// all paths see the same load on a shared machine.
+fn interleaved_round_trips(paths: Vec<(File, File)>, rounds: usize) -> Vec<Stats> {
+    let warm = 1000;
+    let mut ends = vec![];
+    let mut echoes = vec![];
+    for (a, b) in paths {
+        ends.push(a);
+        echoes.push(spawn_echo(b, warm + rounds));
+    }
+    let mut times = vec![Vec::with_capacity(rounds); ends.len()];
+    let mut buf = [0u8; TELEGRAM.len()];
+    for i in 0..warm + rounds {
+        for (k, a) in ends.iter_mut().enumerate() {
+            let t0 = Instant::now();
+            a.write_all(&TELEGRAM).unwrap();
+            a.read_exact(&mut buf).unwrap();
+            let dt = t0.elapsed();
+            assert_eq!(buf, TELEGRAM);
+            if i >= warm {
+                times[k].push(dt);
+            }
+        }
+    }
+    for e in echoes {
+        e.join().unwrap();
+    }
+    times.into_iter().map(stats).collect()
 }
 
 /// MB/s from `a` to `b` (b only reads).
@@ -131,6 +148,8 @@ fn main() {
     let rounds = env_usize("ROUNDS", 20_000);
     let mbytes = env_usize("MBYTES", 8);
     common::require("socat");
+    // Build dpctl first so the build does not disturb the measurements.
+    common::dpctl();
     println!("round trip of a 6-byte telegram, {rounds} rounds; throughput {mbytes} MiB one way");
     println!();
     println!("| path | p50 µs | p99 µs | p99.9 µs | mean µs | MB/s |");
@@ -143,12 +162,6 @@ fn main() {
         make_raw(&b);
         (a, b)
     };
-    let (a, b) = pair();
-    let direct = round_trips(a, b, rounds);
-    let (a, b) = pair();
-    let direct_mbs = throughput(a, b, mbytes);
-    report("pty pair (no relay)", &direct, direct_mbs);
-
     // socat pty pair.
     let dir = TempDir::new("bench");
     let (pa, pb) = (dir.path("a"), dir.path("b"));
@@ -163,34 +176,12 @@ fn main() {
         std::thread::sleep(Duration::from_millis(50));
         p
     };
-    let p = socat();
-    let s = round_trips(open_tty(&pa), open_tty(&pb), rounds);
-    drop(p);
-    common::wait_for("socat gone", Duration::from_secs(10), || !pa.exists());
-    let p = socat();
-    let s_mbs = throughput(open_tty(&pa), open_tty(&pb), mbytes);
-    drop(p);
-    report("socat pty pair", &s, s_mbs);
-
-    // dpctl bus, 2 stations, unpaced.
-    let bus = Bus::start(2, &[]);
-    let (a, b) = (open_tty(&bus.link(0)), open_tty(&bus.link(1)));
-    // The hub checks for new openers every 5 ms.
-    std::thread::sleep(Duration::from_millis(50));
-    let h = round_trips(a, b, rounds);
-    let (a, b) = (open_tty(&bus.link(0)), open_tty(&bus.link(1)));
-    std::thread::sleep(Duration::from_millis(50));
-    let h_mbs = throughput(a, b, mbytes);
-    let out = bus.stop();
-    assert!(out.status.success(), "{out:?}");
-    report("dpctl bus, 2 stations, unpaced", &h, h_mbs);
-
-    let bus = Bus::start(8, &[]);
-    let (a, b) = (open_tty(&bus.link(0)), open_tty(&bus.link(1)));
-    // Six more stations listening (and reading) as on a real bus.
+    // dpctl bus with 2 stations, and with 8 (6 of them only listening).
+    let bus2 = Bus::start(2, &[]);
+    let bus8 = Bus::start(8, &[]);
     let listeners: Vec<_> = (2..8)
         .map(|i| {
-            let mut f = open_tty(&bus.link(i));
+            let mut f = open_tty(&bus8.link(i));
             std::thread::spawn(move || {
                 let mut buf = [0u8; 4096];
                 while let Ok(n) = f.read(&mut buf) {
@@ -201,28 +192,56 @@ fn main() {
             })
         })
         .collect();
+
+    let p = socat();
+    let paths = vec![
+        pair(),
+        (open_tty(&pa), open_tty(&pb)),
+        (open_tty(&bus2.link(0)), open_tty(&bus2.link(1))),
+        (open_tty(&bus8.link(0)), open_tty(&bus8.link(1))),
+    ];
+    // The hub checks for new openers every 5 ms.
     std::thread::sleep(Duration::from_millis(50));
-    let h8 = round_trips(a, b, rounds);
-    let out = bus.stop();
-    assert!(out.status.success(), "{out:?}");
+    let st = interleaved_round_trips(paths, rounds);
+    drop(p);
+    common::wait_for("socat gone", Duration::from_secs(10), || !pa.exists());
+
+    let (a, b) = pair();
+    let direct_mbs = throughput(a, b, mbytes);
+    let p = socat();
+    let socat_mbs = throughput(open_tty(&pa), open_tty(&pb), mbytes);
+    drop(p);
+    let (a, b) = (open_tty(&bus2.link(0)), open_tty(&bus2.link(1)));
+    // Bytes are only delivered once the hub has seen the new openers.
+    std::thread::sleep(Duration::from_millis(50));
+    let hub_mbs = throughput(a, b, mbytes);
+
+    report("pty pair (no relay)", &st[0], direct_mbs);
+    report("socat pty pair", &st[1], socat_mbs);
+    report("dpctl bus, 2 stations, unpaced", &st[2], hub_mbs);
+    report(
+        "dpctl bus, 8 stations (6 listening), unpaced",
+        &st[3],
+        f64::NAN,
+    );
+    for bus in [bus2, bus8] {
+        let out = bus.stop();
+        assert!(out.status.success(), "{out:?}");
+    }
     for l in listeners {
         let _ = l.join();
     }
-    report(
-        "dpctl bus, 8 stations (6 listening), unpaced",
-        &h8,
-        f64::NAN,
-    );
 
     println!();
     let added = |x: Duration, base: Duration| {
         x.as_nanos() as f64 / 1000.0 - base.as_nanos() as f64 / 1000.0
     };
+    let (h, s, d) = (&st[2], &st[1], &st[0]);
     println!(
         "hub added to a round trip vs socat: p50 {:+.1} µs, p99 {:+.1} µs; vs a bare pty pair: p50 {:+.1} µs, p99 {:+.1} µs (target: ≤ 20 µs at p99)",
         added(h.p50, s.p50),
         added(h.p99, s.p99),
-        added(h.p50, direct.p50),
-        added(h.p99, direct.p99)
+        added(h.p50, d.p50),
+        added(h.p99, d.p99)
     );
 }

@@ -143,6 +143,19 @@ pub struct Output {
 pub struct Proc {
     pub child: Option<Child>,
     pub name: String,
+    /// [`Proc::spawn_captured`]: threads collecting stdout and stderr
+    /// while the process runs (so it never blocks on a full pipe).
+    captured: Option<(Drain, Drain)>,
+}
+
+type Drain = std::thread::JoinHandle<String>;
+
+fn drain(mut r: impl Read + Send + 'static) -> Drain {
+    std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = r.read_to_end(&mut v);
+        String::from_utf8_lossy(&v).into_owned()
+    })
 }
 
 impl Proc {
@@ -153,6 +166,7 @@ impl Proc {
         Proc {
             child: Some(child),
             name: name.to_string(),
+            captured: None,
         }
     }
 
@@ -166,7 +180,12 @@ impl Proc {
         cmd.stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
-        Proc::spawn(&name, &mut cmd)
+        let mut p = Proc::spawn(&name, &mut cmd);
+        let c = p.child.as_mut().expect("just spawned");
+        let out = drain(c.stdout.take().expect("piped"));
+        let err = drain(c.stderr.take().expect("piped"));
+        p.captured = Some((out, err));
+        p
     }
 
     /// Send signal number `sig` (e.g. 2 SIGINT, 15 SIGTERM).
@@ -203,14 +222,10 @@ impl Proc {
             }
             std::thread::sleep(Duration::from_millis(10));
         };
-        let mut stdout = String::new();
-        let mut stderr = String::new();
-        if let Some(mut o) = child.stdout.take() {
-            let _ = o.read_to_string(&mut stdout);
-        }
-        if let Some(mut e) = child.stderr.take() {
-            let _ = e.read_to_string(&mut stderr);
-        }
+        let (stdout, stderr) = match self.captured.take() {
+            Some((o, e)) => (o.join().unwrap_or_default(), e.join().unwrap_or_default()),
+            None => (String::new(), String::new()),
+        };
         Output {
             status,
             stdout,
