@@ -30,7 +30,7 @@ proptest! {
         let mut out = vec![];
         let mut last = Instant::ZERO;
         let mut pushed = vec![];
-        let mut check = |ev: TapEvent, out: &mut Vec<u8>, last: &mut Instant| {
+        let check = |ev: TapEvent, out: &mut Vec<u8>, last: &mut Instant| {
             let (at, bytes) = match ev {
                 TapEvent::Telegram { at, bytes } => {
                     prop_assert!(profibus_fdl::Telegram::parse_exact(&bytes).is_ok());
