@@ -95,6 +95,30 @@ fn plant() -> Result<Vec<PlantSlave>> {
             &["2 words in/out"],
             InputPattern::Counter,
         )?,
+        {
+            // Baumüller BM4-O-PRO-01 with the manual's example variables
+            // and its generated GSD; PKW module first.
+            let dev = profibus_devices::bm4::Bm4::example(6);
+            PlantSlave {
+                address: 6,
+                name: "BM4-O-PRO-01 (bm4)".into(),
+                gsd: dev.gsd().clone(),
+                modules: vec!["Bedarfsdaten PKW", "ud_MyReadVar1", "u_MyWriteVar2"],
+                device: Box::new(dev),
+            }
+        },
+        PlantSlave {
+            address: 25,
+            name: "Omega Drive-Line II (omega)".into(),
+            gsd: gsd_files::parse(gsd_files::BNF_00D0)?,
+            modules: vec![
+                "Service data module",
+                "Status / control module",
+                "2 cycl. actual values",
+                "2 cycl. setpoints",
+            ],
+            device: Box::new(profibus_devices::omega::Omega::with_defaults()),
+        },
     ])
 }
 

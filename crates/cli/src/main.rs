@@ -11,6 +11,7 @@ mod demo;
 mod describe;
 mod gsd;
 mod master;
+mod pkw;
 mod scan;
 mod slave;
 mod sniff;
@@ -46,6 +47,8 @@ enum Command {
     Bus(bus::Args),
     /// Listen passively on a line and print every telegram.
     Sniff(sniff::Args),
+    /// Read or write a parameter over a slave's PKW channel.
+    Pkw(pkw::Args),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Command::Slave(a) => slave::run(a),
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
+        Command::Pkw(a) => pkw::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

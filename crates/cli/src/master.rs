@@ -14,7 +14,6 @@ use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
-use tokio::io::AsyncBufReadExt;
 
 /// Poll the slaves of a bus file: parameterise, configure and exchange
 /// data with them, print their state, data and diagnosis.
@@ -197,23 +196,22 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     let mut port = profibus_fdl::transport::Port::open(&args.port, bus.master.params.baud)
         .with_context(|| format!("opening {}", args.port))?;
 
+    // Commands come from a plain thread: a blocking read of stdin must not
+    // keep the runtime from shutting down on Ctrl-C / SIGTERM.
     let (tx, mut rx) = tokio::sync::mpsc::channel::<String>(256);
     if let Some(input) = args.input.clone() {
-        tokio::spawn(async move {
-            let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if input == "-" {
-                Box::new(tokio::io::stdin())
-            } else {
-                match tokio::fs::File::open(&input).await {
-                    Ok(f) => Box::new(f),
-                    Err(e) => {
-                        eprintln!("dpctl master: cannot open {input}: {e}");
-                        return;
-                    }
-                }
-            };
-            let mut lines = tokio::io::BufReader::new(reader).lines();
-            while let Ok(Some(l)) = lines.next_line().await {
-                if !l.trim().is_empty() && tx.send(l).await.is_err() {
+        let reader: Box<dyn std::io::Read + Send> = if input == "-" {
+            Box::new(std::io::stdin())
+        } else {
+            Box::new(std::fs::File::open(&input).with_context(|| format!("cannot open {input}"))?)
+        };
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for l in std::io::BufReader::new(reader)
+                .lines()
+                .map_while(Result::ok)
+            {
+                if !l.trim().is_empty() && tx.blocking_send(l).is_err() {
                     break;
                 }
             }

@@ -16,7 +16,7 @@
 
 use anyhow::{bail, Context};
 use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
-use profibus_devices::{BoxedDevice, ProfileOptions, PROFILES};
+use profibus_devices::{BoxedDevice, ControlInbox, ProfileOptions, PROFILES};
 use profibus_dp::gsd::{Gsd, ParseOptions};
 use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
@@ -38,9 +38,11 @@ pub struct Args {
     /// pty pair).
     #[arg(long, value_name = "PATH", required_unless_present = "list_devices")]
     port: Option<String>,
-    /// Station address of the slave (0..=126).
+    /// Station address of the slave (0..=126). The bm4 profile takes its
+    /// address from --us-device / --switch instead when given, the omega
+    /// profile from --switch.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=126),
-          required_unless_present = "list_devices")]
+          required_unless_present_any = ["list_devices", "us_device", "switch"])]
     addr: Option<u8>,
     /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
     /// traffic on a serial line (on a pty: nominal 19.2 kbit/s).
@@ -69,6 +71,46 @@ pub struct Args {
     /// List the device profiles and exit.
     #[arg(long)]
     list_devices: bool,
+    /// bm4: the PLC's variable table (TOML, see
+    /// crates/devices/data/bm4_example_vars.toml); default: the
+    /// configuration of BM4OPRO1.GSD.
+    #[arg(long, value_name = "FILE.toml", requires = "device")]
+    vars: Option<PathBuf>,
+    /// bm4: us_DEVICE of PROFIBUS_INIT_SL: 1..125 fixed address, 126 set
+    /// once by the master (Set_Slave_Add) and kept in --state-dir, 127 set
+    /// by the master after every start, 128 the rotary switch (--switch).
+    /// Default: --addr.
+    #[arg(long, value_name = "N", requires = "device")]
+    us_device: Option<u8>,
+    /// bm4: rotary switch value for us_DEVICE 128 (0 error, 1..125 the
+    /// address, 126..255 set once by the master). omega: the rotary
+    /// switches S40/S41 (hex allowed, e.g. 0x19 = 25) instead of --addr.
+    #[arg(long, value_name = "N", requires = "device")]
+    switch: Option<String>,
+    /// bm4: directory of the state file keeping a set-once address.
+    #[arg(long, value_name = "DIR", requires = "device")]
+    state_dir: Option<PathBuf>,
+    /// bm4: write the GSD file of this configuration (generated from
+    /// --vars, or BM4OPRO1.GSD) before starting.
+    #[arg(long, value_name = "FILE", requires = "device")]
+    write_gsd: Option<PathBuf>,
+    /// omega: the V controller's parameter set (TOML, see
+    /// crates/devices/data/omega_vparams.toml); default: the shipped one.
+    #[arg(long, value_name = "FILE.toml", requires = "device")]
+    params: Option<PathBuf>,
+    /// omega: number of setpoints the drive expects (si_NR_WR_VALUE,
+    /// 1..8; with --actual-values). Default: any valid configuration.
+    #[arg(long, value_name = "N", requires = "actual_values")]
+    setpoints: Option<u8>,
+    /// omega: number of actual values (si_NR_RD_VALUE, 1..8).
+    #[arg(long, value_name = "N", requires = "setpoints")]
+    actual_values: Option<u8>,
+    /// Control commands for the device, one per line, from FILE or `-`
+    /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
+    /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
+    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`.
+    #[arg(long, value_name = "FILE", requires = "device")]
+    control: Option<String>,
     /// File in which the generic device keeps an address set by
     /// Set_Slave_Add (`address=N`, `no_add_chg=0|1`); when it exists its
     /// address overrides --addr.
@@ -238,7 +280,33 @@ impl Printer {
 }
 
 /// The device to emulate, with its name for people.
-fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<(BoxedDevice, String)> {
+/// Lines from `src` (a file, or `-` for stdin) into `inbox`.
+fn spawn_control_reader(src: String, inbox: ControlInbox) {
+    use tokio::io::AsyncBufReadExt;
+    tokio::spawn(async move {
+        let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if src == "-" {
+            Box::new(tokio::io::stdin())
+        } else {
+            match tokio::fs::File::open(&src).await {
+                Ok(f) => Box::new(f),
+                Err(e) => {
+                    eprintln!("dpctl slave: cannot open {src}: {e}");
+                    return;
+                }
+            }
+        };
+        let mut lines = tokio::io::BufReader::new(reader).lines();
+        while let Ok(Some(l)) = lines.next_line().await {
+            inbox.push(l);
+        }
+    });
+}
+
+/// The device to emulate, its name, and the address its profile chose.
+fn build_device(
+    args: &Args,
+    printer: &Printer,
+) -> anyhow::Result<(BoxedDevice, String, Option<u8>)> {
     if let Some(name) = &args.device {
         let Some(p) = profibus_devices::profile(name) else {
             let names: Vec<&str> = PROFILES.iter().map(|p| p.name).collect();
@@ -252,6 +320,27 @@ fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<(BoxedDevice, 
             );
         };
         let mut opts = ProfileOptions::default();
+        let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+        for (k, v) in [
+            ("addr", args.addr.map(|a| a.to_string())),
+            ("vars", path(&args.vars)),
+            ("us-device", args.us_device.map(|a| a.to_string())),
+            ("switch", args.switch.clone()),
+            ("state-dir", path(&args.state_dir)),
+            ("write-gsd", path(&args.write_gsd)),
+            ("params", path(&args.params)),
+            ("setpoints", args.setpoints.map(|a| a.to_string())),
+            ("actual-values", args.actual_values.map(|a| a.to_string())),
+        ] {
+            if let Some(v) = v {
+                opts.options.push((k.to_string(), v));
+            }
+        }
+        if let Some(src) = &args.control {
+            let inbox = ControlInbox::new();
+            spawn_control_reader(src.clone(), inbox.clone());
+            opts.control = Some(inbox);
+        }
         for o in &args.device_opts {
             let (k, v) = o
                 .split_once('=')
@@ -260,7 +349,9 @@ fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<(BoxedDevice, 
                 .push((k.trim().to_string(), v.trim().to_string()));
         }
         let dev = (p.build)(&opts).map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
-        return Ok((dev, p.name.to_string()));
+        let addr = profibus_devices::profile_address(p.name, &opts)
+            .map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
+        return Ok((dev, p.name.to_string(), addr));
     }
     let Some(path) = &args.gsd else {
         bail!("give --gsd FILE (with --module NAME …) or --device NAME");
@@ -286,7 +377,7 @@ fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<(BoxedDevice, 
         dev = dev.with_address_store(AddressStore::new(f));
     }
     let name = dev.name().to_string();
-    Ok((Box::new(dev), name))
+    Ok((Box::new(dev), name, None))
 }
 
 fn list_devices() {
@@ -331,19 +422,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the runtime")?;
-    rt.block_on(run_async(args))
+    let result = rt.block_on(run_async(args));
+    // A --control reader may be blocked on stdin: do not wait for it.
+    rt.shutdown_background();
+    result
 }
 
 async fn run_async(args: Args) -> anyhow::Result<()> {
     let clock = Clock::start();
     let printer = Printer {
         json: args.json,
-        clock,
+        clock: clock.clone(),
     };
     let path = args.port.clone().expect("clap requires --port");
-    let mut addr = args.addr.expect("clap requires --addr");
     let choice = parse_baud(&args.baud)?;
-    let (device, name) = build_device(&args, &printer)?;
+    let (device, name, profile_addr) = build_device(&args, &printer)?;
+    let mut addr = match profile_addr.or(args.addr) {
+        Some(a) => a,
+        None => bail!("give --addr N"),
+    };
     if let Some(f) = &args.address_file {
         if let Some(s) = AddressStore::new(f)
             .load()
@@ -386,7 +483,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let mut last_outputs: Vec<u8> = vec![];
     loop {
         let baud = if search {
-            match search_baud(&mut port, clock, &printer, &stop_requested).await? {
+            match search_baud(&mut port, clock.clone(), &printer, &stop_requested).await? {
                 Some(b) => b,
                 None => break,
             }
@@ -399,7 +496,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         let result = driver::run(
             &mut station,
             &mut port,
-            clock,
+            clock.clone(),
             async {
                 stop_signal().await;
                 stop_requested.set(true);

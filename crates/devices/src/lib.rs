@@ -6,10 +6,15 @@
 //! in [`PROFILES`], which `dpctl slave --list-devices` prints and
 //! `dpctl slave --device NAME` builds from.
 
+pub mod bm4;
 pub mod generic;
 pub mod gsd_files;
+pub mod omega;
+pub mod pkw;
 
 use profibus_dp::slave::Device;
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
 
 /// A device as `dpctl slave` runs it.
 pub type BoxedDevice = Box<dyn Device + Send>;
@@ -20,7 +25,43 @@ pub type BoxedDevice = Box<dyn Device + Send>;
 pub struct ProfileOptions {
     /// The options in the order given.
     pub options: Vec<(String, String)>,
+    /// Where control commands for the device arrive (e.g. `dpctl slave
+    /// --control -`: lines from stdin), for profiles that take them.
+    pub control: Option<ControlInbox>,
 }
+
+/// Control commands (lines of text) for a running device, e.g. a user
+/// diagnosis the emulated PLC sends. The command line puts lines in; the
+/// device takes them out while it runs. Clones share the queue.
+#[derive(Debug, Clone, Default)]
+pub struct ControlInbox(Arc<Mutex<VecDeque<String>>>);
+
+impl ControlInbox {
+    /// An empty inbox.
+    pub fn new() -> ControlInbox {
+        ControlInbox::default()
+    }
+
+    /// Queue a command line.
+    pub fn push(&self, line: impl Into<String>) {
+        if let Ok(mut q) = self.0.lock() {
+            q.push_back(line.into());
+        }
+    }
+
+    /// The oldest queued line.
+    pub fn take(&self) -> Option<String> {
+        self.0.lock().ok()?.pop_front()
+    }
+}
+
+impl PartialEq for ControlInbox {
+    fn eq(&self, other: &ControlInbox) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Eq for ControlInbox {}
 
 impl ProfileOptions {
     /// The value of `key`, if given (the last one wins).
@@ -47,7 +88,21 @@ pub struct Profile {
 }
 
 /// Every device profile (the device issues add theirs here).
-pub const PROFILES: &[Profile] = &[];
+pub const PROFILES: &[Profile] = &[bm4::profile::PROFILE, omega::profile::PROFILE];
+
+/// The station address a profile chooses itself from its options (the
+/// BM4-O-PRO-01's us_DEVICE and rotary switch, a stored Set_Slave_Add
+/// address), overriding the command line's `--addr`; `Ok(None)` when the
+/// profile takes `--addr` as it is.
+pub fn profile_address(name: &str, opts: &ProfileOptions) -> Result<Option<u8>, String> {
+    if name.eq_ignore_ascii_case(bm4::profile::PROFILE.name) {
+        bm4::profile::address(opts).map(Some)
+    } else if name.eq_ignore_ascii_case(omega::profile::PROFILE.name) {
+        omega::profile::address(opts)
+    } else {
+        Ok(None)
+    }
+}
 
 /// The profile named `name`.
 pub fn profile(name: &str) -> Option<&'static Profile> {

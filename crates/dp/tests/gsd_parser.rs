@@ -5,7 +5,6 @@ use profibus_dp::gsd::{
     Allowed, DiagKind, Gsd, GsdError, ParseOptions, Parsed, PrmDataType, Quirk, MAX_FILE_LEN,
     MAX_LINE_LEN,
 };
-use std::time::Instant;
 
 const HEAD: &str =
     "#Profibus_DP\nGSD_Revision=3\nVendor_Name=\"V\"\nModel_Name=\"M\"\nIdent_Number=0x1234\n";
@@ -263,9 +262,10 @@ fn latin1_files() {
 }
 
 #[test]
-fn oversized_input_is_refused_quickly() {
+fn oversized_input_is_refused() {
     // A 100 MB file (sparse: nothing is written) is refused from its
-    // length, without being read.
+    // length, without being read (how fast: `cargo bench -p profibus-dp
+    // --bench gsd`).
     let dir = std::env::temp_dir().join(format!("gsd-big-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("big.gsd");
@@ -273,10 +273,8 @@ fn oversized_input_is_refused_quickly() {
         .unwrap()
         .set_len(100 << 20)
         .unwrap();
-    let t = Instant::now();
     let e = Gsd::from_file(&path, ParseOptions::LENIENT).unwrap_err();
     assert_eq!(e.first().kind, DiagKind::TooLarge);
-    assert!(t.elapsed().as_millis() < 1000, "{:?}", t.elapsed());
     std::fs::remove_dir_all(&dir).unwrap();
 
     // Text in memory: over the file limit, refused before parsing.
@@ -338,4 +336,18 @@ fn module_lookup() {
         e.to_string().starts_with("no module named `temperature`"),
         "{e}"
     );
+}
+
+#[test]
+fn continuation_after_an_empty_piece() {
+    // Found by the fuzzer: ` \` followed by an indented line used to keep
+    // the indentation, so the line read differently once written back.
+    let text = "#Profibus_DP\nIdent_Number=1\n \\\n    Vendor_Key=\"x\"\n\
+                Module=\"m\" 0x10\n \\\n  7\nEndModule\n";
+    let p = strict(text);
+    assert_eq!(p.gsd.other, ["Vendor_Key=\"x\""]);
+    assert_eq!(p.gsd.modules[0].reference, Some(7));
+    assert_eq!(p.warnings[0].pos.line, 4);
+    assert_eq!(p.warnings[0].pos.col, 5);
+    assert_eq!(strict(&p.gsd.write()).gsd, p.gsd);
 }

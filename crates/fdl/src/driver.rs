@@ -10,8 +10,13 @@
 //!
 //! Timers: tokio's timer wheel has 1 ms granularity, which is coarse next
 //! to PROFIBUS bit times (min TSDR is 0.9 µs at 12 Mbit/s). Deadlines less
-//! than [`SPIN_BELOW`] away are therefore awaited by yielding to the
-//! runtime in a loop (still reading the port), not by sleeping.
+//! than [`WARP_BELOW`] away are taken as reached at once: the driver's
+//! clock jumps to the deadline (and never runs backwards afterwards). No
+//! operating system wakes a process that precisely, and every transport
+//! this driver runs on (ptys, USB adapters) adds more latency than that
+//! anyway; spinning instead would steal the CPU from the peer on a small
+//! machine. Deadlines up to [`SPIN_BELOW`] away are awaited by yielding to
+//! the runtime in a loop (still reading the port); longer ones sleep.
 
 use crate::station::Station;
 use crate::time::Instant;
@@ -24,10 +29,15 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 /// Deadlines closer than this are awaited by yielding instead of sleeping.
 pub const SPIN_BELOW: Duration = Duration::from_micros(1500);
 
-/// The clock of a driver: real time since its start as an [`Instant`].
-#[derive(Debug, Clone, Copy)]
+/// Deadlines closer than this count as reached (the clock jumps).
+pub const WARP_BELOW: Duration = Duration::from_micros(100);
+
+/// The clock of a driver: real time since its start as an [`Instant`],
+/// never running backwards after a jump ([`Clock::jump_to`]).
+#[derive(Debug, Clone)]
 pub struct Clock {
     epoch: tokio::time::Instant,
+    floor: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl Clock {
@@ -35,12 +45,21 @@ impl Clock {
     pub fn start() -> Clock {
         Clock {
             epoch: tokio::time::Instant::now(),
+            floor: Default::default(),
         }
     }
 
     /// Now.
     pub fn now(&self) -> Instant {
-        Instant::from_nanos(self.epoch.elapsed().as_nanos() as u64)
+        let real = self.epoch.elapsed().as_nanos() as u64;
+        let floor = self.floor.load(std::sync::atomic::Ordering::Relaxed);
+        Instant::from_nanos(real.max(floor))
+    }
+
+    /// Let the clock read at least `t` from now on.
+    pub fn jump_to(&self, t: Instant) {
+        self.floor
+            .fetch_max(t.as_nanos(), std::sync::atomic::Ordering::Relaxed);
     }
 
     /// The tokio instant of `t`.
@@ -84,7 +103,13 @@ where
         if tick(station, now).is_break() {
             return Ok(Stop::Done);
         }
-        let deadline = station.poll_timeout();
+        let mut deadline = station.poll_timeout();
+        if let Some(d) = deadline.filter(|&d| d > clock.now()) {
+            if d.saturating_duration_since(clock.now()) < WARP_BELOW {
+                clock.jump_to(d);
+                deadline = Some(d);
+            }
+        }
         let wait = deadline.map(|d| d.saturating_duration_since(clock.now()));
         tokio::select! {
             biased;
@@ -96,14 +121,14 @@ where
                 }
                 station.handle_rx(clock.now(), &buf[..n]);
             }
-            _ = wait_for(clock, deadline, wait) => {
+            _ = wait_for(&clock, deadline, wait) => {
                 station.handle_timeout(clock.now());
             }
         }
     }
 }
 
-async fn wait_for(clock: Clock, deadline: Option<Instant>, wait: Option<Duration>) {
+async fn wait_for(clock: &Clock, deadline: Option<Instant>, wait: Option<Duration>) {
     match (deadline, wait) {
         (None, _) | (_, None) => std::future::pending().await,
         (Some(_), Some(w)) if w.is_zero() => {}

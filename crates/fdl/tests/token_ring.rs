@@ -338,11 +338,12 @@ fn lost_token_is_claimed_by_exactly_one_master() {
 #[test]
 fn simultaneous_claims_resolve_to_one_token() {
     // Give master 2 a latency allowance that makes its token-lost timeout
-    // equal master 5's, so both claim at the same instant and collide.
+    // (TTO + 3 allowances) equal master 5's (TTO(2) + 6 TSL), so both
+    // claim at the same instant and collide.
     let params = BusParams::defaults(Baud::B1500000);
     let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
     let mut c2 = ActiveConfig::new(2, params);
-    c2.latency_allowance = params.bits(6 * params.slot_time as u64);
+    c2.latency_allowance = params.bits(2 * params.slot_time as u64);
     let a = bus.add(ActiveStation::new(c2, Poller::default()));
     let b = bus.add(ActiveStation::new(
         ActiveConfig::new(5, params),

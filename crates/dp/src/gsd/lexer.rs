@@ -133,18 +133,40 @@ impl<'a> LogicalLine<'a> {
         text.push_str(content);
     }
 
-    /// Remove trailing blanks and stray trailing `\\` (after the final
-    /// continuation; a statement cannot end in a backslash).
-    pub(crate) fn trim_end(&mut self) {
-        let trim = |s: &str| {
-            s.trim_end_matches(|c: char| c.is_whitespace() || c == '\\')
-                .len()
-        };
+    /// Finish the line after its last continuation: remove blanks at
+    /// both ends (a continuation may leave leading blanks when the first
+    /// piece was empty) and stray trailing `\\` (a statement cannot end in
+    /// a backslash), keeping positions right.
+    pub(crate) fn trim(&mut self) {
+        let end = self
+            .text
+            .trim_end_matches(|c: char| c.is_whitespace() || c == '\\')
+            .len();
+        let lead = self.text[..end].len() - self.text[..end].trim_start().len();
+        if lead > 0 {
+            // The segment holding the first kept byte becomes the first.
+            let mut segs = vec![self.first];
+            segs.append(&mut self.more);
+            let k = segs.iter().rposition(|g| g.offset <= lead).unwrap_or(0);
+            let skipped = self.text[segs[k].offset..lead].chars().count() as u32;
+            self.first = Segment {
+                offset: 0,
+                line: segs[k].line,
+                col: segs[k].col + skipped,
+            };
+            self.more = segs[k + 1..]
+                .iter()
+                .map(|g| Segment {
+                    offset: g.offset - lead,
+                    ..*g
+                })
+                .collect();
+        }
         match &mut self.text {
-            Cow::Borrowed(s) => *s = &s[..trim(s)],
+            Cow::Borrowed(s) => *s = &s[lead..end],
             Cow::Owned(s) => {
-                let n = trim(s);
-                s.truncate(n);
+                s.truncate(end);
+                s.drain(..lead);
             }
         }
     }
@@ -447,11 +469,18 @@ mod tests {
     fn positions_across_continuations() {
         let mut l = LogicalLine::new(3, "  Module=\"a\" 0x10,");
         l.push(4, "   0x20");
-        l.trim_end();
+        l.trim();
         assert_eq!(l.text, "Module=\"a\" 0x10,   0x20");
         assert_eq!(l.pos(0), Pos { line: 3, col: 3 });
         let at = l.text.find("0x20").unwrap();
         assert_eq!(l.pos(at), Pos { line: 4, col: 4 });
+        // An empty first piece: the text starts on the continuation line.
+        let mut l = LogicalLine::new(7, "");
+        l.push(8, "   Foo=1 \\");
+        l.trim();
+        assert_eq!(l.text, "Foo=1");
+        assert_eq!(l.pos(0), Pos { line: 8, col: 4 });
+        assert_eq!(l.pos(4), Pos { line: 8, col: 8 });
     }
 
     #[test]

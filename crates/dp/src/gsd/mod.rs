@@ -261,18 +261,20 @@ impl Gsd {
             )
         };
         let file = std::fs::File::open(path).map_err(io)?;
-        let too_large = |len: u64| {
+        let too_large = |len: Option<u64>| {
+            let size = match len {
+                Some(n) => format!("{n} bytes long, more than"),
+                None => "longer than".to_string(),
+            };
             GsdError::single(
                 Some(path),
                 DiagKind::TooLarge,
-                format!(
-                    "the file is {len} bytes long, more than the {MAX_FILE_LEN} bytes a GSD file may have"
-                ),
+                format!("the file is {size} the {MAX_FILE_LEN} bytes a GSD file may have"),
             )
         };
         if let Ok(meta) = file.metadata() {
             if meta.len() > MAX_FILE_LEN as u64 {
-                return Err(too_large(meta.len()));
+                return Err(too_large(Some(meta.len())));
             }
         }
         // The size may change or be unknown (pipes): never read more than
@@ -282,7 +284,7 @@ impl Gsd {
             .read_to_end(&mut bytes)
             .map_err(io)?;
         if bytes.len() > MAX_FILE_LEN {
-            return Err(too_large(bytes.len() as u64));
+            return Err(too_large(None));
         }
         let text = decode_latin1(&bytes);
         Gsd::parse(&text, opts).map_err(|mut e| {

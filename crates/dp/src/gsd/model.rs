@@ -253,7 +253,8 @@ pub struct Slot {
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct UnitDiagText {
     /// Bit number in the device-related diagnosis, as the GSD numbers it
-    /// (bit 0 = bit 0 of the first byte after the header byte).
+    /// (this stack reads bit 0 as bit 0 of the first byte after the
+    /// block's header byte; see [`crate::diag::describe`]).
     pub bit: u32,
     /// Text shown when the bit is set (`Unit_Diag_Bit`) or clear
     /// (`Unit_Diag_Not_Bit`).

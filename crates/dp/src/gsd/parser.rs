@@ -82,7 +82,6 @@ const KNOWN_EXTRA: &[&str] = &[
     "channel_diag_help",
     "unit_diag_bit_help",
     "unit_diag_not_bit_help",
-    "diag_update_delay",
     "family_name",
     "web_server_supp",
 ];
@@ -275,14 +274,14 @@ impl Parser {
             continued = cont;
             if !cont {
                 let mut ll = current.take().expect("a line was started");
-                ll.trim_end();
+                ll.trim();
                 if !ll.text.is_empty() {
                     self.statement(&ll);
                 }
             }
         }
         if let Some(mut ll) = current.take() {
-            ll.trim_end();
+            ll.trim();
             if !ll.text.is_empty() {
                 self.statement(&ll);
             }

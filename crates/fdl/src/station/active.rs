@@ -54,7 +54,10 @@
 //!   token exists; this station drops its token and goes Active_Idle.
 //!
 //! Timeouts get an extra `latency_allowance` for transports that add
-//! latency (ptys, USB adapters); on the simulator it is zero.
+//! latency (ptys, USB adapters): one allowance on the slot time and the
+//! token-pass check, three on the token-lost timeout (so that a station
+//! waiting a stretched slot time never looks like a lost token to the
+//! others). On the simulator it is zero.
 
 use super::{earliest, RxPath, Station};
 use crate::time::Instant;
@@ -322,6 +325,9 @@ struct Pending {
     attempts: u8,
     max_retries: u8,
     len: usize,
+    /// SAPs of the request; a reply carries them swapped.
+    dsap: Option<u8>,
+    ssap: Option<u8>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -564,8 +570,13 @@ impl Core {
         self.bits(self.p().slot_time) + self.cfg.latency_allowance
     }
 
+    /// TTO plus three latency allowances: the line may be silent for a
+    /// slot time plus one allowance while any station awaits a reply, and
+    /// scheduling jitter on a slow transport must not make a station
+    /// claim a token that is not lost. Every station adds the same amount,
+    /// so the lowest address still claims first.
     fn token_lost_timeout(&self) -> Duration {
-        self.bits(self.p().token_lost_timeout(self.ts())) + self.cfg.latency_allowance
+        self.bits(self.p().token_lost_timeout(self.ts())) + 3 * self.cfg.latency_allowance
     }
 
     /// Distance from `from` to `to` going up and wrapping after HSA.
@@ -693,7 +704,17 @@ impl Core {
                 let p = self.pending.expect("pending request while awaiting");
                 let outcome = match t {
                     Telegram::ShortAck => Some(Outcome::ShortAck),
-                    Telegram::Data(d) if !d.fc.is_request() && d.da == ts && d.sa == p.da => {
+                    // A reply to this request: from the station asked, to
+                    // us, with the request's SAPs swapped (a reply without
+                    // SAPs is accepted for any request: negative
+                    // acknowledges often carry none).
+                    Telegram::Data(d)
+                        if !d.fc.is_request()
+                            && d.da == ts
+                            && d.sa == p.da
+                            && (d.dsap.is_none() && d.ssap.is_none()
+                                || (d.dsap, d.ssap) == (p.ssap, p.dsap)) =>
+                    {
                         let FunctionCode::Response { status, station } = d.fc else {
                             unreachable!()
                         };
@@ -1117,7 +1138,7 @@ impl Core {
                 return None;
             }
         };
-        let (service, da) = (req.service, req.da);
+        let (service, da, dsap, ssap) = (req.service, req.da, req.dsap, req.ssap);
         let end = self.send_req_buffer(now, len);
         if reply {
             self.pending = Some(Pending {
@@ -1126,6 +1147,8 @@ impl Core {
                 attempts: 0,
                 max_retries: if r.operational { self.p().max_retry } else { 0 },
                 len,
+                dsap,
+                ssap,
             });
             self.state = State::AwaitResponse {
                 deadline: end + self.slot(),

@@ -276,11 +276,15 @@ impl AsyncWrite for Port {
         Pin::new(&mut self.stream).poll_write(cx, buf)
     }
 
+    /// Without manual RTS control a flush does nothing: writes go straight
+    /// to the kernel, and the stream's own flush is `tcdrain`, which
+    /// blocks the thread until the bytes have left (on a pty: until the
+    /// peer has read them), adding latency to every telegram.
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        ready!(Pin::new(&mut self.stream).poll_flush(cx))?;
         if self.rts != RtsMechanism::Manual || !self.rts_raised {
             return Poll::Ready(Ok(()));
         }
+        ready!(Pin::new(&mut self.stream).poll_flush(cx))?;
         if self.drain.is_none() {
             // tcdrain blocks until the last bit has left the UART; run it
             // on a duplicate fd so that dropping the port cannot close the

@@ -1,0 +1,400 @@
+//! DP master benchmarks (issue: DP master), in one run:
+//!
+//! (a)  Data_Exchange transactions per second with one slave over a socat
+//!      pty pair: `dpctl master` and pyprofibus's master against the same
+//!      `dpctl slave`, next to the raw round trip of the same kind of pty
+//!      pair (a bare echo of an 11-byte telegram) as the physical limit.
+//! (a') CPU cost of the master core per Data_Exchange in process (an FDL
+//!      active station with the DP master against a canned responder),
+//!      next to pyprofibus's master on its in-process dummy PHY.
+//! (c)  Resident memory of `dpctl master` with 125 configured slaves.
+//!
+//! Run: `cargo bench --bench dp_master` (needs socat and the .venv of
+//! `scripts/setup-test-env`; builds `dpctl` in release mode first).
+
+use profibus::dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
+use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
+use profibus::fdl::station::Station;
+use profibus::fdl::wire::{DataTelegram, FunctionCode, ResponseStatus, Telegram};
+use profibus::fdl::{Baud, BusParams, Instant};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn dpctl() -> PathBuf {
+    let st = Command::new(env!("CARGO"))
+        .args(["build", "--release", "-q", "-p", "dpctl"])
+        .current_dir(repo())
+        .status()
+        .expect("cargo build");
+    assert!(st.success(), "building dpctl failed");
+    repo().join("target/release/dpctl")
+}
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn socat(a: &Path, b: &Path) -> Kill {
+    let c = Command::new("socat")
+        .arg(format!("pty,raw,echo=0,link={}", a.display()))
+        .arg(format!("pty,raw,echo=0,link={}", b.display()))
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("socat is missing: run scripts/setup-test-env");
+    let end = std::time::Instant::now() + Duration::from_secs(5);
+    while !(a.exists() && b.exists()) {
+        assert!(std::time::Instant::now() < end, "no pty pair");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Kill(c)
+}
+
+fn raw_tty(path: &Path) -> std::fs::File {
+    // socat already set raw mode on both ends.
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .expect("open pty")
+}
+
+/// Round trips per second of a 13-byte message (a Data_Exchange with 4
+/// bytes of data) through a pty pair with
+/// a bare echo on the other end.
+fn raw_echo_rate(dir: &Path, n: u32) -> f64 {
+    let (a, b) = (dir.join("ea"), dir.join("eb"));
+    let _s = socat(&a, &b);
+    let mut far = raw_tty(&b);
+    let echo = std::thread::spawn(move || {
+        let mut buf = [0u8; 64];
+        let mut left = n as usize * 13;
+        while left > 0 {
+            let k = far.read(&mut buf).unwrap();
+            far.write_all(&buf[..k]).unwrap();
+            left -= k;
+        }
+    });
+    let mut near = raw_tty(&a);
+    let msg = [0x68, 7, 7, 0x68, 8, 2, 0x7D, 1, 2, 3, 4, 0x91, 0x16];
+    let mut got = [0u8; 13];
+    let t = std::time::Instant::now();
+    for _ in 0..n {
+        near.write_all(&msg).unwrap();
+        near.read_exact(&mut got).unwrap();
+    }
+    let rate = n as f64 / t.elapsed().as_secs_f64();
+    echo.join().unwrap();
+    rate
+}
+
+fn start_slave(dpctl: &Path, port: &Path) -> Kill {
+    Kill(
+        Command::new(dpctl)
+            .args(["slave", "--addr", "8", "--baud", "1.5M", "--port"])
+            .arg(port)
+            .arg("--gsd")
+            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .args(["--module", "2 words in/out"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// `dpctl master` Data_Exchange rate: cycles / elapsed from its JSON.
+fn dpctl_rate(dpctl: &Path, dir: &Path, n: u32) -> f64 {
+    let (a, b) = (dir.join("da"), dir.join("db"));
+    let _s = socat(&a, &b);
+    let _slave = start_slave(dpctl, &b);
+    // One slave, one master: HSA = the master's address keeps the GAP
+    // (live list) polls to one address per 100 token visits.
+    let cfg = dir.join("bus.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n\
+             [[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
+            repo().join("gsd/DPCTL_GEN.GSD").display()
+        ),
+    )
+    .unwrap();
+    let out = Command::new(dpctl)
+        .args([
+            "master",
+            "--json",
+            "--interval",
+            "100000",
+            "--cycles",
+            &n.to_string(),
+        ])
+        .arg("--port")
+        .arg(&a)
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let last = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .rev()
+        .find(|l| l.contains("\"status\""))
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .expect("a status line");
+    let avg_us = last["cycle_us"]["avg"].as_f64().unwrap();
+    assert_eq!(last["slaves"][0]["state"], "data_exchange", "{last}");
+    1e6 / avg_us
+}
+
+fn python() -> PathBuf {
+    let p = repo().join(".venv/bin/python");
+    assert!(p.exists(), ".venv is missing: run scripts/setup-test-env");
+    p
+}
+
+/// pyprofibus master rate against the same kind of `dpctl slave`.
+fn pyprofibus_rate(dpctl: &Path, dir: &Path, n: u32) -> f64 {
+    let (a, b) = (dir.join("pa"), dir.join("pb"));
+    let _s = socat(&a, &b);
+    let _slave = start_slave(dpctl, &b);
+    let out = Command::new(python())
+        .arg(repo().join("tests/interop/pyprofibus_master.py"))
+        .arg("--port")
+        .arg(&a)
+        .arg("--gsd")
+        .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+        .args([
+            "--addr",
+            "8",
+            "--baud",
+            "1500000",
+            "--out-len",
+            "4",
+            "--in-len",
+            "4",
+        ])
+        .args(["--module", "2 words in/out"])
+        .args(["--cycles", &n.to_string()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    let s: serde_json::Value = serde_json::from_str(text.lines().last().expect("summary")).unwrap();
+    let cycles = s["cycles"].as_f64().unwrap();
+    let secs = s["seconds"].as_f64().unwrap() - s["first_dx_s"].as_f64().unwrap_or(0.0);
+    cycles / secs
+}
+
+/// A responder that answers every Data_Exchange with a canned DL reply
+/// (and nothing else): the cheapest possible far end, so the loop's time
+/// is the master's.
+struct Canned {
+    reply: Vec<u8>,
+    diag: Vec<u8>,
+    ack: [u8; 1],
+    out: Option<usize>,
+}
+
+impl Station for Canned {
+    fn handle_rx(&mut self, _: Instant, bytes: &[u8]) {
+        // Start-up services carry SAPs (DA with bit 7 set): Slave_Diag
+        // gets a "ready" diagnosis, Set_Prm/Chk_Cfg a short ack.
+        self.out = match bytes {
+            [0x68, _, _, 0x68, da, _, _, dsap, ..] if da & 0x80 != 0 && *dsap == 60 => Some(1),
+            [0x68, _, _, 0x68, da, ..] | [0x10, da, ..] if da & 0x80 != 0 => Some(2),
+            [0x68, ..] | [0x10, _, _, 0x7D | 0x5D, ..] => Some(0),
+            _ => None,
+        };
+    }
+    fn handle_timeout(&mut self, _: Instant) {}
+    fn poll_transmit(&mut self, _: Instant) -> Option<&[u8]> {
+        match self.out.take()? {
+            0 => Some(&self.reply),
+            1 => Some(&self.diag),
+            _ => Some(&self.ack),
+        }
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        None
+    }
+}
+
+fn emit(t: Telegram<'_>) -> Vec<u8> {
+    let mut b = vec![0u8; 255];
+    let n = t.emit(&mut b).unwrap();
+    b.truncate(n);
+    b
+}
+
+/// CPU time per Data_Exchange of ActiveStation<DpMaster> in process.
+fn core_cost(cycles: u64) -> f64 {
+    let params = BusParams::defaults(Baud::B12000000);
+    let mut p = SlaveParams::new(8, 0x0DCE, vec![0x20, 0x10]);
+    p.watchdog = None;
+    let cfg = MasterConfig {
+        address: 2,
+        params,
+        slaves: vec![p],
+        options: MasterOptions::default(),
+    };
+    let mut bus = cfg.params;
+    bus.hsa = 2;
+    bus.gap_factor = 100;
+    let mut m = ActiveStation::new(
+        ActiveConfig::new(2, bus),
+        DpMaster::new(&MasterConfig { params: bus, ..cfg }).unwrap(),
+    );
+    let resp = |data: &'static [u8], dsap, ssap| {
+        emit(Telegram::Data(DataTelegram {
+            da: 2,
+            sa: 8,
+            fc: FunctionCode::slave_response(ResponseStatus::Dl),
+            dsap,
+            ssap,
+            data,
+        }))
+    };
+    let mut far = Canned {
+        reply: resp(&[0x42], None, None),
+        diag: resp(&[0, 0x04, 0, 2, 0x0D, 0xCE], Some(62), Some(60)),
+        ack: [0xE5],
+        out: None,
+    };
+    let mut now = Instant::ZERO;
+    let mut buf = [0u8; 256];
+    let mut step = |m: &mut ActiveStation<DpMaster>, far: &mut Canned, now: &mut Instant| {
+        if let Some(b) = m.poll_transmit(*now) {
+            let n = b.len();
+            buf[..n].copy_from_slice(b);
+            far.handle_rx(*now, &buf[..n]);
+            if let Some(r) = far.poll_transmit(*now) {
+                m.handle_rx(*now, r);
+            }
+            return;
+        }
+        *now = (*now).max(m.poll_timeout().unwrap());
+        m.handle_timeout(*now);
+    };
+    while m.app().cycle_stats().cycles < 100 {
+        step(&mut m, &mut far, &mut now);
+    }
+    let start = m.app().slave_stats(8).unwrap().data_exchanges;
+    let t = cpu_time();
+    while m.app().slave_stats(8).unwrap().data_exchanges < start + cycles {
+        step(&mut m, &mut far, &mut now);
+    }
+    (cpu_time() - t) / cycles as f64
+}
+
+fn cpu_time() -> f64 {
+    // getrusage through /proc: utime + stime of this process in clock ticks.
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap();
+    let f: Vec<&str> = s.rsplit(')').next().unwrap().split_whitespace().collect();
+    let ticks: f64 = f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
+
+fn pyprofibus_cost(n: u32) -> f64 {
+    let out = Command::new(python())
+        .arg(repo().join("benches/support/pyprofibus_dummy.py"))
+        .arg(repo().join("gsd/corpus/pyprofibus_dummy_compact.gsd"))
+        .arg(n.to_string())
+        .stderr(Stdio::null())
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("pyprofibus JSON");
+    v["cpu_s"].as_f64().unwrap() / v["cycles"].as_f64().unwrap()
+}
+
+/// RSS of `dpctl master` with 125 configured slaves (none answering).
+fn rss_125(dpctl: &Path, dir: &Path) -> u64 {
+    let (a, b) = (dir.join("ra"), dir.join("rb"));
+    let _s = socat(&a, &b);
+    let mut t = String::from("[master]\naddress = 0\nbaud = \"1.5M\"\n");
+    for addr in 1..=125 {
+        t.push_str(&format!(
+            "[[slave]]\naddress = {addr}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
+            repo().join("gsd/DPCTL_GEN.GSD").display()
+        ));
+    }
+    let cfg = dir.join("big.toml");
+    std::fs::write(&cfg, t).unwrap();
+    let child = Kill(
+        Command::new(dpctl)
+            .args(["master", "--json", "--port"])
+            .arg(&a)
+            .arg("--config")
+            .arg(&cfg)
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    let status = std::fs::read_to_string(format!("/proc/{}/status", child.0.id())).unwrap();
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|k| k.parse().ok())
+        .expect("VmHWM")
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return;
+    }
+    let dpctl = dpctl();
+    let dir = std::env::temp_dir().join(format!("dpctl-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+
+    let n = 3000;
+    let raw = raw_echo_rate(&dir, n);
+    let ours = dpctl_rate(&dpctl, &dir, n);
+    let py = pyprofibus_rate(&dpctl, &dir, n);
+    println!("(a) Data_Exchange over a socat pty pair, 1 slave, {n} transactions");
+    println!("| peer | transactions/s | vs raw pty | vs pyprofibus |");
+    println!("|---|---|---|---|");
+    println!("| raw pty round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | |");
+    println!(
+        "| dpctl master | {ours:.0} | {:.0} % | {:.2}× |",
+        100.0 * ours / raw,
+        ours / py
+    );
+    println!(
+        "| pyprofibus 1.13 master | {py:.0} | {:.0} % | 1× |",
+        100.0 * py / raw
+    );
+
+    let ours_cpu = core_cost(2_000_000);
+    let py_cpu = pyprofibus_cost(20_000);
+    println!();
+    println!("(a') CPU per Data_Exchange, in process");
+    println!("| master | CPU per transaction | ratio |");
+    println!("|---|---|---|");
+    println!(
+        "| profibus ActiveStation<DpMaster> (canned responder) | {:.3} µs | {:.0}× less |",
+        ours_cpu * 1e6,
+        py_cpu / ours_cpu
+    );
+    println!(
+        "| pyprofibus 1.13 (dummy_slave PHY) | {:.2} µs | 1× |",
+        py_cpu * 1e6
+    );
+
+    let rss = rss_125(&dpctl, &dir);
+    println!();
+    println!(
+        "(c) dpctl master with 125 configured slaves: peak RSS {:.1} MiB",
+        rss as f64 / 1024.0
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,733 @@
+//! Baumüller PROFIBUS-DP slave option board PBDP-01 for the Omega
+//! Drive-Line II (ident 0x00D0), after its manual 5.01013.03
+//! (`../shared/seeds/001_d92fd39cc46957e9.txt`, cited as Lnnn; digest in
+//! `../shared/reference/device-checklists.md` §2).
+//!
+//! # Configuration (Chk_Cfg)
+//!
+//! The modules of `BNF_00D0.GSD` (L1462-1547), with these rules
+//! (L569-625, L686): the service data (PKW) module, if present, comes
+//! first; the status/control module must be present and precede the
+//! value modules; at least one setpoint and one actual value; a
+//! standard module (status/control plus values) may only be preceded by
+//! the service data module; a block-consistent module (PKW, status and
+//! values in one) stands alone; at most 8 setpoints and 8 actual values
+//! (one actual value module and one setpoint module, Max_Module = 4).
+//! A violation, or counts other than the emulated PLC's si_NR_WR_VALUE /
+//! si_NR_RD_VALUE when given ([`Omega::with_counts`], L378), is a
+//! configuration fault and sets b_MESSAGE 3 ("setpoint / actual value
+//! configuration error").
+//!
+//! Where the manual contradicts itself:
+//!
+//! - **0x73** is both the service data module and the standard module
+//!   "1 actual value, 1 setpoint" (L630, L649). A 0x73 followed by other
+//!   modules is the service data module (it must come first); a 0x73
+//!   alone is the standard module, since a service data module alone
+//!   (without status/control) would be invalid anyway.
+//! - **Block-consistent modules**: table 5.4.3 (L673-680) gives 4/4 =
+//!   0xFB, 5/5 = 0xFD, 6/6 = 0xFF, 7/7 = 0xC0,209,209, one step off its
+//!   own word counts; the GSD file and the identifier bits give 3/3 =
+//!   0xFB … 7/7 = 0xC0,211,211. We follow the bits (= the GSD).
+//! - **0xC0,81,67 and 0xC0,213,199** ("8 actual values, 1 setpoint"):
+//!   by the standard the first length byte after 0xC0 is the output
+//!   length, so they mean 18 (22) words out and 4 (8) words in, the
+//!   reverse of the names (L632, L679). Every master and the board's
+//!   SPC3 chip size the buffers that way, so the emulation does too: the
+//!   modules carry 8 setpoints and 1 actual value.
+//!
+//! # Cyclic data (L769-837)
+//!
+//! Inputs: [PKE IND PWE1 PWE2] if configured, status word 1 and 2, actual
+//! values 1..n (32 bit each, high word first). Outputs: the same with
+//! control words and setpoints. The emulated drive sets status word 1 bit
+//! 9 "Remote" (L1333-1347) and follows its setpoints: actual value i is
+//! setpoint i (0 where there is no setpoint i); P218 reads actual value
+//! 1.
+//!
+//! # PKW ([`crate::pkw::OMEGA`], L840-1178)
+//!
+//! PNU 0..999 address the V-controller parameters
+//! ([`params::ParamTable`]), 1000..2047 the Omega's DINT array (double
+//! word only, commands 1 and 3, L1632-1633, L1241-1246). Errors:
+//! unknown PNU 0x0008; word/double-word command that does not match the
+//! parameter's format 0x0005 (also command 2 on the array); write to a
+//! protected parameter 0x0001; outside min/max 0x0002; IND ≠ 0 outside
+//! PBE 0x0003; PBE element other than 1, 2, 5, 6 → 0x0104; minimum or
+//! maximum of a double-word parameter → 0x0103 (the PBE response carries
+//! only PWE2); PBE on the array → 0x0102; reserved command codes 0x0080;
+//! a new command without PKE = 0 before → 0x0101 (the manual names the
+//! cause, L1024, but no number). Responses come after a processing delay
+//! (default 5 ms; the drive works "at low priority", L967).
+//!
+//! # Monitoring (L440-490, L1650-1680, L1765-1780, L1905-1925)
+//!
+//! b_MESSAGE: 2 (field bus error) while no Data_Exchange came for
+//! t_TIMEOUT_PB_DP (1000 ms) after data exchange began; 3 after a
+//! configuration fault; 4 while a Slave_Diag was answered during data
+//! exchange (until the next Data_Exchange). b_ERR bit 7 (cyclic data
+//! timeout) when no Data_Exchange came for t_TIMEOUT_CYCLIC (1000 ms),
+//! kept until acknowledged (x_QUIT, [`Omega::quit`]). Changes are `status`
+//! device events.
+//!
+//! The board supports sync and freeze (GSD) and takes its address from
+//! the rotary switches S40/S41 (hex, L498-511): [`profile`].
+
+pub mod params;
+pub mod profile;
+
+use crate::pkw::{self, Command, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
+use crate::ControlInbox;
+use params::ParamTable;
+use profibus_dp::cfg::identifiers;
+use profibus_dp::prm::SetPrm;
+use profibus_dp::slave::{
+    ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
+};
+use profibus_fdl::Instant;
+use std::collections::VecDeque;
+use std::time::Duration;
+
+/// The ident number (BNF_00D0.GSD).
+pub const IDENT: u16 = 0x00D0;
+
+/// `BNF_00D0.GSD` as printed in the manual (Latin-1, with its quirks).
+pub const GSD: &[u8] = crate::gsd_files::BNF_00D0;
+
+/// Length of the User_Prm_Data (GSD `User_Prm_Data_Len=5`).
+pub const USER_PRM_LEN: usize = 5;
+
+/// Most setpoints and actual values.
+pub const MAX_VALUES: usize = 8;
+
+/// First PNU of the Omega's own DINT array.
+pub const OMEGA_ARRAY_FIRST: u16 = 1000;
+/// Entries of the array (1000..=2047).
+pub const OMEGA_ARRAY_LEN: usize = 1048;
+
+/// Default t_TIMEOUT_PB_DP and t_TIMEOUT_CYCLIC.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(1000);
+
+/// Default PKW processing delay.
+pub const DEFAULT_PKW_DELAY: Duration = Duration::from_millis(5);
+
+/// Status word 1 bit 9: remote (PROFIBUS control enabled).
+pub const STATUS_REMOTE: u16 = 1 << 9;
+
+/// b_ERR bit 7: cyclic data transmission timeout.
+pub const B_ERR_CYCLIC_TIMEOUT: u8 = 1 << 7;
+
+const INBOX_PERIOD: Duration = Duration::from_millis(20);
+
+/// The data layout a configuration gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Layout {
+    /// The PKW words come first.
+    pub pkw: bool,
+    /// Number of setpoints (outputs).
+    pub setpoints: usize,
+    /// Number of actual values (inputs).
+    pub actual_values: usize,
+    /// Block-consistent transmission.
+    pub block: bool,
+}
+
+impl Layout {
+    /// Input bytes.
+    pub fn input_bytes(&self) -> usize {
+        self.pkw as usize * PKW_LEN + 4 + 4 * self.actual_values
+    }
+
+    /// Output bytes.
+    pub fn output_bytes(&self) -> usize {
+        self.pkw as usize * PKW_LEN + 4 + 4 * self.setpoints
+    }
+}
+
+/// One module of the board's GSD, as the configuration check sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Module {
+    Service,
+    StatusControl,
+    /// Standard module: status/control with (setpoints, actual values).
+    Standard(usize, usize),
+    /// Block-consistent: PKW, status/control, (setpoints, actual values).
+    Block(usize, usize),
+    Actual(usize),
+    Setpoint(usize),
+}
+
+fn module(raw: &[u8], first: bool, alone: bool) -> Option<Module> {
+    Some(match raw {
+        [0x73] if first && !alone => Module::Service,
+        [0x73] => Module::Standard(1, 1),
+        [0x71] => Module::StatusControl,
+        [0x75] => Module::Standard(2, 2),
+        [0x79] => Module::Standard(4, 4),
+        [0xC0, 0x51, 0x43] => Module::Standard(8, 1),
+        [0xC0, 0x51, 0x51] => Module::Standard(8, 8),
+        [0xF7] => Module::Block(1, 1),
+        [0xF9] => Module::Block(2, 2),
+        [0xFB] => Module::Block(3, 3),
+        [0xFD] => Module::Block(4, 4),
+        [0xFF] => Module::Block(5, 5),
+        [0xC0, 0xD1, 0xD1] => Module::Block(6, 6),
+        [0xC0, 0xD3, 0xD3] => Module::Block(7, 7),
+        [0xC0, 0xD5, 0xC7] => Module::Block(8, 1),
+        [0xC0, 0xD5, 0xD5] => Module::Block(8, 8),
+        [b @ 0x51..=0x5F] if b % 2 == 1 => Module::Actual(((b - 0x51) / 2 + 1) as usize),
+        [b @ 0x61..=0x6F] if b % 2 == 1 => Module::Setpoint(((b - 0x61) / 2 + 1) as usize),
+        _ => return None,
+    })
+}
+
+/// Check a configuration against the board's rules (module docs).
+pub fn check_configuration(cfg: &[u8]) -> Result<Layout, String> {
+    let mut raws: Vec<&[u8]> = vec![];
+    for id in identifiers(cfg) {
+        raws.push(id.map_err(|e| e.to_string())?.raw);
+    }
+    if raws.is_empty() {
+        return Err("empty configuration".into());
+    }
+    let alone = raws.len() == 1;
+    let mut mods = vec![];
+    for (i, r) in raws.iter().enumerate() {
+        mods.push(module(r, i == 0, alone).ok_or_else(|| {
+            format!(
+                "module {i} ({}) is not a module of BNF_00D0.GSD",
+                r.iter()
+                    .map(|b| format!("0x{b:02X}"))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            )
+        })?);
+    }
+    if let [Module::Block(sp, av)] = mods[..] {
+        return Ok(Layout {
+            pkw: true,
+            setpoints: sp,
+            actual_values: av,
+            block: true,
+        });
+    }
+    if mods.iter().any(|m| matches!(m, Module::Block(..))) {
+        return Err("a block-consistent module must not be combined with other modules".into());
+    }
+    let pkw = mods[0] == Module::Service;
+    let rest = &mods[pkw as usize..];
+    if let [Module::Standard(sp, av)] = rest[..] {
+        return Ok(Layout {
+            pkw,
+            setpoints: sp,
+            actual_values: av,
+            block: false,
+        });
+    }
+    if rest.iter().any(|m| matches!(m, Module::Standard(..))) {
+        return Err("a standard module may only be preceded by the service data module".into());
+    }
+    if rest.first() != Some(&Module::StatusControl) {
+        return Err(
+            "the status / control module must be present, after the service data module and before the value modules"
+                .into(),
+        );
+    }
+    let (mut sp, mut av) = (0usize, 0usize);
+    for m in &rest[1..] {
+        match *m {
+            Module::Actual(n) if av == 0 => av = n,
+            Module::Setpoint(n) if sp == 0 => sp = n,
+            Module::Actual(_) | Module::Setpoint(_) => {
+                return Err("more than one actual value or setpoint module".into())
+            }
+            Module::StatusControl => return Err("a second status / control module".into()),
+            Module::Service => unreachable!("0x73 after the first module is a standard module"),
+            Module::Standard(..) | Module::Block(..) => unreachable!("handled above"),
+        }
+    }
+    if sp == 0 || av == 0 {
+        return Err("at least one setpoint and one actual value must be configured".into());
+    }
+    Ok(Layout {
+        pkw,
+        setpoints: sp,
+        actual_values: av,
+        block: false,
+    })
+}
+
+/// The drive's parameters: the PKW server.
+#[derive(Debug, Clone)]
+struct Drive {
+    table: ParamTable,
+    values: Vec<i64>,
+    array: Vec<u32>,
+    actual1: Option<u32>,
+}
+
+const E_CANNOT_CHANGE: u16 = 0x0001;
+const E_MIN_MAX: u16 = 0x0002;
+const E_INDEX: u16 = 0x0003;
+const E_TYPE: u16 = 0x0005;
+const E_PNU: u16 = 0x0008;
+const E_UNINTERPRETABLE: u16 = 0x0080;
+const E_NOT_IMPLEMENTED: u16 = 0x0102;
+const E_TOO_LARGE: u16 = 0x0103;
+const E_NO_INFO: u16 = 0x0104;
+
+/// P218 "L rev actual value".
+const P_REV_ACTUAL: u16 = 218;
+
+impl PkwServer for Drive {
+    fn execute(&mut self, _now: Instant, pnu: u16, ind: u16, cmd: Command) -> Result<Reply, u16> {
+        if matches!(cmd, Command::Unsupported(_)) {
+            return Err(E_UNINTERPRETABLE);
+        }
+        let plain = !matches!(cmd, Command::Describe(_));
+        if plain && ind != 0 {
+            return Err(E_INDEX);
+        }
+        if pnu >= OMEGA_ARRAY_FIRST {
+            let i = (pnu - OMEGA_ARRAY_FIRST) as usize;
+            return match cmd {
+                Command::Read => Ok(Reply::Dword(self.array[i])),
+                Command::WriteDword(v) => {
+                    self.array[i] = v;
+                    Ok(Reply::Dword(v))
+                }
+                Command::WriteWord(_) => Err(E_TYPE),
+                _ => Err(E_NOT_IMPLEMENTED),
+            };
+        }
+        let Some(idx) = self.table.params.iter().position(|p| p.pnu == pnu) else {
+            return Err(E_PNU);
+        };
+        let p = &self.table.params[idx];
+        let value = if pnu == P_REV_ACTUAL {
+            self.actual1.map_or(self.values[idx], |v| p.from_raw(v))
+        } else {
+            self.values[idx]
+        };
+        match cmd {
+            Command::Read if p.dword => Ok(Reply::Dword(p.raw(value))),
+            Command::Read => Ok(Reply::Word(p.raw(value) as u16)),
+            Command::WriteWord(_) if p.dword => Err(E_TYPE),
+            Command::WriteDword(_) if !p.dword => Err(E_TYPE),
+            Command::WriteWord(_) | Command::WriteDword(_) if p.protected => Err(E_CANNOT_CHANGE),
+            Command::WriteWord(w) => {
+                let v = p.from_raw(w as u32);
+                if v < p.min || v > p.max {
+                    return Err(E_MIN_MAX);
+                }
+                self.values[idx] = v;
+                Ok(Reply::Word(w))
+            }
+            Command::WriteDword(d) => {
+                let v = p.from_raw(d);
+                if v < p.min || v > p.max {
+                    return Err(E_MIN_MAX);
+                }
+                self.values[idx] = v;
+                Ok(Reply::Dword(d))
+            }
+            Command::Describe(1) => Ok(Reply::Element(p.attribute())),
+            Command::Describe(2) => Ok(Reply::Element(p.info())),
+            Command::Describe(5 | 6) if p.dword => Err(E_TOO_LARGE),
+            Command::Describe(5) => Ok(Reply::Element(p.raw(p.min) as u16)),
+            Command::Describe(6) => Ok(Reply::Element(p.raw(p.max) as u16)),
+            Command::Describe(_) => Err(E_NO_INFO),
+            _ => Err(E_UNINTERPRETABLE),
+        }
+    }
+}
+
+/// The Omega Drive-Line II option board; see the module docs.
+#[derive(Debug)]
+pub struct Omega {
+    drive: Drive,
+    counts: Option<(usize, usize)>,
+    cfg: Vec<u8>,
+    layout: Option<Layout>,
+    engine: PkwEngine,
+    control: [u16; 2],
+    setpoints: [u32; MAX_VALUES],
+    b_message: i8,
+    b_err: u8,
+    t_pb_dp: Duration,
+    t_cyclic: Duration,
+    last_exchange: Option<Instant>,
+    events: VecDeque<DeviceEvent>,
+    inbox: Option<ControlInbox>,
+    next_inbox: Instant,
+}
+
+/// The default Get_Cfg before a configuration: service data,
+/// status/control, 2 actual values, 2 setpoints.
+const DEFAULT_CFG: [u8; 4] = [0x73, 0x71, 0x53, 0x63];
+
+impl Omega {
+    /// A board with the V-controller parameter set `table`, accepting any
+    /// valid configuration.
+    pub fn new(table: ParamTable) -> Omega {
+        let values = table.params.iter().map(|p| p.default).collect();
+        Omega {
+            drive: Drive {
+                table,
+                values,
+                array: vec![0; OMEGA_ARRAY_LEN],
+                actual1: None,
+            },
+            counts: None,
+            cfg: DEFAULT_CFG.to_vec(),
+            layout: None,
+            engine: PkwEngine::new(&pkw::OMEGA, DEFAULT_PKW_DELAY),
+            control: [0; 2],
+            setpoints: [0; MAX_VALUES],
+            b_message: 0,
+            b_err: 0,
+            t_pb_dp: DEFAULT_TIMEOUT,
+            t_cyclic: DEFAULT_TIMEOUT,
+            last_exchange: None,
+            events: VecDeque::new(),
+            inbox: None,
+            next_inbox: Instant::ZERO,
+        }
+    }
+
+    /// The board with the shipped default parameter set: what `dpctl
+    /// demo` runs.
+    pub fn with_defaults() -> Omega {
+        Omega::new(ParamTable::default_table())
+    }
+
+    /// Require exactly `setpoints` setpoints and `actual_values` actual
+    /// values (si_NR_WR_VALUE / si_NR_RD_VALUE, 1..=8).
+    pub fn with_counts(mut self, setpoints: usize, actual_values: usize) -> Result<Omega, String> {
+        if !(1..=MAX_VALUES).contains(&setpoints) {
+            return Err(format!(
+                "si_NR_WR_VALUE {setpoints} outside 1..8 (b_ERR bit 5, setpoint number error)"
+            ));
+        }
+        if !(1..=MAX_VALUES).contains(&actual_values) {
+            return Err(format!(
+                "si_NR_RD_VALUE {actual_values} outside 1..8 (b_ERR bit 6, actual value number error)"
+            ));
+        }
+        self.counts = Some((setpoints, actual_values));
+        Ok(self)
+    }
+
+    /// Set t_TIMEOUT_PB_DP and t_TIMEOUT_CYCLIC (zero: off).
+    pub fn with_timeouts(mut self, pb_dp: Duration, cyclic: Duration) -> Omega {
+        self.t_pb_dp = pb_dp;
+        self.t_cyclic = cyclic;
+        self
+    }
+
+    /// Set the PKW processing delay.
+    pub fn with_pkw_delay(mut self, delay: Duration) -> Omega {
+        self.engine = PkwEngine::new(&pkw::OMEGA, delay);
+        self
+    }
+
+    /// Read control commands from `inbox` (see [`Omega::control`]).
+    pub fn with_inbox(mut self, inbox: ControlInbox) -> Omega {
+        self.inbox = Some(inbox);
+        self
+    }
+
+    /// The layout of the accepted configuration.
+    pub fn layout(&self) -> Option<Layout> {
+        self.layout
+    }
+
+    /// b_MESSAGE.
+    pub fn b_message(&self) -> i8 {
+        self.b_message
+    }
+
+    /// b_ERR.
+    pub fn b_err(&self) -> u8 {
+        self.b_err
+    }
+
+    /// Control words 1 and 2 last received.
+    pub fn control_words(&self) -> [u16; 2] {
+        self.control
+    }
+
+    /// Setpoint `i` (0-based) last received.
+    pub fn setpoint(&self, i: usize) -> Option<u32> {
+        self.setpoints.get(i).copied()
+    }
+
+    /// The value of V-controller parameter `pnu`.
+    pub fn parameter(&self, pnu: u16) -> Option<i64> {
+        let i = self.drive.table.params.iter().position(|p| p.pnu == pnu)?;
+        Some(self.drive.values[i])
+    }
+
+    /// Entry `pnu` (1000..=2047) of the Omega's DINT array.
+    pub fn omega_value(&self, pnu: u16) -> Option<i32> {
+        let i = pnu.checked_sub(OMEGA_ARRAY_FIRST)? as usize;
+        self.drive.array.get(i).map(|v| *v as i32)
+    }
+
+    /// x_QUIT: acknowledge b_ERR bits whose cause is gone.
+    pub fn quit(&mut self) {
+        if self.b_err != 0 {
+            self.b_err = 0;
+            self.report();
+        }
+    }
+
+    /// b_MESSAGE and b_ERR in words.
+    pub fn status_text(&self) -> String {
+        let m = match self.b_message {
+            0 => "no warning, no error",
+            1 => "general error",
+            2 => "field bus error",
+            3 => "setpoint / actual value configuration error",
+            4 => "diagnostic function active",
+            _ => "reserved",
+        };
+        let mut s = format!(
+            "b_MESSAGE {} ({m}), b_ERR 16#{:02X}",
+            self.b_message, self.b_err
+        );
+        if self.b_err & B_ERR_CYCLIC_TIMEOUT != 0 {
+            s.push_str(" (cyclic data transmission timeout)");
+        }
+        s
+    }
+
+    /// Execute a control command: `status`, `quit` (x_QUIT), `get P`.
+    pub fn control(&mut self, line: &str) -> Result<String, String> {
+        let mut w = line.split_whitespace();
+        match w.next().unwrap_or("") {
+            "status" => Ok(self.status_text()),
+            "quit" => {
+                self.quit();
+                Ok(self.status_text())
+            }
+            "get" => {
+                let p: u16 = w
+                    .next()
+                    .and_then(|p| p.trim_start_matches('P').parse().ok())
+                    .ok_or("give a parameter number")?;
+                if p >= OMEGA_ARRAY_FIRST {
+                    self.omega_value(p)
+                        .map(|v| format!("P{p} = {v}"))
+                        .ok_or_else(|| format!("no parameter {p}"))
+                } else {
+                    self.parameter(p)
+                        .map(|v| format!("P{p:03} = {v}"))
+                        .ok_or_else(|| format!("no parameter {p}"))
+                }
+            }
+            other => Err(format!("unknown command `{other}` (status, quit, get P)")),
+        }
+    }
+
+    fn note(&mut self, kind: &'static str, text: String) {
+        if self.events.len() < 64 {
+            self.events.push_back(DeviceEvent { kind, text });
+        }
+    }
+
+    fn report(&mut self) {
+        let t = self.status_text();
+        self.note("status", t);
+    }
+
+    fn set_message(&mut self, m: i8) {
+        if self.b_message != m {
+            self.b_message = m;
+            self.report();
+        }
+    }
+
+    fn deadlines(&self) -> (Option<Instant>, Option<Instant>) {
+        let Some(last) = self.last_exchange else {
+            return (None, None);
+        };
+        let pb = (!self.t_pb_dp.is_zero() && self.b_message != 2).then(|| last + self.t_pb_dp);
+        let cyc = (!self.t_cyclic.is_zero() && self.b_err & B_ERR_CYCLIC_TIMEOUT == 0)
+            .then(|| last + self.t_cyclic);
+        (pb, cyc)
+    }
+}
+
+fn be32(b: &[u8]) -> u32 {
+    u32::from_be_bytes([b[0], b[1], b[2], b[3]])
+}
+
+impl Device for Omega {
+    fn ident_number(&self) -> u16 {
+        IDENT
+    }
+
+    fn real_cfg(&self) -> &[u8] {
+        &self.cfg
+    }
+
+    fn features(&self) -> Features {
+        Features {
+            sync: true,
+            freeze: true,
+            max_diag_len: 16,
+            ..Features::default()
+        }
+    }
+
+    fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        if prm.user_prm_data.len() != USER_PRM_LEN {
+            return Err(format!(
+                "User_Prm_Data has {} bytes, the GSD gives {USER_PRM_LEN}",
+                prm.user_prm_data.len()
+            )
+            .into());
+        }
+        Ok(())
+    }
+
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        let checked = check_configuration(cfg).and_then(|l| match self.counts {
+            Some((sp, av)) if (sp, av) != (l.setpoints, l.actual_values) => Err(format!(
+                "the master configured {} setpoints and {} actual values, the drive has {sp} and {av} (si_NR_WR_VALUE / si_NR_RD_VALUE)",
+                l.setpoints, l.actual_values
+            )),
+            _ => Ok(l),
+        });
+        match checked {
+            Ok(l) => {
+                self.layout = Some(l);
+                self.cfg = cfg.to_vec();
+                self.engine.reset();
+                if self.b_message == 3 {
+                    self.set_message(0);
+                }
+                Ok(IoLayout {
+                    inputs: l.input_bytes(),
+                    outputs: l.output_bytes(),
+                })
+            }
+            Err(e) => {
+                self.layout = None;
+                self.set_message(3);
+                Err(
+                    format!("setpoint / actual value configuration error (b_MESSAGE 3): {e}")
+                        .into(),
+                )
+            }
+        }
+    }
+
+    fn write_outputs(&mut self, now: Instant, outputs: &[u8]) {
+        let Some(l) = self.layout else { return };
+        self.last_exchange = Some(now);
+        if matches!(self.b_message, 2 | 4) {
+            self.set_message(0);
+        }
+        let mut at = 0;
+        if l.pkw {
+            if let Some(req) = Pkw::parse(outputs) {
+                if let Some(job) = self.engine.on_request(now, req, &mut self.drive) {
+                    self.note("pkw", format!("PKW {} -> {}", job.request, job.response));
+                }
+            }
+            at = PKW_LEN;
+        }
+        let Some(cw) = outputs.get(at..at + 4) else {
+            return;
+        };
+        self.control = [
+            u16::from_be_bytes([cw[0], cw[1]]),
+            u16::from_be_bytes([cw[2], cw[3]]),
+        ];
+        for i in 0..l.setpoints {
+            if let Some(b) = outputs.get(at + 4 + 4 * i..at + 8 + 4 * i) {
+                self.setpoints[i] = be32(b);
+            }
+        }
+        self.drive.actual1 = (l.setpoints > 0).then_some(self.setpoints[0]);
+    }
+
+    fn read_inputs(&mut self, now: Instant, inputs: &mut [u8]) {
+        let Some(l) = self.layout else { return };
+        let mut at = 0;
+        if l.pkw {
+            self.engine.response(now).emit(inputs);
+            at = PKW_LEN;
+        }
+        let status1 = STATUS_REMOTE;
+        let status2 = 0u16;
+        if let Some(sw) = inputs.get_mut(at..at + 4) {
+            sw[..2].copy_from_slice(&status1.to_be_bytes());
+            sw[2..].copy_from_slice(&status2.to_be_bytes());
+        }
+        for i in 0..l.actual_values {
+            let v = if i < l.setpoints {
+                self.setpoints[i]
+            } else {
+                0
+            };
+            if let Some(b) = inputs.get_mut(at + 4 + 4 * i..at + 8 + 4 * i) {
+                b.copy_from_slice(&v.to_be_bytes());
+            }
+        }
+    }
+
+    fn clear_outputs(&mut self, _now: Instant, _why: ClearReason) {
+        self.control = [0; 2];
+        self.setpoints = [0; MAX_VALUES];
+        self.drive.actual1 = None;
+        self.engine.reset();
+    }
+
+    fn diagnosis(&mut self, _now: Instant, _diag: &mut DiagWriter<'_>) {
+        // "Process data communication is halted for this function" (L1182):
+        // a diagnosis read during data exchange is b_MESSAGE 4.
+        if self.last_exchange.is_some() && self.layout.is_some() && self.b_message == 0 {
+            self.set_message(4);
+        }
+    }
+
+    fn poll_event(&mut self) -> Option<DeviceEvent> {
+        self.events.pop_front()
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        let (pb, cyc) = self.deadlines();
+        let inbox = self.inbox.as_ref().map(|_| self.next_inbox);
+        // The PKW engine needs no wake-up: a held response is shown by the
+        // first read_inputs after its time.
+        [pb, cyc, inbox].into_iter().flatten().min()
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        let (pb, cyc) = self.deadlines();
+        if pb.is_some_and(|t| now >= t) {
+            self.set_message(2);
+        }
+        if cyc.is_some_and(|t| now >= t) {
+            self.b_err |= B_ERR_CYCLIC_TIMEOUT;
+            self.report();
+        }
+        if let Some(inbox) = self.inbox.clone() {
+            if now >= self.next_inbox {
+                self.next_inbox = now + INBOX_PERIOD;
+                while let Some(line) = inbox.take() {
+                    match self.control(line.trim()) {
+                        Ok(t) => self.note("control", t),
+                        Err(e) => self.note("control_error", e),
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

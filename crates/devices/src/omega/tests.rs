@@ -1,0 +1,214 @@
+use super::*;
+use crate::pkw::Pkw;
+
+const T0: Instant = Instant::ZERO;
+
+fn ms(n: u64) -> Instant {
+    T0 + Duration::from_millis(n)
+}
+
+fn cycle(d: &mut Omega, now: Instant, out: &[u8], inputs: usize) -> Vec<u8> {
+    d.write_outputs(now, out);
+    let mut i = vec![0u8; inputs];
+    d.read_inputs(now, &mut i);
+    i
+}
+
+/// Run one PKW job on a board configured 0x73 0x71 0x51 0x61; returns
+/// the response words.
+fn job(d: &mut Omega, req: Pkw) -> Pkw {
+    let l = d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).unwrap();
+    let mut out = vec![0u8; l.outputs];
+    cycle(d, ms(0), &out, l.inputs);
+    req.emit(&mut out);
+    let i = cycle(d, ms(1), &out, l.inputs);
+    assert_eq!(Pkw::parse(&i), Some(Pkw::ZERO), "processing delay");
+    let i = cycle(d, ms(10), &out, l.inputs);
+    Pkw::parse(&i).unwrap()
+}
+
+#[test]
+fn configuration_rules() {
+    let ok = |c: &[u8]| check_configuration(c).unwrap();
+    let l = ok(&[0x73, 0x71, 0x51, 0x65]);
+    assert_eq!(
+        (l.input_bytes(), l.output_bytes()),
+        (16, 24),
+        "§5.5: 8 AI, 12 AO"
+    );
+    // §6.1: A, B and C give the same layout.
+    let a = ok(&[0x73, 0x75]);
+    let b = ok(&[0x73, 0x71, 0x53, 0x63]);
+    let c = ok(&[0xF9]);
+    for l in [a, b, c] {
+        assert_eq!((l.pkw, l.setpoints, l.actual_values), (true, 2, 2));
+        assert_eq!((l.input_bytes(), l.output_bytes()), (20, 20));
+    }
+    assert!(!ok(&[0x73]).pkw, "a lone 0x73 is the 1/1 standard module");
+    assert_eq!(ok(&[0x73]).input_bytes(), 8);
+    let l = ok(&[0xC0, 0x51, 0x43]);
+    assert_eq!(
+        (l.setpoints, l.actual_values),
+        (8, 1),
+        "by the standard: 36 B out, 8 in"
+    );
+    assert_eq!((l.output_bytes(), l.input_bytes()), (36, 8));
+    assert_eq!(ok(&[0xC0, 0xD5, 0xD5]).input_bytes(), 44);
+    assert_eq!(ok(&[0xFB]).setpoints, 3);
+    for (bad, why) in [
+        (&[0x71, 0x73, 0x51, 0x61][..], "standard module"),
+        (&[0x73, 0x51, 0x61], "status / control"),
+        (&[0x71, 0x51], "at least one setpoint"),
+        (&[0x71, 0x61], "at least one setpoint"),
+        (&[0xF9, 0x51], "block-consistent"),
+        (&[0x73, 0x75, 0x51], "standard module"),
+        (&[0x71, 0x51, 0x53, 0x61], "more than one"),
+        (&[0x71, 0x51, 0x61, 0x71], "second status"),
+        (&[0x71, 0x52, 0x61], "not a module"),
+        (&[], "empty"),
+    ] {
+        let e = check_configuration(bad).unwrap_err();
+        assert!(e.contains(why), "{bad:02X?}: {e}");
+    }
+    // A fault sets b_MESSAGE 3; the drive's own counts are checked.
+    let mut d = Omega::with_defaults().with_counts(2, 2).unwrap();
+    assert!(d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).is_err());
+    assert_eq!(d.b_message(), 3);
+    assert!(d.check_cfg(&[0xF9]).is_ok());
+    assert_eq!(d.b_message(), 0);
+    assert!(Omega::with_defaults().with_counts(9, 1).is_err());
+}
+
+#[test]
+fn cyclic_data_high_word_first() {
+    let mut d = Omega::with_defaults();
+    let l = d.check_cfg(&[0x71, 0x53, 0x61]).unwrap();
+    assert_eq!((l.inputs, l.outputs), (12, 8));
+    let i = cycle(&mut d, T0, &[0x04, 0x7F, 0, 1, 0x12, 0x34, 0x56, 0x78], 12);
+    assert_eq!(d.control_words(), [0x047F, 0x0001]);
+    assert_eq!(d.setpoint(0), Some(0x1234_5678));
+    // Status word 1 with Remote; AV1 follows SP1; AV2 has no setpoint.
+    assert_eq!(i, [0x02, 0x00, 0, 0, 0x12, 0x34, 0x56, 0x78, 0, 0, 0, 0]);
+}
+
+#[test]
+fn pkw_examples_of_the_manual() {
+    // Read P218 (double word): 10DA → 20DA, value in PWE1/PWE2 (L1028-1047);
+    // it follows setpoint 1, here 0.
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(1, 218, 0, 0)).to_string(),
+        "20DA 0000 0000 0000"
+    );
+    // P127 := 4: 207F 0000 0000 0004 → 107F 0000 0000 0004 (L1080-1097).
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(2, 127, 0, 4)).to_string(),
+        "107F 0000 0000 0004"
+    );
+    assert_eq!(d.parameter(127), Some(4));
+    // Maximum of P126: 407E 0006 → 307E 0006 0000 000F (L1161-1178).
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(4, 126, 6, 0)).to_string(),
+        "307E 0006 0000 000F"
+    );
+    // P003 = 0x0064 (L1901-1906).
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(1, 3, 0, 0)).to_string(),
+        "1003 0000 0000 0064"
+    );
+    // PNU 1000 := 0x12345678, read back (L1859-1870).
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(3, 1000, 0, 0x1234_5678)).to_string(),
+        "23E8 0000 1234 5678"
+    );
+    assert_eq!(
+        job(&mut d, Pkw::new(1, 1000, 0, 0)).to_string(),
+        "23E8 0000 1234 5678"
+    );
+    assert_eq!(d.omega_value(1000), Some(0x1234_5678));
+}
+
+#[test]
+fn pkw_error_table() {
+    let cases: [(Pkw, &str); 12] = [
+        (Pkw::new(1, 999, 0, 0), "73E7 0000 0000 0008"),
+        (Pkw::new(2, 218, 0, 1), "70DA 0000 0000 0005"),
+        (Pkw::new(3, 127, 0, 1), "707F 0000 0000 0005"),
+        (Pkw::new(2, 1, 0, 1), "7001 0000 0000 0001"),
+        (Pkw::new(2, 126, 0, 0x10), "707E 0000 0000 0002"),
+        (Pkw::new(1, 126, 1, 0), "707E 0000 0000 0003"),
+        (Pkw::new(4, 126, 3, 0), "707E 0003 0000 0104"),
+        (Pkw::new(4, 218, 6, 0), "70DA 0006 0000 0103"),
+        (Pkw::new(4, 1000, 1, 0), "73E8 0001 0000 0102"),
+        (Pkw::new(2, 1000, 0, 1), "73E8 0000 0000 0005"),
+        (Pkw::new(5, 3, 0, 0), "7003 0000 0000 0080"),
+        (Pkw::new(4, 127, 1, 0), "307F 0001 0000 0005"),
+    ];
+    for (req, want) in cases {
+        let mut d = Omega::with_defaults();
+        assert_eq!(job(&mut d, req).to_string(), want, "{req}");
+    }
+    let mut d = Omega::with_defaults();
+    assert_eq!(
+        job(&mut d, Pkw::new(4, 127, 2, 0)).pwe2,
+        0x0008,
+        "info: STORE"
+    );
+    assert_eq!(
+        job(&mut d, Pkw::new(4, 218, 2, 0)).pwe2,
+        0x0001,
+        "info: protected"
+    );
+}
+
+#[test]
+fn a_new_command_needs_pke_zero_first() {
+    let mut d = Omega::with_defaults();
+    let l = d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).unwrap();
+    let mut out = vec![0u8; l.outputs];
+    Pkw::new(1, 3, 0, 0).emit(&mut out);
+    cycle(&mut d, ms(0), &out, l.inputs);
+    Pkw::new(2, 127, 0, 4).emit(&mut out);
+    cycle(&mut d, ms(10), &out, l.inputs);
+    let i = cycle(&mut d, ms(20), &out, l.inputs);
+    assert_eq!(Pkw::parse(&i).unwrap().to_string(), "707F 0000 0000 0101");
+    assert_eq!(d.parameter(127), Some(0), "not executed");
+}
+
+#[test]
+fn monitoring_b_message_and_b_err() {
+    let mut d = Omega::with_defaults();
+    d.check_cfg(&[0x71, 0x51, 0x61]).unwrap();
+    assert_eq!(
+        d.poll_timeout(),
+        None,
+        "nothing to watch before data exchange"
+    );
+    cycle(&mut d, ms(0), &[0; 8], 8);
+    assert_eq!(d.poll_timeout(), Some(ms(1000)));
+    d.handle_timeout(ms(1000));
+    assert_eq!(d.b_message(), 2);
+    assert_eq!(d.b_err(), B_ERR_CYCLIC_TIMEOUT);
+    assert!(d.status_text().contains("field bus error"));
+    cycle(&mut d, ms(1100), &[0; 8], 8);
+    assert_eq!(d.b_message(), 0, "data flow again");
+    assert_eq!(d.b_err(), B_ERR_CYCLIC_TIMEOUT, "kept until x_QUIT");
+    assert_eq!(
+        d.control("quit").unwrap(),
+        "b_MESSAGE 0 (no warning, no error), b_ERR 16#00"
+    );
+    let mut w = [0u8; 16];
+    d.diagnosis(ms(1101), &mut DiagWriter::new(&mut w));
+    assert_eq!(d.b_message(), 4, "diagnosis read during data exchange");
+    let kinds: Vec<&str> = std::iter::from_fn(|| d.poll_event())
+        .map(|e| e.kind)
+        .collect();
+    assert!(
+        kinds.iter().all(|k| *k == "status") && kinds.len() >= 4,
+        "{kinds:?}"
+    );
+}
