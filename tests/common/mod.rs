@@ -1,15 +1,17 @@
-//! Helpers for end-to-end tests: the `dpctl` binary, socat pty pairs,
-//! the Python venv with pyprofibus, child processes that are stopped and
-//! cleaned up even when a test fails.
+//! Helpers for end-to-end tests: the `dpctl` binary (built on first use),
+//! socat pty pairs, `dpctl bus` in a temp dir, the Python venv with
+//! pyprofibus, child processes that are stopped and cleaned up even when a
+//! test fails.
 //!
 //! Missing peers (socat, the venv) make a test FAIL with a message that
 //! says how to install them (`scripts/setup-test-env`); they never skip.
 
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 /// The repository root.
@@ -17,25 +19,69 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// `target/<profile>/dpctl`, next to this test binary's `deps` directory.
+/// Path of the `dpctl` binary, built on first use.
+///
+/// The binary lives next to the test executable's `deps/` directory
+/// (`target/<profile>/dpctl`). It is (re)built with `cargo build -p dpctl`
+/// for that profile, so a test never runs a stale binary; when cargo is
+/// not available (tests run by hand) an existing binary is used.
 pub fn dpctl() -> PathBuf {
-    let exe = std::env::current_exe().expect("test binary path");
-    let dir = exe
-        .parent()
-        .and_then(|d| d.parent())
-        .expect("target/<profile>/deps");
-    let p = dir.join(format!("dpctl{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        p.exists(),
-        "{} is missing: build it with `cargo build -p dpctl` (cargo test --workspace does)",
-        p.display()
-    );
-    p
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let exe = std::env::current_exe().expect("test executable path");
+        // target/<profile>/deps/<test> → target/<profile>
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable in target/<profile>/deps")
+            .to_path_buf();
+        let bin = profile_dir.join(format!("dpctl{}", std::env::consts::EXE_SUFFIX));
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args(["build", "--quiet", "-p", "dpctl", "--bin", "dpctl"]);
+        match profile_dir.file_name().and_then(|n| n.to_str()) {
+            Some("debug") => {}
+            Some("release") => {
+                cmd.arg("--release");
+            }
+            Some(other) => {
+                cmd.args(["--profile", other]);
+            }
+            None => {}
+        }
+        // Build into the same target directory as the tests.
+        if let Some(target) = profile_dir.parent() {
+            cmd.env("CARGO_TARGET_DIR", target);
+        }
+        cmd.current_dir(env!("CARGO_MANIFEST_DIR"));
+        match cmd.status() {
+            Ok(s) if s.success() => {}
+            Ok(s) => panic!("building dpctl failed ({s})"),
+            Err(e) if bin.exists() => {
+                eprintln!("cannot run cargo ({e}); using {}", bin.display())
+            }
+            Err(e) => panic!("cannot run cargo to build dpctl: {e}"),
+        }
+        assert!(bin.exists(), "{} missing after the build", bin.display());
+        bin
+    })
+    .clone()
 }
 
 /// Fail with how to set up the test environment.
 pub fn need(what: &str) -> ! {
     panic!("{what} is missing: run scripts/setup-test-env (scripts/test does it)");
+}
+
+/// Fail the test with a clear message when `tool` is not installed.
+/// External peers are never skipped silently.
+pub fn require(tool: &str) {
+    let found = std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).any(|d| d.join(tool).is_file()))
+        .unwrap_or(false);
+    if !found {
+        need(&format!("`{tool}` (required by this test)"));
+    }
 }
 
 /// The venv's Python with pyprofibus and pyserial importable.
@@ -82,10 +128,34 @@ impl Drop for TempDir {
     }
 }
 
+/// Output of a finished process.
+#[derive(Debug)]
+pub struct Output {
+    /// Exit status.
+    pub status: ExitStatus,
+    /// Standard output.
+    pub stdout: String,
+    /// Standard error.
+    pub stderr: String,
+}
+
 /// A child process killed (by its pid) on drop.
 pub struct Proc {
     pub child: Option<Child>,
     pub name: String,
+    /// [`Proc::spawn_captured`]: threads collecting stdout and stderr
+    /// while the process runs (so it never blocks on a full pipe).
+    captured: Option<(Drain, Drain)>,
+}
+
+type Drain = std::thread::JoinHandle<String>;
+
+fn drain(mut r: impl Read + Send + 'static) -> Drain {
+    std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = r.read_to_end(&mut v);
+        String::from_utf8_lossy(&v).into_owned()
+    })
 }
 
 impl Proc {
@@ -96,11 +166,77 @@ impl Proc {
         Proc {
             child: Some(child),
             name: name.to_string(),
+            captured: None,
         }
     }
 
     pub fn pid(&self) -> u32 {
         self.child.as_ref().unwrap().id()
+    }
+
+    /// Spawn `cmd` with stdout and stderr captured (see [`Proc::finish`]).
+    pub fn spawn_captured(mut cmd: Command) -> Proc {
+        let name = format!("{cmd:?}");
+        cmd.stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        let mut p = Proc::spawn(&name, &mut cmd);
+        let c = p.child.as_mut().expect("just spawned");
+        let out = drain(c.stdout.take().expect("piped"));
+        let err = drain(c.stderr.take().expect("piped"));
+        p.captured = Some((out, err));
+        p
+    }
+
+    /// Send signal number `sig` (e.g. 2 SIGINT, 15 SIGTERM).
+    pub fn signal(&self, sig: i32) {
+        let ok = Command::new("kill")
+            .arg(format!("-{sig}"))
+            .arg(self.pid().to_string())
+            .status()
+            .map(|s| s.success())
+            .unwrap_or(false);
+        assert!(ok, "cannot signal {}", self.name);
+    }
+
+    /// Whether the process has exited.
+    pub fn exited(&mut self) -> bool {
+        self.child
+            .as_mut()
+            .is_none_or(|c| c.try_wait().ok().flatten().is_some())
+    }
+
+    /// Wait for the end (at most `timeout`, then kill and fail) and collect
+    /// the captured output.
+    pub fn finish(mut self, timeout: Duration) -> Output {
+        let mut child = self.child.take().expect("running");
+        let deadline = Instant::now() + timeout;
+        let status = loop {
+            if let Some(s) = child.try_wait().expect("try_wait") {
+                break s;
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{} did not exit within {timeout:?}", self.name);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let (stdout, stderr) = match self.captured.take() {
+            Some((o, e)) => (o.join().unwrap_or_default(), e.join().unwrap_or_default()),
+            None => (String::new(), String::new()),
+        };
+        Output {
+            status,
+            stdout,
+            stderr,
+        }
+    }
+
+    /// SIGTERM, then [`Proc::finish`] within 10 s.
+    pub fn stop(self) -> Output {
+        self.signal(15);
+        self.finish(Duration::from_secs(10))
     }
 
     /// Send SIGTERM and wait up to `timeout` for the exit status.
@@ -207,5 +343,97 @@ impl Lines {
             self.1.push(l);
         }
         &self.1
+    }
+}
+
+/// Run `dpctl` with `args` to completion (at most 30 s).
+pub fn run_dpctl(args: &[&str]) -> Output {
+    let mut cmd = Command::new(dpctl());
+    cmd.args(args);
+    Proc::spawn_captured(cmd).finish(Duration::from_secs(30))
+}
+
+/// Wait until `cond` holds, polling every 5 ms; panic after `timeout`.
+pub fn wait_for(what: &str, timeout: Duration, mut cond: impl FnMut() -> bool) {
+    let deadline = Instant::now() + timeout;
+    while !cond() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// A running `dpctl bus` whose links live in a temp dir.
+pub struct Bus {
+    /// The hub process.
+    pub proc: Proc,
+    /// The link prefix.
+    pub prefix: PathBuf,
+    /// Number of stations.
+    pub stations: usize,
+    dir: TempDir,
+}
+
+impl Bus {
+    /// Start `dpctl bus --stations N --link <tmp>/st` with `extra`
+    /// arguments and wait until every link exists.
+    pub fn start(stations: usize, extra: &[&str]) -> Bus {
+        let dir = TempDir::new("bus");
+        let prefix = dir.path("st");
+        let mut cmd = Command::new(dpctl());
+        cmd.arg("bus")
+            .args(["--stations", &stations.to_string()])
+            .arg("--link")
+            .arg(&prefix)
+            .args(extra);
+        let mut proc = Proc::spawn_captured(cmd);
+        let bus_links: Vec<PathBuf> = (0..stations)
+            .map(|i| PathBuf::from(format!("{}{i}", prefix.display())))
+            .collect();
+        wait_for("the bus links", Duration::from_secs(20), || {
+            assert!(!proc.exited(), "dpctl bus exited early");
+            bus_links.iter().all(|l| l.exists())
+        });
+        Bus {
+            proc,
+            prefix,
+            stations,
+            dir,
+        }
+    }
+
+    /// Link of station `i`.
+    pub fn link(&self, i: usize) -> PathBuf {
+        PathBuf::from(format!("{}{i}", self.prefix.display()))
+    }
+
+    /// Link of station `i` as a string.
+    pub fn link_str(&self, i: usize) -> String {
+        self.link(i).to_string_lossy().into_owned()
+    }
+
+    /// The temp dir holding the links (for other files of the test).
+    pub fn dir(&self) -> &TempDir {
+        &self.dir
+    }
+
+    /// SIGTERM the hub and collect its output (the links must be gone).
+    pub fn stop(self) -> Output {
+        let Bus {
+            proc,
+            prefix,
+            stations,
+            dir,
+        } = self;
+        let out = proc.stop();
+        for i in 0..stations {
+            let l = PathBuf::from(format!("{}{i}", prefix.display()));
+            assert!(
+                std::fs::symlink_metadata(&l).is_err(),
+                "{} left behind",
+                l.display()
+            );
+        }
+        drop(dir);
+        out
     }
 }

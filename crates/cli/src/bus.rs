@@ -386,6 +386,12 @@ pub fn run(args: Args) -> Result<()> {
                                     drain_tap(&mut tap, &mut pcap)?;
                                 }
                             }
+                            // A pty read returns all there is (up to the
+                            // buffer size): skip the read that would say
+                            // EAGAIN.
+                            if len < buf.len() {
+                                break;
+                            }
                         }
                         Err(Errno::EAGAIN) | Err(Errno::EINTR) => break,
                         Err(Errno::EIO) => {

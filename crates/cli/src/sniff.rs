@@ -75,12 +75,6 @@ fn error_text(e: &CodecStats, skipped: usize) -> String {
     parts.join(", ")
 }
 
-fn is_pty(path: &str) -> bool {
-    let real = std::fs::canonicalize(path).unwrap_or_else(|_| PathBuf::from(path));
-    let s = real.to_string_lossy();
-    s.starts_with("/dev/pts/") || s.starts_with("/dev/pty") || s == "/dev/ptmx"
-}
-
 struct Printer {
     json: bool,
     out: BufWriter<std::io::Stdout>,
@@ -187,7 +181,7 @@ async fn sniff(args: Args) -> Result<()> {
             eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
             std::process::exit(2)
         }
-        None if is_pty(&args.port) => Duration::from_millis(5),
+        None if crate::common::is_pty(&args.port) => Duration::from_millis(5),
         None => (BusParams::defaults(args.baud).bits(33) * 2).max(Duration::from_millis(2)),
     };
     let clock = std::time::Instant::now();

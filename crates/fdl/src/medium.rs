@@ -428,7 +428,7 @@ impl Medium {
                 }
             }
         }
-        if self.next_noise != Instant::NEVER && self.next_noise.as_nanos() != u64::MAX {
+        if self.next_noise != Instant::NEVER {
             t = Some(t.map_or(self.next_noise, |t| t.min(self.next_noise)));
         }
         t

@@ -239,6 +239,9 @@ impl<R: Read> PcapReader<R> {
             loop {
                 let (kind, body) = r.block()?.ok_or_else(|| invalid("no interface".into()))?;
                 if kind == PCAPNG_IDB {
+                    if body.len() < 8 {
+                        return Err(invalid(format!("interface block of {} bytes", body.len())));
+                    }
                     r.linktype = r.u16_at(&body, 0) as u32;
                     r.units_per_s = r.tsresol(&body[8..])?;
                     return Ok(r);
@@ -479,6 +482,18 @@ mod tests {
         let mut cut = PcapReader::new(&file[..100]).unwrap();
         assert!(cut.next_packet().is_ok());
         assert!(cut.next_packet().is_err());
+    }
+
+    #[test]
+    fn short_interface_block_is_an_error() {
+        // Found by fuzzing (pcap_read): an IDB with a 4-byte body.
+        let mut f = sample(PcapFormat::Pcapng)[..28].to_vec();
+        f.extend_from_slice(&1u32.to_le_bytes());
+        f.extend_from_slice(&16u32.to_le_bytes());
+        f.extend_from_slice(&[0x01, 0x01, 0, 0]);
+        f.extend_from_slice(&16u32.to_le_bytes());
+        let e = PcapReader::new(&f[..]).unwrap_err();
+        assert!(e.to_string().contains("interface block"), "{e}");
     }
 
     #[test]
