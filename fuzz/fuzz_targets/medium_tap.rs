@@ -41,7 +41,7 @@ fuzz_target!(|data: &[u8]| {
     let mut got = vec![Vec::new(); stations];
     let mut delivered = Vec::new();
     let mut tapped = Vec::new();
-    let mut deliver = |m: &mut Medium, t: Instant, tap: &mut Tap, last_at: &mut Instant,
+    let deliver = |m: &mut Medium, t: Instant, tap: &mut Tap, last_at: &mut Instant,
                        got: &mut Vec<Vec<u8>>, delivered: &mut Vec<u8>| {
         while let Some(d) = m.poll_delivery(t) {
             assert!(!d.bytes.is_empty());
