@@ -63,6 +63,16 @@ pub fn master_station(
     Ok((ActiveStation::new(cfg, dp), port_))
 }
 
+/// Driver options for `port`: telegrams gathered into one write on a pty
+/// (ptys carry no timing), busy polling for `busy_poll_us` µs after each
+/// event.
+pub fn driver_options(port: &str, busy_poll_us: u64) -> profibus_fdl::driver::Options {
+    profibus_fdl::driver::Options {
+        coalesce: is_pty(port),
+        busy_poll: Duration::from_micros(busy_poll_us),
+    }
+}
+
 /// Latency allowance when none is given: ptys answer within a
 /// millisecond even on a loaded machine; USB serial adapters buffer for up
 /// to 16 ms (the FTDI latency timer).

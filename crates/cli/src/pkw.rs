@@ -297,10 +297,11 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
     let mut failure: Option<String> = None;
     let mut probe: Option<Reply> = None;
     let mut inflight: Option<Step> = None;
-    let result = driver::run(
+    let result = driver::run_with(
         &mut station,
         &mut port,
         Clock::start(),
+        common::driver_options(&args.port, 0),
         common::shutdown(),
         |st, now| {
             let m = st.app_mut();

@@ -39,10 +39,11 @@ async fn scan(args: Args) -> Result<()> {
     let mut station = ActiveStation::new(cfg, LiveListScan::new(args.addr));
     let limit = Duration::from_secs_f64(args.timeout.max(0.0));
     let deadline = tokio::time::sleep(limit);
-    let stop = driver::run(
+    let stop = driver::run_with(
         &mut station,
         &mut port,
         Clock::start(),
+        common::driver_options(&args.line.port, 0),
         async {
             tokio::select! {
                 _ = common::shutdown() => {}

@@ -132,6 +132,10 @@ pub struct Args {
     /// adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    /// After each telegram keep polling the port for this many µs instead
+    /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
+    #[arg(long, default_value_t = 0, value_name = "US")]
+    busy_poll: u64,
     /// Print one JSON object per line.
     #[arg(long)]
     json: bool,
@@ -482,10 +486,11 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
         let mut research = false;
         let mut seen = (0u64, clock.now());
-        let result = driver::run(
+        let result = driver::run_with(
             &mut station,
             &mut port,
             clock.clone(),
+            common::driver_options(&path, args.busy_poll),
             async {
                 common::shutdown().await;
                 stop_requested.set(true);

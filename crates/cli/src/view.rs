@@ -93,6 +93,7 @@ impl View {
                 "{}",
                 json!({
                     "event": "status",
+                    "t": now.as_nanos() as f64 / 1e9,
                     "cycles": c.cycles,
                     "cycle_us": {
                         "min": c.min_ns / 1000,

@@ -77,6 +77,23 @@ pub enum Stop {
     Shutdown,
 }
 
+/// How the driver writes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Options {
+    /// Gather what the station sends within [`WARP_BELOW`] (e.g. a token
+    /// to itself and the request that follows it after TID1) into one
+    /// write. Right for ptys, which carry bytes without their timing:
+    /// the peer gets one wake-up instead of two. Wrong for a real line,
+    /// where the idle time between telegrams (TSYN) must appear on the
+    /// wire.
+    pub coalesce: bool,
+    /// After each event, keep polling the port for this long instead of
+    /// sleeping in the operating system (busy polling): the answer to a
+    /// request is seen microseconds earlier, at the price of a busy CPU
+    /// while waiting. Zero (the default) sleeps at once.
+    pub busy_poll: Duration,
+}
+
 /// Run `station` on `port` until `tick` breaks, `shutdown` completes or
 /// the port fails. End of file on the port is an error (the other side
 /// went away).
@@ -84,6 +101,23 @@ pub async fn run<S, P, F>(
     station: &mut S,
     port: &mut P,
     clock: Clock,
+    shutdown: F,
+    tick: impl FnMut(&mut S, Instant) -> ControlFlow<()>,
+) -> io::Result<Stop>
+where
+    S: Station + ?Sized,
+    P: AsyncRead + AsyncWrite + Unpin + ?Sized,
+    F: Future<Output = ()>,
+{
+    run_with(station, port, clock, Options::default(), shutdown, tick).await
+}
+
+/// [`run`] with [`Options`].
+pub async fn run_with<S, P, F>(
+    station: &mut S,
+    port: &mut P,
+    clock: Clock,
+    options: Options,
     shutdown: F,
     mut tick: impl FnMut(&mut S, Instant) -> ControlFlow<()>,
 ) -> io::Result<Stop>
@@ -93,6 +127,7 @@ where
     F: Future<Output = ()>,
 {
     let mut buf = vec![0u8; 4096];
+    let mut out: Vec<u8> = Vec::with_capacity(1024);
     tokio::pin!(shutdown);
     loop {
         // A deadline about to come counts as reached before anything is
@@ -100,16 +135,36 @@ where
         // after another round through the port's read and the runtime.
         warp(station, &clock);
         let now = clock.now();
-        while let Some(bytes) = station.poll_transmit(now) {
-            port.write_all(bytes).await?;
+        if options.coalesce {
+            out.clear();
+            gather(station, now, &mut out);
+            // What follows within the warp window joins the same write.
+            for _ in 0..8 {
+                if out.is_empty() || !warp(station, &clock) {
+                    break;
+                }
+                let t = clock.now();
+                station.handle_timeout(t);
+                if !gather(station, t, &mut out) {
+                    break;
+                }
+            }
+            if !out.is_empty() {
+                port.write_all(&out).await?;
+            }
+        } else {
+            while let Some(bytes) = station.poll_transmit(now) {
+                port.write_all(bytes).await?;
+            }
         }
         port.flush().await?;
-        if tick(station, now).is_break() {
+        if tick(station, clock.now()).is_break() {
             return Ok(Stop::Done);
         }
         warp(station, &clock);
         let deadline = station.poll_timeout();
         let wait = deadline.map(|d| d.saturating_duration_since(clock.now()));
+        let spin_until = clock.now() + options.busy_poll;
         tokio::select! {
             biased;
             _ = &mut shutdown => return Ok(Stop::Shutdown),
@@ -120,25 +175,55 @@ where
                 }
                 station.handle_rx(clock.now(), &buf[..n]);
             }
-            _ = wait_for(&clock, deadline, wait) => {
+            _ = wait_for(&clock, deadline, wait, spin_until) => {
                 station.handle_timeout(clock.now());
             }
         }
     }
 }
 
-/// Jump the clock to the station's deadline when it is less than
-/// [`WARP_BELOW`] away.
-fn warp<S: Station + ?Sized>(station: &S, clock: &Clock) {
-    if let Some(d) = station.poll_timeout() {
-        let now = clock.now();
-        if d > now && d.saturating_duration_since(now) < WARP_BELOW {
-            clock.jump_to(d);
+/// Append what the station sends now to `out`; whether there was any.
+fn gather<S: Station + ?Sized>(station: &mut S, now: Instant, out: &mut Vec<u8>) -> bool {
+    let before = out.len();
+    while let Some(bytes) = station.poll_transmit(now) {
+        out.extend_from_slice(bytes);
+    }
+    out.len() > before
+}
+
+/// Jump the clock to the station's deadline when it is due or less than
+/// [`WARP_BELOW`] away; whether the deadline is reached now.
+fn warp<S: Station + ?Sized>(station: &S, clock: &Clock) -> bool {
+    match station.poll_timeout() {
+        Some(d) => {
+            let now = clock.now();
+            if d > now && d.saturating_duration_since(now) < WARP_BELOW {
+                clock.jump_to(d);
+            }
+            d <= clock.now()
         }
+        None => false,
     }
 }
 
-async fn wait_for(clock: &Clock, deadline: Option<Instant>, wait: Option<Duration>) {
+async fn wait_for(
+    clock: &Clock,
+    deadline: Option<Instant>,
+    wait: Option<Duration>,
+    spin_until: Instant,
+) {
+    // Busy polling: yield to the runtime (which then polls the port
+    // without blocking) until the spin window or the deadline ends.
+    while clock.now() < spin_until {
+        if deadline.is_some_and(|d| clock.now() >= d) {
+            return;
+        }
+        tokio::task::yield_now().await;
+    }
+    let wait = match (deadline, wait) {
+        (Some(d), Some(_)) => Some(d.saturating_duration_since(clock.now())),
+        _ => wait,
+    };
     match (deadline, wait) {
         (None, _) | (_, None) => std::future::pending().await,
         (Some(_), Some(w)) if w.is_zero() => {}

@@ -41,7 +41,9 @@
 //!   (IEC 61158-4-3; reference §11).
 //! - **GAP update**: with time left after the cycles, one FDL Status
 //!   request per token visit to the next address between this station and
-//!   its successor NS (wrapping at HSA). A station answering "ready for
+//!   its successor NS (wrapping at HSA), not repeated when unanswered (as
+//!   profirust does), awaited for TSL plus at most 1 ms of the latency
+//!   allowance. A station answering "ready for
 //!   ring" or "in ring" becomes the new NS. After a whole sweep the station
 //!   waits G rotations (GAP factor) before sweeping again.
 //! - **Pass_Token / Check_Token_Pass**: the token telegram `DC NS TS`; NS
@@ -575,6 +577,15 @@ impl Core {
     /// scheduling jitter on a slow transport must not make a station
     /// claim a token that is not lost. Every station adds the same amount,
     /// so the lowest address still claims first.
+    /// The wait for the answer to a GAP poll: the slot time plus at most
+    /// 1 ms of the latency allowance. Most GAP addresses are empty, so this
+    /// wait is paid on almost every poll; an answer that comes later only
+    /// delays finding a new master to the next sweep (it is ignored as a
+    /// late reply meanwhile).
+    fn gap_slot(&self) -> Duration {
+        self.bits(self.p().slot_time) + self.cfg.latency_allowance.min(Duration::from_millis(1))
+    }
+
     fn token_lost_timeout(&self) -> Duration {
         self.bits(self.p().token_lost_timeout(self.ts())) + 3 * self.cfg.latency_allowance
     }
@@ -1077,7 +1088,7 @@ impl Core {
                 );
                 self.state = State::AwaitStatus {
                     address,
-                    deadline: end + self.slot(),
+                    deadline: end + self.gap_slot(),
                 };
                 return;
             }
