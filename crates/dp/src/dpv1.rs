@@ -133,6 +133,20 @@ fn need(du: &[u8], n: usize) -> Result<(), Dpv1ParseError> {
     }
 }
 
+/// `function slot index length data…`: slot, index and the data, whose
+/// length must match the length byte.
+fn with_data(du: &[u8]) -> Result<(u8, u8, &[u8]), Dpv1ParseError> {
+    need(du, 4)?;
+    let data = &du[4..];
+    if du[3] as usize != data.len() {
+        return Err(Dpv1ParseError::LengthByte {
+            length: du[3],
+            data: data.len(),
+        });
+    }
+    Ok((du[1], du[2], data))
+}
+
 impl<'a> Pdu<'a> {
     /// Decode a PDU sent by a master.
     pub fn parse_request(du: &'a [u8]) -> Result<Pdu<'a>, Dpv1ParseError> {
@@ -147,19 +161,8 @@ impl<'a> Pdu<'a> {
                 })
             }
             FN_WRITE => {
-                need(du, 4)?;
-                let data = &du[4..];
-                if du[3] as usize != data.len() {
-                    return Err(Dpv1ParseError::LengthByte {
-                        length: du[3],
-                        data: data.len(),
-                    });
-                }
-                Ok(Pdu::WriteReq {
-                    slot: du[1],
-                    index: du[2],
-                    data,
-                })
+                let (slot, index, data) = with_data(du)?;
+                Ok(Pdu::WriteReq { slot, index, data })
             }
             FN_ALARM_ACK => {
                 need(du, 4)?;
@@ -187,19 +190,8 @@ impl<'a> Pdu<'a> {
         }
         match f {
             FN_READ => {
-                need(du, 4)?;
-                let data = &du[4..];
-                if du[3] as usize != data.len() {
-                    return Err(Dpv1ParseError::LengthByte {
-                        length: du[3],
-                        data: data.len(),
-                    });
-                }
-                Ok(Pdu::ReadRes {
-                    slot: du[1],
-                    index: du[2],
-                    data,
-                })
+                let (slot, index, data) = with_data(du)?;
+                Ok(Pdu::ReadRes { slot, index, data })
             }
             FN_WRITE => {
                 need(du, 4)?;
