@@ -4,51 +4,25 @@ dummy PHY (type=dummy_slave: a simulated slave that echoes the outputs),
 for the dp_master benchmark. Prints one JSON line:
 {"cycles": N, "cpu_s": ..., "wall_s": ...}."""
 
-import io
 import json
+import os
 import sys
 import time
 
-import pyprofibus
-
-CONF = """
-[PROFIBUS]
-debug = 0
-[PHY]
-type = dummy_slave
-[DP]
-master_class = 1
-master_addr = 2
-[SLAVE_0]
-name = dummy
-addr = 8
-gsd = %s
-sync_mode = 0
-freeze_mode = 0
-group_mask = 1
-watchdog_ms = 1000
-input_size = 1
-output_size = 1
-module_0 = dummy output module
-module_1 = dummy input module
-"""
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests", "interop"))
+import pbmaster  # noqa: E402
 
 
 def main():
     gsd, cycles = sys.argv[1], int(sys.argv[2])
-    conf = pyprofibus.PbConf(io.StringIO(CONF % gsd), "dummy.conf")
-    master = conf.makeDPM()
-    desc = None
-    for sc in conf.slaveConfs:
-        desc = sc.makeDpSlaveDesc()
-        master.addSlave(desc)
-    master.initialize()
+    master, desc = pbmaster.start(
+        gsd, 8, ["dummy output module", "dummy input module"], 1, 1, master=2)
     # Start-up until the first Data_Exchange answer.
-    n = 0
     while True:
         desc.setMasterOutData(b"\x42")
         if master.run() is desc and desc.getMasterInData() is not None:
             break
+    n = 0
     cpu0, wall0 = time.process_time(), time.monotonic()
     while n < cycles:
         desc.setMasterOutData(bytes([n & 0xFF]))

@@ -14,41 +14,11 @@ check passed, 1 otherwise.
 """
 
 import argparse
-import io
 import json
 import sys
 import time
 
-import pyprofibus
-
-
-def conf_text(a):
-    mods = "\n".join(
-        "module_%d = %s" % (i, m) for i, m in enumerate(a.module)
-    )
-    return """
-[PROFIBUS]
-debug = %d
-[PHY]
-type = serial
-dev = %s
-baud = %d
-[DP]
-master_class = 1
-master_addr = %d
-[SLAVE_0]
-name = dut
-addr = %d
-gsd = %s
-sync_mode = 0
-freeze_mode = %d
-group_mask = 1
-watchdog_ms = %d
-input_size = %d
-output_size = %d
-%s
-""" % (a.debug, a.port, a.baud, a.master, a.addr, a.gsd, 1 if a.freeze else 0,
-       a.watchdog_ms, a.out_len, a.in_len, mods)
+import pbmaster
 
 
 def pattern(cycle, n):
@@ -79,13 +49,10 @@ def main():
     p.add_argument("--debug", type=int, default=0)
     a = p.parse_args()
 
-    conf = pyprofibus.PbConf(io.StringIO(conf_text(a)), "interop.conf")
-    master = conf.makeDPM()
-    desc = None
-    for sc in conf.slaveConfs:
-        desc = sc.makeDpSlaveDesc()
-        master.addSlave(desc)
-    master.initialize()
+    master, desc = pbmaster.start(
+        a.gsd, a.addr, a.module, a.out_len, a.in_len, port=a.port,
+        baud=a.baud, master=a.master, freeze=a.freeze,
+        watchdog_ms=a.watchdog_ms, debug=a.debug)
 
     errors = []
     cycle = 0          # Data_Exchange answers received

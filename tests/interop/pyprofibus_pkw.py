@@ -9,40 +9,11 @@ status 0 when the response came and the handshake ended, 1 otherwise.
 """
 
 import argparse
-import io
 import json
 import sys
 import time
 
-import pyprofibus
-
-
-def conf_text(a):
-    mods = "\n".join("module_%d = %s" % (i, m) for i, m in enumerate(a.module))
-    return """
-[PROFIBUS]
-debug = 0
-[PHY]
-type = serial
-dev = %s
-baud = %d
-[DP]
-master_class = 1
-master_addr = %d
-[SLAVE_0]
-name = dut
-addr = %d
-gsd = %s
-sync_mode = 0
-freeze_mode = 0
-group_mask = 1
-watchdog_ms = 1000
-# pyprofibus names the sizes from the slave's side of the master:
-# input_size = bytes the master sends, output_size = bytes it receives.
-input_size = %d
-output_size = %d
-%s
-""" % (a.port, a.baud, a.master, a.addr, a.gsd, a.out_len, a.in_len, mods)
+import pbmaster
 
 
 def main():
@@ -62,13 +33,9 @@ def main():
     request = bytes.fromhex(a.request)
     expect = bytes.fromhex(a.expect)
 
-    conf = pyprofibus.PbConf(io.StringIO(conf_text(a)), "pkw.conf")
-    master = conf.makeDPM()
-    desc = None
-    for sc in conf.slaveConfs:
-        desc = sc.makeDpSlaveDesc()
-        master.addSlave(desc)
-    master.initialize()
+    master, desc = pbmaster.start(
+        a.gsd, a.addr, a.module, a.out_len, a.in_len, port=a.port,
+        baud=a.baud, master=a.master)
 
     phase = "idle"      # idle -> request -> reset -> done
     cycles = 0
