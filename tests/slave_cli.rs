@@ -26,6 +26,7 @@ fn request(da: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
         dsap: saps.map(|s| s.0),
         ssap: saps.map(|s| s.1),
         data,
+        format: None,
     })
     .emit(&mut b)
     .unwrap();

@@ -318,6 +318,10 @@ pub struct SlaveStats {
     pub restarts: u64,
     /// Slave_Diag reads.
     pub diag_reads: u64,
+    /// Slave_Diag answers rejected as invalid (shorter than 6 bytes, or
+    /// bit 2 of Station_Status_2 clear); the diagnosis is read again and
+    /// nothing is derived from them.
+    pub invalid_diags: u64,
 }
 
 /// Poll-cycle statistics.
@@ -891,6 +895,19 @@ impl DpMaster {
         let me = self.address;
         let s = &mut self.slaves[i];
         s.stats.diag_reads += 1;
+        let Some(d) = SlaveDiag::parse(data).ok().filter(SlaveDiag::is_valid) else {
+            // Not a diagnosis (too short, or the always-1 bit clear): a
+            // stray or corrupt answer. Count it, keep the last valid
+            // diagnosis and state, and read it again.
+            s.stats.invalid_diags += 1;
+            s.need_diag = true;
+            tracing::debug!(
+                address = s.p.address,
+                len = data.len(),
+                "invalid Slave_Diag answer ignored"
+            );
+            return;
+        };
         s.last_diag = now;
         s.need_diag = false;
         let changed = s.diag != data;
@@ -902,14 +919,6 @@ impl DpMaster {
         if changed {
             self.emit(MasterEvent::Diag { address });
         }
-        let Ok(d) = SlaveDiag::parse(data) else {
-            self.emit(MasterEvent::Fault {
-                address,
-                reason: format!("diagnosis of {} bytes is too short", data.len()),
-            });
-            self.set_state(i, SlaveState::Diag);
-            return;
-        };
         use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
         let state = self.slaves[i].state;
         let ident = self.slaves[i].p.ident_number;
