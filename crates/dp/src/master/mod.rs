@@ -114,6 +114,20 @@ pub struct SlaveView<'a> {
     pub stats: SlaveStats,
 }
 
+/// One slave's process images for in-place work: the inputs to read and
+/// the outputs to write at the same time ([`DpMaster::io_mut`]).
+#[derive(Debug)]
+pub struct SlaveIoMut<'a> {
+    /// Where it is in the start-up sequence.
+    pub state: SlaveState,
+    /// Counters (`data_exchanges` tells what was sent).
+    pub stats: SlaveStats,
+    /// The last inputs received.
+    pub inputs: &'a [u8],
+    /// The output image, to write in place.
+    pub outputs: &'a mut [u8],
+}
+
 /// Where a slave is in the master's start-up sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SlaveState {
@@ -570,6 +584,19 @@ impl DpMaster {
     /// The output image of a slave, to write in place.
     pub fn outputs_mut(&mut self, h: SlaveHandle) -> &mut [u8] {
         &mut self.slaves[h.0 as usize].outputs
+    }
+
+    /// The state, counters and both process images of a slave, the
+    /// outputs writable: for helpers that answer the inputs in the
+    /// outputs without copying (e.g. a PKW client).
+    pub fn io_mut(&mut self, h: SlaveHandle) -> SlaveIoMut<'_> {
+        let s = &mut self.slaves[h.0 as usize];
+        SlaveIoMut {
+            state: s.state,
+            stats: s.stats,
+            inputs: &s.inputs,
+            outputs: &mut s.outputs,
+        }
     }
 
     /// A slave's state.
