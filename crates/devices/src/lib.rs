@@ -9,6 +9,7 @@
 pub mod bm4;
 pub mod generic;
 pub mod gsd_files;
+pub mod jx2;
 pub mod omega;
 pub mod pkw;
 
@@ -88,7 +89,11 @@ pub struct Profile {
 }
 
 /// Every device profile (the device issues add theirs here).
-pub const PROFILES: &[Profile] = &[bm4::profile::PROFILE, omega::profile::PROFILE];
+pub const PROFILES: &[Profile] = &[
+    bm4::profile::PROFILE,
+    omega::profile::PROFILE,
+    jx2::profile::PROFILE,
+];
 
 /// The station address a profile chooses itself from its options (the
 /// BM4-O-PRO-01's us_DEVICE and rotary switch, a stored Set_Slave_Add
