@@ -44,8 +44,9 @@ pub struct Args {
     /// Station address of the slave (0..=126). The bm4 profile takes its
     /// address from --us-device / --switch instead when given, the omega
     /// profile from --switch.
+    /// (jx2: none, the PLC writes it into register 1x107.)
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=126),
-          required_unless_present_any = ["list_devices", "us_device", "switch"])]
+          required_unless_present_any = ["list_devices", "us_device", "switch", "device"])]
     addr: Option<u8>,
     /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
     /// traffic on a serial line (on a pty: nominal 19.2 kbit/s), or
@@ -113,9 +114,17 @@ pub struct Args {
     /// Control commands for the device, one per line, from FILE or `-`
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
-    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`.
+    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. jx2: a Unix
+    /// socket to create for register commands (`read 12100`, `write 12102
+    /// 16`, ...; stdin always takes them too).
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
+    /// jx2: the module number x of the registers 1x100..1x999 (1..9).
+    #[arg(long, value_name = "N", requires = "device", default_value_t = 2)]
+    module_number: u32,
+    /// jx2: register commands run as the PLC program at start.
+    #[arg(long, value_name = "FILE", requires = "device")]
+    script: Option<PathBuf>,
     /// File in which the generic device keeps an address set by
     /// Set_Slave_Add (`address=N`, `no_add_chg=0|1`); when it exists its
     /// address overrides --addr.
@@ -321,6 +330,10 @@ fn build_device(
     printer: &Printer,
 ) -> anyhow::Result<(BoxedDevice, String, Option<u8>)> {
     if let Some(name) = &args.device {
+        if name.eq_ignore_ascii_case("jx2") {
+            let dev = crate::jx2::start(&jx2_options(args), printer.clock.clone())?;
+            return Ok((dev, "jx2".into(), Some(0)));
+        }
         let Some(p) = profibus_devices::profile(name) else {
             let names: Vec<&str> = PROFILES.iter().map(|p| p.name).collect();
             bail!(
@@ -393,6 +406,21 @@ fn build_device(
     Ok((Box::new(dev), name, None))
 }
 
+fn jx2_options(args: &Args) -> crate::jx2::Options {
+    crate::jx2::Options {
+        module_number: args.module_number,
+        control: args.control.as_ref().map(PathBuf::from),
+        script: args.script.clone(),
+        baud: parse_baud(&args.baud)
+            .ok()
+            .and_then(|b| match b {
+                BaudChoice::Fixed(b) => Some(b.bps()),
+                _ => None,
+            })
+            .unwrap_or(PTY_NOMINAL.bps()),
+    }
+}
+
 fn list_devices() {
     println!("generic  any device a GSD file describes: --gsd FILE --module NAME ...");
     for p in PROFILES {
@@ -409,7 +437,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let rt = common::runtime()?;
+    let jx2 = args
+        .device
+        .as_deref()
+        .is_some_and(|d| d.eq_ignore_ascii_case("jx2"))
+        .then(|| jx2_options(&args));
     let result = rt.block_on(run_async(args));
+    if let Some(o) = &jx2 {
+        crate::jx2::cleanup(o);
+    }
     // A --control reader may be blocked on stdin: do not wait for it.
     rt.shutdown_background();
     result

@@ -7,9 +7,12 @@
 //! write REG VALUE [VALUE…]      REGISTER_LOAD (to REG, REG+1, …)
 //! copy N FROM TO                COPY (N, FROM, TO): N registers
 //! calc DEST A [OP B]            DEST = A op B (+ - * / % & |), e.g. calc 100 r12118 + 1
-//! wait-bit REG BIT set|clear [TIMEOUT]    WHEN BIT_SET / BIT_CLEAR (default 10s)
+//! wait-bit REG BIT[,BIT…] set|clear [TIMEOUT]
+//!                               WHEN BIT_SET / BIT_CLEAR (default 10s; with
+//!                               several bits: until any of them is so)
 //! wait A CMP B [TIMEOUT]        until A CMP B (== != < <= > >=)
 //! if A CMP B COMMAND…           run COMMAND when A CMP B holds
+//! if-bit REG BIT set|clear COMMAND…       IF BIT_SET / BIT_CLEAR
 //! label NAME / goto NAME        jumps (in scripts)
 //! delay DURATION                wait, e.g. 100ms, 2s
 //! status                        the module's status, error and state decoded
@@ -127,12 +130,13 @@ pub enum Command {
         /// Operator and second operand.
         rest: Option<(Op, Operand)>,
     },
-    /// `wait-bit REG BIT set|clear [TIMEOUT]`
+    /// `wait-bit REG BIT[,BIT…] set|clear [TIMEOUT]`
     WaitBit {
         /// Register.
         reg: u32,
-        /// Bit 0..=23.
-        bit: u8,
+        /// Bits 0..=23 (a mask): any of them reaching the state ends the
+        /// wait.
+        bits: u32,
         /// Wait for set (true) or clear.
         set: bool,
         /// Give up after this long.
@@ -157,6 +161,17 @@ pub enum Command {
         cmp: Cmp,
         /// Right side.
         b: Operand,
+        /// What to do when it holds.
+        then: Box<Command>,
+    },
+    /// `if-bit REG BIT set|clear COMMAND`
+    IfBit {
+        /// Register.
+        reg: u32,
+        /// Bit 0..=23.
+        bit: u8,
+        /// Test for set (true) or clear.
+        set: bool,
         /// What to do when it holds.
         then: Box<Command>,
     },
@@ -305,17 +320,23 @@ impl Command {
             "wait-bit" => match w {
                 [_, r, b, s, rest @ ..] if rest.len() <= 1 => Command::WaitBit {
                     reg: parse_reg(r)?,
-                    bit: parse_int(b)
-                        .filter(|b| (0..=23).contains(b))
-                        .ok_or("BIT must be 0..=23")? as u8,
-                    set: match s.to_ascii_lowercase().as_str() {
-                        "set" | "1" => true,
-                        "clear" | "0" => false,
-                        _ => return usage("wait-bit REG BIT set|clear [TIMEOUT]"),
-                    },
+                    bits: b
+                        .split(',')
+                        .map(parse_bit)
+                        .try_fold(0u32, |m, b| b.map(|b| m | 1 << b))?,
+                    set: parse_state(s)?,
                     timeout: timeout(rest.first())?,
                 },
-                _ => return usage("wait-bit REG BIT set|clear [TIMEOUT]"),
+                _ => return usage("wait-bit REG BIT[,BIT...] set|clear [TIMEOUT]"),
+            },
+            "if-bit" => match w {
+                [_, r, b, s, then @ ..] if !then.is_empty() => Command::IfBit {
+                    reg: parse_reg(r)?,
+                    bit: parse_bit(b)?,
+                    set: parse_state(s)?,
+                    then: Box::new(conditional(then)?),
+                },
+                _ => return usage("if-bit REG BIT set|clear COMMAND"),
             },
             "wait" => match w {
                 [_, a, c, b, rest @ ..] if rest.len() <= 1 => Command::Wait {
@@ -327,18 +348,12 @@ impl Command {
                 _ => return usage("wait A CMP B [TIMEOUT]"),
             },
             "if" => match w {
-                [_, a, c, b, then @ ..] if !then.is_empty() => {
-                    let then = Command::parse_words(then)?;
-                    if matches!(then, Command::Label(_)) {
-                        return Err("a label cannot be conditional".into());
-                    }
-                    Command::If {
-                        a: parse_operand(a)?,
-                        cmp: parse_cmp(c)?,
-                        b: parse_operand(b)?,
-                        then: Box::new(then),
-                    }
-                }
+                [_, a, c, b, then @ ..] if !then.is_empty() => Command::If {
+                    a: parse_operand(a)?,
+                    cmp: parse_cmp(c)?,
+                    b: parse_operand(b)?,
+                    then: Box::new(conditional(then)?),
+                },
                 _ => return usage("if A CMP B COMMAND"),
             },
             "label" => match w {
@@ -358,6 +373,29 @@ impl Command {
             other => return Err(format!("unknown command `{other}`")),
         })
     }
+}
+
+fn parse_bit(s: &str) -> Result<u8, String> {
+    parse_int(s)
+        .filter(|b| (0..=23).contains(b))
+        .map(|b| b as u8)
+        .ok_or_else(|| format!("bit `{s}` is not 0..=23"))
+}
+
+fn parse_state(s: &str) -> Result<bool, String> {
+    match s.to_ascii_lowercase().as_str() {
+        "set" | "1" => Ok(true),
+        "clear" | "0" => Ok(false),
+        _ => Err(format!("`{s}` is neither `set` nor `clear`")),
+    }
+}
+
+fn conditional(words: &[&str]) -> Result<Command, String> {
+    let then = Command::parse_words(words)?;
+    if matches!(then, Command::Label(_)) {
+        return Err("a label cannot be conditional".into());
+    }
+    Ok(then)
 }
 
 fn value(plc: &mut Plc, now: Instant, o: Operand) -> i64 {
@@ -456,7 +494,7 @@ impl Interpreter {
         for l in &it.program {
             let target = match &l.cmd {
                 Command::Goto(n) => Some(n),
-                Command::If { then, .. } => match &**then {
+                Command::If { then, .. } | Command::IfBit { then, .. } => match &**then {
                     Command::Goto(n) => Some(n),
                     _ => None,
                 },
@@ -613,17 +651,42 @@ impl Interpreter {
             }
             Command::WaitBit {
                 reg,
-                bit,
+                bits,
                 set,
                 timeout,
             } => {
                 let v = plc.read(now, *reg);
-                let on = v & (1 << bit) != 0;
+                let hit = if *set {
+                    v as u32 & bits
+                } else {
+                    !(v as u32) & bits
+                };
                 let state = if *set { "set" } else { "clear" };
-                self.wait_step(now, *timeout, on == *set, |waited, ok| {
-                    json!({"cmd": "wait-bit", "reg": reg, "bit": bit, "state": state,
-                           "value": v, "ok": ok, "timeout": !ok, "waited_ms": waited})
+                let list: Vec<u32> = (0..24).filter(|b| bits & 1 << b != 0).collect();
+                let which: Vec<u32> = (0..24).filter(|b| hit & 1 << b != 0).collect();
+                self.wait_step(now, *timeout, hit != 0, |waited, ok| {
+                    let mut r = json!({"cmd": "wait-bit", "reg": reg, "state": state,
+                           "value": v, "ok": ok, "timeout": !ok, "waited_ms": waited});
+                    if list.len() == 1 {
+                        r["bit"] = json!(list[0]);
+                    } else {
+                        r["bits"] = json!(list);
+                        r["hit"] = json!(which);
+                    }
+                    r
                 })
+            }
+            Command::IfBit {
+                reg,
+                bit,
+                set,
+                then,
+            } => {
+                let v = plc.read(now, *reg);
+                if (v & (1 << bit) != 0) != *set {
+                    return Step::Next(Some(json!({"cmd": "if-bit", "taken": false, "ok": true})));
+                }
+                self.exec(plc, now, then)
             }
             Command::Wait { a, cmp, b, timeout } => {
                 let (x, y) = (value(plc, now, *a), value(plc, now, *b));

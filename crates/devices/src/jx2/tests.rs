@@ -652,5 +652,15 @@ fn script_parsing() {
     it.push("bogus");
     assert_eq!(it.take_reply().unwrap()["ok"], false);
     assert!(Plc::new(10).is_err());
+    // Several bits: any of them; if-bit.
+    let mut it = Interpreter::script(
+        "wait-bit 1000 4,5 set 1s\nif-bit 1000 5 set write 1001 7\nif-bit 1000 4 set write 1002 7",
+    )
+    .unwrap();
+    assert_eq!(it.run(&mut plc, t(0)), Progress::Waiting(t(1000)));
+    plc.write(t(1), 1000, 32);
+    assert_eq!(it.run(&mut plc, t(2)), Progress::Idle);
+    assert_eq!(it.take_reply().unwrap()["hit"], serde_json::json!([5]));
+    assert_eq!((plc.read(t(3), 1001), plc.read(t(3), 1002)), (7, 0));
     assert_eq!(plc.module_register(100), 12100);
 }
