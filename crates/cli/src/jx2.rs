@@ -124,14 +124,6 @@ impl Drop for SocketFile {
     }
 }
 
-/// Remove the control socket of a finished run (the listener task may
-/// not be dropped before the process exits).
-pub fn cleanup(opts: &Options) {
-    if let Some(p) = &opts.control {
-        let _ = std::fs::remove_file(p);
-    }
-}
-
 /// Run `it` with lines from `input`, writing replies to `out`, until the
 /// input ends and everything queued ran.
 async fn serve<R, W>(ctx: Ctx, mut it: Interpreter, input: R, out: &mut W, src: Option<&str>)

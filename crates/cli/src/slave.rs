@@ -18,10 +18,12 @@
 
 use crate::common;
 use anyhow::{bail, Context};
-use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
-use profibus_devices::{BoxedDevice, ControlInbox, ProfileOptions, PROFILES};
-use profibus_dp::gsd::{Gsd, ParseOptions};
-use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
+use profibus_devices::address::StoredAddress;
+use profibus_devices::generic::InputPattern;
+use profibus_devices::{
+    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES,
+};
+use profibus_dp::slave::{control_words, Device, DpSlave, OwnAddress, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
 use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::passive::PassiveStation;
@@ -44,7 +46,6 @@ pub struct Args {
     /// Station address of the slave (0..=126). The bm4 profile takes its
     /// address from --us-device / --switch instead when given, the omega
     /// profile from --switch.
-    /// (jx2: none, the PLC writes it into register 1x107.)
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=126),
           required_unless_present_any = ["list_devices", "us_device", "switch", "device"])]
     addr: Option<u8>,
@@ -119,9 +120,10 @@ pub struct Args {
     /// 16`, ...; stdin always takes them too).
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
-    /// jx2: the module number x of the registers 1x100..1x999 (1..9).
-    #[arg(long, value_name = "N", requires = "device", default_value_t = 2)]
-    module_number: u32,
+    /// jx2: the module number x of the registers 1x100..1x999 (1..9,
+    /// default 2).
+    #[arg(long, value_name = "N", requires = "device")]
+    module_number: Option<u32>,
     /// jx2: register commands run as the PLC program at start.
     #[arg(long, value_name = "FILE", requires = "device")]
     script: Option<PathBuf>,
@@ -324,105 +326,115 @@ fn spawn_control_reader(src: String, inbox: ControlInbox) {
     });
 }
 
-/// The device to emulate, its name, and the address its profile chose.
+/// The profile's options from the command line: the named flags, then
+/// `--device-opt KEY=VALUE` (later ones win).
+fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
+    let mut opts = DeviceOptions::new();
+    if args.device.is_none() {
+        // The generic device: --gsd FILE --module NAME ...
+        let gsd = args
+            .gsd
+            .as_ref()
+            .context("give --gsd FILE (with --module NAME …) or --device NAME")?;
+        opts.set("gsd", gsd.display().to_string());
+        opts.set("modules", args.modules.clone());
+        opts.set("lenient", args.lenient);
+        let inputs = match args.inputs {
+            InputPattern::Echo => "echo",
+            InputPattern::Counter => "counter",
+        };
+        opts.set("inputs", inputs);
+    }
+    let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+    for (k, v) in [
+        ("vars", path(&args.vars)),
+        ("state_dir", path(&args.state_dir)),
+        ("write_gsd", path(&args.write_gsd)),
+        ("params", path(&args.params)),
+        ("address_file", path(&args.address_file)),
+        ("script", path(&args.script)),
+    ] {
+        if let Some(v) = v {
+            opts.set(k, v);
+        }
+    }
+    for (k, v) in [
+        ("us_device", args.us_device.map(i64::from)),
+        ("setpoints", args.setpoints.map(i64::from)),
+        ("actual_values", args.actual_values.map(i64::from)),
+        ("module_number", args.module_number.map(i64::from)),
+    ] {
+        if let Some(v) = v {
+            opts.set(k, v);
+        }
+    }
+    if let Some(s) = &args.switch {
+        opts.set_text("switch", s);
+    }
+    for o in &args.device_opts {
+        opts.set_pair(o)?;
+    }
+    Ok(opts)
+}
+
+/// The configured profile, its slave device and its name for people.
 fn build_device(
     args: &Args,
     printer: &Printer,
-) -> anyhow::Result<(BoxedDevice, String, Option<u8>)> {
-    if let Some(name) = &args.device {
-        if name.eq_ignore_ascii_case("jx2") {
-            let dev = crate::jx2::start(&jx2_options(args), printer.clock.clone())?;
-            return Ok((dev, "jx2".into(), Some(0)));
-        }
-        let Some(p) = profibus_devices::profile(name) else {
-            let names: Vec<&str> = PROFILES.iter().map(|p| p.name).collect();
-            bail!(
-                "no device profile `{name}` (available: {}; or use --gsd FILE)",
-                if names.is_empty() {
-                    "none yet".to_string()
-                } else {
-                    names.join(", ")
-                }
-            );
-        };
-        let mut opts = ProfileOptions::default();
-        let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
-        for (k, v) in [
-            ("addr", args.addr.map(|a| a.to_string())),
-            ("vars", path(&args.vars)),
-            ("us-device", args.us_device.map(|a| a.to_string())),
-            ("switch", args.switch.clone()),
-            ("state-dir", path(&args.state_dir)),
-            ("write-gsd", path(&args.write_gsd)),
-            ("params", path(&args.params)),
-            ("setpoints", args.setpoints.map(|a| a.to_string())),
-            ("actual-values", args.actual_values.map(|a| a.to_string())),
-        ] {
-            if let Some(v) = v {
-                opts.options.push((k.to_string(), v));
-            }
-        }
-        if let Some(src) = &args.control {
+) -> anyhow::Result<(Box<dyn Configured>, BoxedDevice, String)> {
+    let entry = match &args.device {
+        Some(name) => profibus_devices::profile(name)
+            .map_err(|e| anyhow::anyhow!("{e}; or use --gsd FILE"))?,
+        None => profibus_devices::profile("generic")?,
+    };
+    let opts = device_options(args)?;
+    let in_words = |e: ProfileError| match &args.device {
+        Some(_) => anyhow::anyhow!("device `{}`: {e}", entry.name),
+        None => anyhow::anyhow!("{e}"),
+    };
+    let profile = entry.configure(&opts, args.addr).map_err(in_words)?;
+    for w in profile.warnings() {
+        let now = printer.now();
+        printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
+    }
+    let dev = if entry.name == profibus_devices::jx2::profile::NAME {
+        // The register interface runs beside the slave (stdin, a socket).
+        crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?
+    } else {
+        let control = args.control.as_ref().map(|src| {
             let inbox = ControlInbox::new();
             spawn_control_reader(src.clone(), inbox.clone());
-            opts.control = Some(inbox);
-        }
-        for o in &args.device_opts {
-            let (k, v) = o
-                .split_once('=')
-                .with_context(|| format!("--device-opt `{o}` is not KEY=VALUE"))?;
-            opts.options
-                .push((k.trim().to_string(), v.trim().to_string()));
-        }
-        let dev = (p.build)(&opts).map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
-        let addr = profibus_devices::profile_address(p.name, &opts)
-            .map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
-        return Ok((dev, p.name.to_string(), addr));
-    }
-    let Some(path) = &args.gsd else {
-        bail!("give --gsd FILE (with --module NAME …) or --device NAME");
+            inbox
+        });
+        profile.device(control).map_err(in_words)?
     };
-    let opts = if args.lenient {
-        ParseOptions::LENIENT
-    } else {
-        ParseOptions::STRICT
+    let name = match &args.device {
+        Some(_) => entry.name.to_string(),
+        None => {
+            let gsd = profile.gsd();
+            gsd.model_name
+                .clone()
+                .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number))
+        }
     };
-    let parsed = Gsd::from_file(path, opts).map_err(|e| anyhow::anyhow!("{e}"))?;
-    for w in &parsed.warnings {
-        let now = printer.now();
-        printer.emit(
-            now,
-            json!({"event": "gsd_warning", "text": w.to_string()}),
-            format!("{}: warning: {w}", path.display()),
-        );
-    }
-    let mut dev = GenericDevice::from_gsd(&parsed.gsd, &args.modules)
-        .with_context(|| format!("{}", path.display()))?
-        .with_inputs(args.inputs);
-    if let Some(f) = &args.address_file {
-        dev = dev.with_address_store(AddressStore::new(f));
-    }
-    let name = dev.name().to_string();
-    Ok((Box::new(dev), name, None))
+    Ok((profile, dev, name))
 }
 
-fn jx2_options(args: &Args) -> crate::jx2::Options {
-    crate::jx2::Options {
-        module_number: args.module_number,
+/// What the jx2 register clients need.
+fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::Options> {
+    let o: profibus_devices::jx2::profile::Options = opts.decode()?;
+    Ok(crate::jx2::Options {
+        module_number: o.module_number,
         control: args.control.as_ref().map(PathBuf::from),
-        script: args.script.clone(),
-        baud: parse_baud(&args.baud)
-            .ok()
-            .and_then(|b| match b {
-                BaudChoice::Fixed(b) => Some(b.bps()),
-                _ => None,
-            })
-            .unwrap_or(PTY_NOMINAL.bps()),
-    }
+        script: o.script,
+        baud: match parse_baud(&args.baud)? {
+            BaudChoice::Fixed(b) => b.bps(),
+            _ => PTY_NOMINAL.bps(),
+        },
+    })
 }
 
 fn list_devices() {
-    println!("generic  any device a GSD file describes: --gsd FILE --module NAME ...");
     for p in PROFILES {
         println!("{:<8} {}", p.name, p.summary);
         if !p.options_help.is_empty() {
@@ -437,14 +449,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let rt = common::runtime()?;
-    let jx2 = args
+    let socket = args
         .device
         .as_deref()
-        .is_some_and(|d| d.eq_ignore_ascii_case("jx2"))
-        .then(|| jx2_options(&args));
+        .is_some_and(|d| d.eq_ignore_ascii_case(profibus_devices::jx2::profile::NAME))
+        .then(|| args.control.clone())
+        .flatten();
     let result = rt.block_on(run_async(args));
-    if let Some(o) = &jx2 {
-        crate::jx2::cleanup(o);
+    if let Some(s) = socket {
+        // The jx2 control socket (its listener may outlive the runtime).
+        let _ = std::fs::remove_file(s);
     }
     // A --control reader may be blocked on stdin: do not wait for it.
     rt.shutdown_background();
@@ -459,19 +473,14 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let path = args.port.clone().expect("clap requires --port");
     let choice = parse_baud(&args.baud)?;
-    let (device, name, profile_addr) = build_device(&args, &printer)?;
-    let mut addr = match profile_addr.or(args.addr) {
+    let (profile, device, name) = build_device(&args, &printer)?;
+    let addr = match profile.address().or(args.addr) {
         Some(a) => a,
+        // A device that sets its address itself (jx2: its PLC writes it).
+        None if device.own_address() != OwnAddress::Slave => 0,
         None => bail!("give --addr N"),
     };
-    if let Some(f) = &args.address_file {
-        if let Some(s) = AddressStore::new(f)
-            .load()
-            .with_context(|| format!("address file {}", f.display()))?
-        {
-            addr = s.address;
-        }
-    }
+    let address_file = profile.address_file();
     let pty = common::is_pty(&path);
     let latency = match args.latency {
         Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
@@ -496,14 +505,17 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             first.to_string()
         };
+        let (address, at) = match slave.device().own_address() {
+            OwnAddress::NoneYet => (None, "with no address yet".to_string()),
+            OwnAddress::Set(a) => (Some(a), format!("at address {a}")),
+            OwnAddress::Slave => (Some(addr), format!("at address {addr}")),
+        };
         printer.emit(
             now,
             json!({"event": "start", "device": name, "ident": format!("0x{ident:04X}"),
-                   "address": addr, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
+                   "address": address, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
                    "pty": pty}),
-            format!(
-                "{name} (ident 0x{ident:04X}) at address {addr} on {path} ({baud_text})"
-            ),
+            format!("{name} (ident 0x{ident:04X}) {at} on {path} ({baud_text})"),
         );
     }
 
@@ -535,6 +547,22 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                 while let Some(e) = st.app_mut().poll_event() {
                     if search && matches!(e, SlaveEvent::WatchdogExpired { .. }) {
                         research = true;
+                    }
+                    if let (SlaveEvent::AddressChanged { new, no_add_chg, .. }, Some(f)) =
+                        (&e, &address_file)
+                    {
+                        // The device only accepted it: the shell keeps it.
+                        let stored = StoredAddress {
+                            address: *new,
+                            no_add_chg: *no_add_chg,
+                        };
+                        if let Err(err) = stored.save(f) {
+                            printer.emit(
+                                now,
+                                json!({"event": "address_store_error", "text": err.to_string()}),
+                                format!("cannot keep the address: {err}"),
+                            );
+                        }
                     }
                     printer.event(now, &e);
                 }

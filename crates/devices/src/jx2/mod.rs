@@ -75,8 +75,10 @@
 mod device;
 pub mod profile;
 pub mod script;
+mod scripted;
 mod shared;
 
+pub use scripted::ScriptedJx2;
 pub use shared::{Plc, SharedJx2};
 
 use profibus_dp::slave::{DeviceEvent, SlaveState};
@@ -84,6 +86,9 @@ use profibus_fdl::Instant;
 use std::collections::VecDeque;
 use std::fmt;
 use std::time::Duration;
+
+/// `JX2P0DC3.GSD`, written for this project from the manual.
+pub const GSD: &[u8] = include_bytes!("../../../../gsd/JX2P0DC3.GSD");
 
 /// Ident number of the emulation (ours: the manual gives none).
 pub const IDENT: u16 = 0x0DC3;

@@ -84,6 +84,7 @@ impl Rig {
             dsap,
             ssap: dsap.map(|_| 62),
             data,
+            format: None,
         };
         let mut out = [0u8; 246];
         let r = self.slave.on_request(self.now, &req, &mut out);
