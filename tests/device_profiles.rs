@@ -539,3 +539,60 @@ fn pyprofibus_runs_both_profiles_into_data_exchange_with_pkw() {
         .iter()
         .any(|e| e["event"] == "state" && e["to"] == "Data_Exch"));
 }
+
+#[test]
+fn a_bus_file_names_the_omega_profile_and_the_master_shows_its_channels() {
+    let r = rig(
+        "omega-device",
+        &["--device", "omega", "--addr", "25"],
+        false,
+    );
+    let bus = r.bus(
+        "bus.toml",
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 25\ndevice = \"omega\"\nsetpoints = 2\nactual_values = 2\nwatchdog_ms = 1000\n",
+    );
+    let cmds = r.bus(
+        "cmds.jsonl",
+        "{\"slave\": 25, \"set\": {\"setpoint1\": 1234, \"setpoint2\": -5}}\n{\"slave\": 25, \"set\": {\"nope\": 1}}\n",
+    );
+    let out = Command::new(dpctl())
+        .args(["master", "--port"])
+        .arg(&r.master_port)
+        .arg("--config")
+        .arg(&bus)
+        .arg("--input")
+        .arg(&cmds)
+        .args(["--cycles", "60", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    assert!(
+        lines
+            .iter()
+            .any(|v| v["event"] == "state" && v["slave"] == 25 && v["to"] == "data_exchange"),
+        "{lines:?}"
+    );
+    // The last inputs received: the drive follows its setpoints (actual
+    // value i = setpoint i).
+    let st = lines.iter().rev().find(|v| v["event"] == "status").unwrap();
+    let ch = &st["slaves"][0]["channels"];
+    assert_eq!(ch["outputs"]["setpoint1"], 1234, "{ch}");
+    assert_eq!(ch["inputs"]["actual1"], 1234, "{ch}");
+    assert_eq!(ch["inputs"]["actual2"], -5, "{ch}");
+    assert_eq!(ch["inputs"]["status1"], 0x0200, "status word 1: Remote");
+    assert!(
+        lines
+            .iter()
+            .any(|v| v["event"] == "error" && v["error"].as_str().unwrap().contains("nope")),
+        "{lines:?}"
+    );
+    r.stop();
+}
