@@ -11,6 +11,7 @@ pub mod generic;
 pub mod gsd_files;
 pub mod omega;
 pub mod pkw;
+pub mod rfid;
 
 use profibus_dp::slave::Device;
 use std::collections::VecDeque;
@@ -88,7 +89,11 @@ pub struct Profile {
 }
 
 /// Every device profile (the device issues add theirs here).
-pub const PROFILES: &[Profile] = &[bm4::profile::PROFILE, omega::profile::PROFILE];
+pub const PROFILES: &[Profile] = &[
+    bm4::profile::PROFILE,
+    omega::profile::PROFILE,
+    rfid::profile::PROFILE,
+];
 
 /// The station address a profile chooses itself from its options (the
 /// BM4-O-PRO-01's us_DEVICE and rotary switch, a stored Set_Slave_Add
