@@ -455,14 +455,17 @@ fn corpus_user_prm_data() {
         .other
         .iter()
         .any(|l| l.starts_with("Version_Firmware_Download")));
-    // pyprofibus's compact dummy: every module is the configuration.
+    // pyprofibus's compact dummy means all its modules together; a
+    // compact station's modules are otherwise alternatives, and the
+    // default is the first.
     let g = load("gsd/corpus/pyprofibus_dummy_compact.gsd");
-    assert_eq!(
-        g.chk_cfg(&g.default_selection()).unwrap(),
-        [0x00, 0x10, 0x20]
-    );
-    assert_eq!(
-        g.user_prm_data(&g.default_selection(), &[]).unwrap(),
-        [0, 0, 0, 0x42]
-    );
+    assert_eq!(g.default_selection(), [0]);
+    let all = [0, 1, 2];
+    assert_eq!(g.check_selection(&all), vec![]);
+    assert_eq!(g.chk_cfg(&all).unwrap(), [0x00, 0x10, 0x20]);
+    assert_eq!(g.user_prm_data(&all, &[]).unwrap(), [0, 0, 0, 0x42]);
+    assert!(matches!(
+        g.check_selection(&[1, 2]).as_slice(),
+        [Problem::FixedConfiguration { .. }]
+    ));
 }

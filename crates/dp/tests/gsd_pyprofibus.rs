@@ -138,8 +138,18 @@ const PRM_DEFAULTS_BEYOND_CONST: &[(&str, usize, u8, u8)] = &[
     ("proview_siemens_diag_repeater.gsd", 10, 0x03, 0x00),
 ];
 
+/// The modules pyprofibus configures by default: the `Preset` modules,
+/// then for a compact station every other module. (For a compact station
+/// with several modules we default to the first instead, but accept all
+/// of them in file order too; see `Gsd::default_selection`.)
+fn pyprofibus_selection(g: &Gsd) -> Vec<usize> {
+    let preset = (0..g.modules.len()).filter(|&i| g.modules[i].preset);
+    let rest = (0..g.modules.len()).filter(|&i| !g.modules[i].preset && !g.modular_station);
+    preset.chain(rest).collect()
+}
+
 fn compare_prm(name: &str, py: &Value, g: &Gsd) {
-    let ours = g.user_prm_data(&g.default_selection(), &[]).unwrap();
+    let ours = g.user_prm_data(&pyprofibus_selection(g), &[]).unwrap();
     let theirs = py["user_prm_data"].as_str().unwrap();
     let diffs: Vec<_> = PRM_DEFAULTS_BEYOND_CONST
         .iter()

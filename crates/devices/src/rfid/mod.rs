@@ -60,7 +60,6 @@ use profibus_dp::slave::{
 };
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tags::{parse_uid, TagField};
 
@@ -100,7 +99,7 @@ pub struct Rfid {
     events: VecDeque<DeviceEvent>,
     inbox: Option<ControlInbox>,
     next_inbox: Instant,
-    tags_path: Option<PathBuf>,
+    state_events: bool,
 }
 
 impl Rfid {
@@ -112,18 +111,17 @@ impl Rfid {
             events: VecDeque::new(),
             inbox: None,
             next_inbox: Instant::ZERO,
-            tags_path: None,
+            state_events: false,
         }
     }
 
-    /// A reader with the antenna field of the tags file at `path`, which
-    /// it rewrites whenever the field changes.
-    pub fn from_tags_file(path: &Path) -> Result<Rfid, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let field = TagField::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-        let mut r = Rfid::new(field);
-        r.tags_path = Some(path.to_path_buf());
-        Ok(r)
+    /// Report every change of the antenna field (a write, a tag entering
+    /// or leaving, TOR) as a [`DeviceEvent`] of kind
+    /// [`STATE_EVENT`](crate::STATE_EVENT) with the new tags file as its
+    /// text, for the program that keeps the file.
+    pub fn with_state_events(mut self, on: bool) -> Rfid {
+        self.state_events = on;
+        self
     }
 
     /// Read control commands from `inbox` (see [`Rfid::control`]).
@@ -251,13 +249,9 @@ impl Rfid {
         while let Some(e) = self.reader.take_event() {
             self.note("rfid", e);
         }
-        if self.reader.take_changed() {
-            if let Some(path) = &self.tags_path {
-                if let Err(e) = std::fs::write(path, self.reader.field().to_toml()) {
-                    let text = format!("cannot save {}: {e}", path.display());
-                    self.note("rfid_error", text);
-                }
-            }
+        if self.reader.take_changed() && self.state_events {
+            let text = self.reader.field().to_toml();
+            self.note(crate::STATE_EVENT, text);
         }
     }
 

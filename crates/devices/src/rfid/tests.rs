@@ -297,25 +297,34 @@ fn leaving_data_exchange_starts_the_handshake_afresh() {
 }
 
 #[test]
-fn control_commands_and_the_tags_file() {
-    let dir = std::env::temp_dir().join(format!("rfid-tags-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("tags.toml");
-    std::fs::write(&path, "[[tag]]\nuid = \"01020304\"\nblocks = 2\n").unwrap();
-    let mut d = Rfid::from_tags_file(&path).unwrap();
+fn control_commands_and_state_events() {
+    let f = TagField::parse("[[tag]]\nuid = \"01020304\"\nblocks = 2\n").unwrap();
+    let mut d = Rfid::new(f).with_state_events(true);
+    let state = |d: &mut Rfid| {
+        let mut last = None;
+        while let Some(e) = d.poll_event() {
+            if e.kind == crate::STATE_EVENT {
+                last = Some(TagField::parse(&e.text).unwrap());
+            }
+        }
+        last
+    };
     assert!(d.control(ms(0), "enter 01020304").is_ok());
     assert!(d.control(ms(0), "tags").unwrap().contains("in the field"));
     assert!(d.control(ms(0), "fly away").is_err());
     assert!(d.control(ms(0), "enter XY").is_err());
-    let saved = TagField::parse(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let saved = state(&mut d).expect("a state event");
     assert_eq!(saved.in_field().unwrap().uid, [1, 2, 3, 4]);
-    // A write is saved.
+    // A write is reported.
     let mut b = Bench::new(d);
     assert_eq!(b.run(b"WD 1 CAFEF00D").unwrap(), b"CAFEF00D\r");
-    let saved = TagField::parse(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let saved = state(&mut b.d).expect("a state event");
     assert_eq!(saved.tags[0].blocks[1], [0xCA, 0xFE, 0xF0, 0x0D]);
     assert!(b.d.control(ms(0), "leave").unwrap().contains("left"));
     assert!(b.d.control(ms(0), "status").unwrap().contains("none"));
-    let _ = std::fs::remove_dir_all(&dir);
-    assert!(Rfid::from_tags_file(&path).is_err());
+    assert!(state(&mut b.d).unwrap().in_field().is_none());
+    // Without state events nothing is reported.
+    let mut d = Rfid::new(TagField::new());
+    d.control(ms(0), "enter 0A").unwrap();
+    assert!(state(&mut d).is_none());
 }

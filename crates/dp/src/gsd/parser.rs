@@ -8,7 +8,9 @@
 //! revisions the model does not interpret are copied verbatim into
 //! `other`.
 
-use super::lexer::{strip_comment, Cursor, LogicalLine, PhysicalLines, ScanError};
+use super::lexer::{
+    strip_comment, strip_comment_from, Cursor, LogicalLine, PhysicalLines, ScanError,
+};
 use super::model::*;
 use super::{DiagKind, Diagnostic, ParseOptions, Parsed, Pos, Quirk, MAX_LINE_LEN};
 use crate::cfg;
@@ -226,6 +228,8 @@ impl Parser {
         };
         let mut current: Option<LogicalLine<'_>> = None;
         let mut continued = false;
+        // The quote of a string still open at the end of the last line.
+        let mut open: Option<u8> = None;
         for item in PhysicalLines::new(text) {
             let (n, raw) = match item {
                 Ok(l) => l,
@@ -237,11 +241,15 @@ impl Parser {
             if n < start {
                 continue;
             }
-            let content = strip_comment(raw).trim_end();
+            // A continuation line starts inside the string the line
+            // before left open.
+            let (content, quote) = strip_comment_from(raw, if continued { open } else { None });
+            let content = content.trim_end();
             let (content, cont) = match content.strip_suffix('\\') {
                 Some(c) => (c, true),
                 None => (content, false),
             };
+            open = quote;
             if continued {
                 let ll = current.as_mut().expect("a line is being continued");
                 ll.push(n, content);
@@ -1564,6 +1572,75 @@ impl Parser {
                     Pos::default(),
                     DiagKind::Semantic,
                     format!("`{key}` is {v}, more than the 244 bytes a DP telegram carries"),
+                    false,
+                );
+            }
+        }
+        let line_of = |key: &str| Pos {
+            line: self.seen.get(key).copied().unwrap_or(0),
+            col: 1,
+        };
+        // A modular station's limits without `Modular_Station = 1`: the
+        // file contradicts itself, and the station is read as compact.
+        if !g.modular_station && g.modules.len() > 1 {
+            if let Some(n) = g.max_module {
+                let modular = if self.seen.contains_key("modular_station") {
+                    "`Modular_Station = 0`"
+                } else {
+                    "no `Modular_Station = 1`"
+                };
+                note(
+                    line_of("max_module"),
+                    DiagKind::Semantic,
+                    format!(
+                        "`Max_Module = {n}` describes a modular station, but the file has {modular}: \
+                         it is read as a compact station, configured with exactly one of its {} modules; \
+                         if the device takes several modules at once, the file lacks `Modular_Station = 1`",
+                        g.modules.len()
+                    ),
+                    false,
+                );
+            }
+        }
+        // The legacy User_Prm_Data is sent padded or cut to its length.
+        let legacy = g.ext_user_prm_data_const.is_empty() && g.ext_user_prm_data_ref.is_empty();
+        if let Some(len) = g.user_prm_data_len.map(usize::from) {
+            let given = g.user_prm_data.as_ref().map_or(0, Vec::len);
+            let used = if legacy {
+                ""
+            } else {
+                "; the file's `Ext_User_Prm_Data_Const`/`Ext_User_Prm_Data_Ref` lines define the bytes instead"
+            };
+            let pos = line_of("user_prm_data_len");
+            if g.user_prm_data.is_some() && given < len {
+                let what = if legacy {
+                    format!("; the other {} byte(s) are sent as 0", len - given)
+                } else {
+                    used.to_string()
+                };
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data_Len = {len}` but `User_Prm_Data` gives only {given} byte(s){what}"),
+                    false,
+                );
+            } else if given > len {
+                let what = if legacy {
+                    format!("; only the first {len} are sent")
+                } else {
+                    used.to_string()
+                };
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data` gives {given} bytes, more than `User_Prm_Data_Len = {len}`{what}"),
+                    false,
+                );
+            } else if g.user_prm_data.is_none() && len > 0 && legacy {
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data_Len = {len}` but the file gives no `User_Prm_Data`; {len} zero byte(s) are sent"),
                     false,
                 );
             }
