@@ -495,3 +495,118 @@ fn user_prm_data_shorter_or_longer_than_its_length() {
     let p = strict(&format!("{HEAD}User_Prm_Data_Len=0\n{m}"));
     assert!(warnings_with(&p, "User_Prm_Data").is_empty());
 }
+
+#[test]
+fn keywords_of_the_standard_are_known() {
+    // One line per group of the GSD specification (revisions 1–5): each
+    // is kept as text without a warning; a vendor's own keyword is still
+    // reported.
+    let station = [
+        "Fail_Safe_required = 1",
+        "PrmCmd_supp = 1",
+        "Diag_Update_Delay = 2",
+        "Periphery = \"DPS\"",
+        "C1_Read_Write_required = 0",
+        "C2_Read_Write_required = 0",
+        "Extra_Alarm_SAP_supp = 1",
+        "Alarm_Sequence_Mode_Count = 2",
+        "Alarm_Type_Mode_supp = 1",
+        "Diagnostic_Alarm_required = 0",
+        "Manufacturer_Specific_Alarm_required = 0",
+        "DPV1_Data_Types = 0",
+        "Prm_Block_Structure_supp = 1",
+        "Prm_Block_Structure_req = 0",
+        "Jokerblock_Slot = 3",
+        "Jokerblock_Location = 1",
+        "Max_iParameter_Size = 1024",
+        "Publisher_supp = 1",
+        "Subscriber_supp = 1",
+        "DXB_Max_Link_Count = 10",
+        "DXB_Max_Data_Length = 32",
+        "DXB_Subscribertable_Block_Location = 1",
+        "Isochron_Mode_supp = 1",
+        "Isochron_Mode_required = 0",
+        "TBASE_DP = 375",
+        "TDP_MIN = 4",
+        "TDP_MAX = 256",
+        "T_PLL_W_MAX = 12",
+        "TBASE_IO = 375",
+        "TI_MIN = 1",
+        "TO_MIN = 1",
+        "Slave_Redundancy_supp = 0",
+        "Slave_Max_Switch_Over_Time = 100",
+        "Time_Sync_supp = 0",
+        "Ident_Maintenance_supp = 1",
+        "Subsys_Dir_Index = 1",
+        "F_ParamDescCRC = 0x1234",
+        "X_Prm_SAP_supp = 1",
+        "X_Max_User_Prm_Data_Len = 100",
+        "X_Prm_Block_Structure_supp = 1",
+        "X_Unit_Diag_Bit(3) = \"x\"",
+        "Unit_Diag_Bit_Help(3) = \"help\"",
+        "Unit_Diag_Not_Bit_Help(3) = \"help\"",
+        "Channel_Diag(16) = \"Error 16\"",
+        "Channel_Diag_Help(16) = \"What to do\"",
+        // A master's GSD file.
+        "Master_Freeze_Mode_supp = 1",
+        "Max_MPS_Length = 1000",
+        "Min_Poll_Timeout = 10",
+        "Trdy_1.5M = 11",
+        "Tqui_12M = 9",
+        "Tset_9.6 = 1",
+        "Tsdi_500 = 70",
+        "LAS_Len = 126",
+        "Max_Slaves_supp = 125",
+        "DPV1_Master = 1",
+        "C1_Master_Read_Write_supp = 1",
+        "Master_DPV1_Alarm_supp = 1",
+        "Isochron_Mode_Synchronised = 1",
+        "DXB_Master_supp = 0",
+        "X_Master_Prm_SAP_supp = 0",
+    ];
+    let module = [
+        "Channel_Diag(17) = \"Short circuit\"",
+        "F_IO_StructureDescCRC = 0x12345678",
+        "F_Ext_Module_Prm_Data_Len = 10",
+        "X_Ext_Module_Prm_Data_Len = 4",
+        "Subsys_Module_Dir_Index = 2",
+    ];
+    let text = format!(
+        "{HEAD}{}\nVendor_Special = 1\nTrdy_2M = 1\nModule=\"m\" 0x10\n{}\nVendor_Module_Thing = 1\nEndModule\n",
+        station.join("\n"),
+        module.join("\n")
+    );
+    let p = strict(&text);
+    let unknown: Vec<&str> = p
+        .warnings
+        .iter()
+        .filter(|w| w.kind == DiagKind::UnknownKeyword)
+        .map(|w| w.message.as_str())
+        .collect();
+    assert_eq!(
+        unknown,
+        [
+            "unknown keyword `Vendor_Special`; kept, not interpreted",
+            "unknown keyword `Trdy_2M`; kept, not interpreted",
+            "unknown keyword `Vendor_Module_Thing` in a module; kept, not interpreted",
+        ]
+    );
+    let g = &p.gsd;
+    // Every line but `C1_Read_Write_required` (in the model) is kept,
+    // with the two unknown ones.
+    assert_eq!(g.other.len(), station.len() - 1 + 2, "{:#?}", g.other);
+    assert!(!g.c1_read_write_required);
+    assert_eq!(g.other_flag("fail_safe_required"), Some(true));
+    assert_eq!(g.other_flag("PRMCMD_SUPP"), Some(true));
+    assert_eq!(g.other_value("Slave_Max_Switch_Over_Time"), Some("100"));
+    assert_eq!(g.other_flag("Time_Sync_supp"), Some(false));
+    assert_eq!(g.other_value("Periphery"), Some("\"DPS\""));
+    assert_eq!(g.other_flag("Isochron_Mode_required"), Some(false));
+    assert_eq!(g.other_value("No_Such_Keyword"), None);
+    assert_eq!(
+        g.modules[0].other_value("F_IO_StructureDescCRC"),
+        Some("0x12345678")
+    );
+    // Written back, the file reads the same.
+    assert_eq!(strict(&g.write()).gsd, *g);
+}

@@ -8,6 +8,7 @@
 //! revisions the model does not interpret are copied verbatim into
 //! `other`.
 
+use super::keywords;
 use super::lexer::{
     strip_comment, strip_comment_from, Cursor, LogicalLine, PhysicalLines, ScanError,
 };
@@ -37,62 +38,8 @@ const RAW_BLOCKS: &[(&str, &str)] = &[
     ("data_area_beg", "data_area_end"),
 ];
 
-/// Standard keywords of GSD revisions 1–5 the model does not interpret;
-/// they go to `other` without a warning.
-const KNOWN_EXTRA: &[&str] = &[
-    "periphery",
-    "diag_update_delay",
-    "c2_read_write_required",
-    "extra_alarm_sap_supp",
-    "alarm_sequence_mode_count",
-    "alarm_type_mode_supp",
-    "diagnostic_alarm_required",
-    "process_alarm_required",
-    "pull_plug_alarm_required",
-    "status_alarm_required",
-    "update_alarm_required",
-    "manufacturer_specific_alarm_required",
-    "dpv1_data_types",
-    "publisher_supp",
-    "subscriber_supp",
-    "prm_block_structure_supp",
-    "prm_block_structure_req",
-    "isochron_mode_supp",
-    "isochron_mode_required",
-    "isochron_mode_synchronised",
-    "tbase_dp",
-    "tdp_max",
-    "tdp_min",
-    "tbase_io",
-    "ti_min",
-    "to_min",
-    "t_pll_w_max",
-    "ti_to_equal",
-    "time_sync_supp",
-    "ident_maintenance_supp",
-    "firmware_download_supp",
-    "slave_redundancy_supp",
-    "slave_max_switch_over_time",
-    "dxb_max_link_count",
-    "dxb_max_data_length",
-    "dxb_subscribertable_block_location",
-    "max_iso_input_len",
-    "max_iso_output_len",
-    "max_cfg_data_len",
-    "info_text",
-    "channel_diag",
-    "channel_diag_help",
-    "unit_diag_bit_help",
-    "unit_diag_not_bit_help",
-    "family_name",
-    "web_server_supp",
-];
-
 /// Warnings kept per quirk before the rest are folded into one.
 const QUIRK_REPEATS: usize = 3;
-
-/// Module-body keywords the model does not interpret.
-const KNOWN_MODULE_EXTRA: &[&str] = &["info_text", "module_class", "f_ext_module_prm_data_len"];
 
 /// The `(index)` after a keyword: its value and byte offset.
 type Index = Option<(i64, usize)>;
@@ -933,10 +880,7 @@ impl Parser {
                     let v = self.int_value(ll, c, word, &canonical, 0, 0xFFFF)?;
                     self.gsd.baud_rates[i].max_tsdr = Some(v as u16);
                 } else {
-                    let known = KNOWN_EXTRA.contains(&key)
-                        || key.starts_with("x_")
-                        || key.starts_with("f_");
-                    if !known {
+                    if !keywords::known_station(key) {
                         self.warn(
                             ll.pos(0),
                             DiagKind::UnknownKeyword,
@@ -1101,10 +1045,7 @@ impl Parser {
                     self.missing_end(ll, "module", start, "EndModule");
                 }
                 k => {
-                    let known = KNOWN_MODULE_EXTRA.contains(&k)
-                        || k.starts_with("x_")
-                        || k.starts_with("f_");
-                    if !known {
+                    if !keywords::known_module(k) {
                         self.warn(
                             ll.pos(0),
                             DiagKind::UnknownKeyword,

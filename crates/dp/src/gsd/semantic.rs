@@ -434,7 +434,41 @@ fn write_at(
     Ok(())
 }
 
+/// The value of the first `keyword = value` line of `lines` (the keyword
+/// compared without regard to case; a line with an index such as
+/// `Keyword(3) = …` does not match).
+fn raw_value<'a>(lines: &'a [String], keyword: &str) -> Option<&'a str> {
+    lines.iter().find_map(|l| {
+        let (k, v) = l.split_once('=')?;
+        k.trim().eq_ignore_ascii_case(keyword).then(|| v.trim())
+    })
+}
+
+impl Module {
+    /// The raw value of a module keyword the model keeps as text (in
+    /// [`Module::other`]), e.g. `F_ParamDescCRC`.
+    pub fn other_value(&self, keyword: &str) -> Option<&str> {
+        raw_value(&self.other, keyword)
+    }
+}
+
 impl Gsd {
+    /// The raw value of a station keyword the model keeps as text (in
+    /// [`Gsd::other`]: DP-V2, isochronous mode, I&M, PROFIsafe and
+    /// master keywords, …), e.g. `other_value("Fail_Safe_required")`
+    /// gives `Some("1")`.
+    pub fn other_value(&self, keyword: &str) -> Option<&str> {
+        raw_value(&self.other, keyword)
+    }
+
+    /// A boolean station keyword kept as text: `Some(true)` for a value
+    /// other than 0, `None` when the file does not give it or the value is
+    /// no number.
+    pub fn other_flag(&self, keyword: &str) -> Option<bool> {
+        let v = self.other_value(keyword)?;
+        parse_int(v).map(|n| n != 0)
+    }
+
     /// `MaxTsdr_<baud>` in bit times, if the file gives it.
     pub fn max_tsdr(&self, baud: Baud) -> Option<u32> {
         self.baud_rates[baud_index(baud)].max_tsdr.map(u32::from)
