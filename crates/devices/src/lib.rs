@@ -64,14 +64,19 @@
 
 pub mod address;
 pub mod bm4;
+pub mod bus;
 pub mod channels;
 pub mod generic;
 pub mod gsd_files;
+pub mod jx2;
 pub mod omega;
 pub mod pkw;
 pub mod profile;
+pub mod rfid;
 
-pub use profile::{Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError};
+pub use profile::{
+    Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError, STATE_EVENT,
+};
 
 use profibus_dp::slave::Device;
 
@@ -83,6 +88,8 @@ pub const PROFILES: &[ProfileEntry] = &[
     ProfileEntry::of::<generic::GenericProfile>(),
     ProfileEntry::of::<bm4::profile::Bm4Profile>(),
     ProfileEntry::of::<omega::profile::OmegaProfile>(),
+    ProfileEntry::of::<jx2::profile::Jx2Profile>(),
+    ProfileEntry::of::<rfid::profile::RfidProfile>(),
 ];
 
 /// The profile named `name` (case-insensitive).
