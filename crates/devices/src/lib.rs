@@ -6,6 +6,7 @@
 //! in [`PROFILES`], which `dpctl slave --list-devices` prints and
 //! `dpctl slave --device NAME` builds from.
 
+pub mod bk3000;
 pub mod bm4;
 pub mod generic;
 pub mod gsd_files;
