@@ -593,3 +593,71 @@ fn profile_options() {
         .push(("programmed-cfg".into(), "0x10,0x20".into()));
     assert!(profile::build_device(&o).is_ok());
 }
+
+#[test]
+fn gsd_file_agrees_with_the_emulation() {
+    let g = crate::gsd_files::parse(crate::gsd_files::BK30BECF).unwrap();
+    assert_eq!(g.ident_number, IDENT);
+    assert!(g.sync_mode_supp && g.freeze_mode_supp && !g.dpv1_slave);
+    assert_eq!(g.max_diag_data_len, Some(MAX_DIAG_LEN));
+    // Every format of every complex terminal is a module.
+    for t in CATALOGUE {
+        for v in t.variants {
+            assert!(
+                g.modules.iter().any(|m| m.cfg == v.cfg),
+                "{} {:?} {:02X?} has no GSD module",
+                t.name,
+                v.mapping,
+                v.cfg
+            );
+        }
+    }
+    for b in [
+        image::CFG_PLC_INTERFACE,
+        image::CFG_CYCLE_COUNTER,
+        0x10,
+        0x20,
+        0x30,
+    ] {
+        assert!(g.modules.iter().any(|m| m.cfg == [b]), "0x{b:02X}");
+    }
+    // The GSD's parameters produce User_Prm_Data the coupler decodes the
+    // same way.
+    let v: Vec<profibus_dp::gsd::PrmValue> = [
+        "2-byte PLC interface=used",
+        "Start-up mode=parameter mode with Stat_Diag",
+        "K-bus cycle counter=on",
+    ]
+    .iter()
+    .map(|s| s.parse().unwrap())
+    .collect();
+    let sel = g
+        .select(&["2-byte PLC interface", "K-bus cycle counter"])
+        .unwrap();
+    let data = g.user_prm_data(&sel, &v).unwrap();
+    let p = UserPrm::parse(&data, false).unwrap();
+    assert_eq!(
+        p,
+        UserPrm {
+            startup: StartupMode::ParameterStatDiag,
+            cycle_counter: true,
+            plc_interface: true,
+            programmed: false
+        }
+    );
+    assert_eq!(g.user_prm_data(&sel, &[]).unwrap(), prm::DEFAULT_USER_PRM);
+    // A mixed strip selected by module names gives the emulation's Chk_Cfg.
+    let s = strip("KL1104,KL2134,KL3102,KL4002,KL9010");
+    let sel = g
+        .select(&[
+            "KL3xx2, KL3351: 2 x 16 bit in (compact)",
+            "KL4xx2: 2 x 16 bit out (compact)",
+            "8 digital inputs (1 byte)",
+            "8 digital outputs (1 byte)",
+        ])
+        .unwrap();
+    assert_eq!(
+        g.chk_cfg(&sel).unwrap(),
+        s.default_image(Options::default()).cfg
+    );
+}
