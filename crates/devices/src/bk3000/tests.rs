@@ -322,6 +322,7 @@ impl Bench {
             dsap,
             ssap: dsap.map(|_| sap::MASTER),
             data,
+            format: None,
         };
         let mut out = [0u8; 246];
         let r = self.slave.on_request(T0, &req, &mut out);
@@ -571,27 +572,68 @@ fn encode_refuses_inputs_unknown_names_and_out_of_range() {
 }
 
 #[test]
-fn profile_options() {
-    use crate::ProfileOptions;
-    let mut o = ProfileOptions::default();
-    o.options.push(("switch-ones".into(), "7".into()));
-    o.options.push(("switch-tens".into(), "2".into()));
-    assert_eq!(profile::address(&o), Ok(Some(27)));
-    o.options.push(("switch-tens".into(), "12".into()));
-    assert!(profile::address(&o).is_err());
-    let mut o = ProfileOptions::default();
-    assert!(profile::build_device(&o)
-        .unwrap_err()
-        .contains("--terminals"));
-    o.options.push(("terminals".into(), "KL1104,KL2134".into()));
-    assert!(profile::build_device(&o)
-        .unwrap_err()
-        .contains("end terminal"));
-    o.options
-        .push(("terminals".into(), "KL1104,KL2134,KL9010".into()));
-    o.options
-        .push(("programmed-cfg".into(), "0x10,0x20".into()));
-    assert!(profile::build_device(&o).is_ok());
+fn profile_options_modules_and_channels() {
+    use crate::{profile as registry, DeviceOptions};
+    let entry = registry("bk3000").unwrap();
+    let mut o = DeviceOptions::new();
+    o.set_text("terminals", "KL1104,KL2134,KL3102,KL4002,KL1501,KL9010");
+    o.set_text("switch-ones", "7");
+    o.set_text("switch-tens", "2");
+    let p = entry.configure(&o, Some(9)).unwrap();
+    assert_eq!(p.address(), Some(27));
+    assert_eq!(
+        p.chk_cfg().unwrap(),
+        [0x50, 0x50, 0x60, 0x60, 0xB4, 0x10, 0x20]
+    );
+    assert_eq!(p.user_prm_data().unwrap(), prm::DEFAULT_USER_PRM);
+    let m = p.channels(&p.chk_cfg().unwrap()).unwrap();
+    let c = m
+        .find(crate::channels::Direction::Input, "1.KL1104.3")
+        .unwrap();
+    assert_eq!(
+        (c.offset, c.ty),
+        (9, crate::channels::ChannelType::Bool { bit: 2 })
+    );
+    assert!(m
+        .find(crate::channels::Direction::Output, "4.KL4002.2")
+        .is_some());
+    // The PLC interface is recognised in the configuration.
+    let m = p
+        .channels(&[0xB1, 0x50, 0x50, 0x60, 0x60, 0xB4, 0x10, 0x20])
+        .unwrap();
+    assert_eq!(
+        m.find(crate::channels::Direction::Input, "3.KL3102.1")
+            .unwrap()
+            .offset,
+        2
+    );
+    assert!(p.channels(&[0x10]).is_err());
+    // A bus file's list.
+    let mut o = DeviceOptions::new();
+    o.set(
+        "terminals",
+        toml::Value::Array(vec!["KL1104".into(), "KL9010".into()]),
+    );
+    assert_eq!(
+        entry.configure(&o, None).unwrap().chk_cfg().unwrap(),
+        [0x10]
+    );
+    // Refusals a user understands.
+    let e = entry.configure(&DeviceOptions::new(), None).unwrap_err();
+    assert!(e.to_string().contains("--terminals"), "{e}");
+    let mut o = DeviceOptions::new();
+    o.set_text("terminals", "KL1104,KL2134");
+    let e = entry.configure(&o, None).unwrap_err();
+    assert!(e.to_string().contains("end terminal"), "{e}");
+    o.set_text("terminals", "KL1104,KL9010");
+    o.set_text("switch-tens", "12");
+    assert!(entry.configure(&o, None).is_err());
+    let mut o = DeviceOptions::new();
+    o.set_text("terminals", "KL1104,KL2134,KL9010");
+    o.set_text("programmed-cfg", "10 20");
+    assert!(entry.configure(&o, None).unwrap().device(None).is_ok());
+    o.set_text("programmed-cfg", "10");
+    assert!(entry.configure(&o, None).is_err());
 }
 
 #[test]
