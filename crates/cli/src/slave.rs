@@ -21,7 +21,7 @@ use anyhow::{bail, Context};
 use profibus_devices::address::StoredAddress;
 use profibus_devices::generic::InputPattern;
 use profibus_devices::{
-    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES,
+    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES, STATE_EVENT,
 };
 use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
@@ -55,7 +55,8 @@ pub struct Args {
     /// bytes, so it locks at the first rate that sees a valid telegram).
     #[arg(long, value_name = "B", default_value = "auto")]
     baud: String,
-    /// GSD file of the device to emulate (the generic device).
+    /// GSD file of the device to emulate (the generic device; `.gsd` or a
+    /// localised `.gse`, `.gsg`, …).
     #[arg(long, value_name = "FILE", conflicts_with = "device")]
     gsd: Option<PathBuf>,
     /// A module of the GSD file, in slot order (repeat for each module;
@@ -112,6 +113,11 @@ pub struct Args {
     /// omega: number of actual values (si_NR_RD_VALUE, 1..8).
     #[arg(long, value_name = "N", requires = "setpoints")]
     actual_values: Option<u8>,
+    /// rfid: the tags file (TOML: tags with UID and memory, which one is
+    /// in the antenna field, the reader's timing), rewritten when the
+    /// field changes.
+    #[arg(long, value_name = "FILE.toml", requires = "device")]
+    tags: Option<PathBuf>,
     /// bk3000: the terminal strip in plug order, end terminal last, e.g.
     /// KL1104,KL2134,KL3102,KL4002,KL9010 (a name may end in `:complete`
     /// or `:compact`); or `--device-opt terminals-file=FILE`.
@@ -126,9 +132,9 @@ pub struct Args {
     /// Control commands for the device, one per line, from FILE or `-`
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
-    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. bk3000:
-    /// `status`, `outputs`, `set NAME VALUE`, `release NAME|all`, `pull N`,
-    /// `plug N`, `run`.
+    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
+    /// `leave`, `tags`, `status`. bk3000: `status`, `outputs`, `set NAME
+    /// VALUE`, `release NAME|all`, `pull N`, `plug N`, `run`.
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
     /// File in which the generic device keeps an address set by
@@ -356,6 +362,7 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("write_gsd", path(&args.write_gsd)),
         ("params", path(&args.params)),
         ("address_file", path(&args.address_file)),
+        ("tags", path(&args.tags)),
     ] {
         if let Some(v) = v {
             opts.set(k, v);
@@ -457,6 +464,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         None => bail!("give --addr N"),
     };
     let address_file = profile.address_file();
+    let state_file = profile.state_file();
     let pty = common::is_pty(&path);
     let latency = match args.latency {
         Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
@@ -535,6 +543,20 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                                 json!({"event": "address_store_error", "text": err.to_string()}),
                                 format!("cannot keep the address: {err}"),
                             );
+                        }
+                    }
+                    if let (SlaveEvent::Device(d), Some(f)) = (&e, &state_file) {
+                        if d.kind == STATE_EVENT {
+                            // The device's new state: the shell keeps it.
+                            let (kind, text) = match std::fs::write(f, &d.text) {
+                                Ok(()) => ("state_saved", format!("state saved to {}", f.display())),
+                                Err(err) => (
+                                    "state_store_error",
+                                    format!("cannot save the state to {}: {err}", f.display()),
+                                ),
+                            };
+                            printer.emit(now, json!({"event": kind, "text": text}), text.clone());
+                            continue;
                         }
                     }
                     printer.event(now, &e);
