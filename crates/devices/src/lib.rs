@@ -65,6 +65,7 @@
 pub mod address;
 pub mod bk3000;
 pub mod bm4;
+pub mod bus;
 pub mod channels;
 pub mod generic;
 pub mod gsd_files;
