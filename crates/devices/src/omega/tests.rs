@@ -219,7 +219,10 @@ fn pkw_dialect_codes() {
     assert_eq!(PKW.command(&Pkw::new(4, 9, 6, 0)), Command::Describe(6));
     assert_eq!(PKW.command(&Pkw::new(6, 9, 3, 0)), Command::Unsupported(6));
     assert_eq!(PKW.response(0x7E, 6, Reply::Element(0xF)).pke, 0x307E);
-    assert_eq!(PKW.decode_response(&Pkw::new(7, 5, 0, 0x82)), Some(Err(0x82)));
+    assert_eq!(
+        PKW.decode_response(&Pkw::new(7, 5, 0, 0x82)),
+        Some(Err(0x82))
+    );
     assert_eq!(PKW.error_text(0x82), "error reading actual value");
     assert!(PKW.reset_required);
 }
