@@ -316,5 +316,4 @@ fn pkw_dialect_codes() {
     assert_eq!(D.response(5, 2, Reply::ElementDword(7)).pke, 0x5005);
     assert_eq!(D.request(1, Command::Describe(1)), None);
     assert!(D.error_text(0x0B).starts_with("variable does not exist"));
-    assert!(!D.reset_required);
 }

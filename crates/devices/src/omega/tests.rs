@@ -224,5 +224,4 @@ fn pkw_dialect_codes() {
         Some(Err(0x82))
     );
     assert_eq!(PKW.error_text(0x82), "error reading actual value");
-    assert!(PKW.reset_required);
 }
