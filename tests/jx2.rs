@@ -421,6 +421,11 @@ fn error_numbers_through_registers_and_bus() {
         j.cmd("wait-bit 12100 13 clear 5s");
         j.cmd("write 12101 6");
     };
+    assert_eq!(
+        j.cmd("read 12133")["value"],
+        8,
+        "19.2 kbit/s, nominal on a pty"
+    );
     assert_eq!(err(&j.cmd("write 12107 127")), Some(1));
     reset(&mut j);
     assert_eq!(err(&j.cmd("write 12102 123")), Some(2));

@@ -118,13 +118,25 @@ pub struct Args {
     /// field changes.
     #[arg(long, value_name = "FILE.toml", requires = "device")]
     tags: Option<PathBuf>,
+    /// bk3000: the terminal strip in plug order, end terminal last, e.g.
+    /// KL1104,KL2134,KL3102,KL4002,KL9010 (a name may end in `:complete`
+    /// or `:compact`); or `--device-opt terminals-file=FILE`.
+    #[arg(long, value_name = "LIST", requires = "device")]
+    terminals: Option<String>,
+    /// bk3000: the rotary switch for the ones of the address (0..9).
+    #[arg(long, value_name = "N", requires = "device")]
+    switch_ones: Option<u8>,
+    /// bk3000: the rotary switch for the tens of the address (0..9).
+    #[arg(long, value_name = "N", requires = "device")]
+    switch_tens: Option<u8>,
     /// Control commands for the device, one per line, from FILE or `-`
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
     /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
     /// `leave`, `tags`, `status`. jx2: a Unix socket to create for register
     /// commands (`read 12100`, `write 12102 16`, ...; stdin always takes
-    /// them too).
+    /// them too). bk3000: `status`, `outputs`, `set NAME VALUE`, `release
+    /// NAME|all`, `pull N`, `plug N`, `run`.
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
     /// jx2: the module number x of the registers 1x100..1x999 (1..9,
@@ -371,6 +383,8 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("setpoints", args.setpoints.map(i64::from)),
         ("actual_values", args.actual_values.map(i64::from)),
         ("module_number", args.module_number.map(i64::from)),
+        ("switch_ones", args.switch_ones.map(i64::from)),
+        ("switch_tens", args.switch_tens.map(i64::from)),
     ] {
         if let Some(v) = v {
             opts.set(k, v);
@@ -379,17 +393,26 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
     if let Some(s) = &args.switch {
         opts.set_text("switch", s);
     }
+    if let Some(t) = &args.terminals {
+        opts.set("terminals", t.as_str());
+    }
     for o in &args.device_opts {
         opts.set_pair(o)?;
     }
     Ok(opts)
 }
 
+/// A device with its name for people.
+struct Built {
+    profile: Box<dyn Configured>,
+    device: BoxedDevice,
+    name: String,
+    /// jx2: the PLC, for the baud rate register.
+    jx2: Option<profibus_devices::jx2::SharedJx2>,
+}
+
 /// The configured profile, its slave device and its name for people.
-fn build_device(
-    args: &Args,
-    printer: &Printer,
-) -> anyhow::Result<(Box<dyn Configured>, BoxedDevice, String)> {
+fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<Built> {
     let entry = match &args.device {
         Some(name) => profibus_devices::profile(name)
             .map_err(|e| anyhow::anyhow!("{e}; or use --gsd FILE"))?,
@@ -405,9 +428,12 @@ fn build_device(
         let now = printer.now();
         printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
     }
+    let mut jx2 = None;
     let dev = if entry.name == profibus_devices::jx2::profile::NAME {
         // The register interface runs beside the slave (stdin, a socket).
-        crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?
+        let (dev, plc) = crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?;
+        jx2 = Some(plc);
+        dev
     } else {
         let control = args.control.as_ref().map(|src| {
             let inbox = ControlInbox::new();
@@ -425,7 +451,12 @@ fn build_device(
                 .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number))
         }
     };
-    Ok((profile, dev, name))
+    Ok(Built {
+        profile,
+        device: dev,
+        name,
+        jx2,
+    })
 }
 
 /// What the jx2 register clients need.
@@ -435,10 +466,6 @@ fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::
         module_number: o.module_number,
         control: args.control.as_ref().map(PathBuf::from),
         script: o.script,
-        baud: match parse_baud(&args.baud)? {
-            BaudChoice::Fixed(b) => b.bps(),
-            _ => PTY_NOMINAL.bps(),
-        },
     })
 }
 
@@ -481,7 +508,12 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let path = args.port.clone().expect("clap requires --port");
     let choice = parse_baud(&args.baud)?;
-    let (profile, device, name) = build_device(&args, &printer)?;
+    let Built {
+        profile,
+        device,
+        name,
+        jx2,
+    } = build_device(&args, &printer)?;
     let addr = match profile.address().or(args.addr) {
         Some(a) => a,
         // A device that sets its address itself (jx2: its PLC writes it).
@@ -539,6 +571,9 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             port.baud()
         };
+        if let Some(plc) = &jx2 {
+            plc.lock().module.set_baud(baud.bps());
+        }
         let mut station =
             PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
         let mut research = false;
