@@ -6,9 +6,9 @@
 use crate::common;
 use crate::view::{drain_events, hex, SlaveInfo, View};
 use anyhow::{Context, Result};
-use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::bk3000;
 use profibus_devices::channels::ChannelMap;
+use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
 use profibus_devices::jx2::{self, script::Interpreter};
 use profibus_devices::pkw::{self, client::PkwClient};
