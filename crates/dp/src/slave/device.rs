@@ -76,6 +76,10 @@ pub struct Features {
     pub fail_safe: bool,
     /// Longest Slave_Diag response (`Max_Diag_Data_Len`, 6..=244).
     pub max_diag_len: u8,
+    /// Longest data block of an MSAC_C1 Read or Write (`C1_Max_Data_Len`,
+    /// 1..=240). The core answers a Read of 0 or more bytes, and a Write of
+    /// 0 or more bytes, with a DP-V1 error before the device sees it.
+    pub c1_max_data_len: u8,
 }
 
 impl Default for Features {
@@ -90,6 +94,7 @@ impl Default for Features {
             alarms: false,
             fail_safe: false,
             max_diag_len: 244,
+            c1_max_data_len: 240,
         }
     }
 }

@@ -1166,3 +1166,41 @@ fn dp_saps_serve_srd_only() {
         }
     )));
 }
+
+#[test]
+fn dpv1_lengths_are_checked_against_c1_max_data_len() {
+    // C1_Max_Data_Len = 32, as in the DP-V1 GSD of the observation.
+    let mut dev = dpv1_device();
+    dev.features.c1_max_data_len = 32;
+    let mut b = Bench::new(dev);
+    b.start(t(0), &dpv1_prm());
+    let ask = |b: &mut Bench, req: Vec<u8>| -> Vec<u8> {
+        assert_eq!(b.sap(t(1), MASTER, 51, &req), Ans::Sc, "{req:02X?}");
+        b.sap(t(2), MASTER, 51, &[]).data().to_vec()
+    };
+    // Writes of 33 and 200 bytes: write length error, nothing stored.
+    for n in [33usize, 200] {
+        let req = [vec![0x5F, 1, 2, n as u8], vec![0xEE; n]].concat();
+        assert_eq!(ask(&mut b, req), [0xDF, 0x80, 0xB1, 0], "write of {n}");
+    }
+    // A write of no data at all.
+    assert_eq!(ask(&mut b, vec![0x5F, 1, 2, 0]), [0xDF, 0x80, 0xB1, 0]);
+    assert_eq!(b.slave.device().record, vec![0xA1, 0xA2, 0xA3]);
+    // Reads of 0, 33 and 241 bytes: invalid range.
+    for n in [0u8, 33, 241] {
+        assert_eq!(
+            ask(&mut b, vec![0x5E, 1, 2, n]),
+            [0xDE, 0x80, 0xB7, 0],
+            "read of {n}"
+        );
+    }
+    // Within the limit both work.
+    // A length byte of 32 with 1 byte of data is malformed: write length.
+    assert_eq!(
+        ask(&mut b, vec![0x5F, 1, 2, 32, 0x11]),
+        [0xDF, 0x80, 0xB1, 0]
+    );
+    let req = [vec![0x5F, 1, 2, 32], vec![0x55; 32]].concat();
+    assert_eq!(ask(&mut b, req), [0x5F, 1, 2, 32]);
+    assert_eq!(ask(&mut b, vec![0x5E, 1, 2, 32])[..4], [0x5E, 1, 2, 32]);
+}
