@@ -76,7 +76,8 @@ pub mod profile;
 pub mod rfid;
 
 pub use profile::{
-    Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError, STATE_EVENT,
+    Configured, ControlError, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError,
+    STATE_EVENT,
 };
 
 use profibus_dp::slave::Device;
