@@ -749,3 +749,53 @@ fn gsd_names_the_coupler_diagnosis() {
         assert!(w.iter().any(|l| l == t), "{t}: {w:?}");
     }
 }
+
+#[test]
+fn sync_and_freeze_accepted_dpv1_refused_like_a_dp_v0_slave() {
+    let mut b = Bench::new("KL1104,KL2134,KL9010");
+    // Set_Prm with Lock_Req, Sync_Req, Freeze_Req and WD_On.
+    let mut prm = set_prm(&[0; 10]);
+    prm[0] = 0x88 | 0x20 | 0x10;
+    b.req(Some(sap::SET_PRM), &prm);
+    b.req(Some(sap::CHK_CFG), &[0x10, 0x20]);
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    assert!(b.diag()[0] & 0x10 == 0, "not Not_Supported");
+    // An MSAC_C1 read (slot 0, index 1) finds the SAP deactivated.
+    let (r, _) = b.req(Some(sap::MSAC_C1), &[0x5E, 0, 1, 4]);
+    assert!(
+        matches!(
+            r,
+            Reply::Data {
+                status: profibus_fdl::ResponseStatus::Rs,
+                ..
+            }
+        ),
+        "{r:?}"
+    );
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+}
+
+#[test]
+fn terminals_file_option() {
+    use crate::{profile as registry, DeviceOptions};
+    let dir = std::env::temp_dir().join(format!("bk3000-strip-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("strip.txt");
+    std::fs::write(
+        &f,
+        "# my strip\nKL1408\nKL3202:complete  # PT100\nKL9100\nKL9010\n",
+    )
+    .unwrap();
+    let mut o = DeviceOptions::new();
+    o.set("terminals_file", f.display().to_string());
+    let p = registry("bk3000").unwrap().configure(&o, None).unwrap();
+    assert_eq!(p.chk_cfg().unwrap(), [0xB2, 0xB2, 0x10]);
+    std::fs::write(&f, "KL1408\n").unwrap();
+    let e = registry("bk3000")
+        .unwrap()
+        .configure(&o, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
