@@ -12,6 +12,7 @@ mod describe;
 mod gsd;
 mod master;
 mod pkw;
+mod rfid;
 mod scan;
 mod slave;
 mod sniff;
@@ -49,6 +50,9 @@ enum Command {
     Sniff(sniff::Args),
     /// Read or write a parameter over a slave's PKW channel.
     Pkw(pkw::Args),
+    /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
+    /// 16-byte handshake.
+    Rfid(rfid::Args),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +74,7 @@ fn main() -> ExitCode {
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
         Command::Pkw(a) => pkw::run(a),
+        Command::Rfid(a) => rfid::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
