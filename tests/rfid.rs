@@ -50,15 +50,28 @@ struct Rig {
 }
 
 fn rig(tags: &str) -> Rig {
+    rig_with(tags, false)
+}
+
+/// `profile`: the bus file names the profile (`device = "rfid"`) instead
+/// of the GSD and its module.
+fn rig_with(tags: &str, profile: bool) -> Rig {
     let bus = Bus::start(4, &[]);
     let tags_path = bus.dir().path("tags.toml");
     std::fs::write(&tags_path, tags).unwrap();
     let busfile = bus.dir().path("bus.toml");
+    let slave = if profile {
+        "device = \"rfid\"".to_string()
+    } else {
+        format!(
+            "gsd = \"{}\"\nmodules = [\"16 Byte In/Out\"]",
+            repo().join("gsd/AEGI0DC4.GSD").display()
+        )
+    };
     std::fs::write(
         &busfile,
         format!(
-            "[master]\naddress = 1\nbaud = \"1.5M\"\n[options]\nlost_after = 10\n[[slave]]\naddress = {ADDR}\ngsd = \"{}\"\nmodules = [\"16 Byte In/Out\"]\nwatchdog_ms = 3000\n",
-            repo().join("gsd/AEGI0DC4.GSD").display()
+            "[master]\naddress = 1\nbaud = \"1.5M\"\n[options]\nlost_after = 10\n[[slave]]\naddress = {ADDR}\n{slave}\nwatchdog_ms = 3000\n"
         ),
     )
     .unwrap();
@@ -286,7 +299,7 @@ fn long_commands_long_answers_and_a_slow_command() {
 #[test]
 fn tags_arriving_and_leaving_while_a_read_runs() {
     // Slow transfers (1 s per block), so that a tag can leave during one.
-    let mut rig = rig(&TAGS.replace("block_ms = 50", "block_ms = 1000"));
+    let mut rig = rig_with(&TAGS.replace("block_ms = 50", "block_ms = 1000"), true);
     // A tag arrives while the read looks for one (TOR 5 s).
     rig.control("leave");
     rig.wait_event("control: tag E004015012345678 left the field");

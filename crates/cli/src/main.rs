@@ -9,7 +9,9 @@ mod common;
 mod decode;
 mod demo;
 mod describe;
+mod dpv1;
 mod gsd;
+mod jx2;
 mod master;
 mod pkw;
 mod rfid;
@@ -53,6 +55,8 @@ enum Command {
     /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
     /// 16-byte handshake.
     Rfid(rfid::Args),
+    /// Read or write a DP-V1 data record (slot, index) of a slave.
+    Dpv1(dpv1::Args),
 }
 
 fn main() -> ExitCode {
@@ -75,6 +79,7 @@ fn main() -> ExitCode {
         Command::Sniff(a) => sniff::run(a),
         Command::Pkw(a) => pkw::run(a),
         Command::Rfid(a) => rfid::run(a),
+        Command::Dpv1(a) => dpv1::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

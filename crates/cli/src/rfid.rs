@@ -28,7 +28,8 @@ pub struct Args {
     /// Serial device or pty path.
     #[arg(long, value_name = "PATH")]
     port: String,
-    /// Bus file (TOML) with the reader (gsd/AEGI0DC4.GSD).
+    /// Bus file (TOML) with the reader (`device = "rfid"`, or
+    /// gsd/AEGI0DC4.GSD with its module).
     #[arg(long, value_name = "BUS.toml")]
     config: PathBuf,
     /// Station address of the reader.
@@ -61,7 +62,7 @@ struct Done {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = BusFile::load(&args.config)?;
+    let bus = profibus_devices::bus::ProfiledBus::load(&args.config)?.file;
     common::runtime()?.block_on(rfid(args, bus))
 }
 
