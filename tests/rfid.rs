@@ -175,9 +175,11 @@ uid = "E0040150AABBCCDD"
 data = ["CAFEF00D"]
 "#;
 
-#[test]
-fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
-    let rig = rig(TAGS);
+/// One `VER` with `dpctl sniff --json` listening: the Data_Exchange
+/// (request, response) pairs of the reader, consecutive repeats left out;
+/// `None` when the master started the reader up again meanwhile (the
+/// command was sent again, so the wire shows more than one exchange).
+fn sniffed_ver(rig: &Rig) -> Option<Vec<(String, String)>> {
     let mut cmd = Command::new(dpctl());
     cmd.args(["sniff", "--json", "--port", &rig.bus.link_str(2)])
         .stdout(Stdio::piped())
@@ -204,9 +206,12 @@ fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
     assert_eq!(answers[0]["bytes"], 42);
     sniff.signal(15);
     let lines = parse(&sniffed.rest().join("\n"));
-    rig.stop();
-
-    // Data_Exchange requests to the reader and its responses, in order.
+    if answers[0]["restarts"] != 0 {
+        return None;
+    }
+    // Data_Exchange requests to the reader and its responses, in order (a
+    // repeated request is answered once; a response pairs with the last
+    // request).
     let mut pairs: Vec<(String, String)> = vec![];
     let mut request: Option<String> = None;
     for v in &lines {
@@ -217,20 +222,31 @@ fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
         if v["type"] == "request" && v["da"] == ADDR {
             request = Some(v["data"].as_str().unwrap().to_string());
         } else if v["type"] == "response" && v["sa"] == ADDR {
-            let req = request.take().expect("a response follows a request");
+            let req = request.clone().expect("a response follows a request");
             let pair = (req, v["data"].as_str().unwrap().to_string());
             if pairs.last() != Some(&pair) {
                 pairs.push(pair);
             }
         }
     }
-    // Before the command: all zero.
-    let zero = telegram("");
+    Some(pairs)
+}
+
+#[test]
+fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
+    let rig = rig(TAGS);
+    // On a busy machine the master may start the reader up again in the
+    // middle (a late reply); such a run shows the command twice and is
+    // repeated.
+    let pairs = (0..5)
+        .find_map(|_| sniffed_ver(&rig))
+        .expect("five runs disturbed by a start-up of the reader");
+    let events = rig.stop();
+    // Before the command: all zero (or the previous run's last exchange).
     let first = pairs
         .iter()
-        .position(|(q, _)| *q != zero)
+        .position(|(q, _)| *q == telegram(MANUAL_REQUESTS[0]))
         .expect("the command on the wire");
-    assert!(pairs[..first].iter().all(|(_, r)| *r == zero), "{pairs:?}");
     // Then every request and response of the manual, in order; between
     // them only the Data_Exchange right after each change of R, whose
     // response is still the previous one (L86).
@@ -244,7 +260,7 @@ fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
         }
         expect.push((telegram(MANUAL_REQUESTS[i]), telegram(MANUAL_RESPONSES[i])));
     }
-    assert_eq!(pairs[first..], expect[..], "{pairs:#?}");
+    assert_eq!(pairs[first..], expect[..], "{pairs:#?}\n{events:#?}");
 }
 
 #[test]

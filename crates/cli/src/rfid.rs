@@ -59,6 +59,8 @@ struct Done {
     answer: Result<Vec<u8>, String>,
     took: Duration,
     drained: usize,
+    /// Start-ups of the reader while the command ran (it was sent again).
+    restarts: u64,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -95,7 +97,7 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
     let startup = Duration::from_millis(args.startup_timeout);
     let mut todo = args.commands.iter().rev().cloned().collect::<Vec<_>>();
     let mut done: Vec<Done> = vec![];
-    let mut running: Option<(String, Instant)> = None;
+    let mut running: Option<(String, Instant, u64)> = None;
     let mut started: Option<Instant> = None;
     let mut failure: Option<String> = None;
     let result = driver::run_with(
@@ -120,12 +122,14 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
                 return ControlFlow::Break(());
             }
             if let Some(r) = client.poll_master(now, m, handle) {
-                let (command, t) = running.take().expect("a command runs");
+                let (command, t, r0) = running.take().expect("a command runs");
+                let restarts = m.slave_stats(addr).map_or(0, |s| s.restarts) - r0;
                 done.push(Done {
                     command,
                     answer: r.map(<[u8]>::to_vec).map_err(|e| e.to_string()),
                     took: now.saturating_duration_since(t),
                     drained: client.drained(),
+                    restarts,
                 });
                 if done.last().is_some_and(|d| d.answer.is_err()) {
                     return ControlFlow::Break(());
@@ -139,7 +143,7 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
                     failure = Some(format!("`{cmd}`: {e}"));
                     return ControlFlow::Break(());
                 }
-                running = Some((cmd, now));
+                running = Some((cmd, now, m.slave_stats(addr).map_or(0, |s| s.restarts)));
             }
             ControlFlow::Continue(())
         },
@@ -173,7 +177,8 @@ fn print(args: &Args, d: &Done) {
             "{}",
             json!({"slave": args.slave, "command": d.command, "ok": true,
                    "answer": String::from_utf8_lossy(a), "answer_hex": crate::describe::hex(a),
-                   "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained})
+                   "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained,
+                   "restarts": d.restarts})
         ),
         Ok(a) => {
             let text = String::from_utf8_lossy(a);
