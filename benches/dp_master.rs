@@ -272,6 +272,7 @@ fn core_cost(cycles: u64) -> f64 {
             dsap,
             ssap,
             data,
+            format: None,
         }))
     };
     let mut far = Canned {

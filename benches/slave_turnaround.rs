@@ -56,6 +56,7 @@ fn telegram(fc: FunctionCode, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
         dsap: saps.map(|s| s.0),
         ssap: saps.map(|s| s.1),
         data,
+        format: None,
     })
     .emit(&mut b)
     .unwrap();

@@ -49,6 +49,7 @@ fn fdl_status(da: u8, sa: u8) -> Vec<u8> {
         dsap: None,
         ssap: None,
         data: &[],
+        format: None,
     })
     .emit(&mut b)
     .unwrap();
@@ -64,6 +65,7 @@ fn sd2(da: u8, sa: u8, data: &[u8]) -> Vec<u8> {
         dsap: Some(58),
         ssap: Some(62),
         data,
+        format: None,
     })
     .emit(&mut b)
     .unwrap();

@@ -4,9 +4,11 @@
 //! configuration against the Omega's rules.
 
 use profibus::devices::bm4::Bm4;
+use profibus::devices::bm4::PKW as BM4;
 use profibus::devices::omega::Omega;
+use profibus::devices::omega::PKW as OMEGA;
 use profibus::devices::pkw::client::{PkwAnswer, PkwClient, PkwError};
-use profibus::devices::pkw::{Command, Reply, BM4, OMEGA};
+use profibus::devices::pkw::{Command, Reply};
 use profibus::dp::master::{
     DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
 };

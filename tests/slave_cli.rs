@@ -26,6 +26,7 @@ fn request(da: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
         dsap: saps.map(|s| s.0),
         ssap: saps.map(|s| s.1),
         data,
+        format: None,
     })
     .emit(&mut b)
     .unwrap();
@@ -224,7 +225,7 @@ fn set_slave_add_persists_in_the_address_file() {
     assert_eq!(r, vec![0x10, 0x02, 21, 0x03, 0x1A, 0x16], "RS");
     assert!(slave.terminate(Duration::from_secs(10)).success());
     let stored = std::fs::read_to_string(&file).unwrap();
-    assert_eq!(stored, "address=21\nno_add_chg=1\n");
+    assert_eq!(stored, "address = 21\nno_add_chg = true\n");
 
     // A restart takes the stored address over --addr, and keeps refusing.
     let (mut slave, _out) = start_slave(&b, &["--addr", "7", "--address-file", &file_s]);

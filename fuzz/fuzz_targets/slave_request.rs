@@ -101,6 +101,7 @@ fuzz_target!(|data: &[u8]| {
             dsap,
             ssap,
             data: body,
+            format: None,
         };
         let FunctionCode::Request { kind, .. } = req.fc else {
             continue;

@@ -208,8 +208,8 @@ async fn demo(args: Args) -> Result<()> {
     let mut next_output = Instant::ZERO;
     // The parameter channels: a round of PKW jobs on each drive/PLC.
     let mut pkw = [
-        DemoPkw::new(6, &pkw::BM4, &BM4_JOBS),
-        DemoPkw::new(25, &pkw::OMEGA, &OMEGA_JOBS),
+        DemoPkw::new(6, &profibus_devices::bm4::PKW, &BM4_JOBS),
+        DemoPkw::new(25, &profibus_devices::omega::PKW, &OMEGA_JOBS),
     ];
     loop {
         let target = if args.fast {
@@ -335,15 +335,10 @@ impl DemoPkw {
         ramp: u16,
     ) -> Option<(String, serde_json::Value)> {
         let h = m.handle(self.address)?;
-        let view = m.slave(h);
-        if view.state != SlaveState::DataExchange {
+        if m.slave(h).state != SlaveState::DataExchange {
             return None;
         }
-        let (cycle, inputs) = (view.stats.data_exchanges, view.inputs);
-        let mut inbuf = [0u8; 244];
-        let n = inputs.len().min(244);
-        inbuf[..n].copy_from_slice(&inputs[..n]);
-        let done = self.client.poll(now, cycle, &inbuf[..n], m.outputs_mut(h));
+        let done = self.client.drive(now, m, h);
         let mut report = None;
         if let Some(r) = done {
             let (pnu, _, name) = self.jobs[(self.next + self.jobs.len() - 1) % self.jobs.len()];

@@ -6,7 +6,6 @@ use anyhow::bail;
 use profibus_dp::cfg::IoLen;
 use profibus_dp::gsd::{
     Allowed, DiagKind, Diagnostic, Gsd, GsdError, Module, ParamInstance, ParseOptions, Parsed,
-    Problem,
 };
 use profibus_fdl::timing::Baud;
 use serde_json::{json, Value};
@@ -454,20 +453,13 @@ fn show_json(file: &Path, parsed: &Parsed) -> Value {
 }
 
 /// Problems of the file's modules beyond syntax: a module that alone
-/// breaks the limits, a compact station's fixed configuration that does.
+/// breaks the limits. A modular station takes it with others, a compact
+/// station as its one configuration (its modules are alternatives).
 fn module_problems(g: &Gsd) -> Vec<String> {
     let mut out = Vec::new();
-    if g.modular_station {
-        for (i, m) in g.modules.iter().enumerate() {
-            for p in g.check_selection(&[i]) {
-                if !matches!(p, Problem::Empty) {
-                    out.push(format!("module {i} `{}` alone: {p}", m.name));
-                }
-            }
-        }
-    } else {
-        for p in g.check_selection(&g.default_selection()) {
-            out.push(format!("the station's fixed configuration: {p}"));
+    for (i, m) in g.modules.iter().enumerate() {
+        for p in g.check_selection(&[i]) {
+            out.push(format!("module {i} `{}` alone: {p}", m.name));
         }
     }
     out

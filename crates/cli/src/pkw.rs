@@ -10,7 +10,7 @@
 use crate::common;
 use anyhow::{bail, Context, Result};
 use profibus_devices::pkw::client::{PkwAnswer, PkwClient, PkwError};
-use profibus_devices::pkw::{dialect_for, Command, Dialect, Reply};
+use profibus_devices::pkw::{Command, Dialect, Reply};
 use profibus_dp::busfile::{BusFile, BusSlave};
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_fdl::driver::{self, Clock, Stop};
@@ -282,7 +282,7 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
         .find(|s| s.params.address == args.slave)
         .with_context(|| format!("slave {} is not in {}", args.slave, args.config.display()))?
         .clone();
-    let dialect = dialect_for(slave.params.ident_number, &slave.params.cfg)
+    let dialect = profibus_devices::pkw_dialect(slave.params.ident_number, &slave.params.cfg)
         .map_err(|e| anyhow::anyhow!("slave {}: {e}", args.slave))?;
     let (param, mut steps) = plan(&args.op, &slave, dialect)?;
     steps.reverse();
@@ -320,10 +320,10 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
                     return ControlFlow::Continue(());
                 }
             }
-            let cycle = m.slave_stats(addr).map_or(0, |s| s.data_exchanges);
-            let inputs = m.inputs(addr).unwrap_or(&[]).to_vec();
-            let mut outputs = m.outputs(addr).unwrap_or(&[]).to_vec();
-            if let Some(r) = client.poll(now, cycle, &inputs, &mut outputs) {
+            let Some(h) = m.handle(addr) else {
+                return ControlFlow::Continue(());
+            };
+            if let Some(r) = client.drive(now, m, h) {
                 match (r, inflight.take()) {
                     (Ok(a), Some(Step::Probe(_))) => probe = Some(a.reply),
                     (r, _) => {
@@ -332,7 +332,6 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
                     }
                 }
             }
-            m.set_outputs(addr, &outputs);
             if client.is_idle() {
                 let Some(step) = steps.pop() else {
                     return ControlFlow::Break(());

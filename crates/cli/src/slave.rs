@@ -18,9 +18,11 @@
 
 use crate::common;
 use anyhow::{bail, Context};
-use profibus_devices::generic::{AddressStore, GenericDevice, InputPattern};
-use profibus_devices::{BoxedDevice, ControlInbox, ProfileOptions, PROFILES};
-use profibus_dp::gsd::{Gsd, ParseOptions};
+use profibus_devices::address::StoredAddress;
+use profibus_devices::generic::InputPattern;
+use profibus_devices::{
+    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES,
+};
 use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
 use profibus_fdl::driver::{self, Clock, Stop};
@@ -319,86 +321,94 @@ fn spawn_control_reader(src: String, inbox: ControlInbox) {
     });
 }
 
-/// The device to emulate, its name, and the address its profile chose.
+/// The profile's options from the command line: the named flags, then
+/// `--device-opt KEY=VALUE` (later ones win).
+fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
+    let mut opts = DeviceOptions::new();
+    if args.device.is_none() {
+        // The generic device: --gsd FILE --module NAME ...
+        let gsd = args
+            .gsd
+            .as_ref()
+            .context("give --gsd FILE (with --module NAME …) or --device NAME")?;
+        opts.set("gsd", gsd.display().to_string());
+        opts.set("modules", args.modules.clone());
+        opts.set("lenient", args.lenient);
+        let inputs = match args.inputs {
+            InputPattern::Echo => "echo",
+            InputPattern::Counter => "counter",
+        };
+        opts.set("inputs", inputs);
+    }
+    let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+    for (k, v) in [
+        ("vars", path(&args.vars)),
+        ("state_dir", path(&args.state_dir)),
+        ("write_gsd", path(&args.write_gsd)),
+        ("params", path(&args.params)),
+        ("address_file", path(&args.address_file)),
+    ] {
+        if let Some(v) = v {
+            opts.set(k, v);
+        }
+    }
+    for (k, v) in [
+        ("us_device", args.us_device.map(i64::from)),
+        ("setpoints", args.setpoints.map(i64::from)),
+        ("actual_values", args.actual_values.map(i64::from)),
+    ] {
+        if let Some(v) = v {
+            opts.set(k, v);
+        }
+    }
+    if let Some(s) = &args.switch {
+        opts.set_text("switch", s);
+    }
+    for o in &args.device_opts {
+        opts.set_pair(o)?;
+    }
+    Ok(opts)
+}
+
+/// The configured profile, its slave device and its name for people.
 fn build_device(
     args: &Args,
     printer: &Printer,
-) -> anyhow::Result<(BoxedDevice, String, Option<u8>)> {
-    if let Some(name) = &args.device {
-        let Some(p) = profibus_devices::profile(name) else {
-            let names: Vec<&str> = PROFILES.iter().map(|p| p.name).collect();
-            bail!(
-                "no device profile `{name}` (available: {}; or use --gsd FILE)",
-                if names.is_empty() {
-                    "none yet".to_string()
-                } else {
-                    names.join(", ")
-                }
-            );
-        };
-        let mut opts = ProfileOptions::default();
-        let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
-        for (k, v) in [
-            ("addr", args.addr.map(|a| a.to_string())),
-            ("vars", path(&args.vars)),
-            ("us-device", args.us_device.map(|a| a.to_string())),
-            ("switch", args.switch.clone()),
-            ("state-dir", path(&args.state_dir)),
-            ("write-gsd", path(&args.write_gsd)),
-            ("params", path(&args.params)),
-            ("setpoints", args.setpoints.map(|a| a.to_string())),
-            ("actual-values", args.actual_values.map(|a| a.to_string())),
-        ] {
-            if let Some(v) = v {
-                opts.options.push((k.to_string(), v));
-            }
-        }
-        if let Some(src) = &args.control {
-            let inbox = ControlInbox::new();
-            spawn_control_reader(src.clone(), inbox.clone());
-            opts.control = Some(inbox);
-        }
-        for o in &args.device_opts {
-            let (k, v) = o
-                .split_once('=')
-                .with_context(|| format!("--device-opt `{o}` is not KEY=VALUE"))?;
-            opts.options
-                .push((k.trim().to_string(), v.trim().to_string()));
-        }
-        let dev = (p.build)(&opts).map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
-        let addr = profibus_devices::profile_address(p.name, &opts)
-            .map_err(|e| anyhow::anyhow!("device `{}`: {e}", p.name))?;
-        return Ok((dev, p.name.to_string(), addr));
-    }
-    let Some(path) = &args.gsd else {
-        bail!("give --gsd FILE (with --module NAME …) or --device NAME");
+) -> anyhow::Result<(Box<dyn Configured>, BoxedDevice, String)> {
+    let entry = match &args.device {
+        Some(name) => profibus_devices::profile(name)
+            .map_err(|e| anyhow::anyhow!("{e}; or use --gsd FILE"))?,
+        None => profibus_devices::profile("generic")?,
     };
-    let opts = if args.lenient {
-        ParseOptions::LENIENT
-    } else {
-        ParseOptions::STRICT
+    let opts = device_options(args)?;
+    let in_words = |e: ProfileError| match &args.device {
+        Some(_) => anyhow::anyhow!("device `{}`: {e}", entry.name),
+        None => anyhow::anyhow!("{e}"),
     };
-    let parsed = Gsd::from_file(path, opts).map_err(|e| anyhow::anyhow!("{e}"))?;
-    for w in &parsed.warnings {
+    let profile = entry.configure(&opts, args.addr).map_err(in_words)?;
+    for w in profile.warnings() {
         let now = printer.now();
-        printer.emit(
-            now,
-            json!({"event": "gsd_warning", "text": w.to_string()}),
-            format!("{}: warning: {w}", path.display()),
-        );
+        printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
     }
-    let mut dev = GenericDevice::from_gsd(&parsed.gsd, &args.modules)
-        .with_context(|| format!("{}", path.display()))?
-        .with_inputs(args.inputs);
-    if let Some(f) = &args.address_file {
-        dev = dev.with_address_store(AddressStore::new(f));
-    }
-    let name = dev.name().to_string();
-    Ok((Box::new(dev), name, None))
+    let control = args.control.as_ref().map(|src| {
+        let inbox = ControlInbox::new();
+        spawn_control_reader(src.clone(), inbox.clone());
+        inbox
+    });
+    let dev = profile.device(control).map_err(in_words)?;
+    let name = match &args.device {
+        Some(_) => entry.name.to_string(),
+        None => {
+            let gsd = profile.gsd();
+            gsd.model_name
+                .clone()
+                .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number))
+        }
+    };
+    Ok((profile, dev, name))
 }
 
 fn list_devices() {
-    println!("generic  any device a GSD file describes: --gsd FILE --module NAME ...");
     for p in PROFILES {
         println!("{:<8} {}", p.name, p.summary);
         if !p.options_help.is_empty() {
@@ -427,19 +437,12 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let path = args.port.clone().expect("clap requires --port");
     let choice = parse_baud(&args.baud)?;
-    let (device, name, profile_addr) = build_device(&args, &printer)?;
-    let mut addr = match profile_addr.or(args.addr) {
+    let (profile, device, name) = build_device(&args, &printer)?;
+    let addr = match profile.address().or(args.addr) {
         Some(a) => a,
         None => bail!("give --addr N"),
     };
-    if let Some(f) = &args.address_file {
-        if let Some(s) = AddressStore::new(f)
-            .load()
-            .with_context(|| format!("address file {}", f.display()))?
-        {
-            addr = s.address;
-        }
-    }
+    let address_file = profile.address_file();
     let mut port = Port::open(&path, PTY_NOMINAL)?;
     let pty = port.is_pty();
     let latency = common::latency(args.latency, &port)?;
@@ -501,6 +504,22 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                 while let Some(e) = st.app_mut().poll_event() {
                     if search && matches!(e, SlaveEvent::WatchdogExpired { .. }) {
                         research = true;
+                    }
+                    if let (SlaveEvent::AddressChanged { new, no_add_chg, .. }, Some(f)) =
+                        (&e, &address_file)
+                    {
+                        // The device only accepted it: the shell keeps it.
+                        let stored = StoredAddress {
+                            address: *new,
+                            no_add_chg: *no_add_chg,
+                        };
+                        if let Err(err) = stored.save(f) {
+                            printer.emit(
+                                now,
+                                json!({"event": "address_store_error", "text": err.to_string()}),
+                                format!("cannot keep the address: {err}"),
+                            );
+                        }
                     }
                     printer.event(now, &e);
                 }

@@ -72,3 +72,27 @@ fn decode_reports_malformed_telegrams_with_exit_1() {
     let o = dpctl(&["decode"]);
     assert_eq!(o.status.code(), Some(2), "usage error");
 }
+
+#[test]
+fn decode_shows_the_start_delimiter_received() {
+    // The same 6-byte Slave_Diag answer as SD2 (as real devices send it)
+    // and as SD3: each is labelled as received.
+    let o = dpctl(&[
+        "decode",
+        "--json",
+        "680b0b68828b083e3c020900ff002bc416",
+        "a2828b083e3c020900ff002bc416",
+    ]);
+    assert!(o.status.success());
+    let out = String::from_utf8(o.stdout).unwrap();
+    let v: Vec<Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(v[0]["format"], "SD2");
+    assert_eq!(v[1]["format"], "SD3");
+    assert_eq!(v[0]["data"], v[1]["data"]);
+    let o = dpctl(&["decode", "680b0b68828b083e3c020900ff002bc416"]);
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(text.starts_with("SD2 "), "{text}");
+}

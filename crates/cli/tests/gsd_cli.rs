@@ -144,3 +144,50 @@ fn check_reports_selection_problems_of_modules() {
         stdout(&o)
     );
 }
+
+#[test]
+fn localised_extensions_are_read_like_gsd() {
+    // `.gse`, `.gsg`, … are GSD files in other languages: `gsd show`,
+    // `gsd check` and `slave --gsd` take them like `.gsd`.
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("gsd_cli_ext");
+    std::fs::create_dir_all(&dir).unwrap();
+    let en = gsd("corpus/siemens_dp_rs232c_link.gse");
+    let mut files = vec![en.clone(), gsd("corpus/siemens_dp_rs232c_link.gsg")];
+    for ext in ["gsp", "gst", "GSE"] {
+        let f = dir.join(format!("SIEM8042.{ext}"));
+        std::fs::copy(&en, &f).unwrap();
+        files.push(f);
+    }
+    for f in &files {
+        let f = f.to_str().unwrap();
+        let o = dpctl(&["gsd", "show", f]);
+        assert!(o.status.success(), "{f}: {}", stderr(&o));
+        assert!(stdout(&o).contains("Ident number:  0x8042"), "{f}");
+        let o = dpctl(&["gsd", "check", f]);
+        assert!(o.status.success(), "{f}: {}", stderr(&o));
+        assert!(
+            stdout(&o).contains("ok, 193 module(s), 0 warning(s)"),
+            "{f}: {}",
+            stdout(&o)
+        );
+        // The slave reads the file and looks the module up before it
+        // opens its port.
+        let o = dpctl(&[
+            "slave",
+            "--gsd",
+            f,
+            "--module",
+            "no such module",
+            "--port",
+            "/nonexistent",
+            "--addr",
+            "5",
+        ]);
+        assert_eq!(o.status.code(), Some(1), "{f}");
+        assert!(
+            stderr(&o).contains("no module named `no such module`"),
+            "{f}: {}",
+            stderr(&o)
+        );
+    }
+}

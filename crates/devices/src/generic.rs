@@ -12,8 +12,12 @@
 //!   record store; any slot/index can be written (up to 240 bytes,
 //!   [`MAX_RECORDS`] records) and read back; reading a record never
 //!   written is "invalid index".
-//! - Set_Slave_Add (when supported): the address can be persisted in a
-//!   small text file ([`AddressStore`]).
+//! - Set_Slave_Add (when supported): accepted unless No_Add_Chg was
+//!   stored before ([`GenericDevice::with_stored_address`]); the program
+//!   running the slave keeps the address ([`crate::address`]).
+//!
+//! [`GenericProfile`] is the `generic` entry of the profile registry: the
+//! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`.
 
 use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
 use profibus_dp::prm::SetPrm;
@@ -23,7 +27,14 @@ use profibus_dp::slave::{
 };
 use profibus_fdl::Instant;
 use std::collections::{BTreeMap, VecDeque};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+
+use crate::address::StoredAddress;
+use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::profile::{ControlInbox, Profile, ProfileError};
+use crate::BoxedDevice;
+use profibus_dp::gsd::ParseOptions;
+use serde::Deserialize;
 
 /// Most DP-V1 records the generic device stores.
 pub const MAX_RECORDS: usize = 16;
@@ -41,13 +52,18 @@ pub enum InputPattern {
     Counter,
 }
 
+/// An input pattern name that is neither `echo` nor `counter`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown input pattern `{0}` (echo, counter)")]
+pub struct UnknownPattern(pub String);
+
 impl std::str::FromStr for InputPattern {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownPattern;
+    fn from_str(s: &str) -> Result<Self, UnknownPattern> {
         match s {
             "echo" => Ok(InputPattern::Echo),
             "counter" => Ok(InputPattern::Counter),
-            _ => Err(format!("unknown input pattern `{s}` (echo, counter)")),
+            _ => Err(UnknownPattern(s.to_string())),
         }
     }
 }
@@ -55,82 +71,6 @@ impl std::str::FromStr for InputPattern {
 /// A check of the User_Prm_Data beyond its length: `Err` names the
 /// parameter and what is wrong.
 pub type PrmCheck = Box<dyn Fn(&[u8]) -> Result<(), Reason> + Send>;
-
-/// Where the generic device keeps an address set by Set_Slave_Add: a text
-/// file with `address=N` and `no_add_chg=0|1` lines.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AddressStore {
-    path: PathBuf,
-}
-
-/// What an [`AddressStore`] holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StoredAddress {
-    /// The persisted address.
-    pub address: u8,
-    /// No further changes through the bus.
-    pub no_add_chg: bool,
-}
-
-impl AddressStore {
-    /// A store at `path` (created on the first change).
-    pub fn new(path: impl Into<PathBuf>) -> AddressStore {
-        AddressStore { path: path.into() }
-    }
-
-    /// The file.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
-    /// The stored address, if the file exists. A file that exists but
-    /// cannot be read or understood is an error.
-    pub fn load(&self) -> std::io::Result<Option<StoredAddress>> {
-        let text = match std::fs::read_to_string(&self.path) {
-            Ok(t) => t,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(e) => return Err(e),
-        };
-        let bad = |what: &str| {
-            std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!("{}: {what}", self.path.display()),
-            )
-        };
-        let mut address = None;
-        let mut no_add_chg = false;
-        for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
-            match line.split_once('=') {
-                Some(("address", v)) => {
-                    address = Some(
-                        v.trim()
-                            .parse::<u8>()
-                            .ok()
-                            .filter(|a| *a <= 125)
-                            .ok_or_else(|| bad("address must be 0..=125"))?,
-                    )
-                }
-                Some(("no_add_chg", v)) => no_add_chg = v.trim() == "1",
-                _ => return Err(bad(&format!("unexpected line `{line}`"))),
-            }
-        }
-        let address = address.ok_or_else(|| bad("no `address=` line"))?;
-        Ok(Some(StoredAddress {
-            address,
-            no_add_chg,
-        }))
-    }
-
-    /// Persist `s` (written to a temporary file, then renamed).
-    pub fn save(&self, s: StoredAddress) -> std::io::Result<()> {
-        let tmp = self.path.with_extension("tmp");
-        std::fs::write(
-            &tmp,
-            format!("address={}\nno_add_chg={}\n", s.address, s.no_add_chg as u8),
-        )?;
-        std::fs::rename(&tmp, &self.path)
-    }
-}
 
 /// Why a GSD file and module list do not make a device.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -179,7 +119,7 @@ pub struct GenericDevice {
     outputs: [u8; 244],
     counter: u32,
     records: BTreeMap<(u8, u8), Vec<u8>>,
-    store: Option<AddressStore>,
+    no_add_chg: bool,
     ext_diag: Vec<u8>,
     ext_diag_fault: bool,
     static_diag: bool,
@@ -218,7 +158,7 @@ impl GenericDevice {
             outputs: [0; 244],
             counter: 0,
             records: BTreeMap::new(),
-            store: None,
+            no_add_chg: false,
             ext_diag: vec![],
             ext_diag_fault: false,
             static_diag: false,
@@ -302,9 +242,11 @@ impl GenericDevice {
         self
     }
 
-    /// Persist Set_Slave_Add in `store`.
-    pub fn with_address_store(mut self, store: AddressStore) -> Self {
-        self.store = Some(store);
+    /// Start with the address the program running the slave kept from
+    /// an earlier Set_Slave_Add: with No_Add_Chg, further changes are
+    /// refused.
+    pub fn with_stored_address(mut self, stored: Option<StoredAddress>) -> Self {
+        self.no_add_chg = stored.is_some_and(|s| s.no_add_chg);
         self
     }
 
@@ -456,32 +398,152 @@ impl Device for GenericDevice {
         no_add_chg: bool,
         _rem_slave_data: &[u8],
     ) -> Result<(), Reason> {
-        let Some(store) = &self.store else {
-            return Ok(());
-        };
-        if let Ok(Some(s)) = store.load() {
-            if s.no_add_chg {
-                return Err(format!(
-                    "{} holds No_Add_Chg: the address cannot be changed through the bus",
-                    store.path().display()
-                )
-                .into());
-            }
+        if self.no_add_chg {
+            return Err(
+                "No_Add_Chg was stored: the address cannot be changed through the bus".into(),
+            );
         }
-        let saved = StoredAddress {
-            address: new_address,
-            no_add_chg,
-        };
-        store
-            .save(saved)
-            .map_err(|e| Reason::from(format!("cannot store the address: {e}")))?;
-        let text = format!("address {new_address} stored in {}", store.path().display());
-        self.note("address", text);
+        self.no_add_chg = no_add_chg;
+        self.note("address", format!("address {new_address} accepted"));
         Ok(())
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         self.events.pop_front()
+    }
+}
+
+/// The options of the `generic` profile.
+#[derive(Debug, Default, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GenericOptions {
+    /// The GSD file (required).
+    pub gsd: Option<PathBuf>,
+    /// Module names in slot order (matched approximately); none: the
+    /// file's fixed configuration.
+    pub modules: Vec<String>,
+    /// Accept known vendor quirks in the GSD file (as warnings).
+    pub lenient: bool,
+    /// Input pattern: `echo` (default) or `counter`.
+    pub inputs: Option<String>,
+    /// File in which the program running the slave keeps an address set
+    /// by Set_Slave_Add; when it exists its address overrides the
+    /// caller's.
+    pub address_file: Option<PathBuf>,
+}
+
+/// The generic device a GSD file and module list describe, as a
+/// profile.
+#[derive(Debug)]
+pub struct GenericProfile {
+    options: GenericOptions,
+    gsd: Gsd,
+    pattern: InputPattern,
+    stored: Option<StoredAddress>,
+    warnings: Vec<String>,
+}
+
+impl Profile for GenericProfile {
+    type Options = GenericOptions;
+    const NAME: &'static str = "generic";
+    const SUMMARY: &'static str = "any device a GSD file describes: --gsd FILE --module NAME ...";
+    const OPTIONS_HELP: &'static str =
+        "--gsd FILE, --module NAME (repeat), --lenient, --inputs echo|counter, --address-file FILE";
+    const IDENT: Option<u16> = None;
+
+    fn configure(options: GenericOptions, _address: Option<u8>) -> Result<Self, ProfileError> {
+        let path = options.gsd.clone().ok_or_else(|| {
+            ProfileError::Invalid("give --gsd FILE (with --module NAME …) or --device NAME".into())
+        })?;
+        let opts = if options.lenient {
+            ParseOptions::LENIENT
+        } else {
+            ParseOptions::STRICT
+        };
+        let parsed = Gsd::from_file(&path, opts)?;
+        let warnings = parsed
+            .warnings
+            .iter()
+            .map(|w| format!("{}: warning: {w}", path.display()))
+            .collect();
+        let pattern = match &options.inputs {
+            Some(p) => p
+                .parse()
+                .map_err(|e: UnknownPattern| ProfileError::Invalid(e.to_string()))?,
+            None => InputPattern::Echo,
+        };
+        GenericDevice::from_gsd(&parsed.gsd, &options.modules)
+            .map_err(|e| ProfileError::Invalid(format!("{}: {e}", path.display())))?;
+        let stored = match &options.address_file {
+            Some(f) => StoredAddress::load(f)?,
+            None => None,
+        };
+        Ok(GenericProfile {
+            options,
+            gsd: parsed.gsd,
+            pattern,
+            stored,
+            warnings,
+        })
+    }
+
+    fn gsd(&self) -> &Gsd {
+        &self.gsd
+    }
+
+    fn modules(&self) -> Vec<String> {
+        if self.options.modules.is_empty() {
+            let sel = self.gsd.default_selection();
+            sel.iter()
+                .map(|&i| self.gsd.modules[i].name.clone())
+                .collect()
+        } else {
+            self.options.modules.clone()
+        }
+    }
+
+    fn address(&self) -> Option<u8> {
+        self.stored.map(|s| s.address)
+    }
+
+    fn address_file(&self) -> Option<PathBuf> {
+        self.options.address_file.clone()
+    }
+
+    fn device(&self, _control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)?
+            .with_inputs(self.pattern)
+            .with_stored_address(self.stored);
+        Ok(Box::new(dev))
+    }
+
+    /// One `U8` channel per process data byte, named after its module:
+    /// `NAME[i]` (`slotN[i]` for identifiers beyond the module list).
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+        let names = self.modules();
+        let mut m = ChannelMap::new();
+        let (mut inp, mut out) = (0, 0);
+        for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
+            let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
+            let name = names
+                .get(slot)
+                .cloned()
+                .unwrap_or_else(|| format!("slot{slot}"));
+            for (dir, n, at) in [
+                (Direction::Input, id.input_bytes(), &mut inp),
+                (Direction::Output, id.output_bytes(), &mut out),
+            ] {
+                for i in 0..n {
+                    m.push(format!("{name}[{i}]"), dir, *at + i, ChannelType::U8);
+                }
+                *at += n;
+            }
+        }
+        Ok(m)
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
     }
 }
 
@@ -669,25 +731,19 @@ EndModule
     }
 
     #[test]
-    fn address_store_round_trip_and_no_add_chg() {
-        let dir = std::env::temp_dir().join(format!("dpctl-addr-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("addr.txt");
-        let _ = std::fs::remove_file(&path);
-        let store = AddressStore::new(&path);
-        assert_eq!(store.load().unwrap(), None);
-        let mut d = dev().with_address_store(store.clone());
+    fn stored_no_add_chg_refuses_changes() {
+        let mut d = dev().with_stored_address(None);
         d.set_address(17, true, &[]).unwrap();
-        assert_eq!(
-            store.load().unwrap(),
-            Some(StoredAddress {
-                address: 17,
-                no_add_chg: true
-            })
-        );
         assert!(d.set_address(18, false, &[]).is_err());
-        std::fs::write(&path, "address=300\n").unwrap();
-        assert!(store.load().is_err());
-        std::fs::remove_dir_all(&dir).unwrap();
+        let mut d = dev().with_stored_address(Some(StoredAddress {
+            address: 17,
+            no_add_chg: true,
+        }));
+        assert!(d.set_address(18, false, &[]).is_err());
+        let mut d = dev().with_stored_address(Some(StoredAddress {
+            address: 17,
+            no_add_chg: false,
+        }));
+        assert!(d.set_address(18, false, &[]).is_ok());
     }
 }

@@ -1,110 +1,176 @@
 //! `profibus-devices`: device profiles: slave emulations of specific
-//! PROFIBUS-DP products (and master-side helpers for them), plus the
+//! PROFIBUS-DP products and master-side helpers for them, plus the
 //! [`generic`] device any GSD file describes.
 //!
-//! Every profile implements [`profibus_dp::slave::Device`] and is listed
-//! in [`PROFILES`], which `dpctl slave --list-devices` prints and
-//! `dpctl slave --device NAME` builds from.
+//! # The shape of a profile
+//!
+//! Every product is one module that implements [`Profile`]:
+//!
+//! - **typed options**: `type Options`, a serde struct (the keys of a bus
+//!   file's `[[slave]]` table, or `dpctl slave --device-opt KEY=VALUE`,
+//!   both through [`DeviceOptions`]);
+//! - **its GSD** ([`Profile::gsd`]) and the GSD **modules** a master
+//!   configures it with ([`Profile::modules`]; Chk_Cfg and
+//!   User_Prm_Data follow, [`Configured::chk_cfg`]);
+//! - **its slave** ([`Profile::device`]: a
+//!   [`profibus_dp::slave::Device`] for the DP slave core) and the
+//!   **station address** it chooses ([`Profile::address`]; a
+//!   Set_Slave_Add address is kept by the program running it in
+//!   [`Profile::address_file`], see [`address`]);
+//! - **the master side**: the named, typed [`channels`] of the process
+//!   images a configuration gives ([`Profile::channels`]) and its PKW
+//!   dialect ([`Profile::pkw_dialect`]; the [`pkw`] module itself knows
+//!   no device).
+//!
+//! [`PROFILES`] is the registry: name → [`ProfileEntry`]. `dpctl slave
+//! --device NAME` and bus files with `device = "NAME"` go through it;
+//! [`profile`] finds an entry, [`pkw_dialect`] the PKW dialect of a slave.
+//!
+//! # How to add a profile
+//!
+//! 1. Create `src/<name>/mod.rs` (the device: `impl Device`, its docs with
+//!    the manual's line references) and `src/<name>/profile.rs` with
+//!    ```ignore
+//!    #[derive(Debug, Default, serde::Deserialize)]
+//!    #[serde(default, deny_unknown_fields)]
+//!    pub struct Options { /* one field per option, snake_case */ }
+//!
+//!    pub struct MyProfile { /* the configured state: GSD, tables … */ }
+//!
+//!    impl Profile for MyProfile {
+//!        type Options = Options;
+//!        const NAME: &'static str = "myname";
+//!        const SUMMARY: &'static str = "Vendor product (ident 0x….): what it is";
+//!        const OPTIONS_HELP: &'static str = "key = …, key = …";
+//!        const IDENT: Option<u16> = Some(IDENT);
+//!        fn configure(o: Options, address: Option<u8>) -> Result<Self, ProfileError> { … }
+//!        fn gsd(&self) -> &Gsd { … }
+//!        fn modules(&self) -> Vec<String> { … }     // GSD module names, slot order
+//!        fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> { … }
+//!        fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> { … }
+//!    }
+//!    ```
+//!    Use [`profile::int`] / [`profile::opt_int`] for numbers that may
+//!    come as text (`"0x19"`). Optional methods: `address`,
+//!    `address_file`, `pkw_dialect`, `gsd_file`, `warnings`.
+//! 2. Add `pub mod <name>;` and one row `ProfileEntry::of::<<name>::profile::MyProfile>()`
+//!    to [`PROFILES`] below.
+//!
+//! Nothing else changes: `dpctl slave --device myname --device-opt
+//! key=value`, `dpctl slave --list-devices`, bus files with `device =
+//! "myname"` plus the options, and the master's named channels work from
+//! the registry. Errors are [`ProfileError`] (no `String` errors); the
+//! device does no file I/O while it runs.
 
+pub mod address;
 pub mod bm4;
+pub mod channels;
 pub mod generic;
 pub mod gsd_files;
 pub mod omega;
 pub mod pkw;
+pub mod profile;
+
+pub use profile::{Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError};
 
 use profibus_dp::slave::Device;
-use std::collections::VecDeque;
-use std::sync::{Arc, Mutex};
 
 /// A device as `dpctl slave` runs it.
 pub type BoxedDevice = Box<dyn Device + Send>;
 
-/// Options of a device profile from the command line
-/// (`--device-opt KEY=VALUE`, repeatable).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct ProfileOptions {
-    /// The options in the order given.
-    pub options: Vec<(String, String)>,
-    /// Where control commands for the device arrive (e.g. `dpctl slave
-    /// --control -`: lines from stdin), for profiles that take them.
-    pub control: Option<ControlInbox>,
+/// Every device profile (a new profile adds its row here).
+pub const PROFILES: &[ProfileEntry] = &[
+    ProfileEntry::of::<generic::GenericProfile>(),
+    ProfileEntry::of::<bm4::profile::Bm4Profile>(),
+    ProfileEntry::of::<omega::profile::OmegaProfile>(),
+];
+
+/// The profile named `name` (case-insensitive).
+pub fn profile(name: &str) -> Result<&'static ProfileEntry, ProfileError> {
+    PROFILES
+        .iter()
+        .find(|p| p.name.eq_ignore_ascii_case(name))
+        .ok_or_else(|| ProfileError::Unknown {
+            name: name.to_string(),
+            available: PROFILES
+                .iter()
+                .map(|p| p.name)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
 }
 
-/// Control commands (lines of text) for a running device, e.g. a user
-/// diagnosis the emulated PLC sends. The command line puts lines in; the
-/// device takes them out while it runs. Clones share the queue.
-#[derive(Debug, Clone, Default)]
-pub struct ControlInbox(Arc<Mutex<VecDeque<String>>>);
+/// Why a slave has no PKW dialect.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PkwLookupError {
+    /// The product has a PKW channel, but the configuration lacks the
+    /// module.
+    #[error("the configuration of ident 0x{0:04X} has no PKW module (configure the service data module first)")]
+    NotConfigured(u16),
+    /// No profile with a PKW channel has that ident number.
+    #[error("ident 0x{ident:04X} has no known PKW channel (known: {known})")]
+    Unknown {
+        /// The slave's ident number.
+        ident: u16,
+        /// The products with one.
+        known: String,
+    },
+}
 
-impl ControlInbox {
-    /// An empty inbox.
-    pub fn new() -> ControlInbox {
-        ControlInbox::default()
+/// The PKW dialect of a slave with ident number `ident` configured with
+/// `cfg` (Chk_Cfg bytes), from the profile with that ident number.
+pub fn pkw_dialect(ident: u16, cfg: &[u8]) -> Result<&'static pkw::Dialect, PkwLookupError> {
+    if let Some(p) = PROFILES
+        .iter()
+        .find(|p| p.ident == Some(ident) && p.pkw.is_some())
+    {
+        return p
+            .pkw_dialect(cfg)
+            .ok_or(PkwLookupError::NotConfigured(ident));
     }
+    let known: Vec<String> = PROFILES
+        .iter()
+        .filter_map(|p| Some(format!("0x{:04X} {}", p.ident?, p.pkw?.name)))
+        .collect();
+    Err(PkwLookupError::Unknown {
+        ident,
+        known: known.join(", "),
+    })
+}
 
-    /// Queue a command line.
-    pub fn push(&self, line: impl Into<String>) {
-        if let Ok(mut q) = self.0.lock() {
-            q.push_back(line.into());
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn registry_names_are_unique_and_found() {
+        for p in PROFILES {
+            assert_eq!(profile(&p.name.to_uppercase()).unwrap().name, p.name);
+            assert_eq!(PROFILES.iter().filter(|q| q.name == p.name).count(), 1);
         }
+        assert!(matches!(profile("nope"), Err(ProfileError::Unknown { .. })));
     }
 
-    /// The oldest queued line.
-    pub fn take(&self) -> Option<String> {
-        self.0.lock().ok()?.pop_front()
+    #[test]
+    fn pkw_dialect_by_ident_and_configuration() {
+        assert_eq!(
+            pkw_dialect(bm4::IDENT, &[0x73]).unwrap().name,
+            bm4::PKW.name
+        );
+        assert_eq!(
+            pkw_dialect(omega::IDENT, &[0x73, 0x71, 0x53, 0x63])
+                .unwrap()
+                .name,
+            omega::PKW.name
+        );
+        assert_eq!(
+            pkw_dialect(omega::IDENT, &[0x71, 0x53, 0x63]),
+            Err(PkwLookupError::NotConfigured(omega::IDENT))
+        );
+        let e = pkw_dialect(0x1234, &[0x73]).unwrap_err().to_string();
+        assert!(
+            e.contains("0x0008 BM4-O-PRO-01") && e.contains("0x00D0"),
+            "{e}"
+        );
     }
-}
-
-impl PartialEq for ControlInbox {
-    fn eq(&self, other: &ControlInbox) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
-}
-
-impl Eq for ControlInbox {}
-
-impl ProfileOptions {
-    /// The value of `key`, if given (the last one wins).
-    pub fn get(&self, key: &str) -> Option<&str> {
-        self.options
-            .iter()
-            .rev()
-            .find(|(k, _)| k == key)
-            .map(|(_, v)| v.as_str())
-    }
-}
-
-/// A device profile: a named product the slave can emulate.
-#[derive(Debug, Clone, Copy)]
-pub struct Profile {
-    /// The name given to `--device`.
-    pub name: &'static str,
-    /// One line about the product.
-    pub summary: &'static str,
-    /// The options it takes, in words (for `--list-devices`).
-    pub options_help: &'static str,
-    /// Build the device; `Err` says what is wrong with the options.
-    pub build: fn(&ProfileOptions) -> Result<BoxedDevice, String>,
-}
-
-/// Every device profile (the device issues add theirs here).
-pub const PROFILES: &[Profile] = &[bm4::profile::PROFILE, omega::profile::PROFILE];
-
-/// The station address a profile chooses itself from its options (the
-/// BM4-O-PRO-01's us_DEVICE and rotary switch, a stored Set_Slave_Add
-/// address), overriding the command line's `--addr`; `Ok(None)` when the
-/// profile takes `--addr` as it is.
-pub fn profile_address(name: &str, opts: &ProfileOptions) -> Result<Option<u8>, String> {
-    if name.eq_ignore_ascii_case(bm4::profile::PROFILE.name) {
-        bm4::profile::address(opts).map(Some)
-    } else if name.eq_ignore_ascii_case(omega::profile::PROFILE.name) {
-        omega::profile::address(opts)
-    } else {
-        Ok(None)
-    }
-}
-
-/// The profile named `name`.
-pub fn profile(name: &str) -> Option<&'static Profile> {
-    PROFILES.iter().find(|p| p.name.eq_ignore_ascii_case(name))
 }

@@ -119,6 +119,14 @@ impl<'a> SlaveDiag<'a> {
         })
     }
 
+    /// Whether this is a valid diagnosis: bit 2 of Station_Status_2 is
+    /// always 1 in a slave's answer (EN 50170 / IEC 61158-6-3). A master
+    /// must not act on a diagnosis without it: such an answer is a stray
+    /// telegram (e.g. a late Data_Exchange reply) or corrupt.
+    pub fn is_valid(&self) -> bool {
+        self.status2.contains(StationStatus2::ALWAYS_ONE)
+    }
+
     /// Encode into `buf`; returns the length or `None` when `buf` is too
     /// small.
     pub fn emit(&self, buf: &mut [u8]) -> Option<usize> {

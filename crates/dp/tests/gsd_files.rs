@@ -19,7 +19,7 @@ fn gsd_files() -> Vec<PathBuf> {
     for dir in ["gsd", "gsd/corpus"] {
         for e in std::fs::read_dir(root().join(dir)).unwrap() {
             let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("gsd")) {
+            if profibus_dp::gsd::is_gsd_file_name(&p) {
                 v.push(p);
             }
         }
@@ -61,8 +61,15 @@ fn sel(g: &Gsd, names: &[&str]) -> Vec<usize> {
 
 #[test]
 fn every_file_parses_and_round_trips() {
-    // Only the two manual files with vendor quirks need lenient mode.
-    let quirky = ["BM4OPRO1.GSD", "BNF_00D0.GSD"];
+    // Only the files with vendor quirks need lenient mode: the two
+    // manual files, and SIPOS 5 (`24V Pins = 0`, a blank for the `_`).
+    let quirky = [
+        "BM4OPRO1.GSD",
+        "BNF_00D0.GSD",
+        "siemens_sipos5_actuator.gsd",
+    ];
+    // Siemens' stand-in file for unknown slaves describes no module.
+    let no_modules = ["siemens_dummy_slave_siem8fff.gsd"];
     for path in gsd_files() {
         let name = path.file_name().unwrap().to_str().unwrap().to_string();
         let parsed = Gsd::from_file(&path, ParseOptions::LENIENT)
@@ -81,7 +88,11 @@ fn every_file_parses_and_round_trips() {
             let s = strict.unwrap_or_else(|e| panic!("{name}: strict parse failed: {e}"));
             assert_eq!(s.gsd, parsed.gsd, "{name}");
         }
-        assert!(!parsed.gsd.modules.is_empty(), "{name}: no modules");
+        assert_eq!(
+            parsed.gsd.modules.is_empty(),
+            no_modules.contains(&name.as_str()),
+            "{name}: modules"
+        );
         for m in &parsed.gsd.modules {
             m.io()
                 .unwrap_or_else(|e| panic!("{name}: module `{}`: {e}", m.name));
@@ -455,14 +466,151 @@ fn corpus_user_prm_data() {
         .other
         .iter()
         .any(|l| l.starts_with("Version_Firmware_Download")));
-    // pyprofibus's compact dummy: every module is the configuration.
+    // pyprofibus's compact dummy means all its modules together; a
+    // compact station's modules are otherwise alternatives, and the
+    // default is the first.
     let g = load("gsd/corpus/pyprofibus_dummy_compact.gsd");
+    assert_eq!(g.default_selection(), [0]);
+    let all = [0, 1, 2];
+    assert_eq!(g.check_selection(&all), vec![]);
+    assert_eq!(g.chk_cfg(&all).unwrap(), [0x00, 0x10, 0x20]);
+    assert_eq!(g.user_prm_data(&all, &[]).unwrap(), [0, 0, 0, 0x42]);
+    assert!(matches!(
+        g.check_selection(&[1, 2]).as_slice(),
+        [Problem::FixedConfiguration { .. }]
+    ));
+}
+
+/// The files of `gsd/corpus/` (every GSD extension), sorted.
+fn corpus_files() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("gsd/corpus"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| profibus_dp::gsd::is_gsd_file_name(p))
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn vendor_corpus_parses_leniently() {
+    let files = corpus_files();
+    assert!(files.len() >= 28, "{files:?}");
+    let mut exts = std::collections::BTreeSet::new();
+    for path in &files {
+        let name = path.file_name().unwrap().to_str().unwrap();
+        exts.insert(path.extension().unwrap().to_str().unwrap().to_string());
+        let p =
+            Gsd::from_file(path, ParseOptions::LENIENT).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // No syntax trouble hidden in the warnings either.
+        for w in &p.warnings {
+            assert!(
+                !matches!(w.kind, DiagKind::Syntax | DiagKind::TooLarge | DiagKind::Io),
+                "{name}: {w}"
+            );
+        }
+        for m in &p.gsd.modules {
+            m.io()
+                .unwrap_or_else(|e| panic!("{name}: `{}`: {e}", m.name));
+        }
+    }
     assert_eq!(
-        g.chk_cfg(&g.default_selection()).unwrap(),
-        [0x00, 0x10, 0x20]
+        exts.into_iter().collect::<Vec<_>>(),
+        ["gsd", "gse", "gsf", "gsg", "gsi", "gss"]
     );
+}
+
+#[test]
+fn vendor_corpus_details() {
+    // ABB FPBA-01 (CR LF, a byte list continued over four lines, 22
+    // alternative PPO modules of a modular station with Max_Module 1).
+    let g = load("gsd/corpus/abb_fpba01_acs880.gsd");
+    assert_eq!(g.ident_number, 0x0959);
+    assert_eq!(g.modules.len(), 22);
+    assert_eq!(g.modules[8].cfg, [0xF3, 0xF1, 0xF1, 0xF1]);
+    let prm = g.user_prm_data(&[0], &[]).unwrap();
+    assert_eq!(prm.len(), 30);
+    // "DP Mode" (Bit(7) of byte 0, default 0 = DP-V0) clears the 0x80 of
+    // the constant bytes; "Failsafe Timeout" 30 at 8, "PZD1 Failsafe
+    // value" 1150 at 10.
     assert_eq!(
-        g.user_prm_data(&g.default_selection(), &[]).unwrap(),
-        [0, 0, 0, 0x42]
+        &prm[..12],
+        [0x00, 0, 0x08, 0x1A, 0x81, 0, 0, 0, 0, 0x1E, 0x04, 0x7E]
     );
+    for i in 0..22 {
+        assert_eq!(g.check_selection(&[i]), vec![], "module {i}");
+    }
+    // Siemens direct key module: a module line continued with `\`,
+    // Latin-1 comments, `Freeze_Mode_supp=1;ja`.
+    let g = load("gsd/corpus/siemens_direct_key_module_siem8007.gsd");
+    assert_eq!(g.modules[0].cfg, [0x21, 0x15]);
+    assert!(g.freeze_mode_supp && g.sync_mode_supp && g.set_slave_add_supp);
+    assert_eq!(g.user_prm_data(&[0], &[]).unwrap(), [0; 5]);
+    // SIMODRIVE sensor (Italian .gsi, encoder profile): module
+    // parameters with Latin-1 names.
+    let g = load("gsd/corpus/siemens_simodrive_sensor_encoder.gsi");
+    assert_eq!(g.slave_family.as_ref().unwrap().main, 7);
+    assert_eq!(g.modules.len(), 11);
+    assert_eq!(g.prm_definition(2).unwrap().name, "Funzionalità classe 2");
+    let i = g.module_index("Class 2 Multiturn").unwrap();
+    let prm = g.user_prm_data(&[i], &[]).unwrap();
+    assert_eq!(prm.len(), 18);
+    assert_eq!(prm[1], 0x0A);
+    // schtiot DP-V1 slave: keywords of DP-V1, I&M and a UnitDiagType
+    // block, all known.
+    let p = Gsd::from_file(
+        root().join("gsd/corpus/schtiot_dpv10008.gsd"),
+        ParseOptions::STRICT,
+    )
+    .unwrap();
+    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    assert_eq!(p.gsd.other_flag("Ident_Maintenance_supp"), Some(true));
+    assert_eq!(p.gsd.other_flag("Publisher_supp"), Some(true));
+}
+
+#[test]
+fn localised_files_of_one_device_read_alike() {
+    // The DP/RS 232C link in English, French, German and Spanish: the
+    // same device, the German file with German texts.
+    let read = |ext: &str| load(&format!("gsd/corpus/siemens_dp_rs232c_link.{ext}"));
+    let en = read("gse");
+    for ext in ["gsf", "gsg", "gss"] {
+        let g = read(ext);
+        assert_eq!(g.ident_number, en.ident_number, "{ext}");
+        let cfg = |g: &Gsd| g.modules.iter().map(|m| m.cfg.clone()).collect::<Vec<_>>();
+        assert_eq!(cfg(&g), cfg(&en), "{ext}");
+        assert_eq!(
+            g.user_prm_data(&[1], &[]).unwrap(),
+            en.user_prm_data(&[1], &[]).unwrap(),
+            "{ext}"
+        );
+    }
+    assert_eq!(read("gsg").modules[1].name, "1 Byte DE/Konsistenz 1 Byte");
+    assert_eq!(en.modules[1].name, "1 Byte DI/consistency 1 Byte");
+}
+
+#[test]
+fn bus_files_take_localised_gsd_files() {
+    let text = r#"
+[master]
+address = 1
+baud = "1.5M"
+
+[[slave]]
+address = 5
+gsd = "siemens_dp_rs232c_link.gsg"
+modules = ["2 Byte DE/Konsistenz 1 Byte", "2 Byte DA/Konsistenz 1 Byte"]
+
+[[slave]]
+address = 6
+gsd = "siemens_simodrive_sensor_encoder.gsi"
+modules = ["Class 1 Multiturn"]
+"#;
+    let bus = profibus_dp::busfile::BusFile::parse(&root().join("gsd/corpus/bus.toml"), text)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let s = &bus.master.slaves;
+    assert_eq!(s[0].ident_number, 0x8042);
+    assert_eq!(s[0].io_lengths().unwrap(), (2, 2));
+    assert_eq!(s[1].ident_number, 0x0024);
+    assert_eq!(s[1].io_lengths().unwrap(), (4, 0));
 }

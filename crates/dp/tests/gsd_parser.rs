@@ -351,3 +351,262 @@ fn continuation_after_an_empty_piece() {
     assert_eq!(p.warnings[0].pos.col, 5);
     assert_eq!(strict(&p.gsd.write()).gsd, p.gsd);
 }
+
+#[test]
+fn strings_continued_over_lines_then_a_comment() {
+    // The Siemens CP 342-5 files continue an `Info_Text` string with `\`
+    // over several lines and put a `; comment` after the closing quote:
+    // the quote on the last continuation line closes the string.
+    let text = format!(
+        "{HEAD}Info_Text=\"first part, \\\n  second part, \\\n  last part\" ; comment\n\
+         Module=\"m\" 0x10\nEndModule\n"
+    );
+    let g = strict(&text).gsd;
+    assert_eq!(
+        g.info_text.as_deref(),
+        Some("first part,   second part,   last part")
+    );
+    assert_eq!(g.modules.len(), 1);
+
+    // `;` inside the continued string is text, `;` after it a comment;
+    // a continuation line outside a string still has its comment
+    // removed.
+    let text = format!(
+        "{HEAD}Info_Text=\"a;b \\\n;c; \\\nd\";\"e\" \\\n\n\
+         Module=\"m\" 0x10, \\\n 0x20 ; one; two \"three\n\
+         EndModule\n\
+         Model_Name=\"x;\\\ny\" ; z \"\n"
+    );
+    let g = strict(&text).gsd;
+    assert_eq!(g.info_text.as_deref(), Some("a;b ;c; d"));
+    assert_eq!(g.modules[0].cfg, [0x10, 0x20]);
+    assert_eq!(g.model_name.as_deref(), Some("x;y"));
+    // Positions still point into the right physical line.
+    let e = strict_err(&format!("{HEAD}Info_Text=\"a;\\\nb\" x ; c\n"));
+    assert_eq!(e.first().pos.line, 7);
+    assert_eq!(e.first().pos.col, 4);
+}
+
+/// Warnings of `p` that mention `needle`.
+fn warnings_with<'a>(p: &'a Parsed, needle: &str) -> Vec<&'a str> {
+    p.warnings
+        .iter()
+        .filter(|w| w.message.contains(needle))
+        .map(|w| w.message.as_str())
+        .collect()
+}
+
+#[test]
+fn compact_station_modules_are_alternatives() {
+    use profibus_dp::gsd::Problem;
+    // A drive that offers three PPO types: one is configured, never the
+    // three together, so their sizes are not added.
+    let text = format!(
+        "{HEAD}Max_Input_Len=20\nMax_Output_Len=20\n\
+         Module=\"PPO 1\" 0xF3,0xF1\nEndModule\n\
+         Module=\"PPO 2\" 0xF3,0xF5\nEndModule\n\
+         Module=\"PPO 3\" 0xF5\nEndModule\n"
+    );
+    let p = strict(&text);
+    assert!(
+        p.warnings.iter().all(|w| w.kind != DiagKind::Semantic),
+        "{:?}",
+        p.warnings
+    );
+    let g = p.gsd;
+    assert!(!g.modular_station);
+    assert_eq!(g.default_selection(), [0]);
+    for i in 0..3 {
+        assert_eq!(g.check_selection(&[i]), vec![], "module {i}");
+    }
+    // All three in file order is the other reading of such a file: it
+    // breaks the limits here.
+    assert_eq!(g.check_selection(&[0, 1, 2]).len(), 2);
+    let two = g.check_selection(&[0, 2]);
+    assert!(
+        matches!(two.as_slice(), [Problem::FixedConfiguration { .. }]),
+        "{two:?}"
+    );
+    assert_eq!(
+        two[0].to_string(),
+        "this is a compact station (no Modular_Station=1): it is configured with exactly \
+         one of its modules (`PPO 1`, `PPO 2`, `PPO 3`), or all of them in file order"
+    );
+}
+
+#[test]
+fn max_module_without_modular_station_names_the_cause() {
+    let modules: String = (0..6)
+        .map(|i| format!("Module=\"M{i}\" 0x13\nEndModule\n"))
+        .collect();
+    let p = lenient(&format!("{HEAD}Max_Module=4\nMax_Input_Len=8\n{modules}"));
+    let w = warnings_with(&p, "Max_Module");
+    assert_eq!(w.len(), 1, "{:?}", p.warnings);
+    assert!(
+        w[0].contains("`Max_Module = 4` describes a modular station, but the file has no `Modular_Station = 1`")
+            && w[0].contains("exactly one of its 6 modules"),
+        "{w:?}"
+    );
+    assert_eq!(p.warnings[0].pos.line, 6);
+    // Every module alone is a valid configuration: no limit is broken.
+    for i in 0..6 {
+        assert_eq!(p.gsd.check_selection(&[i]), vec![]);
+    }
+    // With `Modular_Station = 1` the file is consistent.
+    let p = lenient(&format!(
+        "{HEAD}Modular_Station=1\nMax_Module=4\nMax_Input_Len=8\n{modules}"
+    ));
+    assert!(warnings_with(&p, "Max_Module").is_empty());
+    // `Modular_Station = 0` said outright is named as such.
+    let p = lenient(&format!("{HEAD}Modular_Station=0\nMax_Module=4\n{modules}"));
+    assert!(warnings_with(&p, "Max_Module")[0].contains("the file has `Modular_Station = 0`"));
+}
+
+#[test]
+fn user_prm_data_shorter_or_longer_than_its_length() {
+    let m = "Module=\"m\" 0x10\nEndModule\n";
+    let p = strict(&format!(
+        "{HEAD}User_Prm_Data_Len=40\nUser_Prm_Data=1,2,3,4,5,6,7,8\n{m}"
+    ));
+    assert_eq!(
+        warnings_with(&p, "User_Prm_Data"),
+        ["`User_Prm_Data_Len = 40` but `User_Prm_Data` gives only 8 byte(s); the other 32 byte(s) are sent as 0"]
+    );
+    assert_eq!(p.warnings[0].pos.line, 6);
+    let prm = p.gsd.user_prm_data(&[0], &[]).unwrap();
+    assert_eq!(prm.len(), 40);
+    let p = strict(&format!(
+        "{HEAD}User_Prm_Data_Len=2\nUser_Prm_Data=1,2,3\n{m}"
+    ));
+    assert_eq!(
+        warnings_with(&p, "User_Prm_Data"),
+        ["`User_Prm_Data` gives 3 bytes, more than `User_Prm_Data_Len = 2`; only the first 2 are sent"]
+    );
+    let p = strict(&format!("{HEAD}User_Prm_Data_Len=3\n{m}"));
+    assert_eq!(
+        warnings_with(&p, "User_Prm_Data"),
+        ["`User_Prm_Data_Len = 3` but the file gives no `User_Prm_Data`; 3 zero byte(s) are sent"]
+    );
+    // Consistent files get no such warning.
+    let p = strict(&format!(
+        "{HEAD}User_Prm_Data_Len=2\nUser_Prm_Data=1,2\n{m}"
+    ));
+    assert!(warnings_with(&p, "User_Prm_Data").is_empty());
+    let p = strict(&format!("{HEAD}User_Prm_Data_Len=0\n{m}"));
+    assert!(warnings_with(&p, "User_Prm_Data").is_empty());
+}
+
+#[test]
+fn keywords_of_the_standard_are_known() {
+    // One line per group of the GSD specification (revisions 1–5): each
+    // is kept as text without a warning; a vendor's own keyword is still
+    // reported.
+    let station = [
+        "Fail_Safe_required = 1",
+        "PrmCmd_supp = 1",
+        "Diag_Update_Delay = 2",
+        "Periphery = \"DPS\"",
+        "C1_Read_Write_required = 0",
+        "C2_Read_Write_required = 0",
+        "Extra_Alarm_SAP_supp = 1",
+        "Alarm_Sequence_Mode_Count = 2",
+        "Alarm_Type_Mode_supp = 1",
+        "Diagnostic_Alarm_required = 0",
+        "Manufacturer_Specific_Alarm_required = 0",
+        "DPV1_Data_Types = 0",
+        "Prm_Block_Structure_supp = 1",
+        "Prm_Block_Structure_req = 0",
+        "Jokerblock_Slot = 3",
+        "Jokerblock_Location = 1",
+        "Max_iParameter_Size = 1024",
+        "Publisher_supp = 1",
+        "Subscriber_supp = 1",
+        "DXB_Max_Link_Count = 10",
+        "DXB_Max_Data_Length = 32",
+        "DXB_Subscribertable_Block_Location = 1",
+        "Isochron_Mode_supp = 1",
+        "Isochron_Mode_required = 0",
+        "TBASE_DP = 375",
+        "TDP_MIN = 4",
+        "TDP_MAX = 256",
+        "T_PLL_W_MAX = 12",
+        "TBASE_IO = 375",
+        "TI_MIN = 1",
+        "TO_MIN = 1",
+        "Slave_Redundancy_supp = 0",
+        "Slave_Max_Switch_Over_Time = 100",
+        "Time_Sync_supp = 0",
+        "Ident_Maintenance_supp = 1",
+        "Subsys_Dir_Index = 1",
+        "F_ParamDescCRC = 0x1234",
+        "X_Prm_SAP_supp = 1",
+        "X_Max_User_Prm_Data_Len = 100",
+        "X_Prm_Block_Structure_supp = 1",
+        "X_Unit_Diag_Bit(3) = \"x\"",
+        "Unit_Diag_Bit_Help(3) = \"help\"",
+        "Unit_Diag_Not_Bit_Help(3) = \"help\"",
+        "Channel_Diag(16) = \"Error 16\"",
+        "Channel_Diag_Help(16) = \"What to do\"",
+        // A master's GSD file.
+        "Master_Freeze_Mode_supp = 1",
+        "Max_MPS_Length = 1000",
+        "Min_Poll_Timeout = 10",
+        "Trdy_1.5M = 11",
+        "Tqui_12M = 9",
+        "Tset_9.6 = 1",
+        "Tsdi_500 = 70",
+        "LAS_Len = 126",
+        "Max_Slaves_supp = 125",
+        "DPV1_Master = 1",
+        "C1_Master_Read_Write_supp = 1",
+        "Master_DPV1_Alarm_supp = 1",
+        "Isochron_Mode_Synchronised = 1",
+        "DXB_Master_supp = 0",
+        "X_Master_Prm_SAP_supp = 0",
+    ];
+    let module = [
+        "Channel_Diag(17) = \"Short circuit\"",
+        "F_IO_StructureDescCRC = 0x12345678",
+        "F_Ext_Module_Prm_Data_Len = 10",
+        "X_Ext_Module_Prm_Data_Len = 4",
+        "Subsys_Module_Dir_Index = 2",
+    ];
+    let text = format!(
+        "{HEAD}{}\nVendor_Special = 1\nTrdy_2M = 1\nModule=\"m\" 0x10\n{}\nVendor_Module_Thing = 1\nEndModule\n",
+        station.join("\n"),
+        module.join("\n")
+    );
+    let p = strict(&text);
+    let unknown: Vec<&str> = p
+        .warnings
+        .iter()
+        .filter(|w| w.kind == DiagKind::UnknownKeyword)
+        .map(|w| w.message.as_str())
+        .collect();
+    assert_eq!(
+        unknown,
+        [
+            "unknown keyword `Vendor_Special`; kept, not interpreted",
+            "unknown keyword `Trdy_2M`; kept, not interpreted",
+            "unknown keyword `Vendor_Module_Thing` in a module; kept, not interpreted",
+        ]
+    );
+    let g = &p.gsd;
+    // Every line but `C1_Read_Write_required` (in the model) is kept,
+    // with the two unknown ones.
+    assert_eq!(g.other.len(), station.len() - 1 + 2, "{:#?}", g.other);
+    assert!(!g.c1_read_write_required);
+    assert_eq!(g.other_flag("fail_safe_required"), Some(true));
+    assert_eq!(g.other_flag("PRMCMD_SUPP"), Some(true));
+    assert_eq!(g.other_value("Slave_Max_Switch_Over_Time"), Some("100"));
+    assert_eq!(g.other_flag("Time_Sync_supp"), Some(false));
+    assert_eq!(g.other_value("Periphery"), Some("\"DPS\""));
+    assert_eq!(g.other_flag("Isochron_Mode_required"), Some(false));
+    assert_eq!(g.other_value("No_Such_Keyword"), None);
+    assert_eq!(
+        g.modules[0].other_value("F_IO_StructureDescCRC"),
+        Some("0x12345678")
+    );
+    // Written back, the file reads the same.
+    assert_eq!(strict(&g.write()).gsd, *g);
+}

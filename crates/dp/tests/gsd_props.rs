@@ -440,7 +440,7 @@ fn edited_file() -> impl Strategy<Value = String> {
     for d in [dir.clone(), dir.join("corpus")] {
         for e in std::fs::read_dir(d).unwrap() {
             let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("gsd")) {
+            if profibus_dp::gsd::is_gsd_file_name(&p) {
                 texts.push(decode_latin1(&std::fs::read(p).unwrap()));
             }
         }

@@ -95,6 +95,7 @@ fn emit(buf: &mut [u8], da: u8, fc: FunctionCode, saps: Option<(u8, u8)>, data: 
         dsap: saps.map(|s| s.0),
         ssap: saps.map(|s| s.1),
         data,
+        format: None,
     })
     .emit(buf)
     .unwrap()

@@ -203,6 +203,7 @@ proptest! {
                 dsap: r.saps.map(|s| s.0),
                 ssap: r.saps.and_then(|s| s.1),
                 data: &r.data,
+                format: None,
             };
             let before = s.state();
             let owner = s.master();
@@ -277,6 +278,7 @@ fn request_strategy_reaches_data_exch() {
                 dsap: r.saps.map(|s| s.0),
                 ssap: r.saps.and_then(|s| s.1),
                 data: &r.data,
+                format: None,
             };
             let mut buf = [0u8; 246];
             s.on_request(now, &t, &mut buf);

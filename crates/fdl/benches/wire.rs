@@ -21,6 +21,7 @@ fn data_exchange(len: usize) -> Vec<u8> {
         dsap: None,
         ssap: None,
         data: &data,
+        format: None,
     });
     let mut b = vec![0u8; 255];
     let n = t.emit(&mut b).unwrap();
@@ -70,6 +71,7 @@ fn encode(c: &mut Criterion) {
                     dsap: None,
                     ssap: None,
                     data: black_box(data),
+                    format: None,
                 });
                 black_box(t.emit(&mut buf).unwrap())
             })

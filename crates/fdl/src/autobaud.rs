@@ -159,6 +159,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data: &[],
+            format: None,
         })
         .emit(&mut b)
         .unwrap();

@@ -271,6 +271,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data: &[],
+            format: None,
         })
         .emit(&mut b)
         .unwrap();

@@ -35,6 +35,7 @@ fn random_telegram(r: &mut Rng) -> Vec<u8> {
                 dsap: sap.then_some(r.range_inclusive(0, 63) as u8),
                 ssap: sap.then_some(r.range_inclusive(0, 63) as u8),
                 data: &data,
+                format: None,
             })
             .emit(&mut buf)
             .unwrap();

@@ -2,7 +2,7 @@
 
 use bytes::BytesMut;
 use profibus_fdl::codec::FdlCodec;
-use profibus_fdl::wire::{DataTelegram, FunctionCode, Telegram};
+use profibus_fdl::wire::{DataTelegram, Format, FunctionCode, Telegram};
 use proptest::prelude::*;
 use tokio_util::codec::Decoder;
 
@@ -15,6 +15,7 @@ enum Owned {
         dsap: Option<u8>,
         ssap: Option<u8>,
         data: Vec<u8>,
+        format: Option<Format>,
     },
     Token(u8, u8),
     Ack,
@@ -30,6 +31,7 @@ impl Owned {
                 dsap,
                 ssap,
                 data,
+                format,
             } => Telegram::Data(DataTelegram {
                 da: *da,
                 sa: *sa,
@@ -37,6 +39,7 @@ impl Owned {
                 dsap: *dsap,
                 ssap: *ssap,
                 data,
+                format: *format,
             }),
             Owned::Token(da, sa) => Telegram::Token { da: *da, sa: *sa },
             Owned::Ack => Telegram::ShortAck,
@@ -51,6 +54,10 @@ impl Owned {
     }
 }
 
+fn sent_format(bytes: &[u8]) -> Format {
+    Format::from_start_delimiter(bytes[0]).unwrap()
+}
+
 fn telegram() -> impl Strategy<Value = Owned> {
     let data = (
         0u8..=127,
@@ -61,16 +68,30 @@ fn telegram() -> impl Strategy<Value = Owned> {
         // Bias towards the format boundaries: empty, SD3 (8 bytes with the
         // SAPs) and the 246-byte maximum.
         prop_oneof![0usize..=10, 0usize..=244],
+        // The start delimiter: the emitter's choice, SD2 (fits any length)
+        // or the fixed-length format of the data field when there is one.
+        0u8..3,
     )
-        .prop_flat_map(|(da, sa, fc, dsap, ssap, n)| {
+        .prop_flat_map(|(da, sa, fc, dsap, ssap, n, pick)| {
             let room = 246 - dsap.is_some() as usize - ssap.is_some() as usize;
-            proptest::collection::vec(any::<u8>(), n.min(room)).prop_map(move |data| Owned::Data {
-                da,
-                sa,
-                fc,
-                dsap,
-                ssap,
-                data,
+            proptest::collection::vec(any::<u8>(), n.min(room)).prop_map(move |data| {
+                let field = dsap.is_some() as usize + ssap.is_some() as usize + data.len();
+                let format = match (pick, field) {
+                    (0, _) => None,
+                    (1, _) => Some(Format::Sd2),
+                    (_, 0) => Some(Format::Sd1),
+                    (_, 8) => Some(Format::Sd3),
+                    _ => Some(Format::Sd2),
+                };
+                Owned::Data {
+                    da,
+                    sa,
+                    fc,
+                    dsap,
+                    ssap,
+                    data,
+                    format,
+                }
             })
         });
     prop_oneof![
@@ -89,7 +110,16 @@ proptest! {
         prop_assert_eq!(bytes.len(), t.view().emitted_len());
         let (parsed, n) = Telegram::parse(&bytes).unwrap();
         prop_assert_eq!(n, bytes.len());
-        prop_assert_eq!(parsed, t.view());
+        // The parsed telegram is the emitted one, with the start delimiter
+        // it was sent in; emitting it again gives the same bytes.
+        let mut sent = t.view();
+        if let Telegram::Data(d) = &mut sent {
+            d.format = Some(sent_format(&bytes));
+        }
+        prop_assert_eq!(parsed, sent);
+        let mut again = vec![0u8; 255];
+        let m = parsed.emit(&mut again).unwrap();
+        prop_assert_eq!(&again[..m], &bytes[..]);
         // Parsing a prefix reports truncation, never a wrong telegram.
         for cut in 0..bytes.len() {
             prop_assert!(Telegram::parse(&bytes[..cut]).is_err());

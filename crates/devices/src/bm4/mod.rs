@@ -25,7 +25,7 @@
 //!   after the 8 PKW bytes if configured, each element in Motorola byte
 //!   order (L1224-1226). Consistency over all modules (L1237) holds by
 //!   construction: the slave takes and gives whole telegrams.
-//! - **PKW** ([`crate::pkw::BM4`], L1492-1647): PNU = parameter number.
+//! - **PKW** ([`PKW`], L1492-1647): PNU = parameter number.
 //!   Variables of 1 or 2 bytes per element use the word commands (value
 //!   in PWE2, PWE1 = 0; SINT/INT sign-extended to 16 bits), 4-byte
 //!   variables the double-word commands. Error numbers: variable number
@@ -61,8 +61,8 @@
 pub mod profile;
 pub mod vars;
 
-use crate::generic::{AddressStore, StoredAddress};
-use crate::pkw::{self, Command, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN, PKW_MODULE};
+use crate::address::{AddressFileError, StoredAddress};
+use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN, PKW_MODULE};
 use crate::ControlInbox;
 use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
 use profibus_dp::prm::SetPrm;
@@ -71,9 +71,36 @@ use profibus_dp::slave::{
 };
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use vars::{IecType, VarModule, VarTable, Variable};
+
+/// BM4-O-PRO-01 (BM4 manual L1514-1560): requests 1 read, 2 write word,
+/// 3 write double word, 4 PBE (not supported), 6 array element read,
+/// 7/8 array element write word/double word; responses 1 word, 2 double
+/// word, 4/5 array element word/double word, 7 error.
+pub const PKW: Dialect = Dialect {
+    name: "BM4-O-PRO-01",
+    read_element: Some(6),
+    write_element_word: Some(7),
+    write_element_dword: Some(8),
+    resp_element_word: Some(4),
+    resp_element_dword: Some(5),
+    errors: &[
+        (0x0001, "read only (the variable is an INPUT module)"),
+        (0x0003, "array subindex does not exist"),
+        (
+            0x0005,
+            "incorrect type (the variable's format is not the command's)",
+        ),
+        (
+            0x000B,
+            "variable does not exist (or is configured as cyclic process data)",
+        ),
+        (0x0016, "unknown command code"),
+    ],
+    ..Dialect::BASE
+};
 
 /// The ident number (GSD L2205).
 pub const IDENT: u16 = 0x0008;
@@ -121,8 +148,9 @@ pub struct Addressing {
     pub address: u8,
     /// The mode.
     pub mode: AddressMode,
-    /// Where a set-once address is kept.
-    pub store: Option<AddressStore>,
+    /// Where a set-once address is kept (the program running the slave
+    /// writes it when the master sets the address).
+    pub store: Option<PathBuf>,
     /// A set-once address is stored already.
     pub stored: bool,
 }
@@ -163,15 +191,10 @@ impl Addressing {
         us_device: u8,
         switch: Option<u8>,
         state_dir: Option<&Path>,
-    ) -> Result<Addressing, String> {
-        let set_once = |dir: Option<&Path>| -> Result<Addressing, String> {
-            let dir = dir.ok_or(
-                "a set-once address (us_DEVICE 126) is kept in a state file: give --state-dir DIR",
-            )?;
-            let store = AddressStore::new(dir.join(STATE_FILE));
-            let saved = store
-                .load()
-                .map_err(|e| format!("state file {}: {e}", store.path().display()))?;
+    ) -> Result<Addressing, AddressingError> {
+        let set_once = |dir: Option<&Path>| -> Result<Addressing, AddressingError> {
+            let store = dir.ok_or(AddressingError::NoStateDir)?.join(STATE_FILE);
+            let saved = StoredAddress::load(&store)?;
             Ok(Addressing {
                 address: saved.map_or(DEFAULT_ADDRESS, |s| s.address),
                 mode: AddressMode::SetOnce,
@@ -189,17 +212,12 @@ impl Addressing {
                 stored: false,
             }),
             128 => match switch {
-                None => Err("us_DEVICE 128 reads the rotary switch: give --switch N".into()),
-                Some(0) => Err(
-                    "rotary switch 0x00 is reserved: PROFIBUS_INIT_SL reports an initialisation error"
-                        .into(),
-                ),
+                None => Err(AddressingError::NoSwitch),
+                Some(0) => Err(AddressingError::SwitchZero),
                 Some(s @ 1..=125) => Ok(Addressing::fixed(s)),
                 Some(_) => set_once(state_dir),
             },
-            _ => Err(format!(
-                "us_DEVICE {us_device} is invalid (1..125, 126, 127, 128): PROFIBUS_INIT_SL u_ERROR 4"
-            )),
+            _ => Err(AddressingError::UsDevice(us_device)),
         }
     }
 
@@ -211,6 +229,27 @@ impl Addressing {
             AddressMode::EveryStart => true,
         }
     }
+}
+
+/// Why us_DEVICE, the rotary switch and the state directory give no
+/// address.
+#[derive(Debug, thiserror::Error)]
+pub enum AddressingError {
+    /// us_DEVICE 126 without a state directory.
+    #[error("a set-once address (us_DEVICE 126) is kept in a state file: give --state-dir DIR")]
+    NoStateDir,
+    /// us_DEVICE 128 without a switch value.
+    #[error("us_DEVICE 128 reads the rotary switch: give --switch N")]
+    NoSwitch,
+    /// Rotary switch 0x00.
+    #[error("rotary switch 0x00 is reserved: PROFIBUS_INIT_SL reports an initialisation error")]
+    SwitchZero,
+    /// us_DEVICE outside its values.
+    #[error("us_DEVICE {0} is invalid (1..125, 126, 127, 128): PROFIBUS_INIT_SL u_ERROR 4")]
+    UsDevice(u8),
+    /// The state file cannot be read.
+    #[error("state file {0}")]
+    StateFile(#[from] AddressFileError),
 }
 
 /// The module's status as its LEDs show it (L1158-1166, L2041-2049).
@@ -418,6 +457,122 @@ impl PkwServer for Vars {
     }
 }
 
+/// A configuration fault: the Chk_Cfg does not fit the variable table.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ConfigError(pub String);
+
+/// The process images a configuration of a variable table gives.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct CfgLayout {
+    /// The PKW module comes first.
+    pub pkw: bool,
+    /// The configured variables by parameter number, in Chk_Cfg order.
+    pub used: Vec<usize>,
+    /// Input variables with their offsets.
+    inputs: Vec<Slot>,
+    /// Output variables with their offsets.
+    outputs: Vec<Slot>,
+    /// Input bytes.
+    pub input_len: usize,
+    /// Output bytes.
+    pub output_len: usize,
+}
+
+impl CfgLayout {
+    /// Check `cfg` against `table` (module docs: Chk_Cfg) and lay out the
+    /// images: the PKW words first if configured, then the variables of
+    /// each direction in configuration order.
+    pub(crate) fn new(table: &VarTable, cfg: &[u8]) -> Result<CfgLayout, ConfigError> {
+        let err = |m: String| ConfigError(m);
+        let mut i = 0;
+        let pkw = cfg.first() == Some(&PKW_MODULE);
+        if pkw {
+            i = 1;
+        }
+        let all = table.all_modules_cfg().filter(|_| table.all_modules);
+        let mut used: Vec<usize> = vec![];
+        let take = |var: usize, used: &mut Vec<usize>| {
+            if used.contains(&var) {
+                Err(err(format!(
+                    "variable {} (`{}`) is configured twice",
+                    var, table.vars[var].name
+                )))
+            } else {
+                used.push(var);
+                Ok(())
+            }
+        };
+        while i < cfg.len() {
+            if let Some((all_cfg, order)) = all.as_ref().filter(|(c, _)| cfg[i..].starts_with(c)) {
+                for &v in order {
+                    take(v, &mut used)?;
+                }
+                i += all_cfg.len();
+                continue;
+            }
+            if cfg[i] == PKW_MODULE {
+                return Err(err(format!(
+                    "the PKW module 0x73 is at byte {i}; it must be the first module"
+                )));
+            }
+            let Some(id) = cfg.get(i..i + 4) else {
+                return Err(err(format!(
+                    "byte {i} (0x{:02X}) does not start a module of the variable table",
+                    cfg[i]
+                )));
+            };
+            let pnu = id[3] as usize;
+            if pnu >= table.vars.len() || table.identifier(pnu) != id {
+                return Err(err(format!(
+                    "identifier {:02X} {:02X} {:02X} {:02X} at byte {i} is no module of the variable table",
+                    id[0], id[1], id[2], id[3]
+                )));
+            }
+            take(pnu, &mut used)?;
+            i += 4;
+        }
+        if !pkw && used.is_empty() {
+            return Err(err("empty configuration".into()));
+        }
+        let mut inp = if pkw { PKW_LEN } else { 0 };
+        let mut out = inp;
+        let (mut inputs, mut outputs) = (vec![], vec![]);
+        for &var in &used {
+            let v: &Variable = &table.vars[var];
+            let (list, at) = match v.module {
+                VarModule::Input => (&mut inputs, &mut inp),
+                VarModule::Output => (&mut outputs, &mut out),
+            };
+            list.push(Slot { var, offset: *at });
+            *at += v.bytes();
+        }
+        if inp > 244 || out > 244 {
+            return Err(err(format!(
+                "{inp} input and {out} output bytes, at most 244 each way"
+            )));
+        }
+        Ok(CfgLayout {
+            pkw,
+            used,
+            inputs,
+            outputs,
+            input_len: inp,
+            output_len: out,
+        })
+    }
+
+    /// The variables of one direction with their offsets: (parameter
+    /// number, byte offset).
+    pub(crate) fn slots(&self, module: VarModule) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let list = match module {
+            VarModule::Input => &self.inputs,
+            VarModule::Output => &self.outputs,
+        };
+        list.iter().map(|s| (s.var, s.offset))
+    }
+}
+
 /// The BM4-O-PRO-01 emulation; see the module docs.
 #[derive(Debug)]
 pub struct Bm4 {
@@ -465,7 +620,7 @@ impl Bm4 {
             inputs: vec![],
             outputs: vec![],
             pkw: false,
-            engine: PkwEngine::new(&pkw::BM4, Duration::ZERO),
+            engine: PkwEngine::new(&PKW, Duration::ZERO),
             addressing,
             sdiag: None,
             new_diag: false,
@@ -700,64 +855,6 @@ impl Bm4 {
         }
     }
 
-    fn parse_cfg(&self, cfg: &[u8]) -> Result<(bool, Vec<usize>), String> {
-        let mut i = 0;
-        let pkw = cfg.first() == Some(&PKW_MODULE);
-        if pkw {
-            i = 1;
-        }
-        let all = self
-            .vars
-            .table
-            .all_modules_cfg()
-            .filter(|_| self.vars.table.all_modules);
-        let mut used: Vec<usize> = vec![];
-        let take = |var: usize, used: &mut Vec<usize>| {
-            if used.contains(&var) {
-                Err(format!(
-                    "variable {} (`{}`) is configured twice",
-                    var, self.vars.table.vars[var].name
-                ))
-            } else {
-                used.push(var);
-                Ok(())
-            }
-        };
-        while i < cfg.len() {
-            if let Some((all_cfg, order)) = all.as_ref().filter(|(c, _)| cfg[i..].starts_with(c)) {
-                for &v in order {
-                    take(v, &mut used)?;
-                }
-                i += all_cfg.len();
-                continue;
-            }
-            if cfg[i] == PKW_MODULE {
-                return Err(format!(
-                    "the PKW module 0x73 is at byte {i}; it must be the first module"
-                ));
-            }
-            let Some(id) = cfg.get(i..i + 4) else {
-                return Err(format!(
-                    "byte {i} (0x{:02X}) does not start a module of the variable table",
-                    cfg[i]
-                ));
-            };
-            let pnu = id[3] as usize;
-            if pnu >= self.vars.table.vars.len() || self.vars.table.identifier(pnu) != id {
-                return Err(format!(
-                    "identifier {:02X} {:02X} {:02X} {:02X} at byte {i} is no module of the variable table",
-                    id[0], id[1], id[2], id[3]
-                ));
-            }
-            take(pnu, &mut used)?;
-            i += 4;
-        }
-        if !pkw && used.is_empty() {
-            return Err("empty configuration".into());
-        }
-        Ok((pkw, used))
-    }
-
     fn run_inbox(&mut self, now: Instant) {
         let Some(inbox) = self.inbox.clone() else {
             return;
@@ -816,42 +913,26 @@ impl Device for Bm4 {
     }
 
     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
-        let (pkw, used) = match self.parse_cfg(cfg) {
-            Ok(x) => x,
+        let l = match CfgLayout::new(&self.vars.table, cfg) {
+            Ok(l) => l,
             Err(e) => {
                 self.set_led(Led::ConfigurationError);
-                return Err(e.into());
+                return Err(e.0.into());
             }
         };
-        let mut inp = if pkw { PKW_LEN } else { 0 };
-        let mut out = inp;
-        let (mut inputs, mut outputs) = (vec![], vec![]);
-        for &var in &used {
-            let v: &Variable = &self.vars.table.vars[var];
-            let (list, at) = match v.module {
-                VarModule::Input => (&mut inputs, &mut inp),
-                VarModule::Output => (&mut outputs, &mut out),
-            };
-            list.push(Slot { var, offset: *at });
-            *at += v.bytes();
-        }
-        if inp > 244 || out > 244 {
-            self.set_led(Led::ConfigurationError);
-            return Err(format!("{inp} input and {out} output bytes, at most 244 each way").into());
-        }
         self.vars.cyclic.iter_mut().for_each(|c| *c = false);
-        for &v in &used {
+        for &v in &l.used {
             self.vars.cyclic[v] = true;
         }
-        self.pkw = pkw;
-        self.inputs = inputs;
-        self.outputs = outputs;
+        self.pkw = l.pkw;
+        self.inputs = l.inputs;
+        self.outputs = l.outputs;
         self.cfg = Some(cfg.to_vec());
         self.engine.reset();
         self.set_led(Led::ParameteriseConfigure);
         Ok(IoLayout {
-            inputs: inp,
-            outputs: out,
+            inputs: l.input_len,
+            outputs: l.output_len,
         })
     }
 
@@ -922,7 +1003,7 @@ impl Device for Bm4 {
     fn set_address(
         &mut self,
         new_address: u8,
-        no_add_chg: bool,
+        _no_add_chg: bool,
         _rem_slave_data: &[u8],
     ) -> Result<(), Reason> {
         match self.addressing.mode {
@@ -931,19 +1012,13 @@ impl Device for Bm4 {
                 Err("the address was set once already (us_DEVICE 126)".into())
             }
             AddressMode::SetOnce => {
-                if let Some(store) = &self.addressing.store {
-                    store
-                        .save(StoredAddress {
-                            address: new_address,
-                            no_add_chg,
-                        })
-                        .map_err(|e| Reason::from(format!("cannot store the address: {e}")))?;
-                    let text = format!(
-                        "address {new_address} set once and stored in {}",
-                        store.path().display()
-                    );
-                    self.note("address", text);
-                }
+                // The program running the slave keeps it in the state
+                // file (SlaveEvent::AddressChanged); no file I/O here.
+                let text = match &self.addressing.store {
+                    Some(p) => format!("address {new_address} set once, kept in {}", p.display()),
+                    None => format!("address {new_address} set once"),
+                };
+                self.note("address", text);
                 self.addressing.stored = true;
                 Ok(())
             }

@@ -1,66 +1,262 @@
-//! The `bm4` entry of the profile registry: `dpctl slave --device bm4`.
+//! The `bm4` profile: `dpctl slave --device bm4`, `device = "bm4"` in a
+//! bus file.
 
-use super::vars::VarTable;
-use super::{Addressing, Bm4};
-use crate::{BoxedDevice, Profile, ProfileOptions};
-use std::path::Path;
+use super::vars::{IecType, VarModule, VarTable};
+use super::{Addressing, Bm4, CfgLayout, IDENT, PKW};
+use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::pkw::{Dialect, PKW_LEN, PKW_MODULE};
+use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::BoxedDevice;
+use profibus_dp::gsd::Gsd;
+use serde::Deserialize;
+use std::path::PathBuf;
 
-/// The registry entry.
-pub const PROFILE: Profile = Profile {
-    name: "bm4",
-    summary: "Baumüller b maXX PLC module BM4-O-PRO-01 (ident 0x0008): PLC variables as modules, PKW channel, SDIAG user diagnosis",
-    options_help: "--vars FILE.toml (variable table; default: BM4OPRO1.GSD's configuration), \
+/// The options of the `bm4` profile.
+#[derive(Debug, Default, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Options {
+    /// The PLC's variable table (TOML); default: the configuration of
+    /// `BM4OPRO1.GSD`.
+    pub vars: Option<PathBuf>,
+    /// us_DEVICE of PROFIBUS_INIT_SL (1..125 fixed, 126 set once and kept
+    /// in `state_dir`, 127 set after every start, 128 the rotary switch);
+    /// default: the caller's address.
+    #[serde(deserialize_with = "opt_int")]
+    pub us_device: Option<u8>,
+    /// The rotary switch (for us_DEVICE 128; alone it means 128).
+    #[serde(deserialize_with = "opt_int")]
+    pub switch: Option<u8>,
+    /// Directory of the state file keeping a set-once address.
+    pub state_dir: Option<PathBuf>,
+    /// Write the GSD file of this configuration here when configured.
+    pub write_gsd: Option<PathBuf>,
+    /// Master side: the variables (names) a master configures, in slot
+    /// order; default: all of them.
+    pub modules: Option<Vec<String>>,
+    /// Master side: configure the PKW module first (default: true).
+    pub pkw: Option<bool>,
+}
+
+/// The BM4-O-PRO-01 with a variable table and an addressing mode.
+#[derive(Debug)]
+pub struct Bm4Profile {
+    options: Options,
+    table: VarTable,
+    addressing: Addressing,
+    gsd: Gsd,
+    gsd_file: Vec<u8>,
+}
+
+impl Profile for Bm4Profile {
+    type Options = Options;
+    const NAME: &'static str = "bm4";
+    const SUMMARY: &'static str = "Baumüller b maXX PLC module BM4-O-PRO-01 (ident 0x0008): PLC variables as modules, PKW channel, SDIAG user diagnosis";
+    const OPTIONS_HELP: &'static str = "--vars FILE.toml (variable table; default: BM4OPRO1.GSD's configuration), \
 --us-device N (1..125 fixed, 126 set once by the master and kept in --state-dir, 127 set after every start, \
 128 rotary switch; default: --addr), --switch N (rotary switch for us_DEVICE 128), --state-dir DIR, \
---write-gsd FILE (write the generated GSD), --control FILE|- (commands: sdiag HEX..., sdiag-clear, set NAME VALUE, get NAME, status)",
-    build,
-};
+--write-gsd FILE (write the generated GSD), --control FILE|- (commands: sdiag HEX..., sdiag-clear, set NAME VALUE, get NAME, status); \
+bus file: modules = [variable names] (default all), pkw = true|false";
+    const IDENT: Option<u16> = Some(IDENT);
+    const PKW: Option<&'static Dialect> = Some(&PKW);
 
-fn num(opts: &ProfileOptions, key: &str) -> Result<Option<u8>, String> {
-    opts.get(key)
-        .map(|v| {
-            let v = v.trim();
-            let parsed = match v.strip_prefix("0x").or_else(|| v.strip_prefix("0X")) {
-                Some(h) => u8::from_str_radix(h, 16),
-                None => v.parse::<u8>(),
-            };
-            parsed.map_err(|_| format!("--{key} `{v}` is not a number 0..=255"))
-        })
-        .transpose()
-}
-
-/// The addressing the options give: `us-device` (default: `addr`),
-/// `switch`, `state-dir`.
-pub fn addressing(opts: &ProfileOptions) -> Result<Addressing, String> {
-    let switch = num(opts, "switch")?;
-    let us = match (num(opts, "us-device")?, switch) {
-        (Some(u), _) => u,
-        (None, Some(_)) => 128,
-        (None, None) => num(opts, "addr")?
-            .ok_or("give --us-device N, --switch N (us_DEVICE 128) or --addr N")?,
-    };
-    Addressing::from_us_device(us, switch, opts.get("state-dir").map(Path::new))
-}
-
-/// The station address at start.
-pub fn address(opts: &ProfileOptions) -> Result<u8, String> {
-    addressing(opts).map(|a| a.address)
-}
-
-fn build(opts: &ProfileOptions) -> Result<BoxedDevice, String> {
-    let table = match opts.get("vars") {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-            VarTable::parse(&text).map_err(|e| format!("{path}: {e}"))?
+    fn configure(options: Options, address: Option<u8>) -> Result<Self, ProfileError> {
+        let table = match &options.vars {
+            Some(path) => {
+                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
+                    path: path.clone(),
+                    source,
+                })?;
+                VarTable::parse(&text).map_err(|e| ProfileError::Table {
+                    path: path.clone(),
+                    message: e.to_string(),
+                })?
+            }
+            None => VarTable::default_table(),
+        };
+        let us = match (options.us_device, options.switch) {
+            (Some(u), _) => u,
+            (None, Some(_)) => 128,
+            (None, None) => address.ok_or_else(|| {
+                ProfileError::Invalid(
+                    "give --us-device N, --switch N (us_DEVICE 128) or --addr N".into(),
+                )
+            })?,
+        };
+        let addressing =
+            Addressing::from_us_device(us, options.switch, options.state_dir.as_deref())
+                .map_err(|e| ProfileError::Invalid(e.to_string()))?;
+        let dev = Bm4::new(table.clone(), addressing.clone());
+        let (gsd, gsd_file) = (dev.gsd().clone(), dev.gsd_file());
+        if let Some(path) = &options.write_gsd {
+            std::fs::write(path, &gsd_file).map_err(|source| ProfileError::File {
+                path: path.clone(),
+                source,
+            })?;
         }
-        None => VarTable::default_table(),
-    };
-    let mut dev = Bm4::new(table, addressing(opts)?);
-    if let Some(path) = opts.get("write-gsd") {
-        std::fs::write(path, dev.gsd_file()).map_err(|e| format!("{path}: {e}"))?;
+        Ok(Bm4Profile {
+            options,
+            table,
+            addressing,
+            gsd,
+            gsd_file,
+        })
     }
-    if let Some(inbox) = &opts.control {
-        dev = dev.with_inbox(inbox.clone());
+
+    fn gsd(&self) -> &Gsd {
+        &self.gsd
     }
-    Ok(Box::new(dev))
+
+    fn gsd_file(&self) -> Vec<u8> {
+        self.gsd_file.clone()
+    }
+
+    fn modules(&self) -> Vec<String> {
+        let name_of = |cfg: &[u8]| {
+            self.gsd
+                .modules
+                .iter()
+                .find(|m| m.cfg == cfg)
+                .map(|m| m.name.clone())
+        };
+        let mut out = vec![];
+        if self.options.pkw.unwrap_or(true) {
+            out.extend(name_of(&[PKW_MODULE]));
+        }
+        match &self.options.modules {
+            Some(names) => out.extend(names.iter().cloned()),
+            None => out.extend(
+                (0..self.table.vars.len()).filter_map(|i| name_of(&self.table.identifier(i))),
+            ),
+        }
+        out
+    }
+
+    fn address(&self) -> Option<u8> {
+        Some(self.addressing.address)
+    }
+
+    fn address_file(&self) -> Option<PathBuf> {
+        self.addressing.store.clone()
+    }
+
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        let mut dev = Bm4::new(self.table.clone(), self.addressing.clone());
+        if let Some(inbox) = control {
+            dev = dev.with_inbox(inbox);
+        }
+        Ok(Box::new(dev))
+    }
+
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+        let l = CfgLayout::new(&self.table, cfg).map_err(|e| ProfileError::Config(e.0))?;
+        let mut m = ChannelMap::new();
+        if l.pkw {
+            pkw_channels(&mut m);
+        }
+        for (module, dir) in [
+            (VarModule::Input, Direction::Input),
+            (VarModule::Output, Direction::Output),
+        ] {
+            for (pnu, offset) in l.slots(module) {
+                let v = &self.table.vars[pnu];
+                let ty = channel_type(v.ty);
+                for i in 0..v.length {
+                    let name = if v.is_array() {
+                        format!("{}[{i}]", v.name)
+                    } else {
+                        v.name.clone()
+                    };
+                    m.push(name, dir, offset + i * v.ty.size(), ty);
+                }
+            }
+        }
+        Ok(m)
+    }
+}
+
+/// The four PKW words in both images: `pke`, `ind`, `pwe1`, `pwe2`.
+pub(crate) fn pkw_channels(m: &mut ChannelMap) {
+    for dir in [Direction::Input, Direction::Output] {
+        for (i, name) in ["pke", "ind", "pwe1", "pwe2"].into_iter().enumerate() {
+            m.push(name, dir, 2 * i, ChannelType::U16);
+        }
+    }
+    debug_assert_eq!(PKW_LEN, 8);
+}
+
+fn channel_type(t: IecType) -> ChannelType {
+    match t {
+        IecType::Bool | IecType::Usint | IecType::Byte => ChannelType::U8,
+        IecType::Sint => ChannelType::I8,
+        IecType::Int => ChannelType::I16,
+        IecType::Uint | IecType::Word => ChannelType::U16,
+        IecType::Dint => ChannelType::I32,
+        IecType::Udint | IecType::Dword => ChannelType::U32,
+        IecType::Real => ChannelType::F32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channels::Value;
+    use crate::{Configured, DeviceOptions};
+
+    fn example() -> Box<dyn Configured> {
+        let mut o = DeviceOptions::new();
+        o.set_text(
+            "vars",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/data/bm4_example_vars.toml"),
+        );
+        crate::profile("bm4")
+            .unwrap()
+            .configure(&o, Some(6))
+            .unwrap()
+    }
+
+    #[test]
+    fn master_side_from_the_variable_table() {
+        let p = example();
+        assert_eq!(p.address(), Some(6));
+        assert_eq!(p.modules()[0], "Bedarfsdaten PKW");
+        let cfg = p.chk_cfg().unwrap();
+        assert_eq!(cfg[0], PKW_MODULE);
+        assert_eq!(p.user_prm_data().unwrap().len(), super::super::USER_PRM_LEN);
+        let ch = p.channels(&cfg).unwrap();
+        assert!(ch.find(Direction::Input, "pke").is_some());
+        let first_in = ch.of(Direction::Input).nth(4).unwrap();
+        assert_eq!(
+            (first_in.name.as_str(), first_in.offset),
+            ("ud_MyReadVar1", 8)
+        );
+        let mut img = vec![0u8; 64];
+        ch.write_output("ud_MyWriteVar1", Value::Int(0x0102_0304), &mut img)
+            .unwrap();
+        let w = ch.find(Direction::Output, "ud_MyWriteVar1").unwrap();
+        assert_eq!(&img[w.offset..w.offset + 4], &[1, 2, 3, 4]);
+        assert!(p.channels(&[0x42]).is_err());
+    }
+
+    #[test]
+    fn options_are_typed_and_checked() {
+        let entry = crate::profile("bm4").unwrap();
+        let mut o = DeviceOptions::new();
+        o.set_pair("us-device=0x7F").unwrap();
+        let p = entry.configure(&o, None).unwrap();
+        assert_eq!(p.address(), Some(126), "us_DEVICE 127 waits at 126");
+        let mut o = DeviceOptions::new();
+        o.set_pair("switch=0X19").unwrap();
+        assert_eq!(entry.configure(&o, None).unwrap().address(), Some(25));
+        let mut o = DeviceOptions::new();
+        o.set_pair("no-such-option=1").unwrap();
+        let e = entry.configure(&o, Some(6)).unwrap_err().to_string();
+        assert!(e.contains("no_such_option"), "{e}");
+        let mut o = DeviceOptions::new();
+        o.set_pair("us-device=300").unwrap();
+        assert!(entry.configure(&o, None).is_err());
+        assert!(
+            entry.configure(&DeviceOptions::new(), None).is_err(),
+            "no address"
+        );
+    }
 }

@@ -1,5 +1,6 @@
+use super::PKW as D;
 use super::*;
-use crate::pkw::{Pkw, BM4 as D};
+use crate::pkw::Pkw;
 use profibus_dp::gsd::{Gsd, ParseOptions};
 
 const T0: Instant = Instant::ZERO;
@@ -266,9 +267,18 @@ fn addressing_modes() {
     // 126 (and 128 with the switch at 0x7E..): set once, then kept.
     let once = a(128, Some(0x7E)).unwrap();
     assert_eq!((once.address, once.mode), (126, AddressMode::SetOnce));
+    let store = once.store.clone().unwrap();
     let mut d = Bm4::new(VarTable::example(), once);
     d.set_address(17, false, &[]).unwrap();
     assert!(d.set_address(18, false, &[]).is_err(), "only once");
+    assert!(!store.exists(), "the device itself writes no file");
+    // The program running the slave keeps it (on SlaveEvent::AddressChanged).
+    crate::address::StoredAddress {
+        address: 17,
+        no_add_chg: false,
+    }
+    .save(&store)
+    .unwrap();
     let again = a(126, None).unwrap();
     assert_eq!(again.address, 17);
     assert!(

@@ -45,7 +45,7 @@
 //! setpoint i (0 where there is no setpoint i); P218 reads actual value
 //! 1.
 //!
-//! # PKW ([`crate::pkw::OMEGA`], L840-1178)
+//! # PKW ([`PKW`], L840-1178)
 //!
 //! PNU 0..999 address the V-controller parameters
 //! ([`params::ParamTable`]), 1000..2047 the Omega's DINT array (double
@@ -76,7 +76,7 @@
 pub mod params;
 pub mod profile;
 
-use crate::pkw::{self, Command, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
+use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
 use crate::ControlInbox;
 use params::ParamTable;
 use profibus_dp::cfg::identifiers;
@@ -87,6 +87,42 @@ use profibus_dp::slave::{
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
 use std::time::Duration;
+
+/// Omega Drive-Line II option board (Omega manual L871-926): requests 1
+/// read, 2 write word, 3 write double word, 4 PBE; responses 1 word, 2
+/// double word, 3 description element, 7 error.
+pub const PKW: Dialect = Dialect {
+    name: "Omega Drive-Line II",
+    describe: Some(4),
+    resp_element: Some(3),
+    reset_required: true,
+    not_reset_error: 0x0101,
+    errors: &[
+        (0x0000, "no error"),
+        (0x0001, "cannot change parameter"),
+        (0x0002, "value outside MIN / MAX limit"),
+        (0x0003, "wrong index entry"),
+        (0x0004, "no array"),
+        (0x0005, "wrong data type"),
+        (0x0006, "no setting permitted"),
+        (0x0007, "cannot change description element"),
+        (0x0008, "impermissible parameter number"),
+        (0x0080, "received uninterpretable command"),
+        (0x0081, "no configuration / initialisation performed"),
+        (0x0082, "error reading actual value"),
+        (0x0083, "error writing setpoint"),
+        (0x0084, "actual value configuration error"),
+        (0x0085, "setpoint configuration error"),
+        (0x0101, "unspecified error"),
+        (0x0102, "service not implemented"),
+        (0x0103, "parameter format too large for PKW area"),
+        (
+            0x0104,
+            "parameter information does not exist (request via index)",
+        ),
+    ],
+    ..Dialect::BASE
+};
 
 /// The ident number (BNF_00D0.GSD).
 pub const IDENT: u16 = 0x00D0;
@@ -381,7 +417,7 @@ impl Omega {
             counts: None,
             cfg: DEFAULT_CFG.to_vec(),
             layout: None,
-            engine: PkwEngine::new(&pkw::OMEGA, DEFAULT_PKW_DELAY),
+            engine: PkwEngine::new(&PKW, DEFAULT_PKW_DELAY),
             control: [0; 2],
             setpoints: [0; MAX_VALUES],
             b_message: 0,
@@ -427,7 +463,7 @@ impl Omega {
 
     /// Set the PKW processing delay.
     pub fn with_pkw_delay(mut self, delay: Duration) -> Omega {
-        self.engine = PkwEngine::new(&pkw::OMEGA, delay);
+        self.engine = PkwEngine::new(&PKW, delay);
         self
     }
 

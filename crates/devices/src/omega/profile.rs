@@ -1,65 +1,233 @@
-//! The `omega` entry of the profile registry: `dpctl slave --device omega`.
+//! The `omega` profile: `dpctl slave --device omega`, `device = "omega"`
+//! in a bus file.
 
 use super::params::ParamTable;
-use super::Omega;
-use crate::{BoxedDevice, Profile, ProfileOptions};
+use super::{check_configuration, Omega, IDENT, MAX_VALUES, PKW};
+use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::pkw::{Dialect, PKW_LEN};
+use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::BoxedDevice;
+use profibus_dp::gsd::Gsd;
+use serde::Deserialize;
+use std::path::PathBuf;
 use std::time::Duration;
 
-/// The registry entry.
-pub const PROFILE: Profile = Profile {
-    name: "omega",
-    summary: "Baumüller Omega Drive-Line II option board PBDP-01 (ident 0x00D0): setpoints/actual values, PKW to a V-controller parameter set",
-    options_help: "--params FILE.toml (V-controller parameter set; default: the shipped table), \
+/// The options of the `omega` profile.
+#[derive(Debug, Default, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Options {
+    /// The V controller's parameter set (TOML); default: the shipped one.
+    pub params: Option<PathBuf>,
+    /// si_NR_WR_VALUE: setpoints the drive expects (1..8, with
+    /// `actual_values`); default: any valid configuration (the master
+    /// side: 2).
+    #[serde(deserialize_with = "opt_int")]
+    pub setpoints: Option<u8>,
+    /// si_NR_RD_VALUE: actual values (1..8).
+    #[serde(deserialize_with = "opt_int")]
+    pub actual_values: Option<u8>,
+    /// The rotary switches S40/S41 (hex allowed), instead of the caller's
+    /// address.
+    #[serde(deserialize_with = "opt_int")]
+    pub switch: Option<u16>,
+    /// PKW processing delay in ms (default 5).
+    #[serde(deserialize_with = "opt_int")]
+    pub pkw_delay_ms: Option<u64>,
+    /// Master side: configure the service data (PKW) module (default:
+    /// true).
+    pub pkw: Option<bool>,
+}
+
+/// The Omega Drive-Line II option board with a parameter set.
+#[derive(Debug)]
+pub struct OmegaProfile {
+    options: Options,
+    table: ParamTable,
+    gsd: Gsd,
+}
+
+impl Profile for OmegaProfile {
+    type Options = Options;
+    const NAME: &'static str = "omega";
+    const SUMMARY: &'static str = "Baumüller Omega Drive-Line II option board PBDP-01 (ident 0x00D0): setpoints/actual values, PKW to a V-controller parameter set";
+    const OPTIONS_HELP: &'static str = "--params FILE.toml (V-controller parameter set; default: the shipped table), \
 --setpoints N / --actual-values N (si_NR_WR_VALUE / si_NR_RD_VALUE, 1..8; default: any valid configuration), \
 --switch N (rotary switches S40/S41, hex allowed, instead of --addr), --device-opt pkw-delay-ms=MS (PKW processing delay, default 5), \
---control FILE|- (commands: status, quit, get P)",
-    build,
-};
+--control FILE|- (commands: status, quit, get P); bus file: setpoints, actual_values (default 2 each), pkw = true|false";
+    const IDENT: Option<u16> = Some(IDENT);
+    const PKW: Option<&'static Dialect> = Some(&PKW);
 
-fn number(opts: &ProfileOptions, key: &str) -> Result<Option<u64>, String> {
-    opts.get(key)
-        .map(|v| {
-            let v = v.trim();
-            match v.strip_prefix("0x").or_else(|| v.strip_prefix("0X")) {
-                Some(h) => u64::from_str_radix(h, 16),
-                None => v.parse(),
+    fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
+        let table = match &options.params {
+            Some(path) => {
+                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
+                    path: path.clone(),
+                    source,
+                })?;
+                ParamTable::parse(&text).map_err(|e| ProfileError::Table {
+                    path: path.clone(),
+                    message: e.to_string(),
+                })?
             }
-            .map_err(|_| format!("--{key} `{v}` is not a number"))
-        })
-        .transpose()
-}
-
-/// The address from the rotary switches (`switch`), if given: S40 is the
-/// high nibble, S41 the low one (L498-511); DP addresses stop at 125.
-pub fn address(opts: &ProfileOptions) -> Result<Option<u8>, String> {
-    match number(opts, "switch")? {
-        None => Ok(None),
-        Some(s) if s <= 125 => Ok(Some(s as u8)),
-        Some(s) => Err(format!(
-            "rotary switches S40/S41 at 0x{s:02X}: station addresses are 0..=125"
-        )),
-    }
-}
-
-fn build(opts: &ProfileOptions) -> Result<BoxedDevice, String> {
-    let table = match opts.get("params") {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-            ParamTable::parse(&text).map_err(|e| format!("{path}: {e}"))?
+            None => ParamTable::default_table(),
+        };
+        match (options.setpoints, options.actual_values) {
+            (None, None) => {}
+            (Some(sp), Some(av)) => {
+                Omega::new(ParamTable::default_table())
+                    .with_counts(sp as usize, av as usize)
+                    .map_err(|e| ProfileError::Invalid(e.to_string()))?;
+            }
+            _ => {
+                return Err(ProfileError::Invalid(
+                    "give both --setpoints and --actual-values, or neither".into(),
+                ))
+            }
         }
-        None => ParamTable::default_table(),
-    };
-    let mut dev = Omega::new(table);
-    match (number(opts, "setpoints")?, number(opts, "actual-values")?) {
-        (None, None) => {}
-        (Some(sp), Some(av)) => dev = dev.with_counts(sp as usize, av as usize)?,
-        _ => return Err("give both --setpoints and --actual-values, or neither".into()),
+        if let Some(s) = options.switch.filter(|s| *s > 125) {
+            return Err(ProfileError::Invalid(format!(
+                "rotary switches S40/S41 at 0x{s:02X}: station addresses are 0..=125"
+            )));
+        }
+        Ok(OmegaProfile {
+            options,
+            table,
+            gsd: crate::gsd_files::parse(super::GSD).expect("BNF_00D0.GSD parses leniently"),
+        })
     }
-    if let Some(ms) = number(opts, "pkw-delay-ms")? {
-        dev = dev.with_pkw_delay(Duration::from_millis(ms));
+
+    fn gsd(&self) -> &Gsd {
+        &self.gsd
     }
-    if let Some(inbox) = &opts.control {
-        dev = dev.with_inbox(inbox.clone());
+
+    fn gsd_file(&self) -> Vec<u8> {
+        super::GSD.to_vec()
     }
-    Ok(Box::new(dev))
+
+    fn modules(&self) -> Vec<String> {
+        let sp = self
+            .options
+            .setpoints
+            .unwrap_or(2)
+            .clamp(1, MAX_VALUES as u8);
+        let av = self
+            .options
+            .actual_values
+            .unwrap_or(2)
+            .clamp(1, MAX_VALUES as u8);
+        // By identifier (BNF_00D0.GSD L1462-1547): the first 0x73 is the
+        // service data module, 0x71 status / control, 0x51.. actual
+        // values, 0x61.. setpoints (both in steps of 2).
+        let mut ids = vec![];
+        if self.options.pkw.unwrap_or(true) {
+            ids.push(0x73);
+        }
+        ids.extend([0x71, 0x51 + 2 * (av - 1), 0x61 + 2 * (sp - 1)]);
+        ids.into_iter()
+            .filter_map(|id| {
+                let m = self.gsd.modules.iter().find(|m| m.cfg == [id])?;
+                Some(m.name.clone())
+            })
+            .collect()
+    }
+
+    fn address(&self) -> Option<u8> {
+        self.options.switch.map(|s| s as u8)
+    }
+
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        let o = &self.options;
+        let mut dev = Omega::new(self.table.clone());
+        if let (Some(sp), Some(av)) = (o.setpoints, o.actual_values) {
+            dev = dev
+                .with_counts(sp as usize, av as usize)
+                .map_err(|e| ProfileError::Invalid(e.to_string()))?;
+        }
+        if let Some(ms) = o.pkw_delay_ms {
+            dev = dev.with_pkw_delay(Duration::from_millis(ms));
+        }
+        if let Some(inbox) = control {
+            dev = dev.with_inbox(inbox);
+        }
+        Ok(Box::new(dev))
+    }
+
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+        let l = check_configuration(cfg).map_err(|e| ProfileError::Config(e.to_string()))?;
+        let mut m = ChannelMap::new();
+        let at = if l.pkw {
+            crate::bm4::profile::pkw_channels(&mut m);
+            PKW_LEN
+        } else {
+            0
+        };
+        for (dir, words, values, n) in [
+            (
+                Direction::Input,
+                ["status1", "status2"],
+                "actual",
+                l.actual_values,
+            ),
+            (
+                Direction::Output,
+                ["control1", "control2"],
+                "setpoint",
+                l.setpoints,
+            ),
+        ] {
+            m.push(words[0], dir, at, ChannelType::U16);
+            m.push(words[1], dir, at + 2, ChannelType::U16);
+            for i in 0..n {
+                m.push(
+                    format!("{values}{}", i + 1),
+                    dir,
+                    at + 4 + 4 * i,
+                    ChannelType::I32,
+                );
+            }
+        }
+        Ok(m)
+    }
+
+    fn pkw_dialect(cfg: &[u8]) -> Option<&'static Dialect> {
+        check_configuration(cfg)
+            .is_ok_and(|l| l.pkw)
+            .then_some(&PKW)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channels::Value;
+    use crate::DeviceOptions;
+
+    #[test]
+    fn master_side_follows_the_counts() {
+        let entry = crate::profile("omega").unwrap();
+        let mut o = DeviceOptions::new();
+        o.set_pair("setpoints=8").unwrap();
+        o.set_pair("actual-values=1").unwrap();
+        o.set_pair("switch=0x19").unwrap();
+        let p = entry.configure(&o, None).unwrap();
+        assert_eq!(p.address(), Some(25));
+        let cfg = p.chk_cfg().unwrap();
+        assert_eq!(check_configuration(&cfg).unwrap().setpoints, 8);
+        let ch = p.channels(&cfg).unwrap();
+        let names: Vec<&str> = ch.of(Direction::Input).map(|c| c.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["pke", "ind", "pwe1", "pwe2", "status1", "status2", "actual1"]
+        );
+        let mut out = vec![0u8; 44];
+        ch.write_output("setpoint8", Value::Int(-1), &mut out)
+            .unwrap();
+        assert_eq!(&out[40..44], &[0xFF; 4]);
+        let p = entry.configure(&DeviceOptions::new(), Some(25)).unwrap();
+        assert_eq!(p.address(), None, "the caller's address");
+        assert_eq!(p.chk_cfg().unwrap(), [0x73, 0x71, 0x53, 0x63]);
+        let mut o = DeviceOptions::new();
+        o.set_pair("setpoints=2").unwrap();
+        assert!(entry.configure(&o, None).is_err(), "both counts or neither");
+    }
 }

@@ -19,6 +19,7 @@
 //! the PKW module first).
 
 use super::{Command, Dialect, Pkw, Reply, PKW_LEN};
+use profibus_dp::master::{DpMaster, SlaveHandle};
 use profibus_fdl::Instant;
 use std::fmt;
 use std::time::Duration;
@@ -224,6 +225,20 @@ impl PkwClient {
         }
     }
 
+    /// [`PkwClient::poll`] on slave `h` of `master`, in place: its input
+    /// image is read and its output image written where the master keeps
+    /// them (no copies, no allocation). Polls in every state, so a job
+    /// times out while the slave is away from Data_Exchange.
+    pub fn drive(
+        &mut self,
+        now: Instant,
+        master: &mut DpMaster,
+        h: SlaveHandle,
+    ) -> Option<Result<PkwAnswer, PkwError>> {
+        let io = master.io_mut(h);
+        self.poll(now, io.stats.data_exchanges, io.inputs, io.outputs)
+    }
+
     fn fail(&mut self, cycle: u64, outputs: &mut [u8], reached_request: bool) -> PkwError {
         Pkw::ZERO.emit(outputs);
         self.state = State::Reset {
@@ -238,7 +253,8 @@ impl PkwClient {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{PkwEngine, PkwServer, BM4, OMEGA};
+    use super::super::tests::{DESCRIBE as OMEGA, ELEMENTS as BM4};
+    use super::super::{PkwEngine, PkwServer};
     use super::*;
 
     /// Dword parameter 4 = 3000; word parameter 5 writable.

@@ -1,12 +1,17 @@
 //! The PKW parameter channel ("Parameter-Kennung-Wert"): four words at the
 //! front of the cyclic data (PKE, IND, PWE1, PWE2) through which a master
 //! reads and writes single parameters of a slave by handshake, next to the
-//! process data. Both Baumüller profiles ([`crate::bm4`], [`crate::omega`])
+//! process data. Both Baumüller profiles (`crate::bm4`, `crate::omega`)
 //! carry one.
+//!
+//! This module is a leaf: it knows no device. Each device module owns its
+//! [`Dialect`] (`bm4::PKW`, `omega::PKW`); the crate's profile registry
+//! finds the dialect of a slave from its ident number and configuration
+//! (`crate::pkw_dialect`).
 //!
 //! - [`Pkw`]: the four words and their wire form (big-endian, 8 bytes).
 //! - [`Dialect`]: which command code (AK) means what and which error
-//!   numbers exist, per device family ([`BM4`], [`OMEGA`]). The AK field is
+//!   numbers exist, per device family. The AK field is
 //!   bits 15..12 of PKE, bit 11 is the spare bit R, bits 10..0 the
 //!   parameter number PNU (BM4 manual L1497-1524, Omega manual L855-895).
 //! - [`PkwEngine`]: the slave side. It sees the master's PKW words with
@@ -236,77 +241,24 @@ pub const AK_RESP_DWORD: u8 = 2;
 /// Response AK "cannot execute", error number in PWE2, in both dialects.
 pub const AK_RESP_ERROR: u8 = 7;
 
-/// BM4-O-PRO-01 (BM4 manual L1514-1560): requests 1 read, 2 write word,
-/// 3 write double word, 4 PBE (not supported), 6 array element read,
-/// 7/8 array element write word/double word; responses 1 word, 2 double
-/// word, 4/5 array element word/double word, 7 error.
-pub const BM4: Dialect = Dialect {
-    name: "BM4-O-PRO-01",
-    read_element: Some(6),
-    write_element_word: Some(7),
-    write_element_dword: Some(8),
-    describe: None,
-    resp_element: None,
-    resp_element_word: Some(4),
-    resp_element_dword: Some(5),
-    reset_required: false,
-    not_reset_error: 0,
-    errors: &[
-        (0x0001, "read only (the variable is an INPUT module)"),
-        (0x0003, "array subindex does not exist"),
-        (
-            0x0005,
-            "incorrect type (the variable's format is not the command's)",
-        ),
-        (
-            0x000B,
-            "variable does not exist (or is configured as cyclic process data)",
-        ),
-        (0x0016, "unknown command code"),
-    ],
-};
-
-/// Omega Drive-Line II option board (Omega manual L871-926): requests 1
-/// read, 2 write word, 3 write double word, 4 PBE; responses 1 word, 2
-/// double word, 3 description element, 7 error.
-pub const OMEGA: Dialect = Dialect {
-    name: "Omega Drive-Line II",
-    read_element: None,
-    write_element_word: None,
-    write_element_dword: None,
-    describe: Some(4),
-    resp_element: Some(3),
-    resp_element_word: None,
-    resp_element_dword: None,
-    reset_required: true,
-    not_reset_error: 0x0101,
-    errors: &[
-        (0x0000, "no error"),
-        (0x0001, "cannot change parameter"),
-        (0x0002, "value outside MIN / MAX limit"),
-        (0x0003, "wrong index entry"),
-        (0x0004, "no array"),
-        (0x0005, "wrong data type"),
-        (0x0006, "no setting permitted"),
-        (0x0007, "cannot change description element"),
-        (0x0008, "impermissible parameter number"),
-        (0x0080, "received uninterpretable command"),
-        (0x0081, "no configuration / initialisation performed"),
-        (0x0082, "error reading actual value"),
-        (0x0083, "error writing setpoint"),
-        (0x0084, "actual value configuration error"),
-        (0x0085, "setpoint configuration error"),
-        (0x0101, "unspecified error"),
-        (0x0102, "service not implemented"),
-        (0x0103, "parameter format too large for PKW area"),
-        (
-            0x0104,
-            "parameter information does not exist (request via index)",
-        ),
-    ],
-};
-
 impl Dialect {
+    /// The codes every dialect shares (read, write word, write double
+    /// word; responses word, double word, error) and nothing else: the
+    /// base a device's dialect extends with struct update syntax.
+    pub const BASE: Dialect = Dialect {
+        name: "PKW",
+        read_element: None,
+        write_element_word: None,
+        write_element_dword: None,
+        describe: None,
+        resp_element: None,
+        resp_element_word: None,
+        resp_element_dword: None,
+        reset_required: false,
+        not_reset_error: 0,
+        errors: &[],
+    };
+
     /// Decode a request's command (AK, IND, PWE).
     pub fn command(&self, req: &Pkw) -> Command {
         let ak = req.ak();
@@ -517,30 +469,31 @@ impl PkwEngine {
     }
 }
 
-/// The PKW dialect of a slave with ident number `ident` configured with
-/// `cfg`, when the configuration has the PKW module: the BM4-O-PRO-01
-/// (0x0008, PKW module 0x73 first) or the Omega board (0x00D0, service
-/// data module first or a block-consistent module).
-pub fn dialect_for(ident: u16, cfg: &[u8]) -> Result<&'static Dialect, String> {
-    match ident {
-        crate::bm4::IDENT if cfg.first() == Some(&PKW_MODULE) => Ok(&BM4),
-        crate::omega::IDENT
-            if crate::omega::check_configuration(cfg).is_ok_and(|l| l.pkw) =>
-        {
-            Ok(&OMEGA)
-        }
-        crate::bm4::IDENT | crate::omega::IDENT => Err(format!(
-            "the configuration of ident 0x{ident:04X} has no PKW module (configure the service data module first)"
-        )),
-        _ => Err(format!(
-            "ident 0x{ident:04X} has no known PKW channel (known: 0x0008 BM4-O-PRO-01, 0x00D0 Omega Drive-Line II)"
-        )),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A dialect with array element codes (as the BM4-O-PRO-01's).
+    pub(crate) const ELEMENTS: Dialect = Dialect {
+        read_element: Some(6),
+        write_element_word: Some(7),
+        write_element_dword: Some(8),
+        resp_element_word: Some(4),
+        resp_element_dword: Some(5),
+        errors: &[(0x0B, "does not exist")],
+        ..Dialect::BASE
+    };
+
+    /// A dialect with description elements and the PKE = 0 rule (as the
+    /// Omega board's).
+    pub(crate) const DESCRIBE: Dialect = Dialect {
+        describe: Some(4),
+        resp_element: Some(3),
+        reset_required: true,
+        not_reset_error: 0x0101,
+        errors: &[(0x82, "error reading actual value")],
+        ..Dialect::BASE
+    };
 
     /// Word parameter 1 = 0x1234, read-only word 2; everything else
     /// "does not exist" (BM4 numbers).
@@ -575,12 +528,18 @@ mod tests {
     #[test]
     fn dialect_codes() {
         let r = Pkw::new(6, 9, 3, 0);
-        assert_eq!(BM4.command(&r), Command::ReadElement(3));
-        assert_eq!(OMEGA.command(&r), Command::Unsupported(6));
-        assert_eq!(OMEGA.command(&Pkw::new(4, 9, 6, 0)), Command::Describe(6));
-        assert_eq!(BM4.command(&Pkw::new(4, 9, 6, 0)), Command::Unsupported(4));
+        assert_eq!(ELEMENTS.command(&r), Command::ReadElement(3));
+        assert_eq!(DESCRIBE.command(&r), Command::Unsupported(6));
         assert_eq!(
-            OMEGA.response(0x7E, 6, Reply::Element(0xF)),
+            DESCRIBE.command(&Pkw::new(4, 9, 6, 0)),
+            Command::Describe(6)
+        );
+        assert_eq!(
+            ELEMENTS.command(&Pkw::new(4, 9, 6, 0)),
+            Command::Unsupported(4)
+        );
+        assert_eq!(
+            DESCRIBE.response(0x7E, 6, Reply::Element(0xF)),
             Pkw {
                 pke: 0x307E,
                 ind: 6,
@@ -588,25 +547,25 @@ mod tests {
                 pwe2: 0xF
             }
         );
-        assert_eq!(BM4.response(5, 2, Reply::ElementDword(7)).pke, 0x5005);
+        assert_eq!(ELEMENTS.response(5, 2, Reply::ElementDword(7)).pke, 0x5005);
         assert_eq!(
-            BM4.decode_response(&Pkw::new(5, 5, 2, 7)),
+            ELEMENTS.decode_response(&Pkw::new(5, 5, 2, 7)),
             Some(Ok(Reply::ElementDword(7)))
         );
-        assert_eq!(OMEGA.decode_response(&Pkw::new(5, 5, 2, 7)), None);
+        assert_eq!(DESCRIBE.decode_response(&Pkw::new(5, 5, 2, 7)), None);
         assert_eq!(
-            OMEGA.decode_response(&Pkw::new(7, 5, 0, 0x82)),
+            DESCRIBE.decode_response(&Pkw::new(7, 5, 0, 0x82)),
             Some(Err(0x82))
         );
-        assert_eq!(OMEGA.error_text(0x82), "error reading actual value");
-        assert!(BM4.error_text(0x0B).starts_with("variable does not exist"));
-        assert_eq!(BM4.request(1, Command::Describe(1)), None);
+        assert_eq!(DESCRIBE.error_text(0x82), "error reading actual value");
+        assert!(ELEMENTS.error_text(0x0B).starts_with("does not exist"));
+        assert_eq!(ELEMENTS.request(1, Command::Describe(1)), None);
     }
 
     #[test]
     fn handshake_executes_once_and_resets() {
         let mut t = Table(0x1234);
-        let mut e = PkwEngine::new(&BM4, Duration::ZERO);
+        let mut e = PkwEngine::new(&ELEMENTS, Duration::ZERO);
         let now = Instant::ZERO;
         assert_eq!(e.on_request(now, Pkw::ZERO, &mut t), None);
         let job = e.on_request(now, Pkw::new(2, 1, 0, 0x55), &mut t).unwrap();
@@ -623,16 +582,16 @@ mod tests {
         // Errors: PWE2 = number, PWE1 = 0.
         let j = e.on_request(now, Pkw::new(1, 7, 0, 0), &mut t).unwrap();
         assert_eq!(j.response, Pkw::new(7, 7, 0, 0x0B));
-        // BM4: a changed PKE without reset is a new job.
+        // Without the PKE = 0 rule a changed PKE without reset is a new job.
         let j = e.on_request(now, Pkw::new(1, 1, 0, 0), &mut t).unwrap();
         assert_eq!(j.response, Pkw::new(1, 1, 0, 9));
         assert_eq!(e.jobs(), 3);
     }
 
     #[test]
-    fn omega_requires_reset_and_delays() {
+    fn reset_rule_and_delay_and_delays() {
         let mut t = Table(0x1234);
-        let mut e = PkwEngine::new(&OMEGA, Duration::from_millis(5));
+        let mut e = PkwEngine::new(&DESCRIBE, Duration::from_millis(5));
         let t0 = Instant::ZERO;
         e.on_request(t0, Pkw::new(1, 1, 0, 0), &mut t).unwrap();
         assert_eq!(e.response(t0), Pkw::ZERO, "not yet");

@@ -64,14 +64,23 @@ impl<'a> Iterator for PhysicalLines<'a> {
 /// (right after `=`, as in the Omega board's `Modules='…'`; an apostrophe
 /// elsewhere is an ordinary character).
 pub(crate) fn strip_comment(line: &str) -> &str {
-    let mut quote: Option<u8> = None;
+    strip_comment_from(line, None).0
+}
+
+/// [`strip_comment`] for a physical line that starts inside a string
+/// opened by the quote `open` (a string continued with `\` from the line
+/// before), also returning the quote of a string still open at the end of
+/// the line. A `"` on a continuation line thus closes the string the
+/// first piece opened, and a `;` after it starts a comment.
+pub(crate) fn strip_comment_from(line: &str, open: Option<u8>) -> (&str, Option<u8>) {
+    let mut quote = open;
     let mut prev: u8 = 0;
     for (i, &b) in line.as_bytes().iter().enumerate() {
         match quote {
             Some(q) if b == q => quote = None,
             Some(_) => {}
             None => match b {
-                b';' => return &line[..i],
+                b';' => return (&line[..i], None),
                 b'"' => quote = Some(b),
                 b'\'' if prev == b'=' => quote = Some(b),
                 _ => {}
@@ -81,7 +90,7 @@ pub(crate) fn strip_comment(line: &str) -> &str {
             prev = b;
         }
     }
-    line
+    (line, quote)
 }
 
 /// Where a piece of a logical line came from.
@@ -450,6 +459,17 @@ mod tests {
         assert_eq!(strip_comment(";#Profibus_DP"), "");
         assert_eq!(strip_comment("M = 'a;b' 0x10"), "M = 'a;b' 0x10");
         assert_eq!(strip_comment("F=1@it's;c"), "F=1@it's");
+    }
+
+    #[test]
+    fn comments_after_a_continued_string() {
+        assert_eq!(
+            strip_comment_from("A=\"x;\\", None),
+            ("A=\"x;\\", Some(b'"'))
+        );
+        assert_eq!(strip_comment_from("y\" ;c \"", Some(b'"')), ("y\" ", None));
+        assert_eq!(strip_comment_from("y;z", Some(b'"')), ("y;z", Some(b'"')));
+        assert_eq!(strip_comment_from("y ;z", None), ("y ", None));
     }
 
     #[test]

@@ -3,8 +3,11 @@
 //!
 //! - Parsing ([`Gsd::parse`], [`Gsd::from_file`]): GSD revisions 1–5 as
 //!   found in the field. Keywords are case-insensitive, `;` starts a
-//!   comment, `\` continues a line, numbers are decimal or `0x` hex,
-//!   strings are quoted, files are Latin-1. Errors carry line and column
+//!   comment, `\` continues a line (a string continued so keeps its
+//!   quotes: a `;` after its closing quote on a later line starts a
+//!   comment), numbers are decimal or `0x` hex, strings are quoted, files
+//!   are Latin-1, with the extension `.gsd` or a localised one
+//!   ([`FILE_EXTENSIONS`], all read alike). Errors carry line and column
 //!   and say what was expected. In lenient mode
 //!   ([`ParseOptions::lenient`]) known vendor quirks (a commented-out
 //!   `#Profibus_DP`, `MaxTsd_` for `MaxTsdr_`, `Modules=` and single
@@ -13,7 +16,12 @@
 //!   [`MAX_FILE_LEN`] bytes or with a line over [`MAX_LINE_LEN`] bytes are
 //!   rejected before anything else is done with them.
 //! - The typed model ([`Gsd`], [`Module`], [`ExtUserPrmData`], …) in
-//!   [`model`], with every keyword the DP master and slave need.
+//!   [`model`], with every keyword the DP master and slave need. The
+//!   other keywords of the standard (DP-V1 and DP-V2 details, isochronous
+//!   mode, I&M, PROFIsafe `F_…`, extended parameterisation `X_…`,
+//!   diagnosis help texts, a master's keywords) are known to the parser
+//!   and kept as raw text ([`Gsd::other_value`]); only keywords outside
+//!   the standard are reported as unknown.
 //! - The semantic API in [`semantic`]: identifier decoding per module
 //!   (through [`crate::cfg`]), module lookup by exact or approximate
 //!   name, Chk_Cfg and User_Prm_Data for a module selection plus named
@@ -22,6 +30,7 @@
 //! - The writer ([`Gsd::write`]): a valid GSD file from the model, such
 //!   that parse → write → parse gives the same model.
 
+mod keywords;
 mod lexer;
 pub mod model;
 mod parser;
@@ -47,6 +56,22 @@ pub const MAX_FILE_LEN: usize = 4 << 20;
 /// Longest line accepted, in bytes (64 KiB), for a physical line and for
 /// a logical line joined from continuations.
 pub const MAX_LINE_LEN: usize = 64 << 10;
+
+/// File name extensions of GSD files, lower case: `gsd`, and the
+/// localised variants a vendor ships beside it or instead of it, which
+/// differ only in the language of their texts: `gse` (English), `gsf`
+/// (French), `gsg` (German), `gsi` (Italian), `gsp` (Portuguese), `gss`
+/// (Spanish) and `gst`. Every reader of GSD files accepts any path; this
+/// list is for finding GSD files in a directory.
+pub const FILE_EXTENSIONS: [&str; 8] = ["gsd", "gse", "gsf", "gsg", "gsi", "gsp", "gss", "gst"];
+
+/// Whether `path` has one of the [`FILE_EXTENSIONS`] (in any case:
+/// `SIEM8042.GSE` and `si0180fd.gsg` both count).
+pub fn is_gsd_file_name(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| FILE_EXTENSIONS.iter().any(|x| e.eq_ignore_ascii_case(x)))
+}
 
 /// Options for [`Gsd::parse`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

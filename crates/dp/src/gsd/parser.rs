@@ -8,7 +8,10 @@
 //! revisions the model does not interpret are copied verbatim into
 //! `other`.
 
-use super::lexer::{strip_comment, Cursor, LogicalLine, PhysicalLines, ScanError};
+use super::keywords;
+use super::lexer::{
+    strip_comment, strip_comment_from, Cursor, LogicalLine, PhysicalLines, ScanError,
+};
 use super::model::*;
 use super::{DiagKind, Diagnostic, ParseOptions, Parsed, Pos, Quirk, MAX_LINE_LEN};
 use crate::cfg;
@@ -35,62 +38,8 @@ const RAW_BLOCKS: &[(&str, &str)] = &[
     ("data_area_beg", "data_area_end"),
 ];
 
-/// Standard keywords of GSD revisions 1–5 the model does not interpret;
-/// they go to `other` without a warning.
-const KNOWN_EXTRA: &[&str] = &[
-    "periphery",
-    "diag_update_delay",
-    "c2_read_write_required",
-    "extra_alarm_sap_supp",
-    "alarm_sequence_mode_count",
-    "alarm_type_mode_supp",
-    "diagnostic_alarm_required",
-    "process_alarm_required",
-    "pull_plug_alarm_required",
-    "status_alarm_required",
-    "update_alarm_required",
-    "manufacturer_specific_alarm_required",
-    "dpv1_data_types",
-    "publisher_supp",
-    "subscriber_supp",
-    "prm_block_structure_supp",
-    "prm_block_structure_req",
-    "isochron_mode_supp",
-    "isochron_mode_required",
-    "isochron_mode_synchronised",
-    "tbase_dp",
-    "tdp_max",
-    "tdp_min",
-    "tbase_io",
-    "ti_min",
-    "to_min",
-    "t_pll_w_max",
-    "ti_to_equal",
-    "time_sync_supp",
-    "ident_maintenance_supp",
-    "firmware_download_supp",
-    "slave_redundancy_supp",
-    "slave_max_switch_over_time",
-    "dxb_max_link_count",
-    "dxb_max_data_length",
-    "dxb_subscribertable_block_location",
-    "max_iso_input_len",
-    "max_iso_output_len",
-    "max_cfg_data_len",
-    "info_text",
-    "channel_diag",
-    "channel_diag_help",
-    "unit_diag_bit_help",
-    "unit_diag_not_bit_help",
-    "family_name",
-    "web_server_supp",
-];
-
 /// Warnings kept per quirk before the rest are folded into one.
 const QUIRK_REPEATS: usize = 3;
-
-/// Module-body keywords the model does not interpret.
-const KNOWN_MODULE_EXTRA: &[&str] = &["info_text", "module_class", "f_ext_module_prm_data_len"];
 
 /// The `(index)` after a keyword: its value and byte offset.
 type Index = Option<(i64, usize)>;
@@ -226,6 +175,8 @@ impl Parser {
         };
         let mut current: Option<LogicalLine<'_>> = None;
         let mut continued = false;
+        // The quote of a string still open at the end of the last line.
+        let mut open: Option<u8> = None;
         for item in PhysicalLines::new(text) {
             let (n, raw) = match item {
                 Ok(l) => l,
@@ -237,11 +188,15 @@ impl Parser {
             if n < start {
                 continue;
             }
-            let content = strip_comment(raw).trim_end();
+            // A continuation line starts inside the string the line
+            // before left open.
+            let (content, quote) = strip_comment_from(raw, if continued { open } else { None });
+            let content = content.trim_end();
             let (content, cont) = match content.strip_suffix('\\') {
                 Some(c) => (c, true),
                 None => (content, false),
             };
+            open = quote;
             if continued {
                 let ll = current.as_mut().expect("a line is being continued");
                 ll.push(n, content);
@@ -925,10 +880,7 @@ impl Parser {
                     let v = self.int_value(ll, c, word, &canonical, 0, 0xFFFF)?;
                     self.gsd.baud_rates[i].max_tsdr = Some(v as u16);
                 } else {
-                    let known = KNOWN_EXTRA.contains(&key)
-                        || key.starts_with("x_")
-                        || key.starts_with("f_");
-                    if !known {
+                    if !keywords::known_station(key) {
                         self.warn(
                             ll.pos(0),
                             DiagKind::UnknownKeyword,
@@ -1093,10 +1045,7 @@ impl Parser {
                     self.missing_end(ll, "module", start, "EndModule");
                 }
                 k => {
-                    let known = KNOWN_MODULE_EXTRA.contains(&k)
-                        || k.starts_with("x_")
-                        || k.starts_with("f_");
-                    if !known {
+                    if !keywords::known_module(k) {
                         self.warn(
                             ll.pos(0),
                             DiagKind::UnknownKeyword,
@@ -1564,6 +1513,75 @@ impl Parser {
                     Pos::default(),
                     DiagKind::Semantic,
                     format!("`{key}` is {v}, more than the 244 bytes a DP telegram carries"),
+                    false,
+                );
+            }
+        }
+        let line_of = |key: &str| Pos {
+            line: self.seen.get(key).copied().unwrap_or(0),
+            col: 1,
+        };
+        // A modular station's limits without `Modular_Station = 1`: the
+        // file contradicts itself, and the station is read as compact.
+        if !g.modular_station && g.modules.len() > 1 {
+            if let Some(n) = g.max_module {
+                let modular = if self.seen.contains_key("modular_station") {
+                    "`Modular_Station = 0`"
+                } else {
+                    "no `Modular_Station = 1`"
+                };
+                note(
+                    line_of("max_module"),
+                    DiagKind::Semantic,
+                    format!(
+                        "`Max_Module = {n}` describes a modular station, but the file has {modular}: \
+                         it is read as a compact station, configured with exactly one of its {} modules; \
+                         if the device takes several modules at once, the file lacks `Modular_Station = 1`",
+                        g.modules.len()
+                    ),
+                    false,
+                );
+            }
+        }
+        // The legacy User_Prm_Data is sent padded or cut to its length.
+        let legacy = g.ext_user_prm_data_const.is_empty() && g.ext_user_prm_data_ref.is_empty();
+        if let Some(len) = g.user_prm_data_len.map(usize::from) {
+            let given = g.user_prm_data.as_ref().map_or(0, Vec::len);
+            let used = if legacy {
+                ""
+            } else {
+                "; the file's `Ext_User_Prm_Data_Const`/`Ext_User_Prm_Data_Ref` lines define the bytes instead"
+            };
+            let pos = line_of("user_prm_data_len");
+            if g.user_prm_data.is_some() && given < len {
+                let what = if legacy {
+                    format!("; the other {} byte(s) are sent as 0", len - given)
+                } else {
+                    used.to_string()
+                };
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data_Len = {len}` but `User_Prm_Data` gives only {given} byte(s){what}"),
+                    false,
+                );
+            } else if given > len {
+                let what = if legacy {
+                    format!("; only the first {len} are sent")
+                } else {
+                    used.to_string()
+                };
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data` gives {given} bytes, more than `User_Prm_Data_Len = {len}`{what}"),
+                    false,
+                );
+            } else if g.user_prm_data.is_none() && len > 0 && legacy {
+                note(
+                    pos,
+                    DiagKind::Semantic,
+                    format!("`User_Prm_Data_Len = {len}` but the file gives no `User_Prm_Data`; {len} zero byte(s) are sent"),
                     false,
                 );
             }

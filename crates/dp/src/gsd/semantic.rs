@@ -4,8 +4,10 @@
 //!
 //! A *selection* is a list of indices into [`Gsd::modules`], in slot
 //! order (what the master configures and sends in Chk_Cfg). Build it from
-//! names with [`Gsd::select`]; a compact station's fixed configuration is
-//! [`Gsd::default_selection`].
+//! names with [`Gsd::select`]. A compact station is configured with
+//! exactly one of its modules (several modules in such a file are
+//! alternatives) or, as some files mean it, with all of them in file
+//! order; [`Gsd::default_selection`] gives the first module.
 //!
 //! User_Prm_Data follows the standard: when the station-level
 //! `Ext_User_Prm_Data_Const`/`Ext_User_Prm_Data_Ref` lines exist they
@@ -126,12 +128,13 @@ pub enum Problem {
     /// A modular station with no modules selected.
     #[error("no modules are selected; a modular station needs at least one")]
     Empty,
-    /// A compact station configured otherwise than with its modules.
+    /// A compact station configured with other than exactly one of its
+    /// modules or all of them in file order.
     #[error(
-        "this is a compact station (Modular_Station=0): its configuration is fixed to {expected}"
+        "this is a compact station (no Modular_Station=1): it is configured with exactly {expected}"
     )]
     FixedConfiguration {
-        /// The fixed configuration, as module names.
+        /// What is allowed, in words (the module, or the alternatives).
         expected: String,
     },
     /// More modules than `Max_Module`.
@@ -431,7 +434,41 @@ fn write_at(
     Ok(())
 }
 
+/// The value of the first `keyword = value` line of `lines` (the keyword
+/// compared without regard to case; a line with an index such as
+/// `Keyword(3) = …` does not match).
+fn raw_value<'a>(lines: &'a [String], keyword: &str) -> Option<&'a str> {
+    lines.iter().find_map(|l| {
+        let (k, v) = l.split_once('=')?;
+        k.trim().eq_ignore_ascii_case(keyword).then(|| v.trim())
+    })
+}
+
+impl Module {
+    /// The raw value of a module keyword the model keeps as text (in
+    /// [`Module::other`]), e.g. `F_ParamDescCRC`.
+    pub fn other_value(&self, keyword: &str) -> Option<&str> {
+        raw_value(&self.other, keyword)
+    }
+}
+
 impl Gsd {
+    /// The raw value of a station keyword the model keeps as text (in
+    /// [`Gsd::other`]: DP-V2, isochronous mode, I&M, PROFIsafe and
+    /// master keywords, …), e.g. `other_value("Fail_Safe_required")`
+    /// gives `Some("1")`.
+    pub fn other_value(&self, keyword: &str) -> Option<&str> {
+        raw_value(&self.other, keyword)
+    }
+
+    /// A boolean station keyword kept as text: `Some(true)` for a value
+    /// other than 0, `None` when the file does not give it or the value is
+    /// no number.
+    pub fn other_flag(&self, keyword: &str) -> Option<bool> {
+        let v = self.other_value(keyword)?;
+        parse_int(v).map(|n| n != 0)
+    }
+
     /// `MaxTsdr_<baud>` in bit times, if the file gives it.
     pub fn max_tsdr(&self, baud: Baud) -> Option<u32> {
         self.baud_rates[baud_index(baud)].max_tsdr.map(u32::from)
@@ -483,13 +520,24 @@ impl Gsd {
             .collect()
     }
 
-    /// The selection a configurator starts from: for a compact station
-    /// every module (its fixed configuration), for a modular station the
-    /// `Preset` modules.
+    /// The selection a configurator starts from: for a modular station
+    /// the `Preset` modules; for a compact station its first module.
+    ///
+    /// A compact station (no `Modular_Station = 1`) has one fixed
+    /// configuration. Where such a file lists several modules they are
+    /// normally alternatives (the PPO types of a drive, the classes of an
+    /// encoder), of which the master configures exactly one; some files
+    /// (pyprofibus's examples) mean all of them together, in file order.
+    /// [`check_selection`](Self::check_selection) accepts both; name the
+    /// module for any but the first.
     pub fn default_selection(&self) -> Vec<usize> {
-        (0..self.modules.len())
-            .filter(|&i| !self.modular_station || self.modules[i].preset)
-            .collect()
+        if self.modular_station {
+            (0..self.modules.len())
+                .filter(|&i| self.modules[i].preset)
+                .collect()
+        } else {
+            (0..self.modules.len().min(1)).collect()
+        }
     }
 
     /// The `ExtUserPrmData` block with this reference number (the first,
@@ -738,7 +786,6 @@ impl Gsd {
     /// keywords and the protocol's limits. Empty when the selection is
     /// fine.
     pub fn check_selection(&self, selection: &[usize]) -> Vec<Problem> {
-        let mut problems = Vec::new();
         let modules = match self.selected(selection) {
             Ok(m) => m,
             Err(SelectionError::NoSuchModule { index, count }) => {
@@ -746,17 +793,28 @@ impl Gsd {
             }
             Err(e) => return vec![Problem::Selection(e)],
         };
+        let mut problems = Vec::new();
         if modules.is_empty() && self.modular_station {
             problems.push(Problem::Empty);
         }
-        if !self.modular_station && selection != self.default_selection().as_slice() {
-            let expected = self
+        let every: Vec<usize> = (0..self.modules.len()).collect();
+        if !self.modular_station && selection.len() != 1 && selection != every.as_slice() {
+            let names: Vec<String> = self
                 .modules
                 .iter()
                 .map(|m| format!("`{}`", m.name))
-                .collect::<Vec<_>>()
-                .join(", ");
-            problems.push(Problem::FixedConfiguration { expected });
+                .collect();
+            let expected = match names.len() {
+                0 => "no module (the file defines none)".to_string(),
+                1 => names[0].clone(),
+                _ => format!(
+                    "one of its modules ({}), or all of them in file order",
+                    names.join(", ")
+                ),
+            };
+            // The modules' sizes would be added for a configuration the
+            // station cannot have: that is the one problem.
+            return vec![Problem::FixedConfiguration { expected }];
         }
         if let Some(max) = self.max_module.map(usize::from) {
             if modules.len() > max {

@@ -114,6 +114,20 @@ pub struct SlaveView<'a> {
     pub stats: SlaveStats,
 }
 
+/// One slave's process images for in-place work: the inputs to read and
+/// the outputs to write at the same time ([`DpMaster::io_mut`]).
+#[derive(Debug)]
+pub struct SlaveIoMut<'a> {
+    /// Where it is in the start-up sequence.
+    pub state: SlaveState,
+    /// Counters (`data_exchanges` tells what was sent).
+    pub stats: SlaveStats,
+    /// The last inputs received.
+    pub inputs: &'a [u8],
+    /// The output image, to write in place.
+    pub outputs: &'a mut [u8],
+}
+
 /// Where a slave is in the master's start-up sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SlaveState {
@@ -318,6 +332,10 @@ pub struct SlaveStats {
     pub restarts: u64,
     /// Slave_Diag reads.
     pub diag_reads: u64,
+    /// Slave_Diag answers rejected as invalid (shorter than 6 bytes, or
+    /// bit 2 of Station_Status_2 clear); the diagnosis is read again and
+    /// nothing is derived from them.
+    pub invalid_diags: u64,
 }
 
 /// Poll-cycle statistics.
@@ -566,6 +584,19 @@ impl DpMaster {
     /// The output image of a slave, to write in place.
     pub fn outputs_mut(&mut self, h: SlaveHandle) -> &mut [u8] {
         &mut self.slaves[h.0 as usize].outputs
+    }
+
+    /// The state, counters and both process images of a slave, the
+    /// outputs writable: for helpers that answer the inputs in the
+    /// outputs without copying (e.g. a PKW client).
+    pub fn io_mut(&mut self, h: SlaveHandle) -> SlaveIoMut<'_> {
+        let s = &mut self.slaves[h.0 as usize];
+        SlaveIoMut {
+            state: s.state,
+            stats: s.stats,
+            inputs: &s.inputs,
+            outputs: &mut s.outputs,
+        }
     }
 
     /// A slave's state.
@@ -891,6 +922,19 @@ impl DpMaster {
         let me = self.address;
         let s = &mut self.slaves[i];
         s.stats.diag_reads += 1;
+        let Some(d) = SlaveDiag::parse(data).ok().filter(SlaveDiag::is_valid) else {
+            // Not a diagnosis (too short, or the always-1 bit clear): a
+            // stray or corrupt answer. Count it, keep the last valid
+            // diagnosis and state, and read it again.
+            s.stats.invalid_diags += 1;
+            s.need_diag = true;
+            tracing::debug!(
+                address = s.p.address,
+                len = data.len(),
+                "invalid Slave_Diag answer ignored"
+            );
+            return;
+        };
         s.last_diag = now;
         s.need_diag = false;
         let changed = s.diag != data;
@@ -902,14 +946,6 @@ impl DpMaster {
         if changed {
             self.emit(MasterEvent::Diag { address });
         }
-        let Ok(d) = SlaveDiag::parse(data) else {
-            self.emit(MasterEvent::Fault {
-                address,
-                reason: format!("diagnosis of {} bytes is too short", data.len()),
-            });
-            self.set_state(i, SlaveState::Diag);
-            return;
-        };
         use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
         let state = self.slaves[i].state;
         let ident = self.slaves[i].p.ident_number;

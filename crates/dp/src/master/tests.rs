@@ -261,3 +261,66 @@ fn locked_by_another_master_is_left_alone() {
     assert_eq!(m.slave_state(8), Some(SlaveState::Locked));
     assert!(next(&mut m, 2).is_none());
 }
+
+#[test]
+fn an_invalid_diagnosis_is_counted_read_again_and_never_acted_on() {
+    let mut m = master();
+    bring_up(&mut m);
+    states(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(
+        &mut m,
+        5,
+        Outcome::Response {
+            status: ResponseStatus::Dh,
+            station: StationType::Passive,
+            dsap: None,
+            ssap: None,
+            data: &[0, 0],
+        },
+    );
+    // The observed failure: 20 bytes of process data taken as Slave_Diag
+    // (Master_Lock set, always-1 bit clear, ident 0). Then a 3-byte one.
+    let bogus = [
+        0x80, 0x00, 0x00, 0x00, 0x00, 0x00, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
+    ];
+    for (t, data) in [(6, &bogus[..]), (7, &[0x00, 0x0C, 0x00][..])] {
+        assert_eq!(next(&mut m, t).unwrap().0, Some(sap::SLAVE_DIAG));
+        answer(&mut m, t, diag_resp(data));
+        assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+    }
+    assert_eq!(m.slave_stats(8).unwrap().invalid_diags, 2);
+    assert_eq!(
+        m.diag(8),
+        Some(&READY[..]),
+        "the last valid diagnosis is kept"
+    );
+    while let Some(e) = m.poll_event() {
+        assert!(
+            !matches!(
+                e,
+                MasterEvent::Fault { .. } | MasterEvent::StateChanged { .. }
+            ),
+            "{e:?}"
+        );
+    }
+    // Read again; a valid answer lets data exchange go on.
+    assert_eq!(next(&mut m, 8).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 8, diag_resp(&READY));
+    assert_eq!(next(&mut m, 9).unwrap().0, None);
+}
+
+#[test]
+fn an_invalid_diagnosis_at_start_up_is_not_taken_for_a_lock_or_an_ident() {
+    let mut m = master();
+    // Master_Lock by master 5 and a foreign ident, but bit 2 of
+    // Station_Status_2 clear: not a diagnosis.
+    assert_eq!(next(&mut m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 1, diag_resp(&[0x80, 0x00, 0x00, 0x05, 0x00, 0x00]));
+    assert_eq!(m.slave_state(8), Some(SlaveState::Diag));
+    assert!(m.poll_event().is_none());
+    assert_eq!(next(&mut m, 2).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 2, diag_resp(&FRESH));
+    assert_eq!(next(&mut m, 3).unwrap().0, Some(sap::SET_PRM));
+    assert_eq!(m.slave_stats(8).unwrap().invalid_diags, 1);
+}

@@ -201,6 +201,7 @@ impl Bench {
             dsap: saps.map(|s| s.0),
             ssap: saps.map(|s| s.1),
             data,
+            format: None,
         };
         let mut out = [0u8; 246];
         match self.slave.on_request(now, &req, &mut out) {
@@ -242,6 +243,7 @@ impl Bench {
             dsap: Some(sap::GLOBAL_CONTROL),
             ssap: Some(sap::MASTER),
             data: &[cmd, group],
+            format: None,
         };
         let mut none = [0u8; 0];
         assert_eq!(self.slave.on_request(now, &req, &mut none), Reply::Silence);
@@ -798,6 +800,7 @@ fn no_inputs_answers_short_ack_or_dh() {
         dsap,
         ssap: dsap.map(|_| 62),
         data,
+        format: None,
     };
     s.on_request(
         t(0),
@@ -1026,6 +1029,7 @@ fn wire_request(da: u8, sa: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> 
         dsap: saps.map(|s| s.0),
         ssap: saps.map(|s| s.1),
         data,
+        format: None,
     })
     .emit(&mut b)
     .unwrap();

@@ -551,6 +551,29 @@ impl<A: MasterApp> Station for ActiveStation<A> {
 }
 
 /// The address after `a`, wrapping after HSA to 0.
+/// Whether a reply (already known to come from the station asked and to be
+/// addressed to us) answers the pending request as far as SAPs go.
+///
+/// A reply carries the request's SAPs swapped; a request without SAPs (the
+/// default SAP, e.g. Data_Exchange) is answered without SAPs. The only
+/// exception: a negative acknowledge without data (UE, RR, RS, NR, RDL,
+/// RDH) may omit the SAPs of a request that had them, as slave ASICs do
+/// for a SAP that is not activated. A data reply without the SAPs, such as
+/// a late Data_Exchange answer arriving while a Slave_Diag is pending, is
+/// not an answer to this request.
+fn reply_matches(p: &Pending, d: &DataTelegram<'_>) -> bool {
+    if (d.dsap, d.ssap) == (p.ssap, p.dsap) {
+        return true;
+    }
+    let FunctionCode::Response { status, .. } = d.fc else {
+        return false;
+    };
+    d.dsap.is_none()
+        && d.ssap.is_none()
+        && d.data.is_empty()
+        && (status.is_negative() || status == ResponseStatus::Nr)
+}
+
 fn next_addr(a: u8, hsa: u8) -> u8 {
     if a >= hsa {
         0
@@ -737,15 +760,14 @@ impl Core {
                 let outcome = match t {
                     Telegram::ShortAck => Some(Outcome::ShortAck),
                     // A reply to this request: from the station asked, to
-                    // us, with the request's SAPs swapped (a reply without
-                    // SAPs is accepted for any request: negative
-                    // acknowledges often carry none).
+                    // us, and matching the request's SAPs (see
+                    // `reply_matches`). Anything else is a late or stray
+                    // reply, counted and ignored.
                     Telegram::Data(d)
                         if !d.fc.is_request()
                             && d.da == ts
                             && d.sa == p.da
-                            && (d.dsap.is_none() && d.ssap.is_none()
-                                || (d.dsap, d.ssap) == (p.ssap, p.dsap)) =>
+                            && reply_matches(&p, d) =>
                     {
                         let FunctionCode::Response { status, station } = d.fc else {
                             unreachable!()
@@ -863,6 +885,7 @@ impl Core {
                 dsap: d.ssap,
                 ssap: d.dsap,
                 data: &[],
+                format: None,
             }),
         );
         (kind == RequestKind::FdlStatus).then_some(station)
@@ -1105,6 +1128,7 @@ impl Core {
                         dsap: None,
                         ssap: None,
                         data: &[],
+                        format: None,
                     }),
                 );
                 self.state = State::AwaitStatus {
@@ -1161,6 +1185,7 @@ impl Core {
             dsap: req.dsap,
             ssap: req.ssap,
             data: req.data,
+            format: None,
         });
         let len = match t.emit(&mut self.req) {
             Ok(n) => n,
@@ -1289,6 +1314,8 @@ mod tests {
         events: Vec<FdlEvent>,
         results: Vec<(u8, &'static str, u8)>,
         queue: Vec<(u8, Service)>,
+        /// (DSAP, SSAP) of every request, if any.
+        saps: Option<(u8, u8)>,
     }
 
     impl MasterApp for Recorder {
@@ -1298,8 +1325,8 @@ mod tests {
             Some(Request {
                 da,
                 service,
-                dsap: None,
-                ssap: None,
+                dsap: self.saps.map(|s| s.0),
+                ssap: self.saps.map(|s| s.1),
                 data: &[],
             })
         }
@@ -1349,6 +1376,114 @@ mod tests {
         assert_eq!(st.stats().retries, 1);
     }
 
+    /// A response from `sa` to `da` with the given status, SAPs and data.
+    fn reply(
+        da: u8,
+        sa: u8,
+        status: ResponseStatus,
+        saps: Option<(u8, u8)>,
+        data: &[u8],
+    ) -> Vec<u8> {
+        let mut b = [0u8; 255];
+        let n = Telegram::Data(DataTelegram {
+            da,
+            sa,
+            fc: FunctionCode::Response {
+                status,
+                station: StationType::Passive,
+            },
+            dsap: saps.map(|s| s.0),
+            ssap: saps.map(|s| s.1),
+            data,
+            format: None,
+        })
+        .emit(&mut b)
+        .unwrap();
+        b[..n].to_vec()
+    }
+
+    #[test]
+    fn only_a_reply_with_the_requests_saps_swapped_answers_it() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        // Slave_Diag: DSAP 60, SSAP 62.
+        st.app_mut().saps = Some((60, 62));
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        let (t, tx) = step(&mut st);
+        assert_eq!(tx.unwrap()[..4], [0x68, 5, 5, 0x68]);
+        let at = t + params.bits(11);
+        // A late Data_Exchange answer (20 bytes of inputs, no SAPs) is not
+        // the diagnosis: counted and ignored.
+        st.handle_rx(at, &reply(3, 8, ResponseStatus::Dl, None, &[0x55; 20]));
+        // Nor is a reply with other SAPs, or one from another station.
+        st.handle_rx(
+            at,
+            &reply(3, 8, ResponseStatus::Dl, Some((62, 59)), &[1, 2]),
+        );
+        st.handle_rx(
+            at,
+            &reply(3, 9, ResponseStatus::Dl, Some((62, 60)), &[0; 6]),
+        );
+        assert!(st.app().results.is_empty());
+        assert_eq!(st.stats().late_replies, 3);
+        assert_eq!(st.stats().duplicate_tokens, 0);
+        // The real answer.
+        let diag = [0, 0x0C, 0, 3, 0x80, 0x6A];
+        st.handle_rx(at, &reply(3, 8, ResponseStatus::Dl, Some((62, 60)), &diag));
+        assert_eq!(st.app().results, vec![(8, "response", 0)]);
+    }
+
+    #[test]
+    fn a_negative_acknowledge_without_saps_answers_a_request_with_saps() {
+        let params = BusParams::defaults(Baud::B19200);
+        for (status, data, accepted) in [
+            (ResponseStatus::Rs, &[][..], true),
+            (ResponseStatus::Ue, &[][..], true),
+            (ResponseStatus::Rr, &[][..], true),
+            (ResponseStatus::Nr, &[][..], true),
+            // Data without SAPs cannot answer a request with SAPs.
+            (ResponseStatus::Dl, &[1, 2, 3][..], false),
+            (ResponseStatus::Rs, &[1][..], false),
+        ] {
+            let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+            st.app_mut().saps = Some((61, 62));
+            st.app_mut().queue.push((8, Service::SrdHigh));
+            step(&mut st);
+            step(&mut st);
+            let (t, _) = step(&mut st);
+            st.handle_rx(t + params.bits(11), &reply(3, 8, status, None, data));
+            assert_eq!(st.app().results.len(), accepted as usize, "{status:?}");
+            assert_eq!(st.stats().late_replies, !accepted as u64, "{status:?}");
+        }
+    }
+
+    #[test]
+    fn a_reply_with_saps_does_not_answer_a_request_without() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        let (t, _) = step(&mut st);
+        let late_diag = reply(
+            3,
+            8,
+            ResponseStatus::Dl,
+            Some((62, 60)),
+            &[0, 0x0C, 0, 3, 0x80, 0x6A],
+        );
+        st.handle_rx(t + params.bits(11), &late_diag);
+        assert!(st.app().results.is_empty());
+        st.handle_rx(
+            t + params.bits(11),
+            &reply(3, 8, ResponseStatus::Dl, None, &[7; 4]),
+        );
+        assert_eq!(st.app().results, vec![(8, "response", 0)]);
+        assert_eq!(st.stats().late_replies, 1);
+    }
+
     #[test]
     fn fcb_alternates_after_answers() {
         let params = BusParams::defaults(Baud::B19200);
@@ -1383,6 +1518,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data: &[],
+            format: None,
         })
         .emit(&mut b)
         .unwrap();

@@ -210,6 +210,7 @@ impl<R: Responder> PassiveStation<R> {
                     dsap: None,
                     ssap: None,
                     data: &[],
+                    format: None,
                 });
                 self.tx_len = t.emit(&mut self.tx).unwrap_or(0);
                 self.tx_at = Some(respond_at);
@@ -246,6 +247,7 @@ impl<R: Responder> PassiveStation<R> {
                     dsap,
                     ssap,
                     data: &du[..len.min(du.len())],
+                    format: None,
                 })
                 .emit(&mut self.tx)
                 .ok(),
@@ -339,6 +341,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data,
+            format: None,
         })
         .emit(&mut b)
         .unwrap();
@@ -410,6 +413,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data: &[],
+            format: None,
         })
         .emit(&mut b)
         .unwrap();

@@ -11,12 +11,13 @@
 //! // FDL Status request from master 2 to station 8.
 //! let t = Telegram::Data(DataTelegram {
 //!     da: 8, sa: 2, fc: FunctionCode::request(RequestKind::FdlStatus),
-//!     dsap: None, ssap: None, data: &[],
+//!     dsap: None, ssap: None, data: &[], format: None,
 //! });
 //! let mut buf = [0u8; 8];
 //! let n = t.emit(&mut buf).unwrap();
 //! assert_eq!(&buf[..n], &[0x10, 0x08, 0x02, 0x49, 0x53, 0x16]);
-//! assert_eq!(Telegram::parse(&buf[..n]).unwrap(), (t, n));
+//! let (parsed, m) = Telegram::parse(&buf[..n]).unwrap();
+//! assert_eq!((parsed.format().name(), m), ("SD1", n));
 //! ```
 
 pub mod consts;

@@ -3,8 +3,11 @@
 //! [`Telegram::parse`] validates a telegram at the start of a byte slice
 //! once (delimiters, lengths, FCS) and returns a borrowed view whose data
 //! unit is a sub-slice of the input. [`Telegram::emit`] writes a telegram
-//! into a caller-provided buffer, choosing SD1, SD3 or SD2 from the length
-//! of the data field, and computing the FCS.
+//! into a caller-provided buffer and computes the FCS. A parsed telegram
+//! remembers the start delimiter it arrived with, so that it is shown as
+//! received and re-emitted byte for byte; a telegram built by a caller is
+//! sent as SD1 without a data field and as SD2 otherwise, as slave ASICs
+//! and the real devices in the traces do (SD3 only when asked for).
 
 use super::consts::*;
 use super::fc::FunctionCode;
@@ -97,6 +100,15 @@ pub enum EmitError {
     /// not by the caller).
     #[error("address {0} out of range (0..=127)")]
     BadAddress(u8),
+    /// The requested start delimiter cannot carry this data field (SD1
+    /// carries none, SD3 exactly 8 bytes including the SAP bytes).
+    #[error("{} cannot carry a data field of {data_field} bytes", format.name())]
+    FormatMismatch {
+        /// The format asked for.
+        format: Format,
+        /// Length of the data field (SAP bytes plus data unit).
+        data_field: usize,
+    },
 }
 
 /// Telegram with a data field (SD1, SD2 or SD3): a request or a response.
@@ -120,6 +132,13 @@ pub struct DataTelegram<'a> {
     pub ssap: Option<u8>,
     /// The data unit, borrowed from the receive buffer.
     pub data: &'a [u8],
+    /// The start delimiter: the one received (set by
+    /// [`Telegram::parse`]), or the one a caller asks for. `None` lets the
+    /// emitter choose: SD1 for an empty data field, SD2 otherwise (also
+    /// for exactly 8 bytes, where SD3 would be allowed: real devices and
+    /// slave ASICs send SD2 with LE = 0x0B there). Only `Sd1`, `Sd2` and
+    /// `Sd3` are meaningful here.
+    pub format: Option<Format>,
 }
 
 impl<'a> DataTelegram<'a> {
@@ -336,6 +355,7 @@ impl<'a> Telegram<'a> {
                 dsap,
                 ssap,
                 data: &body[i..],
+                format: Format::from_start_delimiter(sd),
             }),
             len,
         ))
@@ -348,15 +368,16 @@ impl<'a> Telegram<'a> {
         Self::parse(buf).map(|(t, _)| t)
     }
 
-    /// The wire format [`Telegram::emit`] will use.
+    /// The wire format: the one received for a parsed telegram, otherwise
+    /// the one [`Telegram::emit`] will use (see [`DataTelegram::format`]).
     pub fn format(&self) -> Format {
         match self {
             Telegram::ShortAck => Format::Sc,
             Telegram::Token { .. } => Format::Sd4,
-            Telegram::Data(d) => match d.data_field_len() {
-                0 => Format::Sd1,
-                SD3_DATA_FIELD => Format::Sd3,
-                _ => Format::Sd2,
+            Telegram::Data(d) => match (d.format, d.data_field_len()) {
+                (Some(f), _) => f,
+                (None, 0) => Format::Sd1,
+                (None, _) => Format::Sd2,
             },
         }
     }
@@ -366,17 +387,18 @@ impl<'a> Telegram<'a> {
         match self {
             Telegram::ShortAck => 1,
             Telegram::Token { .. } => 3,
-            Telegram::Data(d) => match d.data_field_len() {
-                0 => 6,
-                SD3_DATA_FIELD => 14,
-                n => n + 9,
+            Telegram::Data(d) => match self.format() {
+                Format::Sd1 => 6,
+                Format::Sd3 => 6 + SD3_DATA_FIELD,
+                _ => d.data_field_len() + 9,
             },
         }
     }
 
     /// Write the telegram into `buf`; returns the number of bytes written.
-    /// Picks SD1 for an empty data field, SD3 for exactly 8 bytes (SAP
-    /// bytes included) and SD2 otherwise.
+    /// The start delimiter is [`Telegram::format`]'s; a requested format
+    /// that does not fit the data field (SD1 with data, SD3 without exactly
+    /// 8 bytes) is an error.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize, EmitError> {
         let len = self.check()?;
         if buf.len() < len {
@@ -452,8 +474,21 @@ impl<'a> Telegram<'a> {
                         return Err(EmitError::BadAddress(a));
                     }
                 }
-                if d.data_field_len() > MAX_DATA_FIELD {
-                    return Err(EmitError::DataTooLong(d.data_field_len()));
+                let n = d.data_field_len();
+                if n > MAX_DATA_FIELD {
+                    return Err(EmitError::DataTooLong(n));
+                }
+                let fits = match self.format() {
+                    Format::Sd1 => n == 0,
+                    Format::Sd2 => true,
+                    Format::Sd3 => n == SD3_DATA_FIELD,
+                    Format::Sd4 | Format::Sc => false,
+                };
+                if !fits {
+                    return Err(EmitError::FormatMismatch {
+                        format: self.format(),
+                        data_field: n,
+                    });
                 }
             }
         }
@@ -472,7 +507,7 @@ impl<'a> Telegram<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wire::{RequestKind, ResponseStatus};
+    use crate::wire::{RequestKind, ResponseStatus, StationType};
 
     fn hex(s: &str) -> Vec<u8> {
         s.split_whitespace()
@@ -520,6 +555,7 @@ mod tests {
             dsap: None,
             ssap: None,
             data: &[0x10, 0x04, 0, 0, 0, 0, 0, 0],
+            format: Some(Format::Sd3),
         });
         let mut out = [0u8; 32];
         let n = t.emit(&mut out).unwrap();
@@ -528,6 +564,66 @@ mod tests {
             hex("A2 06 02 7D 10 04 00 00 00 00 00 00 99 16")
         );
         assert_eq!(Telegram::parse(&out[..n]).unwrap(), (t, 14));
+    }
+
+    #[test]
+    fn eight_byte_data_field_is_sd2_unless_sd3_is_asked_for() {
+        // A 6-byte Slave_Diag answer with SAPs: real devices and slave ASICs
+        // send SD2 with LE = 0x0B, not SD3.
+        let diag = [0x00, 0x0C, 0x00, 0x02, 0x80, 0x6A];
+        let mut d = DataTelegram {
+            da: 2,
+            sa: 8,
+            fc: FunctionCode::Response {
+                status: ResponseStatus::Dl,
+                station: StationType::Passive,
+            },
+            dsap: Some(62),
+            ssap: Some(60),
+            data: &diag,
+            format: None,
+        };
+        let mut out = [0u8; 32];
+        let n = Telegram::Data(d).emit(&mut out).unwrap();
+        assert_eq!(
+            out[..n].to_vec(),
+            hex("68 0B 0B 68 82 88 08 3E 3C 00 0C 00 02 80 6A 84 16")
+        );
+        assert_eq!(Telegram::Data(d).format(), Format::Sd2);
+        d.format = Some(Format::Sd3);
+        let n = Telegram::Data(d).emit(&mut out).unwrap();
+        assert_eq!(out[0], 0xA2);
+        assert_eq!(n, 14);
+        // Asking for a format that cannot carry the data field is an error.
+        d.format = Some(Format::Sd1);
+        assert!(matches!(
+            Telegram::Data(d).emit(&mut out),
+            Err(EmitError::FormatMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn parse_keeps_the_received_start_delimiter() {
+        // The same 6-byte Slave_Diag answer (the example) once as
+        // SD2 and once as SD3: each is shown as received and re-emitted
+        // byte for byte.
+        for frame in [
+            "A2 82 8B 08 3E 3C 02 09 00 FF 00 2B C4 16",
+            "68 0B 0B 68 82 8B 08 3E 3C 02 09 00 FF 00 2B C4 16",
+        ] {
+            let bytes = hex(frame);
+            let (t, n) = Telegram::parse(&bytes).unwrap();
+            assert_eq!(n, bytes.len());
+            let want = if bytes[0] == 0xA2 {
+                Format::Sd3
+            } else {
+                Format::Sd2
+            };
+            assert_eq!(t.format(), want, "{frame}");
+            let mut out = [0u8; 64];
+            let m = t.emit(&mut out).unwrap();
+            assert_eq!(out[..m], bytes[..], "{frame}");
+        }
     }
 
     #[test]
@@ -546,6 +642,7 @@ mod tests {
             dsap: Some(61),
             ssap: Some(62),
             data: &du,
+            format: Some(Format::Sd2),
         });
         let mut out = [0u8; 64];
         let n = t.emit(&mut out).unwrap();
@@ -619,6 +716,7 @@ mod tests {
             dsap: Some(1),
             ssap: Some(2),
             data: &big,
+            format: None,
         });
         assert_eq!(t.emit(&mut [0u8; 300]), Err(EmitError::DataTooLong(247)));
         assert_eq!(

@@ -1,0 +1,347 @@
+//! Named, typed channels of a slave's process images: the master-side
+//! view of a device profile ([`crate::Profile::channels`]).
+//!
+//! A [`ChannelMap`] says where each value sits in the input image (what
+//! the slave sends) and the output image (what the master sends), with
+//! its type and byte order. The master decodes its images with it and
+//! writes outputs by channel name; nothing in it knows a device.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Which process image a channel is in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Direction {
+    /// Slave → master (the slave's inputs to the master).
+    Input,
+    /// Master → slave.
+    Output,
+}
+
+/// The data type of a channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelType {
+    /// One bit (`bit` 0 = least significant bit of the byte).
+    Bool {
+        /// Bit number in the byte, 0..=7.
+        bit: u8,
+    },
+    /// Unsigned 8 bit.
+    U8,
+    /// Signed 8 bit.
+    I8,
+    /// Unsigned 16 bit.
+    U16,
+    /// Signed 16 bit.
+    I16,
+    /// Unsigned 32 bit.
+    U32,
+    /// Signed 32 bit.
+    I32,
+    /// IEEE 754 single precision.
+    F32,
+}
+
+impl ChannelType {
+    /// Bytes the value takes.
+    pub fn size(self) -> usize {
+        match self {
+            ChannelType::Bool { .. } | ChannelType::U8 | ChannelType::I8 => 1,
+            ChannelType::U16 | ChannelType::I16 => 2,
+            ChannelType::U32 | ChannelType::I32 | ChannelType::F32 => 4,
+        }
+    }
+
+    /// The smallest and largest integer the type holds (`None` for
+    /// `F32`).
+    pub fn range(self) -> Option<(i64, i64)> {
+        Some(match self {
+            ChannelType::Bool { .. } => (0, 1),
+            ChannelType::U8 => (0, u8::MAX as i64),
+            ChannelType::I8 => (i8::MIN as i64, i8::MAX as i64),
+            ChannelType::U16 => (0, u16::MAX as i64),
+            ChannelType::I16 => (i16::MIN as i64, i16::MAX as i64),
+            ChannelType::U32 => (0, u32::MAX as i64),
+            ChannelType::I32 => (i32::MIN as i64, i32::MAX as i64),
+            ChannelType::F32 => return None,
+        })
+    }
+}
+
+/// Byte order of a multi-byte channel.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ByteOrder {
+    /// Most significant byte first ("Motorola"; PROFIBUS' default).
+    #[default]
+    BigEndian,
+    /// Least significant byte first ("Intel").
+    LittleEndian,
+}
+
+/// A channel's value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    /// A bit.
+    Bool(bool),
+    /// An integer.
+    Int(i64),
+    /// A floating point number.
+    Float(f64),
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{}", *b as u8),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::Float(x) => write!(f, "{x}"),
+        }
+    }
+}
+
+/// One named value in a process image.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Channel {
+    /// Name (unique per direction), e.g. `setpoint1` or `di_MyReadVar3`.
+    pub name: String,
+    /// Input or output image.
+    pub direction: Direction,
+    /// Byte offset in the image.
+    pub offset: usize,
+    /// Type.
+    pub ty: ChannelType,
+    /// Byte order of multi-byte types.
+    #[serde(default)]
+    pub order: ByteOrder,
+}
+
+/// Why a value cannot be written to a channel.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ChannelError {
+    /// No output channel has that name.
+    #[error("no output channel `{0}`")]
+    Unknown(String),
+    /// The value does not fit the channel's type.
+    #[error("{value} does not fit channel `{name}` ({ty:?})")]
+    OutOfRange {
+        /// Channel.
+        name: String,
+        /// Its type.
+        ty: ChannelType,
+        /// The value given.
+        value: Value,
+    },
+    /// The image is shorter than the channel needs.
+    #[error("channel `{name}` ends at byte {end}, the image has {len}")]
+    Short {
+        /// Channel.
+        name: String,
+        /// Its end.
+        end: usize,
+        /// The image's length.
+        len: usize,
+    },
+}
+
+impl Channel {
+    /// A big-endian channel.
+    pub fn new(
+        name: impl Into<String>,
+        direction: Direction,
+        offset: usize,
+        ty: ChannelType,
+    ) -> Channel {
+        Channel {
+            name: name.into(),
+            direction,
+            offset,
+            ty,
+            order: ByteOrder::BigEndian,
+        }
+    }
+
+    /// The same channel in little-endian order.
+    pub fn little_endian(mut self) -> Channel {
+        self.order = ByteOrder::LittleEndian;
+        self
+    }
+
+    fn bytes<const N: usize>(&self, image: &[u8]) -> Option<[u8; N]> {
+        let mut b: [u8; N] = image.get(self.offset..self.offset + N)?.try_into().ok()?;
+        if self.order == ByteOrder::LittleEndian {
+            b.reverse();
+        }
+        Some(b)
+    }
+
+    /// The channel's value in `image`; `None` when the image is shorter.
+    pub fn read(&self, image: &[u8]) -> Option<Value> {
+        Some(match self.ty {
+            ChannelType::Bool { bit } => Value::Bool(image.get(self.offset)? >> (bit & 7) & 1 == 1),
+            ChannelType::U8 => Value::Int(*image.get(self.offset)? as i64),
+            ChannelType::I8 => Value::Int(*image.get(self.offset)? as i8 as i64),
+            ChannelType::U16 => Value::Int(u16::from_be_bytes(self.bytes(image)?) as i64),
+            ChannelType::I16 => Value::Int(i16::from_be_bytes(self.bytes(image)?) as i64),
+            ChannelType::U32 => Value::Int(u32::from_be_bytes(self.bytes(image)?) as i64),
+            ChannelType::I32 => Value::Int(i32::from_be_bytes(self.bytes(image)?) as i64),
+            ChannelType::F32 => Value::Float(f32::from_be_bytes(self.bytes(image)?) as f64),
+        })
+    }
+
+    /// Write `value` into `image` (other bits and bytes unchanged).
+    pub fn write(&self, value: Value, image: &mut [u8]) -> Result<(), ChannelError> {
+        let end = self.offset + self.ty.size();
+        if image.len() < end {
+            return Err(ChannelError::Short {
+                name: self.name.clone(),
+                end,
+                len: image.len(),
+            });
+        }
+        let out_of_range = || ChannelError::OutOfRange {
+            name: self.name.clone(),
+            ty: self.ty,
+            value,
+        };
+        let mut b: Vec<u8> = match (self.ty, value) {
+            (ChannelType::F32, Value::Int(i)) => (i as f32).to_be_bytes().to_vec(),
+            (ChannelType::F32, Value::Float(x)) => (x as f32).to_be_bytes().to_vec(),
+            (ChannelType::F32, Value::Bool(_)) => return Err(out_of_range()),
+            (ty, v) => {
+                let i = match v {
+                    Value::Bool(b) => b as i64,
+                    Value::Int(i) => i,
+                    Value::Float(x) if x.fract() == 0.0 => x as i64,
+                    Value::Float(_) => return Err(out_of_range()),
+                };
+                let (lo, hi) = ty.range().unwrap_or((0, 0));
+                if i < lo || i > hi {
+                    return Err(out_of_range());
+                }
+                if let ChannelType::Bool { bit } = ty {
+                    let m = 1u8 << (bit & 7);
+                    let byte = &mut image[self.offset];
+                    *byte = if i == 1 { *byte | m } else { *byte & !m };
+                    return Ok(());
+                }
+                (i as u32).to_be_bytes()[4 - ty.size()..].to_vec()
+            }
+        };
+        if self.order == ByteOrder::LittleEndian {
+            b.reverse();
+        }
+        image[self.offset..end].copy_from_slice(&b);
+        Ok(())
+    }
+}
+
+/// The channels of one slave's configuration.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChannelMap {
+    /// The channels, inputs and outputs, in image order.
+    pub channels: Vec<Channel>,
+}
+
+impl ChannelMap {
+    /// An empty map.
+    pub fn new() -> ChannelMap {
+        ChannelMap::default()
+    }
+
+    /// Add a big-endian channel.
+    pub fn push(
+        &mut self,
+        name: impl Into<String>,
+        direction: Direction,
+        offset: usize,
+        ty: ChannelType,
+    ) {
+        self.channels
+            .push(Channel::new(name, direction, offset, ty));
+    }
+
+    /// The channels of one image.
+    pub fn of(&self, direction: Direction) -> impl Iterator<Item = &Channel> + '_ {
+        self.channels
+            .iter()
+            .filter(move |c| c.direction == direction)
+    }
+
+    /// The channel `name` of one image.
+    pub fn find(&self, direction: Direction, name: &str) -> Option<&Channel> {
+        self.of(direction).find(|c| c.name == name)
+    }
+
+    /// Every channel of one image with its value in `image` (channels
+    /// beyond the image's end are left out).
+    pub fn decode<'a>(
+        &'a self,
+        direction: Direction,
+        image: &'a [u8],
+    ) -> impl Iterator<Item = (&'a Channel, Value)> + 'a {
+        self.of(direction)
+            .filter_map(move |c| Some((c, c.read(image)?)))
+    }
+
+    /// Write `value` to the output channel `name` in `outputs`.
+    pub fn write_output(
+        &self,
+        name: &str,
+        value: Value,
+        outputs: &mut [u8],
+    ) -> Result<(), ChannelError> {
+        self.find(Direction::Output, name)
+            .ok_or_else(|| ChannelError::Unknown(name.to_string()))?
+            .write(value, outputs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn read_and_write_each_type() {
+        let mut m = ChannelMap::new();
+        m.push("b", Direction::Output, 0, ChannelType::Bool { bit: 3 });
+        m.push("w", Direction::Output, 1, ChannelType::I16);
+        m.push("d", Direction::Output, 3, ChannelType::U32);
+        m.push("f", Direction::Output, 7, ChannelType::F32);
+        m.channels
+            .push(Channel::new("le", Direction::Output, 11, ChannelType::U16).little_endian());
+        let mut img = [0u8; 13];
+        m.write_output("b", Value::Bool(true), &mut img).unwrap();
+        m.write_output("w", Value::Int(-2), &mut img).unwrap();
+        m.write_output("d", Value::Int(0x1234_5678), &mut img)
+            .unwrap();
+        m.write_output("f", Value::Float(1.5), &mut img).unwrap();
+        m.write_output("le", Value::Int(0x0102), &mut img).unwrap();
+        assert_eq!(
+            img,
+            [0x08, 0xFF, 0xFE, 0x12, 0x34, 0x56, 0x78, 0x3F, 0xC0, 0, 0, 0x02, 0x01]
+        );
+        let values: Vec<(String, Value)> = m
+            .decode(Direction::Output, &img)
+            .map(|(c, v)| (c.name.clone(), v))
+            .collect();
+        assert_eq!(values[0].1, Value::Bool(true));
+        assert_eq!(values[1].1, Value::Int(-2));
+        assert_eq!(values[2].1, Value::Int(0x1234_5678));
+        assert_eq!(values[3].1, Value::Float(1.5));
+        assert_eq!(values[4].1, Value::Int(0x0102));
+        assert!(matches!(
+            m.write_output("w", Value::Int(40000), &mut img),
+            Err(ChannelError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            m.write_output("x", Value::Int(1), &mut img),
+            Err(ChannelError::Unknown(_))
+        ));
+        assert_eq!(m.decode(Direction::Output, &img[..5]).count(), 2);
+        assert_eq!(m.decode(Direction::Input, &img).count(), 0);
+    }
+}

@@ -1,0 +1,420 @@
+//! The one shape of every device profile: the [`Profile`] trait, its
+//! options ([`DeviceOptions`]), the object-safe [`Configured`] view the
+//! programs use, and the registry rows ([`ProfileEntry`]) of
+//! [`crate::PROFILES`].
+//!
+//! A profile is configured once from its typed options (a serde struct
+//! per profile; the keys of a bus file's `[[slave]]` table or of
+//! `dpctl slave --device-opt KEY=VALUE`) and then answers everything the
+//! programs need about that product in that configuration: its GSD, the
+//! slave [`Device`](profibus_dp::slave::Device) that emulates it, the
+//! station address it chooses, and the master side: the GSD modules (and
+//! so Chk_Cfg and User_Prm_Data) a master configures it with, the named
+//! channels of its process images, and its PKW dialect.
+
+use crate::channels::ChannelMap;
+use crate::pkw::Dialect;
+use crate::BoxedDevice;
+use profibus_dp::gsd::Gsd;
+use serde::de::DeserializeOwned;
+use serde::Deserializer;
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+/// Why a profile cannot be configured or used.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    /// No profile has that name.
+    #[error("no device profile `{name}` (available: {available})")]
+    Unknown {
+        /// The name asked for.
+        name: String,
+        /// The registered names.
+        available: String,
+    },
+    /// The options do not fit the profile's options struct.
+    #[error("options: {0}")]
+    Options(String),
+    /// A file named in the options cannot be read or written.
+    #[error("{}: {source}", path.display())]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A table file (variables, parameters) named in the options is
+    /// invalid.
+    #[error("{}: {message}", path.display())]
+    Table {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The stored Set_Slave_Add address cannot be read.
+    #[error(transparent)]
+    AddressFile(#[from] crate::address::AddressFileError),
+    /// The GSD cannot give the configuration.
+    #[error(transparent)]
+    Selection(#[from] profibus_dp::gsd::SelectionError),
+    /// A module name matches no module of the GSD, or several.
+    #[error(transparent)]
+    Module(#[from] profibus_dp::gsd::LookupError),
+    /// A GSD file cannot be read.
+    #[error(transparent)]
+    Gsd(#[from] profibus_dp::gsd::GsdError),
+    /// The GSD's modules do not make a device.
+    #[error(transparent)]
+    Generic(#[from] crate::generic::GenericError),
+    /// A configuration (Chk_Cfg) the profile does not know.
+    #[error("configuration: {0}")]
+    Config(String),
+    /// The options contradict each other or the product.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Control commands (lines of text) for a running device, e.g. a user
+/// diagnosis the emulated PLC sends. The command line puts lines in; the
+/// device takes them out while it runs. Clones share the queue.
+#[derive(Debug, Clone, Default)]
+pub struct ControlInbox(Arc<Mutex<VecDeque<String>>>);
+
+impl ControlInbox {
+    /// An empty inbox.
+    pub fn new() -> ControlInbox {
+        ControlInbox::default()
+    }
+
+    /// Queue a command line.
+    pub fn push(&self, line: impl Into<String>) {
+        if let Ok(mut q) = self.0.lock() {
+            q.push_back(line.into());
+        }
+    }
+
+    /// The oldest queued line.
+    pub fn take(&self) -> Option<String> {
+        self.0.lock().ok()?.pop_front()
+    }
+}
+
+impl PartialEq for ControlInbox {
+    fn eq(&self, other: &ControlInbox) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Eq for ControlInbox {}
+
+/// A profile's options before they are decoded into its options struct:
+/// a TOML table with `snake_case` keys (`-` in keys is read as `_`, so
+/// `--device-opt us-device=126` and a bus file's `us_device = 126` are
+/// the same option).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DeviceOptions(toml::Table);
+
+impl DeviceOptions {
+    /// No options.
+    pub fn new() -> DeviceOptions {
+        DeviceOptions::default()
+    }
+
+    /// The options of a table (e.g. the rest of a bus file's `[[slave]]`).
+    pub fn from_table(table: toml::Table) -> DeviceOptions {
+        let mut o = DeviceOptions::new();
+        for (k, v) in table {
+            o.set(&k, v);
+        }
+        o
+    }
+
+    /// Set `key` to `value`.
+    pub fn set(&mut self, key: &str, value: impl Into<toml::Value>) {
+        self.0.insert(key.trim().replace('-', "_"), value.into());
+    }
+
+    /// Set `key` from command-line text: a TOML value when the text is
+    /// one (`126`, `0x19`, `true`, `[1, 2]`, `"x"`), else the text itself
+    /// (a path, a name).
+    pub fn set_text(&mut self, key: &str, text: &str) {
+        let text = text.trim();
+        let value = format!("v = {text}")
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(text.to_string()));
+        self.set(key, value);
+    }
+
+    /// Set an option from `KEY=VALUE` (see [`DeviceOptions::set_text`]).
+    pub fn set_pair(&mut self, pair: &str) -> Result<(), ProfileError> {
+        let (k, v) = pair
+            .split_once('=')
+            .ok_or_else(|| ProfileError::Options(format!("`{pair}` is not KEY=VALUE")))?;
+        self.set_text(k, v);
+        Ok(())
+    }
+
+    /// The value of `key`.
+    pub fn get(&self, key: &str) -> Option<&toml::Value> {
+        self.0.get(&key.replace('-', "_"))
+    }
+
+    /// The table.
+    pub fn table(&self) -> &toml::Table {
+        &self.0
+    }
+
+    /// Decode into a profile's options struct.
+    pub fn decode<T: DeserializeOwned>(&self) -> Result<T, ProfileError> {
+        toml::Value::Table(self.0.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| ProfileError::Options(e.message().to_string()))
+    }
+}
+
+/// Serde helper for options structs: an integer given as a number or as
+/// text (`25`, `"0x19"`, `"16#19"`), range-checked for the field's type.
+pub fn int<'de, D, T>(d: D) -> Result<T, D::Error>
+where
+    D: Deserializer<'de>,
+    T: TryFrom<i64>,
+{
+    opt_int(d)?.ok_or_else(|| serde::de::Error::custom("a number is required"))
+}
+
+/// [`int`] for an `Option` field (use with `#[serde(default)]`).
+pub fn opt_int<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: TryFrom<i64>,
+{
+    use serde::de::Error;
+    use serde::Deserialize;
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Raw {
+        Int(i64),
+        Text(String),
+    }
+    let v = match Raw::deserialize(d)? {
+        Raw::Int(i) => i,
+        Raw::Text(t) => {
+            let t = t.trim().replace('_', "");
+            let hex = t
+                .strip_prefix("0x")
+                .or_else(|| t.strip_prefix("0X"))
+                .or_else(|| t.strip_prefix("16#"));
+            match hex {
+                Some(h) => i64::from_str_radix(h, 16),
+                None => t.parse(),
+            }
+            .map_err(|_| D::Error::custom(format!("`{t}` is not a number")))?
+        }
+    };
+    T::try_from(v)
+        .map(Some)
+        .map_err(|_| D::Error::custom(format!("{v} is out of range")))
+}
+
+/// A device profile: one product, configured from its options. Every
+/// product module implements it the same way and registers with one line
+/// in [`crate::PROFILES`] (`ProfileEntry::of::<MyProfile>()`).
+pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
+    /// The options, decoded from [`DeviceOptions`] (use
+    /// `#[serde(default, deny_unknown_fields)]` so that a typo is an
+    /// error).
+    type Options: DeserializeOwned;
+    /// The name (`dpctl slave --device NAME`, a bus file's `device = "NAME"`).
+    const NAME: &'static str;
+    /// One line about the product.
+    const SUMMARY: &'static str;
+    /// The options in words (for `dpctl slave --list-devices`).
+    const OPTIONS_HELP: &'static str;
+    /// The ident number the product always reports, if fixed (finds the
+    /// profile of a slave configured from plain GSD modules, e.g. for its
+    /// PKW dialect).
+    const IDENT: Option<u16>;
+
+    /// The profile configured with `options`; `address` is the station
+    /// address the caller has for it (`--addr`, a bus file's `address`),
+    /// if any. May read files the options name; nothing else.
+    fn configure(options: Self::Options, address: Option<u8>) -> Result<Self, ProfileError>;
+
+    /// The GSD of this configuration.
+    fn gsd(&self) -> &Gsd;
+
+    /// The GSD file as bytes (Latin-1). Default: the GSD written out.
+    fn gsd_file(&self) -> Vec<u8> {
+        self.gsd().write_latin1()
+    }
+
+    /// The GSD module names a master configures this device with, in slot
+    /// order (they give Chk_Cfg and User_Prm_Data).
+    fn modules(&self) -> Vec<String>;
+
+    /// The station address the device chooses itself (a rotary switch, a
+    /// stored Set_Slave_Add address), overriding the caller's; `None`:
+    /// the caller's address.
+    fn address(&self) -> Option<u8> {
+        None
+    }
+
+    /// The file in which the program running the slave keeps an address
+    /// set by Set_Slave_Add ([`crate::address::StoredAddress`]), if the
+    /// device keeps one.
+    fn address_file(&self) -> Option<PathBuf> {
+        None
+    }
+
+    /// The slave device that emulates the product; `control` is where
+    /// control commands arrive, for profiles that take them.
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError>;
+
+    /// The named channels of the process images the configuration `cfg`
+    /// (Chk_Cfg bytes) gives.
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError>;
+
+    /// The product's PKW dialect, if it has a PKW channel (the [`pkw`](crate::pkw)
+    /// module knows no device: each owns its dialect).
+    const PKW: Option<&'static Dialect> = None;
+
+    /// The PKW dialect of a slave of this product configured with `cfg`
+    /// (Chk_Cfg bytes): [`Profile::PKW`] when the configuration has the
+    /// PKW module. Default: the PKW module 0x73 first.
+    fn pkw_dialect(cfg: &[u8]) -> Option<&'static Dialect> {
+        Self::PKW.filter(|_| cfg.first() == Some(&crate::pkw::PKW_MODULE))
+    }
+
+    /// Warnings found while configuring (e.g. GSD vendor quirks).
+    fn warnings(&self) -> Vec<String> {
+        vec![]
+    }
+}
+
+/// A configured profile, object-safe: what programs hold
+/// (`Box<dyn Configured>`). Every [`Profile`] is one.
+pub trait Configured: std::fmt::Debug + Send + Sync {
+    /// The profile's name.
+    fn name(&self) -> &'static str;
+    /// See [`Profile::gsd`].
+    fn gsd(&self) -> &Gsd;
+    /// See [`Profile::gsd_file`].
+    fn gsd_file(&self) -> Vec<u8>;
+    /// See [`Profile::modules`].
+    fn modules(&self) -> Vec<String>;
+    /// See [`Profile::address`].
+    fn address(&self) -> Option<u8>;
+    /// See [`Profile::address_file`].
+    fn address_file(&self) -> Option<PathBuf>;
+    /// See [`Profile::device`].
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError>;
+    /// See [`Profile::channels`].
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError>;
+    /// See [`Profile::warnings`].
+    fn warnings(&self) -> Vec<String>;
+
+    /// The Chk_Cfg bytes of [`Configured::modules`].
+    fn chk_cfg(&self) -> Result<Vec<u8>, ProfileError> {
+        let gsd = self.gsd();
+        Ok(gsd.chk_cfg(&gsd.select(&self.modules())?)?)
+    }
+
+    /// The User_Prm_Data of [`Configured::modules`] with the GSD's
+    /// default parameter values.
+    fn user_prm_data(&self) -> Result<Vec<u8>, ProfileError> {
+        let gsd = self.gsd();
+        Ok(gsd.user_prm_data(&gsd.select(&self.modules())?, &[])?)
+    }
+}
+
+impl<P: Profile> Configured for P {
+    fn name(&self) -> &'static str {
+        P::NAME
+    }
+    fn gsd(&self) -> &Gsd {
+        Profile::gsd(self)
+    }
+    fn gsd_file(&self) -> Vec<u8> {
+        Profile::gsd_file(self)
+    }
+    fn modules(&self) -> Vec<String> {
+        Profile::modules(self)
+    }
+    fn address(&self) -> Option<u8> {
+        Profile::address(self)
+    }
+    fn address_file(&self) -> Option<PathBuf> {
+        Profile::address_file(self)
+    }
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        Profile::device(self, control)
+    }
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+        Profile::channels(self, cfg)
+    }
+    fn warnings(&self) -> Vec<String> {
+        Profile::warnings(self)
+    }
+}
+
+/// How a registry row configures its profile.
+type ConfigureFn = fn(&DeviceOptions, Option<u8>) -> Result<Box<dyn Configured>, ProfileError>;
+
+/// One row of the registry: a profile's name and words, and how to
+/// configure it.
+#[derive(Debug, Clone, Copy)]
+pub struct ProfileEntry {
+    /// See [`Profile::NAME`].
+    pub name: &'static str,
+    /// See [`Profile::SUMMARY`].
+    pub summary: &'static str,
+    /// See [`Profile::OPTIONS_HELP`].
+    pub options_help: &'static str,
+    /// See [`Profile::IDENT`].
+    pub ident: Option<u16>,
+    /// See [`Profile::PKW`].
+    pub pkw: Option<&'static Dialect>,
+    configure: ConfigureFn,
+    pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
+}
+
+fn configure_boxed<P: Profile>(
+    options: &DeviceOptions,
+    address: Option<u8>,
+) -> Result<Box<dyn Configured>, ProfileError> {
+    Ok(Box::new(P::configure(options.decode()?, address)?))
+}
+
+impl ProfileEntry {
+    /// The row of profile `P`.
+    pub const fn of<P: Profile>() -> ProfileEntry {
+        ProfileEntry {
+            name: P::NAME,
+            summary: P::SUMMARY,
+            options_help: P::OPTIONS_HELP,
+            ident: P::IDENT,
+            pkw: P::PKW,
+            configure: configure_boxed::<P>,
+            pkw_dialect: P::pkw_dialect,
+        }
+    }
+
+    /// Configure the profile from `options`; `address` is the caller's
+    /// station address for it, if any.
+    pub fn configure(
+        &self,
+        options: &DeviceOptions,
+        address: Option<u8>,
+    ) -> Result<Box<dyn Configured>, ProfileError> {
+        (self.configure)(options, address)
+    }
+
+    /// See [`Profile::pkw_dialect`].
+    pub fn pkw_dialect(&self, cfg: &[u8]) -> Option<&'static Dialect> {
+        (self.pkw_dialect)(cfg)
+    }
+}

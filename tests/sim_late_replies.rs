@@ -1,0 +1,237 @@
+//! Late, duplicated and reordered replies on the simulated bus: slaves
+//! whose answers (seeded at random) arrive after the master's slot time,
+//! twice, or after the next answer, as on a loaded machine behind a pty.
+//! The master must take none of them for the answer to another request:
+//! every slave stays in Data_Exchange, and the counters say what was
+//! dropped.
+
+use profibus::devices::generic::{GenericDevice, InputPattern};
+use profibus::dp::master::{
+    DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
+};
+use profibus::dp::slave::{DpSlave, Features};
+use profibus::fdl::medium::{Collisions, MediumConfig};
+use profibus::fdl::sim::SimBus;
+use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
+use profibus::fdl::station::passive::PassiveStation;
+use profibus::fdl::station::Station;
+use profibus::fdl::time::Instant;
+use profibus::fdl::{Baud, BusParams};
+use std::collections::VecDeque;
+use std::time::Duration;
+
+type Master = ActiveStation<DpMaster>;
+type Slave = PassiveStation<DpSlave<GenericDevice>>;
+
+/// What a [`Laggard`] does with one answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fate {
+    OnTime,
+    /// Sent only after the slot time ran out.
+    Late,
+    /// Sent on time, and once more later.
+    Duplicated,
+    /// Held back and sent after the station's next answer.
+    Reordered,
+}
+
+/// A slave station whose answers are delayed, repeated or reordered at
+/// random (seeded): the transport of a busy machine, not the slave core.
+struct Laggard<S> {
+    inner: S,
+    rng: u64,
+    /// Probability (in 1/1000) of each fate other than on time.
+    permille: u64,
+    delay: Duration,
+    held: VecDeque<(Instant, Vec<u8>)>,
+    reorder: Option<Vec<u8>>,
+    out: Vec<u8>,
+    fates: [u64; 4],
+}
+
+impl<S> Laggard<S> {
+    fn new(inner: S, seed: u64, permille: u64, delay: Duration) -> Self {
+        Laggard {
+            inner,
+            rng: seed,
+            permille,
+            delay,
+            held: VecDeque::new(),
+            reorder: None,
+            out: Vec::new(),
+            fates: [0; 4],
+        }
+    }
+
+    fn roll(&mut self) -> Fate {
+        // splitmix64
+        self.rng = self.rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.rng;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        let r = (z ^ (z >> 31)) % 1000;
+        match r {
+            r if r < self.permille => Fate::Late,
+            r if r < 2 * self.permille => Fate::Duplicated,
+            r if r < 3 * self.permille => Fate::Reordered,
+            _ => Fate::OnTime,
+        }
+    }
+}
+
+impl<S: Station> Station for Laggard<S> {
+    fn handle_rx(&mut self, now: Instant, bytes: &[u8]) {
+        self.inner.handle_rx(now, bytes)
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.inner.handle_timeout(now)
+    }
+
+    fn poll_transmit(&mut self, now: Instant) -> Option<&[u8]> {
+        if self.held.front().is_some_and(|(t, _)| *t <= now) {
+            self.out = self.held.pop_front().unwrap().1;
+            return Some(&self.out);
+        }
+        let reply = self.inner.poll_transmit(now)?.to_vec();
+        let fate = self.roll();
+        self.fates[fate as usize] += 1;
+        let release = now + self.delay;
+        self.out = match fate {
+            Fate::OnTime => reply,
+            Fate::Late => {
+                self.held.push_back((release, reply));
+                return None;
+            }
+            Fate::Duplicated => {
+                self.held.push_back((release, reply.clone()));
+                reply
+            }
+            // Two in a row: the older one goes now.
+            Fate::Reordered => self.reorder.replace(reply)?,
+        };
+        // A reordered answer follows the next one that goes out.
+        if fate != Fate::Reordered {
+            if let Some(r) = self.reorder.take() {
+                self.held.push_front((now, r));
+            }
+        }
+        Some(&self.out)
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        let held = self.held.front().map(|(t, _)| *t);
+        match (self.inner.poll_timeout(), held) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+}
+
+#[test]
+fn late_duplicated_and_reordered_replies_never_knock_a_slave_out_of_data_exchange() {
+    let baud = Baud::B1500000;
+    let params = BusParams::defaults(baud);
+    // A pty-like line: a late sender waits for the line instead of
+    // garbling the master's next request.
+    let mut medium = MediumConfig::paced(baud);
+    medium.collisions = Collisions::Serialize;
+    let mut bus = SimBus::new(medium);
+    let addrs = [10u8, 11, 12];
+    // Different input lengths, so that a late answer of one slave would
+    // not even fit another's image.
+    let cfgs: [&[u8]; 3] = [&[0x11, 0x21], &[0x13, 0x23], &[0x17, 0x27]];
+    // Read every diagnosis often, so that late Data_Exchange answers meet
+    // pending Slave_Diag requests.
+    let options = MasterOptions {
+        diag_interval: Some(Duration::from_millis(1)),
+        ..MasterOptions::default()
+    };
+    let slaves = addrs
+        .iter()
+        .zip(cfgs)
+        .map(|(&a, cfg)| {
+            let mut p = SlaveParams::new(a, 0x0DCE, cfg.to_vec());
+            p.watchdog = Some(Duration::from_millis(200));
+            p
+        })
+        .collect();
+    let dp = DpMaster::new(&MasterConfig {
+        address: 2,
+        params,
+        slaves,
+        options,
+    })
+    .unwrap();
+    let master = bus.add(ActiveStation::new(ActiveConfig::new(2, params), dp));
+    let mut ids = vec![];
+    for (k, (&a, cfg)) in addrs.iter().zip(cfgs).enumerate() {
+        let dev = GenericDevice::new("test", 0x0DCE, cfg.to_vec(), Features::default())
+            .with_inputs(InputPattern::Counter);
+        let slave: Slave = PassiveStation::new(DpSlave::new(dev, a), params);
+        // 3 % late, 3 % duplicated, 3 % reordered; late by 1.5 slot times.
+        let delay = params.bits(params.slot_time as u64 * 3 / 2);
+        ids.push(bus.add(Laggard::new(slave, 0x5EED + k as u64, 30, delay)));
+    }
+    let in_dx = |b: &SimBus| {
+        let m = b.station::<Master>(master).app();
+        addrs
+            .iter()
+            .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
+    };
+    // Start-up may take a few rounds when answers go astray.
+    assert!(bus.run_while(Duration::from_secs(2), |b| in_dx(b)));
+    while bus
+        .station_mut::<Master>(master)
+        .app_mut()
+        .poll_event()
+        .is_some()
+    {}
+
+    // Steady state: 1 s of cycles with late, duplicated and reordered
+    // answers, checked after every step.
+    let end = bus.now() + Duration::from_millis(1000);
+    while bus.now() < end {
+        assert!(bus.step(), "the simulation stopped");
+        let m = bus.station_mut::<Master>(master).app_mut();
+        while let Some(e) = m.poll_event() {
+            assert!(
+                !matches!(
+                    e,
+                    MasterEvent::StateChanged {
+                        from: SlaveState::DataExchange,
+                        ..
+                    } | MasterEvent::Fault { .. }
+                ),
+                "at {:?}: {e:?}",
+                bus.now()
+            );
+        }
+    }
+    let m = bus.station::<Master>(master);
+    let dropped = m.stats().late_replies;
+    let fates: Vec<[u64; 4]> = ids
+        .iter()
+        .map(|&id| bus.station::<Laggard<Slave>>(id).fates)
+        .collect();
+    eprintln!("late replies dropped by the master: {dropped}; fates (on time, late, dup, reordered): {fates:?}");
+    for f in &fates {
+        assert!(
+            f[1] > 5 && f[2] > 5 && f[3] > 5,
+            "every fate happened: {f:?}"
+        );
+    }
+    assert!(
+        dropped > 10,
+        "late and duplicated answers were counted: {dropped}"
+    );
+    for &a in &addrs {
+        let s = m.app().slave_stats(a).unwrap();
+        assert!(s.data_exchanges > 200, "{a}: {s:?}");
+        assert!(s.diag_reads > 50, "{a}: {s:?}");
+        // The FDL layer already dropped the stray answers: the DP layer
+        // never saw one as a diagnosis.
+        assert_eq!(s.invalid_diags, 0, "{a}: {s:?}");
+    }
+    assert_eq!(m.stats().duplicate_tokens, 0);
+}
