@@ -21,7 +21,7 @@ use anyhow::{bail, Context};
 use profibus_devices::address::StoredAddress;
 use profibus_devices::generic::InputPattern;
 use profibus_devices::{
-    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES,
+    BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES, STATE_EVENT,
 };
 use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
@@ -112,10 +112,16 @@ pub struct Args {
     /// omega: number of actual values (si_NR_RD_VALUE, 1..8).
     #[arg(long, value_name = "N", requires = "setpoints")]
     actual_values: Option<u8>,
+    /// rfid: the tags file (TOML: tags with UID and memory, which one is
+    /// in the antenna field, the reader's timing), rewritten when the
+    /// field changes.
+    #[arg(long, value_name = "FILE.toml", requires = "device")]
+    tags: Option<PathBuf>,
     /// Control commands for the device, one per line, from FILE or `-`
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
-    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`.
+    /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
+    /// `leave`, `tags`, `status`.
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
     /// File in which the generic device keeps an address set by
@@ -347,6 +353,7 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("write_gsd", path(&args.write_gsd)),
         ("params", path(&args.params)),
         ("address_file", path(&args.address_file)),
+        ("tags", path(&args.tags)),
     ] {
         if let Some(v) = v {
             opts.set(k, v);
@@ -443,6 +450,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         None => bail!("give --addr N"),
     };
     let address_file = profile.address_file();
+    let state_file = profile.state_file();
     let mut port = Port::open(&path, PTY_NOMINAL)?;
     let pty = port.is_pty();
     let latency = common::latency(args.latency, &port)?;
@@ -519,6 +527,20 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                                 json!({"event": "address_store_error", "text": err.to_string()}),
                                 format!("cannot keep the address: {err}"),
                             );
+                        }
+                    }
+                    if let (SlaveEvent::Device(d), Some(f)) = (&e, &state_file) {
+                        if d.kind == STATE_EVENT {
+                            // The device's new state: the shell keeps it.
+                            let (kind, text) = match std::fs::write(f, &d.text) {
+                                Ok(()) => ("state_saved", format!("state saved to {}", f.display())),
+                                Err(err) => (
+                                    "state_store_error",
+                                    format!("cannot save the state to {}: {err}", f.display()),
+                                ),
+                            };
+                            printer.emit(now, json!({"event": kind, "text": text}), text.clone());
+                            continue;
                         }
                     }
                     printer.event(now, &e);

@@ -15,6 +15,8 @@ pub const BM4_EXAMPLE: &[u8] = include_bytes!("../../../gsd/MyGSDFile.gsd");
 pub const BNF_00D0: &[u8] = include_bytes!("../../../gsd/BNF_00D0.GSD");
 /// `BK30BECF.GSD`: Beckhoff BK3000 bus coupler.
 pub const BK30BECF: &[u8] = include_bytes!("../../../gsd/BK30BECF.GSD");
+/// `AEGI0DC4.GSD`: AEG ID ARE I2/K1 PFB RFID reader.
+pub const AEGI0DC4: &[u8] = include_bytes!("../../../gsd/AEGI0DC4.GSD");
 
 /// Parse one of the built-in files (leniently: some keep their vendor
 /// quirks).
@@ -33,6 +35,7 @@ mod tests {
             (BM4OPRO1, 0x0008),
             (BM4_EXAMPLE, 0x0008),
             (BNF_00D0, 0x00D0),
+            (AEGI0DC4, 0x0DC4),
         ] {
             assert_eq!(parse(bytes).unwrap().ident_number, ident);
         }

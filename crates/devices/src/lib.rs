@@ -70,8 +70,11 @@ pub mod gsd_files;
 pub mod omega;
 pub mod pkw;
 pub mod profile;
+pub mod rfid;
 
-pub use profile::{Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError};
+pub use profile::{
+    Configured, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError, STATE_EVENT,
+};
 
 use profibus_dp::slave::Device;
 
@@ -83,6 +86,7 @@ pub const PROFILES: &[ProfileEntry] = &[
     ProfileEntry::of::<generic::GenericProfile>(),
     ProfileEntry::of::<bm4::profile::Bm4Profile>(),
     ProfileEntry::of::<omega::profile::OmegaProfile>(),
+    ProfileEntry::of::<rfid::profile::RfidProfile>(),
 ];
 
 /// The profile named `name` (case-insensitive).

@@ -220,6 +220,12 @@ where
         .map_err(|_| D::Error::custom(format!("{v} is out of range")))
 }
 
+/// The kind of a [`DeviceEvent`](profibus_dp::slave::DeviceEvent) whose
+/// text is the whole new content of the device's state file
+/// ([`Profile::state_file`]); the program running the slave writes it
+/// there (the device does no file I/O).
+pub const STATE_EVENT: &str = "state";
+
 /// A device profile: one product, configured from its options. Every
 /// product module implements it the same way and registers with one line
 /// in [`crate::PROFILES`] (`ProfileEntry::of::<MyProfile>()`).
@@ -270,6 +276,16 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
         None
     }
 
+    /// The file in which the program running the slave keeps the device's
+    /// state (e.g. the RFID reader's tags), if it keeps one: the device
+    /// reports each new content as a [`DeviceEvent`] of kind
+    /// [`STATE_EVENT`], and the program writes it there.
+    ///
+    /// [`DeviceEvent`]: profibus_dp::slave::DeviceEvent
+    fn state_file(&self) -> Option<PathBuf> {
+        None
+    }
+
     /// The slave device that emulates the product; `control` is where
     /// control commands arrive, for profiles that take them.
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError>;
@@ -310,6 +326,8 @@ pub trait Configured: std::fmt::Debug + Send + Sync {
     fn address(&self) -> Option<u8>;
     /// See [`Profile::address_file`].
     fn address_file(&self) -> Option<PathBuf>;
+    /// See [`Profile::state_file`].
+    fn state_file(&self) -> Option<PathBuf>;
     /// See [`Profile::device`].
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError>;
     /// See [`Profile::channels`].
@@ -349,6 +367,9 @@ impl<P: Profile> Configured for P {
     }
     fn address_file(&self) -> Option<PathBuf> {
         Profile::address_file(self)
+    }
+    fn state_file(&self) -> Option<PathBuf> {
+        Profile::state_file(self)
     }
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
         Profile::device(self, control)

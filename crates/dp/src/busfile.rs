@@ -15,7 +15,7 @@
 //! lost_after = 3         # cycles without answer before a slave is lost
 //! reprobe_ms = 100       # how often a lost slave is probed
 //! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
-//! global_control_ms = 0  # repeat operate/clear Global_Control (0 = on change)
+//! global_control_ms = 100  # repeat operate/clear Global_Control (default 100; 0 = only on change)
 //!
 //! [[slave]]
 //! address = 8
@@ -461,7 +461,10 @@ impl BusFile {
                 .map(Duration::from_millis)
                 .unwrap_or(d.reprobe_interval),
             diag_interval: ms(o.diag_interval_ms),
-            global_control_interval: ms(o.global_control_ms),
+            global_control_interval: match o.global_control_ms {
+                None => d.global_control_interval,
+                Some(v) => ms(Some(v)),
+            },
             not_ready_limit: d.not_ready_limit,
         };
         Ok(BusFile {
@@ -514,6 +517,25 @@ watchdog_ms = 300
         assert_eq!(s.io_lengths().unwrap(), (44, 44));
         assert_eq!(b.master.params.baud, Baud::B1500000);
         assert_eq!(b.master.address, 2);
+        // A class-1 master announces Operate/Clear cyclically by default.
+        assert_eq!(
+            b.master.options.global_control_interval,
+            Some(crate::master::DEFAULT_GLOBAL_CONTROL_INTERVAL)
+        );
+    }
+
+    #[test]
+    fn global_control_period_from_the_options() {
+        for (line, want) in [
+            ("global_control_ms = 0", None),
+            ("global_control_ms = 40", Some(Duration::from_millis(40))),
+        ] {
+            let text = format!(
+                "[master]\naddress = 2\nbaud = \"1.5M\"\n[options]\n{line}\n[[slave]]\naddress = 5\ngsd = \"BNF_00D0.GSD\"\nmodules = [\"Service data module\"]\n"
+            );
+            let b = load(&text).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(b.master.options.global_control_interval, want, "{line}");
+        }
     }
 
     #[test]

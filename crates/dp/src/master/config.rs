@@ -139,13 +139,22 @@ pub struct MasterOptions {
     pub reprobe_interval: Duration,
     /// Read every slave's diagnosis this often even without DH.
     pub diag_interval: Option<Duration>,
-    /// Repeat the operate/clear Global_Control this often (the standard's
-    /// Data_Control_Time announcement); `None`: only on changes.
+    /// Repeat the operate/clear Global_Control this often; `None`: only on
+    /// changes. A class-1 master announces its operating state (Operate or
+    /// Clear) to its slaves cyclically, at least once per
+    /// Data_Control_Time (EN 50170 Vol. 2, DDLM_Global_Control; the
+    /// masters in real traces do so several times a second). Default:
+    /// [`DEFAULT_GLOBAL_CONTROL_INTERVAL`].
     pub global_control_interval: Option<Duration>,
     /// Cycles a slave may stay Station_Not_Ready after Chk_Cfg before it
     /// is parameterised again.
     pub not_ready_limit: u16,
 }
+
+/// The default period of the cyclic operate/clear Global_Control: 100 ms,
+/// well inside the usual Data_Control_Time (a multiple of the slaves'
+/// watchdog time) and a negligible share of the bus at any baud rate.
+pub const DEFAULT_GLOBAL_CONTROL_INTERVAL: Duration = Duration::from_millis(100);
 
 impl Default for MasterOptions {
     fn default() -> Self {
@@ -153,7 +162,7 @@ impl Default for MasterOptions {
             lost_after: 3,
             reprobe_interval: Duration::from_millis(100),
             diag_interval: None,
-            global_control_interval: None,
+            global_control_interval: Some(DEFAULT_GLOBAL_CONTROL_INTERVAL),
             not_ready_limit: 100,
         }
     }

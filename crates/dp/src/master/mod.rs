@@ -77,7 +77,7 @@
 
 mod config;
 
-pub use config::{MasterConfig, MasterOptions, SlaveParams};
+pub use config::{MasterConfig, MasterOptions, SlaveParams, DEFAULT_GLOBAL_CONTROL_INTERVAL};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::diag::SlaveDiag;

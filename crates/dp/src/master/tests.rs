@@ -5,14 +5,23 @@ use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
 use profibus_fdl::timing::{Baud, BusParams};
 use profibus_fdl::wire::StationType;
 
+/// A master with one slave; no cyclic Global_Control, so that the tests
+/// of the poll sequence see only the slave's requests.
 fn master() -> DpMaster {
+    master_with(MasterOptions {
+        global_control_interval: None,
+        ..MasterOptions::default()
+    })
+}
+
+fn master_with(options: MasterOptions) -> DpMaster {
     let mut s = SlaveParams::new(8, 0x1234, vec![0x11, 0x21]); // 2 in, 2 out
     s.initial_outputs = vec![0xA0, 0xA1];
     DpMaster::new(&MasterConfig {
         address: 2,
         params: BusParams::defaults(Baud::B1500000),
         slaves: vec![s],
-        options: MasterOptions::default(),
+        options,
     })
     .unwrap()
 }
@@ -323,4 +332,70 @@ fn an_invalid_diagnosis_at_start_up_is_not_taken_for_a_lock_or_an_ident() {
     answer(&mut m, 2, diag_resp(&FRESH));
     assert_eq!(next(&mut m, 3).unwrap().0, Some(sap::SET_PRM));
     assert_eq!(m.slave_stats(8).unwrap().invalid_diags, 1);
+}
+
+#[test]
+fn operate_is_announced_with_global_control_cyclically_by_default() {
+    let mut m = master_with(MasterOptions::default());
+    // Start-up, skipping the Global_Control announcements in between.
+    for (t, want, outcome) in [
+        (1, sap::SLAVE_DIAG, diag_resp(&FRESH)),
+        (2, sap::SET_PRM, Outcome::ShortAck),
+        (3, sap::CHK_CFG, Outcome::ShortAck),
+        (4, sap::SLAVE_DIAG, diag_resp(&READY)),
+    ] {
+        let mut dsap = next(&mut m, t).unwrap().0;
+        while dsap == Some(sap::GLOBAL_CONTROL) {
+            m.on_result(
+                Instant::from_nanos(t),
+                &CycleResult {
+                    da: 127,
+                    service: Service::SdnHigh,
+                    outcome: Outcome::Sent,
+                    retries: 0,
+                },
+            );
+            dsap = m.poll_request(&ctx(t, 1)).unwrap().dsap;
+        }
+        assert_eq!(dsap, Some(want));
+        answer(&mut m, t, outcome);
+    }
+    assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+    let (mut gcs, mut sent) = (vec![], 0);
+    // One second of token visits, 1 ms apart.
+    for k in 0..1000u64 {
+        let now = 10 + k * 1_000_000;
+        while let Some(r) = m.poll_request(&ctx(now, 0)) {
+            let (da, service, data) = (r.da, r.service, r.data.to_vec());
+            let outcome = if da == 127 {
+                gcs.push((now, data));
+                Outcome::Sent
+            } else {
+                Outcome::ShortAck
+            };
+            m.on_result(
+                Instant::from_nanos(now),
+                &CycleResult {
+                    da,
+                    service,
+                    outcome,
+                    retries: 0,
+                },
+            );
+            sent += 1;
+            if sent % 4 == 0 {
+                break;
+            }
+        }
+    }
+    // Operate (Control_Command 0, all groups) at least every 100 ms.
+    assert!(gcs.len() >= 9, "{} Global_Control in 1 s", gcs.len());
+    assert!(gcs.iter().all(|(_, d)| d == &[0x00, 0x00]));
+    for w in gcs.windows(2) {
+        assert!(w[1].0 - w[0].0 <= 101_000_000, "gap {:?}", w[1].0 - w[0].0);
+    }
+    // In Clear, the same announcement carries Clear_Data.
+    m.set_operating_state(OperatingState::Clear);
+    let r = m.poll_request(&ctx(2_000_000_000, 0)).unwrap();
+    assert_eq!((r.da, r.data.to_vec()), (127, vec![0x02, 0x00]));
 }

@@ -1018,7 +1018,17 @@ impl<D: Device> Responder for DpSlave<D> {
             }
             return Reply::Silence;
         }
-        let reply = match (req.dsap, req.ssap) {
+        // The DP SAPs (and the default SAP of Data_Exchange) serve SRD
+        // only: EN 50170 Vol. 2 maps every DDLM service but Global_Control
+        // onto SRD, and slave ASICs (SPC3, VPC3+) activate the DP SAPs for
+        // SRD alone. An SDA or MSRD is answered "SAP not activated" (RS)
+        // and nothing is executed.
+        if !matches!(kind, RequestKind::SrdLow | RequestKind::SrdHigh) {
+            let service = req.dsap.and_then(sap::name).unwrap_or("Data_Exchange");
+            self.refuse(from, service, "DP services are SRD only");
+            return NEGATIVE_RS;
+        }
+        match (req.dsap, req.ssap) {
             (None, None) => self.data_exchange(now, from, req.data, out),
             (Some(dsap), Some(_)) => match dsap {
                 sap::SLAVE_DIAG => {
@@ -1089,15 +1099,6 @@ impl<D: Device> Responder for DpSlave<D> {
                 self.stats.refused += 1;
                 rs(req)
             }
-        };
-        // SDA carries no response data: a positive reply is an SC.
-        match (kind, reply) {
-            (RequestKind::SdaLow | RequestKind::SdaHigh, Reply::Data { status, .. })
-                if !status.is_negative() =>
-            {
-                Reply::ShortAck
-            }
-            _ => reply,
         }
     }
 

@@ -1000,7 +1000,7 @@ fn unknown_saps_and_odd_requests() {
     // Only one SAP byte.
     let a = b.req(t(0), MASTER, RequestKind::SrdHigh, None, &[]);
     assert_eq!(a.status(), Some(ResponseStatus::Rs));
-    // SDA gets SC instead of data.
+    // SDA to a DP SAP: SAP not activated for that service.
     let a = b.req(
         t(0),
         MASTER,
@@ -1008,7 +1008,7 @@ fn unknown_saps_and_odd_requests() {
         Some((sap::SLAVE_DIAG, 62)),
         &[],
     );
-    assert_eq!(a, Ans::Sc);
+    assert_eq!(a, Ans::Data(ResponseStatus::Rs, None, None, vec![]));
     // SDN to the slave is never answered.
     let a = b.req(
         t(0),
@@ -1117,4 +1117,52 @@ fn on_the_wire_with_the_passive_station() {
     );
     assert!(r.is_empty());
     assert_eq!(st.app().state(), SlaveState::DataExch);
+}
+
+#[test]
+fn dp_saps_serve_srd_only() {
+    let rs = Ans::Data(ResponseStatus::Rs, None, None, vec![]);
+    let mut b = Bench::new(TestDevice::new());
+    let prm = prm(LOCK_WD);
+    for kind in [RequestKind::SdaHigh, RequestKind::SdaLow, RequestKind::Msrd] {
+        // Set_Prm, Chk_Cfg and Slave_Diag sent with another FDL service:
+        // "SAP not activated", and nothing is executed.
+        let set_prm = b.req(t(0), MASTER, kind, Some((sap::SET_PRM, sap::MASTER)), &prm);
+        assert_eq!(set_prm, rs, "{kind:?}");
+        assert_eq!(b.slave.state(), SlaveState::WaitPrm, "{kind:?}");
+        let diag = b.req(
+            t(0),
+            MASTER,
+            kind,
+            Some((sap::SLAVE_DIAG, sap::MASTER)),
+            &[],
+        );
+        assert_eq!(diag, rs, "{kind:?}");
+    }
+    b.start(t(1), &prm);
+    let refused = b.slave.stats().refused;
+    let chk = b.req(
+        t(2),
+        MASTER,
+        RequestKind::SdaHigh,
+        Some((sap::CHK_CFG, sap::MASTER)),
+        &[0x11],
+    );
+    assert_eq!(chk, rs);
+    let dx = b.req(t(2), MASTER, RequestKind::SdaHigh, None, &[9, 9]);
+    assert_eq!(dx, rs);
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    assert_eq!(
+        b.slave.device().writes,
+        0,
+        "the SDA's outputs were not taken"
+    );
+    assert_eq!(b.slave.stats().refused, refused + 2);
+    assert!(b.events().iter().any(|e| matches!(
+        e,
+        SlaveEvent::Refused {
+            service: "Chk_Cfg",
+            ..
+        }
+    )));
 }
