@@ -150,7 +150,7 @@ fn wrong_configuration_shows_cfg_fault_in_words() {
     let mut faults = vec![];
     while let Some(e) = p.m().poll_event() {
         if let MasterEvent::Fault { reason, .. } = e {
-            faults.push(reason);
+            faults.push(reason.to_string());
         }
     }
     assert!(!faults.is_empty());

@@ -159,7 +159,7 @@ fn omega_configuration_against_the_rules_is_a_cfg_fault() {
     let mut faults = vec![];
     while let Some(e) = dp.poll_event() {
         if let MasterEvent::Fault { address, reason } = e {
-            faults.push((address, reason));
+            faults.push((address, reason.to_string()));
         }
     }
     assert!(

@@ -158,6 +158,7 @@ async fn demo(args: Args) -> Result<()> {
             name: s.name.clone(),
             gsd: Some(s.gsd.clone()),
             dpv1: s.gsd.dpv1_slave,
+            channels: None,
         })
         .collect();
 

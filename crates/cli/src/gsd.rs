@@ -30,7 +30,7 @@ enum Cmd {
 
 #[derive(clap::Args)]
 struct ShowArgs {
-    /// The GSD file (Latin-1 text).
+    /// The GSD file (Latin-1 text; `.gsd` or a localised `.gse`, `.gsg`, …).
     file: PathBuf,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -45,7 +45,7 @@ struct ShowArgs {
 
 #[derive(clap::Args)]
 struct CheckArgs {
-    /// The GSD file (Latin-1 text).
+    /// The GSD file (Latin-1 text; `.gsd` or a localised `.gse`, `.gsg`, …).
     file: PathBuf,
     /// Treat vendor quirks (e.g. `MaxTsd_`, `Modules=`, a commented-out
     /// `#Profibus_DP`) as errors instead of warnings.

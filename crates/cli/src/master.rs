@@ -3,7 +3,8 @@
 use crate::common;
 use crate::view::{drain_events, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
-use profibus_dp::busfile::BusFile;
+use profibus_devices::bus::ProfiledBus;
+use profibus_devices::channels::Value as ChannelValue;
 use profibus_dp::control::ControlCommand;
 use profibus_dp::master::{DpMaster, Job, OperatingState, SlaveState};
 use profibus_fdl::driver::{self, Clock};
@@ -20,6 +21,8 @@ use std::time::Duration;
 /// Commands for scripting come as JSON lines from `--input` (a file, or
 /// `-` for stdin), one per line:
 ///   {"slave": 8, "outputs": "01 02"}          write outputs (hex or [1, 2])
+///   {"slave": 25, "set": {"setpoint1": 100}}  write outputs by channel name
+///                                             (slaves given as `device = …`)
 ///   {"operating": "clear"}                    operate | clear | stop
 ///   {"global_control": ["sync"], "group": 1}  sync, unsync, freeze, unfreeze
 ///   {"read_diag": 8} / {"get_cfg": 8} / {"rd_inp": 8} / {"rd_outp": 8}
@@ -67,8 +70,41 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = BusFile::load(&args.config)?;
+    let bus = ProfiledBus::load(&args.config)?;
     common::runtime()?.block_on(master(args, bus))
+}
+
+/// `{"slave": N, "set": {"NAME": VALUE, …}}`: outputs by channel name.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SetChannels {
+    slave: u8,
+    set: std::collections::BTreeMap<String, ChannelValue>,
+}
+
+/// Apply a channel command; `None` when `line` is none.
+fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Result<()>> {
+    let v: Value = serde_json::from_str(line).ok()?;
+    v.get("set")?;
+    Some((|| {
+        let c: SetChannels = serde_json::from_value(v)?;
+        let map = info
+            .iter()
+            .find(|s| s.address == c.slave)
+            .and_then(|s| s.channels.as_ref())
+            .with_context(|| {
+                format!(
+                    "slave {} has no named channels (give it as `device = …` in the bus file)",
+                    c.slave
+                )
+            })?;
+        let h = m.handle(c.slave).context("slave not in the bus file")?;
+        map.write_outputs(
+            c.set.iter().map(|(k, v)| (k.as_str(), *v)),
+            m.outputs_mut(h),
+        )?;
+        Ok(())
+    })())
 }
 
 fn parse_bytes(v: &Value) -> Result<Vec<u8>> {
@@ -186,7 +222,8 @@ pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
     Ok(Some(format!("job {} queued", id.0)))
 }
 
-async fn master(args: Args, bus: BusFile) -> Result<()> {
+async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
+    let bus = &profiled.file;
     for w in &bus.warnings {
         eprintln!("dpctl master: warning: {w}");
     }
@@ -194,7 +231,7 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
     if args.clear {
         dp.set_operating_state(OperatingState::Clear);
     }
-    let (mut station, mut port) = common::master_station(&args.port, &bus, dp, args.latency)?;
+    let (mut station, mut port) = common::master_station(&args.port, bus, dp, args.latency)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
 
     // Commands come from a plain thread: a blocking read of stdin must not
@@ -224,16 +261,20 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
         !args.json && std::io::stdout().is_terminal(),
         Duration::from_millis(args.interval.max(10)),
     );
-    let info: Vec<SlaveInfo> = bus
-        .slaves
-        .iter()
-        .map(|s| SlaveInfo {
-            address: s.params.address,
+    let mut info: Vec<SlaveInfo> = vec![];
+    for s in &bus.slaves {
+        let a = s.params.address;
+        info.push(SlaveInfo {
+            address: a,
             name: s.params.name.clone(),
             gsd: Some(s.gsd.clone()),
             dpv1: s.params.dpv1,
-        })
-        .collect();
+            channels: profiled
+                .channels(a)
+                .transpose()
+                .with_context(|| format!("slave {a}"))?,
+        });
+    }
     let baud = bus.master.params.baud;
     let cycles = args.cycles;
     let mut last_now = Instant::ZERO;
@@ -247,7 +288,11 @@ async fn master(args: Args, bus: BusFile) -> Result<()> {
             last_now = now;
             let m = st.app_mut();
             while let Ok(line) = rx.try_recv() {
-                match apply_command(m, &line) {
+                let result = match set_channels(m, &info, &line) {
+                    Some(r) => r.map(|_| None),
+                    None => apply_command(m, &line),
+                };
+                match result {
                     Ok(Some(reply)) => {
                         view.event(json!({"event": "command", "result": reply}), reply)
                     }

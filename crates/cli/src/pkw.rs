@@ -271,7 +271,7 @@ fn describe_attr(ind: u16, v: u16) -> String {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = BusFile::load(&args.config)?;
+    let bus = profibus_devices::bus::ProfiledBus::load(&args.config)?.file;
     common::runtime()?.block_on(pkw(args, bus))
 }
 

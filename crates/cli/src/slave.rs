@@ -55,7 +55,8 @@ pub struct Args {
     /// bytes, so it locks at the first rate that sees a valid telegram).
     #[arg(long, value_name = "B", default_value = "auto")]
     baud: String,
-    /// GSD file of the device to emulate (the generic device).
+    /// GSD file of the device to emulate (the generic device; `.gsd` or a
+    /// localised `.gse`, `.gsg`, …).
     #[arg(long, value_name = "FILE", conflicts_with = "device")]
     gsd: Option<PathBuf>,
     /// A module of the GSD file, in slot order (repeat for each module;

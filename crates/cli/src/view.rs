@@ -2,6 +2,7 @@
 //! lines or JSON, a refreshing table of the slaves on a terminal.
 
 pub use crate::describe::hex;
+use profibus_devices::channels::{ChannelMap, Direction};
 use profibus_dp::diag;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterEvent};
@@ -20,6 +21,20 @@ pub struct SlaveInfo {
     pub gsd: Option<Gsd>,
     /// DP-V1 slave.
     pub dpv1: bool,
+    /// Named channels of its process images (a slave given as a device
+    /// profile).
+    pub channels: Option<ChannelMap>,
+}
+
+/// The channels of one image as a JSON object and as `name=value` words.
+fn channel_values(map: &ChannelMap, dir: Direction, image: &[u8]) -> (Value, String) {
+    let mut obj = serde_json::Map::new();
+    let mut words = vec![];
+    for (c, v) in map.decode(dir, image) {
+        obj.insert(c.name.clone(), json!(v));
+        words.push(format!("{}={v}", c.name));
+    }
+    (Value::Object(obj), words.join(" "))
 }
 
 impl View {
@@ -70,12 +85,12 @@ impl View {
         }
         self.last_print = Some(now);
         let c = m.cycle_stats();
-        let slaves: Vec<Value> = slaves_info
+        let mut slaves: Vec<Value> = slaves_info
             .iter()
             .map(|s| {
                 let a = s.address;
                 let st = m.slave_stats(a).unwrap_or_default();
-                json!({
+                let mut v = json!({
                     "address": a,
                     "name": s.name,
                     "state": m.slave_state(a).map(|x| x.name()),
@@ -85,10 +100,23 @@ impl View {
                     "retries": st.retries,
                     "errors": st.errors,
                     "restarts": st.restarts,
-                })
+                });
+                if let Some(map) = &s.channels {
+                    let (i, it) = channel_values(map, Direction::Input, m.inputs(a).unwrap_or(&[]));
+                    let (o, ot) =
+                        channel_values(map, Direction::Output, m.outputs(a).unwrap_or(&[]));
+                    v["channels"] = json!({"inputs": i, "outputs": o});
+                    v["channels_text"] = json!(format!("in: {it}  out: {ot}"));
+                }
+                v
             })
             .collect();
         if self.json {
+            for s in &mut slaves {
+                if let Some(o) = s.as_object_mut() {
+                    o.remove("channels_text");
+                }
+            }
             println!(
                 "{}",
                 json!({
@@ -131,6 +159,9 @@ impl View {
                 s["errors"],
                 s["retries"],
             ));
+            if let Some(t) = s["channels_text"].as_str() {
+                out.push_str(&format!("      {t}\n"));
+            }
         }
         if self.tty {
             for l in &self.log {
@@ -164,7 +195,7 @@ pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View
                 );
             }
             MasterEvent::Fault { address, reason } => view.event(
-                json!({"event": "fault", "slave": address, "reason": reason}),
+                json!({"event": "fault", "slave": address, "reason": reason.to_string()}),
                 format!("slave {address} fault: {reason}"),
             ),
             MasterEvent::JobDone(id) => {

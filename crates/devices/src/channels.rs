@@ -300,6 +300,23 @@ impl ChannelMap {
     }
 }
 
+impl ChannelMap {
+    /// Write several output channels: all of them, or none when one name
+    /// or value is wrong.
+    pub fn write_outputs<'a>(
+        &self,
+        values: impl IntoIterator<Item = (&'a str, Value)>,
+        outputs: &mut [u8],
+    ) -> Result<(), ChannelError> {
+        let mut scratch = outputs.to_vec();
+        for (name, v) in values {
+            self.write_output(name, v, &mut scratch)?;
+        }
+        outputs.copy_from_slice(&scratch);
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -342,6 +359,14 @@ mod tests {
             Err(ChannelError::Unknown(_))
         ));
         assert_eq!(m.decode(Direction::Output, &img[..5]).count(), 2);
+        let before = img;
+        assert!(m
+            .write_outputs([("w", Value::Int(1)), ("d", Value::Float(0.5))], &mut img)
+            .is_err());
+        assert_eq!(img, before, "nothing written");
+        m.write_outputs([("w", Value::Int(1)), ("b", Value::Bool(false))], &mut img)
+            .unwrap();
+        assert_eq!(&img[..3], &[0, 0, 1]);
         assert_eq!(m.decode(Direction::Input, &img).count(), 0);
     }
 }

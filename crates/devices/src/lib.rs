@@ -64,6 +64,7 @@
 
 pub mod address;
 pub mod bm4;
+pub mod bus;
 pub mod channels;
 pub mod generic;
 pub mod gsd_files;

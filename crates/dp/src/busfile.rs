@@ -28,7 +28,22 @@
 //! sync = false
 //! freeze = false
 //! initial_outputs = [0, 0]               # optional
+//!
+//! [[slave]]
+//! address = 25
+//! device = "omega"                       # a device profile instead of gsd/modules
+//! setpoints = 2                          # … with its options
+//! actual_values = 2
 //! ```
+//!
+//! A slave names either a GSD file and its modules, or a device profile
+//! (`device = "NAME"`) with the profile's options as further keys. This
+//! crate knows no profile: [`BusFile::load_with`] takes a
+//! [`DeviceResolver`] (the `profibus-devices` registry is one) that turns
+//! the name and options into the profile's GSD and modules; from there
+//! the slave is built like any other (`params`, `watchdog_ms`, … apply),
+//! and [`BusSlave::device`] keeps the name and options for the layer
+//! above (named channels, PKW).
 //!
 //! [`BusFile::load`] parses the file, reads every GSD, selects the modules,
 //! builds Chk_Cfg and User_Prm_Data, checks the selection against the
@@ -96,12 +111,29 @@ struct RawOptions {
     global_control_ms: Option<u64>,
 }
 
+/// The keys of a `[[slave]]` table; any other key is a profile option
+/// (only with `device`).
+const SLAVE_KEYS: &[&str] = &[
+    "address",
+    "name",
+    "gsd",
+    "device",
+    "modules",
+    "params",
+    "watchdog_ms",
+    "group",
+    "sync",
+    "freeze",
+    "initial_outputs",
+    "dpv1",
+];
+
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
 struct RawSlave {
     address: Spanned<u8>,
     name: Option<String>,
-    gsd: Spanned<String>,
+    gsd: Option<Spanned<String>>,
+    device: Option<Spanned<String>>,
     #[serde(default)]
     modules: Vec<Spanned<String>>,
     #[serde(default)]
@@ -114,13 +146,62 @@ struct RawSlave {
     dpv1: Option<bool>,
 }
 
+/// A slave given as a device profile: `device = "NAME"` and the other
+/// keys of its table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceEntry {
+    /// The profile's name.
+    pub name: String,
+    /// The profile's options (the table's keys that are not slave keys).
+    pub options: toml::Table,
+}
+
+/// What a [`DeviceResolver`] makes of a [`DeviceEntry`].
+#[derive(Debug, Clone)]
+pub struct ResolvedDevice {
+    /// The profile's GSD for these options.
+    pub gsd: Gsd,
+    /// The GSD module names to configure, in slot order.
+    pub modules: Vec<String>,
+}
+
+/// Turns `device = "NAME"` plus options into a GSD and modules (the
+/// layer above implements it with its profile registry).
+pub trait DeviceResolver {
+    /// Resolve the profile entry of the slave at `address`.
+    fn resolve(
+        &self,
+        entry: &DeviceEntry,
+        address: u8,
+    ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>>;
+}
+
+/// No device profiles: a `device =` entry is an error.
+struct NoProfiles;
+
+impl DeviceResolver for NoProfiles {
+    fn resolve(
+        &self,
+        entry: &DeviceEntry,
+        _address: u8,
+    ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
+        Err(format!(
+            "device profiles (`{}`) need a loader with the device registry (profibus-devices)",
+            entry.name
+        )
+        .into())
+    }
+}
+
 /// One configured slave with its GSD.
 #[derive(Debug, Clone)]
 pub struct BusSlave {
     /// What the master sends it.
     pub params: SlaveParams,
-    /// The GSD file it was built from.
+    /// The GSD file it was built from (`<NAME>` for a device profile).
     pub gsd_path: PathBuf,
+    /// The device profile it was given as, if any.
+    pub device: Option<DeviceEntry>,
     /// The parsed GSD (for diagnosis texts and `dpctl gsd`).
     pub gsd: Gsd,
     /// The selected module names, in order.
@@ -204,8 +285,18 @@ impl Ctx<'_> {
 const MAX_BUS_FILE: u64 = 4 << 20;
 
 impl BusFile {
-    /// Read and check a bus file; see the module docs.
+    /// Read and check a bus file without device profiles; see the module
+    /// docs.
     pub fn load(path: impl AsRef<Path>) -> Result<BusFile, BusFileError> {
+        Self::load_with(path, &NoProfiles)
+    }
+
+    /// Read and check a bus file whose `device = "NAME"` entries
+    /// `resolver` resolves.
+    pub fn load_with(
+        path: impl AsRef<Path>,
+        resolver: &dyn DeviceResolver,
+    ) -> Result<BusFile, BusFileError> {
         let path = path.as_ref();
         let io = |m: String| BusFileError {
             path: path.to_path_buf(),
@@ -221,14 +312,39 @@ impl BusFile {
             )));
         }
         let text = std::fs::read_to_string(path).map_err(|e| io(format!("cannot read: {e}")))?;
-        Self::parse(path, &text)
+        Self::parse_with(path, &text, resolver)
     }
 
-    /// Check the text of a bus file; GSD paths are relative to `path`'s
-    /// directory.
+    /// Check the text of a bus file without device profiles; GSD paths
+    /// are relative to `path`'s directory.
     pub fn parse(path: &Path, text: &str) -> Result<BusFile, BusFileError> {
+        Self::parse_with(path, text, &NoProfiles)
+    }
+
+    /// Check the text of a bus file whose `device = "NAME"` entries
+    /// `resolver` resolves.
+    pub fn parse_with(
+        path: &Path,
+        text: &str,
+        resolver: &dyn DeviceResolver,
+    ) -> Result<BusFile, BusFileError> {
         let cx = Ctx { path, text };
         let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
+        // The slaves' tables once more as plain tables: the keys that are
+        // not slave keys are a profile's options.
+        let tables: Vec<toml::Table> = match toml::from_str::<toml::Table>(text)
+            .map_err(|e| cx.err(e.span(), e.message()))?
+            .remove("slave")
+        {
+            Some(toml::Value::Array(a)) => a
+                .into_iter()
+                .map(|v| match v {
+                    toml::Value::Table(t) => t,
+                    _ => toml::Table::new(),
+                })
+                .collect(),
+            _ => vec![],
+        };
         let mut warnings = Vec::new();
 
         let m = raw.master.get_ref();
@@ -255,9 +371,16 @@ impl BusFile {
         let mut slaves = Vec::new();
         let mut seen = [false; 128];
         let mut max_tsdr_needed = 0u32;
-        for rs in &raw.slave {
+        for (n, rs) in raw.slave.iter().enumerate() {
             let s = rs.get_ref();
             let addr = *s.address.get_ref();
+            let options: toml::Table = tables
+                .get(n)
+                .into_iter()
+                .flatten()
+                .filter(|(k, _)| !SLAVE_KEYS.contains(&k.as_str()))
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect();
             if addr > 125 || addr == address {
                 return Err(cx.err(
                     Some(s.address.span()),
@@ -272,16 +395,64 @@ impl BusFile {
                     format!("a second slave with address {addr}"),
                 ));
             }
-            let gsd_path = dir.join(s.gsd.get_ref());
-            let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
-                .map_err(|e| cx.err(Some(s.gsd.span()), format!("GSD file: {e}")))?;
-            for w in &parsed.warnings {
-                warnings.push(format!("{}:{w}", gsd_path.display()));
-            }
-            let gsd = parsed.gsd;
+            // Where the GSD came from, for error positions.
+            let (gsd_path, gsd, device, source_span, module_names) = match (&s.gsd, &s.device) {
+                (Some(g), None) => {
+                    if let Some(k) = options.keys().next() {
+                        return Err(cx.err(
+                            key_span(text, rs.span(), k),
+                            format!("slave {addr}: unknown key `{k}` (profile options need `device = \"NAME\"`)"),
+                        ));
+                    }
+                    let gsd_path = dir.join(g.get_ref());
+                    let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
+                        .map_err(|e| cx.err(Some(g.span()), format!("GSD file: {e}")))?;
+                    for w in &parsed.warnings {
+                        warnings.push(format!("{}:{w}", gsd_path.display()));
+                    }
+                    let names: Vec<(String, Option<std::ops::Range<usize>>)> = s
+                        .modules
+                        .iter()
+                        .map(|m| (m.get_ref().clone(), Some(m.span())))
+                        .collect();
+                    (gsd_path, parsed.gsd, None, g.span(), names)
+                }
+                (None, Some(d)) => {
+                    if let Some(m) = s.modules.first() {
+                        return Err(cx.err(
+                            Some(m.span()),
+                            format!("slave {addr}: a device profile chooses its modules; give its options instead"),
+                        ));
+                    }
+                    let entry = DeviceEntry {
+                        name: d.get_ref().clone(),
+                        options,
+                    };
+                    let r = resolver.resolve(&entry, addr).map_err(|e| {
+                        cx.err(
+                            Some(d.span()),
+                            format!("slave {addr}: device `{}`: {e}", entry.name),
+                        )
+                    })?;
+                    let names = r.modules.into_iter().map(|m| (m, None)).collect();
+                    (
+                        PathBuf::from(format!("<{}>", entry.name)),
+                        r.gsd,
+                        Some(entry),
+                        d.span(),
+                        names,
+                    )
+                }
+                _ => {
+                    return Err(cx.err(
+                        Some(rs.span()),
+                        format!("slave {addr}: give either `gsd` (with `modules`) or `device`"),
+                    ))
+                }
+            };
             if !gsd.supports_baud(baud) {
                 return Err(cx.err(
-                    Some(s.gsd.span()),
+                    Some(source_span.clone()),
                     format!("{} does not support {baud}", gsd_path.display()),
                 ));
             }
@@ -290,14 +461,17 @@ impl BusFile {
             }
             let mut selection = Vec::new();
             let mut names = Vec::new();
-            for m in &s.modules {
-                let i = gsd.find_module_index(m.get_ref()).map_err(|e| {
-                    cx.err(Some(m.span()), format!("{e} in {}", gsd_path.display()))
+            for (m, span) in &module_names {
+                let i = gsd.find_module_index(m).map_err(|e| {
+                    cx.err(
+                        span.clone().or(Some(source_span.clone())),
+                        format!("{e} in {}", gsd_path.display()),
+                    )
                 })?;
                 selection.push(i);
                 names.push(gsd.modules[i].name.clone());
             }
-            if s.modules.is_empty() {
+            if module_names.is_empty() {
                 selection = gsd.default_selection();
                 names = selection
                     .iter()
@@ -395,6 +569,7 @@ impl BusFile {
             slaves.push(BusSlave {
                 params: p,
                 gsd_path,
+                device,
                 gsd,
                 modules: names,
             });
@@ -479,6 +654,24 @@ impl BusFile {
             warnings,
         })
     }
+}
+
+/// Where `key` is set inside the table at `span` (its line), else the
+/// table.
+fn key_span(text: &str, span: std::ops::Range<usize>, key: &str) -> Option<std::ops::Range<usize>> {
+    let body = text.get(span.clone())?;
+    let mut at = 0;
+    for line in body.split_inclusive('\n') {
+        let t = line.trim_start();
+        if t.strip_prefix(key)
+            .is_some_and(|r| r.trim_start().starts_with('='))
+        {
+            let start = span.start + at + (line.len() - t.len());
+            return Some(start..start + key.len());
+        }
+        at += line.len();
+    }
+    Some(span)
 }
 
 #[cfg(test)]
@@ -567,5 +760,85 @@ modules = ["no such module"]
         )
         .unwrap_err();
         assert!(e.message.contains("not the master's"), "{e}");
+    }
+
+    /// A resolver with one profile, `omega2`: BNF_00D0.GSD with 2/2
+    /// values, `pkw = false` leaves the service data module out.
+    struct OneProfile;
+
+    impl DeviceResolver for OneProfile {
+        fn resolve(
+            &self,
+            entry: &DeviceEntry,
+            _address: u8,
+        ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
+            if entry.name != "omega2" {
+                return Err("unknown".into());
+            }
+            let gsd = Gsd::from_file(
+                gsd_dir().with_file_name("BNF_00D0.GSD"),
+                ParseOptions { lenient: true },
+            )?
+            .gsd;
+            let mut modules = vec![
+                "Status / control module",
+                "2 cycl. actual values",
+                "2 cycl. setpoints",
+            ];
+            if entry.options.get("pkw") != Some(&toml::Value::Boolean(false)) {
+                modules.insert(0, "Service data module");
+            }
+            Ok(ResolvedDevice {
+                gsd,
+                modules: modules.into_iter().map(String::from).collect(),
+            })
+        }
+    }
+
+    #[test]
+    fn a_slave_may_name_a_device_profile() {
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 25
+device = "omega2"
+pkw = false
+watchdog_ms = 300
+"#;
+        let b = BusFile::parse_with(&gsd_dir(), text, &OneProfile).unwrap();
+        let s = &b.slaves[0];
+        assert_eq!(s.params.cfg, [0x71, 0x53, 0x63]);
+        assert_eq!(s.params.user_prm_data.len(), 5);
+        assert_eq!(s.params.watchdog, Some(Duration::from_millis(300)));
+        let d = s.device.as_ref().unwrap();
+        assert_eq!(d.name, "omega2");
+        assert_eq!(d.options.get("pkw"), Some(&toml::Value::Boolean(false)));
+        assert!(!d.options.contains_key("watchdog_ms"));
+
+        // Without a registry, or with an unknown name: an error at `device`.
+        let e = BusFile::parse(&gsd_dir(), text).unwrap_err();
+        assert_eq!(e.line, 7, "{e}");
+        let e = BusFile::parse_with(&gsd_dir(), &text.replace("omega2", "nope"), &OneProfile)
+            .unwrap_err();
+        assert!(e.message.contains("device `nope`"), "{e}");
+        // Profile options without a profile: the key's line.
+        let e = BusFile::parse_with(
+            &gsd_dir(),
+            &text.replace("device = \"omega2\"", "gsd = \"BNF_00D0.GSD\""),
+            &OneProfile,
+        )
+        .unwrap_err();
+        assert_eq!(e.line, 8, "{e}");
+        assert!(e.message.contains("unknown key `pkw`"), "{e}");
+        // Both, or neither.
+        let e = BusFile::parse_with(
+            &gsd_dir(),
+            &text.replace("pkw = false", "gsd = \"BNF_00D0.GSD\""),
+            &OneProfile,
+        )
+        .unwrap_err();
+        assert!(e.message.contains("either"), "{e}");
     }
 }

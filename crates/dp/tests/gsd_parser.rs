@@ -610,3 +610,18 @@ fn keywords_of_the_standard_are_known() {
     // Written back, the file reads the same.
     assert_eq!(strict(&g.write()).gsd, *g);
 }
+
+#[test]
+fn a_compact_station_with_many_alternatives_names_a_few() {
+    let modules: String = (0..9)
+        .map(|i| format!("Module=\"PPO {i}\" 0xF1\nEndModule\n"))
+        .collect();
+    let g = strict(&format!("{HEAD}{modules}")).gsd;
+    let p = g.check_selection(&[0, 1]);
+    assert_eq!(
+        p[0].to_string(),
+        "this is a compact station (no Modular_Station=1): it is configured with exactly \
+         one of its modules (`PPO 0`, `PPO 1`, `PPO 2`, `PPO 3`, `PPO 4`, `PPO 5`, … 9 in all), \
+         or all of them in file order"
+    );
+}

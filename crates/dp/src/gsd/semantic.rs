@@ -799,12 +799,18 @@ impl Gsd {
         }
         let every: Vec<usize> = (0..self.modules.len()).collect();
         if !self.modular_station && selection.len() != 1 && selection != every.as_slice() {
-            let names: Vec<String> = self
+            // Name a few modules; a long list helps nobody.
+            const NAMED: usize = 6;
+            let mut names: Vec<String> = self
                 .modules
                 .iter()
+                .take(NAMED)
                 .map(|m| format!("`{}`", m.name))
                 .collect();
-            let expected = match names.len() {
+            if self.modules.len() > NAMED {
+                names.push(format!("… {} in all", self.modules.len()));
+            }
+            let expected = match self.modules.len() {
                 0 => "no module (the file defines none)".to_string(),
                 1 => names[0].clone(),
                 _ => format!(

@@ -289,6 +289,49 @@ impl JobResult {
     }
 }
 
+/// Why the master reports a slave fault ([`MasterEvent::Fault`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FaultReason {
+    /// The slave reports another ident number than the configuration.
+    #[error(
+        "slave reports ident number 0x{reported:04X}, the configuration expects 0x{expected:04X}"
+    )]
+    IdentMismatch {
+        /// In the slave's diagnosis.
+        reported: u16,
+        /// In the configuration.
+        expected: u16,
+    },
+    /// The station status bytes report a fault (Prm_Fault, Cfg_Fault,
+    /// Not_Supported, …); shown as the status bits in words.
+    #[error("{}", crate::diag::SlaveDiag {
+        status1: *status1,
+        status2: *status2,
+        status3: *status3,
+        master_address: crate::diag::NO_MASTER,
+        ident_number: 0,
+        ext_diag: &[],
+    }.status_words())]
+    Station {
+        /// Station_Status_1.
+        status1: crate::diag::StationStatus1,
+        /// Station_Status_2.
+        status2: crate::diag::StationStatus2,
+        /// Station_Status_3.
+        status3: crate::diag::StationStatus3,
+    },
+}
+
+impl FaultReason {
+    fn station(d: &SlaveDiag<'_>) -> FaultReason {
+        FaultReason::Station {
+            status1: d.status1,
+            status2: d.status2,
+            status3: d.status3,
+        }
+    }
+}
+
 /// What the master reports.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum MasterEvent {
@@ -310,8 +353,8 @@ pub enum MasterEvent {
     Fault {
         /// Station address.
         address: u8,
-        /// The fault in words.
-        reason: String,
+        /// What is wrong (`Display`: in words).
+        reason: FaultReason,
     },
     /// A job ended; take its result with [`DpMaster::take_result`].
     JobDone(JobId),
@@ -963,10 +1006,10 @@ impl DpMaster {
                     if d.ident_number != ident {
                         self.emit(MasterEvent::Fault {
                             address,
-                            reason: format!(
-                                "slave reports ident number 0x{:04X}, the configuration expects 0x{ident:04X}",
-                                d.ident_number
-                            ),
+                            reason: FaultReason::IdentMismatch {
+                                reported: d.ident_number,
+                                expected: ident,
+                            },
                         });
                     }
                     if state == SlaveState::Offline || state == SlaveState::Locked {
@@ -984,7 +1027,7 @@ impl DpMaster {
                 {
                     self.emit(MasterEvent::Fault {
                         address,
-                        reason: d.status_words(),
+                        reason: FaultReason::station(&d),
                     });
                     self.set_state(i, SlaveState::Diag);
                 } else if d.status2.contains(S2::PRM_REQ) || locked_by_other {
@@ -1003,7 +1046,7 @@ impl DpMaster {
                     if d.status1.intersects(S1::PRM_FAULT | S1::CFG_FAULT) {
                         self.emit(MasterEvent::Fault {
                             address,
-                            reason: d.status_words(),
+                            reason: FaultReason::station(&d),
                         });
                     }
                     self.set_state(i, SlaveState::Diag);

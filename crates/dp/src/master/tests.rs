@@ -166,7 +166,7 @@ fn cfg_fault_is_reported_in_words() {
     let mut reasons = vec![];
     while let Some(e) = m.poll_event() {
         if let MasterEvent::Fault { reason, .. } = e {
-            reasons.push(reason);
+            reasons.push(reason.to_string());
         }
     }
     assert_eq!(

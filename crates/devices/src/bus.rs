@@ -1,0 +1,165 @@
+//! Bus files whose slaves may name a device profile (`device = "bm4"`
+//! plus its options instead of `gsd` and `modules`): the profile registry
+//! as the bus file's [`DeviceResolver`], and the named channels of those
+//! slaves for the master.
+
+use crate::channels::ChannelMap;
+use crate::profile::{Configured, DeviceOptions, ProfileError};
+use profibus_dp::busfile::{BusFile, BusFileError, DeviceEntry, DeviceResolver, ResolvedDevice};
+use std::cell::RefCell;
+use std::path::Path;
+
+/// A loaded bus file with the configured profiles of its `device`
+/// slaves.
+#[derive(Debug)]
+pub struct ProfiledBus {
+    /// The bus file.
+    pub file: BusFile,
+    profiles: Vec<(u8, Box<dyn Configured>)>,
+}
+
+/// The registry as a [`DeviceResolver`], keeping what it configured.
+#[derive(Default)]
+struct Registry {
+    configured: RefCell<Vec<(u8, Box<dyn Configured>)>>,
+}
+
+impl DeviceResolver for Registry {
+    fn resolve(
+        &self,
+        entry: &DeviceEntry,
+        address: u8,
+    ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
+        let profile = crate::profile(&entry.name)?.configure(
+            &DeviceOptions::from_table(entry.options.clone()),
+            Some(address),
+        )?;
+        let resolved = ResolvedDevice {
+            gsd: profile.gsd().clone(),
+            modules: profile.modules(),
+        };
+        self.configured.borrow_mut().push((address, profile));
+        Ok(resolved)
+    }
+}
+
+impl ProfiledBus {
+    /// Read and check a bus file (see `profibus_dp::busfile`), resolving
+    /// `device = "NAME"` slaves with the profile registry.
+    pub fn load(path: impl AsRef<Path>) -> Result<ProfiledBus, BusFileError> {
+        let registry = Registry::default();
+        let file = BusFile::load_with(path, &registry)?;
+        Ok(ProfiledBus {
+            file,
+            profiles: registry.configured.into_inner(),
+        })
+    }
+
+    /// [`ProfiledBus::load`] from text; GSD paths are relative to `path`'s
+    /// directory.
+    pub fn parse(path: &Path, text: &str) -> Result<ProfiledBus, BusFileError> {
+        let registry = Registry::default();
+        let file = BusFile::parse_with(path, text, &registry)?;
+        Ok(ProfiledBus {
+            file,
+            profiles: registry.configured.into_inner(),
+        })
+    }
+
+    /// The configured profile of the slave at `address`, if it was given
+    /// as one.
+    pub fn profile(&self, address: u8) -> Option<&dyn Configured> {
+        self.profiles
+            .iter()
+            .find(|(a, _)| *a == address)
+            .map(|(_, p)| p.as_ref())
+    }
+
+    /// The named channels of the slave at `address` for the configuration
+    /// the master sends it; `None` for a slave given by GSD modules.
+    pub fn channels(&self, address: u8) -> Option<Result<ChannelMap, ProfileError>> {
+        let profile = self.profile(address)?;
+        let slave = self
+            .file
+            .slaves
+            .iter()
+            .find(|s| s.params.address == address)?;
+        Some(profile.channels(&slave.params.cfg))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channels::{Direction, Value};
+
+    #[test]
+    fn bm4_and_omega_from_a_bus_file() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 6
+device = "bm4"
+vars = "../crates/devices/data/bm4_example_vars.toml"
+modules = ["ud_MyReadVar1", "ud_MyWriteVar1"]
+"#;
+        // `modules` is a slave key: a profile chooses its own.
+        assert!(ProfiledBus::parse(&dir, text).is_err());
+        let text = text.replace("modules", "variables");
+        let e = ProfiledBus::parse(&dir, &text).unwrap_err();
+        assert!(e.message.contains("variables"), "{e}");
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 6
+device = "bm4"
+vars = "BM4_VARS"
+
+[[slave]]
+address = 25
+device = "omega"
+setpoints = 1
+actual_values = 1
+pkw = false
+"#
+        .replace(
+            "BM4_VARS",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/data/bm4_example_vars.toml"),
+        );
+        let bus = ProfiledBus::parse(&dir, &text).unwrap();
+        let bm4 = &bus.file.slaves[0];
+        assert_eq!(bm4.params.ident_number, crate::bm4::IDENT);
+        assert_eq!(bm4.params.cfg[0], crate::pkw::PKW_MODULE);
+        assert_eq!(bm4.device.as_ref().unwrap().name, "bm4");
+        let ch = bus.channels(6).unwrap().unwrap();
+        assert!(ch.find(Direction::Output, "ud_MyWriteVar1").is_some());
+        let omega = &bus.file.slaves[1];
+        assert_eq!(omega.params.cfg, [0x71, 0x51, 0x61]);
+        let ch = bus.channels(25).unwrap().unwrap();
+        let mut inputs = [0u8; 8];
+        inputs[0] = 0x02; // status word 1: Remote
+        inputs[4..8].copy_from_slice(&1234i32.to_be_bytes());
+        let values: Vec<(String, Value)> = ch
+            .decode(Direction::Input, &inputs)
+            .map(|(c, v)| (c.name.clone(), v))
+            .collect();
+        assert_eq!(
+            values,
+            [
+                ("status1".to_string(), Value::Int(0x0200)),
+                ("status2".to_string(), Value::Int(0)),
+                ("actual1".to_string(), Value::Int(1234)),
+            ]
+        );
+        assert!(bus.profile(25).is_some() && bus.channels(7).is_none());
+        // Profile options are checked by the profile.
+        let e =
+            ProfiledBus::parse(&dir, &text.replace("setpoints = 1", "setpoints = 9")).unwrap_err();
+        assert!(e.message.contains("si_NR_WR_VALUE"), "{e}");
+    }
+}

@@ -1,0 +1,106 @@
+//! A bus file that names a device profile (`device = "omega"` plus its
+//! options) end to end: `dpctl master` configures the slave from the
+//! profile, shows its named channels and takes outputs by channel name;
+//! `dpctl slave --device omega` on the other end of a socat pty pair.
+//! (A file of its own: its processes do not run next to the other
+//! profile tests.)
+
+mod common;
+
+use common::*;
+use serde_json::Value;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const BUS: &str = "[master]
+address = 2
+baud = \"1.5M\"
+
+[[slave]]
+address = 25
+device = \"omega\"
+setpoints = 2
+actual_values = 2
+watchdog_ms = 1000
+";
+
+const COMMANDS: &str = r#"{"slave": 25, "set": {"setpoint1": 1234, "setpoint2": -5}}
+{"slave": 25, "set": {"nope": 1}}
+"#;
+
+#[test]
+fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
+    let dir = TempDir::new("device-bus");
+    let (master_end, slave_end) = (dir.path("m"), dir.path("s"));
+    let _socat = pty_pair(&master_end, &slave_end);
+    let mut slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args([
+                "slave", "--device", "omega", "--addr", "25", "--json", "--port",
+            ])
+            .arg(&slave_end)
+            .stdout(Stdio::piped())
+            .stdin(Stdio::null()),
+    );
+    let mut slave_out = Lines::from(&mut slave);
+    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    let (bus, cmds) = (dir.path("bus.toml"), dir.path("cmds.jsonl"));
+    std::fs::write(&bus, BUS).unwrap();
+    std::fs::write(&cmds, COMMANDS).unwrap();
+    let out = Command::new(dpctl())
+        .args(["master", "--cycles", "60", "--json", "--port"])
+        .arg(&master_end)
+        .arg("--config")
+        .arg(&bus)
+        .arg("--input")
+        .arg(&cmds)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    assert!(
+        lines
+            .iter()
+            .any(|v| v["event"] == "state" && v["slave"] == 25 && v["to"] == "data_exchange"),
+        "{lines:?}"
+    );
+    // The last inputs received: the drive follows its setpoints (actual
+    // value i = setpoint i) and reports Remote in status word 1.
+    let st = lines.iter().rev().find(|v| v["event"] == "status").unwrap();
+    let ch = &st["slaves"][0]["channels"];
+    assert_eq!(ch["outputs"]["setpoint1"], 1234, "{ch}");
+    assert_eq!(ch["inputs"]["actual1"], 1234, "{ch}");
+    assert_eq!(ch["inputs"]["actual2"], -5, "{ch}");
+    assert_eq!(ch["inputs"]["status1"], 0x0200, "{ch}");
+    // A wrong channel name is refused with the name, nothing written.
+    assert!(
+        lines
+            .iter()
+            .any(|v| v["event"] == "error" && v["error"].as_str().unwrap().contains("`nope`")),
+        "{lines:?}"
+    );
+    // In words: a line of `name=value` under the slave.
+    let out = Command::new(dpctl())
+        .args(["master", "--cycles", "60", "--port"])
+        .arg(&master_end)
+        .arg("--config")
+        .arg(&bus)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.lines().any(|l| l.trim_start().starts_with("in: pke=")
+            && l.contains(" status1=")
+            && l.contains("out: pke=")),
+        "{text}"
+    );
+    assert!(slave.terminate(Duration::from_secs(10)).success());
+}
