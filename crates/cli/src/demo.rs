@@ -8,6 +8,7 @@ use crate::view::{drain_events, hex, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
+use profibus_devices::jx2::{self, script::Interpreter};
 use profibus_devices::pkw::{self, client::PkwClient};
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
@@ -120,7 +121,54 @@ fn plant() -> Result<Vec<PlantSlave>> {
             ],
             device: Box::new(profibus_devices::omega::Omega::with_defaults()),
         },
+        PlantSlave {
+            address: JX2_ADDRESS,
+            name: "JX2-PROFI1 (jx2)".into(),
+            gsd: gsd_files::parse(jx2::GSD)?,
+            modules: vec!["INPUT : 4 words", "OUTPUT : 4 words"],
+            device: Box::new(jx2_plc()?),
+        },
     ])
+}
+
+/// Station address the demo's JX2-PROFI1 gets from its PLC.
+const JX2_ADDRESS: u8 = 7;
+
+/// How the PLC configured its JX2-PROFI1 (module 2) before the plant
+/// started: 4 input and 4 output words, station 7 (example 1 of the
+/// manual with smaller counts).
+const JX2_INIT: &str = "write 12102 4\nwrite 12103 4\nwrite 12107 7\n";
+
+/// The demo PLC's program, in the register line protocol.
+const JX2_PROGRAM: &str = "\
+; in data exchange: input word 0 counts, input word 1 echoes output word 0,
+; a data-record read is answered with the area as it is
+label loop
+wait-bit 12100 3 set 60s
+calc 12300 r12300 + 1
+copy 1 12400 12301
+if-bit 12100 4 set write 12101 11
+delay 50ms
+goto loop
+";
+
+/// The demo's JX2-PROFI1: configured and initialised, its program
+/// running.
+fn jx2_plc() -> Result<jx2::ScriptedJx2> {
+    let mut plc = jx2::Plc::new(2)?;
+    let mut init = Interpreter::script(JX2_INIT)?;
+    init.run(&mut plc, Instant::ZERO);
+    // The PLC was switched on before the plant: initialisation is over.
+    plc.module.settle(Instant::ZERO + jx2::INIT_TIME);
+    anyhow::ensure!(
+        plc.module.station_address() == Some(JX2_ADDRESS),
+        "the demo PLC did not configure its JX2-PROFI1"
+    );
+    Ok(jx2::ScriptedJx2::new(
+        plc,
+        Interpreter::script(JX2_PROGRAM)?,
+        None,
+    ))
 }
 
 fn master_config(params: BusParams, slaves: &[PlantSlave]) -> Result<MasterConfig> {
@@ -221,6 +269,11 @@ async fn demo(args: Args) -> Result<()> {
         bus.run_until(target);
         let now = bus.now();
         let m = bus.station_mut::<Master>(master).app_mut();
+        // Stop before the application changes outputs: the last status
+        // then shows the inputs that answer the outputs shown.
+        if args.cycles.is_some_and(|n| m.cycle_stats().cycles >= n) {
+            break;
+        }
         // The "application": a ramp on the echo slave's outputs.
         if now >= next_output {
             next_output = now + Duration::from_millis(100);
@@ -228,6 +281,7 @@ async fn demo(args: Args) -> Result<()> {
             let r = ramp.to_be_bytes();
             m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
             m.set_outputs(4, &[0, 0, r[0], r[1]]);
+            m.set_outputs(JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]);
         }
         for p in pkw.iter_mut() {
             if let Some((text, v)) = p.step(m, now, ramp) {
@@ -236,9 +290,6 @@ async fn demo(args: Args) -> Result<()> {
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);
-        if args.cycles.is_some_and(|n| m.cycle_stats().cycles >= n) {
-            break;
-        }
         if !args.fast {
             tokio::select! {
                 _ = &mut shutdown => break,

@@ -9,7 +9,9 @@ mod common;
 mod decode;
 mod demo;
 mod describe;
+mod dpv1;
 mod gsd;
+mod jx2;
 mod master;
 mod pkw;
 mod scan;
@@ -49,6 +51,8 @@ enum Command {
     Sniff(sniff::Args),
     /// Read or write a parameter over a slave's PKW channel.
     Pkw(pkw::Args),
+    /// Read or write a DP-V1 data record (slot, index) of a slave.
+    Dpv1(dpv1::Args),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +74,7 @@ fn main() -> ExitCode {
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
         Command::Pkw(a) => pkw::run(a),
+        Command::Dpv1(a) => dpv1::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -23,7 +23,7 @@ use profibus_devices::generic::InputPattern;
 use profibus_devices::{
     BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES, STATE_EVENT,
 };
-use profibus_dp::slave::{control_words, DpSlave, SlaveEvent};
+use profibus_dp::slave::{control_words, Device, DpSlave, OwnAddress, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
 use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::passive::PassiveStation;
@@ -47,7 +47,7 @@ pub struct Args {
     /// address from --us-device / --switch instead when given, the omega
     /// profile from --switch.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=126),
-          required_unless_present_any = ["list_devices", "us_device", "switch"])]
+          required_unless_present_any = ["list_devices", "us_device", "switch", "device"])]
     addr: Option<u8>,
     /// Baud rate (9600 … 12M), or `auto` to search for the rate of the
     /// traffic on a serial line (on a pty: nominal 19.2 kbit/s), or
@@ -122,9 +122,18 @@ pub struct Args {
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
     /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
-    /// `leave`, `tags`, `status`.
+    /// `leave`, `tags`, `status`. jx2: a Unix socket to create for register
+    /// commands (`read 12100`, `write 12102 16`, ...; stdin always takes
+    /// them too).
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
+    /// jx2: the module number x of the registers 1x100..1x999 (1..9,
+    /// default 2).
+    #[arg(long, value_name = "N", requires = "device")]
+    module_number: Option<u32>,
+    /// jx2: register commands run as the PLC program at start.
+    #[arg(long, value_name = "FILE", requires = "device")]
+    script: Option<PathBuf>,
     /// File in which the generic device keeps an address set by
     /// Set_Slave_Add (`address=N`, `no_add_chg=0|1`); when it exists its
     /// address overrides --addr.
@@ -354,6 +363,7 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("write_gsd", path(&args.write_gsd)),
         ("params", path(&args.params)),
         ("address_file", path(&args.address_file)),
+        ("script", path(&args.script)),
         ("tags", path(&args.tags)),
     ] {
         if let Some(v) = v {
@@ -364,6 +374,7 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("us_device", args.us_device.map(i64::from)),
         ("setpoints", args.setpoints.map(i64::from)),
         ("actual_values", args.actual_values.map(i64::from)),
+        ("module_number", args.module_number.map(i64::from)),
     ] {
         if let Some(v) = v {
             opts.set(k, v);
@@ -398,12 +409,17 @@ fn build_device(
         let now = printer.now();
         printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
     }
-    let control = args.control.as_ref().map(|src| {
-        let inbox = ControlInbox::new();
-        spawn_control_reader(src.clone(), inbox.clone());
-        inbox
-    });
-    let dev = profile.device(control).map_err(in_words)?;
+    let dev = if entry.name == profibus_devices::jx2::profile::NAME {
+        // The register interface runs beside the slave (stdin, a socket).
+        crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?
+    } else {
+        let control = args.control.as_ref().map(|src| {
+            let inbox = ControlInbox::new();
+            spawn_control_reader(src.clone(), inbox.clone());
+            inbox
+        });
+        profile.device(control).map_err(in_words)?
+    };
     let name = match &args.device {
         Some(_) => entry.name.to_string(),
         None => {
@@ -414,6 +430,20 @@ fn build_device(
         }
     };
     Ok((profile, dev, name))
+}
+
+/// What the jx2 register clients need.
+fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::Options> {
+    let o: profibus_devices::jx2::profile::Options = opts.decode()?;
+    Ok(crate::jx2::Options {
+        module_number: o.module_number,
+        control: args.control.as_ref().map(PathBuf::from),
+        script: o.script,
+        baud: match parse_baud(&args.baud)? {
+            BaudChoice::Fixed(b) => b.bps(),
+            _ => PTY_NOMINAL.bps(),
+        },
+    })
 }
 
 fn list_devices() {
@@ -431,7 +461,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let rt = common::runtime()?;
+    let socket = args
+        .device
+        .as_deref()
+        .is_some_and(|d| d.eq_ignore_ascii_case(profibus_devices::jx2::profile::NAME))
+        .then(|| args.control.clone())
+        .flatten();
     let result = rt.block_on(run_async(args));
+    if let Some(s) = socket {
+        // The jx2 control socket (its listener may outlive the runtime).
+        let _ = std::fs::remove_file(s);
+    }
     // A --control reader may be blocked on stdin: do not wait for it.
     rt.shutdown_background();
     result
@@ -448,6 +488,8 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let (profile, device, name) = build_device(&args, &printer)?;
     let addr = match profile.address().or(args.addr) {
         Some(a) => a,
+        // A device that sets its address itself (jx2: its PLC writes it).
+        None if device.own_address() != OwnAddress::Slave => 0,
         None => bail!("give --addr N"),
     };
     let address_file = profile.address_file();
@@ -474,14 +516,17 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             first.to_string()
         };
+        let (address, at) = match slave.device().own_address() {
+            OwnAddress::NoneYet => (None, "with no address yet".to_string()),
+            OwnAddress::Set(a) => (Some(a), format!("at address {a}")),
+            OwnAddress::Slave => (Some(addr), format!("at address {addr}")),
+        };
         printer.emit(
             now,
             json!({"event": "start", "device": name, "ident": format!("0x{ident:04X}"),
-                   "address": addr, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
+                   "address": address, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
                    "pty": pty}),
-            format!(
-                "{name} (ident 0x{ident:04X}) at address {addr} on {path} ({baud_text})"
-            ),
+            format!("{name} (ident 0x{ident:04X}) {at} on {path} ({baud_text})"),
         );
     }
 

@@ -48,6 +48,20 @@ fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
     );
     assert!(pkw.iter().any(|v| v["slave"] == 25 && v["name"] == "P003"));
     assert!(pkw.iter().all(|v| v["error"].is_null()), "{pkw:?}");
+    // The JX2-PROFI1's PLC program: input word 0 counts, word 1 echoes
+    // output word 0.
+    let jx2 = status["slaves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["address"] == 7)
+        .expect("the JX2-PROFI1");
+    let (i, o) = (
+        jx2["inputs"].as_str().unwrap(),
+        jx2["outputs"].as_str().unwrap(),
+    );
+    assert_ne!(&i[..5], "00 00", "{jx2}");
+    assert_ne!(&o[..5], "00 00", "{jx2}");
     let summary = lines.last().unwrap();
     assert_eq!(summary["event"], "summary");
     assert!(summary["telegrams"].as_u64().unwrap() > 1000);

@@ -68,6 +68,7 @@ pub mod bus;
 pub mod channels;
 pub mod generic;
 pub mod gsd_files;
+pub mod jx2;
 pub mod omega;
 pub mod pkw;
 pub mod profile;
@@ -87,6 +88,7 @@ pub const PROFILES: &[ProfileEntry] = &[
     ProfileEntry::of::<generic::GenericProfile>(),
     ProfileEntry::of::<bm4::profile::Bm4Profile>(),
     ProfileEntry::of::<omega::profile::OmegaProfile>(),
+    ProfileEntry::of::<jx2::profile::Jx2Profile>(),
     ProfileEntry::of::<rfid::profile::RfidProfile>(),
 ];
 

@@ -11,6 +11,7 @@
 use crate::diag::ChannelIo;
 use crate::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
 use crate::prm::SetPrm;
+use crate::slave::SlaveState;
 use profibus_fdl::Instant;
 use std::borrow::Cow;
 use std::fmt;
@@ -171,6 +172,20 @@ pub const ERR_INVALID_SLOT: u8 = 2;
 pub const ERR_STATE_CONFLICT: u8 = 5;
 /// Access error code "invalid range".
 pub const ERR_INVALID_RANGE: u8 = 7;
+
+/// Where the slave's station address comes from (see
+/// [`Device::own_address`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum OwnAddress {
+    /// The address the slave was created with, or got by Set_Slave_Add.
+    Slave,
+    /// The device has no address yet: the station does not take part in
+    /// the bus (it answers nothing, broadcasts included).
+    NoneYet,
+    /// The device set this address itself, e.g. its PLC wrote it into a
+    /// register.
+    Set(u8),
+}
 
 /// Something a device reports for people (e.g. "PKW job done"); the slave
 /// passes it on as [`SlaveEvent::Device`](super::SlaveEvent::Device).
@@ -455,6 +470,30 @@ pub trait Device {
         Ok(())
     }
 
+    /// The station address when the device decides it at run time
+    /// (asked for every received telegram, so it must be cheap). Default:
+    /// [`OwnAddress::Slave`].
+    fn own_address(&self) -> OwnAddress {
+        OwnAddress::Slave
+    }
+
+    /// Whether the device restarted its bus interface since the last call
+    /// (a reset, a newly set address). The slave then forgets the master,
+    /// the parameters and the configuration and returns to Wait_Prm.
+    /// Asked before each request and at each timeout. Default: never.
+    fn take_restart(&mut self) -> bool {
+        false
+    }
+
+    /// The DP state changed to `state` (Wait_Prm, Wait_Cfg, Data_Exch).
+    /// Default: nothing.
+    fn state_changed(&mut self, _now: Instant, _state: SlaveState) {}
+
+    /// The slave refused a Set_Prm in its own checks (ident number, lock
+    /// bits, watchdog, DP-V1 status bytes) or in [`Device::check_prm`].
+    /// Default: nothing.
+    fn prm_refused(&mut self, _now: Instant, _reason: &Reason) {}
+
     /// Something for people (polled after every request and timeout).
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         None
@@ -525,6 +564,18 @@ impl<D: Device + ?Sized> Device for Box<D> {
         rem_slave_data: &[u8],
     ) -> Result<(), Reason> {
         (**self).set_address(new_address, no_add_chg, rem_slave_data)
+    }
+    fn own_address(&self) -> OwnAddress {
+        (**self).own_address()
+    }
+    fn take_restart(&mut self) -> bool {
+        (**self).take_restart()
+    }
+    fn state_changed(&mut self, now: Instant, state: SlaveState) {
+        (**self).state_changed(now, state)
+    }
+    fn prm_refused(&mut self, now: Instant, reason: &Reason) {
+        (**self).prm_refused(now, reason)
     }
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         (**self).poll_event()

@@ -84,8 +84,9 @@ mod state;
 pub use device::Device;
 pub use device::{
     expect_cfg, layout_of, ClearReason, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
-    Reason, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_CLASS_RESOURCE, ERR_FEATURE_NOT_SUPPORTED,
-    ERR_INVALID_INDEX, ERR_INVALID_RANGE, ERR_INVALID_SLOT, ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
+    OwnAddress, Reason, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_CLASS_RESOURCE,
+    ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE, ERR_INVALID_SLOT,
+    ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
 };
 pub use state::{control_words, SlaveEvent, SlaveState};
 
@@ -106,6 +107,10 @@ use std::time::Duration;
 /// Longest process data in one direction (and the size of the slave's
 /// fixed buffers).
 pub const MAX_IO_LEN: usize = 244;
+
+/// What [`Responder::address`] reports while the device has no address
+/// ([`OwnAddress::NoneYet`]): no telegram carries it, so none matches.
+pub const NO_ADDRESS: u8 = 0xFF;
 
 /// Highest address Set_Slave_Add may assign.
 pub const MAX_SLAVE_ADDRESS: u8 = 125;
@@ -334,8 +339,22 @@ impl<D: Device> DpSlave<D> {
         }
         if from != to {
             self.state = to;
+            self.device.state_changed(now, to);
             self.event(SlaveEvent::State { from, to });
         }
+    }
+
+    /// The device restarted its bus interface: back to Wait_Prm with no
+    /// master, parameters, configuration or pending diagnosis.
+    fn restart(&mut self, now: Instant) {
+        self.enter(now, SlaveState::WaitPrm, ClearReason::LeftDataExchange);
+        self.prm_fault = false;
+        self.cfg_fault = false;
+        self.not_supported = false;
+        self.diag_pending = false;
+        self.stat_diag = false;
+        self.layout = IoLayout::default();
+        self.c1 = C1Job::Idle;
     }
 
     /// Build the Slave_Diag data unit into `out` (needs at least 6 bytes);
@@ -646,6 +665,7 @@ impl<D: Device> DpSlave<D> {
 
     fn prm_fault(&mut self, now: Instant, from: u8, reason: Reason, not_supported: bool) {
         self.enter(now, SlaveState::WaitPrm, ClearReason::LeftDataExchange);
+        self.device.prm_refused(now, &reason);
         self.prm_fault = true;
         self.not_supported = not_supported;
         self.event(SlaveEvent::PrmFault {
@@ -995,7 +1015,11 @@ const NEGATIVE_RS: Reply = Reply::Data {
 
 impl<D: Device> Responder for DpSlave<D> {
     fn address(&self) -> u8 {
-        self.address
+        match self.device.own_address() {
+            OwnAddress::Slave => self.address,
+            OwnAddress::NoneYet => NO_ADDRESS,
+            OwnAddress::Set(a) => a,
+        }
     }
 
     fn min_tsdr(&self) -> u32 {
@@ -1006,6 +1030,12 @@ impl<D: Device> Responder for DpSlave<D> {
         let FunctionCode::Request { kind, .. } = req.fc else {
             return Reply::Silence;
         };
+        if self.device.take_restart() {
+            self.restart(now);
+        }
+        if self.device.own_address() == OwnAddress::NoneYet {
+            return Reply::Silence;
+        }
         let from = req.sa;
         if self.owner == Some(from) {
             if let Some(wd) = self.watchdog {
@@ -1107,6 +1137,9 @@ impl<D: Device> Responder for DpSlave<D> {
     }
 
     fn handle_timeout(&mut self, now: Instant) {
+        if self.device.take_restart() {
+            self.restart(now);
+        }
         if self.wd_deadline.is_some_and(|t| t <= now) {
             self.wd_deadline = None;
             self.expire_watchdog(now);

@@ -1,0 +1,230 @@
+//! `dpctl dpv1 read|write`: one DP-V1 class-1 data-record read or write.
+//!
+//! Runs the DP master of the bus file like `dpctl master`; once the slave
+//! is in Data_Exchange, the master's MSAC_C1 job runs (request, then
+//! polls until the slave answers or the slave's C1 response timeout of
+//! the bus file passes). Exit 0 with the data (or one JSON line), 1 with
+//! the slave's negative answer decoded in words, a timeout, or a slave
+//! that does not reach Data_Exchange.
+
+use crate::common;
+use anyhow::{bail, Context, Result};
+use profibus_dp::busfile::BusFile;
+use profibus_dp::master::{DpMaster, Job, JobId, JobResult, SlaveState};
+use profibus_fdl::driver::{self, Clock, Stop};
+use profibus_fdl::Instant;
+use serde_json::json;
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Read or write a DP-V1 data record (slot, index) of a slave.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Serial device or pty path.
+    #[arg(long, value_name = "PATH")]
+    port: String,
+    /// Bus file (TOML) with the slave (DP-V1 enabled).
+    #[arg(long, value_name = "BUS.toml")]
+    config: PathBuf,
+    /// Station address of the slave.
+    #[arg(long, value_name = "ADDR")]
+    slave: u8,
+    /// Slot of the record (0..=254).
+    #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
+    slot: u8,
+    /// Index of the record (0..=254).
+    #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
+    index: u8,
+    /// Milliseconds to wait for the slave to reach Data_Exchange.
+    #[arg(long, value_name = "MS", default_value_t = 10000)]
+    startup_timeout: u64,
+    /// Extra milliseconds on the slot time for the transport's latency
+    /// (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
+    /// Print one JSON object.
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    op: Op,
+}
+
+/// What to do.
+#[derive(clap::Subcommand)]
+enum Op {
+    /// Read up to LENGTH bytes (1..=240) of the record.
+    Read {
+        /// Bytes wanted.
+        #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u8).range(1..=240))]
+        length: u8,
+    },
+    /// Write the bytes (hex, e.g. `0A 0B` or `0a0b`) to the record.
+    Write {
+        /// Data, hex.
+        #[arg(value_name = "HEX", required = true)]
+        data: Vec<String>,
+    },
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let bus = BusFile::load(&args.config)?;
+    common::runtime()?.block_on(dpv1(args, bus))
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
+    let addr = args.slave;
+    let slave = bus
+        .slaves
+        .iter()
+        .find(|s| s.params.address == addr)
+        .with_context(|| format!("slave {addr} is not in {}", args.config.display()))?;
+    if !slave.params.dpv1 {
+        bail!("slave {addr} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)");
+    }
+    let (op, job) = match &args.op {
+        Op::Read { length } => (
+            "read",
+            Job::Dpv1Read {
+                address: addr,
+                slot: args.slot,
+                index: args.index,
+                length: *length,
+            },
+        ),
+        Op::Write { data } => {
+            let data = crate::decode::parse_hex(data)?;
+            if data.is_empty() || data.len() > 240 {
+                bail!("a record write carries 1..=240 bytes, not {}", data.len());
+            }
+            (
+                "write",
+                Job::Dpv1Write {
+                    address: addr,
+                    slot: args.slot,
+                    index: args.index,
+                    data,
+                },
+            )
+        }
+    };
+    let (mut station, mut port) =
+        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
+    let startup = Duration::from_millis(args.startup_timeout);
+    let mut started: Option<Instant> = None;
+    let mut job = Some(job);
+    let mut id: Option<JobId> = None;
+    let mut result: Option<JobResult> = None;
+    let mut failure: Option<String> = None;
+    let stop = driver::run_with(
+        &mut station,
+        &mut port,
+        Clock::start(),
+        common::driver_options(&args.port, 0),
+        common::shutdown(),
+        |st, now| {
+            let m = st.app_mut();
+            while m.poll_event().is_some() {}
+            let t0 = *started.get_or_insert(now);
+            if let Some(i) = id {
+                if let Some(r) = m.take_result(i) {
+                    result = Some(r);
+                    return ControlFlow::Break(());
+                }
+                return ControlFlow::Continue(());
+            }
+            if m.slave_state(addr) != Some(SlaveState::DataExchange) {
+                if now.saturating_duration_since(t0) > startup {
+                    failure = Some(format!(
+                        "slave {addr} did not reach Data_Exchange within {} ms (state {})",
+                        startup.as_millis(),
+                        m.slave_state(addr).map_or("unknown", |s| s.name())
+                    ));
+                    return ControlFlow::Break(());
+                }
+                return ControlFlow::Continue(());
+            }
+            if let Some(j) = job.take() {
+                match m.submit(j) {
+                    Some(i) => id = Some(i),
+                    None => {
+                        failure = Some("job queue full".into());
+                        return ControlFlow::Break(());
+                    }
+                }
+            }
+            ControlFlow::Continue(())
+        },
+    )
+    .await;
+    match stop.with_context(|| format!("on {}", args.port))? {
+        Stop::Shutdown => bail!("interrupted"),
+        Stop::Done => {}
+    }
+    if let Some(f) = failure {
+        bail!("{f}");
+    }
+    let (slot, index) = (args.slot, args.index);
+    match result.context("no result")? {
+        JobResult::Data(d) => {
+            if args.json {
+                println!(
+                    "{}",
+                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true,
+                           "length": d.len(), "data": hex(&d)})
+                );
+            } else {
+                println!(
+                    "slave {addr} slot {slot} index {index}: {} bytes {}",
+                    d.len(),
+                    hex(&d)
+                );
+            }
+            Ok(())
+        }
+        JobResult::Done => {
+            if args.json {
+                println!(
+                    "{}",
+                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true})
+                );
+            } else {
+                println!("slave {addr} slot {slot} index {index}: written");
+            }
+            Ok(())
+        }
+        JobResult::Dpv1Error(e) => {
+            let words = e.describe();
+            if args.json {
+                println!(
+                    "{}",
+                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
+                           "error": words, "error_decode": e.error_decode,
+                           "error_code_1": format!("0x{:02X}", e.error_code_1),
+                           "error_code_2": e.error_code_2})
+                );
+            }
+            bail!("slave {addr} slot {slot} index {index}: {words}")
+        }
+        other => {
+            if args.json {
+                println!(
+                    "{}",
+                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
+                           "error": other.describe()})
+                );
+            }
+            bail!(
+                "slave {addr} slot {slot} index {index}: {}",
+                other.describe()
+            )
+        }
+    }
+}

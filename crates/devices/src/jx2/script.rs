@@ -1,0 +1,792 @@
+//! The register line protocol: a person, a test or a script plays the
+//! PLC program of a [`Plc`] with a JX2-PROFI1, one command per line, one
+//! JSON reply per command.
+//!
+//! ```text
+//! read REG [COUNT]              value(s) of REG, REG+1, …
+//! write REG VALUE [VALUE…]      REGISTER_LOAD (to REG, REG+1, …)
+//! copy N FROM TO                COPY (N, FROM, TO): N registers
+//! calc DEST A [OP B]            DEST = A op B (+ - * / % & |), e.g. calc 100 r12118 + 1
+//! wait-bit REG BIT[,BIT…] set|clear [TIMEOUT]
+//!                               WHEN BIT_SET / BIT_CLEAR (default 10s; with
+//!                               several bits: until any of them is so)
+//! wait A CMP B [TIMEOUT]        until A CMP B (== != < <= > >=)
+//! if A CMP B COMMAND…           run COMMAND when A CMP B holds
+//! if-bit REG BIT set|clear COMMAND…       IF BIT_SET / BIT_CLEAR
+//! label NAME / goto NAME        jumps (in scripts)
+//! delay DURATION                wait, e.g. 100ms, 2s
+//! status                        the module's status, error and state decoded
+//! fail-memory-test              the next reset (command 5) reports error 11
+//! ```
+//! A value is a number (decimal, `0x` hex, negative) or `rREG`, the
+//! content of a register (`r12118`; also for COPY's count: the manual's
+//! `COPY (100, 600, 12600)` after `REG 100 = …` is `copy r100 600 12600`).
+//! `#` and `;` start comments. Register numbers `1xzzz` (x = the module
+//! number) are the module's, all others plain PLC registers.
+//!
+//! Replies are JSON objects with `"cmd"` and `"ok"`; a write the module
+//! ignored has `"ok": false` and `"ignored"` (why), a write that raised an
+//! error has `"error"` (the number of 1x134) and `"error_text"`; a wait
+//! that timed out has `"ok": false, "timeout": true`. The interpreter is
+//! sans-IO: [`Interpreter::run`] executes as far as it can at `now` and
+//! says when to call again.
+
+use super::{status, ErrorNumber, Plc, WriteEffect};
+use profibus_fdl::Instant;
+use serde_json::{json, Value};
+use std::collections::{HashMap, VecDeque};
+use std::time::Duration;
+
+/// Default timeout of `wait-bit` and `wait`.
+pub const DEFAULT_WAIT: Duration = Duration::from_secs(10);
+
+/// A line that is not a command.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("line {line}: {message}")]
+pub struct ParseError {
+    /// 1-based line number.
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// A value: a number or a register's content.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Operand {
+    /// A number.
+    Lit(i64),
+    /// The content of a register.
+    Reg(u32),
+}
+
+/// A comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cmp {
+    /// `==`
+    Eq,
+    /// `!=`
+    Ne,
+    /// `<`
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+}
+
+/// An arithmetic operator of `calc`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Op {
+    /// `+`
+    Add,
+    /// `-`
+    Sub,
+    /// `*`
+    Mul,
+    /// `/` (integer, toward zero; by zero gives 0)
+    Div,
+    /// `%`
+    Rem,
+    /// `&`
+    And,
+    /// `|`
+    Or,
+}
+
+/// One command of the protocol.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Command {
+    /// `read REG [COUNT]`
+    Read {
+        /// First register.
+        reg: u32,
+        /// Registers to read.
+        count: u32,
+    },
+    /// `write REG VALUE…`
+    Write {
+        /// First register.
+        reg: u32,
+        /// Values for REG, REG+1, ….
+        values: Vec<Operand>,
+    },
+    /// `copy N FROM TO`
+    Copy {
+        /// Number of registers.
+        count: Operand,
+        /// First source register.
+        from: u32,
+        /// First destination register.
+        to: u32,
+    },
+    /// `calc DEST A [OP B]`
+    Calc {
+        /// Destination register.
+        dest: u32,
+        /// First operand.
+        a: Operand,
+        /// Operator and second operand.
+        rest: Option<(Op, Operand)>,
+    },
+    /// `wait-bit REG BIT[,BIT…] set|clear [TIMEOUT]`
+    WaitBit {
+        /// Register.
+        reg: u32,
+        /// Bits 0..=23 (a mask): any of them reaching the state ends the
+        /// wait.
+        bits: u32,
+        /// Wait for set (true) or clear.
+        set: bool,
+        /// Give up after this long.
+        timeout: Duration,
+    },
+    /// `wait A CMP B [TIMEOUT]`
+    Wait {
+        /// Left side.
+        a: Operand,
+        /// Comparison.
+        cmp: Cmp,
+        /// Right side.
+        b: Operand,
+        /// Give up after this long.
+        timeout: Duration,
+    },
+    /// `if A CMP B COMMAND`
+    If {
+        /// Left side.
+        a: Operand,
+        /// Comparison.
+        cmp: Cmp,
+        /// Right side.
+        b: Operand,
+        /// What to do when it holds.
+        then: Box<Command>,
+    },
+    /// `if-bit REG BIT set|clear COMMAND`
+    IfBit {
+        /// Register.
+        reg: u32,
+        /// Bit 0..=23.
+        bit: u8,
+        /// Test for set (true) or clear.
+        set: bool,
+        /// What to do when it holds.
+        then: Box<Command>,
+    },
+    /// `label NAME`
+    Label(String),
+    /// `goto NAME`
+    Goto(String),
+    /// `delay DURATION`
+    Delay(Duration),
+    /// `status`
+    Status,
+    /// `fail-memory-test`
+    FailMemoryTest,
+}
+
+fn parse_int(s: &str) -> Option<i64> {
+    let (neg, t) = match s.strip_prefix('-') {
+        Some(r) => (true, r),
+        None => (false, s),
+    };
+    let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(h) => i64::from_str_radix(h, 16).ok()?,
+        None => t.parse::<i64>().ok()?,
+    };
+    Some(if neg { -v } else { v })
+}
+
+fn parse_reg(s: &str) -> Result<u32, String> {
+    parse_int(s)
+        .filter(|v| (0..=99_999_999).contains(v))
+        .map(|v| v as u32)
+        .ok_or_else(|| format!("`{s}` is not a register number"))
+}
+
+fn parse_operand(s: &str) -> Result<Operand, String> {
+    if let Some(r) = s.strip_prefix(['r', 'R']) {
+        return parse_reg(r).map(Operand::Reg);
+    }
+    parse_int(s)
+        .map(Operand::Lit)
+        .ok_or_else(|| format!("`{s}` is neither a number nor rREG"))
+}
+
+fn parse_cmp(s: &str) -> Result<Cmp, String> {
+    Ok(match s {
+        "==" | "=" => Cmp::Eq,
+        "!=" | "<>" => Cmp::Ne,
+        "<" => Cmp::Lt,
+        "<=" => Cmp::Le,
+        ">" => Cmp::Gt,
+        ">=" => Cmp::Ge,
+        _ => return Err(format!("`{s}` is not a comparison (== != < <= > >=)")),
+    })
+}
+
+/// Parse a duration: `5s`, `500ms`, `2m`, or a number of seconds.
+pub fn parse_duration(s: &str) -> Result<Duration, String> {
+    let bad = || format!("`{s}` is not a duration (e.g. 500ms, 5s)");
+    let (num, scale) = if let Some(n) = s.strip_suffix("ms") {
+        (n, 0.001)
+    } else if let Some(n) = s.strip_suffix('s') {
+        (n, 1.0)
+    } else if let Some(n) = s.strip_suffix('m') {
+        (n, 60.0)
+    } else {
+        (s, 1.0)
+    };
+    let v: f64 = num.parse().map_err(|_| bad())?;
+    if !(v.is_finite() && v >= 0.0 && v * scale < 1e7) {
+        return Err(bad());
+    }
+    Ok(Duration::from_secs_f64(v * scale))
+}
+
+impl Command {
+    /// Parse one line; `Ok(None)` for a blank or comment line.
+    pub fn parse(line: &str) -> Result<Option<Command>, String> {
+        let text = line.split(['#', ';']).next().unwrap_or("").trim();
+        if text.is_empty() {
+            return Ok(None);
+        }
+        let words: Vec<&str> = text.split_whitespace().collect();
+        Command::parse_words(&words).map(Some)
+    }
+
+    fn parse_words(w: &[&str]) -> Result<Command, String> {
+        let usage = |u: &str| Err(format!("usage: {u}"));
+        let timeout = |s: Option<&&str>| s.map_or(Ok(DEFAULT_WAIT), |s| parse_duration(s));
+        Ok(match w[0].to_ascii_lowercase().as_str() {
+            "read" => match w {
+                [_, r] => Command::Read {
+                    reg: parse_reg(r)?,
+                    count: 1,
+                },
+                [_, r, n] => Command::Read {
+                    reg: parse_reg(r)?,
+                    count: parse_int(n)
+                        .filter(|n| (1..=1000).contains(n))
+                        .ok_or("COUNT must be 1..=1000")? as u32,
+                },
+                _ => return usage("read REG [COUNT]"),
+            },
+            "write" => match w {
+                [_, r, vals @ ..] if !vals.is_empty() => Command::Write {
+                    reg: parse_reg(r)?,
+                    values: vals
+                        .iter()
+                        .map(|v| parse_operand(v))
+                        .collect::<Result<_, _>>()?,
+                },
+                _ => return usage("write REG VALUE [VALUE...]"),
+            },
+            "copy" => match w {
+                [_, n, from, to] => Command::Copy {
+                    count: parse_operand(n)?,
+                    from: parse_reg(from)?,
+                    to: parse_reg(to)?,
+                },
+                _ => return usage("copy N FROM TO"),
+            },
+            "calc" => match w {
+                [_, d, a] => Command::Calc {
+                    dest: parse_reg(d)?,
+                    a: parse_operand(a)?,
+                    rest: None,
+                },
+                [_, d, a, op, b] => Command::Calc {
+                    dest: parse_reg(d)?,
+                    a: parse_operand(a)?,
+                    rest: Some((
+                        match *op {
+                            "+" => Op::Add,
+                            "-" => Op::Sub,
+                            "*" => Op::Mul,
+                            "/" => Op::Div,
+                            "%" => Op::Rem,
+                            "&" => Op::And,
+                            "|" => Op::Or,
+                            _ => return Err(format!("`{op}` is not an operator (+ - * / % & |)")),
+                        },
+                        parse_operand(b)?,
+                    )),
+                },
+                _ => return usage("calc DEST A [OP B]"),
+            },
+            "wait-bit" => match w {
+                [_, r, b, s, rest @ ..] if rest.len() <= 1 => Command::WaitBit {
+                    reg: parse_reg(r)?,
+                    bits: b
+                        .split(',')
+                        .map(parse_bit)
+                        .try_fold(0u32, |m, b| b.map(|b| m | 1 << b))?,
+                    set: parse_state(s)?,
+                    timeout: timeout(rest.first())?,
+                },
+                _ => return usage("wait-bit REG BIT[,BIT...] set|clear [TIMEOUT]"),
+            },
+            "if-bit" => match w {
+                [_, r, b, s, then @ ..] if !then.is_empty() => Command::IfBit {
+                    reg: parse_reg(r)?,
+                    bit: parse_bit(b)?,
+                    set: parse_state(s)?,
+                    then: Box::new(conditional(then)?),
+                },
+                _ => return usage("if-bit REG BIT set|clear COMMAND"),
+            },
+            "wait" => match w {
+                [_, a, c, b, rest @ ..] if rest.len() <= 1 => Command::Wait {
+                    a: parse_operand(a)?,
+                    cmp: parse_cmp(c)?,
+                    b: parse_operand(b)?,
+                    timeout: timeout(rest.first())?,
+                },
+                _ => return usage("wait A CMP B [TIMEOUT]"),
+            },
+            "if" => match w {
+                [_, a, c, b, then @ ..] if !then.is_empty() => Command::If {
+                    a: parse_operand(a)?,
+                    cmp: parse_cmp(c)?,
+                    b: parse_operand(b)?,
+                    then: Box::new(conditional(then)?),
+                },
+                _ => return usage("if A CMP B COMMAND"),
+            },
+            "label" => match w {
+                [_, n] => Command::Label(n.to_string()),
+                _ => return usage("label NAME"),
+            },
+            "goto" => match w {
+                [_, n] => Command::Goto(n.to_string()),
+                _ => return usage("goto NAME"),
+            },
+            "delay" => match w {
+                [_, d] => Command::Delay(parse_duration(d)?),
+                _ => return usage("delay DURATION"),
+            },
+            "status" if w.len() == 1 => Command::Status,
+            "fail-memory-test" if w.len() == 1 => Command::FailMemoryTest,
+            other => return Err(format!("unknown command `{other}`")),
+        })
+    }
+}
+
+fn parse_bit(s: &str) -> Result<u8, String> {
+    parse_int(s)
+        .filter(|b| (0..=23).contains(b))
+        .map(|b| b as u8)
+        .ok_or_else(|| format!("bit `{s}` is not 0..=23"))
+}
+
+fn parse_state(s: &str) -> Result<bool, String> {
+    match s.to_ascii_lowercase().as_str() {
+        "set" | "1" => Ok(true),
+        "clear" | "0" => Ok(false),
+        _ => Err(format!("`{s}` is neither `set` nor `clear`")),
+    }
+}
+
+fn conditional(words: &[&str]) -> Result<Command, String> {
+    let then = Command::parse_words(words)?;
+    if matches!(then, Command::Label(_)) {
+        return Err("a label cannot be conditional".into());
+    }
+    Ok(then)
+}
+
+fn value(plc: &mut Plc, now: Instant, o: Operand) -> i64 {
+    match o {
+        Operand::Lit(v) => v,
+        Operand::Reg(r) => plc.read(now, r) as i64,
+    }
+}
+
+fn holds(a: i64, cmp: Cmp, b: i64) -> bool {
+    match cmp {
+        Cmp::Eq => a == b,
+        Cmp::Ne => a != b,
+        Cmp::Lt => a < b,
+        Cmp::Le => a <= b,
+        Cmp::Gt => a > b,
+        Cmp::Ge => a >= b,
+    }
+}
+
+/// Names of the set status bits, for people.
+pub fn status_bits(s: i32) -> Vec<&'static str> {
+    [
+        (status::BUFFER_OK, "buffer_ok"),
+        (status::ADDRESS_OK, "address_ok"),
+        (status::INITIALISED, "initialised"),
+        (status::DATA_EXCHANGE, "data_exchange"),
+        (status::DS_READ, "ds_read_pending"),
+        (status::DS_WRITE, "ds_write_pending"),
+        (status::ACYCLIC_BUSY, "acyclic_busy"),
+        (status::ACYCLIC_ERROR, "acyclic_access_error"),
+        (status::CIN_SENT, "consistent_inputs_sent"),
+        (status::COUT_RECEIVED, "consistent_outputs_received"),
+        (status::BUSY, "busy"),
+        (status::ERROR, "error"),
+    ]
+    .iter()
+    .filter(|(b, _)| s & b != 0)
+    .map(|&(_, n)| n)
+    .collect()
+}
+
+/// What [`Interpreter::run`] needs next.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Progress {
+    /// Everything queued ran.
+    Idle,
+    /// Waiting: call again at this time, or earlier when a register may
+    /// have changed.
+    Waiting(Instant),
+    /// More to run right away (a long loop yielded).
+    Busy,
+}
+
+#[derive(Debug, Clone)]
+struct Line {
+    no: usize,
+    cmd: Command,
+}
+
+/// Runs commands against a [`Plc`]: a whole script ([`Interpreter::script`])
+/// or lines as they come ([`Interpreter::push`]).
+#[derive(Debug, Clone, Default)]
+pub struct Interpreter {
+    program: Vec<Line>,
+    labels: HashMap<String, usize>,
+    pc: usize,
+    /// The running wait: (start, deadline).
+    wait: Option<(Instant, Instant)>,
+    replies: VecDeque<Value>,
+    lines: usize,
+}
+
+/// Steps [`Interpreter::run`] takes before yielding (a loop without waits
+/// must not starve the bus).
+const MAX_STEPS: usize = 10_000;
+
+impl Interpreter {
+    /// An empty interpreter for lines pushed one by one.
+    pub fn new() -> Interpreter {
+        Interpreter::default()
+    }
+
+    /// A whole script; labels may be used before they are defined.
+    pub fn script(text: &str) -> Result<Interpreter, ParseError> {
+        let mut it = Interpreter::new();
+        for (i, l) in text.lines().enumerate() {
+            let no = i + 1;
+            match Command::parse(l) {
+                Ok(Some(cmd)) => it.add(no, cmd),
+                Ok(None) => {}
+                Err(message) => return Err(ParseError { line: no, message }),
+            }
+        }
+        it.lines = text.lines().count();
+        for l in &it.program {
+            let target = match &l.cmd {
+                Command::Goto(n) => Some(n),
+                Command::If { then, .. } | Command::IfBit { then, .. } => match &**then {
+                    Command::Goto(n) => Some(n),
+                    _ => None,
+                },
+                _ => None,
+            };
+            if let Some(n) = target {
+                if !it.labels.contains_key(n) {
+                    return Err(ParseError {
+                        line: l.no,
+                        message: format!("no label `{n}`"),
+                    });
+                }
+            }
+        }
+        Ok(it)
+    }
+
+    fn add(&mut self, no: usize, cmd: Command) {
+        if let Command::Label(n) = &cmd {
+            self.labels.insert(n.clone(), self.program.len());
+        }
+        self.program.push(Line { no, cmd });
+    }
+
+    /// Queue one line; a line that does not parse gets an error reply.
+    pub fn push(&mut self, line: &str) {
+        self.lines += 1;
+        match Command::parse(line) {
+            Ok(Some(cmd)) => self.add(self.lines, cmd),
+            Ok(None) => {}
+            Err(e) => self.replies.push_back(json!({
+                "line": line.trim(), "ok": false, "error": e,
+            })),
+        }
+    }
+
+    /// The next reply.
+    pub fn take_reply(&mut self) -> Option<Value> {
+        self.replies.pop_front()
+    }
+
+    /// Whether all queued commands ran.
+    pub fn finished(&self) -> bool {
+        self.pc >= self.program.len()
+    }
+
+    /// Run at `now` until everything queued ran, a wait blocks, or a loop
+    /// yields.
+    pub fn run(&mut self, plc: &mut Plc, now: Instant) -> Progress {
+        for _ in 0..MAX_STEPS {
+            let Some(line) = self.program.get(self.pc) else {
+                return Progress::Idle;
+            };
+            let cmd = line.cmd.clone();
+            match self.exec(plc, now, &cmd) {
+                Step::Next(reply) => {
+                    if let Some(r) = reply {
+                        self.replies.push_back(r);
+                    }
+                    self.pc += 1;
+                }
+                Step::Jump(to, reply) => {
+                    self.replies.push_back(reply);
+                    self.pc = to;
+                }
+                Step::Blocked(until) => return Progress::Waiting(until),
+            }
+        }
+        Progress::Busy
+    }
+
+    fn exec(&mut self, plc: &mut Plc, now: Instant, cmd: &Command) -> Step {
+        match cmd {
+            Command::Read { reg, count } => {
+                let values: Vec<i32> = (0..*count).map(|i| plc.read(now, reg + i)).collect();
+                let mut r = json!({"cmd": "read", "reg": reg, "ok": true});
+                if *count == 1 {
+                    r["value"] = json!(values[0]);
+                    if plc.local(*reg) == Some(super::reg::STATUS) {
+                        r["bits"] = json!(status_bits(values[0]));
+                    }
+                } else {
+                    r["values"] = json!(values);
+                }
+                Step::Next(Some(r))
+            }
+            Command::Write { reg, values } => {
+                let vals: Vec<i64> = values.iter().map(|&o| value(plc, now, o)).collect();
+                let before = plc.module.error_count();
+                let mut ignored = Vec::new();
+                for (i, v) in vals.iter().enumerate() {
+                    if let WriteEffect::Ignored(why) = plc.write(now, reg + i as u32, *v) {
+                        ignored.push(json!({"reg": reg + i as u32, "why": why}));
+                    }
+                }
+                let mut r = json!({"cmd": "write", "reg": reg, "ok": ignored.is_empty()});
+                if vals.len() == 1 {
+                    r["value"] = json!(vals[0]);
+                    if let Some(i) = ignored.first() {
+                        r["ignored"] = i["why"].clone();
+                    }
+                } else {
+                    r["values"] = json!(vals);
+                    if !ignored.is_empty() {
+                        r["ignored"] = json!(ignored);
+                    }
+                }
+                error_fields(plc, before, &mut r);
+                Step::Next(Some(r))
+            }
+            Command::Copy { count, from, to } => {
+                let n = value(plc, now, *count);
+                if !(0..=10_000).contains(&n) {
+                    return Step::Next(Some(json!({"cmd": "copy", "ok": false,
+                        "error": format!("count {n} is outside 0..=10000")})));
+                }
+                let before = plc.module.error_count();
+                let mut ignored = 0;
+                for i in 0..n as u32 {
+                    let v = plc.read(now, from + i);
+                    if plc.write(now, to + i, v as i64) != WriteEffect::Applied {
+                        ignored += 1;
+                    }
+                }
+                let mut r = json!({"cmd": "copy", "count": n, "from": from, "to": to,
+                                   "ok": ignored == 0});
+                if ignored > 0 {
+                    r["ignored"] = json!(ignored);
+                }
+                error_fields(plc, before, &mut r);
+                Step::Next(Some(r))
+            }
+            Command::Calc { dest, a, rest } => {
+                let a = value(plc, now, *a);
+                let v = match rest {
+                    None => a,
+                    Some((op, b)) => {
+                        let b = value(plc, now, *b);
+                        match op {
+                            Op::Add => a.wrapping_add(b),
+                            Op::Sub => a.wrapping_sub(b),
+                            Op::Mul => a.wrapping_mul(b),
+                            Op::Div => a.checked_div(b).unwrap_or(0),
+                            Op::Rem => a.checked_rem(b).unwrap_or(0),
+                            Op::And => a & b,
+                            Op::Or => a | b,
+                        }
+                    }
+                };
+                let ok = plc.write(now, *dest, v) == WriteEffect::Applied;
+                Step::Next(Some(
+                    json!({"cmd": "calc", "reg": dest, "value": v, "ok": ok}),
+                ))
+            }
+            Command::WaitBit {
+                reg,
+                bits,
+                set,
+                timeout,
+            } => {
+                let v = plc.read(now, *reg);
+                let hit = if *set {
+                    v as u32 & bits
+                } else {
+                    !(v as u32) & bits
+                };
+                let state = if *set { "set" } else { "clear" };
+                let list: Vec<u32> = (0..24).filter(|b| bits & 1 << b != 0).collect();
+                let which: Vec<u32> = (0..24).filter(|b| hit & 1 << b != 0).collect();
+                self.wait_step(now, *timeout, hit != 0, |waited, ok| {
+                    let mut r = json!({"cmd": "wait-bit", "reg": reg, "state": state,
+                           "value": v, "ok": ok, "timeout": !ok, "waited_ms": waited});
+                    if list.len() == 1 {
+                        r["bit"] = json!(list[0]);
+                    } else {
+                        r["bits"] = json!(list);
+                        r["hit"] = json!(which);
+                    }
+                    r
+                })
+            }
+            Command::IfBit {
+                reg,
+                bit,
+                set,
+                then,
+            } => {
+                let v = plc.read(now, *reg);
+                if (v & (1 << bit) != 0) != *set {
+                    return Step::Next(Some(json!({"cmd": "if-bit", "taken": false, "ok": true})));
+                }
+                self.exec(plc, now, then)
+            }
+            Command::Wait { a, cmp, b, timeout } => {
+                let (x, y) = (value(plc, now, *a), value(plc, now, *b));
+                self.wait_step(now, *timeout, holds(x, *cmp, y), |waited, ok| {
+                    json!({"cmd": "wait", "a": x, "b": y, "ok": ok, "timeout": !ok,
+                           "waited_ms": waited})
+                })
+            }
+            Command::Delay(d) => {
+                let (start, until) = *self.wait.get_or_insert((now, now + *d));
+                if now < until {
+                    return Step::Blocked(until);
+                }
+                self.wait = None;
+                Step::Next(Some(json!({"cmd": "delay", "ok": true,
+                    "waited_ms": now.saturating_duration_since(start).as_millis() as u64})))
+            }
+            Command::If { a, cmp, b, then } => {
+                let (x, y) = (value(plc, now, *a), value(plc, now, *b));
+                if !holds(x, *cmp, y) {
+                    return Step::Next(Some(json!({"cmd": "if", "taken": false, "ok": true})));
+                }
+                self.exec(plc, now, then)
+            }
+            Command::Label(_) => Step::Next(None),
+            Command::Goto(n) => match self.labels.get(n) {
+                Some(&to) => Step::Jump(to, json!({"cmd": "goto", "label": n, "ok": true})),
+                None => Step::Next(Some(
+                    json!({"cmd": "goto", "ok": false, "error": format!("no label `{n}`")}),
+                )),
+            },
+            Command::Status => {
+                let m = &mut plc.module;
+                let s = m.read(now, super::reg::STATUS);
+                let e = m.error();
+                Step::Next(Some(json!({
+                    "cmd": "status", "ok": true, "status": s, "bits": status_bits(s),
+                    "error": e.map_or(0, |e| e.number()), "error_text": e.map(|e| e.as_str()),
+                    "init_error": m.read(now, super::reg::INIT_ERROR),
+                    "dp_state": m.read(now, super::reg::DP_STATE),
+                    "address": m.station_address(),
+                    "diag_pending": m.read(now, super::reg::DIAG_PENDING),
+                })))
+            }
+            Command::FailMemoryTest => {
+                plc.module.fail_memory_test();
+                Step::Next(Some(json!({"cmd": "fail-memory-test", "ok": true})))
+            }
+        }
+    }
+
+    fn wait_step(
+        &mut self,
+        now: Instant,
+        timeout: Duration,
+        done: bool,
+        reply: impl FnOnce(u64, bool) -> Value,
+    ) -> Step {
+        let (start, deadline) = *self.wait.get_or_insert((now, now + timeout));
+        let waited = now.saturating_duration_since(start).as_millis() as u64;
+        if done || now >= deadline {
+            self.wait = None;
+            return Step::Next(Some(reply(waited, done)));
+        }
+        Step::Blocked(deadline)
+    }
+}
+
+fn error_fields(plc: &Plc, before: u64, r: &mut Value) {
+    if plc.module.error_count() != before {
+        if let Some(e) = plc.module.error() {
+            r["error"] = json!(e.number());
+            r["error_text"] = json!(e.as_str());
+            r["ok"] = json!(false);
+        }
+    }
+}
+
+enum Step {
+    Next(Option<Value>),
+    Jump(usize, Value),
+    Blocked(Instant),
+}
+
+/// The error numbers 1..=12 with their meaning (for documentation and
+/// `status`).
+pub fn error_text(n: u8) -> Option<&'static str> {
+    [
+        ErrorNumber::Address,
+        ErrorNumber::CyclicArea,
+        ErrorNumber::AcyclicArea,
+        ErrorNumber::ControllerInit,
+        ErrorNumber::Prm,
+        ErrorNumber::Cfg,
+        ErrorNumber::DiagLength,
+        ErrorNumber::DiagPending,
+        ErrorNumber::MemoryTest,
+        ErrorNumber::ConsistentArea,
+    ]
+    .into_iter()
+    .find(|e| e.number() == n)
+    .map(|e| e.as_str())
+}
