@@ -148,7 +148,8 @@ impl Jx2 {
         )
     }
 
-    /// `dpctl master --json` in the background, with commands from a file.
+    /// `dpctl master --json` in the background, with commands from a file
+    /// (or from its stdin with `Some("-")`).
     fn master(&self, bus: &Path, input: Option<&str>) -> (Proc, Receiver<String>) {
         let mut cmd = Command::new(dpctl());
         cmd.args([
@@ -166,7 +167,9 @@ impl Jx2 {
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
-        if let Some(text) = input {
+        if input == Some("-") {
+            cmd.args(["--input", "-"]).stdin(Stdio::piped());
+        } else if let Some(text) = input {
             let f = self.dir.path("master-input.jsonl");
             std::fs::write(&f, text).unwrap();
             cmd.arg("--input").arg(f);
@@ -277,10 +280,27 @@ fn example_2_data_records_and_diagnosis_kinds() {
     // be asked for; a write of 4 bytes to a 4-register area is fine.
 
     // Diagnosis kinds while a master runs.
-    let (mut master, rx) = j.master(&bus, None);
+    let (mut master, rx) = j.master(&bus, Some("-"));
     master_line(&rx, 20, |v| {
         v["event"] == "state" && v["to"] == "data_exchange"
     });
+    // The master's command input: a record job, its refusal in words.
+    {
+        let stdin = master.child.as_mut().unwrap().stdin.as_mut().unwrap();
+        writeln!(
+            stdin,
+            r#"{{"dpv1_write": 3, "slot": 0, "index": 7, "data": "01 02"}}"#
+        )
+        .unwrap();
+        stdin.flush().unwrap();
+    }
+    let job = master_line(&rx, 20, |v| v["event"] == "job");
+    assert!(
+        job["result"]
+            .as_str()
+            .is_some_and(|r| r.contains("application: write error")),
+        "{job}"
+    );
     let r = j.cmd("if r12139 != 0 write 12101 10");
     assert!(r["ok"] == true, "{r}");
     for l in ["write 12140 14", "write 12146 1", "write 12147 65535"] {
@@ -401,6 +421,11 @@ fn error_numbers_through_registers_and_bus() {
         j.cmd("wait-bit 12100 13 clear 5s");
         j.cmd("write 12101 6");
     };
+    assert_eq!(
+        j.cmd("read 12133")["value"],
+        8,
+        "19.2 kbit/s, nominal on a pty"
+    );
     assert_eq!(err(&j.cmd("write 12107 127")), Some(1));
     reset(&mut j);
     assert_eq!(err(&j.cmd("write 12102 123")), Some(2));

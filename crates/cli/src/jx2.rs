@@ -29,8 +29,6 @@ pub struct Options {
     pub control: Option<PathBuf>,
     /// PLC program run at start.
     pub script: Option<PathBuf>,
-    /// Baud rate in bit/s for register 1x133.
-    pub baud: u32,
 }
 
 #[derive(Clone)]
@@ -41,10 +39,9 @@ struct Ctx {
 }
 
 /// Build the module, start the register clients; the device for the
-/// slave.
-pub fn start(opts: &Options, clock: Clock) -> Result<BoxedDevice> {
-    let mut plc = Plc::new(opts.module_number)?;
-    plc.module.set_baud(opts.baud);
+/// slave, and the PLC (e.g. to set the baud rate register).
+pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
+    let plc = Plc::new(opts.module_number)?;
     let notify = Arc::new(Notify::new());
     let shared = SharedJx2::new(plc).with_on_change({
         let n = notify.clone();
@@ -95,7 +92,7 @@ pub fn start(opts: &Options, clock: Clock) -> Result<BoxedDevice> {
             }
         });
     }
-    Ok(Box::new(shared))
+    Ok((Box::new(shared.clone()), shared))
 }
 
 fn bind(path: &Path) -> Result<tokio::net::UnixListener> {

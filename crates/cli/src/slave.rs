@@ -389,11 +389,17 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
     Ok(opts)
 }
 
+/// A device with its name for people.
+struct Built {
+    profile: Box<dyn Configured>,
+    device: BoxedDevice,
+    name: String,
+    /// jx2: the PLC, for the baud rate register.
+    jx2: Option<profibus_devices::jx2::SharedJx2>,
+}
+
 /// The configured profile, its slave device and its name for people.
-fn build_device(
-    args: &Args,
-    printer: &Printer,
-) -> anyhow::Result<(Box<dyn Configured>, BoxedDevice, String)> {
+fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<Built> {
     let entry = match &args.device {
         Some(name) => profibus_devices::profile(name)
             .map_err(|e| anyhow::anyhow!("{e}; or use --gsd FILE"))?,
@@ -409,9 +415,12 @@ fn build_device(
         let now = printer.now();
         printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
     }
+    let mut jx2 = None;
     let dev = if entry.name == profibus_devices::jx2::profile::NAME {
         // The register interface runs beside the slave (stdin, a socket).
-        crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?
+        let (dev, plc) = crate::jx2::start(&jx2_options(args, &opts)?, printer.clock.clone())?;
+        jx2 = Some(plc);
+        dev
     } else {
         let control = args.control.as_ref().map(|src| {
             let inbox = ControlInbox::new();
@@ -429,7 +438,12 @@ fn build_device(
                 .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number))
         }
     };
-    Ok((profile, dev, name))
+    Ok(Built {
+        profile,
+        device: dev,
+        name,
+        jx2,
+    })
 }
 
 /// What the jx2 register clients need.
@@ -439,10 +453,6 @@ fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::
         module_number: o.module_number,
         control: args.control.as_ref().map(PathBuf::from),
         script: o.script,
-        baud: match parse_baud(&args.baud)? {
-            BaudChoice::Fixed(b) => b.bps(),
-            _ => PTY_NOMINAL.bps(),
-        },
     })
 }
 
@@ -485,7 +495,12 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let path = args.port.clone().expect("clap requires --port");
     let choice = parse_baud(&args.baud)?;
-    let (profile, device, name) = build_device(&args, &printer)?;
+    let Built {
+        profile,
+        device,
+        name,
+        jx2,
+    } = build_device(&args, &printer)?;
     let addr = match profile.address().or(args.addr) {
         Some(a) => a,
         // A device that sets its address itself (jx2: its PLC writes it).
@@ -541,6 +556,9 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         } else {
             port.baud()
         };
+        if let Some(plc) = &jx2 {
+            plc.lock().module.set_baud(baud.bps());
+        }
         let mut station =
             PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
         let mut research = false;

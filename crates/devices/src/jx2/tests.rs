@@ -665,3 +665,30 @@ fn script_parsing() {
     assert_eq!((plc.read(t(3), 1001), plc.read(t(3), 1002)), (7, 0));
     assert_eq!(plc.module_register(100), 12100);
 }
+
+/// The registry's device: the PLC program runs inside it, inbox lines
+/// are register commands answered as device events.
+#[test]
+fn scripted_device_runs_its_program_and_inbox() {
+    let inbox = crate::ControlInbox::new();
+    let program = Interpreter::script(
+        "write 12102 2\nwrite 12107 9\nlabel l\nwait-bit 12100 3 set 10s\ncalc 12300 r12300 + 1\ndelay 10ms\ngoto l",
+    )
+    .unwrap();
+    let d = ScriptedJx2::new(Plc::new(2).unwrap(), program, Some(inbox.clone()));
+    let mut slave = DpSlave::new(d, 0);
+    slave.handle_timeout(t(0));
+    assert_eq!(slave.address(), profibus_dp::slave::NO_ADDRESS, "BUSY");
+    slave.handle_timeout(t(25));
+    assert_eq!(slave.address(), 9);
+    inbox.push("read 12199");
+    slave.handle_timeout(t(50));
+    let e = std::iter::from_fn(|| slave.poll_event())
+        .find_map(|e| match e {
+            profibus_dp::slave::SlaveEvent::Device(d) if d.text.contains("12199") => Some(d),
+            _ => None,
+        })
+        .expect("the inbox reply");
+    assert!(e.text.contains("\"value\":103"), "{}", e.text);
+    assert_eq!(slave.device().plc().module.station_address(), Some(9));
+}
