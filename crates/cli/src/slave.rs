@@ -118,13 +118,25 @@ pub struct Args {
     /// field changes.
     #[arg(long, value_name = "FILE.toml", requires = "device")]
     tags: Option<PathBuf>,
+    /// bk3000: the terminal strip in plug order, end terminal last, e.g.
+    /// KL1104,KL2134,KL3102,KL4002,KL9010 (a name may end in `:complete`
+    /// or `:compact`); or `--device-opt terminals-file=FILE`.
+    #[arg(long, value_name = "LIST", requires = "device")]
+    terminals: Option<String>,
+    /// bk3000: the rotary switch for the ones of the address (0..9).
+    #[arg(long, value_name = "N", requires = "device")]
+    switch_ones: Option<u8>,
+    /// bk3000: the rotary switch for the tens of the address (0..9).
+    #[arg(long, value_name = "N", requires = "device")]
+    switch_tens: Option<u8>,
     /// Control commands for the device, one per line, from FILE or `-`
     /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
     /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
     /// `leave`, `tags`, `status`. jx2: a Unix socket to create for register
     /// commands (`read 12100`, `write 12102 16`, ...; stdin always takes
-    /// them too).
+    /// them too). bk3000: `status`, `outputs`, `set NAME VALUE`, `release
+    /// NAME|all`, `pull N`, `plug N`, `run`.
     #[arg(long, value_name = "FILE", requires = "device")]
     control: Option<String>,
     /// jx2: the module number x of the registers 1x100..1x999 (1..9,
@@ -375,6 +387,8 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
         ("setpoints", args.setpoints.map(i64::from)),
         ("actual_values", args.actual_values.map(i64::from)),
         ("module_number", args.module_number.map(i64::from)),
+        ("switch_ones", args.switch_ones.map(i64::from)),
+        ("switch_tens", args.switch_tens.map(i64::from)),
     ] {
         if let Some(v) = v {
             opts.set(k, v);
@@ -382,6 +396,9 @@ fn device_options(args: &Args) -> anyhow::Result<DeviceOptions> {
     }
     if let Some(s) = &args.switch {
         opts.set_text("switch", s);
+    }
+    if let Some(t) = &args.terminals {
+        opts.set("terminals", t.as_str());
     }
     for o in &args.device_opts {
         opts.set_pair(o)?;

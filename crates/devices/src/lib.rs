@@ -63,6 +63,7 @@
 //! device does no file I/O while it runs.
 
 pub mod address;
+pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
@@ -90,6 +91,7 @@ pub const PROFILES: &[ProfileEntry] = &[
     ProfileEntry::of::<omega::profile::OmegaProfile>(),
     ProfileEntry::of::<jx2::profile::Jx2Profile>(),
     ProfileEntry::of::<rfid::profile::RfidProfile>(),
+    ProfileEntry::of::<bk3000::profile::Bk3000Profile>(),
 ];
 
 /// The profile named `name` (case-insensitive).

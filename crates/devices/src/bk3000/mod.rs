@@ -1,0 +1,732 @@
+//! Beckhoff BK3000 PROFIBUS-DP bus coupler with its K-bus terminal strip
+//! (ident 0xBECF, `gsd/BK30BECF.GSD`), after the manual "PROFIBUS Koppler
+//! BK3000 … LC3100", version 2.3 (`../shared/seeds/002_e04f45fc5bcf0245.txt`,
+//! page summaries, cited as "p. N"; facts cut off there come from the
+//! English edition of the same manual and Beckhoff's Information System,
+//! listed in `docs/devices/bk3000.md` with what is inferred).
+//!
+//! - [`catalogue`]: the terminals (channels, widths, DP identifiers of the
+//!   compact and complete mappings, scaling, simulated signals).
+//! - [`image`]: the strip, the process-image layout and the Chk_Cfg
+//!   comparison with its CfgData error byte and I/O-ERR blink code.
+//! - [`prm`]: User_Prm_Data and the coupler's diagnosis bytes.
+//! - [`master`]: the master side: Chk_Cfg and User_Prm_Data of a terminal
+//!   list, named channels decoded from and encoded into the image.
+//! - [`Bk3000`]: the slave device.
+//!
+//! # Behaviour of the emulated coupler
+//!
+//! - Sync and freeze are always supported (p. 35), DP-V1 is not (p. 55):
+//!   DP-V1 requests find the SAPs deactivated, as on a DP-V0 slave.
+//! - Set_Prm: User_Prm_Data checked byte by byte ([`prm::UserPrm`]); a
+//!   refusal sets Prm_Fault and the UserPrm error bytes of the diagnosis.
+//! - Chk_Cfg: compared terminal by terminal with the real strip
+//!   ([`image::check_cfg`]), or byte for byte with the programmed table
+//!   (table 70) when User_Prm_Data byte 9 bit 1 asks for programmed
+//!   configuration. A refusal sets Cfg_Fault, the CfgData error bytes, and
+//!   the I/O-ERR blink code (6 pulses, then n), reported as an `io-err`
+//!   device event.
+//! - Data_Exchange: outputs go to the terminals (recorded, `outputs`
+//!   events name every changed channel); inputs are simulated (walking
+//!   bits, sines, counters) unless pinned with `set`.
+//! - Start-up mode 1/2 (parameter mode): data exchange runs but the K-bus
+//!   is held (outputs not applied, inputs zero) until the control command
+//!   `run`; mode 2 reports Stat_Diag meanwhile (inferred behaviour).
+//! - Watchdog, clear, leaving Data_Exch: all terminal outputs 0.
+//! - `pull N` / `plug N` (control commands): a pulled terminal breaks the
+//!   K-bus behind terminal N-1: K-bus error in the diagnosis (with Ext_Diag
+//!   and Stat_Diag), I/O-ERR 4 pulses then N-1, inputs 0 and outputs held
+//!   until the terminal is plugged again.
+
+pub mod catalogue;
+pub mod image;
+pub mod master;
+pub mod prm;
+pub mod profile;
+
+#[cfg(test)]
+mod tests;
+
+use crate::ControlInbox;
+use catalogue::{Class, Role, Sim};
+use image::{CfgError, CfgReject, Dir, Image, Options, Owner, Strip};
+use prm::{CouplerDiag, StartupMode, UserPrm};
+use profibus_dp::prm::SetPrm;
+use profibus_dp::slave::{
+    ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
+};
+use profibus_fdl::Instant;
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+/// The ident number (`BK30BECF.GSD`; the manual does not print it, the
+/// file name carries it).
+pub const IDENT: u16 = 0xBECF;
+
+/// Longest diagnosis (`Max_Diag_Data_Len`): 6 + length byte + reserved +
+/// 7 messages of 8 bytes.
+pub const MAX_DIAG_LEN: u8 = 64;
+
+const INBOX_PERIOD: Duration = Duration::from_millis(20);
+
+/// The emulated coupler; see the module docs.
+#[derive(Debug)]
+pub struct Bk3000 {
+    strip: Strip,
+    present: Vec<bool>,
+    programmed: Option<Vec<u8>>,
+    prm: UserPrm,
+    image: Image,
+    diag: CouplerDiag,
+    diag_changed: bool,
+    held: bool,
+    outputs: Vec<u8>,
+    inputs: Vec<u8>,
+    pinned: BTreeMap<String, i64>,
+    counter: u8,
+    events: VecDeque<DeviceEvent>,
+    inbox: Option<ControlInbox>,
+    next_inbox: Instant,
+}
+
+impl Bk3000 {
+    /// A coupler with `strip`, automatic configuration, default settings.
+    pub fn new(strip: Strip) -> Bk3000 {
+        let image = strip.default_image(Options::default());
+        Bk3000 {
+            present: vec![true; strip.len()],
+            strip,
+            programmed: None,
+            prm: UserPrm::default(),
+            image,
+            diag: CouplerDiag::default(),
+            diag_changed: false,
+            held: false,
+            outputs: vec![],
+            inputs: vec![],
+            pinned: BTreeMap::new(),
+            counter: 0,
+            events: VecDeque::new(),
+            inbox: None,
+            next_inbox: Instant::ZERO,
+        }
+    }
+
+    /// Store a programmed configuration (table 70): the Chk_Cfg bytes
+    /// expected when User_Prm_Data selects programmed configuration. The
+    /// table must be a valid configuration of the strip (the emulation
+    /// maps the data as in automatic configuration).
+    pub fn with_programmed_cfg(mut self, cfg: Vec<u8>) -> Result<Bk3000, String> {
+        for opts in [
+            Options::default(),
+            Options {
+                plc_interface: true,
+                cycle_counter: false,
+            },
+            Options {
+                plc_interface: false,
+                cycle_counter: true,
+            },
+            Options {
+                plc_interface: true,
+                cycle_counter: true,
+            },
+        ] {
+            if image::check_cfg(&self.strip, opts, &cfg).is_ok() {
+                self.programmed = Some(cfg);
+                return Ok(self);
+            }
+        }
+        Err(format!(
+            "programmed configuration {} does not describe the strip {}",
+            hex(&cfg),
+            self.strip.names().join(",")
+        ))
+    }
+
+    /// Read control commands from `inbox` ([`Bk3000::control`]).
+    pub fn with_inbox(mut self, inbox: ControlInbox) -> Bk3000 {
+        self.inbox = Some(inbox);
+        self
+    }
+
+    /// The strip.
+    pub fn strip(&self) -> &Strip {
+        &self.strip
+    }
+
+    /// The current process image (the accepted configuration's, or the
+    /// default one before a Chk_Cfg).
+    pub fn image(&self) -> &Image {
+        &self.image
+    }
+
+    /// The accepted User_Prm_Data settings.
+    pub fn user_prm(&self) -> UserPrm {
+        self.prm
+    }
+
+    /// The coupler's diagnosis state.
+    pub fn coupler_diag(&self) -> CouplerDiag {
+        self.diag
+    }
+
+    /// The outputs as the terminals got them last.
+    pub fn terminal_outputs(&self) -> &[u8] {
+        &self.outputs
+    }
+
+    /// The value of the output channel `name` as the terminal has it.
+    pub fn output_value(&self, name: &str) -> Option<i64> {
+        let e = self.image.find(name, Some(Dir::Out))?;
+        Some(Image::get(e, &self.outputs))
+    }
+
+    /// Whether terminal `pos` (1-based) is plugged.
+    pub fn is_present(&self, pos: usize) -> bool {
+        self.present
+            .get(pos.wrapping_sub(1))
+            .copied()
+            .unwrap_or(false)
+    }
+
+    fn event(&mut self, kind: &'static str, text: String) {
+        tracing::debug!(kind, %text, "bk3000");
+        self.events.push_back(DeviceEvent { kind, text });
+    }
+
+    fn kbus_ok(&self) -> bool {
+        self.diag.kbus == 0
+    }
+
+    /// Pin the input channel `name` to the engineering value `v` (digital
+    /// 0/1, volts, °C, counts; status bytes raw).
+    pub fn set_input(&mut self, name: &str, v: f64) -> Result<String, String> {
+        let e = self
+            .image
+            .find(name, Some(Dir::In))
+            .ok_or_else(|| format!("no input channel `{name}` (see `status`)"))?
+            .clone();
+        let raw = match (e.owner, e.role) {
+            (Owner::Terminal(p), Role::Value) => {
+                self.strip.slots()[p - 1].ty.scale.from_engineering(v)
+            }
+            _ => v.round() as i64,
+        };
+        self.pinned.insert(e.name.clone(), raw);
+        Ok(format!("input {} pinned to {}", e.name, self.show(&e, raw)))
+    }
+
+    fn show(&self, e: &image::Entry, raw: i64) -> String {
+        match (e.owner, e.role) {
+            (Owner::Terminal(p), Role::Value) => {
+                let sc = self.strip.slots()[p - 1].ty.scale;
+                match sc.unit() {
+                    Some(u) => format!("{:.3} {u} (raw {raw})", sc.to_engineering(raw)),
+                    None => raw.to_string(),
+                }
+            }
+            _ => format!("0x{:02X}", raw as u8),
+        }
+    }
+
+    /// Pull terminal `pos` (1-based) from the strip: K-bus error.
+    pub fn pull(&mut self, pos: usize) -> Result<String, String> {
+        self.check_pos(pos)?;
+        if !self.present[pos - 1] {
+            return Err(format!("terminal {pos} is already pulled"));
+        }
+        self.present[pos - 1] = false;
+        self.update_kbus();
+        let (c, a) = self.diag.kbus_code;
+        Ok(format!(
+            "terminal {pos} ({}) pulled: K-bus error, break behind {}; {}",
+            self.strip.slots()[pos - 1].ty.name,
+            if a == 0 {
+                "the coupler".to_string()
+            } else {
+                format!("terminal {a}")
+            },
+            prm::blink_text(c, a)
+        ))
+    }
+
+    /// Plug terminal `pos` back.
+    pub fn plug(&mut self, pos: usize) -> Result<String, String> {
+        self.check_pos(pos)?;
+        if self.present[pos - 1] {
+            return Err(format!("terminal {pos} is plugged already"));
+        }
+        self.present[pos - 1] = true;
+        self.update_kbus();
+        Ok(format!(
+            "terminal {pos} ({}) plugged{}",
+            self.strip.slots()[pos - 1].ty.name,
+            if self.kbus_ok() {
+                ": K-bus running again".to_string()
+            } else {
+                format!(
+                    ", K-bus still broken behind terminal {}",
+                    self.diag.kbus_code.1
+                )
+            }
+        ))
+    }
+
+    fn check_pos(&self, pos: usize) -> Result<(), String> {
+        if pos == 0 || pos > self.strip.len() {
+            return Err(format!(
+                "terminal {pos}: the strip has terminals 1..={}",
+                self.strip.len()
+            ));
+        }
+        Ok(())
+    }
+
+    fn update_kbus(&mut self) {
+        let before = self.diag;
+        match self.present.iter().position(|p| !p) {
+            Some(i) => {
+                self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::RECEIVE;
+                self.diag.kbus_code = (prm::KBUS_CODE_BREAK, i as u8);
+            }
+            None => {
+                self.diag.kbus = 0;
+                self.diag.kbus_code = (0, 0);
+            }
+        }
+        if self.diag != before {
+            self.diag_changed = true;
+        }
+    }
+
+    /// Apply one control command: `status`, `set NAME VALUE`, `release
+    /// NAME|all`, `pull N`, `plug N`, `run` (leave parameter mode),
+    /// `outputs` (the terminals' outputs). Returns the answer in words.
+    pub fn control(&mut self, line: &str) -> Result<String, String> {
+        let mut w = line.split_whitespace();
+        let cmd = w.next().unwrap_or("");
+        let num = |s: Option<&str>| -> Result<usize, String> {
+            s.and_then(|s| s.parse().ok())
+                .ok_or_else(|| format!("`{cmd}` needs a terminal position"))
+        };
+        match cmd {
+            "status" => Ok(self.status_text()),
+            "outputs" => Ok(self.channel_text(Dir::Out)),
+            "set" => {
+                let name = w.next().ok_or("`set NAME VALUE`")?;
+                let v: f64 = w
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .ok_or("`set NAME VALUE` needs a number")?;
+                self.set_input(name, v)
+            }
+            "release" => match w.next() {
+                Some("all") | None => {
+                    self.pinned.clear();
+                    Ok("all inputs simulated again".into())
+                }
+                Some(n) => {
+                    let e = self
+                        .image
+                        .find(n, Some(Dir::In))
+                        .ok_or_else(|| format!("no input channel `{n}`"))?;
+                    let name = e.name.clone();
+                    self.pinned.remove(&name);
+                    Ok(format!("input {name} simulated again"))
+                }
+            },
+            "pull" => self.pull(num(w.next())?),
+            "plug" => self.plug(num(w.next())?),
+            "run" => {
+                if self.held {
+                    self.held = false;
+                    self.diag_changed = true;
+                    Ok("parameter mode left: K-bus running".into())
+                } else {
+                    Ok("K-bus already running".into())
+                }
+            }
+            "" => Err("empty command".into()),
+            other => Err(format!(
+                "unknown command `{other}` (status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)"
+            )),
+        }
+    }
+
+    fn channel_text(&self, dir: Dir) -> String {
+        let data = match dir {
+            Dir::In => &self.inputs,
+            Dir::Out => &self.outputs,
+        };
+        let parts: Vec<String> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == dir && e.role != Role::Reserved)
+            .map(|e| format!("{}={}", e.name, self.show(e, Image::get(e, data))))
+            .collect();
+        if parts.is_empty() {
+            "(none)".into()
+        } else {
+            parts.join(", ")
+        }
+    }
+
+    fn status_text(&self) -> String {
+        let pulled: Vec<String> = self
+            .present
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| !**p)
+            .map(|(i, _)| (i + 1).to_string())
+            .collect();
+        let mut s = format!(
+            "strip {}; cfg {}; {} in / {} out bytes; K-bus {}{}",
+            self.strip.names().join(","),
+            hex(&self.image.cfg),
+            self.image.in_len,
+            self.image.out_len,
+            if self.kbus_ok() { "running" } else { "ERROR" },
+            if self.held {
+                " (held: parameter mode)"
+            } else {
+                ""
+            }
+        );
+        if !pulled.is_empty() {
+            s += &format!("; pulled: {}", pulled.join(","));
+        }
+        for l in self.diag.describe() {
+            s += "; ";
+            s += &l;
+        }
+        s += &format!("; inputs: {}", self.channel_text(Dir::In));
+        s += &format!("; outputs: {}", self.channel_text(Dir::Out));
+        s
+    }
+
+    fn simulate(&self, e: &image::Entry, now: Instant) -> i64 {
+        let Owner::Terminal(pos) = e.owner else {
+            return 0;
+        };
+        let ty = self.strip.slots()[pos - 1].ty;
+        let t = now.as_nanos() as f64 / 1e9;
+        let ch = e.channel as f64;
+        match e.role {
+            Role::Status => {
+                // Register communication: the status byte acknowledges
+                // the control byte while bit 7 (register access) is set.
+                let c = self.control_byte(pos, e.channel);
+                if c & 0x80 != 0 {
+                    c as i64
+                } else {
+                    0
+                }
+            }
+            Role::Control | Role::Reserved => 0,
+            Role::Value => {
+                let c = self.control_byte(pos, e.channel);
+                if c & 0xC0 == 0x80 && e.bytes >= 2 {
+                    // Register read: R8 is the terminal type (e.g. 3102).
+                    return if c & 0x3F == 8 {
+                        ty.name[2..].parse::<i64>().unwrap_or(0)
+                    } else {
+                        0
+                    };
+                }
+                match ty.sim {
+                    Sim::Walk => {
+                        let step = (t / 0.5) as u64 % ty.channels as u64;
+                        (step + 1 == e.channel as u64) as i64
+                    }
+                    Sim::Sine => ty
+                        .scale
+                        .from_engineering(5.0 * (std::f64::consts::TAU * t / 20.0 + ch).sin()),
+                    Sim::Temperature => ty.scale.from_engineering(
+                        22.5 + 2.5 * (std::f64::consts::TAU * t / 60.0 + ch).sin(),
+                    ),
+                    Sim::Counter => (t * 10.0) as i64 & 0xFFFF_FFFF,
+                    Sim::Encoder => (t * 100.0) as i64 & 0x00FF_FFFF,
+                    Sim::Echo => self
+                        .image
+                        .entries
+                        .iter()
+                        .find(|o| {
+                            o.dir == Dir::Out
+                                && o.owner == e.owner
+                                && o.channel == e.channel
+                                && o.role == Role::Value
+                        })
+                        .map_or(0, |o| Image::get(o, &self.outputs)),
+                    Sim::None => 0,
+                }
+            }
+        }
+    }
+
+    fn control_byte(&self, pos: usize, channel: u8) -> u8 {
+        self.image
+            .entries
+            .iter()
+            .find(|o| {
+                o.dir == Dir::Out
+                    && o.owner == Owner::Terminal(pos)
+                    && o.channel == channel
+                    && o.role == Role::Control
+            })
+            .map_or(0, |o| Image::get(o, &self.outputs) as u8)
+    }
+
+    fn apply_outputs(&mut self, outputs: &[u8]) {
+        if self.outputs.as_slice() == outputs {
+            return;
+        }
+        let old = std::mem::replace(&mut self.outputs, outputs.to_vec());
+        let changed: Vec<String> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == Dir::Out && e.role != Role::Reserved)
+            .filter(|e| old.len() != outputs.len() || Image::get(e, &old) != Image::get(e, outputs))
+            .map(|e| format!("{}={}", e.name, self.show(e, Image::get(e, outputs))))
+            .collect();
+        if !changed.is_empty() {
+            self.event(
+                "outputs",
+                format!("terminal outputs: {}", changed.join(", ")),
+            );
+        }
+    }
+
+    fn cfg_fault(&mut self, rej: CfgReject) -> Reason {
+        let (p, n) = rej.error.blink();
+        self.diag.cfg = (rej.error.code(), rej.error.byte());
+        self.diag_changed = true;
+        let text = format!("{}: {}; {}", rej.error, rej.reason, prm::blink_text(p, n));
+        self.event(
+            "io-err",
+            format!("I/O-ERR {p} pulses, then {n}: {}", rej.error),
+        );
+        text.into()
+    }
+}
+
+impl Device for Bk3000 {
+    fn ident_number(&self) -> u16 {
+        IDENT
+    }
+
+    fn real_cfg(&self) -> &[u8] {
+        &self.image.cfg
+    }
+
+    fn features(&self) -> Features {
+        Features {
+            sync: true,
+            freeze: true,
+            max_diag_len: MAX_DIAG_LEN,
+            ..Features::default()
+        }
+    }
+
+    fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        match UserPrm::parse(prm.user_prm_data, self.programmed.is_some()) {
+            Ok(p) => {
+                if self.diag.prm != (0, 0) {
+                    self.diag_changed = true;
+                }
+                self.diag.prm = (0, 0);
+                self.prm = p;
+                self.held = p.startup != StartupMode::DataExchange;
+                if self.programmed.is_none() || !p.programmed {
+                    let opts = self.options();
+                    if self.image.cfg != self.strip.default_image(opts).cfg {
+                        self.image = self.strip.default_image(opts);
+                    }
+                }
+                Ok(())
+            }
+            Err(e) => {
+                self.diag.prm = (e.code(), e.byte());
+                self.diag_changed = true;
+                Err(format!("{e} (UserPrmData error {}, byte {})", e.code(), e.byte()).into())
+            }
+        }
+    }
+
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        let opts = self.options();
+        let result = if self.prm.programmed {
+            let table = self.programmed.clone().unwrap_or_default();
+            match table.iter().zip(cfg).position(|(a, b)| a != b) {
+                Some(i) => Err(CfgReject {
+                    error: CfgError::FaultyByte(i),
+                    reason: format!("programmed configuration is {}", hex(&table)),
+                }),
+                None if cfg.len() < table.len() => Err(CfgReject {
+                    error: CfgError::TooFew,
+                    reason: format!("programmed configuration is {}", hex(&table)),
+                }),
+                None if cfg.len() > table.len() => Err(CfgReject {
+                    error: CfgError::FaultyByte(table.len()),
+                    reason: format!("programmed configuration is {}", hex(&table)),
+                }),
+                None => image::check_cfg(&self.strip, opts, cfg),
+            }
+        } else {
+            image::check_cfg(&self.strip, opts, cfg)
+        };
+        match result {
+            Ok(img) => {
+                if self.diag.cfg != (0, 0) {
+                    self.diag_changed = true;
+                }
+                self.diag.cfg = (0, 0);
+                let layout = IoLayout {
+                    inputs: img.in_len,
+                    outputs: img.out_len,
+                };
+                if img.in_len > image::MAX_IO || img.out_len > image::MAX_IO {
+                    return Err(self.cfg_fault(CfgReject {
+                        error: CfgError::FaultyByte(0),
+                        reason: format!(
+                            "{} input and {} output bytes, at most 244 each way",
+                            img.in_len, img.out_len
+                        ),
+                    }));
+                }
+                self.image = img;
+                self.outputs = vec![0; layout.outputs];
+                self.inputs = vec![0; layout.inputs];
+                Ok(layout)
+            }
+            Err(rej) => Err(self.cfg_fault(rej)),
+        }
+    }
+
+    fn write_outputs(&mut self, _now: Instant, outputs: &[u8]) {
+        if self.held || !self.kbus_ok() {
+            return;
+        }
+        self.apply_outputs(outputs);
+    }
+
+    fn read_inputs(&mut self, now: Instant, inputs: &mut [u8]) {
+        inputs.fill(0);
+        if !self.held && self.kbus_ok() {
+            self.counter = self.counter.wrapping_add(1).max(1);
+            for e in self.image.entries.iter().filter(|e| e.dir == Dir::In) {
+                let v = match (e.owner, self.pinned.get(&e.name)) {
+                    (_, Some(&v)) => v,
+                    (Owner::CycleCounter, None) => self.counter as i64,
+                    (Owner::PlcInterface, None) => match e.role {
+                        // The status byte acknowledges the control byte.
+                        Role::Status => self
+                            .image
+                            .find("plc.control", Some(Dir::Out))
+                            .map_or(0, |c| Image::get(c, &self.outputs)),
+                        _ => 0,
+                    },
+                    (Owner::Terminal(_), None) => self.simulate(e, now),
+                };
+                Image::put(e, inputs, v);
+            }
+        }
+        if self.inputs.len() == inputs.len() {
+            self.inputs.copy_from_slice(inputs);
+        } else {
+            self.inputs = inputs.to_vec();
+        }
+    }
+
+    fn clear_outputs(&mut self, _now: Instant, why: ClearReason) {
+        let zero = vec![0; self.outputs.len()];
+        if self.outputs != zero {
+            self.outputs = zero;
+            self.event(
+                "outputs",
+                format!("terminal outputs cleared ({})", why.as_str()),
+            );
+        }
+    }
+
+    fn diagnosis(&mut self, _now: Instant, diag: &mut DiagWriter<'_>) {
+        let payload = self.diag.payload();
+        if !payload.is_empty() {
+            diag.device(&payload);
+            diag.set_ext_diag();
+        }
+        if self.diag.kbus != 0
+            || self.diag.init != 0
+            || (self.held && self.prm.startup == StartupMode::ParameterStatDiag)
+        {
+            diag.set_stat_diag();
+        }
+    }
+
+    fn take_new_diag(&mut self) -> bool {
+        std::mem::take(&mut self.diag_changed)
+    }
+
+    fn poll_event(&mut self) -> Option<DeviceEvent> {
+        self.events.pop_front()
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.inbox.as_ref().map(|_| self.next_inbox)
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        let Some(inbox) = self.inbox.clone() else {
+            return;
+        };
+        if now < self.next_inbox {
+            return;
+        }
+        self.next_inbox = now + INBOX_PERIOD;
+        while let Some(line) = inbox.take() {
+            let line = line.trim().to_string();
+            if line.is_empty() {
+                continue;
+            }
+            let kbus = line.starts_with("pull") || line.starts_with("plug");
+            match self.control(&line) {
+                Ok(text) if kbus => self.event("kbus", text),
+                Ok(text) => self.event("control", text),
+                Err(text) => self.event("control-error", text),
+            }
+        }
+    }
+}
+
+impl Bk3000 {
+    fn options(&self) -> Options {
+        Options {
+            plc_interface: self.prm.plc_interface,
+            cycle_counter: self.prm.cycle_counter,
+        }
+    }
+}
+
+fn hex(b: &[u8]) -> String {
+    if b.is_empty() {
+        return "(none)".into();
+    }
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+impl Class {
+    /// Words for people.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Class::DigitalIn => "digital inputs",
+            Class::DigitalOut => "digital outputs",
+            Class::Complex => "byte-oriented",
+            Class::Passive => "no process data",
+        }
+    }
+}

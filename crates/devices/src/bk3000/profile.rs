@@ -1,0 +1,271 @@
+//! The `bk3000` profile: `dpctl slave --device bk3000 --terminals
+//! KL1104,KL2134,KL3102,KL4002,KL9010`, `device = "bk3000"` with
+//! `terminals = [...]` in a bus file.
+
+use super::catalogue::Role;
+use super::image::{self, Dir, Image, Options as ImageOptions, Strip};
+use super::{Bk3000, IDENT};
+use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::BoxedDevice;
+use profibus_dp::gsd::Gsd;
+use serde::Deserialize;
+use std::path::PathBuf;
+
+/// A terminal list: `["KL1104", "KL2134"]` (bus file) or
+/// `"KL1104,KL2134"` (command line).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum TerminalList {
+    /// One name per element.
+    List(Vec<String>),
+    /// Names separated by commas or blanks.
+    Text(String),
+}
+
+/// The options of the `bk3000` profile.
+#[derive(Debug, Default, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Options {
+    /// The strip in plug order, end terminal last; a name may carry
+    /// `:compact`, `:complete`, `:standard` or `:status`.
+    pub terminals: Option<TerminalList>,
+    /// The strip from a file (one name per line or comma-separated, `#`
+    /// comments).
+    pub terminals_file: Option<PathBuf>,
+    /// Rotary switch for the ones of the address (0..9).
+    #[serde(deserialize_with = "opt_int")]
+    pub switch_ones: Option<u8>,
+    /// Rotary switch for the tens of the address (0..9).
+    #[serde(deserialize_with = "opt_int")]
+    pub switch_tens: Option<u8>,
+    /// Table 70: the programmed configuration (hex bytes).
+    pub programmed_cfg: Option<String>,
+}
+
+/// A BK3000 with its strip.
+#[derive(Debug)]
+pub struct Bk3000Profile {
+    strip: Strip,
+    address: Option<u8>,
+    programmed: Option<Vec<u8>>,
+    gsd: Gsd,
+}
+
+impl Bk3000Profile {
+    /// The strip.
+    pub fn strip(&self) -> &Strip {
+        &self.strip
+    }
+}
+
+fn invalid(e: impl ToString) -> ProfileError {
+    ProfileError::Invalid(e.to_string())
+}
+
+/// The strip the options name.
+pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
+    let list = match (&o.terminals, &o.terminals_file) {
+        (Some(_), Some(_)) => return Err(invalid("give --terminals or a terminals file, not both")),
+        (Some(TerminalList::List(v)), None) => v.join(","),
+        (Some(TerminalList::Text(t)), None) => t.clone(),
+        (None, Some(path)) => std::fs::read_to_string(path).map_err(|source| ProfileError::File {
+            path: path.clone(),
+            source,
+        })?,
+        (None, None) => {
+            return Err(invalid(
+                "give the terminal strip: --terminals KL1104,KL2134,...,KL9010 (plug order, end terminal KL9010 last)",
+            ))
+        }
+    };
+    let s = Strip::parse(&list).map_err(|e| match &o.terminals_file {
+        Some(path) => ProfileError::Table {
+            path: path.clone(),
+            message: e.to_string(),
+        },
+        None => invalid(e),
+    })?;
+    Ok(s)
+}
+
+/// The station address of the rotary switches (p. 31: upper switch =
+/// ones, lower switch = tens), if either is given.
+pub fn switch_address(o: &Options) -> Result<Option<u8>, ProfileError> {
+    for (k, v) in [
+        ("switch-ones", o.switch_ones),
+        ("switch-tens", o.switch_tens),
+    ] {
+        if let Some(d) = v.filter(|d| *d > 9) {
+            return Err(invalid(format!(
+                "--{k} {d}: a decimal rotary switch is 0..9"
+            )));
+        }
+    }
+    Ok(match (o.switch_ones, o.switch_tens) {
+        (None, None) => None,
+        (ones, tens) => Some(tens.unwrap_or(0) * 10 + ones.unwrap_or(0)),
+    })
+}
+
+fn parse_hex(s: &str) -> Result<Vec<u8>, ProfileError> {
+    let bad = || invalid(format!("programmed-cfg `{s}` is not hex bytes"));
+    let digits: String = s
+        .split(|c: char| c.is_whitespace() || c == ',')
+        .map(|t| t.trim_start_matches("0x").trim_start_matches("0X"))
+        .collect();
+    if digits.is_empty() || !digits.len().is_multiple_of(2) {
+        return Err(bad());
+    }
+    (0..digits.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&digits[i..i + 2], 16).map_err(|_| bad()))
+        .collect()
+}
+
+impl Profile for Bk3000Profile {
+    type Options = Options;
+    const NAME: &'static str = "bk3000";
+    const SUMMARY: &'static str =
+        "Beckhoff BK3000 PROFIBUS-DP bus coupler (ident 0xBECF) with a K-bus terminal strip";
+    const OPTIONS_HELP: &'static str = "--terminals KL1104,KL2134,KL3102:complete,...,KL9010 (plug order, end terminal last; \
+bus file: terminals = [...]) or --device-opt terminals-file=FILE, \
+--switch-ones N --switch-tens N (rotary switches, instead of --addr), \
+--device-opt programmed-cfg=HEX (table 70), \
+--control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
+    const IDENT: Option<u16> = Some(IDENT);
+
+    fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
+        let strip = strip(&options)?;
+        let address = switch_address(&options)?;
+        let programmed = options
+            .programmed_cfg
+            .as_deref()
+            .map(parse_hex)
+            .transpose()?;
+        if let Some(p) = &programmed {
+            Bk3000::new(strip.clone())
+                .with_programmed_cfg(p.clone())
+                .map_err(invalid)?;
+        }
+        Ok(Bk3000Profile {
+            strip,
+            address,
+            programmed,
+            gsd: crate::gsd_files::parse(crate::gsd_files::BK30BECF).expect("BK30BECF.GSD parses"),
+        })
+    }
+
+    fn gsd(&self) -> &Gsd {
+        &self.gsd
+    }
+
+    fn gsd_file(&self) -> Vec<u8> {
+        crate::gsd_files::BK30BECF.to_vec()
+    }
+
+    fn modules(&self) -> Vec<String> {
+        gsd_modules(&self.gsd, &self.strip)
+    }
+
+    fn address(&self) -> Option<u8> {
+        self.address
+    }
+
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        let mut dev = Bk3000::new(self.strip.clone());
+        if let Some(p) = &self.programmed {
+            dev = dev.with_programmed_cfg(p.clone()).map_err(invalid)?;
+        }
+        if let Some(inbox) = control {
+            dev = dev.with_inbox(inbox);
+        }
+        Ok(Box::new(dev))
+    }
+
+    fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+        let img = image_of(&self.strip, cfg).map_err(ProfileError::Config)?;
+        Ok(channel_map(&img))
+    }
+}
+
+/// The image a configuration gives on `strip`: the coupler functions
+/// (PLC interface, cycle counter) as the configuration shows them.
+pub fn image_of(strip: &Strip, cfg: &[u8]) -> Result<Image, String> {
+    let mut first = None;
+    for (plc_interface, cycle_counter) in
+        [(false, false), (true, false), (false, true), (true, true)]
+    {
+        match image::check_cfg(
+            strip,
+            ImageOptions {
+                plc_interface,
+                cycle_counter,
+            },
+            cfg,
+        ) {
+            Ok(img) => return Ok(img),
+            Err(e) => {
+                first.get_or_insert(e);
+            }
+        }
+    }
+    let e = first.expect("tried");
+    Err(format!("{}: {}", e.error, e.reason))
+}
+
+/// The named channels of an image (raw values: bits, bytes, signed
+/// words, unsigned double words; [`super::master::Bk3000Master`] scales
+/// them).
+pub fn channel_map(img: &Image) -> ChannelMap {
+    let mut m = ChannelMap::new();
+    for e in img.entries.iter().filter(|e| e.role != Role::Reserved) {
+        let dir = match e.dir {
+            Dir::In => Direction::Input,
+            Dir::Out => Direction::Output,
+        };
+        let ty = match (e.bit, e.bytes) {
+            (Some(bit), _) => ChannelType::Bool { bit },
+            (None, 2) => ChannelType::I16,
+            (None, 4) => ChannelType::U32,
+            _ => ChannelType::U8,
+        };
+        m.push(e.name.clone(), dir, e.byte, ty);
+    }
+    m
+}
+
+/// The GSD modules of `strip` in its default mappings: the complex
+/// terminals in plug order, then the digital bytes (inputs, outputs) in
+/// modules of at most 4 bytes.
+pub fn gsd_modules(gsd: &Gsd, strip: &Strip) -> Vec<String> {
+    let mut names = vec![];
+    for (slot, v) in strip.slots().iter().zip(strip.default_variants()) {
+        let Some(v) = v else { continue };
+        let family = &slot.ty.name[..3];
+        let m = gsd
+            .modules
+            .iter()
+            .filter(|m| m.cfg == v.cfg)
+            .find(|m| m.name.starts_with(family))
+            .or_else(|| gsd.modules.iter().find(|m| m.cfg == v.cfg));
+        if let Some(m) = m {
+            names.push(m.name.clone());
+        }
+    }
+    let img = strip.default_image(ImageOptions::default());
+    for (kind, mut bytes) in [(0x10u8, img.digital.0), (0x20, img.digital.1)] {
+        while bytes > 0 {
+            let n = bytes.min(4);
+            if let Some(m) = gsd
+                .modules
+                .iter()
+                .find(|m| m.cfg == [kind | (n as u8 - 1)] && m.name.contains("digital"))
+            {
+                names.push(m.name.clone());
+            }
+            bytes -= n;
+        }
+    }
+    names
+}
