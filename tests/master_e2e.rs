@@ -62,7 +62,10 @@ fn bus_file(dir: &TempDir, name: &str, master: u8, slaves: &[(u8, &str)]) -> Pat
         format!("[master]\naddress = {master}\nbaud = \"1.5M\"\n[options]\nreprobe_ms = 50\n");
     for (a, m) in slaves {
         t.push_str(&format!(
-            "[[slave]]\naddress = {a}\ngsd = \"{}\"\nmodules = [\"{m}\"]\nwatchdog_ms = 300\n",
+            // A watchdog of seconds: on a busy machine a master process can
+            // stall for longer than a short one, and the slave would drop
+            // out of Data_Exchange while a test looks at it.
+            "[[slave]]\naddress = {a}\ngsd = \"{}\"\nmodules = [\"{m}\"]\nwatchdog_ms = 5000\n",
             gen_gsd().display()
         ));
     }
@@ -336,7 +339,7 @@ fn two_masters_and_a_scanner_share_one_bus() {
     assert_eq!(kind(10).as_deref(), Some("passive"));
     let s11 = found.iter().find(|v| v["address"] == 11).unwrap();
     assert_eq!(s11["ident"], "0x0DCE");
-    assert_eq!(s11["master"], 5);
+    assert_eq!(s11["master"], 5, "{found:?}");
     // Both masters keep cycling with their slaves.
     l2.status("master 2 cycles on", |v| {
         all_dx(v) && v["cycles"].as_u64().unwrap() > c2 + 20

@@ -148,7 +148,7 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
         .any(|v| v["event"] == "global_control" && v["command"] == "Unfreeze"));
 
     // Master → slave: every outputs value the slave saw is one of the
-    // master's patterns, in increasing order, one per cycle.
+    // master's patterns, in increasing order.
     let mut last = 0u32;
     let mut seen = 0u64;
     for v in events.iter().filter(|v| v["event"] == "data") {
@@ -163,7 +163,14 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
         last = n;
         seen += 1;
     }
-    assert!(seen >= CYCLES, "the slave saw {seen} output values");
+    // The slave prints its outputs when they changed since its last
+    // wake-up; on a busy machine several exchanges can fall into one
+    // wake-up, so not every value is printed, but the last one is the
+    // master's last pattern.
+    assert!(
+        seen > 0 && last >= CYCLES as u32,
+        "the slave's last outputs were pattern {last} ({seen} values printed)"
+    );
     let stopped = events.iter().find(|v| v["event"] == "stopped").unwrap();
     assert!(stopped["data_exchanges"].as_u64().unwrap() >= CYCLES);
 }

@@ -79,23 +79,50 @@ pub fn driver_options(
 
 /// A single-threaded tokio runtime for one command.
 pub fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_current_thread()
+    let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .context("starting the runtime")
+        .context("starting the runtime")?;
+    install_shutdown(&rt).context("installing the SIGINT/SIGTERM handlers")?;
+    Ok(rt)
 }
 
-/// Completes on SIGINT (Ctrl-C) or SIGTERM.
-pub async fn shutdown() {
+/// Set once SIGINT or SIGTERM arrived.
+static STOP: std::sync::OnceLock<tokio::sync::watch::Receiver<bool>> = std::sync::OnceLock::new();
+
+/// Catch SIGINT and SIGTERM from now on, before the command prints
+/// anything: a signal that arrives at any later moment stops the command
+/// cleanly (nothing is missed between start-up and the first wait).
+fn install_shutdown(rt: &tokio::runtime::Runtime) -> std::io::Result<()> {
     use tokio::signal::unix::{signal, SignalKind};
-    let (Ok(mut int), Ok(mut term)) = (
-        signal(SignalKind::interrupt()),
-        signal(SignalKind::terminate()),
-    ) else {
+    let _guard = rt.enter();
+    let mut int = signal(SignalKind::interrupt())?;
+    let mut term = signal(SignalKind::terminate())?;
+    let (tx, rx) = tokio::sync::watch::channel(false);
+    rt.spawn(async move {
+        tokio::select! {
+            _ = int.recv() => {}
+            _ = term.recv() => {}
+        }
+        let _ = tx.send(true);
+    });
+    let _ = STOP.set(rx);
+    Ok(())
+}
+
+/// Whether SIGINT or SIGTERM has arrived, without waiting.
+pub fn stop_requested() -> bool {
+    STOP.get().is_some_and(|rx| *rx.borrow())
+}
+
+/// Completes once SIGINT (Ctrl-C) or SIGTERM has arrived (also when it
+/// arrived before this was called).
+pub async fn shutdown() {
+    let Some(rx) = STOP.get() else {
         return std::future::pending().await;
     };
-    tokio::select! {
-        _ = int.recv() => {}
-        _ = term.recv() => {}
+    let mut rx = rx.clone();
+    if rx.wait_for(|&stop| stop).await.is_err() {
+        std::future::pending::<()>().await;
     }
 }

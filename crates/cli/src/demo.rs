@@ -6,6 +6,8 @@
 use crate::common;
 use crate::view::{drain_events, hex, SlaveInfo, View};
 use anyhow::{Context, Result};
+use profibus_devices::bk3000;
+use profibus_devices::channels::ChannelMap;
 use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
 use profibus_devices::jx2::{self, script::Interpreter};
@@ -122,6 +124,15 @@ fn plant() -> Result<Vec<PlantSlave>> {
             device: Box::new(profibus_devices::omega::Omega::with_defaults()),
         },
         PlantSlave {
+            address: BK3000_ADDRESS,
+            name: "BK3000 bus coupler (bk3000)".into(),
+            gsd: gsd_files::parse(gsd_files::BK30BECF)?,
+            modules: BK3000_MODULES.to_vec(),
+            device: Box::new(bk3000::Bk3000::new(bk3000::image::Strip::parse(
+                BK3000_STRIP,
+            )?)),
+        },
+        PlantSlave {
             address: JX2_ADDRESS,
             name: "JX2-PROFI1 (jx2)".into(),
             gsd: gsd_files::parse(jx2::GSD)?,
@@ -129,6 +140,31 @@ fn plant() -> Result<Vec<PlantSlave>> {
             device: Box::new(jx2_plc()?),
         },
     ])
+}
+
+/// Station address of the demo's BK3000 (its rotary switches).
+const BK3000_ADDRESS: u8 = 9;
+
+/// The BK3000's terminal strip: digital in and out, analog in and out.
+const BK3000_STRIP: &str = "KL1104,KL2134,KL3102,KL4002,KL9010";
+
+/// The BK30BECF.GSD modules of that strip.
+const BK3000_MODULES: [&str; 4] = [
+    "KL3xx2, KL3351: 2 x 16 bit in (compact)",
+    "KL4xx2: 2 x 16 bit out (compact)",
+    "8 digital inputs (1 byte)",
+    "8 digital outputs (1 byte)",
+];
+
+/// Named channels of the BK3000 for the view.
+fn bk3000_channels(address: u8, gsd: &Gsd, modules: &[&str]) -> Option<ChannelMap> {
+    if address != BK3000_ADDRESS {
+        return None;
+    }
+    let strip = bk3000::image::Strip::parse(BK3000_STRIP).ok()?;
+    let cfg = gsd.chk_cfg(&gsd.select(modules).ok()?).ok()?;
+    let img = bk3000::profile::image_of(&strip, &cfg).ok()?;
+    Some(bk3000::profile::channel_map(&strip, &img))
 }
 
 /// Station address the demo's JX2-PROFI1 gets from its PLC.
@@ -206,7 +242,7 @@ async fn demo(args: Args) -> Result<()> {
             name: s.name.clone(),
             gsd: Some(s.gsd.clone()),
             dpv1: s.gsd.dpv1_slave,
-            channels: None,
+            channels: bk3000_channels(s.address, &s.gsd, &s.modules),
         })
         .collect();
 
@@ -282,6 +318,11 @@ async fn demo(args: Args) -> Result<()> {
             m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
             m.set_outputs(4, &[0, 0, r[0], r[1]]);
             m.set_outputs(JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]);
+            // BK3000: a 0..10 V ramp on KL4002 channel 1, a walking bit
+            // on the KL2134.
+            let v = ((ramp % 100) as u32 * 32767 / 100) as u16;
+            let v = v.to_be_bytes();
+            m.set_outputs(BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]);
         }
         for p in pkw.iter_mut() {
             if let Some((text, v)) = p.step(m, now, ramp) {
@@ -295,7 +336,7 @@ async fn demo(args: Args) -> Result<()> {
                 _ = &mut shutdown => break,
                 _ = tokio::time::sleep(step) => {}
             }
-        } else if futures_ready(&mut shutdown).await {
+        } else if common::stop_requested() {
             break;
         }
     }
@@ -422,14 +463,5 @@ impl DemoPkw {
             let _ = self.client.start(now, pnu, cmd(ramp));
         }
         report
-    }
-}
-
-/// Whether the shutdown future completed, without waiting.
-async fn futures_ready(f: &mut std::pin::Pin<&mut impl std::future::Future<Output = ()>>) -> bool {
-    tokio::select! {
-        biased;
-        _ = f.as_mut() => true,
-        _ = std::future::ready(()) => false,
     }
 }

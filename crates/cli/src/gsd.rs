@@ -251,6 +251,12 @@ fn show_text(file: &Path, g: &Gsd) -> String {
         opt(g.max_data_len),
         opt(g.max_user_prm_data_len)
     ));
+    if !g.other.is_empty() {
+        line(format!(
+            "Kept as text:  {} line(s) of keywords not interpreted here (DP-V2, I&M, …; --json lists them)",
+            g.other.len()
+        ));
+    }
     line("Baud rates:    (MaxTsdr in bit times)".into());
     for b in Baud::ALL {
         if g.supports_baud(b) || g.max_tsdr(b).is_some() {
@@ -448,6 +454,7 @@ fn show_json(file: &Path, parsed: &Parsed) -> Value {
         "modules": modules,
         "unit_diag_bits": diag_texts(&g.unit_diag_bits),
         "unit_diag_not_bits": diag_texts(&g.unit_diag_not_bits),
+        "other": g.other,
         "warnings": parsed.warnings.iter().map(|w| diag_json(file, "warning", w)).collect::<Vec<_>>(),
     })
 }

@@ -41,6 +41,14 @@ pub struct Args {
     /// Stop after this many poll cycles.
     #[arg(long, value_name = "N")]
     cycles: Option<u64>,
+    /// Stop once every slave has completed N Data_Exchange cycles (however
+    /// long its start-up took): what scripts and tests wait for.
+    #[arg(long, value_name = "N")]
+    exchanges: Option<u64>,
+    /// Give up after this many seconds: exit status 1, naming the slaves
+    /// not in Data_Exchange when `--exchanges` was not reached.
+    #[arg(long, value_name = "SECS")]
+    timeout: Option<f64>,
     /// Print JSON lines instead of text.
     #[arg(long)]
     json: bool,
@@ -277,6 +285,13 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     }
     let baud = bus.master.params.baud;
     let cycles = args.cycles;
+    let exchanges = args.exchanges;
+    let deadline = match args.timeout {
+        Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
+        Some(t) => bail!("--timeout takes a positive number of seconds, not {t}"),
+        None => None,
+    };
+    let mut timed_out = false;
     let mut last_now = Instant::ZERO;
     let result = driver::run_with(
         &mut station,
@@ -305,8 +320,17 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             }
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);
+            let exchanged = exchanges.is_some_and(|n| {
+                m.slave_addresses()
+                    .all(|a| m.slave_stats(a).is_some_and(|s| s.data_exchanges >= n))
+            });
+            if deadline.is_some_and(|d| now - Instant::ZERO >= d) {
+                timed_out = true;
+                return ControlFlow::Break(());
+            }
             match cycles {
                 Some(n) if m.cycle_stats().cycles >= n => ControlFlow::Break(()),
+                _ if exchanged => ControlFlow::Break(()),
                 _ => ControlFlow::Continue(()),
             }
         },
@@ -324,6 +348,13 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         .collect();
     if cycles.is_some() && !stuck.is_empty() {
         tracing::info!(?stuck, "slaves not in data exchange at the end");
+    }
+    if timed_out && exchanges.is_some() {
+        bail!(
+            "timeout after {:.1} s: {} Data_Exchange cycles not reached (not in Data_Exchange: {stuck:?})",
+            args.timeout.unwrap_or(0.0),
+            exchanges.unwrap_or(0)
+        );
     }
     Ok(())
 }

@@ -32,7 +32,10 @@ fn channel_values(map: &ChannelMap, dir: Direction, image: &[u8]) -> (Value, Str
     let mut words = vec![];
     for (c, v) in map.decode(dir, image) {
         obj.insert(c.name.clone(), json!(v));
-        words.push(format!("{}={v}", c.name));
+        match &c.scale {
+            Some(sc) => words.push(format!("{}={v} {}", c.name, sc.unit)),
+            None => words.push(format!("{}={v}", c.name)),
+        }
     }
     (Value::Object(obj), words.join(" "))
 }

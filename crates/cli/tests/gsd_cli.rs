@@ -163,6 +163,9 @@ fn localised_extensions_are_read_like_gsd() {
         let o = dpctl(&["gsd", "show", f]);
         assert!(o.status.success(), "{f}: {}", stderr(&o));
         assert!(stdout(&o).contains("Ident number:  0x8042"), "{f}");
+        let o = dpctl(&["gsd", "show", "--json", f]);
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        assert_eq!(v["other"][0], "Periphery=\"DPS\"", "{f}");
         let o = dpctl(&["gsd", "check", f]);
         assert!(o.status.success(), "{f}: {}", stderr(&o));
         assert!(

@@ -117,6 +117,35 @@ pub struct Channel {
     /// Byte order of multi-byte types.
     #[serde(default)]
     pub order: ByteOrder,
+    /// Engineering units of an integer channel, if the device knows its
+    /// range: the value read and written is then raw × num / den.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<Scale>,
+}
+
+/// Engineering units of an integer channel: value = raw × `num` / `den`
+/// in `unit` (a rational factor keeps channels comparable and hashable),
+/// e.g. ±10 V in a signed word: num 10, den 32767, unit "V".
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Scale {
+    /// Numerator of the factor.
+    pub num: i64,
+    /// Denominator of the factor (not 0).
+    pub den: i64,
+    /// The unit.
+    pub unit: String,
+}
+
+impl Scale {
+    /// The value of a raw integer, rounded to 4 decimals.
+    pub fn value(&self, raw: i64) -> f64 {
+        (raw as f64 * self.num as f64 / self.den as f64 * 1e4).round() / 1e4
+    }
+
+    /// The raw integer closest to `value`.
+    pub fn raw(&self, value: f64) -> f64 {
+        (value * self.den as f64 / self.num as f64).round()
+    }
 }
 
 /// Why a value cannot be written to a channel.
@@ -161,7 +190,14 @@ impl Channel {
             offset,
             ty,
             order: ByteOrder::BigEndian,
+            scale: None,
         }
+    }
+
+    /// The same channel in engineering units (see [`Scale`]).
+    pub fn scaled(mut self, scale: Scale) -> Channel {
+        self.scale = Some(scale);
+        self
     }
 
     /// The same channel in little-endian order.
@@ -178,8 +214,18 @@ impl Channel {
         Some(b)
     }
 
-    /// The channel's value in `image`; `None` when the image is shorter.
+    /// The channel's value in `image` (in engineering units when the
+    /// channel has a [`Scale`]); `None` when the image is shorter.
     pub fn read(&self, image: &[u8]) -> Option<Value> {
+        let v = self.read_raw(image)?;
+        Some(match (&self.scale, v) {
+            (Some(s), Value::Int(i)) => Value::Float(s.value(i)),
+            (_, v) => v,
+        })
+    }
+
+    /// The raw value in `image`, without the scale.
+    pub fn read_raw(&self, image: &[u8]) -> Option<Value> {
         Some(match self.ty {
             ChannelType::Bool { bit } => Value::Bool(image.get(self.offset)? >> (bit & 7) & 1 == 1),
             ChannelType::U8 => Value::Int(*image.get(self.offset)? as i64),
@@ -192,8 +238,24 @@ impl Channel {
         })
     }
 
-    /// Write `value` into `image` (other bits and bytes unchanged).
+    /// Write `value` into `image` (other bits and bytes unchanged); a
+    /// scaled channel takes the value in its unit.
     pub fn write(&self, value: Value, image: &mut [u8]) -> Result<(), ChannelError> {
+        let raw = match (&self.scale, value) {
+            (Some(s), Value::Int(i)) => Value::Float(s.raw(i as f64)),
+            (Some(s), Value::Float(x)) => Value::Float(s.raw(x)),
+            (_, v) => v,
+        };
+        self.write_raw(raw, image).map_err(|e| match e {
+            ChannelError::OutOfRange { name, ty, .. } => {
+                ChannelError::OutOfRange { name, ty, value }
+            }
+            e => e,
+        })
+    }
+
+    /// Write the raw `value` into `image`, without the scale.
+    pub fn write_raw(&self, value: Value, image: &mut [u8]) -> Result<(), ChannelError> {
         let end = self.offset + self.ty.size();
         if image.len() < end {
             return Err(ChannelError::Short {

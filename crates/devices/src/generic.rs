@@ -23,7 +23,7 @@ use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
     expect_cfg, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
-    Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX,
+    Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX, ERR_INVALID_SLOT,
 };
 use profibus_fdl::Instant;
 use std::collections::{BTreeMap, VecDeque};
@@ -119,6 +119,9 @@ pub struct GenericDevice {
     outputs: [u8; 244],
     counter: u32,
     records: BTreeMap<(u8, u8), Vec<u8>>,
+    /// The highest DP-V1 slot (slot 0 is the device itself, slots 1.. its
+    /// modules); `None`: every slot.
+    max_slot: Option<u8>,
     no_add_chg: bool,
     ext_diag: Vec<u8>,
     ext_diag_fault: bool,
@@ -158,6 +161,7 @@ impl GenericDevice {
             outputs: [0; 244],
             counter: 0,
             records: BTreeMap::new(),
+            max_slot: None,
             no_add_chg: false,
             ext_diag: vec![],
             ext_diag_fault: false,
@@ -219,13 +223,23 @@ impl GenericDevice {
                     || gsd.manufacturer_specific_alarm_supp),
             fail_safe: gsd.fail_safe,
             max_diag_len: gsd.max_diag_data_len.unwrap_or(244).clamp(6, 244),
+            c1_max_data_len: gsd.c1_max_data_len.unwrap_or(240).clamp(1, 240),
         };
         let name = gsd
             .model_name
             .clone()
             .unwrap_or_else(|| format!("ident 0x{:04X}", gsd.ident_number));
-        Ok(GenericDevice::new(name, gsd.ident_number, cfg, features)
-            .with_user_prm(user_prm_len, checks))
+        // DP-V1 slots: 0 is the device, 1..=n its modules (Max_Module on a
+        // modular station, the selected modules otherwise).
+        let modules = if gsd.modular_station {
+            gsd.max_module.map_or(selection.len(), usize::from)
+        } else {
+            selection.len()
+        };
+        let mut dev = GenericDevice::new(name, gsd.ident_number, cfg, features)
+            .with_user_prm(user_prm_len, checks);
+        dev.max_slot = Some(modules.min(254) as u8);
+        Ok(dev)
     }
 
     /// Require User_Prm_Data of exactly `len` bytes (for DP-V1 slaves
@@ -366,6 +380,9 @@ impl Device for GenericDevice {
     }
 
     fn dpv1_read(&mut self, _now: Instant, slot: u8, index: u8, out: &mut [u8]) -> Dpv1Outcome {
+        if self.max_slot.is_some_and(|m| slot > m) {
+            return Dpv1Outcome::read_error(ERR_CLASS_ACCESS, ERR_INVALID_SLOT);
+        }
         match self.records.get(&(slot, index)) {
             Some(r) => {
                 let n = r.len().min(out.len());
@@ -377,6 +394,9 @@ impl Device for GenericDevice {
     }
 
     fn dpv1_write(&mut self, _now: Instant, slot: u8, index: u8, data: &[u8]) -> Dpv1Outcome {
+        if self.max_slot.is_some_and(|m| slot > m) {
+            return Dpv1Outcome::write_error(ERR_CLASS_ACCESS, ERR_INVALID_SLOT);
+        }
         if !self.records.contains_key(&(slot, index)) && self.records.len() >= MAX_RECORDS {
             // Resource class: "write constraint conflict".
             return Dpv1Outcome::write_error(ERR_CLASS_RESOURCE, 1);
@@ -511,7 +531,8 @@ impl Profile for GenericProfile {
     }
 
     fn device(&self, _control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
-        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)?
+        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)
+            .map_err(|e| ProfileError::Device(Box::new(e)))?
             .with_inputs(self.pattern)
             .with_stored_address(self.stored);
         Ok(Box::new(dev))
@@ -667,6 +688,7 @@ EndExtUserPrmData
 ExtUserPrmData=2 "Offset"
 Signed16 -100 -1000-1000
 EndExtUserPrmData
+C1_Max_Data_Len=32
 Max_User_Prm_Data_Len=16
 Ext_User_Prm_Data_Const(0)=0x80,0x00,0x00,0x01,0xFF,0x9C
 Ext_User_Prm_Data_Ref(3)=1
@@ -678,6 +700,35 @@ Module="2 words in/out" 0x71
 2
 EndModule
 "#;
+
+    #[test]
+    fn dpv1_slots_and_lengths_come_from_the_gsd() {
+        let gsd = profibus_dp::gsd::Gsd::parse(GSD, Default::default())
+            .unwrap()
+            .gsd;
+        let mut d = GenericDevice::from_gsd(&gsd, &["2 words", "1 byte in"]).unwrap();
+        assert_eq!(d.features().c1_max_data_len, 32);
+        // Max_Module = 4: slots 0 (the device) to 4.
+        let slot_error = |o: Dpv1Outcome| match o {
+            Dpv1Outcome::Error(e) => e.error_code_1 == (ERR_CLASS_ACCESS << 4 | ERR_INVALID_SLOT),
+            _ => false,
+        };
+        assert!(slot_error(d.dpv1_write(Instant::ZERO, 9, 1, &[1])));
+        assert!(slot_error(d.dpv1_write(Instant::ZERO, 5, 1, &[1])));
+        assert!(slot_error(d.dpv1_read(Instant::ZERO, 200, 1, &mut [0; 4])));
+        assert_eq!(
+            d.dpv1_write(Instant::ZERO, 4, 1, &[1]),
+            Dpv1Outcome::Done(1)
+        );
+        assert!(d.records.keys().all(|&(slot, _)| slot <= 4));
+        // An unknown index of a valid slot: invalid index.
+        match d.dpv1_read(Instant::ZERO, 3, 7, &mut [0; 4]) {
+            Dpv1Outcome::Error(e) => {
+                assert_eq!(e.error_code_1, ERR_CLASS_ACCESS << 4 | ERR_INVALID_INDEX)
+            }
+            o => panic!("{o:?}"),
+        }
+    }
 
     #[test]
     fn from_gsd_checks_what_the_file_says() {

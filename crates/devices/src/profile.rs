@@ -65,15 +65,36 @@ pub enum ProfileError {
     /// A GSD file cannot be read.
     #[error(transparent)]
     Gsd(#[from] profibus_dp::gsd::GsdError),
-    /// The GSD's modules do not make a device.
+    /// The device cannot be built from this configuration (the
+    /// device's own error).
     #[error(transparent)]
-    Generic(#[from] crate::generic::GenericError),
+    Device(Box<dyn std::error::Error + Send + Sync>),
     /// A configuration (Chk_Cfg) the profile does not know.
     #[error("configuration: {0}")]
     Config(String),
     /// The options contradict each other or the product.
     #[error("{0}")]
     Invalid(String),
+}
+
+/// Why a control command (a line of text for a running device, see
+/// [`ControlInbox`]) was not executed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ControlError {
+    /// No such command.
+    #[error("unknown command `{command}` ({known})")]
+    Unknown {
+        /// The command word given.
+        command: String,
+        /// The commands the device knows.
+        known: &'static str,
+    },
+    /// An argument is missing or malformed.
+    #[error("{0}")]
+    Argument(String),
+    /// The device refuses (what the emulated product would report).
+    #[error("{0}")]
+    Refused(String),
 }
 
 /// Control commands (lines of text) for a running device, e.g. a user
@@ -174,6 +195,23 @@ impl DeviceOptions {
             .try_into()
             .map_err(|e: toml::de::Error| ProfileError::Options(e.message().to_string()))
     }
+}
+
+/// Read the table file `path` (a profile option) and parse it with
+/// `parse`: a missing file is [`ProfileError::File`], a bad one
+/// [`ProfileError::Table`].
+pub fn read_table<T, E: std::fmt::Display>(
+    path: &std::path::Path,
+    parse: impl FnOnce(&str) -> Result<T, E>,
+) -> Result<T, ProfileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
+        path: path.into(),
+        source,
+    })?;
+    parse(&text).map_err(|e| ProfileError::Table {
+        path: path.into(),
+        message: e.to_string(),
+    })
 }
 
 /// Serde helper for options structs: an integer given as a number or as

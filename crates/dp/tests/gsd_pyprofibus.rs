@@ -136,18 +136,21 @@ fn differences(py: &Value, g: &Gsd) -> Vec<String> {
         .iter()
         .map(|m| (m.name.clone(), hex(&m.cfg)))
         .collect();
-    if theirs.len() != ours.len() {
-        d.push(format!(
-            "modules: ours {}, pyprofibus {}",
-            ours.len(),
-            theirs.len()
-        ));
-    } else {
-        for (i, (t, o)) in theirs.iter().zip(&ours).enumerate() {
-            if t != o {
+    // Walk both lists; a module of ours that pyprofibus lacks is named
+    // as missing, and the comparison goes on with the next one.
+    let mut j = 0;
+    for (i, o) in ours.iter().enumerate() {
+        match theirs.get(j) {
+            Some(t) if t == o => j += 1,
+            Some(t) if t.0 == o.0 => {
                 d.push(format!("module {i}: ours {o:?}, pyprofibus {t:?}"));
+                j += 1;
             }
+            _ => d.push(format!("module {i} `{}`: pyprofibus does not have it", o.0)),
         }
+    }
+    for t in &theirs[j.min(theirs.len())..] {
+        d.push(format!("pyprofibus has a module we do not: {t:?}"));
     }
     // User_Prm_Data of the modules pyprofibus configures by default.
     let prm = g.user_prm_data(&pyprofibus_selection(g), &[]).unwrap();
@@ -243,22 +246,22 @@ const KNOWN_DIFFERENCES: &[(&str, &str)] = &[
 /// longer has.
 const KNOWN_READING_DIFFERENCES: &[(&str, &str)] = &[
     // `Module="empty slot"0x00` (no blank before the identifier byte):
-    // pyprofibus skips that module.
+    // pyprofibus skips that module; the other 192 agree.
     (
         "siemens_dp_rs232c_link.gse",
-        "modules: ours 193, pyprofibus 192",
+        "module 0 `empty slot`: pyprofibus does not have it",
     ),
     (
         "siemens_dp_rs232c_link.gsf",
-        "modules: ours 193, pyprofibus 192",
+        "module 0 `empty slot`: pyprofibus does not have it",
     ),
     (
         "siemens_dp_rs232c_link.gsg",
-        "modules: ours 193, pyprofibus 192",
+        "module 0 `Leermodul`: pyprofibus does not have it",
     ),
     (
         "siemens_dp_rs232c_link.gss",
-        "modules: ours 193, pyprofibus 192",
+        "module 0 `empty slot`: pyprofibus does not have it",
     ),
 ];
 

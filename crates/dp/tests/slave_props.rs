@@ -38,6 +38,7 @@ impl Device for Dev {
             alarms: true,
             fail_safe: true,
             max_diag_len: 32,
+            c1_max_data_len: 240,
         }
     }
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {

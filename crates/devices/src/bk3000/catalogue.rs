@@ -134,6 +134,20 @@ impl Scale {
         }
     }
 
+    /// The factor as a rational number (numerator, denominator) and the
+    /// unit, for [`crate::channels::Scale`]; `None` for bits and counts.
+    pub fn rational(&self) -> Option<(i64, i64, &'static str)> {
+        match *self {
+            Scale::Signed { full, unit } | Scale::Positive { full, unit } => {
+                Some(((full * 1000.0).round() as i64, 32767 * 1000, unit))
+            }
+            Scale::Digit { per_digit, unit } => {
+                Some(((per_digit * 1000.0).round() as i64, 1000, unit))
+            }
+            Scale::Bit | Scale::Count => None,
+        }
+    }
+
     /// The smallest and largest engineering value.
     pub fn range(&self) -> (f64, f64) {
         match *self {

@@ -3,9 +3,9 @@
 //! `terminals = [...]` in a bus file.
 
 use super::catalogue::Role;
-use super::image::{self, Dir, Image, Options as ImageOptions, Strip};
+use super::image::{self, Dir, Image, Options as ImageOptions, Owner, Strip};
 use super::{Bk3000, IDENT};
-use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::channels::{Channel, ChannelMap, ChannelType, Direction, Scale};
 use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::gsd::Gsd;
@@ -185,7 +185,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE, \
 
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
         let img = image_of(&self.strip, cfg).map_err(ProfileError::Config)?;
-        Ok(channel_map(&img))
+        Ok(channel_map(&self.strip, &img))
     }
 }
 
@@ -214,10 +214,10 @@ pub fn image_of(strip: &Strip, cfg: &[u8]) -> Result<Image, String> {
     Err(format!("{}: {}", e.error, e.reason))
 }
 
-/// The named channels of an image (raw values: bits, bytes, signed
-/// words, unsigned double words; [`super::master::Bk3000Master`] scales
-/// them).
-pub fn channel_map(img: &Image) -> ChannelMap {
+/// The named channels of an image on `strip`: bits, bytes (status and
+/// control), signed words in the terminal's unit where its range is
+/// known (V, °C, %), unsigned double words (counters, positions).
+pub fn channel_map(strip: &Strip, img: &Image) -> ChannelMap {
     let mut m = ChannelMap::new();
     for e in img.entries.iter().filter(|e| e.role != Role::Reserved) {
         let dir = match e.dir {
@@ -230,7 +230,17 @@ pub fn channel_map(img: &Image) -> ChannelMap {
             (None, 4) => ChannelType::U32,
             _ => ChannelType::U8,
         };
-        m.push(e.name.clone(), dir, e.byte, ty);
+        let mut c = Channel::new(e.name.clone(), dir, e.byte, ty);
+        if let (Owner::Terminal(p), Role::Value, None) = (e.owner, e.role, e.bit) {
+            if let Some((num, den, unit)) = strip.slots()[p - 1].ty.scale.rational() {
+                c = c.scaled(Scale {
+                    num,
+                    den,
+                    unit: unit.to_string(),
+                });
+            }
+        }
+        m.channels.push(c);
     }
     m
 }

@@ -608,6 +608,20 @@ fn profile_options_modules_and_channels() {
         2
     );
     assert!(p.channels(&[0x10]).is_err());
+    // Analog channels are in volts both ways.
+    let m = p.channels(&p.chk_cfg().unwrap()).unwrap();
+    let mut out = vec![0u8; 5];
+    m.write_output("4.KL4002.1", crate::channels::Value::Float(2.5), &mut out)
+        .unwrap();
+    assert_eq!(i16::from_be_bytes([out[0], out[1]]), 8192);
+    let c = m
+        .find(crate::channels::Direction::Output, "4.KL4002.1")
+        .unwrap();
+    assert_eq!(c.read(&out), Some(crate::channels::Value::Float(2.5001)));
+    assert_eq!(c.scale.as_ref().unwrap().unit, "V");
+    assert!(m
+        .write_output("4.KL4002.1", crate::channels::Value::Float(11.0), &mut out)
+        .is_err());
     // A bus file's list.
     let mut o = DeviceOptions::new();
     o.set(
@@ -702,4 +716,86 @@ fn gsd_file_agrees_with_the_emulation() {
         g.chk_cfg(&sel).unwrap(),
         s.default_image(Options::default()).cfg
     );
+}
+
+#[test]
+fn gsd_names_the_coupler_diagnosis() {
+    let g = crate::gsd_files::parse(crate::gsd_files::BK30BECF).unwrap();
+    let words = |d: &[u8]| profibus_dp::diag::describe(d, Some(&g), false);
+    let mut b = Bench::new("KL1104,KL2134,KL3102,KL4002,KL9010");
+    b.start(&[0; 10], &[0x50, 0x50, 0x50, 0x60, 0x10, 0x20]);
+    let w = words(&b.diag());
+    assert!(
+        w.iter().any(|l| l
+            == "device: CfgData error 2: CfgData byte 2 faulty; I/O-ERR blinks 6 pulses, then 3"),
+        "{w:?}"
+    );
+    let mut u = [0u8; 10];
+    u[3] = 3;
+    b.start(&u, &[]);
+    let w = words(&b.diag());
+    assert!(
+        w.iter()
+            .any(|l| l == "device: UserPrmData error 3: User_Prm_Data byte 3 faulty"),
+        "{w:?}"
+    );
+    b.start(&[0; 10], &[0x50, 0x50, 0x60, 0x60, 0x10, 0x20]);
+    b.slave.device_mut().pull(4).unwrap();
+    let w = words(&b.diag());
+    for t in [
+        "device: K-bus error",
+        "device: K-bus data error, break behind terminal 3; I/O-ERR blinks 4 pulses, then 3",
+    ] {
+        assert!(w.iter().any(|l| l == t), "{t}: {w:?}");
+    }
+}
+
+#[test]
+fn sync_and_freeze_accepted_dpv1_refused_like_a_dp_v0_slave() {
+    let mut b = Bench::new("KL1104,KL2134,KL9010");
+    // Set_Prm with Lock_Req, Sync_Req, Freeze_Req and WD_On.
+    let mut prm = set_prm(&[0; 10]);
+    prm[0] = 0x88 | 0x20 | 0x10;
+    b.req(Some(sap::SET_PRM), &prm);
+    b.req(Some(sap::CHK_CFG), &[0x10, 0x20]);
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    assert!(b.diag()[0] & 0x10 == 0, "not Not_Supported");
+    // An MSAC_C1 read (slot 0, index 1) finds the SAP deactivated.
+    let (r, _) = b.req(Some(sap::MSAC_C1), &[0x5E, 0, 1, 4]);
+    assert!(
+        matches!(
+            r,
+            Reply::Data {
+                status: profibus_fdl::ResponseStatus::Rs,
+                ..
+            }
+        ),
+        "{r:?}"
+    );
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+}
+
+#[test]
+fn terminals_file_option() {
+    use crate::{profile as registry, DeviceOptions};
+    let dir = std::env::temp_dir().join(format!("bk3000-strip-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("strip.txt");
+    std::fs::write(
+        &f,
+        "# my strip\nKL1408\nKL3202:complete  # PT100\nKL9100\nKL9010\n",
+    )
+    .unwrap();
+    let mut o = DeviceOptions::new();
+    o.set("terminals_file", f.display().to_string());
+    let p = registry("bk3000").unwrap().configure(&o, None).unwrap();
+    assert_eq!(p.chk_cfg().unwrap(), [0xB2, 0xB2, 0x10]);
+    std::fs::write(&f, "KL1408\n").unwrap();
+    let e = registry("bk3000")
+        .unwrap()
+        .configure(&o, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -63,7 +63,7 @@ pub mod vars;
 
 use crate::address::{AddressFileError, StoredAddress};
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN, PKW_MODULE};
-use crate::ControlInbox;
+use crate::{ControlError, ControlInbox};
 use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
@@ -275,6 +275,34 @@ impl Led {
             Led::ConfigurationError => "configuration error (H2 and H4 red)",
         }
     }
+}
+
+/// Why the PLC cannot write a variable ([`Bm4::set_value`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ValueError {
+    /// No variable with that parameter number.
+    #[error("no variable {0}")]
+    NoVariable(usize),
+    /// The element is beyond the array.
+    #[error("{name} has {length} elements")]
+    NoElement {
+        /// The variable.
+        name: String,
+        /// Its elements.
+        length: usize,
+    },
+    /// The value does not fit the type.
+    #[error("{value} is outside {ty}'s range {lo}..={hi}")]
+    OutOfRange {
+        /// The value.
+        value: i64,
+        /// The IEC type's name.
+        ty: &'static str,
+        /// Smallest value.
+        lo: i64,
+        /// Largest value.
+        hi: i64,
+    },
 }
 
 /// Why FB SDIAG refused a diagnosis (its d_STATUS, L1965-1983).
@@ -706,22 +734,27 @@ impl Bm4 {
     /// The PLC writes element `index` of variable `pnu` (an actual value
     /// going to the master, or overwriting a setpoint). `Err` when the
     /// variable or element does not exist or the value is out of range.
-    pub fn set_value(&mut self, pnu: usize, index: usize, value: i64) -> Result<(), String> {
+    pub fn set_value(&mut self, pnu: usize, index: usize, value: i64) -> Result<(), ValueError> {
         let v = self
             .vars
             .table
             .vars
             .get(pnu)
-            .ok_or_else(|| format!("no variable {pnu}"))?;
+            .ok_or(ValueError::NoVariable(pnu))?;
         if index >= v.length {
-            return Err(format!("{} has {} elements", v.name, v.length));
+            return Err(ValueError::NoElement {
+                name: v.name.clone(),
+                length: v.length,
+            });
         }
         let (lo, hi) = v.ty.range();
         if value < lo || value > hi {
-            return Err(format!(
-                "{value} is outside {}'s range {lo}..={hi}",
-                v.ty.name()
-            ));
+            return Err(ValueError::OutOfRange {
+                value,
+                ty: v.ty.name(),
+                lo,
+                hi,
+            });
         }
         self.vars.set_element(pnu, index, value as u32);
         Ok(())
@@ -768,14 +801,15 @@ impl Bm4 {
     /// words; returns the answer in words:
     ///
     /// - `sdiag HEX… [overflow] [no-ed-flag]`: FB SDIAG with these bytes
-    ///   (a_ED_DATA[0] first); e.g. the manual's example
+    ///   (`a_ED_DATA[0]` first); e.g. the manual's example
     ///   16#1234_5678_90AB_CDEF is `sdiag EF CD AB 90 78 56 34 12`.
     /// - `sdiag-clear`: remove the user diagnosis.
     /// - `set NAME[INDEX] VALUE` / `set NAME VALUE`: the PLC writes a
     ///   variable.
     /// - `get NAME[INDEX]` / `get NAME`: a variable's value.
     /// - `status`: the LED state.
-    pub fn control(&mut self, line: &str) -> Result<String, String> {
+    pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
+        let arg = |m: String| ControlError::Argument(m);
         let mut words = line.split_whitespace();
         let cmd = words.next().unwrap_or("");
         let rest: Vec<&str> = words.collect();
@@ -788,57 +822,60 @@ impl Bm4 {
                         "overflow" => ovf = true,
                         "no-ed-flag" => flag = false,
                         hex => {
+                            let bad = || arg(format!("`{hex}` is not hex bytes"));
                             let h = hex.trim_start_matches("16#").replace('_', "");
                             if h.len() % 2 != 0 {
-                                return Err(format!("`{hex}` is not hex bytes"));
+                                return Err(bad());
                             }
                             for i in (0..h.len()).step_by(2) {
-                                data.push(
-                                    u8::from_str_radix(&h[i..i + 2], 16)
-                                        .map_err(|_| format!("`{hex}` is not hex bytes"))?,
-                                );
+                                data.push(u8::from_str_radix(&h[i..i + 2], 16).map_err(|_| bad())?);
                             }
                         }
                     }
                 }
                 self.sdiag(&data, flag, ovf)
                     .map(|_| format!("SDIAG: {} bytes of diagnosis announced", data.len()))
-                    .map_err(|e| format!("SDIAG refused: {e}"))
+                    .map_err(|e| ControlError::Refused(format!("SDIAG refused: {e}")))
             }
             "sdiag-clear" => {
                 self.sdiag_clear();
                 Ok("user diagnosis removed".into())
             }
             "set" | "get" => {
-                let name = rest.first().ok_or("give a variable name")?;
+                let name = rest
+                    .first()
+                    .ok_or_else(|| arg("give a variable name".into()))?;
                 let (name, index) = match name.split_once('[') {
                     Some((n, i)) => (
                         n,
                         i.trim_end_matches(']')
                             .parse::<usize>()
-                            .map_err(|_| format!("bad index in `{name}`"))?,
+                            .map_err(|_| arg(format!("bad index in `{name}`")))?,
                     ),
                     None => (*name, 0),
                 };
                 let pnu = self
                     .pnu(name)
-                    .ok_or_else(|| format!("no variable `{name}`"))?;
+                    .ok_or_else(|| arg(format!("no variable `{name}`")))?;
                 if cmd == "set" {
-                    let v = rest.get(1).ok_or("give a value")?;
-                    let value = parse_int(v).ok_or_else(|| format!("`{v}` is not a number"))?;
-                    self.set_value(pnu, index, value)?;
+                    let v = rest.get(1).ok_or_else(|| arg("give a value".into()))?;
+                    let value =
+                        parse_int(v).ok_or_else(|| arg(format!("`{v}` is not a number")))?;
+                    self.set_value(pnu, index, value)
+                        .map_err(|e| ControlError::Refused(e.to_string()))?;
                     Ok(format!("{name}[{index}] := {value}"))
                 } else {
                     let v = self
                         .value(pnu, index)
-                        .ok_or_else(|| format!("{name} has no element {index}"))?;
+                        .ok_or_else(|| arg(format!("{name} has no element {index}")))?;
                     Ok(format!("{name}[{index}] = {v}"))
                 }
             }
             "status" => Ok(self.led.as_str().to_string()),
-            _ => Err(format!(
-                "unknown command `{cmd}` (sdiag, sdiag-clear, set, get, status)"
-            )),
+            _ => Err(ControlError::Unknown {
+                command: cmd.into(),
+                known: "sdiag, sdiag-clear, set, get, status",
+            }),
         }
     }
 

@@ -4,8 +4,8 @@
 use super::vars::{IecType, VarModule, VarTable};
 use super::{Addressing, Bm4, CfgLayout, IDENT, PKW};
 use crate::channels::{ChannelMap, ChannelType, Direction};
-use crate::pkw::{Dialect, PKW_LEN, PKW_MODULE};
-use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::pkw::{Dialect, PKW_MODULE};
+use crate::profile::{opt_int, read_table, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::gsd::Gsd;
 use serde::Deserialize;
@@ -61,16 +61,7 @@ bus file: modules = [variable names] (default all), pkw = true|false";
 
     fn configure(options: Options, address: Option<u8>) -> Result<Self, ProfileError> {
         let table = match &options.vars {
-            Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-                    path: path.clone(),
-                    source,
-                })?;
-                VarTable::parse(&text).map_err(|e| ProfileError::Table {
-                    path: path.clone(),
-                    message: e.to_string(),
-                })?
-            }
+            Some(path) => read_table(path, VarTable::parse)?,
             None => VarTable::default_table(),
         };
         let us = match (options.us_device, options.switch) {
@@ -151,7 +142,7 @@ bus file: modules = [variable names] (default all), pkw = true|false";
         let l = CfgLayout::new(&self.table, cfg).map_err(|e| ProfileError::Config(e.0))?;
         let mut m = ChannelMap::new();
         if l.pkw {
-            pkw_channels(&mut m);
+            crate::pkw::channels(&mut m);
         }
         for (module, dir) in [
             (VarModule::Input, Direction::Input),
@@ -172,16 +163,6 @@ bus file: modules = [variable names] (default all), pkw = true|false";
         }
         Ok(m)
     }
-}
-
-/// The four PKW words in both images: `pke`, `ind`, `pwe1`, `pwe2`.
-pub(crate) fn pkw_channels(m: &mut ChannelMap) {
-    for dir in [Direction::Input, Direction::Output] {
-        for (i, name) in ["pke", "ind", "pwe1", "pwe2"].into_iter().enumerate() {
-            m.push(name, dir, 2 * i, ChannelType::U16);
-        }
-    }
-    debug_assert_eq!(PKW_LEN, 8);
 }
 
 fn channel_type(t: IecType) -> ChannelType {

@@ -307,3 +307,13 @@ fn led_states_follow_the_bus() {
         ["data exchange (H1 green)", "bus error / watchdog (H2 red)"]
     );
 }
+
+#[test]
+fn pkw_dialect_codes() {
+    use crate::pkw::{Command, Reply};
+    assert_eq!(D.command(&Pkw::new(6, 9, 3, 0)), Command::ReadElement(3));
+    assert_eq!(D.command(&Pkw::new(4, 9, 6, 0)), Command::Unsupported(4));
+    assert_eq!(D.response(5, 2, Reply::ElementDword(7)).pke, 0x5005);
+    assert_eq!(D.request(1, Command::Describe(1)), None);
+    assert!(D.error_text(0x0B).starts_with("variable does not exist"));
+}

@@ -118,17 +118,18 @@ impl IecType {
     }
 }
 
+/// A type name that is no IEC type of the module.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown type `{0}` (BOOL SINT USINT INT UINT DINT UDINT BYTE WORD DWORD REAL)")]
+pub struct UnknownType(pub String);
+
 impl std::str::FromStr for IecType {
-    type Err = String;
-    fn from_str(s: &str) -> Result<IecType, String> {
+    type Err = UnknownType;
+    fn from_str(s: &str) -> Result<IecType, UnknownType> {
         IecType::ALL
             .into_iter()
             .find(|t| t.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| {
-                format!(
-                    "unknown type `{s}` (BOOL SINT USINT INT UINT DINT UDINT BYTE WORD DWORD REAL)"
-                )
-            })
+            .ok_or_else(|| UnknownType(s.to_string()))
     }
 }
 
@@ -300,7 +301,7 @@ impl VarTable {
             if vars.iter().any(|v| v.name == r.name) {
                 return Err(at("the name is used twice".into()));
             }
-            let ty: IecType = r.ty.parse().map_err(at)?;
+            let ty: IecType = r.ty.parse().map_err(|e: UnknownType| at(e.to_string()))?;
             let module = match r.module.to_ascii_uppercase().as_str() {
                 "INPUT" => VarModule::Input,
                 "OUTPUT" => VarModule::Output,

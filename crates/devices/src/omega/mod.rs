@@ -77,9 +77,10 @@ pub mod params;
 pub mod profile;
 
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
+use crate::ControlError;
 use crate::ControlInbox;
 use params::ParamTable;
-use profibus_dp::cfg::identifiers;
+use profibus_dp::cfg::{identifiers, CfgError};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
@@ -217,27 +218,87 @@ fn module(raw: &[u8], first: bool, alone: bool) -> Option<Module> {
     })
 }
 
+/// Why a configuration breaks the board's rules (module docs).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    /// No identifier.
+    #[error("empty configuration")]
+    Empty,
+    /// The bytes do not decode as identifiers.
+    #[error(transparent)]
+    Identifier(#[from] CfgError),
+    /// An identifier that is no module of the GSD.
+    #[error("module {index} ({}) is not a module of BNF_00D0.GSD", hex_list(raw))]
+    UnknownModule {
+        /// Its position.
+        index: usize,
+        /// Its bytes.
+        raw: Vec<u8>,
+    },
+    /// A block-consistent module with others.
+    #[error("a block-consistent module must not be combined with other modules")]
+    BlockCombined,
+    /// A standard module after something else than the service data module.
+    #[error("a standard module may only be preceded by the service data module")]
+    StandardPreceded,
+    /// No status / control module where it must be.
+    #[error("the status / control module must be present, after the service data module and before the value modules")]
+    StatusControl,
+    /// Two actual value or two setpoint modules.
+    #[error("more than one actual value or setpoint module")]
+    TwoValueModules,
+    /// Two status / control modules.
+    #[error("a second status / control module")]
+    SecondStatusControl,
+    /// No setpoint or no actual value.
+    #[error("at least one setpoint and one actual value must be configured")]
+    NoValues,
+    /// Counts other than the drive's si_NR_WR_VALUE / si_NR_RD_VALUE.
+    #[error("the master configured {} setpoints and {} actual values, the drive has {} and {} (si_NR_WR_VALUE / si_NR_RD_VALUE)", configured.0, configured.1, drive.0, drive.1)]
+    Counts {
+        /// (setpoints, actual values) configured.
+        configured: (usize, usize),
+        /// (setpoints, actual values) of the drive.
+        drive: (usize, usize),
+    },
+}
+
+fn hex_list(raw: &[u8]) -> String {
+    raw.iter()
+        .map(|b| format!("0x{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// si_NR_WR_VALUE or si_NR_RD_VALUE outside 1..=8.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CountError {
+    /// si_NR_WR_VALUE.
+    #[error("si_NR_WR_VALUE {0} outside 1..8 (b_ERR bit 5, setpoint number error)")]
+    Setpoints(usize),
+    /// si_NR_RD_VALUE.
+    #[error("si_NR_RD_VALUE {0} outside 1..8 (b_ERR bit 6, actual value number error)")]
+    ActualValues(usize),
+}
+
 /// Check a configuration against the board's rules (module docs).
-pub fn check_configuration(cfg: &[u8]) -> Result<Layout, String> {
+pub fn check_configuration(cfg: &[u8]) -> Result<Layout, ConfigError> {
     let mut raws: Vec<&[u8]> = vec![];
     for id in identifiers(cfg) {
-        raws.push(id.map_err(|e| e.to_string())?.raw);
+        raws.push(id?.raw);
     }
     if raws.is_empty() {
-        return Err("empty configuration".into());
+        return Err(ConfigError::Empty);
     }
     let alone = raws.len() == 1;
     let mut mods = vec![];
     for (i, r) in raws.iter().enumerate() {
-        mods.push(module(r, i == 0, alone).ok_or_else(|| {
-            format!(
-                "module {i} ({}) is not a module of BNF_00D0.GSD",
-                r.iter()
-                    .map(|b| format!("0x{b:02X}"))
-                    .collect::<Vec<_>>()
-                    .join(",")
-            )
-        })?);
+        mods.push(
+            module(r, i == 0, alone).ok_or_else(|| ConfigError::UnknownModule {
+                index: i,
+                raw: r.to_vec(),
+            })?,
+        );
     }
     if let [Module::Block(sp, av)] = mods[..] {
         return Ok(Layout {
@@ -248,7 +309,7 @@ pub fn check_configuration(cfg: &[u8]) -> Result<Layout, String> {
         });
     }
     if mods.iter().any(|m| matches!(m, Module::Block(..))) {
-        return Err("a block-consistent module must not be combined with other modules".into());
+        return Err(ConfigError::BlockCombined);
     }
     let pkw = mods[0] == Module::Service;
     let rest = &mods[pkw as usize..];
@@ -261,29 +322,24 @@ pub fn check_configuration(cfg: &[u8]) -> Result<Layout, String> {
         });
     }
     if rest.iter().any(|m| matches!(m, Module::Standard(..))) {
-        return Err("a standard module may only be preceded by the service data module".into());
+        return Err(ConfigError::StandardPreceded);
     }
     if rest.first() != Some(&Module::StatusControl) {
-        return Err(
-            "the status / control module must be present, after the service data module and before the value modules"
-                .into(),
-        );
+        return Err(ConfigError::StatusControl);
     }
     let (mut sp, mut av) = (0usize, 0usize);
     for m in &rest[1..] {
         match *m {
             Module::Actual(n) if av == 0 => av = n,
             Module::Setpoint(n) if sp == 0 => sp = n,
-            Module::Actual(_) | Module::Setpoint(_) => {
-                return Err("more than one actual value or setpoint module".into())
-            }
-            Module::StatusControl => return Err("a second status / control module".into()),
+            Module::Actual(_) | Module::Setpoint(_) => return Err(ConfigError::TwoValueModules),
+            Module::StatusControl => return Err(ConfigError::SecondStatusControl),
             Module::Service => unreachable!("0x73 after the first module is a standard module"),
             Module::Standard(..) | Module::Block(..) => unreachable!("handled above"),
         }
     }
     if sp == 0 || av == 0 {
-        return Err("at least one setpoint and one actual value must be configured".into());
+        return Err(ConfigError::NoValues);
     }
     Ok(Layout {
         pkw,
@@ -439,16 +495,16 @@ impl Omega {
 
     /// Require exactly `setpoints` setpoints and `actual_values` actual
     /// values (si_NR_WR_VALUE / si_NR_RD_VALUE, 1..=8).
-    pub fn with_counts(mut self, setpoints: usize, actual_values: usize) -> Result<Omega, String> {
+    pub fn with_counts(
+        mut self,
+        setpoints: usize,
+        actual_values: usize,
+    ) -> Result<Omega, CountError> {
         if !(1..=MAX_VALUES).contains(&setpoints) {
-            return Err(format!(
-                "si_NR_WR_VALUE {setpoints} outside 1..8 (b_ERR bit 5, setpoint number error)"
-            ));
+            return Err(CountError::Setpoints(setpoints));
         }
         if !(1..=MAX_VALUES).contains(&actual_values) {
-            return Err(format!(
-                "si_NR_RD_VALUE {actual_values} outside 1..8 (b_ERR bit 6, actual value number error)"
-            ));
+            return Err(CountError::ActualValues(actual_values));
         }
         self.counts = Some((setpoints, actual_values));
         Ok(self)
@@ -539,7 +595,8 @@ impl Omega {
     }
 
     /// Execute a control command: `status`, `quit` (x_QUIT), `get P`.
-    pub fn control(&mut self, line: &str) -> Result<String, String> {
+    pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
+        let arg = |m: String| ControlError::Argument(m);
         let mut w = line.split_whitespace();
         match w.next().unwrap_or("") {
             "status" => Ok(self.status_text()),
@@ -551,18 +608,21 @@ impl Omega {
                 let p: u16 = w
                     .next()
                     .and_then(|p| p.trim_start_matches('P').parse().ok())
-                    .ok_or("give a parameter number")?;
+                    .ok_or_else(|| arg("give a parameter number".into()))?;
                 if p >= OMEGA_ARRAY_FIRST {
                     self.omega_value(p)
                         .map(|v| format!("P{p} = {v}"))
-                        .ok_or_else(|| format!("no parameter {p}"))
+                        .ok_or_else(|| arg(format!("no parameter {p}")))
                 } else {
                     self.parameter(p)
                         .map(|v| format!("P{p:03} = {v}"))
-                        .ok_or_else(|| format!("no parameter {p}"))
+                        .ok_or_else(|| arg(format!("no parameter {p}")))
                 }
             }
-            other => Err(format!("unknown command `{other}` (status, quit, get P)")),
+            other => Err(ControlError::Unknown {
+                command: other.into(),
+                known: "status, quit, get P",
+            }),
         }
     }
 
@@ -630,10 +690,12 @@ impl Device for Omega {
 
     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
         let checked = check_configuration(cfg).and_then(|l| match self.counts {
-            Some((sp, av)) if (sp, av) != (l.setpoints, l.actual_values) => Err(format!(
-                "the master configured {} setpoints and {} actual values, the drive has {sp} and {av} (si_NR_WR_VALUE / si_NR_RD_VALUE)",
-                l.setpoints, l.actual_values
-            )),
+            Some((sp, av)) if (sp, av) != (l.setpoints, l.actual_values) => {
+                Err(ConfigError::Counts {
+                    configured: (l.setpoints, l.actual_values),
+                    drive: (sp, av),
+                })
+            }
             _ => Ok(l),
         });
         match checked {
@@ -757,7 +819,7 @@ impl Device for Omega {
                 while let Some(line) = inbox.take() {
                     match self.control(line.trim()) {
                         Ok(t) => self.note("control", t),
-                        Err(e) => self.note("control_error", e),
+                        Err(e) => self.note("control_error", e.to_string()),
                     }
                 }
             }

@@ -170,19 +170,25 @@ pub struct ParamTable {
     pub params: Vec<Parameter>,
 }
 
+/// Why a parameter table cannot be used: the parameter and what is
+/// wrong, in words.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ParamsError(pub String);
+
 impl ParamTable {
     /// The shipped default table.
     pub fn default_table() -> ParamTable {
         ParamTable::parse(DEFAULT_TABLE).expect("built-in parameter table")
     }
 
-    /// Read a table from TOML text; `Err` names the parameter and what is
-    /// wrong.
-    pub fn parse(text: &str) -> Result<ParamTable, String> {
-        let raw: RawFile = toml::from_str(text).map_err(|e| e.to_string())?;
+    /// Read a table from TOML text; the error names the parameter and
+    /// what is wrong.
+    pub fn parse(text: &str) -> Result<ParamTable, ParamsError> {
+        let raw: RawFile = toml::from_str(text).map_err(|e| ParamsError(e.to_string()))?;
         let mut params: Vec<Parameter> = vec![];
         for r in raw.parameter {
-            let at = |m: String| format!("parameter P{:03} `{}`: {m}", r.pnu, r.name);
+            let at = |m: String| ParamsError(format!("parameter P{:03} `{}`: {m}", r.pnu, r.name));
             if r.pnu > 999 {
                 return Err(at(
                     "numbers above 999 belong to the Omega's own array".into()
@@ -232,9 +238,9 @@ impl ParamTable {
         }
         for n in REQUIRED {
             if !params.iter().any(|p| p.pnu == n) {
-                return Err(format!(
+                return Err(ParamsError(format!(
                     "the table lacks P{n:03}, which the manual describes (needed: P003, P041, P042, P126, P127, P218, P247, P248)"
-                ));
+                )));
             }
         }
         params.sort_by_key(|p| p.pnu);
@@ -277,12 +283,12 @@ mod tests {
             "[[parameter]]\npnu = 5\nname = \"x\"\nformat = \"word\"\nmin = 0\nmax = 70000\n",
         )
         .unwrap_err();
-        assert!(e.contains("P005 `x`"), "{e}");
+        assert!(e.to_string().contains("P005 `x`"), "{e}");
         let e = ParamTable::parse(
             "[[parameter]]\npnu = 5\nname = \"x\"\nformat = \"word\"\nmin = 0\nmax = 7\n",
         )
         .unwrap_err();
-        assert!(e.contains("lacks P003"), "{e}");
+        assert!(e.to_string().contains("lacks P003"), "{e}");
         assert!(ParamTable::parse("nonsense").is_err());
     }
 }

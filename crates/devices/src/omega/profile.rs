@@ -5,7 +5,7 @@ use super::params::ParamTable;
 use super::{check_configuration, Omega, IDENT, MAX_VALUES, PKW};
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::pkw::{Dialect, PKW_LEN};
-use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::profile::{opt_int, read_table, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::gsd::Gsd;
 use serde::Deserialize;
@@ -59,16 +59,7 @@ impl Profile for OmegaProfile {
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
         let table = match &options.params {
-            Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-                    path: path.clone(),
-                    source,
-                })?;
-                ParamTable::parse(&text).map_err(|e| ProfileError::Table {
-                    path: path.clone(),
-                    message: e.to_string(),
-                })?
-            }
+            Some(path) => read_table(path, ParamTable::parse)?,
             None => ParamTable::default_table(),
         };
         match (options.setpoints, options.actual_values) {
@@ -156,7 +147,7 @@ impl Profile for OmegaProfile {
         let l = check_configuration(cfg).map_err(|e| ProfileError::Config(e.to_string()))?;
         let mut m = ChannelMap::new();
         let at = if l.pkw {
-            crate::bm4::profile::pkw_channels(&mut m);
+            crate::pkw::channels(&mut m);
             PKW_LEN
         } else {
             0

@@ -68,7 +68,7 @@ fn configuration_rules() {
         (&[], "empty"),
     ] {
         let e = check_configuration(bad).unwrap_err();
-        assert!(e.contains(why), "{bad:02X?}: {e}");
+        assert!(e.to_string().contains(why), "{bad:02X?}: {e}");
     }
     // A fault sets b_MESSAGE 3; the drive's own counts are checked.
     let mut d = Omega::with_defaults().with_counts(2, 2).unwrap();
@@ -211,4 +211,17 @@ fn monitoring_b_message_and_b_err() {
         kinds.iter().all(|k| *k == "status") && kinds.len() >= 4,
         "{kinds:?}"
     );
+}
+
+#[test]
+fn pkw_dialect_codes() {
+    use crate::pkw::{Command, Pkw, Reply};
+    assert_eq!(PKW.command(&Pkw::new(4, 9, 6, 0)), Command::Describe(6));
+    assert_eq!(PKW.command(&Pkw::new(6, 9, 3, 0)), Command::Unsupported(6));
+    assert_eq!(PKW.response(0x7E, 6, Reply::Element(0xF)).pke, 0x307E);
+    assert_eq!(
+        PKW.decode_response(&Pkw::new(7, 5, 0, 0x82)),
+        Some(Err(0x82))
+    );
+    assert_eq!(PKW.error_text(0x82), "error reading actual value");
 }

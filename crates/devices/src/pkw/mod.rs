@@ -48,6 +48,7 @@
 
 pub mod client;
 
+use crate::channels::{ChannelMap, ChannelType, Direction};
 use profibus_fdl::Instant;
 use std::fmt;
 use std::time::Duration;
@@ -58,6 +59,17 @@ pub const PKW_LEN: usize = 8;
 /// The identifier of the PKW module in both devices' GSD files: 4 words
 /// in and out, word consistency (BM4 L2262, Omega L1462).
 pub const PKW_MODULE: u8 = 0x73;
+
+/// The four PKW words as named channels at the front of both process
+/// images: `pke`, `ind`, `pwe1`, `pwe2` (for a profile's
+/// [`ChannelMap`]).
+pub fn channels(m: &mut ChannelMap) {
+    for dir in [Direction::Input, Direction::Output] {
+        for (i, name) in ["pke", "ind", "pwe1", "pwe2"].into_iter().enumerate() {
+            m.push(name, dir, 2 * i, ChannelType::U16);
+        }
+    }
+}
 
 /// The four PKW words.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]

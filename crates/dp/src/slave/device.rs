@@ -76,6 +76,10 @@ pub struct Features {
     pub fail_safe: bool,
     /// Longest Slave_Diag response (`Max_Diag_Data_Len`, 6..=244).
     pub max_diag_len: u8,
+    /// Longest data block of an MSAC_C1 Read or Write (`C1_Max_Data_Len`,
+    /// 1..=240). The core answers a Read of 0 or more bytes, and a Write of
+    /// 0 or more bytes, with a DP-V1 error before the device sees it.
+    pub c1_max_data_len: u8,
 }
 
 impl Default for Features {
@@ -90,6 +94,7 @@ impl Default for Features {
             alarms: false,
             fail_safe: false,
             max_diag_len: 244,
+            c1_max_data_len: 240,
         }
     }
 }
@@ -632,18 +637,11 @@ pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
 }
 
 pub(crate) fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{b:02X}");
+    if bytes.is_empty() {
+        "(none)".into()
+    } else {
+        profibus_fdl::wire::Hex(bytes).to_string()
     }
-    if s.is_empty() {
-        s.push_str("(none)");
-    }
-    s
 }
 
 #[cfg(test)]

@@ -882,9 +882,29 @@ impl<D: Device> DpSlave<D> {
         }
     }
 
+    /// Start an MSAC_C1 job. Lengths are checked here, before the device
+    /// sees the request: a Read asks for 1 ..= C1_Max_Data_Len bytes
+    /// (otherwise "access: invalid range", 0xB7), a Write carries
+    /// 1 ..= C1_Max_Data_Len bytes (otherwise "access: write length
+    /// error", 0xB1); C1_Max_Data_Len is at most 240 (4-byte header + 240
+    /// = 244). Slot and index belong to the device, which answers "invalid
+    /// slot" (0xB2) before "invalid index" (0xB0).
     fn c1_start(&mut self, now: Instant, du: &[u8]) {
         let function = du[0];
+        let limit = (self.features.c1_max_data_len as usize).clamp(1, MAX_DATA_LEN);
         match Pdu::parse_request(du) {
+            Ok(Pdu::ReadReq { length, .. }) if length == 0 || length as usize > limit => self
+                .c1_error(Dpv1Error::dpv1(
+                    FN_READ,
+                    ERR_CLASS_ACCESS,
+                    ERR_INVALID_RANGE,
+                )),
+            Ok(Pdu::WriteReq { data, .. }) if data.is_empty() || data.len() > limit => self
+                .c1_error(Dpv1Error::dpv1(
+                    FN_WRITE,
+                    ERR_CLASS_ACCESS,
+                    ERR_WRITE_LENGTH,
+                )),
             Ok(Pdu::ReadReq {
                 slot,
                 index,

@@ -1166,3 +1166,141 @@ fn dp_saps_serve_srd_only() {
         }
     )));
 }
+
+/// A device whose PLC sets the station address at run time and restarts
+/// the bus interface (the JX2-PROFI1's register 1x107 and command 5).
+#[derive(Debug, Default)]
+struct PlcModule {
+    address: Option<u8>,
+    restart: bool,
+    states: Vec<SlaveState>,
+    prm_refusals: u32,
+}
+
+impl Device for PlcModule {
+    fn ident_number(&self) -> u16 {
+        IDENT
+    }
+    fn real_cfg(&self) -> &[u8] {
+        &CFG
+    }
+    fn check_prm(&mut self, _prm: &SetPrm<'_>) -> Result<(), Reason> {
+        Ok(())
+    }
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        expect_cfg(&CFG, cfg)
+    }
+    fn write_outputs(&mut self, _now: Instant, _outputs: &[u8]) {}
+    fn read_inputs(&mut self, _now: Instant, _inputs: &mut [u8]) {}
+    fn own_address(&self) -> OwnAddress {
+        self.address.map_or(OwnAddress::NoneYet, OwnAddress::Set)
+    }
+    fn take_restart(&mut self) -> bool {
+        std::mem::take(&mut self.restart)
+    }
+    fn state_changed(&mut self, _now: Instant, state: SlaveState) {
+        self.states.push(state);
+    }
+    fn prm_refused(&mut self, _now: Instant, _reason: &Reason) {
+        self.prm_refusals += 1;
+    }
+}
+
+#[test]
+fn a_device_sets_its_address_and_restarts_the_slave() {
+    let mut s = DpSlave::new(PlcModule::default(), ADDR);
+    assert_eq!(s.address(), NO_ADDRESS, "no address yet: off the bus");
+    let mut out = [0u8; 246];
+    let req = |da: u8, dsap: Option<u8>, data: &'static [u8]| DataTelegram {
+        da,
+        sa: MASTER,
+        fc: FunctionCode::request(RequestKind::SrdHigh),
+        dsap,
+        ssap: dsap.map(|_| sap::MASTER),
+        data,
+        format: None,
+    };
+    assert_eq!(
+        s.on_request(t(0), &req(ADDR, Some(sap::SLAVE_DIAG), &[]), &mut out),
+        Reply::Silence
+    );
+    s.device_mut().address = Some(9);
+    assert_eq!(s.address(), 9);
+    let p: &'static [u8] = &[0x80, 1, 1, 0, 0x47, 0x11, 0];
+    assert_eq!(
+        s.on_request(t(1), &req(9, Some(sap::SET_PRM), p), &mut out),
+        Reply::ShortAck
+    );
+    let c: &'static [u8] = &CFG;
+    s.on_request(t(2), &req(9, Some(sap::CHK_CFG), c), &mut out);
+    assert_eq!(s.state(), SlaveState::DataExch);
+    assert_eq!(
+        s.device().states,
+        [SlaveState::WaitCfg, SlaveState::DataExch]
+    );
+    // A wrong ident number: the device hears of the refusal.
+    let bad: &'static [u8] = &[0x80, 1, 1, 0, 0x12, 0x34, 0];
+    s.on_request(t(3), &req(9, Some(sap::SET_PRM), bad), &mut out);
+    assert_eq!(s.device().prm_refusals, 1);
+    s.on_request(t(4), &req(9, Some(sap::SET_PRM), p), &mut out);
+    s.on_request(t(5), &req(9, Some(sap::CHK_CFG), c), &mut out);
+    assert_eq!(s.state(), SlaveState::DataExch);
+    // The device restarts: back to Wait_Prm without a master, faults
+    // forgotten.
+    s.device_mut().restart = true;
+    s.handle_timeout(t(6));
+    assert_eq!(s.state(), SlaveState::WaitPrm);
+    assert_eq!(s.master(), None);
+    s.on_request(t(7), &req(9, Some(sap::SET_PRM), bad), &mut out);
+    let a = s.on_request(t(8), &req(9, Some(sap::SLAVE_DIAG), &[]), &mut out);
+    assert!(matches!(a, Reply::Data { .. }));
+    assert_ne!(out[0] & 0x40, 0, "Prm_Fault");
+    s.device_mut().restart = true;
+    let a = s.on_request(t(9), &req(9, Some(sap::SLAVE_DIAG), &[]), &mut out);
+    assert!(matches!(a, Reply::Data { .. }));
+    assert_eq!(out[0] & 0x40, 0, "no Prm_Fault after the restart");
+    // Without an address again: silent.
+    s.device_mut().address = None;
+    assert_eq!(
+        s.on_request(t(10), &req(9, Some(sap::SLAVE_DIAG), &[]), &mut out),
+        Reply::Silence
+    );
+}
+
+#[test]
+fn dpv1_lengths_are_checked_against_c1_max_data_len() {
+    // C1_Max_Data_Len = 32, as in the DP-V1 GSD of the observation.
+    let mut dev = dpv1_device();
+    dev.features.c1_max_data_len = 32;
+    let mut b = Bench::new(dev);
+    b.start(t(0), &dpv1_prm());
+    let ask = |b: &mut Bench, req: Vec<u8>| -> Vec<u8> {
+        assert_eq!(b.sap(t(1), MASTER, 51, &req), Ans::Sc, "{req:02X?}");
+        b.sap(t(2), MASTER, 51, &[]).data().to_vec()
+    };
+    // Writes of 33 and 200 bytes: write length error, nothing stored.
+    for n in [33usize, 200] {
+        let req = [vec![0x5F, 1, 2, n as u8], vec![0xEE; n]].concat();
+        assert_eq!(ask(&mut b, req), [0xDF, 0x80, 0xB1, 0], "write of {n}");
+    }
+    // A write of no data at all.
+    assert_eq!(ask(&mut b, vec![0x5F, 1, 2, 0]), [0xDF, 0x80, 0xB1, 0]);
+    assert_eq!(b.slave.device().record, vec![0xA1, 0xA2, 0xA3]);
+    // Reads of 0, 33 and 241 bytes: invalid range.
+    for n in [0u8, 33, 241] {
+        assert_eq!(
+            ask(&mut b, vec![0x5E, 1, 2, n]),
+            [0xDE, 0x80, 0xB7, 0],
+            "read of {n}"
+        );
+    }
+    // Within the limit both work.
+    // A length byte of 32 with 1 byte of data is malformed: write length.
+    assert_eq!(
+        ask(&mut b, vec![0x5F, 1, 2, 32, 0x11]),
+        [0xDF, 0x80, 0xB1, 0]
+    );
+    let req = [vec![0x5F, 1, 2, 32], vec![0x55; 32]].concat();
+    assert_eq!(ask(&mut b, req), [0x5F, 1, 2, 32]);
+    assert_eq!(ask(&mut b, vec![0x5E, 1, 2, 32])[..4], [0x5E, 1, 2, 32]);
+}
