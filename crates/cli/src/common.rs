@@ -124,6 +124,11 @@ fn install_shutdown(rt: &tokio::runtime::Runtime) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Whether SIGINT or SIGTERM has arrived, without waiting.
+pub fn stop_requested() -> bool {
+    STOP.get().is_some_and(|rx| *rx.borrow())
+}
+
 /// Completes once SIGINT (Ctrl-C) or SIGTERM has arrived (also when it
 /// arrived before this was called).
 pub async fn shutdown() {

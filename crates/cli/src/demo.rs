@@ -336,7 +336,7 @@ async fn demo(args: Args) -> Result<()> {
                 _ = &mut shutdown => break,
                 _ = tokio::time::sleep(step) => {}
             }
-        } else if futures_ready(&mut shutdown).await {
+        } else if common::stop_requested() {
             break;
         }
     }
@@ -463,14 +463,5 @@ impl DemoPkw {
             let _ = self.client.start(now, pnu, cmd(ramp));
         }
         report
-    }
-}
-
-/// Whether the shutdown future completed, without waiting.
-async fn futures_ready(f: &mut std::pin::Pin<&mut impl std::future::Future<Output = ()>>) -> bool {
-    tokio::select! {
-        biased;
-        _ = f.as_mut() => true,
-        _ = std::future::ready(()) => false,
     }
 }

@@ -7,14 +7,7 @@ use serde_json::{json, Value};
 
 /// Bytes as space-separated upper-case hex (`01 0A FF`).
 pub fn hex(bytes: &[u8]) -> String {
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        s.push_str(&format!("{b:02X}"));
-    }
-    s
+    profibus_fdl::wire::Hex(bytes).to_string()
 }
 
 /// `named`: the SAP is the slave's side of the service (DSAP of a request,

@@ -8,6 +8,7 @@
 //! that does not reach Data_Exchange.
 
 use crate::common;
+use crate::describe::hex;
 use anyhow::{bail, Context, Result};
 use profibus_dp::busfile::BusFile;
 use profibus_dp::master::{DpMaster, Job, JobId, JobResult, SlaveState};
@@ -70,13 +71,6 @@ enum Op {
 pub fn run(args: Args) -> Result<()> {
     let bus = BusFile::load(&args.config)?;
     common::runtime()?.block_on(dpv1(args, bus))
-}
-
-fn hex(b: &[u8]) -> String {
-    b.iter()
-        .map(|x| format!("{x:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 async fn dpv1(args: Args, bus: BusFile) -> Result<()> {

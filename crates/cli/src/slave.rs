@@ -28,6 +28,7 @@ use profibus_fdl::autobaud::AutoBaud;
 use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::transport::Port;
+use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, BusParams, Instant};
 use serde_json::{json, Value};
 use std::cell::Cell;
@@ -199,7 +200,7 @@ const PTY_NOMINAL: Baud = Baud::B19200;
 const RELISTEN_AFTER: Duration = Duration::from_secs(10);
 
 fn hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02X}")).collect()
+    format!("{:#}", Hex(b))
 }
 
 /// Prints events as text or JSON lines.

@@ -380,14 +380,7 @@ pub fn status_type_text(t: u8) -> &'static str {
 }
 
 fn hex(bytes: &[u8]) -> String {
-    let mut s = String::new();
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{b:02X}");
-    }
-    s
+    profibus_fdl::wire::Hex(bytes).to_string()
 }
 
 impl ExtDiagBlock<'_> {

@@ -12,13 +12,13 @@
 //! pause (TSYN, or a few milliseconds on a pty), the driver calls
 //! [`Framer::line_idle`], which abandons the pending candidate.
 //!
-//! [`FdlCodec`] wraps the framer as a `tokio_util` [`Decoder`]/[`Encoder`];
-//! its items are [`RawTelegram`]s: a validated telegram as a `Bytes` slice
-//! of the receive buffer, not a copy.
+//! `FdlCodec` (feature `tokio-codec`, part of the default `transport`)
+//! wraps the framer as a `tokio_util` `Decoder`/`Encoder`; its items are
+//! [`RawTelegram`]s: a validated telegram as a `Bytes` slice of the receive
+//! buffer, not a copy.
 
-use crate::wire::{self, ParseError, Telegram};
-use bytes::{Buf, Bytes, BytesMut};
-use tokio_util::codec::{Decoder, Encoder};
+use crate::wire::{ParseError, Telegram};
+use bytes::Bytes;
 
 /// Error counters of a [`Framer`], by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -179,88 +179,104 @@ impl RawTelegram {
     }
 }
 
-/// `tokio_util` codec framing FDL telegrams; see the module docs.
-#[derive(Debug, Default)]
-pub struct FdlCodec {
-    framer: Framer,
-}
+#[cfg(feature = "tokio-codec")]
+pub use tokio_codec::FdlCodec;
 
-impl FdlCodec {
-    /// A codec with zeroed statistics.
-    pub fn new() -> Self {
-        Self::default()
+#[cfg(feature = "tokio-codec")]
+mod tokio_codec {
+    use super::{CodecStats, Framed, Framer, RawTelegram};
+    use crate::wire::{self, Telegram};
+    use bytes::{Buf, BytesMut};
+    use tokio_util::codec::{Decoder, Encoder};
+
+    /// `tokio_util` codec framing FDL telegrams; see the module docs.
+    #[derive(Debug, Default)]
+    pub struct FdlCodec {
+        framer: Framer,
     }
 
-    /// Error counters so far.
-    pub fn stats(&self) -> CodecStats {
-        self.framer.stats()
-    }
-
-    /// The line went idle: abandon an incomplete candidate at the front of
-    /// `src` and return the first telegram after it, if any. A driver calls
-    /// this when no byte arrived for longer than a telegram may pause.
-    pub fn line_idle(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
-        match self.framer.line_idle(src) {
-            Framed::Telegram { skip, len } => {
-                src.advance(skip);
-                Some(RawTelegram(src.split_to(len).freeze()))
-            }
-            Framed::NeedMore { skip } => {
-                src.advance(skip);
-                None
-            }
+    impl FdlCodec {
+        /// A codec with zeroed statistics.
+        pub fn new() -> Self {
+            Self::default()
         }
-    }
-}
 
-impl Decoder for FdlCodec {
-    type Item = RawTelegram;
-    type Error = std::io::Error;
+        /// Error counters so far.
+        pub fn stats(&self) -> CodecStats {
+            self.framer.stats()
+        }
 
-    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<RawTelegram>, std::io::Error> {
-        match self.framer.frame(src) {
-            Framed::Telegram { skip, len } => {
-                src.advance(skip);
-                Ok(Some(RawTelegram(src.split_to(len).freeze())))
-            }
-            Framed::NeedMore { skip } => {
-                src.advance(skip);
-                Ok(None)
+        /// The line went idle: abandon an incomplete candidate at the front of
+        /// `src` and return the first telegram after it, if any. A driver calls
+        /// this when no byte arrived for longer than a telegram may pause.
+        pub fn line_idle(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
+            match self.framer.line_idle(src) {
+                Framed::Telegram { skip, len } => {
+                    src.advance(skip);
+                    Some(RawTelegram(src.split_to(len).freeze()))
+                }
+                Framed::NeedMore { skip } => {
+                    src.advance(skip);
+                    None
+                }
             }
         }
     }
 
-    fn decode_eof(&mut self, src: &mut BytesMut) -> Result<Option<RawTelegram>, std::io::Error> {
-        if let Some(t) = self.decode(src)? {
-            return Ok(Some(t));
+    impl Decoder for FdlCodec {
+        type Item = RawTelegram;
+        type Error = std::io::Error;
+
+        fn decode(&mut self, src: &mut BytesMut) -> Result<Option<RawTelegram>, std::io::Error> {
+            match self.framer.frame(src) {
+                Framed::Telegram { skip, len } => {
+                    src.advance(skip);
+                    Ok(Some(RawTelegram(src.split_to(len).freeze())))
+                }
+                Framed::NeedMore { skip } => {
+                    src.advance(skip);
+                    Ok(None)
+                }
+            }
         }
-        // End of stream: pending bytes can never complete; rescan after
-        // each abandoned candidate until the buffer is empty.
-        while !src.is_empty() {
-            if let Some(t) = self.line_idle(src) {
+
+        fn decode_eof(
+            &mut self,
+            src: &mut BytesMut,
+        ) -> Result<Option<RawTelegram>, std::io::Error> {
+            if let Some(t) = self.decode(src)? {
                 return Ok(Some(t));
             }
+            // End of stream: pending bytes can never complete; rescan after
+            // each abandoned candidate until the buffer is empty.
+            while !src.is_empty() {
+                if let Some(t) = self.line_idle(src) {
+                    return Ok(Some(t));
+                }
+            }
+            Ok(None)
         }
-        Ok(None)
+    }
+
+    impl Encoder<Telegram<'_>> for FdlCodec {
+        type Error = std::io::Error;
+
+        /// Emit errors (an address or data field out of range) become
+        /// `InvalidInput` I/O errors.
+        fn encode(&mut self, item: Telegram<'_>, dst: &mut BytesMut) -> Result<(), std::io::Error> {
+            item.emit_to(dst).map(|_| ()).map_err(|e: wire::EmitError| {
+                std::io::Error::new(std::io::ErrorKind::InvalidInput, e)
+            })
+        }
     }
 }
 
-impl Encoder<Telegram<'_>> for FdlCodec {
-    type Error = std::io::Error;
-
-    /// Emit errors (an address or data field out of range) become
-    /// `InvalidInput` I/O errors.
-    fn encode(&mut self, item: Telegram<'_>, dst: &mut BytesMut) -> Result<(), std::io::Error> {
-        item.emit_to(dst)
-            .map(|_| ())
-            .map_err(|e: wire::EmitError| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))
-    }
-}
-
-#[cfg(test)]
+#[cfg(all(test, feature = "tokio-codec"))]
 mod tests {
     use super::*;
     use crate::wire::{DataTelegram, FunctionCode, RequestKind};
+    use bytes::BytesMut;
+    use tokio_util::codec::Decoder;
 
     fn fdl_status(da: u8) -> Vec<u8> {
         let mut b = [0u8; 6];

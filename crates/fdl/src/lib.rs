@@ -6,7 +6,10 @@
 //! - [`wire`]: zero-copy telegram parsing and emitting (SD1/SD2/SD3, token,
 //!   short acknowledge), FC decoding, FCS. No I/O, no allocation.
 //! - [`codec`]: frames telegrams out of a byte stream that arrives in
-//!   arbitrary fragments, resynchronises after garbage and counts errors.
+//!   arbitrary fragments, resynchronises after garbage and counts errors;
+//!   `FdlCodec` (feature `tokio-codec`, in the default `transport`) is the
+//!   same framer as a tokio-util codec. With `default-features = false`
+//!   the crate needs no async runtime at all.
 //! - [`timing`]: baud rates, bus parameters (TSL, TSDR, TID1/TID2, TTR …)
 //!   and the bit-time arithmetic every timer is built on.
 //! - [`time`]: the [`time::Instant`] the sans-IO cores take as "now".
@@ -47,7 +50,9 @@ pub mod timing;
 pub mod transport;
 pub mod wire;
 
-pub use codec::{CodecStats, FdlCodec, Framer, RawTelegram};
+#[cfg(feature = "tokio-codec")]
+pub use codec::FdlCodec;
+pub use codec::{CodecStats, Framer, RawTelegram};
 pub use time::Instant;
 pub use timing::{Baud, BusParams};
 pub use wire::{

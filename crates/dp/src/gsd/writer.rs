@@ -107,6 +107,57 @@ impl Out {
 }
 
 impl Gsd {
+    /// Whether [`Gsd::write`] reproduces this model: every text of it can
+    /// be written as a GSD string (a GSD string cannot contain `"`; the
+    /// writer turns it into `'`).
+    pub fn is_writable(&self) -> bool {
+        let g = self;
+        let mut s: Vec<&str> = [
+            &g.vendor_name,
+            &g.model_name,
+            &g.revision,
+            &g.hardware_release,
+            &g.software_release,
+            &g.order_number,
+            &g.info_text,
+            &g.implementation_type,
+            &g.bitmap_device,
+            &g.bitmap_diag,
+            &g.bitmap_sf,
+        ]
+        .iter()
+        .filter_map(|o| o.as_deref())
+        .collect();
+        for m in &g.modules {
+            s.push(&m.name);
+            s.extend(m.info_text.as_deref());
+        }
+        s.extend(g.ext_user_prm_data.iter().map(|p| p.name.as_str()));
+        s.extend(
+            g.prm_texts
+                .iter()
+                .flat_map(|t| t.texts.iter().map(|v| v.text.as_str())),
+        );
+        s.extend(g.slots.iter().map(|x| x.name.as_str()));
+        s.extend(
+            g.unit_diag_bits
+                .iter()
+                .chain(&g.unit_diag_not_bits)
+                .map(|t| t.text.as_str()),
+        );
+        s.extend(
+            g.unit_diag_areas
+                .iter()
+                .flat_map(|a| a.values.iter().map(|v| v.text.as_str())),
+        );
+        s.extend(
+            g.slave_family
+                .iter()
+                .flat_map(|f| f.sub.iter().map(String::as_str)),
+        );
+        s.iter().all(|x| !x.contains('"'))
+    }
+
     /// The model as GSD text (a `#Profibus_DP` section with a short
     /// header comment).
     pub fn write(&self) -> String {

@@ -637,18 +637,11 @@ pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
 }
 
 pub(crate) fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{b:02X}");
+    if bytes.is_empty() {
+        "(none)".into()
+    } else {
+        profibus_fdl::wire::Hex(bytes).to_string()
     }
-    if s.is_empty() {
-        s.push_str("(none)");
-    }
-    s
 }
 
 #[cfg(test)]

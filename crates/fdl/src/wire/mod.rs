@@ -22,7 +22,9 @@
 
 pub mod consts;
 mod fc;
+mod hex;
 mod telegram;
 
 pub use fc::{FunctionCode, RequestKind, ResponseStatus, StationType};
+pub use hex::Hex;
 pub use telegram::{fcs, frame_len, DataTelegram, EmitError, Format, ParseError, Telegram};
