@@ -531,7 +531,8 @@ impl Profile for GenericProfile {
     }
 
     fn device(&self, _control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
-        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)?
+        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)
+            .map_err(|e| ProfileError::Device(Box::new(e)))?
             .with_inputs(self.pattern)
             .with_stored_address(self.stored);
         Ok(Box::new(dev))

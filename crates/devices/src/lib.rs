@@ -23,14 +23,23 @@
 //!   no device).
 //!
 //! [`PROFILES`] is the registry: name → [`ProfileEntry`]. `dpctl slave
-//! --device NAME` and bus files with `device = "NAME"` go through it;
-//! [`profile`] finds an entry, [`pkw_dialect`] the PKW dialect of a slave.
+//! --device NAME` and bus files with `device = "NAME"` go through it
+//! ([`bus::ProfiledBus`] resolves such bus files: the profile's GSD and
+//! modules become the slave's Chk_Cfg and User_Prm_Data, and the master
+//! gets its named channels); [`profile()`] finds an entry, [`pkw_dialect`]
+//! the PKW dialect of a slave.
+//!
+//! Devices never touch files while they answer the bus: an accepted
+//! Set_Slave_Add is reported by the DP slave core and kept by the program
+//! running the slave ([`Profile::address_file`], [`address`]); other
+//! device state is reported as a [`STATE_EVENT`] device event and kept in
+//! [`Profile::state_file`].
 //!
 //! # How to add a profile
 //!
 //! 1. Create `src/<name>/mod.rs` (the device: `impl Device`, its docs with
 //!    the manual's line references) and `src/<name>/profile.rs` with
-//!    ```ignore
+//!    ```text
 //!    #[derive(Debug, Default, serde::Deserialize)]
 //!    #[serde(default, deny_unknown_fields)]
 //!    pub struct Options { /* one field per option, snake_case */ }
@@ -51,8 +60,12 @@
 //!    }
 //!    ```
 //!    Use [`profile::int`] / [`profile::opt_int`] for numbers that may
-//!    come as text (`"0x19"`). Optional methods: `address`,
-//!    `address_file`, `pkw_dialect`, `gsd_file`, `warnings`.
+//!    come as text (`"0x19"`) and [`profile::read_table`] for a table
+//!    file named in the options. Optional items: `PKW` (the product's
+//!    PKW dialect, which its module owns), `address`, `address_file`,
+//!    `state_file`, `pkw_dialect`, `gsd_file`, `warnings`. A device with
+//!    text commands takes them from its [`ControlInbox`] and refuses with
+//!    [`ControlError`].
 //! 2. Add `pub mod <name>;` and one row `ProfileEntry::of::<<name>::profile::MyProfile>()`
 //!    to [`PROFILES`] below.
 //!

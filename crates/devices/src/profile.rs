@@ -65,9 +65,10 @@ pub enum ProfileError {
     /// A GSD file cannot be read.
     #[error(transparent)]
     Gsd(#[from] profibus_dp::gsd::GsdError),
-    /// The GSD's modules do not make a device.
+    /// The device cannot be built from this configuration (the
+    /// device's own error).
     #[error(transparent)]
-    Generic(#[from] crate::generic::GenericError),
+    Device(Box<dyn std::error::Error + Send + Sync>),
     /// A configuration (Chk_Cfg) the profile does not know.
     #[error("configuration: {0}")]
     Config(String),

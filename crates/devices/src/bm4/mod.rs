@@ -801,7 +801,7 @@ impl Bm4 {
     /// words; returns the answer in words:
     ///
     /// - `sdiag HEX… [overflow] [no-ed-flag]`: FB SDIAG with these bytes
-    ///   (a_ED_DATA[0] first); e.g. the manual's example
+    ///   (`a_ED_DATA[0]` first); e.g. the manual's example
     ///   16#1234_5678_90AB_CDEF is `sdiag EF CD AB 90 78 56 34 12`.
     /// - `sdiag-clear`: remove the user diagnosis.
     /// - `set NAME[INDEX] VALUE` / `set NAME VALUE`: the PLC writes a
