@@ -692,6 +692,20 @@ impl Jx2 {
         s
     }
 
+    /// The front LEDs (L513-516): DX lit in data exchange; ERR blinking
+    /// without a valid station address, lit on an error (1x134), else
+    /// off.
+    pub fn leds(&self) -> (bool, &'static str) {
+        let err = if self.error.is_some() {
+            "on"
+        } else if self.address.is_none() {
+            "blinking"
+        } else {
+            "off"
+        };
+        (self.in_data_exchange(), err)
+    }
+
     fn in_data_exchange(&self) -> bool {
         self.initialised && self.dp_state == SlaveState::DataExch
     }

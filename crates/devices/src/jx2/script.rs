@@ -15,7 +15,7 @@
 //! if-bit REG BIT set|clear COMMAND…       IF BIT_SET / BIT_CLEAR
 //! label NAME / goto NAME        jumps (in scripts)
 //! delay DURATION                wait, e.g. 100ms, 2s
-//! status                        the module's status, error and state decoded
+//! status                        the module's status, error, state and LEDs decoded
 //! fail-memory-test              the next reset (command 5) reports error 11
 //! ```
 //! A value is a number (decimal, `0x` hex, negative) or `rREG`, the
@@ -722,7 +722,9 @@ impl Interpreter {
                 let m = &mut plc.module;
                 let s = m.read(now, super::reg::STATUS);
                 let e = m.error();
+                let (dx, err) = m.leds();
                 Step::Next(Some(json!({
+                    "leds": {"dx": dx, "err": err},
                     "cmd": "status", "ok": true, "status": s, "bits": status_bits(s),
                     "error": e.map_or(0, |e| e.number()), "error_text": e.map(|e| e.as_str()),
                     "init_error": m.read(now, super::reg::INIT_ERROR),

@@ -167,6 +167,11 @@ fn reset_values_and_fresh_module() {
     assert_eq!(r.slave.address(), profibus_dp::slave::NO_ADDRESS);
     let (reply, _) = r.req(Some(60), &[]);
     assert_eq!(reply, Reply::Silence, "not on the bus without an address");
+    let st = r.plc("status");
+    assert_eq!(
+        st[0]["leds"],
+        serde_json::json!({"dx": false, "err": "blinking"})
+    );
     // The PLC's own registers are plain memory.
     assert!(ok(&r.plc("write 1000 7\nread 1000")[1]));
     assert_eq!(r.reg(1000), 7);
