@@ -444,8 +444,10 @@ fn omega_configurations_a_b_c_give_the_same_layout() {
         "bad.toml",
         &omega_bus(&gsd, &["Status / control module", "2 cycl. actual values"]),
     );
-    // Start-up takes 4 poll cycles; retries on a busy machine add some.
-    let lines = r.master(&bus, &["--cycles", "50"]);
+    // Start-up takes 4 poll cycles; retries on a busy machine add some,
+    // and a slave that answered late is probed again only every 100 ms
+    // (a cycle without a slave in data exchange takes about 1.5 ms).
+    let lines = r.master(&bus, &["--cycles", "1000"]);
     assert!(lines.iter().any(|v| v["event"] == "fault"), "{lines:?}");
     let events = r.stop();
     assert!(events.iter().any(

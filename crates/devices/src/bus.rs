@@ -136,6 +136,8 @@ pkw = false
         assert_eq!(bm4.params.ident_number, crate::bm4::IDENT);
         assert_eq!(bm4.params.cfg[0], crate::pkw::PKW_MODULE);
         assert_eq!(bm4.device.as_ref().unwrap().name, "bm4");
+        let dialect = crate::pkw_dialect(bm4.params.ident_number, &bm4.params.cfg).unwrap();
+        assert_eq!(dialect.name, crate::bm4::PKW.name);
         let ch = bus.channels(6).unwrap().unwrap();
         assert!(ch.find(Direction::Output, "ud_MyWriteVar1").is_some());
         let omega = &bus.file.slaves[1];

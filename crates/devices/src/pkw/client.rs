@@ -21,16 +21,16 @@
 use super::{Command, Dialect, Pkw, Reply, PKW_LEN};
 use profibus_dp::master::{DpMaster, SlaveHandle};
 use profibus_fdl::Instant;
-use std::fmt;
 use std::time::Duration;
 
 /// Cycles after a change before it counts as sent.
 const SENT_AFTER: u64 = 2;
 
 /// Why a PKW job failed.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum PkwError {
     /// The slave answered "cannot execute" (AK 7) with this error number.
+    #[error("the slave cannot execute the command: error 0x{code:04X} ({text})")]
     Refused {
         /// Error number (PWE2).
         code: u16,
@@ -38,6 +38,7 @@ pub enum PkwError {
         text: &'static str,
     },
     /// No response within the timeout.
+    #[error("{}", timeout_text(*after, *reached_request))]
     Timeout {
         /// The timeout.
         after: Duration,
@@ -45,30 +46,20 @@ pub enum PkwError {
         reached_request: bool,
     },
     /// A response code the dialect does not define.
+    #[error("undefined PKW response {0}")]
     BadResponse(Pkw),
 }
 
-impl fmt::Display for PkwError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            PkwError::Refused { code, text } => {
-                write!(f, "the slave cannot execute the command: error 0x{code:04X} ({text})")
-            }
-            PkwError::Timeout {
-                after,
-                reached_request: true,
-            } => write!(f, "no PKW response within {} ms", after.as_millis()),
-            PkwError::Timeout { after, .. } => write!(
-                f,
-                "the slave did not clear its PKW response within {} ms (is the PKW module configured?)",
-                after.as_millis()
-            ),
-            PkwError::BadResponse(p) => write!(f, "undefined PKW response {p}"),
-        }
+fn timeout_text(after: Duration, reached_request: bool) -> String {
+    if reached_request {
+        format!("no PKW response within {} ms", after.as_millis())
+    } else {
+        format!(
+            "the slave did not clear its PKW response within {} ms (is the PKW module configured?)",
+            after.as_millis()
+        )
     }
 }
-
-impl std::error::Error for PkwError {}
 
 /// Why a job cannot start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
