@@ -12,6 +12,7 @@ use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
 use profibus_devices::jx2::{self, script::Interpreter};
 use profibus_devices::pkw::{self, client::PkwClient};
+use profibus_devices::DeviceOptions;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
 use profibus_dp::slave::{Device, DpSlave};
@@ -58,8 +59,29 @@ struct PlantSlave {
     address: u8,
     name: String,
     gsd: Gsd,
-    modules: Vec<&'static str>,
+    modules: Vec<String>,
     device: Box<dyn Device + Send>,
+    /// Named channels for the view.
+    channels: Option<ChannelMap>,
+}
+
+/// A plant slave from the profile registry: `name` with `options`
+/// (`KEY=VALUE`, as `dpctl slave --device-opt` takes them), as a bus file
+/// with `device = "NAME"` would configure it.
+fn profiled(address: u8, label: &str, name: &str, options: &[&str]) -> Result<PlantSlave> {
+    let mut o = DeviceOptions::new();
+    for kv in options {
+        o.set_pair(kv)?;
+    }
+    let p = profibus_devices::profile(name)?.configure(&o, Some(address))?;
+    Ok(PlantSlave {
+        address,
+        name: label.into(),
+        gsd: p.gsd().clone(),
+        modules: p.modules(),
+        device: p.device(None)?,
+        channels: Some(p.channels(&p.chk_cfg()?)?),
+    })
 }
 
 fn generic(
@@ -76,8 +98,9 @@ fn generic(
         address,
         name: name.into(),
         gsd: gsd.clone(),
-        modules: modules.to_vec(),
+        modules: modules.iter().map(|m| m.to_string()).collect(),
         device: Box::new(dev),
+        channels: None,
     })
 }
 
@@ -99,45 +122,36 @@ fn plant() -> Result<Vec<PlantSlave>> {
             &["2 words in/out"],
             InputPattern::Counter,
         )?,
-        {
-            // Baumüller BM4-O-PRO-01 with the manual's example variables
-            // and its generated GSD; PKW module first.
-            let dev = profibus_devices::bm4::Bm4::example(6);
-            PlantSlave {
-                address: 6,
-                name: "BM4-O-PRO-01 (bm4)".into(),
-                gsd: dev.gsd().clone(),
-                modules: vec!["Bedarfsdaten PKW", "ud_MyReadVar1", "u_MyWriteVar2"],
-                device: Box::new(dev),
-            }
-        },
-        PlantSlave {
-            address: 25,
-            name: "Omega Drive-Line II (omega)".into(),
-            gsd: gsd_files::parse(gsd_files::BNF_00D0)?,
-            modules: vec![
-                "Service data module",
-                "Status / control module",
-                "2 cycl. actual values",
-                "2 cycl. setpoints",
+        // Baumüller BM4-O-PRO-01 with the manual's example variables and
+        // its generated GSD; PKW module first.
+        profiled(
+            6,
+            "BM4-O-PRO-01 (bm4)",
+            "bm4",
+            &[
+                "example=true",
+                r#"modules=["ud_MyReadVar1", "u_MyWriteVar2"]"#,
             ],
-            device: Box::new(profibus_devices::omega::Omega::with_defaults()),
-        },
+        )?,
+        // Omega Drive-Line II: PKW, status / control, 2 values each way.
+        profiled(25, "Omega Drive-Line II (omega)", "omega", &[])?,
         PlantSlave {
             address: BK3000_ADDRESS,
             name: "BK3000 bus coupler (bk3000)".into(),
             gsd: gsd_files::parse(gsd_files::BK30BECF)?,
-            modules: BK3000_MODULES.to_vec(),
+            modules: BK3000_MODULES.iter().map(|m| m.to_string()).collect(),
             device: Box::new(bk3000::Bk3000::new(bk3000::image::Strip::parse(
                 BK3000_STRIP,
             )?)),
+            channels: bk3000_channels(&gsd_files::parse(gsd_files::BK30BECF)?, &BK3000_MODULES),
         },
         PlantSlave {
             address: JX2_ADDRESS,
             name: "JX2-PROFI1 (jx2)".into(),
             gsd: gsd_files::parse(jx2::GSD)?,
-            modules: vec!["INPUT : 4 words", "OUTPUT : 4 words"],
+            modules: vec!["INPUT : 4 words".into(), "OUTPUT : 4 words".into()],
             device: Box::new(jx2_plc()?),
+            channels: None,
         },
     ])
 }
@@ -157,10 +171,7 @@ const BK3000_MODULES: [&str; 4] = [
 ];
 
 /// Named channels of the BK3000 for the view.
-fn bk3000_channels(address: u8, gsd: &Gsd, modules: &[&str]) -> Option<ChannelMap> {
-    if address != BK3000_ADDRESS {
-        return None;
-    }
+fn bk3000_channels(gsd: &Gsd, modules: &[&str]) -> Option<ChannelMap> {
     let strip = bk3000::image::Strip::parse(BK3000_STRIP).ok()?;
     let cfg = gsd.chk_cfg(&gsd.select(modules).ok()?).ok()?;
     let img = bk3000::profile::image_of(&strip, &cfg).ok()?;
@@ -242,7 +253,7 @@ async fn demo(args: Args) -> Result<()> {
             name: s.name.clone(),
             gsd: Some(s.gsd.clone()),
             dpv1: s.gsd.dpv1_slave,
-            channels: bk3000_channels(s.address, &s.gsd, &s.modules),
+            channels: s.channels.clone(),
         })
         .collect();
 

@@ -47,19 +47,20 @@ impl ProfiledBus {
     /// Read and check a bus file (see `profibus_dp::busfile`), resolving
     /// `device = "NAME"` slaves with the profile registry.
     pub fn load(path: impl AsRef<Path>) -> Result<ProfiledBus, BusFileError> {
-        let registry = Registry::default();
-        let file = BusFile::load_with(path, &registry)?;
-        Ok(ProfiledBus {
-            file,
-            profiles: registry.configured.into_inner(),
-        })
+        Self::with_registry(|r| BusFile::load_with(path, r))
     }
 
     /// [`ProfiledBus::load`] from text; GSD paths are relative to `path`'s
     /// directory.
     pub fn parse(path: &Path, text: &str) -> Result<ProfiledBus, BusFileError> {
+        Self::with_registry(|r| BusFile::parse_with(path, text, r))
+    }
+
+    fn with_registry(
+        load: impl FnOnce(&Registry) -> Result<BusFile, BusFileError>,
+    ) -> Result<ProfiledBus, BusFileError> {
         let registry = Registry::default();
-        let file = BusFile::parse_with(path, text, &registry)?;
+        let file = load(&registry)?;
         Ok(ProfiledBus {
             file,
             profiles: registry.configured.into_inner(),

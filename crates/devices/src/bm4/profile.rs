@@ -18,6 +18,9 @@ pub struct Options {
     /// The PLC's variable table (TOML); default: the configuration of
     /// `BM4OPRO1.GSD`.
     pub vars: Option<PathBuf>,
+    /// The manual's example table (MyGSDFile.gsd), built in, instead of
+    /// `vars`.
+    pub example: bool,
     /// us_DEVICE of PROFIBUS_INIT_SL (1..125 fixed, 126 set once and kept
     /// in `state_dir`, 127 set after every start, 128 the rotary switch);
     /// default: the caller's address.
@@ -55,13 +58,19 @@ impl Profile for Bm4Profile {
 --us-device N (1..125 fixed, 126 set once by the master and kept in --state-dir, 127 set after every start, \
 128 rotary switch; default: --addr), --switch N (rotary switch for us_DEVICE 128), --state-dir DIR, \
 --write-gsd FILE (write the generated GSD), --control FILE|- (commands: sdiag HEX..., sdiag-clear, set NAME VALUE, get NAME, status); \
-bus file: modules = [variable names] (default all), pkw = true|false";
+example = true (the manual's example table instead of --vars); bus file: modules = [variable names] (default all), pkw = true|false";
     const IDENT: Option<u16> = Some(IDENT);
     const PKW: Option<&'static Dialect> = Some(&PKW);
 
     fn configure(options: Options, address: Option<u8>) -> Result<Self, ProfileError> {
         let table = match &options.vars {
+            Some(_) if options.example => {
+                return Err(ProfileError::Invalid(
+                    "give --vars FILE or example = true, not both".into(),
+                ))
+            }
             Some(path) => read_table(path, VarTable::parse)?,
+            None if options.example => VarTable::example(),
             None => VarTable::default_table(),
         };
         let us = match (options.us_device, options.switch) {
