@@ -104,3 +104,49 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
     );
     assert!(slave.terminate(Duration::from_secs(10)).success());
 }
+
+#[test]
+fn profile_options_from_the_command_line_are_typed_and_checked() {
+    let slave = |args: &[&str]| {
+        Command::new(dpctl())
+            .args(["slave", "--port", "/nonexistent/x", "--addr", "25"])
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    // Every registered profile is listed, with its options.
+    let o = Command::new(dpctl())
+        .args(["slave", "--list-devices"])
+        .output()
+        .unwrap();
+    let list = String::from_utf8_lossy(&o.stdout);
+    for name in ["generic", "bm4", "omega"] {
+        assert!(list.lines().any(|l| l.starts_with(name)), "{list}");
+    }
+    // A key the profile does not have, a value of the wrong type, and
+    // contradicting options: exit 1 with one line naming the problem.
+    for (args, needle) in [
+        (
+            vec!["--device", "omega", "--device-opt", "no-such=1"],
+            "no_such",
+        ),
+        (
+            vec!["--device", "omega", "--device-opt", "setpoints=many"],
+            "many",
+        ),
+        (
+            vec!["--device", "omega", "--device-opt", "setpoints=2"],
+            "--actual-values",
+        ),
+        (
+            vec!["--device", "omega", "--device-opt", "switch=0x80"],
+            "0x80",
+        ),
+    ] {
+        let o = slave(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
