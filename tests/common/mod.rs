@@ -337,6 +337,13 @@ impl Lines {
         false
     }
 
+    /// The next line within `timeout` (kept in the history too).
+    pub fn next_line(&mut self, timeout: Duration) -> Option<String> {
+        let l = self.0.recv_timeout(timeout).ok()?;
+        self.1.push(l.clone());
+        Some(l)
+    }
+
     /// Everything until the child closed its stdout.
     pub fn rest(&mut self) -> &[String] {
         while let Ok(l) = self.0.recv_timeout(Duration::from_secs(10)) {

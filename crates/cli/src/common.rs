@@ -4,7 +4,6 @@
 use anyhow::{Context, Result};
 use profibus_fdl::transport::Port;
 use profibus_fdl::Baud;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// Line options of every command that runs a station.
@@ -24,24 +23,19 @@ pub struct LineArgs {
 }
 
 impl LineArgs {
-    /// The latency allowance for this port.
-    pub fn latency(&self) -> Result<Duration> {
-        latency(self.latency, &self.port)
-    }
-
     /// Open the port.
     pub fn open(&self) -> Result<Port> {
         Port::open(&self.port, self.baud).with_context(|| format!("opening {}", self.port))
     }
 }
 
-/// The latency allowance from a `--latency MS` option, or the default
-/// for `port`.
-pub fn latency(ms: Option<f64>, port: &str) -> Result<Duration> {
+/// The latency allowance from a `--latency MS` option, or the port's
+/// default ([`Port::default_latency`]).
+pub fn latency(ms: Option<f64>, port: &Port) -> Result<Duration> {
     match ms {
         Some(ms) if ms >= 0.0 && ms.is_finite() => Ok(Duration::from_secs_f64(ms / 1000.0)),
         Some(ms) => anyhow::bail!("--latency {ms} must be a non-negative number"),
-        None => Ok(default_latency(port)),
+        None => Ok(port.default_latency()),
     }
 }
 
@@ -56,39 +50,31 @@ pub fn master_station(
     Port,
 )> {
     use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
-    cfg.latency_allowance = latency(latency_ms, port)?;
     let port_ =
         Port::open(port, bus.master.params.baud).with_context(|| format!("opening {port}"))?;
+    let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
+    cfg.latency_allowance = latency(latency_ms, &port_)?;
     Ok((ActiveStation::new(cfg, dp), port_))
 }
 
-/// Driver options for `port`: telegrams gathered into one write on a pty
-/// (ptys carry no timing), busy polling for `busy_poll_us` µs after each
-/// event.
-pub fn driver_options(port: &str, busy_poll_us: u64) -> profibus_fdl::driver::Options {
-    profibus_fdl::driver::Options {
-        coalesce: is_pty(port),
+/// Driver options: busy polling for `busy_poll_us` µs after each event;
+/// with `gather` (a benchmark option) telegrams are gathered into one
+/// write where the port allows it ([`Port::may_gather`]).
+pub fn driver_options(
+    port: &Port,
+    busy_poll_us: u64,
+    gather: bool,
+) -> Result<profibus_fdl::driver::Options> {
+    if gather && !port.may_gather() {
+        anyhow::bail!(
+            "--gather is for ptys only: {} is a serial line",
+            port.name()
+        );
+    }
+    Ok(profibus_fdl::driver::Options {
+        gather,
         busy_poll: Duration::from_micros(busy_poll_us),
-    }
-}
-
-/// Latency allowance when none is given: ptys answer within a
-/// millisecond even on a loaded machine; USB serial adapters buffer for up
-/// to 16 ms (the FTDI latency timer).
-pub fn default_latency(port: &str) -> Duration {
-    if is_pty(port) {
-        Duration::from_millis(5)
-    } else {
-        Duration::from_millis(20)
-    }
-}
-
-/// Whether `path` (after following links) is a pseudo terminal.
-pub fn is_pty(path: &str) -> bool {
-    let real = std::fs::canonicalize(path).unwrap_or_else(|_| PathBuf::from(path));
-    let s = real.to_string_lossy();
-    s.starts_with("/dev/pts/") || s.starts_with("/dev/pty") || s == "/dev/ptmx"
+    })
 }
 
 /// A single-threaded tokio runtime for one command.

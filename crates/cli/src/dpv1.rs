@@ -121,7 +121,7 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
         &mut station,
         &mut port,
         Clock::start(),
-        common::driver_options(&args.port, 0),
+        driver::Options::default(),
         common::shutdown(),
         |st, now| {
             let m = st.app_mut();

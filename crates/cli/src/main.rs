@@ -14,6 +14,7 @@ mod gsd;
 mod jx2;
 mod master;
 mod pkw;
+mod rfid;
 mod scan;
 mod slave;
 mod sniff;
@@ -51,6 +52,9 @@ enum Command {
     Sniff(sniff::Args),
     /// Read or write a parameter over a slave's PKW channel.
     Pkw(pkw::Args),
+    /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
+    /// 16-byte handshake.
+    Rfid(rfid::Args),
     /// Read or write a DP-V1 data record (slot, index) of a slave.
     Dpv1(dpv1::Args),
 }
@@ -74,6 +78,7 @@ fn main() -> ExitCode {
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
         Command::Pkw(a) => pkw::run(a),
+        Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),
     };
     match result {

@@ -69,6 +69,12 @@ pub struct Args {
     /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
     #[arg(long, default_value_t = 0, value_name = "US")]
     busy_poll: u64,
+    /// Benchmark option for ptys: gather the token to itself and the next
+    /// request into one write. Faster on a pty, but the idle time (TSYN)
+    /// before the request disappears: slaves that frame by idle time
+    /// (ASICs, and slaves behind `dpctl bus`) reject it.
+    #[arg(long)]
+    gather: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -234,6 +240,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         dp.set_operating_state(OperatingState::Clear);
     }
     let (mut station, mut port) = common::master_station(&args.port, bus, dp, args.latency)?;
+    let options = common::driver_options(&port, args.busy_poll, args.gather)?;
 
     // Commands come from a plain thread: a blocking read of stdin must not
     // keep the runtime from shutting down on Ctrl-C / SIGTERM.
@@ -290,7 +297,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         &mut station,
         &mut port,
         Clock::start(),
-        common::driver_options(&args.port, args.busy_poll),
+        options,
         common::shutdown(),
         |st, now| {
             last_now = now;

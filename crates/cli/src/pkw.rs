@@ -294,7 +294,7 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
         &mut station,
         &mut port,
         Clock::start(),
-        common::driver_options(&args.port, 0),
+        driver::Options::default(),
         common::shutdown(),
         |st, now| {
             let m = st.app_mut();

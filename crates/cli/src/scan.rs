@@ -34,8 +34,8 @@ pub fn run(args: Args) -> Result<()> {
 
 async fn scan(args: Args) -> Result<()> {
     let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(args.line.baud));
-    cfg.latency_allowance = args.line.latency()?;
     let mut port = args.line.open()?;
+    cfg.latency_allowance = common::latency(args.line.latency, &port)?;
     let mut station = ActiveStation::new(cfg, LiveListScan::new(args.addr));
     let limit = Duration::from_secs_f64(args.timeout.max(0.0));
     let deadline = tokio::time::sleep(limit);
@@ -43,7 +43,7 @@ async fn scan(args: Args) -> Result<()> {
         &mut station,
         &mut port,
         Clock::start(),
-        common::driver_options(&args.line.port, 0),
+        driver::Options::default(),
         async {
             tokio::select! {
                 _ = common::shutdown() => {}

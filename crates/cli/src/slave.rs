@@ -167,6 +167,10 @@ pub struct Args {
     /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
     #[arg(long, default_value_t = 0, value_name = "US")]
     busy_poll: u64,
+    /// Benchmark option for ptys: gather telegrams due within 100 µs into
+    /// one write (see `dpctl master --gather`).
+    #[arg(long)]
+    gather: bool,
     /// Print one JSON object per line.
     #[arg(long)]
     json: bool,
@@ -523,19 +527,17 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let address_file = profile.address_file();
     let state_file = profile.state_file();
-    let pty = common::is_pty(&path);
-    let latency = match args.latency {
-        Some(ms) if ms >= 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
-        Some(ms) => bail!("--latency {ms} must be a non-negative number"),
-        None => common::default_latency(&path),
-    };
+    let mut port = Port::open(&path, PTY_NOMINAL)?;
+    let pty = port.is_pty();
+    let latency = common::latency(args.latency, &port)?;
+    let options = common::driver_options(&port, args.busy_poll, args.gather)?;
     let search = choice == BaudChoice::Search || (choice == BaudChoice::Auto && !pty);
     let first = match choice {
         BaudChoice::Fixed(b) => b,
         BaudChoice::Auto if pty => PTY_NOMINAL,
         BaudChoice::Auto | BaudChoice::Search => profibus_fdl::autobaud::SEARCH_ORDER[0],
     };
-    let mut port = Port::open(&path, first)?;
+    port.set_baud(first)?;
     let mut slave = DpSlave::new(device, addr);
     {
         let ident = slave.device().ident_number();
@@ -583,7 +585,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             &mut station,
             &mut port,
             clock.clone(),
-            common::driver_options(&path, args.busy_poll),
+            options,
             async {
                 common::shutdown().await;
                 stop_requested.set(true);

@@ -181,7 +181,7 @@ async fn sniff(args: Args) -> Result<()> {
             eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
             std::process::exit(2)
         }
-        None if crate::common::is_pty(&args.port) => Duration::from_millis(5),
+        None if port.is_pty() => Duration::from_millis(5),
         None => (BusParams::defaults(args.baud).bits(33) * 2).max(Duration::from_millis(2)),
     };
     let clock = std::time::Instant::now();

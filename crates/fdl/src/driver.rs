@@ -9,14 +9,20 @@
 //! data and decide to stop, without locks or channels inside the core.
 //!
 //! Timers: tokio's timer wheel has 1 ms granularity, which is coarse next
-//! to PROFIBUS bit times (min TSDR is 0.9 µs at 12 Mbit/s). Deadlines less
-//! than [`WARP_BELOW`] away are taken as reached at once: the driver's
-//! clock jumps to the deadline (and never runs backwards afterwards). No
-//! operating system wakes a process that precisely, and every transport
-//! this driver runs on (ptys, USB adapters) adds more latency than that
-//! anyway; spinning instead would steal the CPU from the peer on a small
-//! machine. Deadlines up to [`SPIN_BELOW`] away are awaited by yielding to
-//! the runtime in a loop (still reading the port); longer ones sleep.
+//! to PROFIBUS bit times (min TSDR is 0.9 µs at 12 Mbit/s). A deadline
+//! less than [`SPIN_INLINE`] away is awaited on the spot by spinning on
+//! the clock, then handled and what it sends is written in the same pass
+//! (no round through the runtime and the port's read). Deadlines up to
+//! [`SPIN_BELOW`] away are awaited by yielding to the runtime in a loop
+//! (still reading the port); longer ones sleep, then spin the rest.
+//!
+//! Line timing: a station's transmission is never written before its
+//! deadline, so the idle time the station keeps before a telegram (TID1 ≥
+//! TSYN + TSM before each request, including after a token to itself) is
+//! on the line as computed. Each transmission is polled with the time read
+//! just before it is written, so a station can account for a late write.
+//! Gathering several telegrams into one write ([`Options::gather`]) gives
+//! this up for speed on ptys; it is off by default.
 
 use crate::station::Station;
 use crate::time::Instant;
@@ -29,8 +35,13 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 /// Deadlines closer than this are awaited by yielding instead of sleeping.
 pub const SPIN_BELOW: Duration = Duration::from_micros(1500);
 
-/// Deadlines closer than this count as reached (the clock jumps).
-pub const WARP_BELOW: Duration = Duration::from_micros(100);
+/// Deadlines closer than this are awaited by spinning on the clock in the
+/// same pass (no sleep, no trip through the runtime).
+pub const SPIN_INLINE: Duration = Duration::from_micros(60);
+
+/// With [`Options::gather`]: telegrams due within this window join the
+/// same write (the driver's clock jumps to their deadline).
+pub const GATHER_WINDOW: Duration = Duration::from_micros(100);
 
 /// The clock of a driver: real time since its start as an [`Instant`],
 /// never running backwards after a jump ([`Clock::jump_to`]).
@@ -80,13 +91,16 @@ pub enum Stop {
 /// How the driver writes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Options {
-    /// Gather what the station sends within [`WARP_BELOW`] (e.g. a token
-    /// to itself and the request that follows it after TID1) into one
-    /// write. Right for ptys, which carry bytes without their timing:
-    /// the peer gets one wake-up instead of two. Wrong for a real line,
-    /// where the idle time between telegrams (TSYN) must appear on the
-    /// wire.
-    pub coalesce: bool,
+    /// Benchmark option, off by default: gather what the station sends
+    /// within [`GATHER_WINDOW`] (e.g. a token to itself and the request
+    /// that follows it after TID1) into one write, jumping the clock to
+    /// the later deadlines. On a pty the peer then gets one wake-up
+    /// instead of two, but the idle time between the gathered telegrams
+    /// (TSYN) disappears: receivers that frame by idle time (slave ASICs,
+    /// and any slave behind `dpctl bus`) see one frame and reject the
+    /// request. Only for ptys ([`crate::transport::Port::may_gather`])
+    /// whose peer frames by length, never for a real line.
+    pub gather: bool,
     /// After each event, keep polling the port for this long instead of
     /// sleeping in the operating system (busy polling): the answer to a
     /// request is seen microseconds earlier, at the price of a busy CPU
@@ -130,30 +144,34 @@ where
     let mut out: Vec<u8> = Vec::with_capacity(1024);
     tokio::pin!(shutdown);
     loop {
-        // A deadline about to come counts as reached before anything is
-        // sent: a response due after min TSDR goes out in this pass, not
-        // after another round through the port's read and the runtime.
-        warp(station, &clock);
-        let now = clock.now();
-        if options.coalesce {
-            out.clear();
-            gather(station, now, &mut out);
-            // What follows within the warp window joins the same write.
-            for _ in 0..8 {
-                if out.is_empty() || !warp(station, &clock) {
-                    break;
-                }
-                let t = clock.now();
-                station.handle_timeout(t);
-                if !gather(station, t, &mut out) {
-                    break;
-                }
-            }
+        if options.gather {
+            gather_due(station, &clock, &mut out);
             if !out.is_empty() {
                 port.write_all(&out).await?;
             }
         } else {
-            while let Some(bytes) = station.poll_transmit(now) {
+            // Deadlines due or about to come are handled in this pass (a
+            // response due after min TSDR, the request TID1 after a token
+            // to itself), each transmission written at its deadline. The
+            // bound keeps a station that never stops asking from starving
+            // the runtime.
+            for _ in 0..16 {
+                while let Some(bytes) = station.poll_transmit(clock.now()) {
+                    port.write_all(bytes).await?;
+                }
+                let Some(d) = station.poll_timeout() else {
+                    break;
+                };
+                let now = clock.now();
+                if d > now {
+                    if d.saturating_duration_since(now) >= SPIN_INLINE {
+                        break;
+                    }
+                    spin_until(&clock, d);
+                }
+                station.handle_timeout(clock.now());
+            }
+            while let Some(bytes) = station.poll_transmit(clock.now()) {
                 port.write_all(bytes).await?;
             }
         }
@@ -161,10 +179,9 @@ where
         if tick(station, clock.now()).is_break() {
             return Ok(Stop::Done);
         }
-        warp(station, &clock);
         let deadline = station.poll_timeout();
         let wait = deadline.map(|d| d.saturating_duration_since(clock.now()));
-        let spin_until = clock.now() + options.busy_poll;
+        let busy_until = clock.now() + options.busy_poll;
         tokio::select! {
             biased;
             _ = &mut shutdown => return Ok(Stop::Shutdown),
@@ -175,10 +192,36 @@ where
                 }
                 station.handle_rx(clock.now(), &buf[..n]);
             }
-            _ = wait_for(&clock, deadline, wait, spin_until) => {
+            _ = wait_for(&clock, deadline, wait, busy_until) => {
                 station.handle_timeout(clock.now());
             }
         }
+    }
+}
+
+/// [`Options::gather`]: what the station sends now and within
+/// [`GATHER_WINDOW`], into `out` (cleared first).
+fn gather_due<S: Station + ?Sized>(station: &mut S, clock: &Clock, out: &mut Vec<u8>) {
+    out.clear();
+    warp(station, clock);
+    let now = clock.now();
+    gather(station, now, out);
+    for _ in 0..8 {
+        if out.is_empty() || !warp(station, clock) {
+            break;
+        }
+        let t = clock.now();
+        station.handle_timeout(t);
+        if !gather(station, t, out) {
+            break;
+        }
+    }
+}
+
+/// Busy-wait until the clock reads `t`.
+fn spin_until(clock: &Clock, t: Instant) {
+    while clock.now() < t {
+        std::hint::spin_loop();
     }
 }
 
@@ -192,12 +235,12 @@ fn gather<S: Station + ?Sized>(station: &mut S, now: Instant, out: &mut Vec<u8>)
 }
 
 /// Jump the clock to the station's deadline when it is due or less than
-/// [`WARP_BELOW`] away; whether the deadline is reached now.
+/// [`GATHER_WINDOW`] away; whether the deadline is reached now.
 fn warp<S: Station + ?Sized>(station: &S, clock: &Clock) -> bool {
     match station.poll_timeout() {
         Some(d) => {
             let now = clock.now();
-            if d > now && d.saturating_duration_since(now) < WARP_BELOW {
+            if d > now && d.saturating_duration_since(now) < GATHER_WINDOW {
                 clock.jump_to(d);
             }
             d <= clock.now()

@@ -20,6 +20,9 @@
 //! let d = m.poll_delivery(t).unwrap(); // the first character
 //! assert_eq!((d.from, &d.bytes[..]), (Some(0), &[0x10][..]));
 //! // ... hand `d.bytes` to every station except `d.from`.
+//! // A driver that wakes later gets everything that has arrived since:
+//! let d = m.poll_delivery(t + Baud::B19200.chars_to_duration(5)).unwrap();
+//! assert_eq!(&d.bytes[..], &[0x02, 0x01, 0x49, 0x4C, 0x16][..]);
 //! ```
 //!
 //! # Timing
@@ -28,16 +31,25 @@
 //! duration: a transmission is delivered at `now` in one chunk.
 //!
 //! With a baud rate, a transmission occupies the line for 11 bit times per
-//! character from its start. It is delivered in at most two chunks: the
-//! first character when it has fully arrived (start + 11 bit times), the
-//! rest when the last character has arrived. Receivers thus see the start
-//! of a reply at the right time (slot-time checks) without one event per
-//! character. Bytes written by a station while its own transmission is
-//! still on the line extend that transmission (a UART's FIFO). Character
-//! end times are computed from the start of the transmission with integer
-//! arithmetic (`origin + baud.bits_to_duration(bits)`), never by adding up
-//! rounded per-character durations, so 2000 characters at 19.2 kbit/s end
-//! at exactly `Baud::B19200.chars_to_duration(2000)`.
+//! character from its start, and every character is delivered when it has
+//! fully arrived (its stop bit has crossed the wire). [`Medium::poll_delivery`]
+//! hands out all characters of one transmission that have arrived by `now`
+//! in one chunk, so a driver that wakes late gets them together, never
+//! with an idle gap inside: a receiver that frames by line idle time (as
+//! slave ASICs do) sees chunk boundaries of one transmission exactly one
+//! character time apart, with no idle between the stop bit of one and the
+//! start bit of the next, and sees the idle time between transmissions as
+//! it was on the wire. A receiver also sees the start of a reply at the
+//! right time (slot-time checks), however long the reply. Bytes written by
+//! a station while its own transmission is still on the line extend that
+//! transmission (a UART's FIFO). Character end times are computed from the
+//! start of the transmission with integer arithmetic
+//! (`origin + baud.bits_to_duration(bits)`), never by adding up rounded
+//! per-character durations, so 2000 characters at 19.2 kbit/s end at
+//! exactly `Baud::B19200.chars_to_duration(2000)`. With
+//! [`Medium::with_whole_transmissions`] each transmission is delivered in
+//! one piece when its last character has arrived instead (for receivers
+//! that run behind a scheduler; see there).
 //!
 //! A station that starts while another one is sending either garbles the
 //! line ([`Collisions::Garble`], as on a real line: the overlapping
@@ -246,13 +258,15 @@ impl Tx {
     fn end(&self, baud: Baud) -> Instant {
         self.char_start(baud, self.chars.len())
     }
-    /// The next delivery: the first character alone, then the rest.
-    fn next_event(&self, baud: Baud) -> Option<Instant> {
-        match self.delivered {
-            d if d >= self.chars.len() => None,
-            0 => Some(self.char_end(baud, 0)),
-            _ => Some(self.char_end(baud, self.chars.len() - 1)),
-        }
+    /// End of the next character to deliver (of the last one when
+    /// delivering whole transmissions).
+    fn next_event(&self, baud: Baud, whole: bool) -> Option<Instant> {
+        let k = if whole {
+            self.chars.len().checked_sub(1)?
+        } else {
+            self.delivered
+        };
+        (self.delivered < self.chars.len()).then(|| self.char_end(baud, k))
     }
 }
 
@@ -276,6 +290,8 @@ pub struct Medium {
     now: Instant,
     /// End of the last transmission that has been removed.
     last_end: Instant,
+    /// Deliver each transmission in one piece at its end.
+    whole: bool,
     stats: MediumStats,
 }
 
@@ -310,8 +326,27 @@ impl Medium {
             next_noise,
             now: Instant::ZERO,
             last_end: Instant::ZERO,
+            whole: false,
             stats: MediumStats::default(),
         }
+    }
+
+    /// Deliver each transmission of a paced line in one piece when its
+    /// last character has arrived, instead of character by character.
+    ///
+    /// For receivers in real time behind a scheduler (`dpctl bus`): a
+    /// process that is woken late, or reads late, would otherwise get the
+    /// characters of one telegram in pieces with pauses between them,
+    /// which a receiver framing by idle time takes for the end of the
+    /// telegram. The price: the first character of a reply arrives only
+    /// when the whole reply has crossed the wire, so a master's slot-time
+    /// allowance must cover the longest reply (see
+    /// `transport::Port::default_latency`). On virtual time (the
+    /// simulator) every receiver is on time and character-wise delivery
+    /// is exact.
+    pub fn with_whole_transmissions(mut self) -> Medium {
+        self.whole = true;
+        self
     }
 
     /// The configuration in force (after clamping).
@@ -423,7 +458,7 @@ impl Medium {
         let mut t = self.ready.front().map(|d| d.at);
         if let Some(baud) = self.cfg.baud {
             for tx in &self.txs {
-                if let Some(e) = tx.next_event(baud) {
+                if let Some(e) = tx.next_event(baud, self.whole) {
                     t = Some(t.map_or(e, |t| t.min(e)));
                 }
             }
@@ -443,22 +478,38 @@ impl Medium {
         }
         let baud = self.cfg.baud?;
         loop {
-            let (i, at) = self
+            let (i, first) = self
                 .txs
                 .iter()
                 .enumerate()
-                .filter_map(|(i, t)| t.next_event(baud).map(|e| (i, e)))
+                .filter_map(|(i, t)| t.next_event(baud, self.whole).map(|e| (i, e)))
                 .min_by_key(|&(i, e)| (e, i))?;
-            if at > now {
+            if first > now {
                 return None;
             }
+            // Everything of this transmission that has arrived, but nothing
+            // later than another transmission's next character (deliveries
+            // stay in time order when transmissions overlap).
+            let limit = self
+                .txs
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .filter_map(|(_, t)| t.next_event(baud, self.whole))
+                .fold(now, Instant::min);
+            let whole = self.whole;
             let tx = &mut self.txs[i];
-            let range = if tx.delivered == 0 {
-                0..1
+            let mut end = if whole {
+                tx.chars.len()
             } else {
-                tx.delivered..tx.chars.len()
+                tx.delivered + 1
             };
-            tx.delivered = range.end;
+            while end < tx.chars.len() && tx.char_end(baud, end) <= limit {
+                end += 1;
+            }
+            let at = tx.char_end(baud, end - 1);
+            let range = tx.delivered..end;
+            tx.delivered = end;
             let bytes: Vec<u8> = tx.chars[range]
                 .iter()
                 .filter(|&&c| c & DROPPED == 0)
@@ -655,16 +706,78 @@ mod tests {
         let data: Vec<u8> = (0..2000u32).map(|i| i as u8).collect();
         m.transmit(Instant::ZERO, 0, &data);
         assert_eq!(m.busy_until(), at(b.chars_to_duration(2000)));
-        let ds = drain(&mut m, Instant::NEVER);
-        assert_eq!(ds.len(), 2);
-        assert_eq!(ds[0].at, at(b.chars_to_duration(1)));
-        assert_eq!(&ds[0].bytes[..], &data[..1]);
-        assert_eq!(ds[1].at, at(b.chars_to_duration(2000)));
-        assert_eq!(
-            ds[1].at - Instant::ZERO,
-            Duration::from_nanos(1_145_833_334)
-        );
-        assert_eq!(&ds[1].bytes[..], &data[1..]);
+        let ds = drain(&mut m.clone(), Instant::NEVER);
+        // Woken at every character's end: one character each.
+        assert_eq!(ds.len(), 2000);
+        for (k, d) in ds.iter().enumerate() {
+            assert_eq!(d.at, at(b.chars_to_duration(k as u64 + 1)));
+            assert_eq!(&d.bytes[..], &data[k..=k]);
+        }
+        // Woken once at the end: everything in one chunk.
+        let end = at(b.chars_to_duration(2000));
+        assert!(m
+            .poll_delivery(before(end, Duration::from_nanos(1)))
+            .is_some());
+        let d = m.poll_delivery(end).unwrap();
+        assert_eq!(d.at, end);
+        assert_eq!(d.at - Instant::ZERO, Duration::from_nanos(1_145_833_334));
+        assert_eq!(&d.bytes[..], &data[1999..]);
+        assert!(m.poll_delivery(Instant::NEVER).is_none());
+    }
+
+    #[test]
+    fn a_late_poll_gets_everything_arrived_in_one_chunk_never_with_a_gap() {
+        // An 11-byte write at 19.2 kbit/s polled 6.5 ms later (after 11
+        // characters = 6.3 ms): all 11 bytes at once, at the last one's end.
+        let b = Baud::B19200;
+        let mut m = Medium::new(2, MediumConfig::paced(b));
+        let data = [
+            0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x87, 0x16,
+        ];
+        m.transmit(Instant::ZERO, 1, &data);
+        let d = m.poll_delivery(at(Duration::from_micros(6500))).unwrap();
+        assert_eq!(&d.bytes[..], &data[..]);
+        assert_eq!(d.at, at(b.chars_to_duration(11)));
+        assert!(m.poll_delivery(Instant::NEVER).is_none());
+        // Polled at arbitrary times: each chunk holds the characters that
+        // arrived since the previous one, so consecutive chunks touch (no
+        // idle between the last character of one and the first of the next).
+        let mut m = Medium::new(2, MediumConfig::paced(b));
+        m.transmit(Instant::ZERO, 1, &data);
+        let mut got = vec![];
+        for us in [600, 610, 2000, 2001, 5000, 9000] {
+            while let Some(d) = m.poll_delivery(at(Duration::from_micros(us))) {
+                got.extend_from_slice(&d.bytes);
+                // The chunk ends where its last character ends.
+                assert_eq!(d.at, at(b.chars_to_duration(got.len() as u64)));
+            }
+        }
+        assert_eq!(got, data);
+    }
+
+    #[test]
+    fn whole_transmissions_arrive_in_one_piece_at_their_end() {
+        let b = Baud::B19200;
+        let mut m = Medium::new(3, MediumConfig::paced(b)).with_whole_transmissions();
+        let data = [
+            0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x87, 0x16,
+        ];
+        m.transmit(Instant::ZERO, 1, &data[..4]);
+        // More bytes while the line is busy extend the transmission.
+        m.transmit(at(b.chars_to_duration(2)), 1, &data[4..]);
+        let end = at(b.chars_to_duration(11));
+        assert_eq!(m.poll_timeout(), Some(end));
+        assert!(m
+            .poll_delivery(before(end, Duration::from_nanos(1)))
+            .is_none());
+        let d = m.poll_delivery(end).unwrap();
+        assert_eq!((d.at, &d.bytes[..]), (end, &data[..]));
+        // The next transmission after an idle gap keeps the gap.
+        let t = end + b.bits_to_duration(37);
+        m.transmit(t, 0, &[0xDC, 0x02, 0x02]);
+        let d = m.poll_delivery(Instant::NEVER).unwrap();
+        assert_eq!(d.at, t + b.chars_to_duration(3));
+        assert_eq!(m.poll_timeout(), None);
     }
 
     #[test]
@@ -674,19 +787,23 @@ mod tests {
         let data: Vec<u8> = (0..2000u32).map(|i| (i * 7) as u8).collect();
         // 1 byte per write, each written a little later while the line is
         // still busy: still one transmission ending at exactly 2000 chars.
+        let mut ds = vec![];
         for (i, c) in data.chunks(1).enumerate() {
             let now = at(b.chars_to_duration(i as u64 / 2));
-            let mut got = vec![];
             while let Some(d) = m.poll_delivery(now) {
-                got.push(d);
+                ds.push(d);
             }
             m.transmit(now, 1, c);
         }
-        let ds = drain(&mut m, Instant::NEVER);
+        ds.extend(drain(&mut m, Instant::NEVER));
         let all: Vec<u8> = ds.iter().flat_map(|d| d.bytes.to_vec()).collect();
-        // The first character was delivered during the loop.
-        assert_eq!(&all[..], &data[1..]);
-        assert_eq!(ds.last().unwrap().at, at(b.chars_to_duration(2000)));
+        assert_eq!(all, data);
+        // Every chunk ends at its last character's exact end.
+        let mut count = 0;
+        for d in &ds {
+            count += d.bytes.len() as u64;
+            assert_eq!(d.at, at(b.chars_to_duration(count)));
+        }
         assert_eq!(m.stats().transmissions, 1);
         assert_eq!(m.stats().collisions, 0);
     }
@@ -707,17 +824,25 @@ mod tests {
         m.transmit(at(b.chars_to_duration(10)), 0, &[1; 200]);
         assert_eq!(m.busy_until(), at(b.chars_to_duration(2000)));
         let ds = drain(&mut m, Instant::NEVER);
-        let summary: Vec<(Option<usize>, Instant, usize)> =
-            ds.iter().map(|d| (d.from, d.at, d.bytes.len())).collect();
+        // Per station: first and last character's arrival, characters.
+        let mut summary: Vec<(Option<usize>, Instant, Instant, usize)> = vec![];
+        for d in &ds {
+            match summary.last_mut() {
+                Some(s) if s.0 == d.from => {
+                    s.2 = d.at;
+                    s.3 += d.bytes.len();
+                }
+                _ => summary.push((d.from, d.at, d.at, d.bytes.len())),
+            }
+        }
+        let c = |n| at(b.chars_to_duration(n));
         assert_eq!(
             summary,
             vec![
-                (Some(0), at(b.chars_to_duration(1)), 1),
-                (Some(0), at(b.chars_to_duration(1200)), 1199),
-                (Some(1), at(b.chars_to_duration(1201)), 1),
-                (Some(1), at(b.chars_to_duration(1800)), 599),
-                (Some(2), at(b.chars_to_duration(1801)), 1),
-                (Some(2), at(b.chars_to_duration(2000)), 199),
+                // The model's time was already at 10 characters.
+                (Some(0), c(10), c(1200), 1200),
+                (Some(1), c(1201), c(1800), 600),
+                (Some(2), c(1801), c(2000), 200),
             ]
         );
         for d in &ds {
@@ -803,12 +928,16 @@ mod tests {
             now += step;
             while let Some(t) = m.poll_timeout().filter(|&t| t <= now) {
                 while let Some(d) = m.poll_delivery(t) {
+                    let start = before(d.at, char_time * d.bytes.len() as u32);
                     match d.from {
-                        // The last character of each noise chunk.
-                        None => noise_chars.push((before(d.at, char_time), d.at)),
-                        Some(_) if d.bytes.len() == 1 => first_at = Some(d.at),
+                        None => noise_chars.push((start, d.at)),
                         Some(_) => {
-                            station_spans.push((before(first_at.take().unwrap(), char_time), d.at))
+                            let (first, n) = first_at.get_or_insert((start, 0));
+                            *n += d.bytes.len();
+                            if *n == 20 {
+                                station_spans.push((*first, d.at));
+                                first_at = None;
+                            }
                         }
                     }
                 }

@@ -134,6 +134,7 @@ pub struct RfidClient {
     answer: Vec<u8>,
     capacity: usize,
     drained: usize,
+    restarts_seen: Option<u64>,
 }
 
 impl RfidClient {
@@ -152,6 +153,7 @@ impl RfidClient {
             answer: Vec::with_capacity(capacity),
             capacity,
             drained: 0,
+            restarts_seen: None,
         }
     }
 
@@ -299,7 +301,9 @@ impl RfidClient {
     }
 
     /// Drive the handshake with the images of `slave` in `master` (a
-    /// gateway's loop); nothing is allocated.
+    /// gateway's loop); nothing is allocated. When the reader leaves
+    /// Data_Exchange or the master starts it up again while a command
+    /// runs, the command starts over ([`RfidClient::restart`]).
     pub fn poll_master(
         &mut self,
         now: Instant,
@@ -313,11 +317,36 @@ impl RfidClient {
             inputs.copy_from_slice(&view.inputs[..TELEGRAM_LEN]);
         }
         let cycle = view.stats.data_exchanges;
+        let restarts = view.stats.restarts;
+        let restarted = self.restarts_seen.is_some_and(|r| r != restarts);
+        self.restarts_seen = Some(restarts);
         let outputs = master.outputs_mut(slave);
+        if !in_dx || restarted {
+            self.restart(outputs);
+        }
         if !in_dx {
             return self.check_timeout(now, outputs).map(Err);
         }
         self.poll(now, cycle, &inputs, outputs)
+    }
+
+    /// The reader started afresh (a new start-up of its DP interface
+    /// drops what it had received and its answer, and counts R, S and E
+    /// from 0): send the running command again from its start. L and the
+    /// payload of `outputs` are set to 0 at once, so that the reader takes
+    /// no stale fragment when it sees S differ from its new reference; an
+    /// S of 255 becomes 0 (the next job's S + 1 must differ from 0). The
+    /// timeout keeps running.
+    pub fn restart(&mut self, outputs: &mut [u8]) {
+        if self.state == State::Idle || outputs.len() < TELEGRAM_LEN {
+            return;
+        }
+        self.state = State::Drain(None);
+        self.answer.clear();
+        outputs[2..TELEGRAM_LEN].fill(0);
+        if outputs[1] == 0xFF {
+            outputs[1] = 0;
+        }
     }
 
     fn stage(&self) -> Stage {

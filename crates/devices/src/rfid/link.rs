@@ -22,6 +22,11 @@
 //!   E = R throughout); should that not change E (R jumped to the current
 //!   E) it is E + 1 instead, because the master sees data only by a change
 //!   of E (L90).
+//! - R of the first request after power-up or a reset is the reference,
+//!   not a change: a master that kept its output image while the reader
+//!   started afresh does not ask for a fragment of the next answer before
+//!   it has seen the data flag. S, in contrast, counts from 0: a command
+//!   already in the image when the reader starts is a send job.
 //! - A change of R while nothing waits and no command runs asks for
 //!   nothing ("only if R changed **and** the flag is set", L82) and is
 //!   forgotten. While a command runs (its answer will come) it is kept:
@@ -95,7 +100,9 @@ pub struct LinkStats {
 /// The reader's side of the handshake; see the module docs.
 #[derive(Debug, Clone)]
 pub struct ReaderLink {
-    last_r: u8,
+    /// R of the last request; `None` until the first request after
+    /// power-up or a reset.
+    last_r: Option<u8>,
     last_s: u8,
     line: Vec<u8>,
     line_overflow: bool,
@@ -117,7 +124,7 @@ impl ReaderLink {
     /// The state after power-up: R, S and E are 0, nothing waits.
     pub fn new() -> ReaderLink {
         ReaderLink {
-            last_r: 0,
+            last_r: None,
             last_s: 0,
             line: Vec::with_capacity(MAX_LINE),
             line_overflow: false,
@@ -170,8 +177,8 @@ impl ReaderLink {
                 Received::Job { bytes: n, lines }
             };
         }
-        if r != self.last_r {
-            self.last_r = r;
+        let last_r = self.last_r.replace(r);
+        if last_r.is_some_and(|l| l != r) {
             let busy = busy || !self.lines.is_empty();
             self.fetch = if self.data_waiting() || busy {
                 Fetch::Requested
@@ -258,11 +265,8 @@ impl ReaderLink {
             .map_or(rest.len(), |p| p + 1);
         let n = line_end.min(PAYLOAD_MAX);
         let e = self.response[1];
-        self.response[1] = if self.last_r != e {
-            self.last_r
-        } else {
-            e.wrapping_add(1)
-        };
+        let r = self.last_r.unwrap_or(e);
+        self.response[1] = if r != e { r } else { e.wrapping_add(1) };
         self.response[2] = n as u8;
         let payload = &mut self.response[HEADER_LEN..];
         payload[..n].copy_from_slice(&rest[..n]);
@@ -421,6 +425,7 @@ mod tests {
     #[test]
     fn e_changes_even_when_r_jumps_to_e() {
         let mut l = ReaderLink::new();
+        dx(&mut l, &req(0, 0, b""));
         l.push_answer(b"A\r");
         dx(&mut l, &req(4, 0, b""));
         let o = dx(&mut l, &req(4, 0, b""));
@@ -440,6 +445,24 @@ mod tests {
         dx(&mut l, &req(0, 0, b""));
         let o = dx(&mut l, &req(0, 0, b""));
         assert_eq!(o[1], 0, "numbers wrap");
+    }
+
+    #[test]
+    fn the_first_r_after_a_reset_is_the_reference() {
+        let mut l = ReaderLink::new();
+        dx(&mut l, &req(0, 0, b""));
+        l.reset();
+        // The master kept R = 5 and sends a command (S differs from 0).
+        let o = dx(&mut l, &req(5, 1, b"GT\r"));
+        assert_eq!(l.take_command(), Some(Line::Text(b"GT".to_vec())));
+        l.push_answer(b"0102030405060708090A\r");
+        // No fetch was asked for: nothing is delivered until R changes.
+        assert_eq!(o[..3], [0, 0, 0]);
+        let o = dx(&mut l, &req(5, 1, b""));
+        assert_eq!(o[..3], [0x08, 0, 0]);
+        dx(&mut l, &req(6, 1, b""));
+        let o = dx(&mut l, &req(6, 1, b""));
+        assert_eq!(o[..3], [0x08, 6, 13]);
     }
 
     #[test]

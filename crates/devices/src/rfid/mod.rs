@@ -256,6 +256,9 @@ impl Rfid {
     }
 
     fn answer(&mut self, bytes: &[u8]) {
+        while let Some(e) = self.reader.take_event() {
+            self.note("rfid", e);
+        }
         self.link.push_answer(bytes);
         let text = format!(
             "answer ready: {} bytes `{}`",

@@ -328,3 +328,30 @@ fn control_commands_and_state_events() {
     d.control(ms(0), "enter 0A").unwrap();
     assert!(state(&mut d).is_none());
 }
+
+#[test]
+fn a_restart_of_the_reader_mid_command_sends_the_command_again() {
+    let mut b = Bench::new(reader_with_tag());
+    let cmd = b"WD 2 AABBCCDD0102030405060708";
+    b.c.start(b.now, cmd).unwrap();
+    let mut restarted = false;
+    let mut result = None;
+    for _ in 0..5000 {
+        if let Some(r) = b.c.poll(b.now, b.cycle, &b.inp, &mut b.out) {
+            result = Some(r.map(|a| a.to_vec()));
+            break;
+        }
+        // The reader restarts once the second fragment has arrived: it
+        // drops both; the master's image still holds the second with
+        // S = 2, which would differ from the reader's new reference.
+        if !restarted && b.d.link().stats().jobs == 2 {
+            b.d.clear_outputs(b.now, ClearReason::LeftDataExchange);
+            b.c.restart(&mut b.out);
+            restarted = true;
+        }
+        b.exchange();
+    }
+    assert!(restarted);
+    assert_eq!(result.unwrap().unwrap(), b"AABBCCDD0102030405060708\r");
+    assert_eq!(b.d.reader().field().tags[0].blocks[3], [1, 2, 3, 4]);
+}

@@ -519,6 +519,10 @@ impl<A: MasterApp> Station for ActiveStation<A> {
         match c.tx_at {
             Some(t) if t <= now && c.tx_len > 0 => {
                 c.tx_at = None;
+                // Sent late (the driver woke after `t`): everything timed
+                // from this telegram's end moves with it, so that the next
+                // telegram still keeps its idle time (TID1 ≥ TSYN) after it.
+                c.delay_timers(now - t);
                 Some(&c.tx[..c.tx_len])
             }
             _ => None,
@@ -646,6 +650,23 @@ impl Core {
             }
         }
         best
+    }
+
+    /// The telegram queued for `tx_at` leaves `late` after it: move the
+    /// timers that were computed from its end.
+    fn delay_timers(&mut self, late: Duration) {
+        if late.is_zero() {
+            return;
+        }
+        self.line_free_at += late;
+        self.last_activity += late;
+        match &mut self.state {
+            State::UseToken { wake } | State::ClaimToken { wake, .. } => *wake += late,
+            State::AwaitResponse { deadline }
+            | State::AwaitStatus { deadline, .. }
+            | State::CheckTokenPass { deadline, .. } => *deadline += late,
+            State::Offline | State::ListenToken | State::ActiveIdle => {}
+        }
     }
 
     /// Queue a telegram for transmission at `at`; returns when its last

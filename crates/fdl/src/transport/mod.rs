@@ -19,9 +19,15 @@
 //! waits with `tcdrain` in [`tokio::io::AsyncWriteExt::flush`], so a
 //! driver must flush after each telegram.
 //!
-//! The in-process simulated bus is not a `Port`: it is the sans-IO
+//! Facts about the line a port leads to, for the shells that run stations
+//! on it: [`Port::is_pty`], [`Port::default_latency`] and
+//! [`Port::may_gather`].
+//!
+//! [`hub`] is the virtual RS-485 bus of ptys behind `dpctl bus`. The
+//! in-process simulated bus is not a `Port`: it is the sans-IO
 //! [`crate::medium::Medium`] driven on virtual time.
 
+pub mod hub;
 mod rs485;
 
 use crate::timing::Baud;
@@ -30,6 +36,7 @@ use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
 use std::pin::Pin;
 use std::task::{ready, Context, Poll};
+use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::task::JoinHandle;
 use tokio_serial::{
@@ -120,6 +127,8 @@ pub struct Port {
     name: String,
     baud: Baud,
     rts: RtsMechanism,
+    /// The port is a pseudo terminal.
+    pty: bool,
     /// Manual RTS: asserted since the last completed flush.
     rts_raised: bool,
     /// Manual RTS: `tcdrain` running on a duplicate of the fd.
@@ -152,9 +161,11 @@ impl Port {
             name: path.to_string(),
             baud: opts.baud,
             rts: RtsMechanism::None,
+            pty: false,
             rts_raised: false,
             drain: None,
         };
+        port.pty = is_pty_fd(port.fd());
         port.check_parity_on_input().map_err(open_err)?;
         port.set_baud(opts.baud)?;
         if opts.rts == RtsControl::OnSend {
@@ -184,6 +195,7 @@ impl Port {
             name: name.to_string(),
             baud,
             rts: RtsMechanism::None,
+            pty: true,
             rts_raised: false,
             drain: None,
         };
@@ -203,6 +215,41 @@ impl Port {
     /// How RTS is driven.
     pub fn rts_mechanism(&self) -> RtsMechanism {
         self.rts
+    }
+
+    /// Whether the port is a pseudo terminal (a `socat` pair, a `dpctl
+    /// bus` link) rather than a serial adapter.
+    pub fn is_pty(&self) -> bool {
+        self.pty
+    }
+
+    /// The latency allowance to add to slot times and token timeouts when
+    /// the user gives none. USB serial adapters buffer for up to 16 ms
+    /// (the FTDI latency timer): 20 ms. A pty answers within a millisecond
+    /// even on a loaded machine, but a paced `dpctl bus` hands a reply over
+    /// only when its last character has crossed the wire: 5 ms plus the
+    /// wire time of the longest telegram (255 characters) at the port's
+    /// rate (2 ms at 1.5 Mbit/s, 146 ms at 19.2 kbit/s).
+    pub fn default_latency(&self) -> Duration {
+        if self.pty {
+            Duration::from_millis(5)
+                + self
+                    .baud
+                    .chars_to_duration(crate::wire::consts::MAX_TELEGRAM_LEN as u64)
+        } else {
+            Duration::from_millis(20)
+        }
+    }
+
+    /// Whether telegrams may be gathered into one write
+    /// ([`crate::driver::Options::gather`]) without changing what the
+    /// peer can observe beyond the idle gaps: true on a pty, which carries
+    /// bytes without their timing. Gathering removes the idle time (TSYN)
+    /// between the gathered telegrams, so receivers that frame by idle
+    /// time (slave ASICs, and `dpctl bus` relaying to them) see one frame;
+    /// it is a benchmark option, never the default. Never on a serial line.
+    pub fn may_gather(&self) -> bool {
+        self.pty
     }
 
     /// Change the rate; fails with [`TransportError::BaudRefused`] when the
@@ -248,6 +295,28 @@ impl Port {
         t.input_flags |= InputFlags::INPCK;
         t.input_flags &= !(InputFlags::IGNPAR | InputFlags::PARMRK);
         tcsetattr(self.fd(), SetArg::TCSANOW, &t).map_err(io::Error::from)
+    }
+}
+
+/// Whether `fd` is a pseudo terminal (either end): Unix 98 pty masters
+/// and slaves, the multiplexer `/dev/ptmx`, and BSD-style ptys, by device
+/// number.
+fn is_pty_fd(fd: BorrowedFd<'_>) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use nix::sys::stat::{fstat, major, minor};
+        let Ok(st) = fstat(fd) else {
+            return false;
+        };
+        let (maj, min) = (major(st.st_rdev), minor(st.st_rdev));
+        // 128..=135 Unix 98 masters, 136..=143 Unix 98 slaves, 5:2 ptmx,
+        // 2 and 3 BSD masters and slaves (Documentation/admin-guide/devices.txt).
+        (128..=143).contains(&maj) || (maj, min) == (5, 2) || maj == 2 || maj == 3
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = fd;
+        false
     }
 }
 
@@ -316,6 +385,10 @@ mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
+    fn consts_max() -> usize {
+        crate::wire::consts::MAX_TELEGRAM_LEN
+    }
+
     #[tokio::test]
     async fn pty_pair_carries_bytes_raw() {
         let (mut a, mut b) = Port::pty_pair(Baud::B12000000).unwrap();
@@ -338,6 +411,9 @@ mod tests {
         drop(pty.slave);
         let path = path.to_str().unwrap();
         let mut port = Port::open(path, Baud::B9600).unwrap();
+        assert!(port.is_pty() && port.may_gather());
+        let longest = Baud::B9600.chars_to_duration(consts_max() as u64);
+        assert_eq!(port.default_latency(), Duration::from_millis(5) + longest);
         for b in Baud::ALL {
             port.set_baud(b).unwrap();
             assert_eq!(port.baud(), b);

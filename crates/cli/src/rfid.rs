@@ -1,0 +1,195 @@
+//! `dpctl rfid`: run commands on an AEG ID RFID reader (ARE I2 / K1 PFB)
+//! over its 16-byte handshake.
+//!
+//! Runs the DP master of the bus file like `dpctl master`; once the reader
+//! is in Data_Exchange, the client (`profibus_devices::rfid::client`)
+//! sends each command and fetches the whole answer. Prints each answer
+//! (its lines; or one JSON object per command with `--json`). Exit 0 when
+//! every command was answered, 1 on a timeout or a reader that does not
+//! reach Data_Exchange.
+
+use crate::common;
+use anyhow::{bail, Context, Result};
+use profibus_devices::rfid::client::RfidClient;
+use profibus_devices::rfid::{CFG, IDENT};
+use profibus_dp::busfile::BusFile;
+use profibus_dp::master::{DpMaster, SlaveState};
+use profibus_fdl::driver::{self, Clock, Stop};
+use profibus_fdl::Instant;
+use serde_json::json;
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Run reader commands (VER, GT, RD b [e], WD b DATA, TOR [n]) on an RFID
+/// reader and print the answers.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Serial device or pty path.
+    #[arg(long, value_name = "PATH")]
+    port: String,
+    /// Bus file (TOML) with the reader (`device = "rfid"`, or
+    /// gsd/AEGI0DC4.GSD with its module).
+    #[arg(long, value_name = "BUS.toml")]
+    config: PathBuf,
+    /// Station address of the reader.
+    #[arg(long, value_name = "ADDR")]
+    slave: u8,
+    /// Milliseconds to wait for the whole answer of each command.
+    #[arg(long, value_name = "MS", default_value_t = 5000)]
+    timeout: u64,
+    /// Milliseconds to wait for the reader to reach Data_Exchange.
+    #[arg(long, value_name = "MS", default_value_t = 10000)]
+    startup_timeout: u64,
+    /// Extra milliseconds on the slot time for the transport's latency
+    /// (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
+    /// Print one JSON object per command.
+    #[arg(long)]
+    json: bool,
+    /// The commands, in order (CR is appended), e.g. "VER" "RD 0 3".
+    #[arg(value_name = "COMMAND", required = true)]
+    commands: Vec<String>,
+}
+
+/// One command's outcome.
+struct Done {
+    command: String,
+    answer: Result<Vec<u8>, String>,
+    took: Duration,
+    drained: usize,
+    /// Start-ups of the reader while the command ran (it was sent again).
+    restarts: u64,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let bus = profibus_devices::bus::ProfiledBus::load(&args.config)?.file;
+    common::runtime()?.block_on(rfid(args, bus))
+}
+
+async fn rfid(args: Args, bus: BusFile) -> Result<()> {
+    let addr = args.slave;
+    let slave = bus
+        .slaves
+        .iter()
+        .find(|s| s.params.address == addr)
+        .with_context(|| format!("slave {addr} is not in {}", args.config.display()))?;
+    if slave.params.cfg != CFG {
+        bail!(
+            "slave {addr} is configured {:02X?}; the reader has 16 bytes in and out (0x3F, gsd/AEGI0DC4.GSD)",
+            slave.params.cfg
+        );
+    }
+    if slave.params.ident_number != IDENT {
+        tracing::warn!(
+            ident = slave.params.ident_number,
+            "slave {addr} is not ident 0x{IDENT:04X}; trying the reader's handshake anyway"
+        );
+    }
+    let (mut station, mut port) =
+        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
+    let handle = station
+        .app()
+        .handle(addr)
+        .context("slave not in the master")?;
+    let mut client = RfidClient::new(Duration::from_millis(args.timeout.max(1)));
+    let startup = Duration::from_millis(args.startup_timeout);
+    let mut todo = args.commands.iter().rev().cloned().collect::<Vec<_>>();
+    let mut done: Vec<Done> = vec![];
+    let mut running: Option<(String, Instant, u64)> = None;
+    let mut started: Option<Instant> = None;
+    let mut failure: Option<String> = None;
+    let result = driver::run_with(
+        &mut station,
+        &mut port,
+        Clock::start(),
+        driver::Options::default(),
+        common::shutdown(),
+        |st, now| {
+            let m = st.app_mut();
+            while m.poll_event().is_some() {}
+            let t0 = *started.get_or_insert(now);
+            if m.slave_state(addr) != Some(SlaveState::DataExchange)
+                && client.is_idle()
+                && now.saturating_duration_since(t0) > startup
+            {
+                failure = Some(format!(
+                    "slave {addr} did not reach Data_Exchange within {} ms (state {})",
+                    startup.as_millis(),
+                    m.slave_state(addr).map_or("unknown", |s| s.name())
+                ));
+                return ControlFlow::Break(());
+            }
+            if let Some(r) = client.poll_master(now, m, handle) {
+                let (command, t, r0) = running.take().expect("a command runs");
+                let restarts = m.slave_stats(addr).map_or(0, |s| s.restarts) - r0;
+                done.push(Done {
+                    command,
+                    answer: r.map(<[u8]>::to_vec).map_err(|e| e.to_string()),
+                    took: now.saturating_duration_since(t),
+                    drained: client.drained(),
+                    restarts,
+                });
+                if done.last().is_some_and(|d| d.answer.is_err()) {
+                    return ControlFlow::Break(());
+                }
+            }
+            if client.is_idle() && m.slave_state(addr) == Some(SlaveState::DataExchange) {
+                let Some(cmd) = todo.pop() else {
+                    return ControlFlow::Break(());
+                };
+                if let Err(e) = client.start(now, cmd.as_bytes()) {
+                    failure = Some(format!("`{cmd}`: {e}"));
+                    return ControlFlow::Break(());
+                }
+                running = Some((cmd, now, m.slave_stats(addr).map_or(0, |s| s.restarts)));
+            }
+            ControlFlow::Continue(())
+        },
+    )
+    .await;
+    match result.with_context(|| format!("on {}", args.port))? {
+        Stop::Shutdown => bail!("interrupted"),
+        Stop::Done => {}
+    }
+    for d in &done {
+        print(&args, d);
+    }
+    if let Some(f) = failure {
+        bail!("{f}");
+    }
+    if let Some(Done {
+        command,
+        answer: Err(e),
+        ..
+    }) = done.last()
+    {
+        bail!("slave {addr} `{command}`: {e}");
+    }
+    Ok(())
+}
+
+fn print(args: &Args, d: &Done) {
+    let ms = d.took.as_secs_f64() * 1000.0;
+    match &d.answer {
+        Ok(a) if args.json => println!(
+            "{}",
+            json!({"slave": args.slave, "command": d.command, "ok": true,
+                   "answer": String::from_utf8_lossy(a), "answer_hex": crate::describe::hex(a),
+                   "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained,
+                   "restarts": d.restarts})
+        ),
+        Ok(a) => {
+            let text = String::from_utf8_lossy(a);
+            for line in text.split_terminator('\r') {
+                println!("{line}");
+            }
+        }
+        Err(e) if args.json => println!(
+            "{}",
+            json!({"slave": args.slave, "command": d.command, "ok": false, "error": e})
+        ),
+        Err(_) => {}
+    }
+}

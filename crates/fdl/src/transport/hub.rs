@@ -1,0 +1,564 @@
+//! A virtual RS-485 multidrop bus made of ptys (the library behind
+//! `dpctl bus`).
+//!
+//! Each station gets a pty; the links given to [`Hub::open`] become
+//! symlinks to the pty ends the station processes open (like any serial
+//! port). The hub keeps the other ends and runs them through a
+//! [`Medium`] driven by real time (nanoseconds since the hub started):
+//! every byte a station writes reaches every other station, in order, and
+//! not the writer; with a baud rate the line is paced at wire speed;
+//! faults are injected as configured.
+//!
+//! # Line timing as receivers see it
+//!
+//! A paced hub delivers each transmission (one station's bytes while it
+//! holds the line) in one write when its last character has crossed the
+//! wire ([`Medium::with_whole_transmissions`]): the characters of one
+//! telegram never arrive with an idle gap inside, even when the hub or a
+//! receiver is scheduled late, and the idle time between telegrams is the
+//! one on the modelled wire (a transmission starts on the wire when the
+//! hub reads it) plus the hub's wake-up latency: never shortened, delayed
+//! by at most one telegram's duration. Receivers that frame by idle time,
+//! as slave ASICs do, see the telegrams as they would on RS-485. A master
+//! sees the first character of a reply only when the whole reply has
+//! arrived; [`super::Port::default_latency`] allows for that on ptys.
+//! Unpaced, bytes pass as fast as they come, in the chunks they were read
+//! in: the gaps are the ones the writers left, plus scheduling jitter.
+//!
+//! # Stations come and go
+//!
+//! A pty whose end is not open (or was closed by a restarting process)
+//! reads EIO and polls HUP. The hub then stops delivering to it, throws
+//! away what it had queued, checks every few milliseconds whether a
+//! process opened it again, and carries on. A station that does not read
+//! for so long that its pty fills up loses bytes (counted as overruns)
+//! instead of stalling the bus.
+//!
+//! # Driving it
+//!
+//! [`Hub::poll`] runs one round of a plain `ppoll` loop over the pty
+//! masters (no runtime, no per-byte allocation; writes go straight to the
+//! fds, and without pacing nothing sleeps between a read and the writes it
+//! causes). A caller passes its own file descriptor to wake on (a signalfd,
+//! an eventfd) and calls it in a loop; [`Hub::finish`] flushes the pcap
+//! recording and removes the links (dropping the hub removes them too).
+
+use crate::codec::CodecStats;
+use crate::medium::{Medium, MediumConfig, MediumStats};
+use crate::pcap::PcapWriter;
+use crate::tap::{Tap, TapEvent};
+use crate::time::Instant;
+use nix::errno::Errno;
+use nix::poll::{PollFd, PollFlags};
+use nix::sys::termios::{self, SetArg};
+use nix::sys::time::TimeSpec;
+use std::fmt;
+use std::io::{self, Write};
+use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// How long the line must be quiet before the pcap framer gives up an
+/// incomplete telegram.
+const IDLE_GAP: Duration = Duration::from_millis(5);
+/// How often ptys without a process are checked for a new one.
+const RECONNECT_CHECK: Duration = Duration::from_millis(5);
+/// Bytes queued for a station that does not read before it loses bytes.
+const MAX_QUEUED: usize = 1 << 20;
+
+/// Why a hub could not be set up or run.
+#[derive(Debug, thiserror::Error)]
+pub enum HubError {
+    /// A link path exists and is not a symlink (the hub never replaces
+    /// other files).
+    #[error("{} exists and is not a symlink; refusing to replace it", .0.display())]
+    NotASymlink(PathBuf),
+    /// A link could not be checked, created or replaced.
+    #[error("cannot create link {}: {source}", .path.display())]
+    Link {
+        /// The link.
+        path: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+    /// A pty could not be made or configured.
+    #[error("cannot set up a pty: {0}")]
+    Pty(io::Error),
+    /// Waiting for the ptys failed.
+    #[error("ppoll: {0}")]
+    Poll(io::Error),
+    /// Writing the pcap recording failed.
+    #[error("writing the pcap recording: {0}")]
+    Pcap(io::Error),
+}
+
+/// Counters of the hub itself (the line's are [`MediumStats`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct HubStats {
+    /// Bytes handed to stations (counted once per receiving station).
+    pub delivered_bytes: u64,
+    /// Bytes lost because a station did not read.
+    pub overrun_bytes: u64,
+    /// Times a process opened a station's pty.
+    pub connects: u64,
+}
+
+/// A snapshot of a hub's counters; `Display` gives the one-line summary
+/// `dpctl bus` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HubStatus {
+    /// What the line carried and injected.
+    pub medium: MediumStats,
+    /// The hub's own counters.
+    pub hub: HubStats,
+    /// Stations whose pty a process has open.
+    pub connected: usize,
+    /// Stations on the bus.
+    pub stations: usize,
+    /// With a pcap recording: telegrams written and the framer's counters.
+    pub pcap: Option<(u64, CodecStats)>,
+}
+
+impl fmt::Display for HubStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}; delivered {} bytes, overruns {} bytes, {}/{} stations connected ({} connects)",
+            self.medium,
+            self.hub.delivered_bytes,
+            self.hub.overrun_bytes,
+            self.connected,
+            self.stations,
+            self.hub.connects
+        )?;
+        if let Some((packets, c)) = self.pcap {
+            write!(
+                f,
+                "; pcap {packets} telegrams (codec: {} garbage bytes, {} bad FCS, {} other errors)",
+                c.garbage_bytes,
+                c.bad_fcs,
+                c.errors() - c.bad_fcs
+            )?;
+        }
+        Ok(())
+    }
+}
+
+struct Station {
+    master: OwnedFd,
+    link: PathBuf,
+    /// Where the link points (the pty end for the station process).
+    tty: PathBuf,
+    /// A process has the pty open.
+    connected: bool,
+    /// Bytes the pty did not take yet.
+    queued: Vec<u8>,
+}
+
+type Recorder = PcapWriter<Box<dyn Write + Send>>;
+
+/// The virtual bus; see the module docs.
+pub struct Hub {
+    stations: Vec<Station>,
+    medium: Medium,
+    clock: std::time::Instant,
+    stats: HubStats,
+    tap: Tap,
+    pcap: Option<Recorder>,
+    next_reconnect: Instant,
+    last_delivery: Instant,
+    buf: Box<[u8; 4096]>,
+    slack_set: bool,
+}
+
+impl fmt::Debug for Hub {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Hub")
+            .field("stations", &self.stations.len())
+            .field("medium", self.medium.config())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Hub {
+    /// Make one pty per link, raw, and point each link at its pty end.
+    /// An existing symlink is replaced; any other file is an error
+    /// ([`HubError::NotASymlink`], checked for every link before anything
+    /// is created). The line behaves as `medium` says.
+    pub fn open(links: &[PathBuf], medium: MediumConfig) -> Result<Hub, HubError> {
+        for l in links {
+            match std::fs::symlink_metadata(l) {
+                Ok(m) if m.file_type().is_symlink() => {}
+                Ok(_) => return Err(HubError::NotASymlink(l.clone())),
+                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                Err(source) => {
+                    return Err(HubError::Link {
+                        path: l.clone(),
+                        source,
+                    })
+                }
+            }
+        }
+        let mut stations: Vec<Station> = Vec::with_capacity(links.len());
+        for link in links {
+            let pty = nix::pty::openpty(None, None).map_err(pty_err)?;
+            // Raw mode on the station's end: no echo, no line editing, no
+            // CR/LF translation; it stays while the hub holds the master.
+            let mut t = termios::tcgetattr(&pty.slave).map_err(pty_err)?;
+            termios::cfmakeraw(&mut t);
+            termios::tcsetattr(&pty.slave, SetArg::TCSANOW, &t).map_err(pty_err)?;
+            let tty = nix::unistd::ttyname(&pty.slave).map_err(pty_err)?;
+            set_nonblocking(&pty.master).map_err(pty_err)?;
+            drop(pty.slave);
+            let st = Station {
+                master: pty.master,
+                link: link.clone(),
+                tty,
+                connected: false,
+                queued: Vec::new(),
+            };
+            // Pushed first, so that a failure removes the links made so far.
+            stations.push(st);
+            let st = stations.last().expect("pushed");
+            if let Err(source) = replace_symlink(&st.tty, link) {
+                stations.pop();
+                remove_links(&stations);
+                return Err(HubError::Link {
+                    path: link.clone(),
+                    source,
+                });
+            }
+        }
+        Ok(Hub {
+            medium: Medium::new(stations.len(), medium).with_whole_transmissions(),
+            stations,
+            clock: std::time::Instant::now(),
+            stats: HubStats::default(),
+            tap: Tap::new(),
+            pcap: None,
+            next_reconnect: Instant::ZERO,
+            last_delivery: Instant::ZERO,
+            buf: Box::new([0; 4096]),
+            slack_set: false,
+        })
+    }
+
+    /// Record every telegram on the line to `sink` (pcapng, link type 257,
+    /// time stamps from the hub's start at `epoch` since the Unix epoch).
+    pub fn record(&mut self, sink: Box<dyn Write + Send>, epoch: Duration) -> Result<(), HubError> {
+        self.pcap = Some(PcapWriter::new(sink, epoch).map_err(HubError::Pcap)?);
+        Ok(())
+    }
+
+    /// The stations' links and the pty ends they point to, by index.
+    pub fn links(&self) -> impl Iterator<Item = (&Path, &Path)> {
+        self.stations
+            .iter()
+            .map(|s| (s.link.as_path(), s.tty.as_path()))
+    }
+
+    /// The line's configuration.
+    pub fn medium_config(&self) -> &MediumConfig {
+        self.medium.config()
+    }
+
+    /// The counters now.
+    pub fn status(&self) -> HubStatus {
+        HubStatus {
+            medium: self.medium.stats(),
+            hub: self.stats,
+            connected: self.stations.iter().filter(|s| s.connected).count(),
+            stations: self.stations.len(),
+            pcap: self.pcap.as_ref().map(|p| (p.packets(), self.tap.stats())),
+        }
+    }
+
+    /// The hub's time now.
+    fn now(&self) -> Instant {
+        Instant::from_nanos(self.clock.elapsed().as_nanos() as u64)
+    }
+
+    /// One round: check for reconnected stations, deliver what is due,
+    /// then wait (at most `max_wait`, or until the next delivery) for
+    /// station writes or for `wake` to become readable, and carry the
+    /// bytes read. Returns whether `wake` is readable (the caller reads
+    /// it). Call it in a loop.
+    pub fn poll(
+        &mut self,
+        wake: Option<BorrowedFd<'_>>,
+        max_wait: Option<Duration>,
+    ) -> Result<bool, HubError> {
+        if !self.slack_set && self.medium.config().baud.is_some() {
+            // Wake-ups on time matter when pacing; the default slack of
+            // this thread is 50 µs.
+            self.slack_set = true;
+            set_timer_slack();
+        }
+        let now = self.now();
+        // Ptys without a process: has one opened them (HUP gone)?
+        if now >= self.next_reconnect {
+            for s in self.stations.iter_mut().filter(|s| !s.connected) {
+                if !hung_up(&s.master) {
+                    // Drop anything written to the pty while nobody had
+                    // it open, so the new process starts on a clean line.
+                    let _ = termios::tcflush(&s.master, termios::FlushArg::TCOFLUSH);
+                    s.connected = true;
+                    self.stats.connects += 1;
+                    tracing::debug!(link = %s.link.display(), "station connected");
+                }
+            }
+            self.next_reconnect = now + RECONNECT_CHECK;
+        }
+        self.deliver_due(now)?;
+        if self.tap.pending() > 0 && now >= self.idle_at() {
+            self.tap.line_idle();
+            self.drain_tap()?;
+            if let Some(p) = self.pcap.as_mut() {
+                p.flush().map_err(HubError::Pcap)?;
+            }
+        }
+
+        // Sleep until something happens or is due.
+        let mut deadline = self.medium.poll_timeout();
+        let mut consider = |t: Instant| deadline = Some(deadline.map_or(t, |d| d.min(t)));
+        if self.stations.iter().any(|s| !s.connected) {
+            consider(self.next_reconnect);
+        }
+        if let Some(w) = max_wait {
+            consider(now + w);
+        }
+        if self.tap.pending() > 0 {
+            consider(self.idle_at());
+        }
+        let timeout =
+            deadline.map(|d| TimeSpec::from_duration(d.saturating_duration_since(self.now())));
+
+        let mut fds = Vec::with_capacity(self.stations.len() + 1);
+        let mut index = Vec::with_capacity(self.stations.len());
+        if let Some(w) = wake {
+            fds.push(PollFd::new(w, PollFlags::POLLIN));
+        }
+        let first = fds.len();
+        for (i, s) in self
+            .stations
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.connected)
+        {
+            let mut ev = PollFlags::POLLIN;
+            if !s.queued.is_empty() {
+                ev |= PollFlags::POLLOUT;
+            }
+            fds.push(PollFd::new(s.master.as_fd(), ev));
+            index.push(i);
+        }
+        match nix::poll::ppoll(&mut fds, timeout, None) {
+            Ok(_) | Err(Errno::EINTR) => {}
+            Err(e) => return Err(HubError::Poll(e.into())),
+        }
+        let revents: Vec<PollFlags> = fds
+            .iter()
+            .map(|f| f.revents().unwrap_or(PollFlags::empty()))
+            .collect();
+        drop(fds);
+        let woken = wake.is_some() && revents[0].contains(PollFlags::POLLIN);
+
+        for (k, &i) in index.iter().enumerate() {
+            let ev = revents[first + k];
+            if ev.contains(PollFlags::POLLOUT) {
+                flush_queue(&mut self.stations[i]);
+            }
+            if ev.intersects(PollFlags::POLLIN | PollFlags::POLLHUP | PollFlags::POLLERR) {
+                self.read_station(i)?;
+            }
+        }
+        Ok(woken)
+    }
+
+    /// Read everything station `i` wrote; the medium gets each chunk as it
+    /// came.
+    fn read_station(&mut self, i: usize) -> Result<(), HubError> {
+        loop {
+            match nix::unistd::read(&self.stations[i].master, &mut self.buf[..]) {
+                Ok(0) => return Ok(()),
+                Ok(len) => {
+                    let now = self.now();
+                    self.medium.transmit(now, i, &self.buf[..len]);
+                    // Unpaced: hand it on at once.
+                    self.deliver_due(now)?;
+                    // A pty read returns all there is (up to the buffer
+                    // size): skip the read that would say EAGAIN.
+                    if len < self.buf.len() {
+                        return Ok(());
+                    }
+                }
+                Err(Errno::EAGAIN) | Err(Errno::EINTR) => return Ok(()),
+                Err(Errno::EIO) => {
+                    disconnect(&mut self.stations[i]);
+                    return Ok(());
+                }
+                Err(e) => {
+                    tracing::warn!(link = %self.stations[i].link.display(), error = %e, "read failed");
+                    disconnect(&mut self.stations[i]);
+                    return Ok(());
+                }
+            }
+        }
+    }
+
+    fn deliver_due(&mut self, now: Instant) -> Result<(), HubError> {
+        while let Some(d) = self.medium.poll_delivery(now) {
+            self.last_delivery = d.at;
+            for (j, s) in self.stations.iter_mut().enumerate() {
+                if d.reaches(j) && s.connected {
+                    deliver(s, &d.bytes, &mut self.stats);
+                }
+            }
+            if self.pcap.is_some() {
+                self.tap.push(d.at, &d.bytes);
+                self.drain_tap()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// When the pcap framer may take the line as idle.
+    fn idle_at(&self) -> Instant {
+        self.last_delivery.max(self.medium.busy_until()) + IDLE_GAP
+    }
+
+    fn drain_tap(&mut self) -> Result<(), HubError> {
+        while let Some(ev) = self.tap.poll() {
+            if let (TapEvent::Telegram { at, bytes }, Some(p)) = (ev, self.pcap.as_mut()) {
+                p.write_telegram(at, &bytes).map_err(HubError::Pcap)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Stop: frame what is left for the recording, flush it, remove the
+    /// links; the final counters.
+    pub fn finish(mut self) -> Result<HubStatus, HubError> {
+        if self.pcap.is_some() {
+            self.tap.line_idle();
+            self.drain_tap()?;
+        }
+        let status = self.status();
+        if let Some(p) = self.pcap.take() {
+            p.into_inner()
+                .and_then(|mut w| w.flush())
+                .map_err(HubError::Pcap)?;
+        }
+        Ok(status)
+    }
+}
+
+impl Drop for Hub {
+    /// Removes the links (only those still pointing to our ptys).
+    fn drop(&mut self) {
+        remove_links(&self.stations);
+    }
+}
+
+fn remove_links(stations: &[Station]) {
+    for s in stations {
+        if std::fs::read_link(&s.link).is_ok_and(|t| t == s.tty) {
+            let _ = std::fs::remove_file(&s.link);
+        }
+    }
+}
+
+fn pty_err(e: Errno) -> HubError {
+    HubError::Pty(e.into())
+}
+
+#[cfg(target_os = "linux")]
+fn set_timer_slack() {
+    // SAFETY: PR_SET_TIMERSLACK takes an unsigned long by value and
+    // touches no memory.
+    let r = unsafe { nix::libc::prctl(nix::libc::PR_SET_TIMERSLACK, 1 as nix::libc::c_ulong) };
+    if r != 0 {
+        tracing::debug!("cannot reduce the timer slack");
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn set_timer_slack() {}
+
+fn set_nonblocking(fd: &OwnedFd) -> Result<(), Errno> {
+    use nix::fcntl::{fcntl, FcntlArg, OFlag};
+    let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL)?);
+    fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    Ok(())
+}
+
+/// Point `link` at `target`, replacing a stale symlink atomically.
+fn replace_symlink(target: &Path, link: &Path) -> io::Result<()> {
+    let tmp = PathBuf::from(format!("{}.dpctl-{}", link.display(), std::process::id()));
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp)?;
+    std::fs::rename(&tmp, link).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+/// Whether nobody has the pty's other end open.
+fn hung_up(master: &OwnedFd) -> bool {
+    let mut fds = [PollFd::new(master.as_fd(), PollFlags::empty())];
+    match nix::poll::poll(&mut fds, nix::poll::PollTimeout::ZERO) {
+        Ok(_) => fds[0]
+            .revents()
+            .is_some_and(|r| r.contains(PollFlags::POLLHUP)),
+        Err(_) => true,
+    }
+}
+
+fn disconnect(s: &mut Station) {
+    if s.connected {
+        tracing::debug!(link = %s.link.display(), "station disconnected");
+    }
+    s.connected = false;
+    s.queued.clear();
+    let _ = termios::tcflush(&s.master, termios::FlushArg::TCOFLUSH);
+}
+
+/// Write `bytes` to a station's pty, queueing what it does not take.
+fn deliver(s: &mut Station, bytes: &[u8], stats: &mut HubStats) {
+    stats.delivered_bytes += bytes.len() as u64;
+    if !s.queued.is_empty() {
+        flush_queue(s);
+    }
+    let mut rest = bytes;
+    if s.queued.is_empty() {
+        match nix::unistd::write(&s.master, bytes) {
+            Ok(k) => rest = &bytes[k..],
+            Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
+            Err(_) => {
+                disconnect(s);
+                return;
+            }
+        }
+    }
+    if !rest.is_empty() {
+        let room = MAX_QUEUED.saturating_sub(s.queued.len());
+        let take = rest.len().min(room);
+        s.queued.extend_from_slice(&rest[..take]);
+        stats.overrun_bytes += (rest.len() - take) as u64;
+    }
+}
+
+fn flush_queue(s: &mut Station) {
+    while !s.queued.is_empty() {
+        match nix::unistd::write(&s.master, &s.queued) {
+            Ok(k) => {
+                s.queued.drain(..k);
+            }
+            Err(Errno::EINTR) => {}
+            Err(Errno::EAGAIN) => return,
+            Err(_) => {
+                disconnect(s);
+                return;
+            }
+        }
+    }
+}
