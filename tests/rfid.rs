@@ -450,3 +450,37 @@ fn a_running_master_takes_rfid_commands() {
         .any(|v| v["event"] == "error" && v["error"].as_str().unwrap().contains("slave 99")));
     rig.stop();
 }
+
+#[test]
+fn control_commands_over_a_socket() {
+    let bus = Bus::start(2, &[]);
+    let sock = bus.dir().path("rfid.sock");
+    let mut cmd = Command::new(dpctl());
+    cmd.args(["slave", "--device", "rfid", "--port", &bus.link_str(1)])
+        .args(["--addr", "9", "--json", "--control"])
+        .arg(&sock)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    let mut slave = Proc::spawn("dpctl slave", &mut cmd);
+    let mut events = Lines::from(&mut slave);
+    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    wait_for("the control socket", Duration::from_secs(10), || {
+        sock.exists()
+    });
+    let mut c = std::os::unix::net::UnixStream::connect(&sock).unwrap();
+    writeln!(c, "enter 0A0B0C0D").unwrap();
+    writeln!(c, "tags").unwrap();
+    assert!(
+        events.wait_for(
+            "0A0B0C0D (16 blocks, in the field)",
+            Duration::from_secs(20)
+        ),
+        "{:?}",
+        events.1
+    );
+    drop(c);
+    slave.signal(15);
+    slave.wait(Duration::from_secs(10));
+    assert!(!sock.exists(), "the socket is removed at the end");
+    bus.stop();
+}
