@@ -2,8 +2,7 @@
 //! GAP polling, token claiming, collision handling and the requester.
 //!
 //! States and rules (IEC 61158-4-3 §8 "MAC"; summarised in the Felser
-//! PROFIBUS manual's state-machine chapter and in
-//! `shared/reference/profibus-dp.md` §11–§12; where the standard's exact
+//! PROFIBUS manual's state-machine chapter; where the standard's exact
 //! rule was not available the source is named):
 //!
 //! - **Offline**: does nothing (entered after an address collision).
