@@ -104,7 +104,7 @@ fn generic(
 }
 
 /// The plant's slaves.
-fn plant() -> Result<Vec<PlantSlave>> {
+fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
     let gen = gsd_files::parse(gsd_files::DPCTL_GEN)?;
     Ok(vec![
         generic(
@@ -150,8 +150,19 @@ fn plant() -> Result<Vec<PlantSlave>> {
             device: Box::new(jx2_plc()?),
             channels: None,
         },
+        PlantSlave {
+            address: RFID_ADDRESS,
+            name: "RFID reader ARE I2 (rfid)".into(),
+            gsd: rfid.gsd,
+            modules: rfid.modules,
+            device: rfid.device,
+            channels: Some(rfid.channels),
+        },
     ])
 }
+
+/// Station address of the demo's RFID reader.
+const RFID_ADDRESS: u8 = 12;
 
 /// Station address of the demo's BK3000 (its rotary switches).
 const BK3000_ADDRESS: u8 = 9;
@@ -225,7 +236,10 @@ pub fn run(args: Args) -> Result<()> {
 async fn demo(args: Args) -> Result<()> {
     let baud = Baud::B1500000;
     let params = BusParams::defaults(baud);
-    let slaves = plant()?;
+    // The RFID reader with a tag that comes and goes, and the PLC's
+    // commands to it.
+    let (mut reader, parts) = crate::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
+    let slaves = plant(parts)?;
     let cfg = master_config(params, &slaves)?;
     let info: Vec<SlaveInfo> = slaves
         .iter()
@@ -320,6 +334,9 @@ async fn demo(args: Args) -> Result<()> {
             if let Some((text, v)) = p.step(m, now, ramp) {
                 view.event(v, text);
             }
+        }
+        for (text, v) in reader.step(m, now, ramp) {
+            view.event(v, text);
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);
