@@ -357,7 +357,7 @@ mod tests {
 
     #[test]
     fn reference_table_tid() {
-        // TID1/TID2 column of the reference table (§11).
+        // TID1/TID2 column of the COM PROFIBUS bus-parameter export.
         let expect = [
             (Baud::B9600, 37, 60),
             (Baud::B19200, 37, 60),

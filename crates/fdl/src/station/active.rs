@@ -37,7 +37,7 @@
 //!   same FCB, up to the retry limit; then "no response", and the remote
 //!   station counts as non-operational: its next request is a first frame
 //!   (FCV = 0, FCB = 1) without retries until it answers again
-//!   (IEC 61158-4-3; reference §11).
+//!   (IEC 61158-4-3).
 //! - **GAP update**: with time left after the cycles, one FDL Status
 //!   request per token visit to the next address between this station and
 //!   its successor NS (wrapping at HSA), not repeated when unanswered (as
