@@ -118,7 +118,8 @@ pub fn hex(bytes: &[u8]) -> String {
     })
 }
 
-/// Bytes of a hex string (spaces, `:` and a `0x` prefix allowed).
+/// Bytes of a non-empty hex string (spaces, `:`, `_` and a `0x` prefix
+/// allowed).
 pub fn parse_hex(text: &str) -> Option<Vec<u8>> {
     let t = text.trim();
     let t = t.strip_prefix("0x").unwrap_or(t);
@@ -126,7 +127,7 @@ pub fn parse_hex(text: &str) -> Option<Vec<u8>> {
         .bytes()
         .filter(|c| !matches!(c, b' ' | b':' | b'_'))
         .collect();
-    if digits.len() % 2 != 0 {
+    if digits.is_empty() || !digits.len().is_multiple_of(2) {
         return None;
     }
     digits
@@ -573,5 +574,218 @@ impl Gateway {
     /// The next message to send, if any.
     pub fn poll_publish(&mut self) -> Option<Publish> {
         self.out.pop_front()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use profibus_devices::channels::ChannelType;
+    use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
+    use profibus_fdl::{Baud, BusParams};
+
+    /// A master with slave 3 (2 words in/out, writable, named channels)
+    /// and slave 4 (2 bytes out, not writable).
+    fn setup() -> (Gateway, DpMaster) {
+        let cfg = MasterConfig {
+            address: 1,
+            params: BusParams::defaults(Baud::B1500000),
+            slaves: vec![
+                SlaveParams::new(3, 0x1234, vec![0x71]),
+                SlaveParams::new(4, 0x1234, vec![0x21]),
+            ],
+            options: MasterOptions::default(),
+        };
+        let m = DpMaster::new(&cfg).unwrap();
+        let mut ch = ChannelMap::new();
+        ch.push("speed", Direction::Output, 0, ChannelType::I16);
+        ch.push("actual", Direction::Input, 0, ChannelType::I16);
+        let mut settings = crate::MqttSettings::from_table(None, "l1").unwrap();
+        settings.writable = vec![3];
+        let info = |address, channels| SlaveInfo {
+            address,
+            name: format!("s{address}"),
+            channels,
+            gsd: None,
+            dpv1: false,
+        };
+        let g = Gateway::new(settings, vec![info(3, Some(ch)), info(4, None)]);
+        (g, m)
+    }
+
+    fn drain(g: &mut Gateway) -> Vec<(String, serde_json::Value, bool)> {
+        std::iter::from_fn(|| g.poll_publish())
+            .map(|p| {
+                (
+                    p.topic,
+                    serde_json::from_slice(&p.payload).unwrap(),
+                    p.retain,
+                )
+            })
+            .collect()
+    }
+
+    fn find<'a>(
+        msgs: &'a [(String, serde_json::Value, bool)],
+        topic: &str,
+    ) -> Option<&'a serde_json::Value> {
+        msgs.iter().find(|(t, _, _)| t == topic).map(|(_, v, _)| v)
+    }
+
+    #[test]
+    fn topics_and_hex() {
+        let t = Topics::new("plant/a", "seg1");
+        assert_eq!(t.status(), "plant/a/seg1/status");
+        assert_eq!(t.slave(7, SlaveTopic::Inputs), "plant/a/seg1/7/inputs");
+        assert_eq!(t.set_filter(), "plant/a/seg1/+/outputs/set");
+        assert_eq!(t.parse_set("plant/a/seg1/7/outputs/set"), Some(Ok(7)));
+        assert_eq!(
+            t.parse_set("plant/a/seg1/x/outputs/set"),
+            Some(Err("x".into()))
+        );
+        assert_eq!(t.parse_set("plant/a/seg1/7/outputs"), None);
+        assert_eq!(t.parse_set("plant/a/seg2/7/outputs/set"), None);
+        assert_eq!(hex(&[0, 0xab]), "00ab");
+        assert_eq!(parse_hex("0x00 ab:01"), Some(vec![0, 0xab, 1]));
+        assert_eq!(parse_hex("abc"), None);
+        assert_eq!(parse_hex("zz"), None);
+    }
+
+    #[test]
+    fn write_payloads() {
+        assert_eq!(
+            parse_write(b"0102").unwrap().0,
+            WriteRequest::Image(vec![1, 2])
+        );
+        assert_eq!(
+            parse_write(b"\"0102\"").unwrap().0,
+            WriteRequest::Image(vec![1, 2])
+        );
+        let (r, c) =
+            parse_write(br#"{"channels": {"a": 1, "b": true, "c": 1.5}, "correlation_id": "x"}"#)
+                .unwrap();
+        assert_eq!(c, Some("x".into()));
+        assert_eq!(
+            r,
+            WriteRequest::Channels(vec![
+                ("a".into(), Value::Int(1)),
+                ("b".into(), Value::Bool(true)),
+                ("c".into(), Value::Float(1.5)),
+            ])
+        );
+        for bad in [
+            &b"{\"hex\": \"01\", \"channels\": {}}"[..],
+            b"{\"hexx\": \"01\"}",
+            b"{\"channels\": {\"a\": \"1\"}}",
+            b"[1]",
+            b"\xff",
+            b"",
+        ] {
+            assert!(
+                matches!(parse_write(bad), Err(WriteError::Malformed(_))),
+                "{bad:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn publishes_retained_state_and_republishes_after_reconnect() {
+        let (mut g, mut m) = setup();
+        g.step(&mut m, 5);
+        assert!(
+            drain(&mut g).is_empty(),
+            "nothing before the first connection"
+        );
+        g.connected(10);
+        g.step(&mut m, 11);
+        let msgs = drain(&mut g);
+        assert_eq!(
+            find(&msgs, "profibus/l1/status").unwrap()["state"],
+            "online"
+        );
+        let st = find(&msgs, "profibus/l1/3/state").unwrap();
+        assert_eq!(
+            (st["state"].as_str(), st["name"].as_str()),
+            (Some(SlaveState::Diag.name()), Some("s3"))
+        );
+        let inp = find(&msgs, "profibus/l1/3/inputs").unwrap();
+        assert_eq!(inp["hex"], "00000000");
+        assert_eq!(inp["values"]["actual"], 0);
+        assert!(find(&msgs, "profibus/l1/4/outputs")
+            .unwrap()
+            .get("values")
+            .is_none());
+        assert!(msgs.iter().all(|(t, _, r)| *r || t.ends_with("response")));
+        // Nothing changed: nothing new.
+        g.step(&mut m, 12);
+        assert!(drain(&mut g).is_empty());
+        // A new connection: everything again.
+        g.disconnected();
+        g.connected(20);
+        g.step(&mut m, 21);
+        assert_eq!(drain(&mut g).len(), msgs.len());
+        assert_eq!(g.last_will().payload, br#"{"state":"offline"}"#);
+    }
+
+    #[test]
+    fn writes_are_checked_then_applied_at_the_step() {
+        let (mut g, mut m) = setup();
+        g.connected(0);
+        g.step(&mut m, 0);
+        drain(&mut g);
+        g.handle_message(
+            "profibus/l1/3/outputs/set",
+            br#"{"channels": {"speed": -2}, "correlation_id": 1}"#,
+            1,
+        );
+        assert_eq!(
+            m.outputs(3).unwrap(),
+            [0, 0, 0, 0],
+            "applied at the step, not before"
+        );
+        g.step(&mut m, 2);
+        assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 0]);
+        let msgs = drain(&mut g);
+        let r = find(&msgs, "profibus/l1/3/outputs/response").unwrap();
+        assert_eq!(
+            (r["ok"].as_bool(), r["correlation_id"].as_i64()),
+            (Some(true), Some(1))
+        );
+        assert_eq!(
+            find(&msgs, "profibus/l1/3/outputs").unwrap()["values"]["speed"],
+            -2
+        );
+
+        // Refused writes change nothing and are answered.
+        for (topic, payload, error) in [
+            ("profibus/l1/4/outputs/set", &b"0001"[..], "not writable"),
+            ("profibus/l1/9/outputs/set", b"0001", "no slave 9"),
+            ("profibus/l1/3/outputs/set", b"01", "4 output bytes"),
+            (
+                "profibus/l1/3/outputs/set",
+                b"{\"channels\": {\"nope\": 1}}",
+                "no output channel",
+            ),
+            (
+                "profibus/l1/3/outputs/set",
+                b"{\"channels\": {\"speed\": 70000}}",
+                "",
+            ),
+            ("profibus/l1/3/outputs/set", b"junk", "malformed"),
+        ] {
+            g.handle_message(topic, payload, 3);
+            g.step(&mut m, 4);
+            let msgs = drain(&mut g);
+            let addr = topic.split('/').nth(2).unwrap();
+            let r = find(&msgs, &format!("profibus/l1/{addr}/outputs/response")).unwrap();
+            assert_eq!(r["ok"], false, "{topic} {payload:?}");
+            assert!(r["error"].as_str().unwrap().contains(error), "{r}");
+            assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 0]);
+            assert_eq!(m.outputs(4).unwrap(), [0, 0]);
+        }
+        // Other topics are not ours.
+        g.handle_message("profibus/l1/3/outputs", b"0000", 5);
+        g.step(&mut m, 6);
+        assert!(drain(&mut g).is_empty());
     }
 }

@@ -227,6 +227,26 @@ mod tests {
     }
 
     #[test]
+    fn from_a_bus_file() {
+        let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 25\ndevice = \"omega\"\n\n[mqtt]\nbus = \"seg2\"\nwritable = [25]\n";
+        let path = std::path::Path::new("/nonexistent/plant.toml");
+        let bus = profibus_devices::bus::ProfiledBus::parse(path, text).unwrap();
+        let s = MqttSettings::from_table(bus.file.mqtt.as_ref(), "plant").unwrap();
+        assert_eq!(
+            (s.bus.as_str(), s.writable.as_slice()),
+            ("seg2", &[25u8][..])
+        );
+        let bus =
+            profibus_devices::bus::ProfiledBus::parse(path, &text[..text.find("[mqtt]").unwrap()])
+                .unwrap();
+        assert!(bus.file.mqtt.is_none());
+        assert_eq!(
+            MqttSettings::from_table(None, "plant").unwrap().bus,
+            "plant"
+        );
+    }
+
+    #[test]
     fn broker_urls() {
         assert_eq!(
             parse_broker("mqtt://127.0.0.1:1884").unwrap(),
