@@ -93,6 +93,47 @@ impl Rig {
         c
     }
 
+    /// Run `dpctl master --config BUS --json --interval 100 [extra]` until
+    /// a JSON line satisfies `done` (at most 30 s), then stop it; its
+    /// lines.
+    fn master_until(
+        &self,
+        bus: &PathBuf,
+        extra: &[&str],
+        done: impl Fn(&Value) -> bool,
+    ) -> Vec<Value> {
+        let mut cmd = self.master();
+        cmd.arg("--config")
+            .arg(bus)
+            .args(["--json", "--interval", "100"])
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stdin(Stdio::null());
+        let mut m = Proc::spawn("dpctl master", &mut cmd);
+        let mut out = Lines::from(&mut m);
+        let end = std::time::Instant::now() + WAIT;
+        let mut hit = false;
+        while !hit && std::time::Instant::now() < end {
+            out.wait_for("\n", Duration::from_millis(200));
+            hit = out
+                .1
+                .iter()
+                .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+                .any(|v| done(&v));
+        }
+        m.terminate(Duration::from_secs(10));
+        let lines: Vec<Value> = out
+            .rest()
+            .iter()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect();
+        assert!(
+            hit,
+            "dpctl master never showed what the test waits for: {lines:?}"
+        );
+        lines
+    }
+
     /// The slave's events so far, as JSON.
     fn events(&self) -> Vec<Value> {
         self.out
@@ -142,35 +183,25 @@ fn master_shows_named_channels_and_writes_outputs_by_name() {
         "cmds.jsonl",
         "{\"slave\": 15, \"set\": {\"2.KL2134.3\": 1, \"4.KL4002.1\": 5.0}}\n",
     );
-    let out = r
-        .master()
-        .arg("--config")
-        .arg(&bus)
-        .args(["--cycles", "80", "--json", "--input"])
-        .arg(&cmds)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let lines = json_lines(&out.stdout);
+    let cmds = cmds.display().to_string();
+    let in_view = |st: &Value| {
+        let ch = &st["slaves"][0]["channels"];
+        st["event"] == "status"
+            && ch["inputs"]["3.KL3102.2"]
+                .as_f64()
+                .is_some_and(|v| (v + 2.5).abs() < 0.001)
+            && ch["inputs"]["1.KL1104.2"] == true
+            && ch["outputs"]["2.KL2134.3"] == true
+            && ch["outputs"]["4.KL4002.1"]
+                .as_f64()
+                .is_some_and(|v| (v - 5.0).abs() < 0.001)
+    };
+    let lines = r.master_until(&bus, &["--input", &cmds], in_view);
     assert!(
         lines
             .iter()
             .any(|v| v["event"] == "state" && v["slave"] == 15 && v["to"] == "data_exchange"),
         "{lines:?}"
-    );
-    let st = lines.iter().rev().find(|v| v["event"] == "status").unwrap();
-    let ch = &st["slaves"][0]["channels"];
-    let volts = ch["inputs"]["3.KL3102.2"].as_f64().unwrap();
-    assert!((volts + 2.5).abs() < 0.001, "{ch}");
-    assert_eq!(ch["inputs"]["1.KL1104.2"], true, "{ch}");
-    assert_eq!(ch["outputs"]["2.KL2134.3"], true, "{ch}");
-    assert!(
-        (ch["outputs"]["4.KL4002.1"].as_f64().unwrap() - 5.0).abs() < 0.001,
-        "{ch}"
     );
     // The outputs written by name reached the emulated terminals.
     assert!(r.out.wait_for("4.KL4002.1=5.000 V", WAIT), "{:?}", r.out.1);
@@ -181,20 +212,23 @@ fn master_shows_named_channels_and_writes_outputs_by_name() {
         "{ev:?}"
     );
     // In words: the named values with their units.
-    let out = r
-        .master()
-        .arg("--config")
+    let mut cmd = r.master();
+    cmd.arg("--config")
         .arg(&bus)
-        .args(["--cycles", "40"])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
+        .args(["--interval", "100"])
+        .stdout(Stdio::piped())
+        .stdin(Stdio::null());
+    let mut m = Proc::spawn("dpctl master", &mut cmd);
+    let mut text = Lines::from(&mut m);
+    assert!(text.wait_for("3.KL3102.2=-2.5001 V", WAIT), "{:?}", text.1);
+    m.terminate(Duration::from_secs(10));
     assert!(
-        text.lines().any(|l| l.contains("in: ")
+        text.1.iter().any(|l| l.contains("in: ")
             && l.contains("3.KL3102.2=-2.5001 V")
             && l.contains("1.KL1104.2=1")
             && l.contains("out: 4.KL4002.1=")),
-        "{text}"
+        "{:?}",
+        text.1
     );
     r.stop();
 }
@@ -204,15 +238,13 @@ fn wrong_configuration_gives_cfgdata_error_and_blink_code() {
     let r = rig("bk3000-cfg");
     // The master believes the KL4002 sits before the KL3102.
     let bus = r.file("bus.toml", &bus_file("KL1104,KL2134,KL4002,KL3102,KL9010"));
-    let out = r
-        .master()
-        .arg("--config")
-        .arg(&bus)
-        .args(["--cycles", "20", "--json"])
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let lines = json_lines(&out.stdout);
+    let blink = "device: CfgData error 2: CfgData byte 0 faulty; I/O-ERR blinks 6 pulses, then 1";
+    let lines = r.master_until(&bus, &[], |v| {
+        v["event"] == "diag"
+            && v["words"]
+                .as_array()
+                .is_some_and(|w| w.iter().any(|w| w == blink))
+    });
     let diag: Vec<&Value> = lines
         .iter()
         .filter(|v| v["event"] == "diag" && v["slave"] == 15)

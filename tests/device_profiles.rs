@@ -24,6 +24,11 @@ struct Rig {
 }
 
 /// A pty pair with `dpctl slave --json <args>` on one end.
+/// Milliseconds added to the masters' slot time and timeouts: a reply
+/// through a pty pair on a busy machine can take that long, and a late
+/// reply must not count as a lost one.
+const LATENCY: &str = "100";
+
 fn rig(tag: &str, args: &[&str], stdin: bool) -> Rig {
     let dir = TempDir::new(tag);
     let (a, b) = (dir.path("master"), dir.path("slave"));
@@ -68,6 +73,7 @@ impl Rig {
             .arg("--config")
             .arg(bus)
             .args(["--slave", &slave.to_string(), "--json"])
+            .args(["--latency", LATENCY])
             .args(op)
             .output()
             .unwrap();
@@ -90,7 +96,7 @@ impl Rig {
             .arg("--config")
             .arg(bus)
             .args(until)
-            .arg("--json")
+            .args(["--latency", LATENCY, "--json"])
             .output()
             .unwrap();
         assert!(
@@ -286,7 +292,7 @@ fn bm4_set_once_address_survives_a_restart() {
         .arg(&bus)
         .arg("--input")
         .arg(&cmds)
-        .args(["--cycles", "50", "--json"])
+        .args(["--cycles", "50", "--latency", LATENCY, "--json"])
         .output()
         .unwrap();
     assert!(out.status.success());

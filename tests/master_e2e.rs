@@ -80,7 +80,7 @@ fn master(prefix: &Path, i: usize, config: &Path) -> (Proc, Watch) {
         Command::new(dpctl())
             .args(["master", "--json", "--interval", "100", "--input", "-"])
             // Tests run side by side on 2 cores: allow for scheduling delays.
-            .args(["--latency", "20", "--port"])
+            .args(["--latency", "100", "--port"])
             .arg(link(prefix, i))
             .arg("--config")
             .arg(config)
@@ -314,7 +314,7 @@ fn two_masters_and_a_scanner_share_one_bus() {
             "--timeout",
             "60",
         ])
-        .args(["--latency", "20", "--port"])
+        .args(["--latency", "100", "--port"])
         .arg(link(&prefix, 0))
         .output()
         .unwrap();

@@ -95,6 +95,10 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
             "--freeze",
             "--timeout",
             "150",
+            // Seconds, not the default 1 s: a busy machine can stall the
+            // Python master for longer, and the slave would drop out.
+            "--watchdog-ms",
+            "5000",
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
@@ -159,7 +163,9 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
         }
         let n = u32::from_be_bytes(out[..4].try_into().unwrap());
         assert_eq!(out, pattern(n, OUT_LEN), "outputs of pattern {n}");
-        assert!(n > last, "pattern {n} after {last}");
+        // The same pattern twice is one exchange repeated (the master
+        // resends its outputs after a lost answer); never an older one.
+        assert!(n >= last, "pattern {n} after {last}");
         last = n;
         seen += 1;
     }

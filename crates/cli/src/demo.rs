@@ -6,7 +6,6 @@
 use crate::common;
 use crate::view::{drain_events, hex, SlaveInfo, View};
 use anyhow::{Context, Result};
-use profibus_devices::bk3000;
 use profibus_devices::channels::ChannelMap;
 use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
@@ -105,7 +104,7 @@ fn generic(
 }
 
 /// The plant's slaves.
-fn plant() -> Result<Vec<PlantSlave>> {
+fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
     let gen = gsd_files::parse(gsd_files::DPCTL_GEN)?;
     Ok(vec![
         generic(
@@ -135,16 +134,14 @@ fn plant() -> Result<Vec<PlantSlave>> {
         )?,
         // Omega Drive-Line II: PKW, status / control, 2 values each way.
         profiled(25, "Omega Drive-Line II (omega)", "omega", &[])?,
-        PlantSlave {
-            address: BK3000_ADDRESS,
-            name: "BK3000 bus coupler (bk3000)".into(),
-            gsd: gsd_files::parse(gsd_files::BK30BECF)?,
-            modules: BK3000_MODULES.iter().map(|m| m.to_string()).collect(),
-            device: Box::new(bk3000::Bk3000::new(bk3000::image::Strip::parse(
-                BK3000_STRIP,
-            )?)),
-            channels: bk3000_channels(&gsd_files::parse(gsd_files::BK30BECF)?, &BK3000_MODULES),
-        },
+        // Beckhoff BK3000 with a mixed terminal strip, from its rotary
+        // switches (station 9).
+        profiled(
+            BK3000_ADDRESS,
+            "BK3000 bus coupler (bk3000)",
+            "bk3000",
+            &[&format!("terminals={BK3000_STRIP}"), "switch-ones=9"],
+        )?,
         PlantSlave {
             address: JX2_ADDRESS,
             name: "JX2-PROFI1 (jx2)".into(),
@@ -153,30 +150,25 @@ fn plant() -> Result<Vec<PlantSlave>> {
             device: Box::new(jx2_plc()?),
             channels: None,
         },
+        PlantSlave {
+            address: RFID_ADDRESS,
+            name: "RFID reader ARE I2 (rfid)".into(),
+            gsd: rfid.gsd,
+            modules: rfid.modules,
+            device: rfid.device,
+            channels: Some(rfid.channels),
+        },
     ])
 }
+
+/// Station address of the demo's RFID reader.
+const RFID_ADDRESS: u8 = 12;
 
 /// Station address of the demo's BK3000 (its rotary switches).
 const BK3000_ADDRESS: u8 = 9;
 
 /// The BK3000's terminal strip: digital in and out, analog in and out.
 const BK3000_STRIP: &str = "KL1104,KL2134,KL3102,KL4002,KL9010";
-
-/// The BK30BECF.GSD modules of that strip.
-const BK3000_MODULES: [&str; 4] = [
-    "KL3xx2, KL3351: 2 x 16 bit in (compact)",
-    "KL4xx2: 2 x 16 bit out (compact)",
-    "8 digital inputs (1 byte)",
-    "8 digital outputs (1 byte)",
-];
-
-/// Named channels of the BK3000 for the view.
-fn bk3000_channels(gsd: &Gsd, modules: &[&str]) -> Option<ChannelMap> {
-    let strip = bk3000::image::Strip::parse(BK3000_STRIP).ok()?;
-    let cfg = gsd.chk_cfg(&gsd.select(modules).ok()?).ok()?;
-    let img = bk3000::profile::image_of(&strip, &cfg).ok()?;
-    Some(bk3000::profile::channel_map(&strip, &img))
-}
 
 /// Station address the demo's JX2-PROFI1 gets from its PLC.
 const JX2_ADDRESS: u8 = 7;
@@ -244,7 +236,10 @@ pub fn run(args: Args) -> Result<()> {
 async fn demo(args: Args) -> Result<()> {
     let baud = Baud::B1500000;
     let params = BusParams::defaults(baud);
-    let slaves = plant()?;
+    // The RFID reader with a tag that comes and goes, and the PLC's
+    // commands to it.
+    let (mut reader, parts) = crate::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
+    let slaves = plant(parts)?;
     let cfg = master_config(params, &slaves)?;
     let info: Vec<SlaveInfo> = slaves
         .iter()
@@ -339,6 +334,9 @@ async fn demo(args: Args) -> Result<()> {
             if let Some((text, v)) = p.step(m, now, ramp) {
                 view.event(v, text);
             }
+        }
+        for (text, v) in reader.step(m, now, ramp) {
+            view.event(v, text);
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);

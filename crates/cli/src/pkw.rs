@@ -127,21 +127,14 @@ fn parse_param(s: &str, slave: &BusSlave) -> Result<Param> {
     let pnu = match parse_num(num) {
         Some(n) if (0..=2047).contains(&n) => n as u16,
         Some(n) => bail!("parameter number {n} is outside 0..=2047"),
-        None => {
-            // A BM4 variable: its module's 4th identifier byte.
-            let m = slave
-                .gsd
-                .modules
-                .iter()
-                .find(|m| m.name == name && m.cfg.len() == 4)
-                .with_context(|| {
-                    format!(
-                        "`{name}` is neither a parameter number nor a variable module of {}",
-                        slave.gsd_path.display()
-                    )
-                })?;
-            m.cfg[3] as u16
-        }
+        // A name the device gives a parameter (a BM4 variable module).
+        None => profibus_devices::pkw_parameter(slave.params.ident_number, &slave.gsd, name)
+            .with_context(|| {
+                format!(
+                    "`{name}` is neither a parameter number nor a variable module of {}",
+                    slave.gsd_path.display()
+                )
+            })?,
     };
     Ok(Param { pnu, index })
 }

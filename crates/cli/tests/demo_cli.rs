@@ -48,6 +48,21 @@ fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
     );
     assert!(pkw.iter().any(|v| v["slave"] == 25 && v["name"] == "P003"));
     assert!(pkw.iter().all(|v| v["error"].is_null()), "{pkw:?}");
+    // The RFID reader: the manual's VER answer; its tag comes and goes, so
+    // GT reads the UID and, with the tag away, the no-read code.
+    let rfid: Vec<&Value> = lines.iter().filter(|v| v["event"] == "rfid").collect();
+    assert!(rfid
+        .iter()
+        .any(|v| v["command"] == "VER"
+            && v["answer"] == "AEG ID - PFB V1.26\rAEG ID - A9 /PFB V1.28\r"));
+    for answer in ["E004015012345678\r", "XXXXXXXX\r"] {
+        assert!(
+            rfid.iter()
+                .any(|v| v["command"] == "GT" && v["answer"] == answer),
+            "{rfid:?}"
+        );
+    }
+    assert!(rfid.iter().all(|v| v["error"].is_null()), "{rfid:?}");
     // The JX2-PROFI1's PLC program: input word 0 counts, word 1 echoes
     // output word 0.
     let jx2 = status["slaves"]

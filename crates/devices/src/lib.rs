@@ -161,6 +161,16 @@ pub fn pkw_dialect(ident: u16, cfg: &[u8]) -> Result<&'static pkw::Dialect, PkwL
     })
 }
 
+/// The PKW parameter number of the parameter named `name` of a slave with
+/// ident number `ident` and GSD `gsd`, from the profile with that ident
+/// number (e.g. a BM4-O-PRO-01 variable: its module's parameter number).
+pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::gsd::Gsd, name: &str) -> Option<u16> {
+    PROFILES
+        .iter()
+        .filter(|p| p.ident == Some(ident))
+        .find_map(|p| p.pkw_parameter(gsd, name))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -343,6 +343,13 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
         Self::PKW.filter(|_| cfg.first() == Some(&crate::pkw::PKW_MODULE))
     }
 
+    /// The PKW parameter number the product gives a parameter named
+    /// `name` in its GSD `gsd` (e.g. a BM4-O-PRO-01 variable module),
+    /// for clients that take names; `None`: names are not parameters.
+    fn pkw_parameter(_gsd: &Gsd, _name: &str) -> Option<u16> {
+        None
+    }
+
     /// Warnings found while configuring (e.g. GSD vendor quirks).
     fn warnings(&self) -> Vec<String> {
         vec![]
@@ -439,6 +446,7 @@ pub struct ProfileEntry {
     pub pkw: Option<&'static Dialect>,
     configure: ConfigureFn,
     pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
+    pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
 }
 
 fn configure_boxed<P: Profile>(
@@ -459,6 +467,7 @@ impl ProfileEntry {
             pkw: P::PKW,
             configure: configure_boxed::<P>,
             pkw_dialect: P::pkw_dialect,
+            pkw_parameter: P::pkw_parameter,
         }
     }
 
@@ -475,5 +484,10 @@ impl ProfileEntry {
     /// See [`Profile::pkw_dialect`].
     pub fn pkw_dialect(&self, cfg: &[u8]) -> Option<&'static Dialect> {
         (self.pkw_dialect)(cfg)
+    }
+
+    /// See [`Profile::pkw_parameter`].
+    pub fn pkw_parameter(&self, gsd: &Gsd, name: &str) -> Option<u16> {
+        (self.pkw_parameter)(gsd, name)
     }
 }

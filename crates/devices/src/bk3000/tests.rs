@@ -632,6 +632,29 @@ fn profile_options_modules_and_channels() {
         entry.configure(&o, None).unwrap().chk_cfg().unwrap(),
         [0x10]
     );
+    // Mappings chosen in the list select the matching GSD modules.
+    o.set(
+        "terminals",
+        toml::Value::Array(vec![
+            "KL1104".into(),
+            "KL3102:complete".into(),
+            "KL4032:status".into(),
+            "KL5001:complete".into(),
+            "KL2502".into(),
+            "KL9010".into(),
+        ]),
+    );
+    let p = entry.configure(&o, None).unwrap();
+    let cfg = p.chk_cfg().unwrap();
+    assert_eq!(
+        cfg,
+        [0xB2, 0xB2, 0xC0, 0x82, 0x00, 0xC0, 0x82, 0x00, 0xB4, 0xB2, 0xB2, 0x10]
+    );
+    assert!(p
+        .channels(&cfg)
+        .unwrap()
+        .find(crate::channels::Direction::Input, "2.KL3102.1.status")
+        .is_some());
     // Refusals a user understands.
     let e = entry.configure(&DeviceOptions::new(), None).unwrap_err();
     assert!(e.to_string().contains("--terminals"), "{e}");

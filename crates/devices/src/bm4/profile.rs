@@ -147,6 +147,16 @@ example = true (the manual's example table instead of --vars); bus file: modules
         Ok(Box::new(dev))
     }
 
+    /// A variable module of the GSD: its identifier's 4th byte is the
+    /// variable's parameter number.
+    fn pkw_parameter(gsd: &Gsd, name: &str) -> Option<u16> {
+        let m = gsd
+            .modules
+            .iter()
+            .find(|m| m.name == name && m.cfg.len() == 4)?;
+        Some(m.cfg[3] as u16)
+    }
+
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
         let l = CfgLayout::new(&self.table, cfg).map_err(|e| ProfileError::Config(e.0))?;
         let mut m = ChannelMap::new();
@@ -225,6 +235,12 @@ mod tests {
         let w = ch.find(Direction::Output, "ud_MyWriteVar1").unwrap();
         assert_eq!(&img[w.offset..w.offset + 4], &[1, 2, 3, 4]);
         assert!(p.channels(&[0x42]).is_err());
+        assert_eq!(
+            crate::pkw_parameter(IDENT, p.gsd(), "di_MyReadVar3"),
+            Some(4)
+        );
+        assert_eq!(crate::pkw_parameter(IDENT, p.gsd(), "nope"), None);
+        assert_eq!(crate::pkw_parameter(0x00D0, p.gsd(), "di_MyReadVar3"), None);
     }
 
     #[test]

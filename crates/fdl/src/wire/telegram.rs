@@ -163,16 +163,57 @@ impl<'a> DataTelegram<'a> {
         self.da == BROADCAST
     }
 
-    fn fcs(&self) -> u8 {
-        let mut sum = self.da_byte().wrapping_add(self.sa_byte());
-        sum = sum.wrapping_add(self.fc.to_byte());
+    /// Write the telegram in one pass (see [`Telegram::emit`]): header,
+    /// SAPs and data unit, then the FCS over what was written.
+    #[inline]
+    fn emit(&self, buf: &mut [u8]) -> Result<usize, EmitError> {
+        for a in [self.da, self.sa] {
+            if a > BROADCAST {
+                return Err(EmitError::BadAddress(a));
+            }
+        }
+        let n = self.data_field_len();
+        if n > MAX_DATA_FIELD {
+            return Err(EmitError::DataTooLong(n));
+        }
+        let (sd, head, len) = match (self.format, n) {
+            (None | Some(Format::Sd1), 0) => (SD1, 1, 6),
+            (None | Some(Format::Sd2), _) => (SD2, 4, n + 9),
+            (Some(Format::Sd3), SD3_DATA_FIELD) => (SD3, 1, 6 + SD3_DATA_FIELD),
+            (Some(format), _) => {
+                return Err(EmitError::FormatMismatch {
+                    format,
+                    data_field: n,
+                })
+            }
+        };
+        let available = buf.len();
+        let buf = buf.get_mut(..len).ok_or(EmitError::BufferTooSmall {
+            needed: len,
+            available,
+        })?;
+        buf[0] = sd;
+        if head == 4 {
+            let le = (n + 3) as u8;
+            buf[1..4].copy_from_slice(&[le, le, SD2]);
+        }
+        buf[head] = self.da_byte();
+        buf[head + 1] = self.sa_byte();
+        buf[head + 2] = self.fc.to_byte();
+        let mut i = head + 3;
         if let Some(s) = self.dsap {
-            sum = sum.wrapping_add(s);
+            buf[i] = s;
+            i += 1;
         }
         if let Some(s) = self.ssap {
-            sum = sum.wrapping_add(s);
+            buf[i] = s;
+            i += 1;
         }
-        sum.wrapping_add(fcs(self.data))
+        buf[i..i + self.data.len()].copy_from_slice(self.data);
+        i += self.data.len();
+        buf[i] = fcs(&buf[head..i]);
+        buf[i + 1] = ED;
+        Ok(len)
     }
 
     fn da_byte(&self) -> u8 {
@@ -399,53 +440,33 @@ impl<'a> Telegram<'a> {
     /// The start delimiter is [`Telegram::format`]'s; a requested format
     /// that does not fit the data field (SD1 with data, SD3 without exactly
     /// 8 bytes) is an error.
+    #[inline]
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize, EmitError> {
-        let len = self.check()?;
-        if buf.len() < len {
-            return Err(EmitError::BufferTooSmall {
-                needed: len,
-                available: buf.len(),
-            });
-        }
-        let buf = &mut buf[..len];
         match *self {
-            Telegram::ShortAck => buf[0] = SC,
-            Telegram::Token { da, sa } => buf.copy_from_slice(&[SD4, da, sa]),
-            Telegram::Data(d) => {
-                let head = match self.format() {
-                    Format::Sd1 => {
-                        buf[0] = SD1;
-                        1
-                    }
-                    Format::Sd3 => {
-                        buf[0] = SD3;
-                        1
-                    }
-                    _ => {
-                        let le = (d.data_field_len() + 3) as u8;
-                        buf[..4].copy_from_slice(&[SD2, le, le, SD2]);
-                        4
-                    }
-                };
-                buf[head] = d.da_byte();
-                buf[head + 1] = d.sa_byte();
-                buf[head + 2] = d.fc.to_byte();
-                let mut i = head + 3;
-                if let Some(s) = d.dsap {
-                    buf[i] = s;
-                    i += 1;
-                }
-                if let Some(s) = d.ssap {
-                    buf[i] = s;
-                    i += 1;
-                }
-                buf[i..i + d.data.len()].copy_from_slice(d.data);
-                i += d.data.len();
-                buf[i] = d.fcs();
-                buf[i + 1] = ED;
+            Telegram::ShortAck => {
+                let b = buf.first_mut().ok_or(EmitError::BufferTooSmall {
+                    needed: 1,
+                    available: 0,
+                })?;
+                *b = SC;
+                Ok(1)
             }
+            Telegram::Token { da, sa } => {
+                for a in [da, sa] {
+                    if a > MAX_STATION_ADDRESS {
+                        return Err(EmitError::BadAddress(a));
+                    }
+                }
+                let available = buf.len();
+                let out = buf.get_mut(..3).ok_or(EmitError::BufferTooSmall {
+                    needed: 3,
+                    available,
+                })?;
+                out.copy_from_slice(&[SD4, da, sa]);
+                Ok(3)
+            }
+            Telegram::Data(ref d) => d.emit(buf),
         }
-        Ok(len)
     }
 
     /// Append the telegram to a `BytesMut` (reserving space once; no other
