@@ -567,7 +567,7 @@ fn flush_queue(s: &mut Station) {
 mod tests {
     use super::*;
     use crate::timing::Baud;
-    use std::io::{Read, Write as _};
+    use std::io::Read;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::Arc;
 
