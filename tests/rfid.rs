@@ -403,3 +403,50 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .iter()
         .any(|e| e["event"] == "state" && e["to"] == "Data_Exch"));
 }
+
+#[test]
+fn a_running_master_takes_rfid_commands() {
+    let rig = rig(TAGS);
+    let mut cmd = Command::new(dpctl());
+    cmd.args([
+        "master",
+        "--json",
+        "--input",
+        "-",
+        "--latency",
+        "20",
+        "--port",
+    ])
+    .arg(rig.bus.link(0))
+    .arg("--config")
+    .arg(&rig.busfile)
+    .stdin(Stdio::piped())
+    .stdout(Stdio::piped())
+    .stderr(Stdio::inherit());
+    let mut master = Proc::spawn("dpctl master", &mut cmd);
+    let mut out = Lines::from(&mut master);
+    let stdin = master.child.as_mut().unwrap().stdin.as_mut().unwrap();
+    for c in ["VER", "RD 0 1"] {
+        writeln!(stdin, "{{\"rfid\": {ADDR}, \"command\": \"{c}\"}}").unwrap();
+    }
+    writeln!(stdin, "{{\"rfid\": 99, \"command\": \"VER\"}}").unwrap();
+    stdin.flush().unwrap();
+    assert!(
+        out.wait_for(
+            "\"command\":\"RD 0 1\",\"event\":\"rfid\"",
+            Duration::from_secs(30)
+        ),
+        "{:#?}",
+        out.1
+    );
+    master.signal(15);
+    let lines = parse(&out.rest().join("\n"));
+    let rfid: Vec<&Value> = lines.iter().filter(|v| v["event"] == "rfid").collect();
+    assert_eq!(rfid[0]["command"], "VER");
+    assert_eq!(rfid[0]["answer"], VERSION);
+    assert_eq!(rfid[1]["answer"], "0011223344556677\r");
+    assert!(lines
+        .iter()
+        .any(|v| v["event"] == "error" && v["error"].as_str().unwrap().contains("slave 99")));
+    rig.stop();
+}

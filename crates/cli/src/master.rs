@@ -29,6 +29,7 @@ use std::time::Duration;
 ///   {"dpv1_read": 8, "slot": 0, "index": 1, "length": 4}
 ///   {"dpv1_write": 8, "slot": 0, "index": 1, "data": "0A 0B"}
 ///   {"set_slave_add": 126, "new_address": 7, "ident": "0x0008", "no_add_chg": false}
+///   {"rfid": 12, "command": "RD 0 3"}        RFID reader command (answer: `rfid` event)
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -293,6 +294,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     };
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
+    let mut rfid = crate::rfid::MasterJobs::default();
     let result = driver::run_with(
         &mut station,
         &mut port,
@@ -303,9 +305,10 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             last_now = now;
             let m = st.app_mut();
             while let Ok(line) = rx.try_recv() {
-                let result = match set_channels(m, &info, &line) {
-                    Some(r) => r.map(|_| None),
-                    None => apply_command(m, &line),
+                let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
+                    (Some(r), _) => r.map(|_| None),
+                    (None, Some(r)) => r.map(Some),
+                    (None, None) => apply_command(m, &line),
                 };
                 match result {
                     Ok(Some(reply)) => {
@@ -317,6 +320,9 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
                         format!("bad command `{line}`: {e:#}"),
                     ),
                 }
+            }
+            for (text, v) in rfid.step(m, now) {
+                view.event(v, text);
             }
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);

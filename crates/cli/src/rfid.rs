@@ -339,3 +339,110 @@ pub mod demo {
         }
     }
 }
+
+/// RFID commands given to a running `dpctl master` as JSON lines
+/// (`{"rfid": 12, "command": "VER"}`): one client per reader, commands
+/// queued and run in turn, each answer reported as an `rfid` event.
+#[derive(Default)]
+pub struct MasterJobs {
+    readers: Vec<MasterReader>,
+}
+
+struct MasterReader {
+    address: u8,
+    client: RfidClient,
+    queue: std::collections::VecDeque<String>,
+    running: Option<String>,
+}
+
+/// Most commands waiting per reader.
+const MAX_QUEUED: usize = 64;
+
+impl MasterJobs {
+    /// Take `line` if it is an RFID command (`{"rfid": ADDR, "command":
+    /// "…", "timeout_ms": MS}`): `None` when it is not one, else the reply
+    /// for the log or why it was refused.
+    pub fn command(&mut self, m: &DpMaster, line: &str) -> Option<Result<String>> {
+        let v: serde_json::Value = serde_json::from_str(line).ok()?;
+        let addr = v.get("rfid")?;
+        Some((|| {
+            let addr = addr
+                .as_u64()
+                .filter(|&a| a <= 126)
+                .context("`rfid` takes a station address")? as u8;
+            let cmd = v
+                .get("command")
+                .and_then(|c| c.as_str())
+                .context("`command` missing (e.g. \"VER\")")?
+                .to_string();
+            if m.handle(addr).is_none() {
+                bail!("slave {addr} is not in the bus file");
+            }
+            let timeout = v.get("timeout_ms").and_then(|t| t.as_u64()).unwrap_or(5000);
+            let i = match self.readers.iter().position(|r| r.address == addr) {
+                Some(i) => i,
+                None => {
+                    self.readers.push(MasterReader {
+                        address: addr,
+                        client: RfidClient::new(Duration::from_millis(timeout.max(1))),
+                        queue: Default::default(),
+                        running: None,
+                    });
+                    self.readers.len() - 1
+                }
+            };
+            let r = &mut self.readers[i];
+            if r.queue.len() >= MAX_QUEUED {
+                bail!("slave {addr}: {MAX_QUEUED} RFID commands are waiting already");
+            }
+            r.queue.push_back(cmd.clone());
+            Ok(format!("rfid slave {addr}: `{cmd}` queued"))
+        })())
+    }
+
+    /// Drive the clients; returns the finished commands as (text, JSON).
+    pub fn step(&mut self, m: &mut DpMaster, now: Instant) -> Vec<(String, serde_json::Value)> {
+        let mut out = vec![];
+        for r in &mut self.readers {
+            let Some(h) = m.handle(r.address) else {
+                continue;
+            };
+            if let Some(res) = r.client.poll_master(now, m, h) {
+                let cmd = r.running.take().unwrap_or_default();
+                let (text, v) = match res {
+                    Ok(a) => {
+                        let s = String::from_utf8_lossy(a).into_owned();
+                        (
+                            format!(
+                                "rfid slave {}: {cmd} → {}",
+                                r.address,
+                                s.trim_end_matches('\r').replace('\r', " | ")
+                            ),
+                            json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": true,
+                                   "answer": s, "answer_hex": crate::describe::hex(a)}),
+                        )
+                    }
+                    Err(e) => (
+                        format!("rfid slave {}: {cmd} failed: {e}", r.address),
+                        json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": false,
+                               "error": e.to_string()}),
+                    ),
+                };
+                out.push((text, v));
+            }
+            if r.client.is_idle() && m.slave(h).state == SlaveState::DataExchange {
+                if let Some(cmd) = r.queue.pop_front() {
+                    match r.client.start(now, cmd.as_bytes()) {
+                        Ok(()) => r.running = Some(cmd),
+                        Err(e) => out.push((
+                            format!("rfid slave {}: {cmd}: {e}", r.address),
+                            json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": false,
+                                   "error": e.to_string()}),
+                        )),
+                    }
+                }
+            }
+        }
+        out
+    }
+}
