@@ -450,3 +450,98 @@ fn a_running_master_takes_rfid_commands() {
         .any(|v| v["event"] == "error" && v["error"].as_str().unwrap().contains("slave 99")));
     rig.stop();
 }
+
+#[test]
+fn control_commands_over_a_socket() {
+    let bus = Bus::start(2, &[]);
+    let sock = bus.dir().path("rfid.sock");
+    let mut cmd = Command::new(dpctl());
+    cmd.args(["slave", "--device", "rfid", "--port", &bus.link_str(1)])
+        .args(["--addr", "9", "--json", "--control"])
+        .arg(&sock)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    let mut slave = Proc::spawn("dpctl slave", &mut cmd);
+    let mut events = Lines::from(&mut slave);
+    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    wait_for("the control socket", Duration::from_secs(10), || {
+        sock.exists()
+    });
+    let mut c = std::os::unix::net::UnixStream::connect(&sock).unwrap();
+    writeln!(c, "enter 0A0B0C0D").unwrap();
+    writeln!(c, "tags").unwrap();
+    assert!(
+        events.wait_for(
+            "0A0B0C0D (16 blocks, in the field)",
+            Duration::from_secs(20)
+        ),
+        "{:?}",
+        events.1
+    );
+    drop(c);
+    slave.signal(15);
+    slave.wait(Duration::from_secs(10));
+    assert!(!sock.exists(), "the socket is removed at the end");
+    bus.stop();
+}
+
+/// The client as a gateway uses it: `poll_master` on the DpMaster's
+/// process images between steps of the simulated bus (virtual time, no
+/// processes), against the reader profile.
+#[test]
+fn the_client_on_the_simulated_bus() {
+    use profibus::devices::rfid::client::RfidClient;
+    use profibus::devices::rfid::tags::TagField;
+    use profibus::devices::rfid::{Rfid, CFG, IDENT};
+    use profibus::dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
+    use profibus::dp::slave::DpSlave;
+    use profibus::fdl::medium::MediumConfig;
+    use profibus::fdl::sim::SimBus;
+    use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
+    use profibus::fdl::station::passive::PassiveStation;
+    use profibus::fdl::{Baud, BusParams};
+    type Master = ActiveStation<DpMaster>;
+
+    let params = BusParams::defaults(Baud::B1500000);
+    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+    let cfg = MasterConfig {
+        address: 2,
+        params,
+        slaves: vec![SlaveParams::new(ADDR, IDENT, CFG.to_vec())],
+        options: MasterOptions::default(),
+    };
+    let m = bus.add(ActiveStation::new(
+        ActiveConfig::new(2, params),
+        DpMaster::new(&cfg).unwrap(),
+    ));
+    let field = TagField::parse(TAGS).unwrap();
+    bus.add(PassiveStation::new(
+        DpSlave::new(Rfid::new(field), ADDR),
+        params,
+    ));
+    assert!(bus.run_while(Duration::from_millis(500), |b| {
+        b.station::<Master>(m).app().slave_state(ADDR) == Some(SlaveState::DataExchange)
+    }));
+    let h = bus.station::<Master>(m).app().handle(ADDR).unwrap();
+    let mut client = RfidClient::new(Duration::from_millis(2000));
+    let mut run = |bus: &mut SimBus, cmd: &str| -> String {
+        client.start(bus.now(), cmd.as_bytes()).unwrap();
+        for _ in 0..5000 {
+            bus.run_for(Duration::from_micros(500));
+            let now = bus.now();
+            let dp = bus.station_mut::<Master>(m).app_mut();
+            if let Some(r) = client.poll_master(now, dp, h) {
+                return String::from_utf8(r.unwrap().to_vec()).unwrap();
+            }
+        }
+        panic!("`{cmd}` did not end");
+    };
+    assert_eq!(run(&mut bus, "VER"), VERSION);
+    let rd = run(&mut bus, "RD 0 F");
+    assert_eq!(rd.len(), 129);
+    assert!(rd.starts_with("0011223344556677"));
+    assert_eq!(run(&mut bus, "WD 3 0102030405060708"), "0102030405060708\r");
+    assert_eq!(run(&mut bus, "RD 3 4"), "0102030405060708\r");
+    let dp = bus.station::<Master>(m).app();
+    assert_eq!(dp.slave_stats(ADDR).unwrap().restarts, 0);
+}

@@ -130,8 +130,9 @@ pub struct Args {
     /// bk3000: the rotary switch for the tens of the address (0..9).
     #[arg(long, value_name = "N", requires = "device")]
     switch_tens: Option<u8>,
-    /// Control commands for the device, one per line, from FILE or `-`
-    /// (stdin). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
+    /// Control commands for the device, one per line, from FILE, `-`
+    /// (stdin), or a Unix socket dpctl creates when the path does not
+    /// exist (each connection sends lines; removed at the end). bm4: `sdiag EF CD AB 90 78 56 34 12 [overflow]` (user
     /// diagnosis, FB SDIAG), `sdiag-clear`, `set NAME VALUE`, `get NAME`,
     /// `status`. omega: `status`, `quit` (x_QUIT), `get P`. rfid: `enter UID`,
     /// `leave`, `tags`, `status`. jx2: a Unix socket to create for register
@@ -331,6 +332,29 @@ impl Printer {
 /// Lines from `src` (a file, or `-` for stdin) into `inbox`.
 fn spawn_control_reader(src: String, inbox: ControlInbox) {
     use tokio::io::AsyncBufReadExt;
+    let path = std::path::Path::new(&src);
+    if src != "-" && (!path.exists() || is_socket(path)) {
+        // A Unix socket we create (removed at the end, see `run`): every
+        // connection sends lines.
+        let _ = std::fs::remove_file(path);
+        match tokio::net::UnixListener::bind(path) {
+            Ok(listener) => {
+                tokio::spawn(async move {
+                    while let Ok((conn, _)) = listener.accept().await {
+                        let inbox = inbox.clone();
+                        tokio::spawn(async move {
+                            let mut lines = tokio::io::BufReader::new(conn).lines();
+                            while let Ok(Some(l)) = lines.next_line().await {
+                                inbox.push(l);
+                            }
+                        });
+                    }
+                });
+            }
+            Err(e) => eprintln!("dpctl slave: cannot listen on {src}: {e}"),
+        }
+        return;
+    }
     tokio::spawn(async move {
         let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if src == "-" {
             Box::new(tokio::io::stdin())
@@ -348,6 +372,11 @@ fn spawn_control_reader(src: String, inbox: ControlInbox) {
             inbox.push(l);
         }
     });
+}
+
+fn is_socket(path: &std::path::Path) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_socket())
 }
 
 /// The profile's options from the command line: the named flags, then
@@ -489,15 +518,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let rt = common::runtime()?;
-    let socket = args
-        .device
-        .as_deref()
-        .is_some_and(|d| d.eq_ignore_ascii_case(profibus_devices::jx2::profile::NAME))
-        .then(|| args.control.clone())
-        .flatten();
+    let socket = args.control.clone().filter(|c| {
+        let p = std::path::Path::new(c);
+        c != "-" && (!p.exists() || is_socket(p))
+    });
     let result = rt.block_on(run_async(args));
-    if let Some(s) = socket {
-        // The jx2 control socket (its listener may outlive the runtime).
+    if let Some(s) = socket.filter(|s| is_socket(std::path::Path::new(s))) {
+        // The control socket we created (its listener may outlive the
+        // runtime).
         let _ = std::fs::remove_file(s);
     }
     // A --control reader may be blocked on stdin: do not wait for it.

@@ -42,7 +42,7 @@ impl Profile for RfidProfile {
     const SUMMARY: &'static str = "AEG ID RFID reader ARE I2 / K1 PFB (ident 0x0DC4): 16-byte handshake carrying reader commands (VER, GT, RD, WD, TOR)";
     const OPTIONS_HELP: &'static str = "--tags FILE.toml (tags with UID and memory, which one is in the field, \
 the reader's timing; rewritten when a tag's memory changes or a tag enters or leaves; default: no tags), \
---control FILE|- (commands: enter UID, leave, tags, status); bus file: tags";
+--control SOCKET|FILE|- (commands: enter UID, leave, tags, status); bus file: tags";
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
