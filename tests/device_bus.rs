@@ -150,3 +150,47 @@ fn profile_options_from_the_command_line_are_typed_and_checked() {
         assert!(err.contains(needle), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn a_bm4_slave_of_a_bus_file_answers_pkw_by_variable_name() {
+    let dir = TempDir::new("device-bus-bm4");
+    let (master_end, slave_end) = (dir.path("m"), dir.path("s"));
+    let _socat = pty_pair(&master_end, &slave_end);
+    let mut slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args(["slave", "--device", "bm4", "--addr", "6", "--json"])
+            .args(["--device-opt", "example=true", "--port"])
+            .arg(&slave_end)
+            .stdout(Stdio::piped())
+            .stdin(Stdio::null()),
+    );
+    let mut slave_out = Lines::from(&mut slave);
+    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    // The master side from the same profile: the example table, PKW
+    // module first, two of its variables.
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 6\ndevice = \"bm4\"\nexample = true\nvariables = [\"ud_MyReadVar1\", \"u_MyWriteVar2\"]\n",
+    )
+    .unwrap();
+    let out = Command::new(dpctl())
+        .args(["pkw", "--slave", "6", "--json", "--port"])
+        .arg(&master_end)
+        .arg("--config")
+        .arg(&bus)
+        .args(["read", "di_MyReadVar3"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
+    assert_eq!(v["request"], "1004 0000 0000 0000", "{v}");
+    assert_eq!(v["value"], 3000, "{v}");
+    assert!(slave.terminate(Duration::from_secs(10)).success());
+}

@@ -129,7 +129,7 @@ fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
             "bm4",
             &[
                 "example=true",
-                r#"modules=["ud_MyReadVar1", "u_MyWriteVar2"]"#,
+                r#"variables=["ud_MyReadVar1", "u_MyWriteVar2"]"#,
             ],
         )?,
         // Omega Drive-Line II: PKW, status / control, 2 values each way.

@@ -30,10 +30,10 @@ impl DeviceResolver for Registry {
         entry: &DeviceEntry,
         address: u8,
     ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
-        let profile = crate::profile(&entry.name)?.configure(
-            &DeviceOptions::from_table(entry.options.clone()),
-            Some(address),
-        )?;
+        let p = crate::profile(&entry.name)?;
+        let mut options = DeviceOptions::from_table(entry.options.clone());
+        options.paths_relative_to(&entry.dir, p.path_options);
+        let profile = p.configure(&options, Some(address))?;
         let resolved = ResolvedDevice {
             gsd: profile.gsd().clone(),
             modules: profile.modules(),
@@ -109,9 +109,14 @@ modules = ["ud_MyReadVar1", "ud_MyWriteVar1"]
 "#;
         // `modules` is a slave key: a profile chooses its own.
         assert!(ProfiledBus::parse(&dir, text).is_err());
-        let text = text.replace("modules", "variables");
+        let text = text.replace("modules", "varz");
         let e = ProfiledBus::parse(&dir, &text).unwrap_err();
-        assert!(e.message.contains("variables"), "{e}");
+        assert!(e.message.contains("varz"), "{e}");
+        let bus = ProfiledBus::parse(&dir, &text.replace("varz", "variables")).unwrap();
+        assert_eq!(
+            bus.file.slaves[0].modules[1..],
+            ["ud_MyReadVar1", "ud_MyWriteVar1"]
+        );
         let text = r#"[master]
 address = 2
 baud = "1.5M"

@@ -470,6 +470,7 @@ impl Profile for GenericProfile {
     const OPTIONS_HELP: &'static str =
         "--gsd FILE, --module NAME (repeat), --lenient, --inputs echo|counter, --address-file FILE";
     const IDENT: Option<u16> = None;
+    const PATH_OPTIONS: &'static [&'static str] = &["gsd", "address_file"];
 
     fn configure(options: GenericOptions, _address: Option<u8>) -> Result<Self, ProfileError> {
         let path = options.gsd.clone().ok_or_else(|| {

@@ -179,6 +179,17 @@ impl DeviceOptions {
         Ok(())
     }
 
+    /// Make the relative paths among `keys` relative to `dir`.
+    pub fn paths_relative_to(&mut self, dir: &std::path::Path, keys: &[&str]) {
+        for key in keys {
+            if let Some(toml::Value::String(p)) = self.0.get_mut(*key) {
+                if std::path::Path::new(p.as_str()).is_relative() {
+                    *p = dir.join(&*p).display().to_string();
+                }
+            }
+        }
+    }
+
     /// The value of `key`.
     pub fn get(&self, key: &str) -> Option<&toml::Value> {
         self.0.get(&key.replace('-', "_"))
@@ -332,6 +343,10 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
     /// (Chk_Cfg bytes) gives.
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError>;
 
+    /// The options that name files or directories: in a bus file they
+    /// are relative to the bus file's directory.
+    const PATH_OPTIONS: &'static [&'static str] = &[];
+
     /// The product's PKW dialect, if it has a PKW channel (the [`pkw`](crate::pkw)
     /// module knows no device: each owns its dialect).
     const PKW: Option<&'static Dialect> = None;
@@ -444,6 +459,8 @@ pub struct ProfileEntry {
     pub ident: Option<u16>,
     /// See [`Profile::PKW`].
     pub pkw: Option<&'static Dialect>,
+    /// See [`Profile::PATH_OPTIONS`].
+    pub path_options: &'static [&'static str],
     configure: ConfigureFn,
     pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
     pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
@@ -465,6 +482,7 @@ impl ProfileEntry {
             options_help: P::OPTIONS_HELP,
             ident: P::IDENT,
             pkw: P::PKW,
+            path_options: P::PATH_OPTIONS,
             configure: configure_boxed::<P>,
             pkw_dialect: P::pkw_dialect,
             pkw_parameter: P::pkw_parameter,

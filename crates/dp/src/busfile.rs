@@ -152,6 +152,9 @@ struct RawSlave {
 pub struct DeviceEntry {
     /// The profile's name.
     pub name: String,
+    /// The bus file's directory: relative file names in the options are
+    /// relative to it (as `gsd` is).
+    pub dir: PathBuf,
     /// The profile's options (the table's keys that are not slave keys).
     pub options: toml::Table,
 }
@@ -426,6 +429,7 @@ impl BusFile {
                     }
                     let entry = DeviceEntry {
                         name: d.get_ref().clone(),
+                        dir: dir.to_path_buf(),
                         options,
                     };
                     let r = resolver.resolve(&entry, addr).map_err(|e| {

@@ -34,8 +34,9 @@ pub struct Options {
     /// Write the GSD file of this configuration here when configured.
     pub write_gsd: Option<PathBuf>,
     /// Master side: the variables (names) a master configures, in slot
-    /// order; default: all of them.
-    pub modules: Option<Vec<String>>,
+    /// order; default: all of them. (Not `modules`: in a bus file that
+    /// key is the slave's GSD modules, which a profile chooses itself.)
+    pub variables: Option<Vec<String>>,
     /// Master side: configure the PKW module first (default: true).
     pub pkw: Option<bool>,
 }
@@ -58,8 +59,9 @@ impl Profile for Bm4Profile {
 --us-device N (1..125 fixed, 126 set once by the master and kept in --state-dir, 127 set after every start, \
 128 rotary switch; default: --addr), --switch N (rotary switch for us_DEVICE 128), --state-dir DIR, \
 --write-gsd FILE (write the generated GSD), --control FILE|- (commands: sdiag HEX..., sdiag-clear, set NAME VALUE, get NAME, status); \
-example = true (the manual's example table instead of --vars); bus file: modules = [variable names] (default all), pkw = true|false";
+example = true (the manual's example table instead of --vars); master side: variables = [names] (default all), pkw = true|false";
     const IDENT: Option<u16> = Some(IDENT);
+    const PATH_OPTIONS: &'static [&'static str] = &["vars", "state_dir", "write_gsd"];
     const PKW: Option<&'static Dialect> = Some(&PKW);
 
     fn configure(options: Options, address: Option<u8>) -> Result<Self, ProfileError> {
@@ -122,7 +124,7 @@ example = true (the manual's example table instead of --vars); bus file: modules
         if self.options.pkw.unwrap_or(true) {
             out.extend(name_of(&[PKW_MODULE]));
         }
-        match &self.options.modules {
+        match &self.options.variables {
             Some(names) => out.extend(names.iter().cloned()),
             None => out.extend(
                 (0..self.table.vars.len()).filter_map(|i| name_of(&self.table.identifier(i))),

@@ -55,6 +55,7 @@ impl Profile for OmegaProfile {
 --switch N (rotary switches S40/S41, hex allowed, instead of --addr), --device-opt pkw-delay-ms=MS (PKW processing delay, default 5), \
 --control FILE|- (commands: status, quit, get P); bus file: setpoints, actual_values (default 2 each), pkw = true|false";
     const IDENT: Option<u16> = Some(IDENT);
+    const PATH_OPTIONS: &'static [&'static str] = &["params"];
     const PKW: Option<&'static Dialect> = Some(&PKW);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
