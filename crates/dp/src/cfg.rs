@@ -1,5 +1,5 @@
 //! Configuration identifiers: the bytes of Chk_Cfg / Get_Cfg and of a GSD
-//! `Module` line (EN 50170 part 3; reference §6).
+//! `Module` line (EN 50170 part 3).
 //!
 //! A configuration is a sequence of identifiers, one or more per module:
 //!
@@ -278,7 +278,7 @@ mod tests {
 
     #[test]
     fn omega_example_a() {
-        // 73 71 5F 6F → 44 in / 44 out (reference §6, example A).
+        // 73 71 5F 6F → 44 in / 44 out (Omega manual 5.01013.03 §5.4).
         let t = totals(&[0x73, 0x71, 0x5F, 0x6F]).unwrap();
         assert_eq!((t.identifiers, t.input_bytes, t.output_bytes), (4, 44, 44));
         // F9: consistent words in+out 10 → 20/20.

@@ -1,5 +1,4 @@
-//! Global_Control (DSAP 58) and Set_Slave_Add (DSAP 55) data units
-//! (reference §8).
+//! Global_Control (DSAP 58) and Set_Slave_Add (DSAP 55) data units (IEC 61158-6-3).
 
 bitflags::bitflags! {
     /// Control_Command byte of Global_Control.

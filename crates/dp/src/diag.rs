@@ -1,4 +1,4 @@
-//! Slave_Diag: the diagnosis response (slave SSAP 60; reference §7).
+//! Slave_Diag: the diagnosis response (slave SSAP 60; IEC 61158-6-3).
 //!
 //! ```text
 //! byte 0  Station_Status_1   byte 1  Station_Status_2
@@ -467,7 +467,7 @@ mod tests {
 
     #[test]
     fn et200s_example() {
-        // [TR26]: 02 05 00 FF 80 6A | 49 00…(8) | 14 82 00 00 …
+        // trace of pyprofibus issue #26: 02 05 00 FF 80 6A | 49 00…(8) | 14 82 00 00 …
         let mut du = vec![0x02, 0x05, 0x00, 0xFF, 0x80, 0x6A, 0x49];
         du.extend([0u8; 8]);
         du.push(0x14);

@@ -1,4 +1,4 @@
-//! DP-V1 MSAC_C1 PDUs (DSAP/SSAP 51, Alarm_Ack on DSAP 50; reference §9).
+//! DP-V1 MSAC_C1 PDUs (DSAP/SSAP 51, Alarm_Ack on DSAP 50).
 //!
 //! ```text
 //! Read request    5E slot index length

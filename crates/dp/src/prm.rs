@@ -1,4 +1,4 @@
-//! Set_Prm: the parameter telegram (DSAP 61; reference §5).
+//! Set_Prm: the parameter telegram (DSAP 61; IEC 61158-6-3).
 //!
 //! ```text
 //! byte 0  Station_Status: b7 Lock_Req, b6 Unlock_Req, b5 Sync_Req,
@@ -193,7 +193,7 @@ mod tests {
 
     #[test]
     fn trace_example() {
-        // [TR19]: B8 1E 01 00 0A 35 01 | 00 00 00 | 82 00 00 00
+        // trace of pyprofibus issue #19: B8 1E 01 00 0A 35 01 | 00 00 00 | 82 00 00 00
         let du = [
             0xB8, 0x1E, 0x01, 0x00, 0x0A, 0x35, 0x01, 0, 0, 0, 0x82, 0, 0, 0,
         ];

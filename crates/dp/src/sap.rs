@@ -1,4 +1,4 @@
-//! Service access points of DP (EN 50170 part 3; reference §4).
+//! Service access points of DP (EN 50170 part 3).
 //!
 //! Every DP service except Data_Exchange is addressed to a slave SAP; the
 //! master sends from SSAP 62 (MS0), DP-V1 class-1 services from SSAP 51.

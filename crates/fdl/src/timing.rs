@@ -7,7 +7,8 @@
 //! usual defaults per baud rate, and the conversions turn bit times into
 //! [`Duration`]s (rounded up to whole nanoseconds).
 //!
-//! Sources of the defaults (see `shared/reference/profibus-dp.md` §11):
+//! Sources of the defaults (the standard, IEC 61158-4-3 / EN 50170 volume 2,
+//! fixes the ranges and TSYN; the values per baud rate come from):
 //! TSL, max TSDR, TSET and TQUI per baud rate from the Felser PROFIBUS
 //! manual's table, cross-checked with profirust's minimum slot times and
 //! with the `MaxTsdr_*` defaults of the BM4-O-PRO-01 and Omega GSD files
@@ -356,7 +357,7 @@ mod tests {
 
     #[test]
     fn reference_table_tid() {
-        // TID1/TID2 column of the reference table (§11).
+        // TID1/TID2 column of the COM PROFIBUS bus-parameter export.
         let expect = [
             (Baud::B9600, 37, 60),
             (Baud::B19200, 37, 60),

@@ -2,8 +2,8 @@
 //! their channels, and the process-image variants (DP identifiers and
 //! byte layouts) the coupler accepts for each.
 //!
-//! Sources: manual pages 49-50 (`../shared/seeds/002_e04f45fc5bcf0245.txt`,
-//! English edition pages 47-48 on azmanual.top / manualsdir.com, document
+//! Sources: manual pages 49-50 (Beckhoff, "PROFIBUS Koppler BK3000 …
+//! LC3100", version 2.3 of 27.11.2006; English edition pages 47-48 on azmanual.top / manualsdir.com, document
 //! 757242) for KL3xx2, KL1501, KL2502 and KL5001; Beckhoff Information
 //! System "Configuration of Complex Modules" (infosys.beckhoff.com,
 //! bk3xx0/3028153611) for the two-word alternative 0x51 of KL3xx2.

@@ -1,7 +1,7 @@
 //! Beckhoff BK3000 PROFIBUS-DP bus coupler with its K-bus terminal strip
 //! (ident 0xBECF, `gsd/BK30BECF.GSD`), after the manual "PROFIBUS Koppler
-//! BK3000 … LC3100", version 2.3 (`../shared/seeds/002_e04f45fc5bcf0245.txt`,
-//! page summaries, cited as "p. N"; facts cut off there come from the
+//! BK3000 … LC3100", Technische Dokumentation, version 2.3 of 27.11.2006
+//! (from its page summaries, cited as "p. N"; facts cut off there come from the
 //! English edition of the same manual and Beckhoff's Information System,
 //! listed in `docs/devices/bk3000.md` with what is inferred).
 //!

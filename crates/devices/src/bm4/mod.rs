@@ -1,7 +1,8 @@
 //! Baumüller b maXX PLC option module BM4-O-PRO-01 (PROFIBUS-DP slave,
-//! ident 0x0008), after its manual 5.03058.03
-//! (`../shared/seeds/000_7c796d3a4a24210e.txt`, cited as Lnnn; digest in
-//! `../shared/reference/device-checklists.md` §1).
+//! ident 0x0008), after its Applikationshandbuch "BM4-O-PRO-01
+//! Optionsmodul PROFIBUS-DP-Slave für b maXX PLC" (Baumüller, document
+//! 5.03058.03, Stand 27.07.2015; cited as Lnnn = manual line N, see
+//! `docs/sources.md`).
 //!
 //! The emulated PLC's **variable table** ([`vars::VarTable`], a TOML file)
 //! is the device's configuration, as the manual's "PROFIBUS-PLC-Slave
@@ -18,7 +19,7 @@
 //!   the first module, L1473, L1490); with the default table also the
 //!   "all modules" compact module. Anything else is a configuration
 //!   fault, with the LED state "configuration error" (L2057-2059). The
-//!   manual does not describe the check (digest §1 B); this is the
+//!   manual does not describe the check; this is the
 //!   strictest reading that accepts everything a master can build from
 //!   the generated GSD.
 //! - **Process data** follow the configured modules in Chk_Cfg order,

@@ -403,7 +403,7 @@ impl VarTable {
     /// (MyGSDFile.gsd L2385-2397). The length limits include the PKW
     /// module's 8 bytes each way (the manual's example file leaves them
     /// out, so a master would refuse PKW together with all variables;
-    /// device-checklists §1 I), capped at 244.
+    /// an ambiguity of the manual), capped at 244.
     pub fn gsd(&self, default_gsd: &Gsd) -> Gsd {
         let mut g = default_gsd.clone();
         g.modules.clear();

@@ -1,7 +1,7 @@
 //! Jetter JX2-PROFI1: the PROFIBUS-DP slave module of a Jetter PLC, as the
-//! PLC program sees it (manual edition 1.05.1,
-//! `../shared/seeds/003_e1433628a0f2ab4f.txt`; the line numbers below are
-//! the seed file's).
+//! PLC program sees it (Jetter AG, "JX2-PROFI1 Peripheriemodul",
+//! Betriebsanleitung, Auflage 1.05.1; Lnnn below = manual line N, see
+//! `docs/sources.md`).
 //!
 //! The module is driven entirely through registers `1x100 … 1x999`
 //! (`1x` = `1` followed by the module number: `12100` for module 2). This

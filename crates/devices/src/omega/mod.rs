@@ -1,7 +1,8 @@
 //! Baumüller PROFIBUS-DP slave option board PBDP-01 for the Omega
-//! Drive-Line II (ident 0x00D0), after its manual 5.01013.03
-//! (`../shared/seeds/001_d92fd39cc46957e9.txt`, cited as Lnnn; digest in
-//! `../shared/reference/device-checklists.md` §2).
+//! Drive-Line II (ident 0x00D0), after its manual "Option board
+//! PROFIBUS-DP — Slave for Ωmega Drive-Line II", Technical Description and
+//! Operating Instructions (Baumüller, document 5.01013.03, edition
+//! September 2001; cited as Lnnn = manual line N, see `docs/sources.md`).
 //!
 //! # Configuration (Chk_Cfg)
 //!

@@ -1,7 +1,8 @@
 //! AEG ID identification system with PROFIBUS-DP (RFID reader "ARE I2 /
 //! PFB", "ARE K1 / PFB"), after its manual "Profibus-DP Kommunikation"
-//! (`../shared/seeds/004_8b67e7d06c71e65b.txt`, cited as Lnnn; digest in
-//! `../shared/reference/device-checklists.md` §5).
+//! (AEG ID, German, no document number or edition printed; section 2
+//! "Datenaustausch über Profibus-DP"; cited as Lnnn = manual line N, see
+//! `docs/sources.md`).
 //!
 //! The reader carries a byte-stream command protocol inside 16 bytes of
 //! cyclic data each way (L42-56):

@@ -5,8 +5,8 @@
 //! ([`profibus_fdl::station::active::ActiveStation`]): it runs inside the
 //! token hold time, so a master shares its bus with other masters.
 //!
-//! Per slave it walks the start-up sequence of the standard (reference
-//! §11): **Slave_Diag → Set_Prm → Chk_Cfg → Slave_Diag** (until the slave
+//! Per slave it walks the start-up sequence of the standard (IEC
+//! 61158-6-3): **Slave_Diag → Set_Prm → Chk_Cfg → Slave_Diag** (until the slave
 //! reports no Station_Not_Ready, Cfg_Fault, Prm_Fault, Prm_Req or
 //! Stat_Diag and names this master in Master_Add) **→ Data_Exchange**.
 //! Faults send it back to the right step: Prm_Req or an RS answer to

@@ -148,7 +148,7 @@ pub enum Dpv1Outcome {
 }
 
 impl Dpv1Outcome {
-    /// Refusal of a read with `class`/`code` (reference §9).
+    /// Refusal of a read with `class`/`code` (DP-V1 error classes, IEC 61158-6-3).
     pub fn read_error(class: u8, code: u8) -> Dpv1Outcome {
         Dpv1Outcome::Error(Dpv1Error::dpv1(FN_READ, class, code))
     }
@@ -280,7 +280,7 @@ impl<'a> DiagWriter<'a> {
 
     /// Append a DP-V1 alarm or status block: a device-related block
     /// `header, type, slot, specifier, data…` (type bit 7 clear = alarm,
-    /// set = status; reference §7).
+    /// set = status).
     pub fn dpv1_block(&mut self, block_type: u8, slot: u8, specifier: u8, data: &[u8]) -> bool {
         self.headed(0x00, &[block_type, slot, specifier], data)
     }

@@ -38,7 +38,7 @@
 //!
 //! - **Data_Exchange outside Data_Exch** (or from a master that does not
 //!   own the slave) is answered with **RS** ("SAP not activated"), as a
-//!   real slave did in the pyprofibus trace [TR19] (reference §10) and as
+//!   real slave did in the trace of pyprofibus issue #19 and as
 //!   the DPC31/VPC3 chips do with their deactivated default SAP. RS is a
 //!   negative acknowledge, so masters of both kinds read it as "not
 //!   ready".
@@ -55,7 +55,7 @@
 //!   masters' Set_Prm and Chk_Cfg are acknowledged (SC) and ignored (a
 //!   [`SlaveEvent::Refused`] tells why), Slave_Diag, Get_Cfg, Rd_Inp and
 //!   Rd_Outp are answered to anyone. The slave never sets Master_Lock
-//!   itself: that bit belongs to the master (reference §7), which sets it
+//!   itself: that bit belongs to the master (IEC 61158-6-3, Slave_Diag), which sets it
 //!   when Diag.Master_Add names another master. Unlock_Req releases the
 //!   slave (Wait_Prm). A Set_Prm with neither Lock_Req nor Unlock_Req
 //!   only updates min TSDR and the User_Prm_Data of the present
@@ -72,7 +72,7 @@
 //!   when it was refused (not supported, not in Wait_Prm, No_Add_Chg set
 //!   earlier, wrong ident number, address above 125, refused by the
 //!   device).
-//! - **MSAC_C1 read/write** follows the polling scheme of reference §9:
+//! - **MSAC_C1 read/write** follows the MSAC_C1 polling scheme (IEC 61158-6-3):
 //!   the request is acknowledged with SC, every poll (an empty request
 //!   on the same SAPs) gets SC until the device has the answer, then the
 //!   answer comes as DL. MSAC_C1 and Alarm_Ack (SAP 50) are active only
@@ -1021,7 +1021,7 @@ impl<D: Device> DpSlave<D> {
 }
 
 /// RS ("SAP not activated"): a negative acknowledge without data and
-/// without SAP bytes (an SD1 frame, as in trace [TR19]).
+/// without SAP bytes (an SD1 frame, as in the trace of pyprofibus issue #19).
 fn rs(_req: &DataTelegram<'_>) -> Reply {
     NEGATIVE_RS
 }

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 use std::fmt;
 use std::time::Duration;
 
-/// The DP state of a slave (EN 50170 part 3; reference §10).
+/// The DP state of a slave (EN 50170 part 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SlaveState {
     /// Wait_Prm: waits for a valid Set_Prm (after power-on, a watchdog

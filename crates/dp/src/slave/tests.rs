@@ -1062,7 +1062,7 @@ fn on_the_wire_with_the_passive_station() {
         DpSlave::new(TestDevice::new(), ADDR),
         BusParams::defaults(Baud::B1500000),
     );
-    // Data_Exchange before parameterisation: RS as in trace [TR19].
+    // Data_Exchange before parameterisation: RS as in the trace of pyprofibus issue #19.
     let r = wire(
         &mut st,
         t(0),

@@ -2,8 +2,7 @@
 //! GAP polling, token claiming, collision handling and the requester.
 //!
 //! States and rules (IEC 61158-4-3 §8 "MAC"; summarised in the Felser
-//! PROFIBUS manual's state-machine chapter and in
-//! `shared/reference/profibus-dp.md` §11–§12; where the standard's exact
+//! PROFIBUS manual's state-machine chapter; where the standard's exact
 //! rule was not available the source is named):
 //!
 //! - **Offline**: does nothing (entered after an address collision).
@@ -38,7 +37,7 @@
 //!   same FCB, up to the retry limit; then "no response", and the remote
 //!   station counts as non-operational: its next request is a first frame
 //!   (FCV = 0, FCB = 1) without retries until it answers again
-//!   (IEC 61158-4-3; reference §11).
+//!   (IEC 61158-4-3).
 //! - **GAP update**: with time left after the cycles, one FDL Status
 //!   request per token visit to the next address between this station and
 //!   its successor NS (wrapping at HSA), not repeated when unanswered (as

@@ -4,7 +4,7 @@
 //! (or broadcast), and:
 //!
 //! - answers **FDL Status** itself (FC 0x00: OK, passive station);
-//! - keeps the **FCB rule** (IEC 61158-4-3; reference §3): it stores the
+//! - keeps the **FCB rule** (IEC 61158-4-3): it stores the
 //!   source address and FCB of the last SRD/SDA with its response; a
 //!   request from the same source with FCV = 1 and the same FCB is a retry
 //!   of a request whose response was lost, and gets the stored response

@@ -1,5 +1,5 @@
 //! Byte constants of the FDL telegram formats (IEC 61158-4-3 / EN 50170
-//! part 2; summarised in `shared/reference/profibus-dp.md` §1–§2).
+//! volume 2, the telegram formats of the data-link layer).
 
 /// Start delimiter of a telegram without data unit: `10 DA SA FC FCS 16`.
 pub const SD1: u8 = 0x10;

@@ -538,7 +538,7 @@ mod tests {
 
     #[test]
     fn slave_fdl_status_reply_from_trace() {
-        // `10 02 08 00 0A 16` [TR19]: slave 8 answers master 2, FC 00.
+        // `10 02 08 00 0A 16` (trace of pyprofibus issue #19): slave 8 answers master 2, FC 00.
         let b = hex("10 02 08 00 0A 16");
         let (t, n) = Telegram::parse(&b).unwrap();
         assert_eq!(n, 6);
@@ -649,7 +649,7 @@ mod tests {
 
     #[test]
     fn set_prm_sd2_with_saps() {
-        // Set_Prm 2 → 8 from [TR19]: DA 88, SA 82, FC 6D, DSAP 3D, SSAP 3E,
+        // Set_Prm 2 → 8 from the trace of pyprofibus issue #19: DA 88, SA 82, FC 6D, DSAP 3D, SSAP 3E,
         // B8 1E 01 00 0A 35 01 00 00 00 82 00 00 00.
         let du = hex("B8 1E 01 00 0A 35 01 00 00 00 82 00 00 00");
         let t = Telegram::Data(DataTelegram {

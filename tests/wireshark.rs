@@ -1,0 +1,348 @@
+//! The Wireshark dissector `tools/wireshark/profibus_dl.lua` under tshark
+//! (Debian's package, installed by `scripts/setup-test-env`) on a capture
+//! of a real start-up: `dpctl bus --pcap` records `dpctl master` bringing
+//! a `dpctl slave` into Data_Exchange and running DP-V1 write and read
+//! jobs; the decoded fields must match what the processes did. A second
+//! test checks that a wrong FCS is flagged. The tests fail when tshark is
+//! missing.
+
+mod common;
+
+use common::{dpctl, repo, require, Bus, Lines, Proc, TempDir};
+use profibus::fdl::pcap::PcapWriter;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const WAIT: Duration = Duration::from_secs(60);
+
+fn script() -> PathBuf {
+    repo().join("tools/wireshark/profibus_dl.lua")
+}
+
+/// `tshark -X lua_script:… -r FILE -T fields -e F1 -e F2 …`: one row per
+/// packet, the fields separated by `|` (repeated values by `,`), byte
+/// fields as plain hex.
+fn tshark_fields(capture: &Path, fields: &[&str]) -> Vec<Vec<String>> {
+    require("tshark");
+    let mut cmd = Command::new("tshark");
+    cmd.arg("-X")
+        .arg(format!("lua_script:{}", script().display()))
+        .arg("-r")
+        .arg(capture)
+        .args(["-T", "fields", "-E", "separator=|", "-E", "occurrence=a"]);
+    for f in fields {
+        cmd.args(["-e", f]);
+    }
+    let out = cmd.output().expect("run tshark");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "tshark failed: {err}");
+    assert!(!err.contains("Lua Error"), "the dissector failed: {err}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!text.contains("Lua Error"), "the dissector failed: {text}");
+    // Byte fields print as `0102` or `01:02` depending on the version.
+    text.lines()
+        .map(|l| l.split('|').map(|v| v.replace(':', "")).collect())
+        .collect()
+}
+
+fn send(p: &mut Proc, line: &str) {
+    let stdin = p.child.as_mut().unwrap().stdin.as_mut().unwrap();
+    writeln!(stdin, "{line}").unwrap();
+    stdin.flush().unwrap();
+}
+
+/// Records a start-up with DP-V1 jobs; returns the capture's path.
+fn record_startup(dir: &TempDir) -> PathBuf {
+    let pcap = dir.path("startup.pcapng");
+    let bus = Bus::start(2, &["--pcap", pcap.to_str().unwrap()]);
+    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let mut slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args(["slave", "--port", &bus.link_str(1), "--addr", "10"])
+            .args(["--baud", "1.5M", "--gsd"])
+            .arg(&gsd)
+            .args(["--module", "2 words in/out"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    let config = dir.path("bus.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 10\ngsd = \"{}\"\n\
+             modules = [\"2 words in/out\"]\nwatchdog_ms = 5000\ninitial_outputs = [1, 2, 3, 4]\n",
+            gsd.display()
+        ),
+    )
+    .unwrap();
+    let mut master = Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--json", "--interval", "100", "--input", "-"])
+            .args(["--latency", "20", "--port", &bus.link_str(0), "--config"])
+            .arg(&config)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null()),
+    );
+    let mut lines = Lines::from(&mut master);
+    // Data_Exchange with the echoed initial outputs.
+    wait_json(&mut lines, "Data_Exchange with echoed inputs", |v| {
+        v["event"] == "status"
+            && v["slaves"].as_array().is_some_and(|a| {
+                a.iter().any(|s| {
+                    s["address"] == 10
+                        && s["state"] == "data_exchange"
+                        && s["inputs"] == "01 02 03 04"
+                })
+            })
+    });
+    send(
+        &mut master,
+        r#"{"dpv1_write": 10, "slot": 1, "index": 7, "data": "CA FE"}"#,
+    );
+    send(
+        &mut master,
+        r#"{"dpv1_read": 10, "slot": 1, "index": 7, "length": 2}"#,
+    );
+    let read = wait_json(&mut lines, "the DP-V1 read job", |v| {
+        v["event"] == "job" && v["id"] == 2
+    });
+    assert_eq!(read["data"], "CA FE", "{read}");
+    master.terminate(Duration::from_secs(10));
+    slave.terminate(Duration::from_secs(10));
+    let out = bus.stop();
+    assert!(out.status.success(), "dpctl bus: {}", out.stderr);
+    pcap
+}
+
+/// Wait for a JSON line of `dpctl master --json` that satisfies `ok`.
+fn wait_json(
+    lines: &mut Lines,
+    what: &str,
+    ok: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let end = Instant::now() + WAIT;
+    let mut seen = 0;
+    loop {
+        while seen < lines.1.len() {
+            let l = &lines.1[seen];
+            seen += 1;
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(l) {
+                if ok(&v) {
+                    return v;
+                }
+            }
+        }
+        let left = end.saturating_duration_since(Instant::now());
+        assert!(
+            lines.next_line(left).is_some() || Instant::now() < end,
+            "timed out waiting for {what}: {:#?}",
+            &lines.1[lines.1.len().saturating_sub(5)..]
+        );
+    }
+}
+
+fn rows_with<'a>(rows: &'a [Vec<String>], col: usize, value: &str) -> Vec<&'a Vec<String>> {
+    rows.iter().filter(|r| r[col] == value).collect()
+}
+
+#[test]
+fn dissector_decodes_a_recorded_startup() {
+    let dir = TempDir::new("wireshark");
+    let pcap = record_startup(&dir);
+
+    // Layer 2: every telegram type of the start-up, addresses, FC, FCS.
+    let rows = tshark_fields(
+        &pcap,
+        &[
+            "pbdl.type",
+            "pbdl.sa.addr",
+            "pbdl.da.addr",
+            "pbdl.da.ext",
+            "pbdl.fc.function",
+            "pbdl.dsap",
+            "pbdl.ssap",
+            "pbdl.fcs.good",
+            "pbdp.service",
+        ],
+    );
+    assert!(rows.len() > 20, "too few packets: {rows:?}");
+    for t in ["SD1", "SD2", "SD4", "SC"] {
+        assert!(
+            rows.iter().any(|r| r[0] == t),
+            "no {t} telegram decoded: {rows:?}"
+        );
+    }
+    for r in &rows {
+        assert!(!r[0].is_empty(), "undecoded packet: {r:?}");
+        if r[0] == "SD1" || r[0] == "SD2" || r[0] == "SD3" {
+            assert_eq!(r[7], "1", "FCS of {r:?}");
+        }
+    }
+    let tokens = rows_with(&rows, 0, "SD4");
+    assert!(
+        tokens.iter().any(|r| r[1] == "2" && r[2] == "2"),
+        "{tokens:?}"
+    );
+    let set_prm = rows_with(&rows, 8, "Set_Prm");
+    assert!(!set_prm.is_empty(), "no Set_Prm: {rows:?}");
+    let p = set_prm[0];
+    assert_eq!((p[1].as_str(), p[2].as_str()), ("2", "10"), "{p:?}");
+    assert_eq!(p[3], "1", "DA extension bit of {p:?}");
+    assert_eq!(p[4], "SRD_high", "{p:?}");
+    assert_eq!((p[5].as_str(), p[6].as_str()), ("61", "62"), "SAPs {p:?}");
+    // The slave answers DP services with DL and its SAP as SSAP.
+    let diag_resp: Vec<_> = rows_with(&rows, 8, "Slave_Diag")
+        .into_iter()
+        .filter(|r| r[1] == "10")
+        .collect();
+    assert!(!diag_resp.is_empty(), "no Slave_Diag response: {rows:?}");
+    assert!(diag_resp[0][4].starts_with("DL"), "{:?}", diag_resp[0]);
+    assert_eq!(diag_resp[0][6], "60", "{:?}", diag_resp[0]);
+    assert!(
+        rows.iter()
+            .any(|r| r[8] == "Data_Exchange" && r[1] == "10" && r[5].is_empty()),
+        "no Data_Exchange response without SAPs"
+    );
+
+    // DP: Set_Prm fields, Chk_Cfg identifiers, Slave_Diag bits.
+    let rows = tshark_fields(
+        &pcap,
+        &[
+            "pbdp.service",
+            "pbdp.prm.ident",
+            "pbdp.prm.wd_on",
+            "pbdp.prm.wd_fact_1",
+            "pbdp.prm.wd_fact_2",
+            "pbdp.cfg.id",
+            "pbdp.cfg.inputs",
+            "pbdp.cfg.outputs",
+            "pbdp.diag.prm_req",
+            "pbdp.diag.station_not_ready",
+            "pbdp.diag.master_add",
+            "pbdp.diag.ident",
+            "pbdp.outputs",
+            "pbdp.inputs",
+        ],
+    );
+    let p = rows_with(&rows, 0, "Set_Prm")[0];
+    assert_eq!(p[1], "0x0dce", "Ident_Number {p:?}");
+    assert_eq!(p[2], "1", "WD_On {p:?}");
+    let wd: u32 = p[3].parse::<u32>().unwrap() * p[4].parse::<u32>().unwrap();
+    assert_eq!(wd * 10, 5000, "watchdog of the bus file {p:?}");
+    let c = rows_with(&rows, 0, "Chk_Cfg")
+        .into_iter()
+        .find(|r| !r[5].is_empty())
+        .expect("Chk_Cfg with identifiers");
+    assert_eq!(c[5], "0x71", "identifier of 2 words in/out {c:?}");
+    assert_eq!((c[6].as_str(), c[7].as_str()), ("4", "4"), "{c:?}");
+    let diags: Vec<_> = rows_with(&rows, 0, "Slave_Diag")
+        .into_iter()
+        .filter(|r| !r[11].is_empty())
+        .collect();
+    assert!(
+        diags.iter().any(|r| r[8] == "1" && r[10] == "255"),
+        "a fresh slave asks for parameters and has no master: {diags:?}"
+    );
+    let last = diags.last().unwrap();
+    assert_eq!(
+        (last[8].as_str(), last[9].as_str(), last[10].as_str()),
+        ("0", "0", "2"),
+        "the slave ready for master 2: {last:?}"
+    );
+    assert_eq!(last[11], "0x0dce");
+    assert!(
+        rows.iter()
+            .any(|r| r[0] == "Data_Exchange" && r[12] == "01020304"),
+        "initial outputs 01 02 03 04 not seen"
+    );
+    assert!(
+        rows.iter()
+            .any(|r| r[0] == "Data_Exchange" && r[13] == "01020304"),
+        "the echoing slave's inputs not seen"
+    );
+
+    // Global_Control and DP-V1.
+    let rows = tshark_fields(
+        &pcap,
+        &[
+            "pbdp.service",
+            "pbdp.gc.command",
+            "pbdl.da.addr",
+            "pbdp.dpv1.function",
+            "pbdp.dpv1.slot",
+            "pbdp.dpv1.index",
+            "pbdp.dpv1.length",
+            "pbdp.dpv1.data",
+            "pbdl.fc.request",
+        ],
+    );
+    let gc = rows_with(&rows, 0, "Global_Control");
+    assert!(!gc.is_empty(), "no Global_Control");
+    assert!(
+        gc.iter().all(|r| r[2] == "127" && !r[1].is_empty()),
+        "{gc:?}"
+    );
+    let v1: Vec<_> = rows_with(&rows, 0, "DP-V1")
+        .into_iter()
+        .filter(|r| !r[3].is_empty())
+        .collect();
+    let write_req = v1
+        .iter()
+        .find(|r| r[3] == "0x5f" && r[8] == "1")
+        .unwrap_or_else(|| panic!("no DP-V1 write request: {v1:?}"));
+    assert_eq!(
+        &write_req[4..8],
+        &["1", "7", "2", "cafe"],
+        "slot, index, length, data"
+    );
+    let read_resp = v1
+        .iter()
+        .find(|r| r[3] == "0x5e" && r[8] == "0" && !r[7].is_empty())
+        .unwrap_or_else(|| panic!("no DP-V1 read response with data: {v1:?}"));
+    assert_eq!(&read_resp[4..8], &["1", "7", "2", "cafe"]);
+}
+
+#[test]
+fn dissector_flags_a_wrong_fcs() {
+    let dir = TempDir::new("wireshark-fcs");
+    let path = dir.path("bad.pcapng");
+    let mut w = PcapWriter::new(
+        std::fs::File::create(&path).unwrap(),
+        Duration::from_secs(1),
+    )
+    .unwrap();
+    // Slave_Diag request 2 → 10, first with the right FCS, then with a
+    // wrong one; a token.
+    let good = [0x68, 5, 5, 0x68, 0x8A, 0x82, 0x6D, 0x3C, 0x3E, 0x00, 0x16];
+    let fcs = good[4..9].iter().fold(0u8, |a, b| a.wrapping_add(*b));
+    let mut good = good;
+    good[9] = fcs;
+    let mut bad = good;
+    bad[9] = fcs.wrapping_add(1);
+    w.write_packet(Duration::from_millis(1), &good).unwrap();
+    w.write_packet(Duration::from_millis(2), &bad).unwrap();
+    w.write_packet(Duration::from_millis(3), &[0xDC, 0x02, 0x02])
+        .unwrap();
+    w.flush().unwrap();
+    drop(w);
+    let rows = tshark_fields(
+        &path,
+        &[
+            "pbdl.type",
+            "pbdl.fcs.good",
+            "pbdl.fcs.status",
+            "pbdp.service",
+            "_ws.expert.message",
+        ],
+    );
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    assert_eq!(&rows[0][..4], &["SD2", "1", "Good", "Slave_Diag"]);
+    assert_eq!(&rows[1][..4], &["SD2", "0", "Bad", "Slave_Diag"]);
+    assert!(rows[1][4].contains("FCS"), "expert info: {:?}", rows[1]);
+    assert_eq!(rows[2][0], "SD4");
+}

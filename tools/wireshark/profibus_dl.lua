@@ -1,0 +1,544 @@
+-- PROFIBUS DL / DP dissector for Wireshark (Lua).
+--
+-- Decodes captures with link type 257 (LINKTYPE_PROFIBUS_DL), one FDL
+-- telegram per packet, as `dpctl sniff --pcap`, `dpctl bus --pcap` and
+-- `dpctl demo --pcap` write them (pcapng). Wireshark has no encapsulation
+-- of its own for link type 257, so such packets arrive with encapsulation
+-- "Unknown" (0); this script claims that encapsulation.
+--
+-- Layer 2 (protocol "pbdl"): telegram type (SD1, SD2, SD3, SD4 token, SC
+-- short acknowledge), LE/LEr, destination and source address with their
+-- extension bits, FC (request: FCB/FCV and function; response: station
+-- type and answer), DSAP/SSAP with the DP service names, FCS (checked)
+-- and ED.
+-- DP (protocol "pbdp"): Set_Prm, Chk_Cfg / Get_Cfg identifiers,
+-- Slave_Diag station status bits, Global_Control, Set_Slave_Add,
+-- DP-V1 MSAC_C1 read / write / errors, Data_Exchange outputs and inputs.
+--
+-- The meanings are those of IEC 61158-4-3 / -6-3 (EN 50170 volume 2) as
+-- the crates profibus-fdl and profibus-dp implement them.
+--
+-- Install: copy this file into Wireshark's personal Lua plugins folder
+-- (Help > About Wireshark > Folders, "Personal Lua Plugins", usually
+-- ~/.local/lib/wireshark/plugins/), or run
+--   wireshark -X lua_script:tools/wireshark/profibus_dl.lua capture.pcapng
+--   tshark    -X lua_script:tools/wireshark/profibus_dl.lua -r capture.pcapng
+
+local pbdl = Proto("pbdl", "PROFIBUS DL (FDL)")
+local pbdp = Proto("pbdp", "PROFIBUS DP")
+
+---------------------------------------------------------------------------
+-- Layer 2 fields
+
+local SD_NAMES = {
+  [0x10] = "SD1", [0x68] = "SD2", [0xA2] = "SD3", [0xDC] = "SD4", [0xE5] = "SC",
+}
+local SD_DESCR = {
+  [0x10] = "SD1 (no data)", [0x68] = "SD2 (variable data)", [0xA2] = "SD3 (8 data bytes)",
+  [0xDC] = "SD4 (token)", [0xE5] = "SC (short acknowledge)",
+}
+
+local REQ_FUNCTIONS = {
+  [0x0] = "TE (time event)", [0x3] = "SDA_low", [0x4] = "SDN_low", [0x5] = "SDA_high",
+  [0x6] = "SDN_high", [0x7] = "MSRD", [0x9] = "FDL_Status", [0xC] = "SRD_low",
+  [0xD] = "SRD_high", [0xE] = "Ident", [0xF] = "LSAP_Status",
+}
+local RESP_FUNCTIONS = {
+  [0x0] = "OK", [0x1] = "UE (user error)", [0x2] = "RR (no resources)",
+  [0x3] = "RS (SAP not activated)", [0x8] = "DL (data low)", [0x9] = "NR (no response data)",
+  [0xA] = "DH (data high)", [0xC] = "RDL (data low, no resources)",
+  [0xD] = "RDH (data high, no resources)",
+}
+local STATION_TYPES = {
+  [0] = "slave", [1] = "master not ready", [2] = "master ready for the ring",
+  [3] = "master in the ring",
+}
+local SAP_NAMES = {
+  [0] = "default SAP (Data_Exchange)", [49] = "MSAC_C2 Initiate", [50] = "Alarm_Ack",
+  [51] = "MSAC_C1 (DP-V1 read/write)", [54] = "master-master", [55] = "Set_Slave_Add",
+  [56] = "Rd_Inp", [57] = "Rd_Outp", [58] = "Global_Control", [59] = "Get_Cfg",
+  [60] = "Slave_Diag", [61] = "Set_Prm", [62] = "Chk_Cfg / DP master",
+}
+
+local f = pbdl.fields
+f.sd = ProtoField.uint8("pbdl.sd", "Start delimiter", base.HEX, SD_DESCR)
+f.type = ProtoField.string("pbdl.type", "Telegram type")
+f.le = ProtoField.uint8("pbdl.le", "LE", base.DEC)
+f.ler = ProtoField.uint8("pbdl.ler", "LEr", base.DEC)
+f.da = ProtoField.uint8("pbdl.da", "Destination (DA)", base.HEX)
+f.da_ext = ProtoField.bool("pbdl.da.ext", "Address extension (DSAP follows)", 8, nil, 0x80)
+f.da_addr = ProtoField.uint8("pbdl.da.addr", "Destination address", base.DEC, nil, 0x7F)
+f.sa = ProtoField.uint8("pbdl.sa", "Source (SA)", base.HEX)
+f.sa_ext = ProtoField.bool("pbdl.sa.ext", "Address extension (SSAP follows)", 8, nil, 0x80)
+f.sa_addr = ProtoField.uint8("pbdl.sa.addr", "Source address", base.DEC, nil, 0x7F)
+f.fc = ProtoField.uint8("pbdl.fc", "Function code (FC)", base.HEX)
+f.fc_req = ProtoField.bool("pbdl.fc.request", "Request", 8, {"request", "response / acknowledge"}, 0x40)
+f.fc_fcb = ProtoField.bool("pbdl.fc.fcb", "FCB (frame count bit)", 8, nil, 0x20)
+f.fc_fcv = ProtoField.bool("pbdl.fc.fcv", "FCV (frame count bit valid)", 8, nil, 0x10)
+f.fc_stype = ProtoField.uint8("pbdl.fc.station_type", "Station type", base.DEC, STATION_TYPES, 0x30)
+f.fc_function = ProtoField.string("pbdl.fc.function", "Function")
+f.dsap = ProtoField.uint8("pbdl.dsap", "DSAP", base.DEC, SAP_NAMES, 0x3F)
+f.ssap = ProtoField.uint8("pbdl.ssap", "SSAP", base.DEC, SAP_NAMES, 0x3F)
+f.data = ProtoField.bytes("pbdl.data", "Data unit")
+f.fcs = ProtoField.uint8("pbdl.fcs", "FCS", base.HEX)
+f.fcs_status = ProtoField.string("pbdl.fcs.status", "FCS status")
+f.fcs_good = ProtoField.bool("pbdl.fcs.good", "FCS good")
+f.ed = ProtoField.uint8("pbdl.ed", "End delimiter", base.HEX)
+f.token = ProtoField.bool("pbdl.token", "Token")
+
+local e_fcs = ProtoExpert.new("pbdl.fcs.bad", "FCS wrong", expert.group.CHECKSUM, expert.severity.ERROR)
+local e_len = ProtoExpert.new("pbdl.malformed", "Malformed telegram", expert.group.MALFORMED, expert.severity.ERROR)
+pbdl.experts = { e_fcs, e_len }
+
+---------------------------------------------------------------------------
+-- DP fields
+
+local d = pbdp.fields
+d.service = ProtoField.string("pbdp.service", "DP service")
+-- Set_Prm
+d.prm_status = ProtoField.uint8("pbdp.prm.status", "Station status", base.HEX)
+d.prm_lock = ProtoField.bool("pbdp.prm.lock_req", "Lock_Req", 8, nil, 0x80)
+d.prm_unlock = ProtoField.bool("pbdp.prm.unlock_req", "Unlock_Req", 8, nil, 0x40)
+d.prm_sync = ProtoField.bool("pbdp.prm.sync_req", "Sync_Req", 8, nil, 0x20)
+d.prm_freeze = ProtoField.bool("pbdp.prm.freeze_req", "Freeze_Req", 8, nil, 0x10)
+d.prm_wd_on = ProtoField.bool("pbdp.prm.wd_on", "WD_On", 8, nil, 0x08)
+d.prm_wd1 = ProtoField.uint8("pbdp.prm.wd_fact_1", "WD_Fact_1", base.DEC)
+d.prm_wd2 = ProtoField.uint8("pbdp.prm.wd_fact_2", "WD_Fact_2", base.DEC)
+d.prm_tsdr = ProtoField.uint8("pbdp.prm.min_tsdr", "min TSDR (bit times, 0 = unchanged)", base.DEC)
+d.prm_ident = ProtoField.uint16("pbdp.prm.ident", "Ident_Number", base.HEX)
+d.prm_group = ProtoField.uint8("pbdp.prm.group", "Group_Ident", base.HEX)
+d.prm_user = ProtoField.bytes("pbdp.prm.user_data", "User_Prm_Data")
+-- Chk_Cfg / Get_Cfg
+d.cfg_id = ProtoField.uint8("pbdp.cfg.id", "Identifier", base.HEX)
+d.cfg_text = ProtoField.string("pbdp.cfg.text", "Module")
+d.cfg_in = ProtoField.uint16("pbdp.cfg.inputs", "Input bytes (total)", base.DEC)
+d.cfg_out = ProtoField.uint16("pbdp.cfg.outputs", "Output bytes (total)", base.DEC)
+-- Slave_Diag
+d.diag_s1 = ProtoField.uint8("pbdp.diag.status1", "Station_Status_1", base.HEX)
+d.diag_nonexist = ProtoField.bool("pbdp.diag.station_non_existent", "Station_Non_Existent", 8, nil, 0x01)
+d.diag_notready = ProtoField.bool("pbdp.diag.station_not_ready", "Station_Not_Ready", 8, nil, 0x02)
+d.diag_cfgfault = ProtoField.bool("pbdp.diag.cfg_fault", "Cfg_Fault", 8, nil, 0x04)
+d.diag_extdiag = ProtoField.bool("pbdp.diag.ext_diag", "Ext_Diag", 8, nil, 0x08)
+d.diag_notsupp = ProtoField.bool("pbdp.diag.not_supported", "Not_Supported", 8, nil, 0x10)
+d.diag_invalid = ProtoField.bool("pbdp.diag.invalid_slave_response", "Invalid_Slave_Response", 8, nil, 0x20)
+d.diag_prmfault = ProtoField.bool("pbdp.diag.prm_fault", "Prm_Fault", 8, nil, 0x40)
+d.diag_mlock = ProtoField.bool("pbdp.diag.master_lock", "Master_Lock", 8, nil, 0x80)
+d.diag_s2 = ProtoField.uint8("pbdp.diag.status2", "Station_Status_2", base.HEX)
+d.diag_prmreq = ProtoField.bool("pbdp.diag.prm_req", "Prm_Req", 8, nil, 0x01)
+d.diag_statdiag = ProtoField.bool("pbdp.diag.stat_diag", "Stat_Diag", 8, nil, 0x02)
+d.diag_one = ProtoField.bool("pbdp.diag.always_one", "(always 1)", 8, nil, 0x04)
+d.diag_wdon = ProtoField.bool("pbdp.diag.wd_on", "WD_On", 8, nil, 0x08)
+d.diag_freeze = ProtoField.bool("pbdp.diag.freeze_mode", "Freeze_Mode", 8, nil, 0x10)
+d.diag_sync = ProtoField.bool("pbdp.diag.sync_mode", "Sync_Mode", 8, nil, 0x20)
+d.diag_deact = ProtoField.bool("pbdp.diag.deactivated", "Deactivated", 8, nil, 0x80)
+d.diag_s3 = ProtoField.uint8("pbdp.diag.status3", "Station_Status_3", base.HEX)
+d.diag_ovf = ProtoField.bool("pbdp.diag.ext_diag_overflow", "Ext_Diag_Overflow", 8, nil, 0x80)
+d.diag_master = ProtoField.uint8("pbdp.diag.master_add", "Master_Add (255 = none)", base.DEC)
+d.diag_ident = ProtoField.uint16("pbdp.diag.ident", "Ident_Number", base.HEX)
+d.diag_ext = ProtoField.bytes("pbdp.diag.ext", "Extended diagnosis")
+-- Global_Control
+d.gc_cmd = ProtoField.uint8("pbdp.gc.command", "Control_Command", base.HEX)
+d.gc_clear = ProtoField.bool("pbdp.gc.clear_data", "Clear_Data", 8, nil, 0x02)
+d.gc_unfreeze = ProtoField.bool("pbdp.gc.unfreeze", "Unfreeze", 8, nil, 0x04)
+d.gc_freeze = ProtoField.bool("pbdp.gc.freeze", "Freeze", 8, nil, 0x08)
+d.gc_unsync = ProtoField.bool("pbdp.gc.unsync", "Unsync", 8, nil, 0x10)
+d.gc_sync = ProtoField.bool("pbdp.gc.sync", "Sync", 8, nil, 0x20)
+d.gc_group = ProtoField.uint8("pbdp.gc.group", "Group_Select", base.HEX)
+-- Set_Slave_Add
+d.ssa_new = ProtoField.uint8("pbdp.ssa.new_address", "New_Slave_Add", base.DEC)
+d.ssa_ident = ProtoField.uint16("pbdp.ssa.ident", "Ident_Number", base.HEX)
+d.ssa_nochg = ProtoField.uint8("pbdp.ssa.no_add_chg", "No_Add_Chg", base.DEC)
+d.ssa_rem = ProtoField.bytes("pbdp.ssa.rem_slave_data", "Rem_Slave_Data")
+-- DP-V1 MSAC_C1
+local DPV1_FUNCTIONS = {
+  [0x48] = "Idle", [0x57] = "Initiate", [0x58] = "Abort", [0x5C] = "Alarm_Ack",
+  [0x5E] = "Read", [0x5F] = "Write", [0xD7] = "Initiate error", [0xDC] = "Alarm_Ack error",
+  [0xDE] = "Read error", [0xDF] = "Write error",
+}
+d.v1_fn = ProtoField.uint8("pbdp.dpv1.function", "Function_Num", base.HEX, DPV1_FUNCTIONS)
+d.v1_slot = ProtoField.uint8("pbdp.dpv1.slot", "Slot_Number", base.DEC)
+d.v1_index = ProtoField.uint8("pbdp.dpv1.index", "Index", base.DEC)
+d.v1_len = ProtoField.uint8("pbdp.dpv1.length", "Length", base.DEC)
+d.v1_data = ProtoField.bytes("pbdp.dpv1.data", "Data")
+d.v1_edec = ProtoField.uint8("pbdp.dpv1.error_decode", "Error_Decode", base.HEX,
+  { [0x80] = "DP-V1", [0xFE] = "FMS", [0xFF] = "HART" })
+d.v1_ec1 = ProtoField.uint8("pbdp.dpv1.error_code_1", "Error_Code_1", base.HEX)
+d.v1_class = ProtoField.uint8("pbdp.dpv1.error_class", "Error class", base.HEX, {
+  [0xA] = "application", [0xB] = "access", [0xC] = "resource" }, 0xF0)
+d.v1_code = ProtoField.uint8("pbdp.dpv1.error_code", "Error code", base.HEX, nil, 0x0F)
+d.v1_ec2 = ProtoField.uint8("pbdp.dpv1.error_code_2", "Error_Code_2", base.HEX)
+d.v1_poll = ProtoField.bool("pbdp.dpv1.poll", "Poll (request without data)")
+-- Data_Exchange
+d.outputs = ProtoField.bytes("pbdp.outputs", "Outputs")
+d.inputs = ProtoField.bytes("pbdp.inputs", "Inputs")
+
+---------------------------------------------------------------------------
+-- DP decoding
+
+-- Length in bytes of a unit count with the word bit.
+local function unit_bytes(count, words)
+  if words then return count * 2 end
+  return count
+end
+
+local function length_byte_text(b)
+  local n = bit.band(b, 0x3F) + 1
+  local words = bit.band(b, 0x40) ~= 0
+  local s = n .. (words and " word" or " byte") .. (n > 1 and "s" or "")
+  if bit.band(b, 0x80) ~= 0 then s = s .. " consistent" end
+  return s, unit_bytes(n, words)
+end
+
+-- Decodes a configuration (Chk_Cfg / Get_Cfg data unit).
+local function dissect_cfg(tvb, tree)
+  local pos, len = 0, tvb:len()
+  local total_in, total_out = 0, 0
+  while pos < len do
+    local id = tvb(pos, 1):uint()
+    local dir = bit.band(bit.rshift(id, 4), 3)
+    if dir ~= 0 then
+      -- general format
+      local n = bit.band(id, 0x0F) + 1
+      local words = bit.band(id, 0x40) ~= 0
+      local bytes = unit_bytes(n, words)
+      local what = ({ "input", "output", "input/output" })[dir]
+      local text = string.format("%d %s%s %s%s", n, words and "word" or "byte", n > 1 and "s" or "",
+        what, bit.band(id, 0x80) ~= 0 and ", consistent" or "")
+      if dir == 1 or dir == 3 then total_in = total_in + bytes end
+      if dir == 2 or dir == 3 then total_out = total_out + bytes end
+      local t = tree:add(d.cfg_id, tvb(pos, 1))
+      t:add(d.cfg_text, tvb(pos, 1), text)
+      t:append_text(" (" .. text .. ")")
+      pos = pos + 1
+    elseif id == 0 then
+      local t = tree:add(d.cfg_id, tvb(pos, 1))
+      t:add(d.cfg_text, tvb(pos, 1), "free place")
+      t:append_text(" (free place)")
+      pos = pos + 1
+    else
+      -- special format
+      local kind = bit.rshift(id, 6)
+      local vendor = bit.band(id, 0x0F)
+      local nlen = (kind == 3) and 2 or ((kind == 0) and 0 or 1)
+      local size = 1 + nlen + vendor
+      if pos + size > len then
+        tree:add_proto_expert_info(e_len, "identifier runs past the data unit")
+        return
+      end
+      local parts = {}
+      local k = pos + 1
+      if kind == 2 or kind == 3 then
+        local s, b = length_byte_text(tvb(k, 1):uint())
+        parts[#parts + 1] = s .. " output"
+        total_out = total_out + b
+        k = k + 1
+      end
+      if kind == 1 or kind == 3 then
+        local s, b = length_byte_text(tvb(k, 1):uint())
+        parts[#parts + 1] = s .. " input"
+        total_in = total_in + b
+        k = k + 1
+      end
+      local text = table.concat(parts, ", ")
+      if vendor > 0 then text = text .. string.format(", %d manufacturer byte%s", vendor, vendor > 1 and "s" or "") end
+      local t = tree:add(d.cfg_id, tvb(pos, size), id)
+      t:add(d.cfg_text, tvb(pos, size), text)
+      t:append_text(" (special: " .. text .. ")")
+      pos = pos + size
+    end
+  end
+  tree:add(d.cfg_in, total_in):set_generated()
+  tree:add(d.cfg_out, total_out):set_generated()
+end
+
+local function dissect_set_prm(tvb, tree)
+  if tvb:len() < 7 then
+    tree:add_proto_expert_info(e_len, "Set_Prm shorter than 7 bytes")
+    return
+  end
+  local st = tree:add(d.prm_status, tvb(0, 1))
+  st:add(d.prm_lock, tvb(0, 1)); st:add(d.prm_unlock, tvb(0, 1))
+  st:add(d.prm_sync, tvb(0, 1)); st:add(d.prm_freeze, tvb(0, 1)); st:add(d.prm_wd_on, tvb(0, 1))
+  local w1, w2 = tvb(1, 1):uint(), tvb(2, 1):uint()
+  tree:add(d.prm_wd1, tvb(1, 1))
+  tree:add(d.prm_wd2, tvb(2, 1)):append_text(string.format(" (watchdog %d ms at a 10 ms base)", 10 * w1 * w2))
+  tree:add(d.prm_tsdr, tvb(3, 1))
+  tree:add(d.prm_ident, tvb(4, 2))
+  tree:add(d.prm_group, tvb(6, 1))
+  if tvb:len() > 7 then tree:add(d.prm_user, tvb(7)) end
+end
+
+local function dissect_diag(tvb, tree)
+  if tvb:len() < 6 then
+    tree:add_proto_expert_info(e_len, "Slave_Diag response shorter than 6 bytes")
+    return
+  end
+  local s1 = tree:add(d.diag_s1, tvb(0, 1))
+  for _, fl in ipairs({ d.diag_nonexist, d.diag_notready, d.diag_cfgfault, d.diag_extdiag,
+    d.diag_notsupp, d.diag_invalid, d.diag_prmfault, d.diag_mlock }) do
+    s1:add(fl, tvb(0, 1))
+  end
+  local s2 = tree:add(d.diag_s2, tvb(1, 1))
+  for _, fl in ipairs({ d.diag_prmreq, d.diag_statdiag, d.diag_one, d.diag_wdon, d.diag_freeze,
+    d.diag_sync, d.diag_deact }) do
+    s2:add(fl, tvb(1, 1))
+  end
+  tree:add(d.diag_s3, tvb(2, 1)):add(d.diag_ovf, tvb(2, 1))
+  tree:add(d.diag_master, tvb(3, 1))
+  tree:add(d.diag_ident, tvb(4, 2))
+  if tvb:len() > 6 then tree:add(d.diag_ext, tvb(6)) end
+end
+
+local function dissect_gc(tvb, tree)
+  if tvb:len() < 2 then
+    tree:add_proto_expert_info(e_len, "Global_Control shorter than 2 bytes")
+    return
+  end
+  local c = tree:add(d.gc_cmd, tvb(0, 1))
+  for _, fl in ipairs({ d.gc_clear, d.gc_unfreeze, d.gc_freeze, d.gc_unsync, d.gc_sync }) do
+    c:add(fl, tvb(0, 1))
+  end
+  tree:add(d.gc_group, tvb(1, 1))
+end
+
+local function dissect_set_slave_add(tvb, tree)
+  if tvb:len() < 4 then
+    tree:add_proto_expert_info(e_len, "Set_Slave_Add shorter than 4 bytes")
+    return
+  end
+  tree:add(d.ssa_new, tvb(0, 1))
+  tree:add(d.ssa_ident, tvb(1, 2))
+  tree:add(d.ssa_nochg, tvb(3, 1))
+  if tvb:len() > 4 then tree:add(d.ssa_rem, tvb(4)) end
+end
+
+-- DP-V1 MSAC_C1 PDU; `request` is the FDL direction. Returns a summary.
+local function dissect_dpv1(tvb, tree, request)
+  local fn = tvb(0, 1):uint()
+  tree:add(d.v1_fn, tvb(0, 1))
+  local name = DPV1_FUNCTIONS[fn] or string.format("function 0x%02X", fn)
+  if bit.band(fn, 0x80) ~= 0 then
+    if tvb:len() >= 4 then
+      tree:add(d.v1_edec, tvb(1, 1))
+      local e1 = tree:add(d.v1_ec1, tvb(2, 1))
+      e1:add(d.v1_class, tvb(2, 1)); e1:add(d.v1_code, tvb(2, 1))
+      tree:add(d.v1_ec2, tvb(3, 1))
+      return string.format("%s 0x%02X 0x%02X", name, tvb(2, 1):uint(), tvb(3, 1):uint())
+    end
+    tree:add_proto_expert_info(e_len, "DP-V1 error shorter than 4 bytes")
+    return name
+  end
+  if tvb:len() >= 4 and (fn == 0x5E or fn == 0x5F) then
+    tree:add(d.v1_slot, tvb(1, 1))
+    tree:add(d.v1_index, tvb(2, 1))
+    tree:add(d.v1_len, tvb(3, 1))
+    if tvb:len() > 4 then tree:add(d.v1_data, tvb(4)) end
+    return string.format("%s slot %d index %d length %d", name, tvb(1, 1):uint(), tvb(2, 1):uint(),
+      tvb(3, 1):uint())
+  end
+  if tvb:len() > 1 then tree:add(d.v1_data, tvb(1)) end
+  return name
+end
+
+-- The DP layer of one telegram. `dsap`/`ssap` are nil without extension.
+-- `tvb` is the data unit (nil when there is none), `whole` the telegram.
+local function dissect_dp(tvb, whole, pinfo, root, request, dsap, ssap, function_code)
+  local service, detail
+  local len = tvb and tvb:len() or 0
+  if dsap == nil and ssap == nil then
+    if len == 0 then return nil end
+    if request then
+      service = "Data_Exchange"
+      local t = root:add(pbdp, tvb(), "PROFIBUS DP, Data_Exchange request")
+      t:add(d.service, service):set_generated()
+      t:add(d.outputs, tvb())
+    else
+      service = "Data_Exchange"
+      local t = root:add(pbdp, tvb(), "PROFIBUS DP, Data_Exchange response")
+      t:add(d.service, service):set_generated()
+      t:add(d.inputs, tvb())
+      if function_code == 0xA then detail = "diagnosis pending" end
+    end
+    return service, detail
+  end
+  -- The slave's SAP is the DSAP of a request and the SSAP of a response.
+  local sap = request and dsap or ssap
+  local dp_names = {
+    [49] = "MSAC_C2 Initiate", [50] = "Alarm_Ack", [51] = "DP-V1", [55] = "Set_Slave_Add",
+    [56] = "Rd_Inp", [57] = "Rd_Outp", [58] = "Global_Control", [59] = "Get_Cfg",
+    [60] = "Slave_Diag", [61] = "Set_Prm", [62] = "Chk_Cfg",
+  }
+  service = dp_names[sap]
+  if service == nil then return nil end
+  local t = root:add(pbdp, tvb or whole, "PROFIBUS DP, " .. service .. (request and " request" or " response"))
+  t:add(d.service, service):set_generated()
+  if sap == 61 and request then
+    dissect_set_prm(tvb, t)
+  elseif sap == 62 and request then
+    dissect_cfg(tvb, t)
+  elseif sap == 59 and not request and len > 0 then
+    dissect_cfg(tvb, t)
+  elseif sap == 60 and not request and len > 0 then
+    dissect_diag(tvb, t)
+  elseif sap == 58 and request then
+    dissect_gc(tvb, t)
+  elseif sap == 55 and request then
+    dissect_set_slave_add(tvb, t)
+  elseif sap == 56 and not request and len > 0 then
+    t:add(d.inputs, tvb())
+  elseif sap == 57 and not request and len > 0 then
+    t:add(d.outputs, tvb())
+  elseif sap == 51 or sap == 50 then
+    if tvb == nil then
+      t:add(d.v1_poll, true):set_generated()
+      detail = "poll"
+    else
+      detail = dissect_dpv1(tvb, t, request)
+    end
+  end
+  return service, detail
+end
+
+---------------------------------------------------------------------------
+-- Layer 2
+
+local function fcs_of(tvb, from, to)
+  local s = 0
+  for i = from, to - 1 do s = s + tvb(i, 1):uint() end
+  return s % 256
+end
+
+-- Dissects DA SA FC [DSAP] [SSAP] DU FCS ED starting at `pos`, with
+-- `body` bytes from DA through the last DU byte.
+local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
+  local da, sa, fc = tvb(pos, 1):uint(), tvb(pos + 1, 1):uint(), tvb(pos + 2, 1):uint()
+  local dt = tree:add(f.da, tvb(pos, 1))
+  dt:add(f.da_ext, tvb(pos, 1)); dt:add(f.da_addr, tvb(pos, 1))
+  local st = tree:add(f.sa, tvb(pos + 1, 1))
+  st:add(f.sa_ext, tvb(pos + 1, 1)); st:add(f.sa_addr, tvb(pos + 1, 1))
+
+  local request = bit.band(fc, 0x40) ~= 0
+  local code = bit.band(fc, 0x0F)
+  local fname
+  local ft = tree:add(f.fc, tvb(pos + 2, 1))
+  ft:add(f.fc_req, tvb(pos + 2, 1))
+  if request then
+    ft:add(f.fc_fcb, tvb(pos + 2, 1)); ft:add(f.fc_fcv, tvb(pos + 2, 1))
+    fname = REQ_FUNCTIONS[code] or string.format("reserved (0x%X)", code)
+  else
+    ft:add(f.fc_stype, tvb(pos + 2, 1))
+    fname = RESP_FUNCTIONS[code] or string.format("reserved (0x%X)", code)
+  end
+  ft:add(f.fc_function, tvb(pos + 2, 1), fname)
+  ft:append_text(" (" .. fname .. ")")
+
+  local k = pos + 3
+  local stop = pos + body
+  local dsap, ssap
+  if bit.band(da, 0x80) ~= 0 and k < stop then
+    dsap = bit.band(tvb(k, 1):uint(), 0x3F); tree:add(f.dsap, tvb(k, 1)); k = k + 1
+  end
+  if bit.band(sa, 0x80) ~= 0 and k < stop then
+    ssap = bit.band(tvb(k, 1):uint(), 0x3F); tree:add(f.ssap, tvb(k, 1)); k = k + 1
+  end
+  local du = nil
+  if stop > k then
+    du = tvb(k, stop - k)
+    tree:add(f.data, du)
+  end
+
+  local fcs = tvb(stop, 1):uint()
+  local want = fcs_of(tvb, pos, stop)
+  local fct = tree:add(f.fcs, tvb(stop, 1))
+  if fcs == want then
+    fct:append_text(" [correct]")
+    tree:add(f.fcs_status, "Good"):set_generated()
+    tree:add(f.fcs_good, true):set_generated()
+  else
+    fct:append_text(string.format(" [incorrect, should be 0x%02X]", want))
+    tree:add(f.fcs_status, "Bad"):set_generated()
+    tree:add(f.fcs_good, false):set_generated()
+    fct:add_proto_expert_info(e_fcs, string.format("FCS 0x%02X, computed 0x%02X", fcs, want))
+  end
+  tree:add(f.ed, tvb(stop + 1, 1))
+
+  local info = string.format("%s %d → %d %s", sdname, bit.band(sa, 0x7F), bit.band(da, 0x7F), fname)
+  if dsap or ssap then
+    info = info .. string.format(" [%s:%s]", ssap and tostring(ssap) or "-", dsap and tostring(dsap) or "-")
+  end
+  local service, detail = dissect_dp(du, tvb(), pinfo, root, request, dsap, ssap, code)
+  if service then
+    pinfo.cols.protocol = "PROFIBUS DP"
+    info = info .. " " .. service
+    if detail then info = info .. " (" .. detail .. ")" end
+  end
+  if fcs ~= want then info = info .. " [FCS wrong]" end
+  pinfo.cols.info = info
+end
+
+function pbdl.dissector(tvb, pinfo, root)
+  local len = tvb:len()
+  if len < 1 then return 0 end
+  pinfo.cols.protocol = "PROFIBUS DL"
+  local sd = tvb(0, 1):uint()
+  local sdname = SD_NAMES[sd]
+  local tree = root:add(pbdl, tvb(), "PROFIBUS DL")
+  tree:add(f.sd, tvb(0, 1))
+  if sdname == nil then
+    tree:add_proto_expert_info(e_len, string.format("unknown start delimiter 0x%02X", sd))
+    pinfo.cols.info = string.format("unknown start delimiter 0x%02X", sd)
+    return len
+  end
+  tree:add(f.type, tvb(0, 1), sdname):set_generated()
+  tree:append_text(", " .. sdname)
+
+  if sd == 0xE5 then
+    pinfo.cols.info = "SC short acknowledge"
+    return 1
+  elseif sd == 0xDC then
+    if len < 3 then
+      tree:add_proto_expert_info(e_len, "token shorter than 3 bytes"); return len
+    end
+    local dt = tree:add(f.da, tvb(1, 1)); dt:add(f.da_addr, tvb(1, 1))
+    local st = tree:add(f.sa, tvb(2, 1)); st:add(f.sa_addr, tvb(2, 1))
+    tree:add(f.token, true):set_generated()
+    pinfo.cols.info = string.format("SD4 token %d → %d", bit.band(tvb(2, 1):uint(), 0x7F),
+      bit.band(tvb(1, 1):uint(), 0x7F))
+    return 3
+  elseif sd == 0x10 then
+    if len < 6 then
+      tree:add_proto_expert_info(e_len, "SD1 telegram shorter than 6 bytes"); return len
+    end
+    dissect_body(tvb, pinfo, tree, root, 1, 3, sdname)
+    return 6
+  elseif sd == 0xA2 then
+    if len < 14 then
+      tree:add_proto_expert_info(e_len, "SD3 telegram shorter than 14 bytes"); return len
+    end
+    dissect_body(tvb, pinfo, tree, root, 1, 11, sdname)
+    return 14
+  else -- SD2
+    if len < 4 then
+      tree:add_proto_expert_info(e_len, "SD2 header cut off"); return len
+    end
+    local le, ler = tvb(1, 1):uint(), tvb(2, 1):uint()
+    tree:add(f.le, tvb(1, 1))
+    tree:add(f.ler, tvb(2, 1))
+    if le ~= ler or tvb(3, 1):uint() ~= 0x68 or le < 3 or len < le + 6 then
+      tree:add_proto_expert_info(e_len, string.format("SD2 with LE %d, LEr %d in %d bytes", le, ler, len))
+      pinfo.cols.info = "SD2 malformed"
+      return len
+    end
+    dissect_body(tvb, pinfo, tree, root, 4, le, sdname)
+    return le + 6
+  end
+end
+
+-- Link type 257 has no Wireshark encapsulation of its own: pcapng files
+-- with it arrive as WTAP_ENCAP_UNKNOWN (0). Newer Wireshark versions
+-- that map it to a name in `wtap_encaps` are served too.
+local encap_table = DissectorTable.get("wtap_encap")
+encap_table:add(0, pbdl)
+if wtap_encaps and wtap_encaps.PROFIBUS_DL then
+  encap_table:add(wtap_encaps.PROFIBUS_DL, pbdl)
+end
