@@ -10,6 +10,7 @@ mod decode;
 mod demo;
 mod describe;
 mod dpv1;
+mod gateway;
 mod gsd;
 mod jx2;
 mod master;
@@ -57,6 +58,9 @@ enum Command {
     Rfid(rfid::Args),
     /// Read or write a DP-V1 data record (slot, index) of a slave.
     Dpv1(dpv1::Args),
+    /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
+    /// take output writes.
+    Gateway(gateway::Args),
 }
 
 fn main() -> ExitCode {
@@ -80,6 +84,7 @@ fn main() -> ExitCode {
         Command::Pkw(a) => pkw::run(a),
         Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),
+        Command::Gateway(a) => gateway::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -29,6 +29,9 @@
 //! freeze = false
 //! initial_outputs = [0, 0]               # optional
 //!
+//! [mqtt]                 # optional: settings of `dpctl gateway`, kept raw
+//! prefix = "profibus"    # (see the `profibus-gateway` crate)
+//!
 //! [[slave]]
 //! address = 25
 //! device = "omega"                       # a device profile instead of gsd/modules
@@ -72,6 +75,9 @@ struct RawFile {
     options: Option<RawOptions>,
     #[serde(default)]
     slave: Vec<Spanned<RawSlave>>,
+    /// The gateway's settings, kept raw: `profibus-gateway` reads them.
+    #[serde(default)]
+    mqtt: Option<toml::Table>,
 }
 
 #[derive(Deserialize)]
@@ -222,6 +228,9 @@ pub struct BusFile {
     pub slaves: Vec<BusSlave>,
     /// Warnings (GSD quirks, adjusted bus parameters).
     pub warnings: Vec<String>,
+    /// The `[mqtt]` table as written, for the gateway (`profibus-gateway`
+    /// parses and checks it; this crate only carries it).
+    pub mqtt: Option<toml::Table>,
 }
 
 /// What is wrong with a bus file, with its position.
@@ -656,6 +665,7 @@ impl BusFile {
             },
             slaves,
             warnings,
+            mqtt: raw.mqtt,
         })
     }
 }

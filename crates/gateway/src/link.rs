@@ -1,0 +1,174 @@
+//! The MQTT connection: a thin driver around the `rumqttc` client.
+//!
+//! The client's event loop runs in a task of its own: it connects,
+//! reconnects after a loss with a growing pause (100 ms doubling to 5 s),
+//! subscribes to the write topics on every connection, and hands
+//! connections, losses and messages to the gateway's loop as
+//! [`LinkEvent`]s. Publishing never blocks the bus: a message that finds
+//! the client's queue full (the broker is away) is dropped, and the
+//! gateway republishes every retained topic when the broker is back.
+
+use crate::core::{Gateway, Publish};
+use rumqttc::{AsyncClient, Event, LastWill, MqttOptions, Packet, QoS};
+use std::time::Duration;
+use tokio::sync::mpsc;
+
+/// What the connection reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkEvent {
+    /// The broker accepted the connection (first or again).
+    Connected,
+    /// The connection was lost or refused.
+    Disconnected(String),
+    /// A message arrived.
+    Message {
+        /// Topic.
+        topic: String,
+        /// Payload.
+        payload: Vec<u8>,
+    },
+}
+
+/// A failed publish.
+#[derive(Debug, thiserror::Error)]
+#[error("MQTT publish failed: {0}")]
+pub struct LinkError(#[from] rumqttc::ClientError);
+
+/// The connection to the broker of one gateway.
+pub struct MqttLink {
+    client: AsyncClient,
+    qos: QoS,
+    events: mpsc::UnboundedReceiver<LinkEvent>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+fn qos(q: u8) -> QoS {
+    match q {
+        0 => QoS::AtMostOnce,
+        1 => QoS::AtLeastOnce,
+        _ => QoS::ExactlyOnce,
+    }
+}
+
+/// Messages the client queues while the broker is away.
+const QUEUE: usize = 1024;
+
+impl MqttLink {
+    /// Start connecting to `host:port` for `gateway` (its client id, last
+    /// will and write subscription). Needs a tokio runtime.
+    pub fn connect(host: &str, port: u16, gateway: &Gateway) -> MqttLink {
+        let s = gateway.settings();
+        let q = qos(s.qos);
+        let mut o = MqttOptions::new(s.client_id.clone(), host, port);
+        o.set_keep_alive(Duration::from_secs(5));
+        o.set_clean_session(true);
+        let will = gateway.last_will();
+        o.set_last_will(LastWill::new(will.topic, will.payload, q, will.retain));
+        let (client, mut eventloop) = AsyncClient::new(o, QUEUE);
+        let (tx, events) = mpsc::unbounded_channel();
+        let filter = gateway.topics().set_filter();
+        let sub = client.clone();
+        let task = tokio::spawn(async move {
+            let mut pause = Duration::from_millis(100);
+            loop {
+                match eventloop.poll().await {
+                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                        pause = Duration::from_millis(100);
+                        tracing::info!("connected to the MQTT broker");
+                        if let Err(e) = sub.try_subscribe(filter.clone(), q) {
+                            tracing::warn!(error = %e, "cannot subscribe to {filter}");
+                        }
+                        if tx.send(LinkEvent::Connected).is_err() {
+                            return;
+                        }
+                    }
+                    Ok(Event::Incoming(Packet::Publish(p))) => {
+                        let ev = LinkEvent::Message {
+                            topic: p.topic,
+                            payload: p.payload.to_vec(),
+                        };
+                        if tx.send(ev).is_err() {
+                            return;
+                        }
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(error = %e, "MQTT connection lost; retrying in {pause:?}");
+                        if tx.send(LinkEvent::Disconnected(e.to_string())).is_err() {
+                            return;
+                        }
+                        // Reconnection backoff, not a wait for an event.
+                        tokio::time::sleep(pause).await;
+                        pause = (pause * 2).min(Duration::from_secs(5));
+                    }
+                }
+            }
+        });
+        MqttLink {
+            client,
+            qos: q,
+            events,
+            task,
+        }
+    }
+
+    /// The next event, without waiting.
+    pub fn try_recv(&mut self) -> Option<LinkEvent> {
+        self.events.try_recv().ok()
+    }
+
+    /// The next event.
+    pub async fn recv(&mut self) -> Option<LinkEvent> {
+        self.events.recv().await
+    }
+
+    /// Queue a message for the broker without waiting.
+    pub fn publish(&self, p: Publish) -> Result<(), LinkError> {
+        self.client
+            .try_publish(p.topic, self.qos, p.retain, p.payload)?;
+        Ok(())
+    }
+
+    /// Publish `p` and disconnect cleanly (the broker then does not send
+    /// the last will: publish the offline status with this).
+    pub async fn close(self, last: Publish) {
+        let _ = self
+            .client
+            .publish(last.topic, self.qos, last.retain, last.payload)
+            .await;
+        let _ = self.client.disconnect().await;
+        // Let the event loop send both, then stop it.
+        let _ = tokio::time::timeout(Duration::from_secs(1), self.task).await;
+    }
+}
+
+/// Hand every link event to `gateway` and every queued message to the
+/// link; `ts_ms` is the wall-clock time in ms since the Unix epoch.
+pub fn pump(link: &mut MqttLink, gateway: &mut Gateway, ts_ms: u64) {
+    while let Some(ev) = link.try_recv() {
+        match ev {
+            LinkEvent::Connected => gateway.connected(ts_ms),
+            LinkEvent::Disconnected(_) => gateway.disconnected(),
+            LinkEvent::Message { topic, payload } => {
+                gateway.handle_message(&topic, &payload, ts_ms)
+            }
+        }
+    }
+}
+
+/// Send everything `gateway` has queued.
+pub fn flush(link: &MqttLink, gateway: &mut Gateway) {
+    while let Some(p) = gateway.poll_publish() {
+        if let Err(e) = link.publish(p) {
+            tracing::debug!(error = %e, "dropped a publish");
+        }
+    }
+}
+
+/// Milliseconds since the Unix epoch, for payload timestamps.
+pub fn wall_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
+}
