@@ -283,6 +283,38 @@ fn class2_services_and_dpv1_read_write() {
     );
     assert_eq!(by_id(5)["result"], "done", "DP-V1 write: {jobs:#?}");
     assert_eq!(by_id(6)["data"], "CA FE", "DP-V1 read: {jobs:#?}");
+    // A bad command is refused with the field named, and not executed
+    // (slot 300 once became slot 44).
+    send(
+        &mut m,
+        r#"{"dpv1_read": 10, "slot": 300, "index": 7, "length": 2}"#,
+    );
+    send(&mut m, r#"{"rd_inp": 10}"#);
+    let end = Instant::now() + WAIT;
+    let seen = loop {
+        let seen: Vec<Value> = lines
+            .all()
+            .iter()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .collect();
+        if seen.iter().any(|v| v["event"] == "job" && v["id"] == 7) {
+            break seen;
+        }
+        assert!(
+            Instant::now() < end,
+            "the Rd_Inp after the bad command is missing"
+        );
+        lines.pull();
+    };
+    let error = seen
+        .iter()
+        .find(|v| v["event"] == "error")
+        .expect("an error line for the bad command");
+    assert_eq!(
+        error["error"], "a DP-V1 slot or index must be 0..=254, not 300",
+        "{error}"
+    );
+    assert_eq!(seen.iter().filter(|v| v["event"] == "job").count(), 7);
     m.terminate(Duration::from_secs(5));
 }
 

@@ -1,7 +1,7 @@
 //! `dpctl decode HEX...`: decode telegram bytes.
 
 use crate::describe;
-use anyhow::{bail, Context};
+use anyhow::Context;
 use profibus_fdl::wire::Telegram;
 
 /// Decode one or more telegrams given as hex bytes.
@@ -18,28 +18,7 @@ pub struct Args {
 }
 
 pub fn parse_hex(parts: &[String]) -> anyhow::Result<Vec<u8>> {
-    let digits: String = parts
-        .iter()
-        .flat_map(|p| p.split(|c: char| c.is_whitespace() || c == ':' || c == ','))
-        .map(|p| p.trim_start_matches("0x").trim_start_matches("0X"))
-        .map(|p| {
-            if p.len() == 1 {
-                format!("0{p}")
-            } else {
-                p.to_string()
-            }
-        })
-        .collect();
-    if !digits.len().is_multiple_of(2) {
-        bail!("odd number of hex digits");
-    }
-    (0..digits.len())
-        .step_by(2)
-        .map(|i| {
-            u8::from_str_radix(&digits[i..i + 2], 16)
-                .with_context(|| format!("`{}` is not a hex byte", &digits[i..i + 2]))
-        })
-        .collect()
+    Ok(profibus_fdl::wire::parse_hex(&parts.join(" "))?)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {

@@ -5,8 +5,7 @@ use crate::view::{drain_events, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::Value as ChannelValue;
-use profibus_dp::control::ControlCommand;
-use profibus_dp::master::{DpMaster, Job, OperatingState, SlaveState};
+use profibus_dp::master::{CommandOutcome, DpMaster, MasterCommand, OperatingState, SlaveState};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
 use serde_json::{json, Value};
@@ -116,119 +115,18 @@ fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Resu
     })())
 }
 
-fn parse_bytes(v: &Value) -> Result<Vec<u8>> {
-    match v {
-        Value::String(s) => crate::decode::parse_hex(std::slice::from_ref(s)),
-        Value::Array(a) => a
-            .iter()
-            .map(|x| {
-                x.as_u64()
-                    .filter(|&n| n <= 255)
-                    .map(|n| n as u8)
-                    .context("byte values must be 0..=255")
-            })
-            .collect(),
-        _ => bail!("bytes must be a hex string or an array of numbers"),
-    }
-}
-
-fn addr(v: &Value) -> Result<u8> {
-    v.as_u64()
-        .filter(|&a| a <= 126)
-        .map(|a| a as u8)
-        .context("a station address must be 0..=126")
-}
-
 /// Apply one command line to the master; returns a reply for the log.
+/// A refused command changes nothing.
 pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
-    let v: Value = serde_json::from_str(line).context("not a JSON object")?;
-    if let Some(s) = v.get("slave") {
-        let a = addr(s)?;
-        let data = parse_bytes(v.get("outputs").context("`outputs` missing")?)?;
-        if !m.set_outputs(a, &data) {
-            bail!("slave {a} is not in the bus file");
-        }
-        return Ok(None);
-    }
-    if let Some(s) = v.get("operating").and_then(|s| s.as_str()) {
-        let st = match s {
-            "operate" => OperatingState::Operate,
-            "clear" => OperatingState::Clear,
-            "stop" => OperatingState::Stop,
-            other => bail!("unknown operating state `{other}`"),
-        };
-        m.set_operating_state(st);
-        return Ok(Some(format!("operating state {s}")));
-    }
-    if let Some(cmds) = v.get("global_control") {
-        let mut c = ControlCommand::empty();
-        let list: Vec<&str> = match cmds {
-            Value::String(s) => vec![s.as_str()],
-            Value::Array(a) => a.iter().filter_map(|x| x.as_str()).collect(),
-            _ => bail!("`global_control` takes a name or a list of names"),
-        };
-        for name in list {
-            c |= match name {
-                "sync" => ControlCommand::SYNC,
-                "unsync" => ControlCommand::UNSYNC,
-                "freeze" => ControlCommand::FREEZE,
-                "unfreeze" => ControlCommand::UNFREEZE,
-                other => bail!("unknown Global_Control command `{other}`"),
-            };
-        }
-        let group = v.get("group").and_then(|g| g.as_u64()).unwrap_or(0) as u8;
-        if !m.global_control(c, group) {
-            bail!("Global_Control queue full");
-        }
-        return Ok(None);
-    }
-    let job = if let Some(a) = v.get("read_diag") {
-        Job::ReadDiag { address: addr(a)? }
-    } else if let Some(a) = v.get("get_cfg") {
-        Job::GetCfg { address: addr(a)? }
-    } else if let Some(a) = v.get("rd_inp") {
-        Job::RdInp { address: addr(a)? }
-    } else if let Some(a) = v.get("rd_outp") {
-        Job::RdOutp { address: addr(a)? }
-    } else if let Some(a) = v.get("dpv1_read") {
-        let n = |k: &str| v.get(k).and_then(|x| x.as_u64()).unwrap_or(0) as u8;
-        Job::Dpv1Read {
-            address: addr(a)?,
-            slot: n("slot"),
-            index: n("index"),
-            length: n("length"),
-        }
-    } else if let Some(a) = v.get("dpv1_write") {
-        let n = |k: &str| v.get(k).and_then(|x| x.as_u64()).unwrap_or(0) as u8;
-        Job::Dpv1Write {
-            address: addr(a)?,
-            slot: n("slot"),
-            index: n("index"),
-            data: parse_bytes(v.get("data").context("`data` missing")?)?,
-        }
-    } else if let Some(a) = v.get("set_slave_add") {
-        let ident = match v.get("ident") {
-            Some(Value::String(s)) => {
-                u16::from_str_radix(s.trim_start_matches("0x").trim_start_matches("0X"), 16)
-                    .context("ident must be hex like \"0x0008\"")?
-            }
-            Some(Value::Number(n)) => n.as_u64().unwrap_or(0) as u16,
-            _ => bail!("`ident` missing"),
-        };
-        Job::SetSlaveAdd {
-            address: addr(a)?,
-            new_address: addr(v.get("new_address").context("`new_address` missing")?)?,
-            ident_number: ident,
-            no_add_chg: v
-                .get("no_add_chg")
-                .and_then(|b| b.as_bool())
-                .unwrap_or(false),
-        }
-    } else {
-        bail!("unknown command");
+    let command = MasterCommand::from_json(line)?;
+    let reply = match &command {
+        MasterCommand::Operating(s) => Some(format!("operating state {}", s.as_str())),
+        _ => None,
     };
-    let id = m.submit(job).context("job queue full")?;
-    Ok(Some(format!("job {} queued", id.0)))
+    Ok(match m.apply(command)? {
+        CommandOutcome::JobQueued(id) => Some(format!("job {} queued", id.0)),
+        CommandOutcome::Applied => reply,
+    })
 }
 
 async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {

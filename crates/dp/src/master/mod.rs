@@ -75,8 +75,10 @@
 //! # }
 //! ```
 
+mod command;
 mod config;
 
+pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{MasterConfig, MasterOptions, SlaveParams, DEFAULT_GLOBAL_CONTROL_INTERVAL};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
@@ -172,6 +174,17 @@ pub enum OperatingState {
     Clear,
     /// Data exchange with the application's outputs.
     Operate,
+}
+
+impl OperatingState {
+    /// The name in commands and logs: `stop`, `clear`, `operate`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            OperatingState::Stop => "stop",
+            OperatingState::Clear => "clear",
+            OperatingState::Operate => "operate",
+        }
+    }
 }
 
 /// A class-2 service or DP-V1 request for one slave.

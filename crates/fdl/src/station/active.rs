@@ -560,13 +560,28 @@ impl<A: MasterApp> Station for ActiveStation<A> {
 /// for a SAP that is not activated. A data reply without the SAPs, such as
 /// a late Data_Exchange answer arriving while a Slave_Diag is pending, is
 /// not an answer to this request.
+///
+/// The status must fit the service, too: an SRD is answered with data
+/// (DL, DH, RDL, RDH), "no data" (NR) or a negative acknowledge, never with
+/// the plain "OK" of an FDL Status reply or an SDA acknowledge (a late
+/// answer to a GAP poll looks exactly like that); an SDA is answered with
+/// OK or a negative acknowledge, never with data; an FDL Status with OK.
 fn reply_matches(p: &Pending, d: &DataTelegram<'_>) -> bool {
-    if (d.dsap, d.ssap) == (p.ssap, p.dsap) {
-        return true;
-    }
     let FunctionCode::Response { status, .. } = d.fc else {
         return false;
     };
+    let fits = match p.service {
+        Service::SrdHigh | Service::SrdLow => status != ResponseStatus::Ok,
+        Service::SdaHigh | Service::SdaLow => status == ResponseStatus::Ok || status.is_negative(),
+        Service::FdlStatus => status == ResponseStatus::Ok,
+        Service::SdnHigh | Service::SdnLow => false,
+    };
+    if !fits {
+        return false;
+    }
+    if (d.dsap, d.ssap) == (p.ssap, p.dsap) {
+        return true;
+    }
     d.dsap.is_none()
         && d.ssap.is_none()
         && d.data.is_empty()
@@ -1456,6 +1471,27 @@ mod tests {
             assert_eq!(st.app().results.len(), accepted as usize, "{status:?}");
             assert_eq!(st.stats().late_replies, !accepted as u64, "{status:?}");
         }
+    }
+
+    #[test]
+    fn a_late_fdl_status_answer_does_not_answer_a_data_exchange() {
+        // The answer to a GAP poll (FDL Status, "OK" from a passive
+        // station) arrives after the GAP wait, while a Data_Exchange to the
+        // same station is pending: not its answer.
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        let (t, _) = step(&mut st);
+        st.handle_rx(t + params.bits(11), &[0x10, 3, 8, 0x00, 0x0B, 0x16]);
+        assert!(st.app().results.is_empty());
+        assert_eq!(st.stats().late_replies, 1);
+        st.handle_rx(
+            t + params.bits(11),
+            &reply(3, 8, ResponseStatus::Dl, None, &[1, 2]),
+        );
+        assert_eq!(st.app().results, vec![(8, "response", 0)]);
     }
 
     #[test]

@@ -26,5 +26,5 @@ mod hex;
 mod telegram;
 
 pub use fc::{FunctionCode, RequestKind, ResponseStatus, StationType};
-pub use hex::Hex;
+pub use hex::{parse_hex, Hex, HexError};
 pub use telegram::{fcs, frame_len, DataTelegram, EmitError, Format, ParseError, Telegram};
