@@ -1,9 +1,11 @@
 //! DP master benchmarks (issue: DP master), in one run:
 //!
 //! (a)  Data_Exchange transactions per second with one slave over a socat
-//!      pty pair: `dpctl master` and pyprofibus's master against the same
-//!      `dpctl slave`, next to the raw round trip of the same kind of pty
-//!      pair (a bare echo of an 11-byte telegram) as the physical limit.
+//!      pty pair and through an unpaced `dpctl bus`: `dpctl master`
+//!      (default, `--busy-poll 300`, `--gather`) and pyprofibus's master
+//!      against the same `dpctl slave`, next to the raw round trip of the
+//!      same path (a bare echo of a 13-byte telegram) as the physical
+//!      limit, with CPU seconds per 10 000 exchanges of each master.
 //! (a') CPU cost of the master core per Data_Exchange in process (an FDL
 //!      active station with the DP master against a canned responder),
 //!      next to pyprofibus's master on its in-process dummy PHY.
@@ -71,9 +73,8 @@ fn raw_tty(path: &Path) -> std::fs::File {
 /// Round trips per second of a 13-byte message (a Data_Exchange with 4
 /// bytes of data) through a pty pair with
 /// a bare echo on the other end.
-fn raw_echo_rate(dir: &Path, n: u32) -> f64 {
-    let (a, b) = (dir.join("ea"), dir.join("eb"));
-    let _s = socat(&a, &b);
+fn raw_echo_rate(dpctl: &Path, dir: &Path, kind: &Line, n: u32) -> f64 {
+    let (a, b, _s) = line(dpctl, dir, kind, "e");
     let mut far = raw_tty(&b);
     let echo = std::thread::spawn(move || {
         let mut buf = [0u8; 64];
@@ -112,12 +113,82 @@ fn start_slave(dpctl: &Path, port: &Path) -> Kill {
     )
 }
 
+/// A master's rate and CPU: exchanges per second in the steady state and
+/// CPU seconds (user + system) per 10 000 exchanges.
+#[derive(Clone, Copy, Debug, Default)]
+struct Rate {
+    per_s: f64,
+    cpu_per_10k: f64,
+}
+
+/// CPU seconds (utime + stime) of process `pid` so far.
+fn cpu_of(pid: u32) -> f64 {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let f: Vec<&str> = s
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = f.get(11).and_then(|x| x.parse().ok()).unwrap_or(0.0)
+        + f.get(12).and_then(|x| x.parse().ok()).unwrap_or(0.0);
+    ticks / 100.0
+}
+
+/// Where the master and its slave meet: a socat pty pair, or two links of
+/// an unpaced `dpctl bus`.
+enum Line {
+    Socat,
+    Hub,
+}
+
+/// Two connected pty paths (near, far) and what keeps them alive.
+fn line(dpctl: &Path, dir: &Path, kind: &Line, tag: &str) -> (PathBuf, PathBuf, Kill) {
+    match kind {
+        Line::Socat => {
+            let (a, b) = (dir.join(format!("{tag}a")), dir.join(format!("{tag}b")));
+            // A killed socat leaves its links behind (see below).
+            let _ = std::fs::remove_file(&a);
+            let _ = std::fs::remove_file(&b);
+            let k = socat(&a, &b);
+            (a, b, k)
+        }
+        Line::Hub => {
+            let prefix = dir.join(format!("{tag}h"));
+            // A killed hub leaves its links behind, pointing at ptys that
+            // may already belong to someone else.
+            for i in 0..2 {
+                let _ = std::fs::remove_file(format!("{}{i}", prefix.display()));
+            }
+            let k = Kill(
+                Command::new(dpctl)
+                    .args(["bus", "--stations", "2", "--link"])
+                    .arg(&prefix)
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            );
+            let (a, b) = (
+                PathBuf::from(format!("{}0", prefix.display())),
+                PathBuf::from(format!("{}1", prefix.display())),
+            );
+            let end = std::time::Instant::now() + Duration::from_secs(5);
+            while !(a.exists() && b.exists()) {
+                assert!(std::time::Instant::now() < end, "no bus links");
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            (a, b, k)
+        }
+    }
+}
+
 /// `dpctl master` Data_Exchange rate in the steady state: the growth of
 /// the slave's Data_Exchange count between the first status line in
-/// Data_Exchange and the last one, over `secs` seconds.
-fn dpctl_rate(dpctl: &Path, dir: &Path, secs: f64, busy_poll_us: u32) -> f64 {
-    let (a, b) = (dir.join("da"), dir.join("db"));
-    let _s = socat(&a, &b);
+/// Data_Exchange and the last one, over `secs` seconds; CPU per exchange
+/// from the master's whole run (start-up included).
+fn dpctl_rate(dpctl: &Path, dir: &Path, kind: &Line, secs: f64, extra: &[&str]) -> Rate {
+    let (a, b, _line) = line(dpctl, dir, kind, "d");
     let _slave = start_slave(dpctl, &b);
     // One slave, one master: HSA = the master's address keeps the GAP
     // (live list) polls to one address per 100 token visits.
@@ -134,7 +205,7 @@ fn dpctl_rate(dpctl: &Path, dir: &Path, secs: f64, busy_poll_us: u32) -> f64 {
     let mut child = Kill(
         Command::new(dpctl)
             .args(["master", "--json", "--interval", "100"])
-            .args(["--busy-poll", &busy_poll_us.to_string()])
+            .args(extra)
             .arg("--port")
             .arg(&a)
             .arg("--config")
@@ -161,10 +232,23 @@ fn dpctl_rate(dpctl: &Path, dir: &Path, secs: f64, busy_poll_us: u32) -> f64 {
             .collect::<Vec<_>>()
     });
     std::thread::sleep(Duration::from_secs_f64(secs));
+    let cpu = cpu_of(child.0.id());
     drop(child);
     let rows = reader.join().unwrap();
     let (first, last) = (rows.first().expect("data exchange"), rows.last().unwrap());
-    (last.1 - first.1) / (last.0 - first.0)
+    Rate {
+        per_s: (last.1 - first.1) / (last.0 - first.0),
+        cpu_per_10k: cpu / last.1 * 10_000.0,
+    }
+}
+
+/// CPU seconds of reaped children so far.
+fn children_cpu() -> f64 {
+    // SAFETY: getrusage writes into the struct it is given.
+    let mut ru: nix::libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { nix::libc::getrusage(nix::libc::RUSAGE_CHILDREN, &mut ru) };
+    let t = |tv: nix::libc::timeval| tv.tv_sec as f64 + tv.tv_usec as f64 * 1e-6;
+    t(ru.ru_utime) + t(ru.ru_stime)
 }
 
 fn python() -> PathBuf {
@@ -174,10 +258,10 @@ fn python() -> PathBuf {
 }
 
 /// pyprofibus master rate against the same kind of `dpctl slave`.
-fn pyprofibus_rate(dpctl: &Path, dir: &Path, n: u32) -> f64 {
-    let (a, b) = (dir.join("pa"), dir.join("pb"));
-    let _s = socat(&a, &b);
+fn pyprofibus_rate(dpctl: &Path, dir: &Path, kind: &Line, n: u32) -> Rate {
+    let (a, b, _s) = line(dpctl, dir, kind, "p");
     let _slave = start_slave(dpctl, &b);
+    let cpu0 = children_cpu();
     let out = Command::new(python())
         .arg(repo().join("tests/interop/pyprofibus_master.py"))
         .arg("--port")
@@ -200,9 +284,13 @@ fn pyprofibus_rate(dpctl: &Path, dir: &Path, n: u32) -> f64 {
         .unwrap();
     let text = String::from_utf8(out.stdout).unwrap();
     let s: serde_json::Value = serde_json::from_str(text.lines().last().expect("summary")).unwrap();
+    let cpu = children_cpu() - cpu0;
     let cycles = s["cycles"].as_f64().unwrap();
     let secs = s["seconds"].as_f64().unwrap() - s["first_dx_s"].as_f64().unwrap_or(0.0);
-    cycles / secs
+    Rate {
+        per_s: cycles / secs,
+        cpu_per_10k: cpu / cycles * 10_000.0,
+    }
 }
 
 /// A responder that answers every Data_Exchange with a canned DL reply
@@ -369,48 +457,63 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
 
     // Three rounds, each path in turn, so that all see the same load;
-    // medians reported.
+    // medians reported. `DP_MASTER_ROUNDS=N` changes the number of rounds.
+    let rounds: usize = std::env::var("DP_MASTER_ROUNDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
     let n = 3000;
-    let mut rows = vec![];
-    for _ in 0..3 {
-        let raw = raw_echo_rate(&dir, n);
-        let ours = dpctl_rate(&dpctl, &dir, 2.5, 0);
-        let busy = dpctl_rate(&dpctl, &dir, 2.5, 300);
-        let py = pyprofibus_rate(&dpctl, &dir, n);
-        println!(
-            "  round: raw {raw:.0}/s, dpctl master {ours:.0}/s, with --busy-poll 300 {busy:.0}/s, pyprofibus {py:.0}/s"
-        );
-        rows.push((raw, ours, py, busy));
+    for kind in [Line::Socat, Line::Hub] {
+        let name = match kind {
+            Line::Socat => "a socat pty pair",
+            Line::Hub => "dpctl bus (unpaced)",
+        };
+        let mut rows: Vec<[Rate; 5]> = vec![];
+        for _ in 0..rounds {
+            let raw = Rate {
+                per_s: raw_echo_rate(&dpctl, &dir, &kind, n),
+                cpu_per_10k: 0.0,
+            };
+            let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[]);
+            let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"]);
+            let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"]);
+            let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
+            println!(
+                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
+                raw.per_s, ours.per_s, ours.cpu_per_10k, busy.per_s, busy.cpu_per_10k,
+                gather.per_s, gather.cpu_per_10k, py.per_s, py.cpu_per_10k
+            );
+            rows.push([raw, ours, busy, gather, py]);
+        }
+        let median = |i: usize, cpu: bool| {
+            let mut v: Vec<f64> = rows
+                .iter()
+                .map(|r| if cpu { r[i].cpu_per_10k } else { r[i].per_s })
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (raw, py) = (median(0, false), median(4, false));
+        println!("(a) Data_Exchange over {name}, 1 slave, medians of {rounds} rounds");
+        println!("| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 |");
+        println!("|---|---|---|---|---|");
+        println!("| raw round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | | |");
+        for (i, label) in [
+            (1, "dpctl master"),
+            (2, "dpctl master --busy-poll 300"),
+            (3, "dpctl master --gather (benchmark option)"),
+            (4, "pyprofibus 1.13 master"),
+        ] {
+            let r = median(i, false);
+            println!(
+                "| {label} | {r:.0} | {:.0} % | {:.2}× | {:.2} |",
+                100.0 * r / raw,
+                r / py,
+                median(i, true)
+            );
+        }
+        println!();
     }
-    let median = |f: fn(&(f64, f64, f64, f64)) -> f64| {
-        let mut v: Vec<f64> = rows.iter().map(f).collect();
-        v.sort_by(f64::total_cmp);
-        v[1]
-    };
-    let (raw, ours, py, busy) = (
-        median(|r| r.0),
-        median(|r| r.1),
-        median(|r| r.2),
-        median(|r| r.3),
-    );
-    println!("(a) Data_Exchange over a socat pty pair, 1 slave, medians of 3 rounds");
-    println!("| peer | transactions/s | vs raw pty | vs pyprofibus |");
-    println!("|---|---|---|---|");
-    println!("| raw pty round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | |");
-    println!(
-        "| dpctl master | {ours:.0} | {:.0} % | {:.2}× |",
-        100.0 * ours / raw,
-        ours / py
-    );
-    println!(
-        "| dpctl master --busy-poll 300 | {busy:.0} | {:.0} % | {:.2}× |",
-        100.0 * busy / raw,
-        busy / py
-    );
-    println!(
-        "| pyprofibus 1.13 master | {py:.0} | {:.0} % | 1× |",
-        100.0 * py / raw
-    );
 
     let ours_cpu = core_cost(2_000_000);
     let py_cpu = pyprofibus_cost(20_000);

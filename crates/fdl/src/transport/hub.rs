@@ -562,3 +562,116 @@ fn flush_queue(s: &mut Station) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::timing::Baud;
+    use std::io::Read;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    /// A hub in a thread of this process, polled until dropped.
+    struct Running {
+        stop: Arc<AtomicBool>,
+        thread: Option<std::thread::JoinHandle<HubStatus>>,
+        links: Vec<PathBuf>,
+    }
+
+    impl Running {
+        fn start(tag: &str, medium: MediumConfig) -> Running {
+            let dir = std::env::temp_dir();
+            let links: Vec<PathBuf> = (0..2)
+                .map(|i| dir.join(format!("hub-{tag}-{}-{i}", std::process::id())))
+                .collect();
+            let mut hub = Hub::open(&links, medium).unwrap();
+            let stop = Arc::new(AtomicBool::new(false));
+            let s = stop.clone();
+            let thread = std::thread::spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    hub.poll(None, Some(Duration::from_millis(2))).unwrap();
+                }
+                hub.finish().unwrap()
+            });
+            Running {
+                stop,
+                thread: Some(thread),
+                links,
+            }
+        }
+
+        fn open(&self, i: usize) -> std::fs::File {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&self.links[i])
+                .unwrap()
+        }
+
+        fn stop(mut self) -> HubStatus {
+            self.stop.store(true, Ordering::Relaxed);
+            self.thread.take().unwrap().join().unwrap()
+        }
+    }
+
+    impl Drop for Running {
+        fn drop(&mut self) {
+            self.stop.store(true, Ordering::Relaxed);
+            if let Some(t) = self.thread.take() {
+                let _ = t.join();
+            }
+        }
+    }
+
+    /// Write `data` on `a` until `b` reads something (the hub notices new
+    /// openers every few milliseconds); what `b` read first.
+    fn first_read(a: &mut std::fs::File, b: &mut std::fs::File, data: &[u8]) -> Vec<u8> {
+        use nix::poll::{PollFd, PollFlags, PollTimeout};
+        let mut buf = [0u8; 64];
+        for _ in 0..500 {
+            a.write_all(data).unwrap();
+            let mut fds = [PollFd::new(b.as_fd(), PollFlags::POLLIN)];
+            if nix::poll::poll(&mut fds, PollTimeout::from(200u16)).unwrap() > 0 {
+                let n = b.read(&mut buf).unwrap();
+                return buf[..n].to_vec();
+            }
+        }
+        panic!("nothing arrived");
+    }
+
+    #[test]
+    fn paced_hub_delivers_a_telegram_in_one_piece_in_process() {
+        let hub = Running::start("paced", MediumConfig::paced(Baud::B19200));
+        let (mut a, mut b) = (hub.open(0), hub.open(1));
+        // An 11-byte telegram at 19.2 kbit/s: 6.3 ms on the wire. However
+        // late this thread reads, it gets all 11 bytes in one read.
+        let t = [
+            0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x87, 0x16,
+        ];
+        for _ in 0..5 {
+            let got = first_read(&mut a, &mut b, &t);
+            assert_eq!(got, t);
+        }
+        drop((a, b));
+        let status = hub.stop();
+        assert!(status.medium.transmissions >= 5, "{status}");
+        assert_eq!(status.medium.collisions, 0, "{status}");
+    }
+
+    #[test]
+    fn links_are_refused_over_other_files_and_removed_at_the_end() {
+        let dir = std::env::temp_dir();
+        let file = dir.join(format!("hub-file-{}", std::process::id()));
+        std::fs::write(&file, b"precious").unwrap();
+        let e = Hub::open(std::slice::from_ref(&file), MediumConfig::default()).unwrap_err();
+        assert!(matches!(e, HubError::NotASymlink(_)), "{e}");
+        assert_eq!(std::fs::read(&file).unwrap(), b"precious");
+        std::fs::remove_file(&file).unwrap();
+
+        let hub = Running::start("links", MediumConfig::default());
+        let links = hub.links.clone();
+        assert!(links.iter().all(|l| std::fs::read_link(l).is_ok()));
+        hub.stop();
+        assert!(links.iter().all(|l| std::fs::symlink_metadata(l).is_err()));
+    }
+}
