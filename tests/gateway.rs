@@ -294,3 +294,53 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     let out = gw.finish(T);
     assert!(out.status.success(), "gateway failed: {}", out.stderr);
 }
+
+/// The gateway as a master on a line: `dpctl bus` with a `dpctl slave`
+/// process (a generic echo slave).
+#[test]
+fn gateway_on_a_line_with_a_slave_process() {
+    let dir = TempDir::new("gateway-line");
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let line = common::Bus::start(2, &[]);
+    let _slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args(["slave", "--port"])
+            .arg(line.link(1))
+            .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
+            .arg(common::repo().join("gsd/DPCTL_GEN.GSD"))
+            .args(["--module", "2 words in/out"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    std::fs::copy(
+        common::repo().join("gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nbus = \"line\"\nwritable = [3]\n",
+    )
+    .unwrap();
+    let (_sub, mut lines) = subscribe(port);
+    let gw = Proc::spawn_captured({
+        let mut c = Command::new(dpctl());
+        c.arg("gateway")
+            .arg("--config")
+            .arg(&bus)
+            .arg("--port")
+            .arg(line.link(0))
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
+        c
+    });
+    expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
+    publish(port, "profibus/line/3/outputs/set", "a5a50102");
+    expect(&mut lines, "profibus/line/3/inputs", &["\"a5a50102\""]);
+    gw.signal(15);
+    expect(&mut lines, "profibus/line/status", &["offline"]);
+    let out = gw.finish(T);
+    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+}
