@@ -22,7 +22,7 @@ use std::time::Duration;
 /// Read or write a DP-V1 data record (slot, index) of a slave.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Serial device or pty path.
+    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
     #[arg(long, value_name = "PATH")]
     port: String,
     /// Bus file (TOML) with the slave (DP-V1 enabled).

@@ -28,7 +28,7 @@ use std::time::Duration;
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// Serial device or pty path.
+    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
     #[arg(long, value_name = "PATH")]
     port: String,
     /// Bus file (TOML) with the slave and its PKW module.

@@ -25,7 +25,7 @@ use std::time::Duration;
 /// reader and print the answers.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Serial device or pty path.
+    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
     #[arg(long, value_name = "PATH")]
     port: String,
     /// Bus file (TOML) with the reader (`device = "rfid"`, or

@@ -41,7 +41,7 @@ use std::time::Duration;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial port or pty path (e.g. /dev/ttyUSB0, or one end of a socat
-    /// pty pair).
+    /// pty pair), or tcp://HOST:PORT (serial device server, raw TCP).
     #[arg(long, value_name = "PATH", required_unless_present = "list_devices")]
     port: Option<String>,
     /// Station address of the slave (0..=126). The bm4 profile takes its
@@ -181,7 +181,7 @@ pub struct Args {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum BaudChoice {
     Fixed(Baud),
-    /// Search on a serial line, nominal rate on a pty.
+    /// Search on a serial line, nominal rate on a pty or tcp:// port.
     Auto,
     /// Search even on a pty.
     Search,
@@ -557,12 +557,15 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let state_file = profile.state_file();
     let mut port = Port::open(&path, PTY_NOMINAL)?;
     let pty = port.is_pty();
+    // Through a serial device server (tcp://) every byte arrives intact
+    // whatever the rate: the server's setting is the rate, no search.
+    let nominal = pty || port.is_tcp();
     let latency = common::latency(args.latency, &port)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
-    let search = choice == BaudChoice::Search || (choice == BaudChoice::Auto && !pty);
+    let search = choice == BaudChoice::Search || (choice == BaudChoice::Auto && !nominal);
     let first = match choice {
         BaudChoice::Fixed(b) => b,
-        BaudChoice::Auto if pty => PTY_NOMINAL,
+        BaudChoice::Auto if nominal => PTY_NOMINAL,
         BaudChoice::Auto | BaudChoice::Search => profibus_fdl::autobaud::SEARCH_ORDER[0],
     };
     port.set_baud(first)?;

@@ -30,7 +30,7 @@ use tokio::signal::unix::{signal, SignalKind};
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial port or pty to listen on (e.g. /dev/ttyUSB0, a `dpctl bus`
-    /// link).
+    /// link), or tcp://HOST:PORT (serial device server, raw TCP).
     #[arg(long, value_name = "PATH")]
     pub port: String,
     /// Baud rate of the line (9600 … 12M); irrelevant on a pty.
@@ -181,7 +181,7 @@ async fn sniff(args: Args) -> Result<()> {
             eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
             std::process::exit(2)
         }
-        None if port.is_pty() => Duration::from_millis(5),
+        None if port.is_pty() || port.is_tcp() => Duration::from_millis(5),
         None => (BusParams::defaults(args.baud).bits(33) * 2).max(Duration::from_millis(2)),
     };
     let clock = std::time::Instant::now();

@@ -8,6 +8,14 @@
 //! a [`TransportError::BaudRefused`] naming it. On a pty the rate only
 //! matters to the peer: ptys carry bytes, not bits, and no parity.
 //!
+//! A path `tcp://HOST:PORT` opens a TCP connection to an RS-485 serial
+//! device server in raw TCP mode (also called "TCP server" or "raw
+//! socket" mode: the server relays the bytes of the connection to its
+//! serial line and back, unchanged). The server's own settings give the
+//! line its rate and 8E1; [`Port::set_baud`] only records the rate for
+//! the bus timing, and RTS control is the server's business (asking for
+//! it is a [`TransportError::Rts`]). See [`Port::is_tcp`].
+//!
 //! Framing never depends on inter-character timing: wrap the port in
 //! `tokio_util::codec::Framed` with [`crate::FdlCodec`].
 //!
@@ -120,10 +128,34 @@ fn serial_err(e: tokio_serial::Error) -> io::Error {
     io::Error::from(e)
 }
 
+/// What a [`Port`] reads and writes: a tty, or a TCP connection to a
+/// serial device server.
+#[derive(Debug)]
+enum Link {
+    Serial(SerialStream),
+    Tcp(tokio::net::TcpStream),
+}
+
+impl AsRawFd for Link {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        match self {
+            Link::Serial(s) => s.as_raw_fd(),
+            Link::Tcp(t) => t.as_raw_fd(),
+        }
+    }
+}
+
+/// The scheme of a serial device server's address: `tcp://HOST:PORT`.
+pub const TCP_SCHEME: &str = "tcp://";
+
+/// How long [`Port::open`] waits for a serial device server to accept the
+/// connection.
+pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
+
 /// An async byte stream to an FDL medium; see the module docs.
 #[derive(Debug)]
 pub struct Port {
-    stream: SerialStream,
+    stream: Link,
     name: String,
     baud: Baud,
     rts: RtsMechanism,
@@ -141,12 +173,15 @@ impl Port {
         Self::open_with(path, PortOptions::new(baud))
     }
 
-    /// Open `path` with `opts`.
+    /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
         let open_err = |source| TransportError::Open {
             path: path.to_string(),
             source,
         };
+        if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
+            return Self::open_tcp(path, addr, opts);
+        }
         // Open at a standard rate first so that a refused PROFIBUS rate is
         // reported as such, not as a failure to open.
         let stream = tokio_serial::new(path, 9600)
@@ -157,7 +192,7 @@ impl Port {
             .open_native_async()
             .map_err(|e| open_err(serial_err(e)))?;
         let mut port = Port {
-            stream,
+            stream: Link::Serial(stream),
             name: path.to_string(),
             baud: opts.baud,
             rts: RtsMechanism::None,
@@ -173,11 +208,10 @@ impl Port {
                 Ok(()) => RtsMechanism::Kernel,
                 Err(e) => {
                     tracing::debug!(path, error = %e, "no kernel RS-485 mode; toggling RTS around writes");
-                    port.stream
-                        .write_request_to_send(false)
-                        .map_err(|e| TransportError::Rts {
+                    port.write_rts(false)
+                        .map_err(|source| TransportError::Rts {
                             path: path.to_string(),
-                            source: serial_err(e),
+                            source,
                         })?;
                     RtsMechanism::Manual
                 }
@@ -186,12 +220,56 @@ impl Port {
         Ok(port)
     }
 
+    /// Connect to the serial device server at `addr` (`HOST:PORT`, from
+    /// the path `tcp://HOST:PORT`): TCP_NODELAY, so that every telegram
+    /// leaves at once.
+    fn open_tcp(path: &str, addr: &str, opts: PortOptions) -> Result<Port, TransportError> {
+        use std::net::ToSocketAddrs;
+        let open_err = |source| TransportError::Open {
+            path: path.to_string(),
+            source,
+        };
+        if opts.rts == RtsControl::OnSend {
+            return Err(TransportError::Rts {
+                path: path.to_string(),
+                source: io::Error::new(
+                    io::ErrorKind::Unsupported,
+                    "a serial device server drives its transceiver itself",
+                ),
+            });
+        }
+        let mut last = io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "give the address as tcp://HOST:PORT",
+        );
+        for sa in addr.to_socket_addrs().map_err(open_err)? {
+            match std::net::TcpStream::connect_timeout(&sa, TCP_CONNECT_TIMEOUT) {
+                Ok(s) => {
+                    s.set_nodelay(true).map_err(open_err)?;
+                    s.set_nonblocking(true).map_err(open_err)?;
+                    let stream = tokio::net::TcpStream::from_std(s).map_err(open_err)?;
+                    return Ok(Port {
+                        stream: Link::Tcp(stream),
+                        name: path.to_string(),
+                        baud: opts.baud,
+                        rts: RtsMechanism::None,
+                        pty: false,
+                        rts_raised: false,
+                        drain: None,
+                    });
+                }
+                Err(e) => last = e,
+            }
+        }
+        Err(open_err(last))
+    }
+
     /// Both ends of a new pty pair, raw, as ports (for tests: bytes
     /// written to one end are read from the other).
     pub fn pty_pair(baud: Baud) -> io::Result<(Port, Port)> {
         let (a, b) = SerialStream::pair().map_err(serial_err)?;
         let wrap = |stream, name: &str| Port {
-            stream,
+            stream: Link::Serial(stream),
             name: name.to_string(),
             baud,
             rts: RtsMechanism::None,
@@ -217,6 +295,13 @@ impl Port {
         self.rts
     }
 
+    /// Whether the port is a TCP connection to a serial device server
+    /// (`tcp://HOST:PORT`): the server sets the line's rate, so a rate
+    /// search (autobaud) cannot work through it.
+    pub fn is_tcp(&self) -> bool {
+        matches!(self.stream, Link::Tcp(_))
+    }
+
     /// Whether the port is a pseudo terminal (a `socat` pair, a `dpctl
     /// bus` link) rather than a serial adapter.
     pub fn is_pty(&self) -> bool {
@@ -229,7 +314,9 @@ impl Port {
     /// even on a loaded machine, but a paced `dpctl bus` hands a reply over
     /// only when its last character has crossed the wire: 5 ms plus the
     /// wire time of the longest telegram (255 characters) at the port's
-    /// rate (2 ms at 1.5 Mbit/s, 146 ms at 19.2 kbit/s).
+    /// rate (2 ms at 1.5 Mbit/s, 146 ms at 19.2 kbit/s). A serial device
+    /// server collects the characters of its line into packets and adds
+    /// the network's delay both ways: 20 ms, as for a USB adapter.
     pub fn default_latency(&self) -> Duration {
         if self.pty {
             Duration::from_millis(5)
@@ -256,15 +343,20 @@ impl Port {
     /// adapter refuses it or reports another rate afterwards (more than 2 %
     /// off).
     pub fn set_baud(&mut self, baud: Baud) -> Result<(), TransportError> {
+        let Link::Serial(stream) = &mut self.stream else {
+            // The serial device server's settings give its line the rate.
+            self.baud = baud;
+            return Ok(());
+        };
         let refused = |detail: String| TransportError::BaudRefused {
             path: self.name.clone(),
             baud,
             detail,
         };
-        self.stream
+        stream
             .set_baud_rate(baud.bps())
             .map_err(|e| refused(e.to_string()))?;
-        match self.stream.baud_rate() {
+        match stream.baud_rate() {
             Ok(actual) => {
                 let want = baud.bps() as u64;
                 let diff = (actual as u64).abs_diff(want);
@@ -278,6 +370,15 @@ impl Port {
         }
         self.baud = baud;
         Ok(())
+    }
+
+    /// Set RTS (serial lines only; a no-op over TCP, where RTS control is
+    /// refused at open).
+    fn write_rts(&mut self, level: bool) -> io::Result<()> {
+        match &mut self.stream {
+            Link::Serial(s) => s.write_request_to_send(level).map_err(serial_err),
+            Link::Tcp(_) => Ok(()),
+        }
     }
 
     fn fd(&self) -> BorrowedFd<'_> {
@@ -326,7 +427,10 @@ impl AsyncRead for Port {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.stream).poll_read(cx, buf)
+        match &mut self.stream {
+            Link::Serial(s) => Pin::new(s).poll_read(cx, buf),
+            Link::Tcp(t) => Pin::new(t).poll_read(cx, buf),
+        }
     }
 }
 
@@ -337,12 +441,13 @@ impl AsyncWrite for Port {
         buf: &[u8],
     ) -> Poll<io::Result<usize>> {
         if self.rts == RtsMechanism::Manual && !self.rts_raised {
-            self.stream
-                .write_request_to_send(true)
-                .map_err(serial_err)?;
+            self.write_rts(true)?;
             self.rts_raised = true;
         }
-        Pin::new(&mut self.stream).poll_write(cx, buf)
+        match &mut self.stream {
+            Link::Serial(s) => Pin::new(s).poll_write(cx, buf),
+            Link::Tcp(t) => Pin::new(t).poll_write(cx, buf),
+        }
     }
 
     /// Without manual RTS control a flush does nothing: writes go straight
@@ -353,7 +458,9 @@ impl AsyncWrite for Port {
         if self.rts != RtsMechanism::Manual || !self.rts_raised {
             return Poll::Ready(Ok(()));
         }
-        ready!(Pin::new(&mut self.stream).poll_flush(cx))?;
+        if let Link::Serial(s) = &mut self.stream {
+            ready!(Pin::new(s).poll_flush(cx))?;
+        }
         if self.drain.is_none() {
             // tcdrain blocks until the last bit has left the UART; run it
             // on a duplicate fd so that dropping the port cannot close the
@@ -367,16 +474,17 @@ impl AsyncWrite for Port {
         let res = ready!(Pin::new(drain).poll(cx));
         self.drain = None;
         res.map_err(io::Error::other)??;
-        self.stream
-            .write_request_to_send(false)
-            .map_err(serial_err)?;
+        self.write_rts(false)?;
         self.rts_raised = false;
         Poll::Ready(Ok(()))
     }
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         ready!(self.as_mut().poll_flush(cx))?;
-        Pin::new(&mut self.stream).poll_shutdown(cx)
+        match &mut self.stream {
+            Link::Serial(s) => Pin::new(s).poll_shutdown(cx),
+            Link::Tcp(t) => Pin::new(t).poll_shutdown(cx),
+        }
     }
 }
 
@@ -432,6 +540,50 @@ mod tests {
         let e = Port::open_with(path.to_str().unwrap(), opts).unwrap_err();
         assert!(matches!(e, TransportError::Rts { .. }), "{e}");
         assert!(e.to_string().contains("RTS"), "{e}");
+    }
+
+    #[tokio::test]
+    async fn tcp_port_carries_bytes_to_a_server() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let path = format!("tcp://{}", listener.local_addr().unwrap());
+        let mut port = Port::open(&path, Baud::B1500000).unwrap();
+        let (mut server, _) = listener.accept().await.unwrap();
+        assert!(port.is_tcp() && !port.is_pty() && !port.may_gather());
+        assert_eq!(port.name(), path);
+        assert_eq!(port.default_latency(), Duration::from_millis(20));
+        port.set_baud(Baud::B19200).unwrap();
+        assert_eq!(port.baud(), Baud::B19200);
+        let data = [0x10, 0x8A, 0x82, 0x6D, 0x00, 0x16];
+        port.write_all(&data).await.unwrap();
+        port.flush().await.unwrap();
+        let mut got = [0u8; 6];
+        server.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, data);
+        server.write_all(&[0xE5]).await.unwrap();
+        let mut sc = [0u8; 1];
+        port.read_exact(&mut sc).await.unwrap();
+        assert_eq!(sc, [0xE5]);
+    }
+
+    #[tokio::test]
+    async fn tcp_port_errors_name_the_address() {
+        // A port nobody listens on: bind, note it, close.
+        let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let path = format!("tcp://{}", free.local_addr().unwrap());
+        drop(free);
+        let e = Port::open(&path, Baud::B19200).unwrap_err();
+        assert!(matches!(e, TransportError::Open { .. }), "{e}");
+        assert!(e.to_string().contains(&path), "{e}");
+        let e = Port::open("tcp://no-port-given", Baud::B19200).unwrap_err();
+        assert!(e.to_string().contains("tcp://no-port-given"), "{e}");
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let opts = PortOptions {
+            baud: Baud::B19200,
+            rts: RtsControl::OnSend,
+        };
+        let path = format!("tcp://{}", listener.local_addr().unwrap());
+        let e = Port::open_with(&path, opts).unwrap_err();
+        assert!(matches!(e, TransportError::Rts { .. }), "{e}");
     }
 
     #[tokio::test]
