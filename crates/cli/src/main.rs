@@ -6,6 +6,7 @@
 
 mod bus;
 mod common;
+mod completions;
 mod decode;
 mod demo;
 mod describe;
@@ -26,8 +27,13 @@ use std::process::ExitCode;
 
 /// PROFIBUS-DP master, slave emulator and bus tools.
 #[derive(Parser)]
-#[command(name = "dpctl", version, about, long_about = None)]
-struct Cli {
+#[command(
+    name = "dpctl",
+    version = concat!(env!("CARGO_PKG_VERSION"), " (git ", env!("DPCTL_GIT_REV"), ")"),
+    about,
+    long_about = None
+)]
+pub(crate) struct Cli {
     #[command(subcommand)]
     command: Command,
 }
@@ -58,6 +64,10 @@ enum Command {
     Rfid(rfid::Args),
     /// Read or write a DP-V1 data record (slot, index) of a slave.
     Dpv1(dpv1::Args),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(completions::Args),
+    /// Print the man page dpctl(1), or write all pages with --out-dir.
+    Man(completions::ManArgs),
     /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
     /// take output writes.
     Gateway(gateway::Args),
@@ -84,6 +94,8 @@ fn main() -> ExitCode {
         Command::Pkw(a) => pkw::run(a),
         Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),
+        Command::Completions(a) => completions::run(a),
+        Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
     };
     match result {
