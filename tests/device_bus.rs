@@ -49,7 +49,10 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
     std::fs::write(&bus, BUS).unwrap();
     std::fs::write(&cmds, COMMANDS).unwrap();
     let out = Command::new(dpctl())
-        .args(["master", "--cycles", "60", "--json", "--port"])
+        // Until 60 Data_Exchange cycles, however long the start-up takes on
+        // a busy machine; late replies within 100 ms are not lost ones.
+        .args(["master", "--exchanges", "60", "--timeout", "120"])
+        .args(["--latency", "100", "--json", "--port"])
         .arg(&master_end)
         .arg("--config")
         .arg(&bus)
@@ -89,7 +92,8 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
     );
     // In words: a line of `name=value` under the slave.
     let out = Command::new(dpctl())
-        .args(["master", "--cycles", "60", "--port"])
+        .args(["master", "--exchanges", "60", "--timeout", "120"])
+        .args(["--latency", "100", "--port"])
         .arg(&master_end)
         .arg("--config")
         .arg(&bus)
