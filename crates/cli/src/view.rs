@@ -219,25 +219,7 @@ pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View
                 );
             }
             MasterEvent::Ring(e) => {
-                use profibus_fdl::station::active::FdlEvent as F;
-                let text = match e {
-                    F::GapStatus {
-                        address,
-                        station: None,
-                    } => format!("station {address} no longer answers"),
-                    F::GapStatus {
-                        address,
-                        station: Some(t),
-                    } => format!("station {address} found: {}", t.describe()),
-                    F::EnteredRing => "in the token ring".into(),
-                    F::LeftRing => "left the token ring".into(),
-                    F::TokenClaimed => "claimed the token".into(),
-                    F::StationJoined(a) => format!("master {a} joined the ring"),
-                    F::StationRemoved(a) => format!("master {a} left the ring"),
-                    F::AddressInUse => "another station uses this address: offline".into(),
-                    F::AddressCollision => "address collision".into(),
-                    F::DuplicateToken => "duplicate token dropped".into(),
-                };
+                let text = e.to_string();
                 view.event(
                     json!({"event": "ring", "what": text}),
                     format!("ring: {text}"),

@@ -214,6 +214,30 @@ pub enum FdlEvent {
     },
 }
 
+impl std::fmt::Display for FdlEvent {
+    /// The event in words, as `dpctl` prints it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            FdlEvent::GapStatus {
+                address,
+                station: None,
+            } => write!(f, "station {address} no longer answers"),
+            FdlEvent::GapStatus {
+                address,
+                station: Some(t),
+            } => write!(f, "station {address} found: {}", t.describe()),
+            FdlEvent::EnteredRing => f.write_str("in the token ring"),
+            FdlEvent::LeftRing => f.write_str("left the token ring"),
+            FdlEvent::TokenClaimed => f.write_str("claimed the token"),
+            FdlEvent::StationJoined(a) => write!(f, "master {a} joined the ring"),
+            FdlEvent::StationRemoved(a) => write!(f, "master {a} left the ring"),
+            FdlEvent::AddressInUse => f.write_str("another station uses this address: offline"),
+            FdlEvent::AddressCollision => f.write_str("address collision"),
+            FdlEvent::DuplicateToken => f.write_str("duplicate token dropped"),
+        }
+    }
+}
+
 /// What the application may do with the token at the moment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TokenContext {
