@@ -23,6 +23,29 @@ pub struct LineArgs {
     pub latency: Option<f64>,
 }
 
+/// What every one-shot command on one slave takes (`dpctl pkw`, `dpv1`,
+/// `rfid`): the line, the bus file, the slave, and how long it may take
+/// the slave to reach Data_Exchange.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SlaveArgs {
+    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
+    #[arg(long, value_name = "PATH")]
+    pub port: String,
+    /// Bus file (TOML) with the slave (GSD modules, or `device = "…"`).
+    #[arg(long, value_name = "BUS.toml")]
+    pub config: std::path::PathBuf,
+    /// Station address of the slave.
+    #[arg(long, value_name = "ADDR")]
+    pub slave: u8,
+    /// Milliseconds to wait for the slave to reach Data_Exchange.
+    #[arg(long, value_name = "MS", default_value_t = 10000)]
+    pub startup_timeout: u64,
+    /// Extra milliseconds on the slot time for the transport's latency
+    /// (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    pub latency: Option<f64>,
+}
+
 impl LineArgs {
     /// Open the port.
     pub fn open(&self) -> Result<Port> {

@@ -16,34 +16,20 @@ use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::Instant;
 use serde_json::json;
 use std::ops::ControlFlow;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// Read or write a DP-V1 data record (slot, index) of a slave.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
-    #[arg(long, value_name = "PATH")]
-    port: String,
-    /// Bus file (TOML) with the slave (DP-V1 enabled).
-    #[arg(long, value_name = "BUS.toml")]
-    config: PathBuf,
-    /// Station address of the slave.
-    #[arg(long, value_name = "ADDR")]
-    slave: u8,
+    /// The line, the bus file, the slave.
+    #[command(flatten)]
+    link: common::SlaveArgs,
     /// Slot of the record (0..=254).
     #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
     slot: u8,
     /// Index of the record (0..=254).
     #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
     index: u8,
-    /// Milliseconds to wait for the slave to reach Data_Exchange.
-    #[arg(long, value_name = "MS", default_value_t = 10000)]
-    startup_timeout: u64,
-    /// Extra milliseconds on the slot time for the transport's latency
-    /// (default: 5 on a pty, 20 on a serial adapter).
-    #[arg(long, value_name = "MS")]
-    latency: Option<f64>,
     /// Print one JSON object.
     #[arg(long, global = true)]
     json: bool,
@@ -69,17 +55,17 @@ enum Op {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = BusFile::load(&args.config)?;
+    let bus = BusFile::load(&args.link.config)?;
     common::runtime()?.block_on(dpv1(args, bus))
 }
 
 async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
-    let addr = args.slave;
+    let addr = args.link.slave;
     let slave = bus
         .slaves
         .iter()
         .find(|s| s.params.address == addr)
-        .with_context(|| format!("slave {addr} is not in {}", args.config.display()))?;
+        .with_context(|| format!("slave {addr} is not in {}", args.link.config.display()))?;
     if !slave.params.dpv1 {
         bail!("slave {addr} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)");
     }
@@ -109,9 +95,13 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
             )
         }
     };
-    let (mut station, mut port) =
-        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
-    let startup = Duration::from_millis(args.startup_timeout);
+    let (mut station, mut port) = common::master_station(
+        &args.link.port,
+        &bus,
+        DpMaster::new(&bus.master)?,
+        args.link.latency,
+    )?;
+    let startup = Duration::from_millis(args.link.startup_timeout);
     let mut started: Option<Instant> = None;
     let mut job = Some(job);
     let mut id: Option<JobId> = None;
@@ -158,7 +148,7 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
         },
     )
     .await;
-    match stop.with_context(|| format!("on {}", args.port))? {
+    match stop.with_context(|| format!("on {}", args.link.port))? {
         Stop::Shutdown => bail!("interrupted"),
         Stop::Done => {}
     }

@@ -17,7 +17,6 @@ use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::Instant;
 use serde_json::json;
 use std::ops::ControlFlow;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// Read or write a parameter over the PKW channel of a slave.
@@ -28,25 +27,12 @@ use std::time::Duration;
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
-    #[arg(long, value_name = "PATH")]
-    port: String,
-    /// Bus file (TOML) with the slave and its PKW module.
-    #[arg(long, value_name = "BUS.toml")]
-    config: PathBuf,
-    /// Station address of the slave.
-    #[arg(long, value_name = "ADDR")]
-    slave: u8,
+    /// The line, the bus file, the slave.
+    #[command(flatten)]
+    link: common::SlaveArgs,
     /// Milliseconds to wait for the PKW response.
     #[arg(long, global = true, value_name = "MS", default_value_t = 2000)]
     timeout: u64,
-    /// Milliseconds to wait for the slave to reach Data_Exchange.
-    #[arg(long, value_name = "MS", default_value_t = 10000)]
-    startup_timeout: u64,
-    /// Extra milliseconds on the slot time for the transport's latency
-    /// (default: 5 on a pty, 20 on a serial adapter).
-    #[arg(long, value_name = "MS")]
-    latency: Option<f64>,
     /// Print one JSON object.
     #[arg(long, global = true)]
     json: bool,
@@ -264,7 +250,7 @@ fn describe_attr(ind: u16, v: u16) -> String {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = profibus_devices::bus::ProfiledBus::load(&args.config)?.file;
+    let bus = profibus_devices::bus::ProfiledBus::load(&args.link.config)?.file;
     common::runtime()?.block_on(pkw(args, bus))
 }
 
@@ -272,19 +258,29 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
     let slave = bus
         .slaves
         .iter()
-        .find(|s| s.params.address == args.slave)
-        .with_context(|| format!("slave {} is not in {}", args.slave, args.config.display()))?
+        .find(|s| s.params.address == args.link.slave)
+        .with_context(|| {
+            format!(
+                "slave {} is not in {}",
+                args.link.slave,
+                args.link.config.display()
+            )
+        })?
         .clone();
     let dialect = profibus_devices::pkw_dialect(slave.params.ident_number, &slave.params.cfg)
-        .map_err(|e| anyhow::anyhow!("slave {}: {e}", args.slave))?;
+        .map_err(|e| anyhow::anyhow!("slave {}: {e}", args.link.slave))?;
     let (param, mut steps) = plan(&args.op, &slave, dialect)?;
     steps.reverse();
-    let (mut station, mut port) =
-        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
+    let (mut station, mut port) = common::master_station(
+        &args.link.port,
+        &bus,
+        DpMaster::new(&bus.master)?,
+        args.link.latency,
+    )?;
 
-    let addr = args.slave;
+    let addr = args.link.slave;
     let mut client = PkwClient::new(dialect, Duration::from_millis(args.timeout.max(1)));
-    let startup = Duration::from_millis(args.startup_timeout);
+    let startup = Duration::from_millis(args.link.startup_timeout);
     let mut started: Option<Instant> = None;
     let mut outcome: Option<Result<PkwAnswer, PkwError>> = None;
     let mut failure: Option<String> = None;
@@ -351,7 +347,7 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
         },
     )
     .await;
-    match result.with_context(|| format!("on {}", args.port))? {
+    match result.with_context(|| format!("on {}", args.link.port))? {
         Stop::Shutdown => bail!("interrupted"),
         Stop::Done => {}
     }
@@ -401,7 +397,7 @@ fn print_answer(args: &Args, dialect: &Dialect, param: Param, a: &PkwAnswer) {
         println!(
             "{}",
             json!({
-                "slave": args.slave, "device": dialect.name, "op": op, "pnu": param.pnu,
+                "slave": args.link.slave, "device": dialect.name, "op": op, "pnu": param.pnu,
                 "index": param.index, "ok": true, "format": if a.reply.is_dword() { "dword" } else { "word" },
                 "value": value, "signed": signed, "hex": format!("0x{value:0width$X}", width = if a.reply.is_dword() { 8 } else { 4 }),
                 "request": a.request.to_string(), "response": a.response.to_string(),

@@ -18,33 +18,18 @@ use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::Instant;
 use serde_json::json;
 use std::ops::ControlFlow;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// Run reader commands (VER, GT, RD b [e], WD b DATA, TOR [n]) on an RFID
 /// reader and print the answers.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
-    #[arg(long, value_name = "PATH")]
-    port: String,
-    /// Bus file (TOML) with the reader (`device = "rfid"`, or
-    /// gsd/AEGI0DC4.GSD with its module).
-    #[arg(long, value_name = "BUS.toml")]
-    config: PathBuf,
-    /// Station address of the reader.
-    #[arg(long, value_name = "ADDR")]
-    slave: u8,
+    /// The line, the bus file, the slave.
+    #[command(flatten)]
+    link: common::SlaveArgs,
     /// Milliseconds to wait for the whole answer of each command.
     #[arg(long, value_name = "MS", default_value_t = 5000)]
     timeout: u64,
-    /// Milliseconds to wait for the reader to reach Data_Exchange.
-    #[arg(long, value_name = "MS", default_value_t = 10000)]
-    startup_timeout: u64,
-    /// Extra milliseconds on the slot time for the transport's latency
-    /// (default: 5 on a pty, 20 on a serial adapter).
-    #[arg(long, value_name = "MS")]
-    latency: Option<f64>,
     /// Print one JSON object per command.
     #[arg(long)]
     json: bool,
@@ -64,17 +49,17 @@ struct Done {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = profibus_devices::bus::ProfiledBus::load(&args.config)?.file;
+    let bus = profibus_devices::bus::ProfiledBus::load(&args.link.config)?.file;
     common::runtime()?.block_on(rfid(args, bus))
 }
 
 async fn rfid(args: Args, bus: BusFile) -> Result<()> {
-    let addr = args.slave;
+    let addr = args.link.slave;
     let slave = bus
         .slaves
         .iter()
         .find(|s| s.params.address == addr)
-        .with_context(|| format!("slave {addr} is not in {}", args.config.display()))?;
+        .with_context(|| format!("slave {addr} is not in {}", args.link.config.display()))?;
     if slave.params.cfg != CFG {
         bail!(
             "slave {addr} is configured {:02X?}; the reader has 16 bytes in and out (0x3F, gsd/AEGI0DC4.GSD)",
@@ -87,14 +72,18 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
             "slave {addr} is not ident 0x{IDENT:04X}; trying the reader's handshake anyway"
         );
     }
-    let (mut station, mut port) =
-        common::master_station(&args.port, &bus, DpMaster::new(&bus.master)?, args.latency)?;
+    let (mut station, mut port) = common::master_station(
+        &args.link.port,
+        &bus,
+        DpMaster::new(&bus.master)?,
+        args.link.latency,
+    )?;
     let handle = station
         .app()
         .handle(addr)
         .context("slave not in the master")?;
     let mut client = RfidClient::new(Duration::from_millis(args.timeout.max(1)));
-    let startup = Duration::from_millis(args.startup_timeout);
+    let startup = Duration::from_millis(args.link.startup_timeout);
     let mut todo = args.commands.iter().rev().cloned().collect::<Vec<_>>();
     let mut done: Vec<Done> = vec![];
     let mut running: Option<(String, Instant, u64)> = None;
@@ -149,7 +138,7 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
         },
     )
     .await;
-    match result.with_context(|| format!("on {}", args.port))? {
+    match result.with_context(|| format!("on {}", args.link.port))? {
         Stop::Shutdown => bail!("interrupted"),
         Stop::Done => {}
     }
@@ -175,7 +164,7 @@ fn print(args: &Args, d: &Done) {
     match &d.answer {
         Ok(a) if args.json => println!(
             "{}",
-            json!({"slave": args.slave, "command": d.command, "ok": true,
+            json!({"slave": args.link.slave, "command": d.command, "ok": true,
                    "answer": String::from_utf8_lossy(a), "answer_hex": crate::describe::hex(a),
                    "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained,
                    "restarts": d.restarts})
@@ -188,7 +177,7 @@ fn print(args: &Args, d: &Done) {
         }
         Err(e) if args.json => println!(
             "{}",
-            json!({"slave": args.slave, "command": d.command, "ok": false, "error": e})
+            json!({"slave": args.link.slave, "command": d.command, "ok": false, "error": e})
         ),
         Err(_) => {}
     }
