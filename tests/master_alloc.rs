@@ -10,33 +10,12 @@ use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus::fdl::station::passive::PassiveStation;
 use profibus::fdl::station::Station;
 use profibus::fdl::{Baud, BusParams, Instant};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-struct Counting;
-
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarding to the system allocator with the same layout.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: `p` was allocated by `System` with layout `l`.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: `p` was allocated by `System` with layout `l`.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
+mod alloc_count;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_count::Counting = alloc_count::Counting;
 
 /// Delivers every transmission to all other stations at once (an unpaced
 /// line), advancing time to the earliest deadline when nothing is sent.
@@ -126,7 +105,7 @@ fn steady_state_master_cycle_does_not_allocate() {
     );
     while master.app_mut().poll_event().is_some() {}
     let c0 = master.app().cycle_stats().cycles;
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = alloc_count::allocations();
     assert!(before > 0, "the counter counts");
     let mut r = Router {
         stations: [&mut master, &mut s3, &mut s4],
@@ -136,7 +115,7 @@ fn steady_state_master_cycle_does_not_allocate() {
     for _ in 0..60_000 {
         r.step();
     }
-    let allocated = ALLOCS.load(Ordering::Relaxed) - before;
+    let allocated = alloc_count::allocations() - before;
     let cycles = master.app().cycle_stats().cycles - c0;
     assert!(cycles >= 1000, "only {cycles} cycles");
     assert_eq!(allocated, 0, "{allocated} allocations in {cycles} cycles");

@@ -6,33 +6,12 @@ use profibus::devices::rfid::client::RfidClient;
 use profibus::devices::rfid::commands::VERSION;
 use profibus::devices::rfid::link::{Line, ReaderLink};
 use profibus::fdl::Instant;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-struct Counting;
-
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarding to the system allocator with the same layout.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: `p` was allocated by `System` with layout `l`.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: `p` was allocated by `System` with layout `l`.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
+mod alloc_count;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_count::Counting = alloc_count::Counting;
 
 #[test]
 fn a_command_runs_without_allocating() {
@@ -48,14 +27,14 @@ fn a_command_runs_without_allocating() {
         c.start(t0, cmd).unwrap();
         for cycle in 0..1000u64 {
             let now = t0 + Duration::from_millis(cycle);
-            let before = ALLOCS.load(Ordering::Relaxed);
+            let before = alloc_count::allocations();
             let r = c.poll(now, cycle, &inp, &mut out);
             let done = r.map(|r| {
                 let a = r.unwrap();
                 answer.clear();
                 answer.extend_from_slice(a);
             });
-            allocs += ALLOCS.load(Ordering::Relaxed) - before;
+            allocs += alloc_count::allocations() - before;
             if done.is_some() {
                 break;
             }
