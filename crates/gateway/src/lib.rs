@@ -49,7 +49,9 @@ pub mod core;
 pub mod link;
 pub mod settings;
 pub mod sim;
+pub mod sparkplug;
 
 pub use crate::core::{Gateway, Publish, SlaveInfo, Topics};
-pub use link::{LinkEvent, MqttLink};
+pub use link::{LinkEvent, MqttLink, Session};
 pub use settings::{MqttSettings, PublishMode, SettingsError};
+pub use sparkplug::{EdgeNode, SparkplugId};

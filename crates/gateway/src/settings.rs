@@ -10,8 +10,10 @@
 //! publish = "change"                 # "change", "interval" or "both"
 //! interval_ms = 1000                 # period of "interval" / "both"
 //! writable = [3, 6]                  # slaves whose outputs MQTT may set (default: none)
+//! sparkplug = "plant/line1"          # Sparkplug B mode, GROUP/EDGE (see crate::sparkplug)
 //! ```
 
+use crate::sparkplug::SparkplugId;
 use std::time::Duration;
 
 /// When process images are published.
@@ -44,6 +46,9 @@ pub struct MqttSettings {
     pub interval: Duration,
     /// Station addresses whose outputs may be written over MQTT.
     pub writable: Vec<u8>,
+    /// Sparkplug B mode with this group and edge node id (`None`: plain
+    /// JSON topics).
+    pub sparkplug: Option<SparkplugId>,
 }
 
 /// A bad `[mqtt]` setting.
@@ -74,6 +79,7 @@ const KEYS: &[&str] = &[
     "publish",
     "interval_ms",
     "writable",
+    "sparkplug",
 ];
 
 fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
@@ -152,6 +158,9 @@ impl MqttSettings {
         if let Some(b) = &broker {
             parse_broker(b)?;
         }
+        let sparkplug = string(t, "sparkplug")?
+            .map(|s| SparkplugId::parse(&s).map_err(|e| bad("sparkplug", e.to_string())))
+            .transpose()?;
         Ok(MqttSettings {
             broker,
             client_id: string(t, "client_id")?.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -161,6 +170,7 @@ impl MqttSettings {
             publish,
             interval,
             writable,
+            sparkplug,
         })
     }
 }
