@@ -11,6 +11,7 @@
 use crate::core::{Gateway, Publish};
 use crate::settings::MqttSettings;
 use profibus_dp::master::DpMaster;
+use profibus_fdl::Instant;
 use rumqttc::{AsyncClient, Event, LastWill, MqttOptions, Packet, QoS};
 use std::time::Duration;
 use tokio::sync::mpsc;
@@ -43,11 +44,12 @@ pub trait Session {
     /// The broker accepted the connection.
     fn connected(&mut self, ts_ms: u64);
     /// The connection was lost (or a connection attempt failed).
-    fn disconnected(&mut self);
+    fn disconnected(&mut self, ts_ms: u64);
     /// A message arrived on a subscribed topic.
     fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64);
-    /// One step at a cycle boundary of the master.
-    fn step(&mut self, m: &mut DpMaster, ts_ms: u64);
+    /// One step at a cycle boundary of the master; `now` is the master's
+    /// time, `ts_ms` the wall clock in ms since the Unix epoch.
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64);
     /// The next message to send, if any.
     fn poll_publish(&mut self) -> Option<Publish>;
     /// The message to publish before a clean disconnect (the broker sends
@@ -78,21 +80,21 @@ impl Session for Gateway {
         LinkSetup {
             qos: self.settings().qos,
             will_qos: self.settings().qos,
-            filters: vec![self.topics().set_filter()],
+            filters: self.topics().request_filters(),
             will: Box::new(move || will.clone()),
         }
     }
     fn connected(&mut self, ts_ms: u64) {
         Gateway::connected(self, ts_ms)
     }
-    fn disconnected(&mut self) {
-        Gateway::disconnected(self)
+    fn disconnected(&mut self, ts_ms: u64) {
+        Gateway::disconnected(self, ts_ms)
     }
     fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
         Gateway::handle_message(self, topic, payload, ts_ms)
     }
-    fn step(&mut self, m: &mut DpMaster, ts_ms: u64) {
-        Gateway::step(self, m, ts_ms)
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
+        Gateway::step(self, m, now, ts_ms)
     }
     fn poll_publish(&mut self) -> Option<Publish> {
         Gateway::poll_publish(self)
@@ -155,9 +157,9 @@ impl MqttLink {
                     Ok(Event::Incoming(Packet::ConnAck(_))) => {
                         pause = Duration::from_millis(100);
                         tracing::info!("connected to the MQTT broker");
-                        for filter in &filters {
-                            if let Err(e) = sub.try_subscribe(filter.clone(), q) {
-                                tracing::warn!(error = %e, "cannot subscribe to {filter}");
+                        for f in &filters {
+                            if let Err(e) = sub.try_subscribe(f.clone(), q) {
+                                tracing::warn!(error = %e, "cannot subscribe to {f}");
                             }
                         }
                         if tx.send(LinkEvent::Connected).is_err() {
@@ -233,7 +235,7 @@ pub fn pump(link: &mut MqttLink, gateway: &mut impl Session, ts_ms: u64) {
     while let Some(ev) = link.try_recv() {
         match ev {
             LinkEvent::Connected => gateway.connected(ts_ms),
-            LinkEvent::Disconnected(_) => gateway.disconnected(),
+            LinkEvent::Disconnected(_) => gateway.disconnected(ts_ms),
             LinkEvent::Message { topic, payload } => {
                 gateway.handle_message(&topic, &payload, ts_ms)
             }

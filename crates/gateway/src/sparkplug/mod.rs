@@ -55,8 +55,10 @@
 //! `Image/Outputs` (Bytes, exactly the output length). The command is
 //! checked as a whole and applied at once between two polls, so one
 //! Data_Exchange carries all of it (the image first, then the
-//! channels); a command with one bad metric, or to a slave not
-//! writable, changes nothing and is logged (Sparkplug has no reply
+//! channels). A `{ address, channels = [...] }` entry of `writable`
+//! allows only those output channels (not the image). A command with
+//! one bad metric, or to a slave not writable, changes nothing and is
+//! logged (Sparkplug has no reply
 //! topic: the next DDATA shows the outputs as they are).
 //!
 //! # Not supported
@@ -77,6 +79,7 @@ use metrics::{CommandError, Device, OutputWrite};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::ChannelMap;
 use profibus_dp::master::{DpMaster, MasterEvent, SlaveState};
+use profibus_fdl::Instant;
 use prost::Message;
 use proto::{DataType, Metric, MetricValue, Payload};
 use std::collections::VecDeque;
@@ -368,10 +371,27 @@ impl EdgeNode {
             return Err(CommandError::UnknownDevice(device.into()));
         };
         let address = e.device.info.address;
-        if !self.settings.writable.contains(&address) {
-            return Err(CommandError::Unauthorised(address));
-        }
+        let access = self
+            .settings
+            .access(address)
+            .ok_or(CommandError::Unauthorised(address))?;
         let write = e.device.check_command(&p.metrics)?;
+        if let Some(allowed) = &access.channels {
+            let refused = match &write.image {
+                Some(_) => Some(metrics::OUTPUT_IMAGE.to_string()),
+                None => write
+                    .channels
+                    .iter()
+                    .find(|(n, _)| !allowed.contains(n))
+                    .map(|(n, _)| n.clone()),
+            };
+            if let Some(name) = refused {
+                return Err(CommandError::NotWritable {
+                    device: device.into(),
+                    name,
+                });
+            }
+        }
         self.pending.push(Pending { address, write });
         Ok(())
     }
@@ -499,7 +519,7 @@ impl Session for EdgeNode {
 
     /// Every lost connection or failed attempt: the next CONNECT carries
     /// the next bdSeq.
-    fn disconnected(&mut self) {
+    fn disconnected(&mut self, _ts_ms: u64) {
         self.online = false;
         self.birth_due = false;
         self.out.clear();
@@ -517,7 +537,7 @@ impl Session for EdgeNode {
 
     /// Apply the pending DCMD writes (each to one slave's whole image at
     /// once), then queue births, deaths and data.
-    fn step(&mut self, m: &mut DpMaster, ts_ms: u64) {
+    fn step(&mut self, m: &mut DpMaster, _now: Instant, ts_ms: u64) {
         while let Some(ev) = m.poll_event() {
             if let MasterEvent::Fault { address, reason } = ev {
                 tracing::warn!(address, %reason, "slave fault");
@@ -559,7 +579,6 @@ impl Session for EdgeNode {
 mod tests {
     use super::*;
     use crate::sim::SimPlant;
-    use profibus_fdl::Instant;
 
     const BUS: &str = r#"[master]
 address = 1
@@ -608,7 +627,8 @@ writable = [3]
             self.t += 1;
             self.plant
                 .run_until(Instant::from_nanos(self.t * 1_000_000));
-            self.node.step(self.plant.master(), 1000 + self.t);
+            let now = self.plant.now();
+            self.node.step(self.plant.master(), now, 1000 + self.t);
             std::iter::from_fn(|| self.node.poll_publish())
                 .map(|p| {
                     assert!(!p.retain);
@@ -844,7 +864,7 @@ writable = [3]
         assert_eq!(msgs[2].1.seq, Some(2));
 
         // A new connection: bdSeq 1 in the NBIRTH and the will.
-        r.node.disconnected();
+        r.node.disconnected(0);
         assert!(r.tick().is_empty());
         r.node.connected(0);
         let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
