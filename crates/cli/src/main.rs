@@ -15,6 +15,7 @@ mod gateway;
 mod gsd;
 mod jx2;
 mod master;
+mod monitor;
 mod pkw;
 mod rfid;
 mod scan;
@@ -68,6 +69,9 @@ enum Command {
     Completions(completions::Args),
     /// Print the man page dpctl(1), or write all pages with --out-dir.
     Man(completions::ManArgs),
+    /// Listen only (never send) and follow another master's slaves: state,
+    /// data, diagnosis, cycle times, retries, errors, masters in the ring.
+    Monitor(monitor::Args),
     /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
     /// take output writes.
     Gateway(gateway::Args),
@@ -97,6 +101,7 @@ fn main() -> ExitCode {
         Command::Completions(a) => completions::run(a),
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
+        Command::Monitor(a) => monitor::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
