@@ -10,6 +10,7 @@ mod completions;
 mod decode;
 mod demo;
 mod describe;
+mod doctor;
 mod dpv1;
 mod gateway;
 mod gsd;
@@ -72,6 +73,9 @@ enum Command {
     /// Listen only (never send) and follow another master's slaves: state,
     /// data, diagnosis, cycle times, retries, errors, masters in the ring.
     Monitor(monitor::Args),
+    /// Check a serial port for PROFIBUS (8E1, baud rates, latency timer,
+    /// RS-485 mode, slot time against the adapter's latency).
+    Doctor(doctor::Args),
     /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
     /// take output writes.
     Gateway(gateway::Args),
@@ -102,6 +106,7 @@ fn main() -> ExitCode {
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
         Command::Monitor(a) => monitor::run(a),
+        Command::Doctor(a) => doctor::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
