@@ -205,10 +205,8 @@ pub enum MonitorEvent {
         /// The master talking to it.
         master: u8,
         /// The state before (`None`: not seen before).
-        #[cfg_attr(feature = "serde", serde(serialize_with = "ser::opt_state"))]
         from: Option<SlaveState>,
         /// The new state.
-        #[cfg_attr(feature = "serde", serde(serialize_with = "ser::state"))]
         to: SlaveState,
     },
     /// A slave's diagnosis changed.
@@ -217,7 +215,7 @@ pub enum MonitorEvent {
         #[cfg_attr(feature = "serde", serde(rename = "slave"))]
         address: u8,
         /// The Slave_Diag data unit.
-        #[cfg_attr(feature = "serde", serde(serialize_with = "ser::hex"))]
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         raw: Vec<u8>,
         /// In words.
         words: Vec<String>,
@@ -230,7 +228,10 @@ pub enum MonitorEvent {
         /// The service asked for (`Data_Exchange`, `Set_Prm` …).
         service: &'static str,
         /// What went wrong.
-        #[cfg_attr(feature = "serde", serde(serialize_with = "ser::display"))]
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::display")
+        )]
         reason: ErrorKind,
     },
     /// A master's Global_Control announced an operating state.
@@ -238,7 +239,6 @@ pub enum MonitorEvent {
         /// The master.
         master: u8,
         /// Clear (Clear_Data set) or operate.
-        #[cfg_attr(feature = "serde", serde(serialize_with = "ser::operating"))]
         state: OperatingState,
     },
     /// A station appeared in the token ring.
@@ -358,10 +358,10 @@ pub struct ModuleData {
     /// Module name from the GSD.
     pub name: String,
     /// Its input bytes.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::hex"))]
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
     pub inputs: Vec<u8>,
     /// Its output bytes.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::hex"))]
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
     pub outputs: Vec<u8>,
 }
 
@@ -386,15 +386,14 @@ pub struct SlaveStatus {
     /// Name from the bus file (empty for slaves not in it).
     pub name: String,
     /// State (`None`: no traffic seen yet).
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::opt_state"))]
     pub state: Option<SlaveState>,
     /// The master that talks to it.
     pub master: Option<u8>,
     /// Inputs of the last Data_Exchange.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::hex"))]
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
     pub inputs: Vec<u8>,
     /// Outputs of the last Data_Exchange.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::hex"))]
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
     pub outputs: Vec<u8>,
     /// Counters.
     #[cfg_attr(feature = "serde", serde(flatten))]
@@ -422,7 +421,6 @@ pub struct MasterStatus {
     /// Time between the tokens it passed (the token rotation it sees).
     pub rotation_us: Interval,
     /// Operating state from its Global_Control (`None`: none seen).
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::opt_operating"))]
     pub operating: Option<OperatingState>,
     /// Still passing the token.
     pub in_ring: bool,
@@ -453,7 +451,6 @@ pub struct MonitorStatus {
     /// Data_Exchange intervals over all slaves.
     pub cycle_us: Interval,
     /// Operating state of the (first) master seen sending Global_Control.
-    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::opt_operating"))]
     pub operating: Option<OperatingState>,
     /// Masters seen in the token ring, by address.
     pub masters: Vec<MasterStatus>,
@@ -1045,45 +1042,10 @@ fn slave_status(s: &SlaveTrack) -> SlaveStatus {
 
 #[cfg(feature = "serde")]
 mod ser {
-    //! Field serialisers: names instead of enum variants, hex text
-    //! instead of byte arrays, channels as a `name: value` object.
+    //! Channels as a `name: value` object.
     use super::Reading;
-    use crate::master::{OperatingState, SlaveState};
     use serde::ser::SerializeMap;
     use serde::Serializer;
-
-    pub fn state<S: Serializer>(s: &SlaveState, ser: S) -> Result<S::Ok, S::Error> {
-        ser.serialize_str(s.name())
-    }
-
-    pub fn opt_state<S: Serializer>(s: &Option<SlaveState>, ser: S) -> Result<S::Ok, S::Error> {
-        match s {
-            Some(s) => ser.serialize_str(s.name()),
-            None => ser.serialize_none(),
-        }
-    }
-
-    pub fn operating<S: Serializer>(s: &OperatingState, ser: S) -> Result<S::Ok, S::Error> {
-        ser.serialize_str(s.as_str())
-    }
-
-    pub fn opt_operating<S: Serializer>(
-        s: &Option<OperatingState>,
-        ser: S,
-    ) -> Result<S::Ok, S::Error> {
-        match s {
-            Some(s) => ser.serialize_str(s.as_str()),
-            None => ser.serialize_none(),
-        }
-    }
-
-    pub fn hex<S: Serializer>(b: &[u8], ser: S) -> Result<S::Ok, S::Error> {
-        ser.collect_str(&profibus_fdl::wire::Hex(b))
-    }
-
-    pub fn display<T: std::fmt::Display, S: Serializer>(v: &T, ser: S) -> Result<S::Ok, S::Error> {
-        ser.collect_str(v)
-    }
 
     pub fn readings<S: Serializer>(r: &[Reading], ser: S) -> Result<S::Ok, S::Error> {
         let mut m = ser.serialize_map(Some(r.len()))?;
