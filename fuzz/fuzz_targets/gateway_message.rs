@@ -41,7 +41,11 @@ fn drain(gw: &mut Gateway) {
             p.topic
         );
         if let Err(e) = serde_json::from_slice::<serde_json::Value>(&p.payload) {
-            panic!("{}: not JSON ({e}): {:?}", p.topic, String::from_utf8_lossy(&p.payload));
+            panic!(
+                "{}: not JSON ({e}): {:?}",
+                p.topic,
+                String::from_utf8_lossy(&p.payload)
+            );
         }
     }
 }
@@ -82,7 +86,11 @@ fn setup() -> Setup {
     let info = |address: u8| SlaveInfo {
         address,
         name: format!("s{address}"),
-        channels: if address == 8 { omega_map.clone() } else { None },
+        channels: if address == 8 {
+            omega_map.clone()
+        } else {
+            None
+        },
         gsd: None,
         dpv1: address == 10,
         pkw: if address == 8 {
@@ -121,7 +129,11 @@ fuzz_target!(|data: &[u8]| {
                 Service::ALL[s as usize % 4].request()
             ),
             12 => "profibus/fuzz/11/outputs/set".to_string(),
-            13 => String::from_utf8_lossy(payload).lines().next().unwrap_or("").to_string(),
+            13 => String::from_utf8_lossy(payload)
+                .lines()
+                .next()
+                .unwrap_or("")
+                .to_string(),
             14 => {
                 let dt = Duration::from_millis((sel >> 4) as u64 * 50);
                 now += dt;
@@ -146,5 +158,9 @@ fuzz_target!(|data: &[u8]| {
         let want = master.slave_params(a).unwrap().io_lengths().unwrap().1;
         assert_eq!(master.outputs(a).unwrap().len(), want);
     }
-    assert_eq!(master.outputs(11).unwrap(), &before11[..], "unwritable slave written");
+    assert_eq!(
+        master.outputs(11).unwrap(),
+        &before11[..],
+        "unwritable slave written"
+    );
 });
