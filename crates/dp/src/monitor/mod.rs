@@ -72,7 +72,9 @@ use crate::gsd::Gsd;
 use crate::master::{OperatingState, SlaveState};
 use crate::sap;
 use profibus_fdl::codec::CodecStats;
-use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, StationType};
+use profibus_fdl::wire::{
+    DataTelegram, FunctionCode, Hex, RequestKind, ResponseStatus, StationType,
+};
 use profibus_fdl::{Instant, Telegram};
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
@@ -1033,6 +1035,89 @@ impl Monitor {
             slaves,
             bus: self.bus,
         }
+    }
+}
+
+/// The text lines `dpctl monitor` prints: a summary line, then per slave
+/// a line with state, data and counters, its module or channel values,
+/// and its diagnosis.
+impl fmt::Display for MonitorStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let masters: Vec<String> = self
+            .masters
+            .iter()
+            .filter(|m| m.in_ring)
+            .map(|m| match m.operating {
+                Some(o) => format!("{} ({})", m.address, o.as_str()),
+                None => m.address.to_string(),
+            })
+            .collect();
+        let c = &self.cycle_us;
+        write!(
+            f,
+            "status t={:.1} s  masters in ring: [{}]  cycles {}  cycle min/avg/max {}/{}/{} µs  telegrams {}  corrupt {}  no reply {}",
+            self.t,
+            masters.join(", "),
+            self.cycles,
+            c.min,
+            c.avg,
+            c.max,
+            self.bus.telegrams,
+            self.bus.corrupt,
+            self.bus.no_reply
+        )?;
+        for s in &self.slaves {
+            write!(f, "\n  {s}")?;
+        }
+        Ok(())
+    }
+}
+
+impl fmt::Display for SlaveStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let c = &self.counters;
+        write!(
+            f,
+            "{:3} {:<20} {:<13} in: {}  out: {}  (cycle {} µs, errors {}, retries {}, restarts {})",
+            self.address,
+            self.name,
+            self.state.map_or("unseen", |x| x.name()),
+            Hex(&self.inputs),
+            Hex(&self.outputs),
+            self.cycle_us.last,
+            c.errors,
+            c.retries,
+            c.restarts,
+        )?;
+        let words = |r: &[Reading]| {
+            r.iter()
+                .map(|x| x.to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        if let Some(ch) = &self.channels {
+            write!(
+                f,
+                "\n      in: {}  out: {}",
+                words(&ch.inputs),
+                words(&ch.outputs)
+            )?;
+        } else if !self.modules.is_empty() {
+            let parts: Vec<String> = self
+                .modules
+                .iter()
+                .map(|m| match (m.inputs.is_empty(), m.outputs.is_empty()) {
+                    (false, true) => format!("{}: in {}", m.name, Hex(&m.inputs)),
+                    (true, false) => format!("{}: out {}", m.name, Hex(&m.outputs)),
+                    _ => format!("{}: in {} out {}", m.name, Hex(&m.inputs), Hex(&m.outputs)),
+                })
+                .collect();
+            write!(f, "\n      {}", parts.join("; "))?;
+        }
+        if !self.diag.is_empty() {
+            write!(f, "\n      diagnosis: {}", self.diag.join("; "))?;
+        }
+        Ok(())
     }
 }
 
