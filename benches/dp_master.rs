@@ -2,7 +2,8 @@
 //!
 //! (a)  Data_Exchange transactions per second with one slave over a socat
 //!      pty pair and through an unpaced `dpctl bus`: `dpctl master`
-//!      (default, `--busy-poll 300`, `--gather`) and pyprofibus's master
+//!      (default, `--busy-poll 300`, `--gather`, and with the token passed
+//!      to itself after every poll cycle) and pyprofibus's master
 //!      against the same `dpctl slave`, next to the raw round trip of the
 //!      same path (a bare echo of a 13-byte telegram) as the physical
 //!      limit, with CPU seconds per 10 000 exchanges of each master.
@@ -187,7 +188,14 @@ fn line(dpctl: &Path, dir: &Path, kind: &Line, tag: &str) -> (PathBuf, PathBuf, 
 /// the slave's Data_Exchange count between the first status line in
 /// Data_Exchange and the last one, over `secs` seconds; CPU per exchange
 /// from the master's whole run (start-up included).
-fn dpctl_rate(dpctl: &Path, dir: &Path, kind: &Line, secs: f64, extra: &[&str]) -> Rate {
+fn dpctl_rate(
+    dpctl: &Path,
+    dir: &Path,
+    kind: &Line,
+    secs: f64,
+    extra: &[&str],
+    options: &str,
+) -> Rate {
     let (a, b, _line) = line(dpctl, dir, kind, "d");
     let _slave = start_slave(dpctl, &b);
     // One slave, one master: HSA = the master's address keeps the GAP
@@ -197,6 +205,7 @@ fn dpctl_rate(dpctl: &Path, dir: &Path, kind: &Line, secs: f64, extra: &[&str]) 
         &cfg,
         format!(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n\
+             [options]\n{options}\n\
              [[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
             repo().join("gsd/DPCTL_GEN.GSD").display()
         ),
@@ -468,22 +477,24 @@ fn main() {
             Line::Socat => "a socat pty pair",
             Line::Hub => "dpctl bus (unpaced)",
         };
-        let mut rows: Vec<[Rate; 5]> = vec![];
+        let mut rows: Vec<[Rate; 6]> = vec![];
         for _ in 0..rounds {
             let raw = Rate {
                 per_s: raw_echo_rate(&dpctl, &dir, &kind, n),
                 cpu_per_10k: 0.0,
             };
-            let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[]);
-            let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"]);
-            let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"]);
+            let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "");
+            let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"], "");
+            let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"], "");
+            let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 0");
             let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
             println!(
-                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
+                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), token after every cycle {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
                 raw.per_s, ours.per_s, ours.cpu_per_10k, busy.per_s, busy.cpu_per_10k,
-                gather.per_s, gather.cpu_per_10k, py.per_s, py.cpu_per_10k
+                gather.per_s, gather.cpu_per_10k, each.per_s, each.cpu_per_10k, py.per_s,
+                py.cpu_per_10k
             );
-            rows.push([raw, ours, busy, gather, py]);
+            rows.push([raw, ours, busy, gather, py, each]);
         }
         let median = |i: usize, cpu: bool| {
             let mut v: Vec<f64> = rows
@@ -502,6 +513,7 @@ fn main() {
             (1, "dpctl master"),
             (2, "dpctl master --busy-poll 300"),
             (3, "dpctl master --gather (benchmark option)"),
+            (5, "dpctl master, token to itself after every cycle"),
             (4, "pyprofibus 1.13 master"),
         ] {
             let r = median(i, false);
