@@ -334,15 +334,6 @@ fn check(baud: Baud, paced: bool, hold: bool, cycles: u64) {
     if paced {
         assert!(retries < dx, "{summary}");
     }
-    if hold && paced {
-        // Requests follow the slave's own answer after TID1; no token to
-        // itself comes just before them. 6 retries in 303 exchanges at
-        // 93.75 kbit/s on the VM at load average 15.
-        assert!(retries * 10 < dx, "{summary}");
-    }
-    if hold {
-        assert!(retries < dx, "{summary}");
-    }
 }
 
 #[test]
