@@ -366,8 +366,8 @@ fn two_masters_and_a_scanner_share_one_bus() {
             .find(|v| v["address"] == a)
             .map(|v| v["type"].as_str().unwrap().to_string())
     };
-    assert_eq!(kind(2).as_deref(), Some("active, in ring"));
-    assert_eq!(kind(5).as_deref(), Some("active, in ring"));
+    assert_eq!(kind(2).as_deref(), Some("active, in ring"), "{found:?}");
+    assert_eq!(kind(5).as_deref(), Some("active, in ring"), "{found:?}");
     assert_eq!(kind(10).as_deref(), Some("passive"));
     let s11 = found.iter().find(|v| v["address"] == 11).unwrap();
     assert_eq!(s11["ident"], "0x0DCE");
