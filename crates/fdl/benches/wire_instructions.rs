@@ -18,6 +18,9 @@ use std::hint::black_box;
 /// Encodes per run.
 const ITERATIONS: usize = 100_000;
 
+/// An encoder under test: data unit in, bytes written out.
+type Encode = fn(&[u8], &mut [u8; 255]) -> usize;
+
 fn ours(data: &[u8], buf: &mut [u8; 255]) -> usize {
     let t = Telegram::Data(DataTelegram {
         da: 8,
@@ -54,7 +57,7 @@ fn main() {
     let Ok(case) = std::env::var("WIRE_CASE") else {
         return;
     };
-    let (f, len): (fn(&[u8], &mut [u8; 255]) -> usize, usize) = match case.as_str() {
+    let (f, len): (Encode, usize) = match case.as_str() {
         "none" => (|d, _| d.len(), 2),
         "ours-2" => (ours, 2),
         "ours-244" => (ours, 244),
