@@ -246,7 +246,7 @@ fn poll_idle_framing_slave(
              [options]\n{}\n\
              [[slave]]\naddress = {SLAVE}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
             baud.bps(),
-            if hold { "" } else { "alone_hold_bits = 0" },
+            if hold { "alone_hold_bits = 3000" } else { "" },
             repo().join("gsd/DPCTL_GEN.GSD").display()
         ),
     )
@@ -307,9 +307,10 @@ fn poll_idle_framing_slave(
 /// test asserts what no load can fake: requests that follow the token to
 /// itself as a telegram of their own are accepted at the first attempt
 /// (in at least 1 exchange of 50), and paced lines need fewer retries than
-/// exchanges. With `hold` the master runs in its default mode (alone in
-/// the ring it polls on while its token hold time lasts, so a request
-/// follows the slave's own answer, not a token to itself); without, it
+/// exchanges. With `hold` the master runs with `alone_hold_bits = 3000`
+/// (alone in the ring it polls on for that share of its token hold time,
+/// so a request follows the slave's own answer, not a token to itself);
+/// without (the default), it
 /// passes the token to itself after every poll cycle, the harder case for
 /// the idle time between two of its own telegrams. The defects this guards against never reached Data_Exchange
 /// (the hub split each telegram) or merged every token and request into

@@ -6,7 +6,7 @@
 use profibus::devices::generic::{GenericDevice, InputPattern};
 use profibus::dp::master::{
     DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
-    DEFAULT_ALONE_HOLD_BITS,
+    ALONE_HOLD_BITS_FAST,
 };
 use profibus::dp::slave::{DpSlave, Features};
 use profibus::fdl::medium::MediumConfig;
@@ -221,15 +221,19 @@ fn steady_state(p: &mut Plant, window: Duration) -> (u64, u64, u64, Duration) {
 #[test]
 fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
     let window = Duration::from_millis(500);
-    let mut hold = plant(&[(10, &CFG), (11, &CFG)]);
+    let fast = MasterOptions {
+        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        ..MasterOptions::default()
+    };
+    let mut hold = plant_with(&[(10, &CFG), (11, &CFG)], fast.clone());
     let (cycles, passes, gaps, rotation) = steady_state(&mut hold, window);
     // Two slaves with 2 bytes each way: about 580 bit a cycle, so about
-    // five cycles in each visit of DEFAULT_ALONE_HOLD_BITS, still a GAP
+    // five cycles in each visit of ALONE_HOLD_BITS_FAST, still a GAP
     // poll in every visit but the G after a sweep (a new master can join),
     // and rotations no longer
     // than that share plus a GAP poll, a Global_Control and the token
     // (the figure includes the start-up).
-    let share = DEFAULT_ALONE_HOLD_BITS as u64;
+    let share = ALONE_HOLD_BITS_FAST as u64;
     assert!(
         cycles > 4 * passes,
         "{cycles} cycles, {passes} token passes"
@@ -244,11 +248,7 @@ fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
         .bits(share + 2 * hold.params.slot_time as u64 + 500);
     assert!(rotation < longest, "rotation {rotation:?}");
 
-    let options = MasterOptions {
-        alone_hold_bits: 0,
-        ..MasterOptions::default()
-    };
-    let mut each = plant_with(&[(10, &CFG), (11, &CFG)], options);
+    let mut each = plant(&[(10, &CFG), (11, &CFG)]);
     let (cycles_each, passes_each, _, _) = steady_state(&mut each, window);
     // One token pass (to itself) per poll cycle, and so fewer cycles.
     assert!(
@@ -263,7 +263,11 @@ fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
 
 #[test]
 fn a_second_master_joins_a_master_that_holds_the_token_alone() {
-    let mut p = plant(&[(10, &CFG)]);
+    let fast = MasterOptions {
+        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        ..MasterOptions::default()
+    };
+    let mut p = plant_with(&[(10, &CFG)], fast);
     let params = p.params;
     let m2 = p.bus.add(ActiveStation::new(
         ActiveConfig::new(5, params),
@@ -300,4 +304,51 @@ fn a_second_master_joins_a_master_that_holds_the_token_alone() {
         "{cycles} cycles, {passes} passes"
     );
     assert_eq!(p.m().slave_state(10), Some(SlaveState::DataExchange));
+}
+
+#[test]
+fn a_scanner_joining_two_masters_lists_both() {
+    use profibus::dp::scan::LiveListScan;
+    use profibus::fdl::wire::StationType;
+    let params = BusParams::defaults(Baud::B1500000);
+    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+    let m2 = bus.add(ActiveStation::new(
+        ActiveConfig::new(2, params),
+        DpMaster::new(&master_cfg(2, params, &[10])).unwrap(),
+    ));
+    let m5 = bus.add(ActiveStation::new(
+        ActiveConfig::new(5, params),
+        DpMaster::new(&master_cfg(5, params, &[11])).unwrap(),
+    ));
+    for a in [10, 11] {
+        bus.add(slave(a, params, &CFG));
+    }
+    let scan = bus.add(ActiveStation::new(
+        ActiveConfig::new(9, params),
+        LiveListScan::new(9),
+    ));
+    bus.set_online(scan, false);
+    assert!(bus.run_while(Duration::from_secs(2), |b| {
+        [(m2, 10), (m5, 11)].iter().all(|&(m, s)| {
+            b.station::<Master>(m).app().slave_state(s) == Some(SlaveState::DataExchange)
+        })
+    }));
+    let now = bus.now();
+    bus.station_mut::<ActiveStation<LiveListScan>>(scan)
+        .restart(now);
+    bus.set_online(scan, true);
+    assert!(bus.run_while(Duration::from_secs(30), |b| {
+        b.station::<ActiveStation<LiveListScan>>(scan)
+            .app()
+            .is_done()
+    }));
+    let found = bus
+        .station::<ActiveStation<LiveListScan>>(scan)
+        .app()
+        .stations()
+        .to_vec();
+    let kind = |a: u8| found.iter().find(|s| s.address == a).map(|s| s.station);
+    assert_eq!(kind(2), Some(StationType::ActiveInRing), "{found:?}");
+    assert_eq!(kind(5), Some(StationType::ActiveInRing), "{found:?}");
+    assert_eq!(kind(10), Some(StationType::Passive), "{found:?}");
 }

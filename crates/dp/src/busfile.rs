@@ -16,8 +16,9 @@
 //! reprobe_ms = 100       # how often a lost slave is probed
 //! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
 //! global_control_ms = 100  # repeat operate/clear Global_Control (default 100; 0 = only on change)
-//! alone_hold_bits = 3000  # alone in the ring: poll cycles per token visit for up to this
-//!                         # many bit times (0: pass the token to itself after every cycle)
+//! alone_hold_bits = 0     # alone in the ring: poll cycles per token visit for up to this
+//!                         # many bit times (default 0: the token to itself after every
+//!                         # cycle; 3000 about doubles the polls of a single small slave)
 //!
 //! [[slave]]
 //! address = 8

@@ -158,8 +158,9 @@ pub struct MasterOptions {
     /// (about 70 bit) and the visit's GAP poll (up to a slot time) are
     /// then spent once per visit instead of once per poll cycle, while the
     /// GAP sweep (how a new master joins, and the live list) slows down by
-    /// about the same factor. 0 passes the token after every poll cycle,
-    /// as most masters do. Default: [`DEFAULT_ALONE_HOLD_BITS`].
+    /// about the same factor. 0 (the default, [`DEFAULT_ALONE_HOLD_BITS`])
+    /// passes the token after every poll cycle, as most masters do;
+    /// [`ALONE_HOLD_BITS_FAST`] is a good value for speed.
     pub alone_hold_bits: u32,
 }
 
@@ -168,14 +169,19 @@ pub struct MasterOptions {
 /// watchdog time) and a negligible share of the bus at any baud rate.
 pub const DEFAULT_GLOBAL_CONTROL_INTERVAL: Duration = Duration::from_millis(100);
 
-/// The default of [`MasterOptions::alone_hold_bits`]: 3000 bit times
-/// (2 ms at 1.5 Mbit/s, 156 ms at 19.2 kbit/s). A poll cycle of one slave
-/// with 2 bytes each way costs about 290 bit, its token to itself and GAP
-/// poll up to 370 more: with 3000 the master alone with that slave polls
-/// it about twice as often as when passing the token after every cycle,
-/// while the GAP sweep takes about 4.5 times as long. Poll cycles of 3000
-/// bit or more (e.g. 32 such slaves) are not affected.
-pub const DEFAULT_ALONE_HOLD_BITS: u32 = 3000;
+/// The default of [`MasterOptions::alone_hold_bits`]: 0, the token after
+/// every poll cycle, as most masters do.
+pub const DEFAULT_ALONE_HOLD_BITS: u32 = 0;
+
+/// A good [`MasterOptions::alone_hold_bits`] for a master that is alone
+/// and wants its slaves polled as often as the line allows: 3000 bit
+/// times (2 ms at 1.5 Mbit/s, 156 ms at 19.2 kbit/s). A poll cycle of one
+/// slave with 2 bytes each way costs about 290 bit, its token to itself
+/// and GAP poll up to 370 more: with 3000 that slave is polled about twice
+/// as often as with the token after every cycle, while the GAP sweep takes
+/// about 4.5 times as long. Poll cycles of 3000 bit or more (e.g. 32 such
+/// slaves) are not affected.
+pub const ALONE_HOLD_BITS_FAST: u32 = 3000;
 
 impl Default for MasterOptions {
     fn default() -> Self {

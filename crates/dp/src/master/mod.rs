@@ -81,7 +81,7 @@ mod report;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{
-    MasterConfig, MasterOptions, SlaveParams, DEFAULT_ALONE_HOLD_BITS,
+    MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
     DEFAULT_GLOBAL_CONTROL_INTERVAL,
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
