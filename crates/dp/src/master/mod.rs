@@ -78,6 +78,7 @@
 mod command;
 mod config;
 mod report;
+mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{
@@ -85,6 +86,7 @@ pub use config::{
     DEFAULT_GLOBAL_CONTROL_INTERVAL,
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use wait::{SlaveWait, StartupTimeout};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::diag::SlaveDiag;
