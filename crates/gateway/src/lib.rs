@@ -77,6 +77,7 @@
 
 pub mod core;
 pub mod link;
+pub mod outage;
 pub mod settings;
 pub mod sim;
 pub mod sparkplug;
