@@ -109,9 +109,6 @@ pub struct SlaveSpec {
     pub name: String,
     /// The GSD: diagnosis texts and the ident number.
     pub gsd: Option<Gsd>,
-    /// A DP-V1 slave (its device-related diagnosis are alarm/status
-    /// blocks).
-    pub dpv1: bool,
     /// How its images are decoded.
     pub decoding: Decoding,
 }
@@ -302,7 +299,8 @@ impl BusView {
                 row.diag_words = if s.diag.is_empty() {
                     vec![]
                 } else {
-                    diag::describe(s.diag, spec.gsd.as_ref(), spec.dpv1)
+                    let dpv1 = m.slave_params(spec.address).is_some_and(|p| p.dpv1);
+                    diag::describe(s.diag, spec.gsd.as_ref(), dpv1)
                 };
             }
             let n = s.stats.data_exchanges;
@@ -646,9 +644,6 @@ impl BusView {
                 g.model_name.as_deref().unwrap_or("")
             ));
         }
-        if spec.dpv1 {
-            l.push_str("  DP-V1");
-        }
         out.push(l);
         let s = &r.stats;
         out.push(format!(
@@ -785,14 +780,12 @@ mod tests {
                     address: 8,
                     name: "pump".into(),
                     gsd: None,
-                    dpv1: false,
                     decoding: Decoding::None,
                 },
                 SlaveSpec {
                     address: 25,
                     name: "drive".into(),
                     gsd: None,
-                    dpv1: false,
                     decoding: Decoding::Channels(map),
                 },
             ],
