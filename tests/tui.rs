@@ -44,7 +44,18 @@ impl Tmux {
         let st = Command::new("tmux")
             .arg("-S")
             .arg(&socket)
-            .args(["-f", "/dev/null", "new-session", "-d", "-s", "t", "-x", "150", "-y", "45"])
+            .args([
+                "-f",
+                "/dev/null",
+                "new-session",
+                "-d",
+                "-s",
+                "t",
+                "-x",
+                "170",
+                "-y",
+                "60",
+            ])
             .arg(shell)
             .env("TERM", "xterm-256color")
             .status()
@@ -168,7 +179,14 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let gsd = gen_gsd();
     let _echo = slave(
         &bus.link(1),
-        &["--addr", "8", "--gsd", &gsd.to_string_lossy(), "--module", "2 words in/out"],
+        &[
+            "--addr",
+            "8",
+            "--gsd",
+            &gsd.to_string_lossy(),
+            "--module",
+            "2 words in/out",
+        ],
     );
     let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
     let config = bus_file(&bus.dir().0);
@@ -186,7 +204,16 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let s = t.wait("both slaves in data exchange", |s| {
         s.matches("data_exchange").count() >= 2
     });
-    for h in ["Addr", "Name", "State", "Cycle", "Retries", "Inputs", "Outputs", "Diagnosis"] {
+    for h in [
+        "Addr",
+        "Name",
+        "State",
+        "Cycle",
+        "Retries",
+        "Inputs",
+        "Outputs",
+        "Diagnosis",
+    ] {
         assert!(s.contains(h), "heading {h} missing:\n{s}");
     }
     assert!(s.contains("dpctl master  master 2 at 1.5Mbit/s"), "{s}");
@@ -231,7 +258,9 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let again = t.screen();
     assert_eq!(cycles(&again), before);
     t.keys(&["p"]);
-    t.wait("running again", |s| !s.contains("PAUSED") && cycles(s) != before);
+    t.wait("running again", |s| {
+        !s.contains("PAUSED") && cycles(s) != before
+    });
 
     t.keys(&["q"]);
     let s = t.wait_for(&["[exit 0]"]);
@@ -245,7 +274,14 @@ fn master_plain_prints_lines_on_a_terminal() {
     let gsd = gen_gsd();
     let _echo = slave(
         &bus.link(1),
-        &["--addr", "8", "--gsd", &gsd.to_string_lossy(), "--module", "2 words in/out"],
+        &[
+            "--addr",
+            "8",
+            "--gsd",
+            &gsd.to_string_lossy(),
+            "--module",
+            "2 words in/out",
+        ],
     );
     let dir = TempDir::new("plain");
     let config = dir.path("bus.toml");
@@ -283,7 +319,14 @@ fn demo_shows_every_device_profile_moving() {
         s.matches("data_exchange").count() >= 7
     });
     assert!(s.contains("dpctl demo"), "{s}");
-    for profile in ["(generic)", "(bm4)", "(omega)", "(bk3000)", "(jx2)", "(rfid)"] {
+    for profile in [
+        "(generic)",
+        "(bm4)",
+        "(omega)",
+        "(bk3000)",
+        "(jx2)",
+        "(rfid)",
+    ] {
         assert!(s.contains(profile), "{profile} missing:\n{s}");
     }
     // The Omega drive's actual value follows its setpoint.
@@ -321,7 +364,14 @@ fn sniff_lists_telegrams_with_filters_and_station_statistics() {
     let gsd = gen_gsd();
     let _echo = slave(
         &bus.link(1),
-        &["--addr", "8", "--gsd", &gsd.to_string_lossy(), "--module", "2 words in/out"],
+        &[
+            "--addr",
+            "8",
+            "--gsd",
+            &gsd.to_string_lossy(),
+            "--module",
+            "2 words in/out",
+        ],
     );
     let dir = TempDir::new("sniff");
     let config = dir.path("bus.toml");
@@ -346,7 +396,10 @@ fn sniff_lists_telegrams_with_filters_and_station_statistics() {
     let port = bus.link_str(2);
     let t = Tmux::start(&["sniff", "--port", &port]);
     let s = t.wait_for(&["dpctl sniff", "stations", "Data_Exchange", "token 2→2"]);
-    assert!(s.contains("Req") && s.contains("Resp") && s.contains("NoAns"), "{s}");
+    assert!(
+        s.contains("Req") && s.contains("Resp") && s.contains("NoAns"),
+        "{s}"
+    );
     // Both stations counted.
     t.wait("both stations in the statistics", |s| {
         s.lines().any(|l| l.contains("│  2 ")) && s.lines().any(|l| l.contains("│  8 "))

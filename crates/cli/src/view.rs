@@ -166,8 +166,7 @@ impl View {
         now: Instant,
         force: bool,
     ) {
-        if self.live.is_some()
-            || !force && self.last_print.is_some_and(|t| now < t + self.interval)
+        if self.live.is_some() || !force && self.last_print.is_some_and(|t| now < t + self.interval)
         {
             return;
         }

@@ -222,6 +222,9 @@ const LOG_LINES: usize = 200;
 /// How long the cycle time is measured over.
 const CYCLE_WINDOW: Duration = Duration::from_millis(500);
 
+/// Most lines of one slave in the table (the details show everything).
+const MAX_ROW_LINES: usize = 5;
+
 /// After this long without a Data_Exchange a slave has no cycle time.
 const CYCLE_STALE: Duration = Duration::from_secs(3);
 
@@ -479,7 +482,7 @@ impl BusView {
 
     /// Draw the view into `area` of a frame.
     pub fn render(&self, f: &mut Frame<'_>, area: Rect) {
-        let log_height = (self.log.len() as u16).clamp(3, 10) + 2;
+        let log_height = (self.log.len() as u16).clamp(3, 8) + 2;
         let [head, table, log, foot] = Layout::vertical([
             Constraint::Length(1),
             Constraint::Min(4),
@@ -563,11 +566,19 @@ impl BusView {
     }
 
     fn render_table(&self, f: &mut Frame<'_>, area: Rect) {
-        let decoded = self
+        let name_w = self
             .specs
             .iter()
-            .any(|s| !matches!(s.decoding, Decoding::None));
-        let height = if decoded { 2 } else { 1 };
+            .map(|s| s.name.chars().count())
+            .max()
+            .unwrap_or(0)
+            .clamp(4, 30) as u16;
+        // Addr, Name, State, Cycle, Retries; 7 gaps between 8 columns and
+        // the two borders.
+        let fixed = 4 + name_w + 13 + 9 + 7 + 7 + 2;
+        let rest = area.width.saturating_sub(fixed).max(24);
+        let io_w = rest * 3 / 8;
+        let diag_w = rest - 2 * io_w;
         let header = Row::new([
             "Addr",
             "Name",
@@ -580,45 +591,56 @@ impl BusView {
         ])
         .style(Style::default().add_modifier(Modifier::BOLD | Modifier::UNDERLINED));
         let rows = self.specs.iter().zip(&self.rows).map(|(spec, r)| {
+            // Hex, then the decoded values, wrapped into the column.
             let io = |dir, image: &[u8]| {
+                let bytes: Vec<String> = image.iter().map(|b| format!("{b:02X}")).collect();
+                let mut lines: Vec<Line> = wrap(&bytes, " ", io_w as usize)
+                    .into_iter()
+                    .map(Line::raw)
+                    .collect();
                 let words = spec.decoding.words(dir, image);
-                let mut t = Text::raw(hex(image));
-                if decoded {
-                    t.push_line(Line::styled(
-                        words.join("  "),
-                        Style::default().fg(Color::Cyan),
-                    ));
-                }
-                Cell::from(t)
+                lines.extend(
+                    wrap(&words, "  ", io_w as usize)
+                        .into_iter()
+                        .map(|l| Line::styled(l, Style::default().fg(Color::Cyan))),
+                );
+                lines
             };
             let state_style = match r.state {
                 SlaveState::DataExchange => Style::default().fg(Color::Green),
                 SlaveState::Offline => Style::default().fg(Color::Red),
                 _ => Style::default().fg(Color::Yellow),
             };
+            let (i, o) = (
+                io(Direction::Input, &r.inputs),
+                io(Direction::Output, &r.outputs),
+            );
+            let diag: Vec<String> = diag_summary(&r.diag_words);
+            let diag = wrap(&diag, "; ", diag_w as usize);
+            let height = i.len().max(o.len()).max(diag.len()).clamp(1, MAX_ROW_LINES);
             Row::new(vec![
                 Cell::from(format!("{:>3}", spec.address)),
-                Cell::from(spec.name.clone()),
+                Cell::from(fit(&spec.name, name_w as usize)),
                 Cell::from(Span::styled(r.state.name(), state_style)),
                 Cell::from(cycle_text(r.cycle)),
                 Cell::from(format!("{:>7}", r.stats.retries)),
-                io(Direction::Input, &r.inputs),
-                io(Direction::Output, &r.outputs),
-                Cell::from(diag_summary(&r.diag_words)),
+                Cell::from(Text::from(i)),
+                Cell::from(Text::from(o)),
+                Cell::from(Text::from(diag.join("\n"))),
             ])
-            .height(height)
+            .height(height as u16)
         });
         let table = Table::new(
             rows,
             [
                 Constraint::Length(4),
-                Constraint::Length(22),
+                Constraint::Length(name_w),
                 Constraint::Length(13),
                 Constraint::Length(9),
                 Constraint::Length(7),
-                Constraint::Fill(3),
-                Constraint::Fill(3),
-                Constraint::Fill(2),
+                Constraint::Length(io_w),
+                Constraint::Length(io_w),
+                Constraint::Length(diag_w),
             ],
         )
         .header(header)
@@ -716,13 +738,33 @@ fn cycle_text(c: Option<Duration>) -> String {
 
 /// The diagnosis in a few words: the station status and the device's
 /// own blocks, without the lines that are always there.
-fn diag_summary(words: &[String]) -> String {
+fn diag_summary(words: &[String]) -> Vec<String> {
     words
         .iter()
         .filter(|w| !w.starts_with("parameterised by") && !w.starts_with("ident number"))
-        .map(|w| w.strip_prefix("station status: ").unwrap_or(w))
-        .collect::<Vec<_>>()
-        .join("; ")
+        .map(|w| w.strip_prefix("station status: ").unwrap_or(w).to_string())
+        .collect()
+}
+
+/// `words` joined by `sep` into lines of at most `width` characters,
+/// breaking between words; a word longer than a line is cut.
+fn wrap(words: &[String], sep: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = vec![];
+    let mut line = String::new();
+    for w in words {
+        let w = fit(w, width.max(1));
+        if !line.is_empty() && line.chars().count() + sep.len() + w.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push_str(sep);
+        }
+        line.push_str(&w);
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
 }
 
 /// A channel value typed at the prompt: `true`/`false`, an integer
@@ -942,6 +984,20 @@ mod tests {
             ["2 words in: 01 02 03 04", "1 byte out: 05"]
         );
         assert_eq!(d.words(Direction::Output, &[9]), ["1 byte out: 09"]);
+    }
+
+    #[test]
+    fn long_values_wrap_between_words_inside_their_column() {
+        let w: Vec<String> = ["speed=1500", "actual=1499", "status1=512"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        assert_eq!(
+            wrap(&w, "  ", 24),
+            ["speed=1500  actual=1499", "status1=512"]
+        );
+        assert_eq!(wrap(&w, "  ", 5), ["spee…", "actu…", "stat…"]);
+        assert!(wrap(&[], " ", 10).is_empty());
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //! | ↑ / ↓, PgUp / PgDn | scroll; ↓ at the end follows new telegrams again |
 
 use crate::{fit, hex, Key};
-use profibus_fdl::wire::{FunctionCode, Telegram};
+use profibus_fdl::wire::{FunctionCode, RequestKind, Telegram};
 use profibus_fdl::Instant;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -53,6 +53,14 @@ pub struct StationStats {
     pub no_answer: u64,
     /// Negative acknowledges it sent (UE, RR, RS, RDL, RDH).
     pub negative: u64,
+}
+
+impl StationStats {
+    /// Whether the station sent anything or a request to it went
+    /// unanswered (FDL Status requests of the GAP polling do not count).
+    pub fn on_the_line(&self) -> bool {
+        self.requests + self.responses + self.tokens + self.no_answer > 0
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,7 +144,9 @@ impl SniffView {
                 FunctionCode::Request { kind, .. } => {
                     self.no_answer();
                     self.stations.entry(d.sa).or_default().requests += 1;
-                    if !d.is_broadcast() && kind.expects_reply() {
+                    // FDL Status requests to absent stations (GAP
+                    // polling) go unanswered by design.
+                    if !d.is_broadcast() && kind.expects_reply() && kind != RequestKind::FdlStatus {
                         self.awaiting = Some((d.sa, d.da));
                     }
                     let sap = d.dsap.and_then(|s| profibus_dp::sap::name(s & 0x3F));
@@ -332,7 +342,10 @@ impl SniffView {
         let lines: Vec<Line> = shown[end.saturating_sub(height)..end]
             .iter()
             .map(|e| {
-                let l = fit(&format!("{:>12} {}", e.at_us, e.text), width);
+                let l = fit(
+                    &format!("{:>12} {:<18} {}", e.at_us, e.service, e.text),
+                    width,
+                );
                 if e.error {
                     Line::styled(l, Style::default().fg(Color::Red))
                 } else {
@@ -350,16 +363,20 @@ impl SniffView {
             list,
         );
 
-        let rows = self.stations.iter().map(|(a, s)| {
-            Row::new(vec![
-                format!("{a:>3}"),
-                format!("{:>7}", s.requests),
-                format!("{:>7}", s.responses),
-                format!("{:>6}", s.tokens),
-                format!("{:>6}", s.no_answer),
-                format!("{:>5}", s.negative),
-            ])
-        });
+        let rows = self
+            .stations
+            .iter()
+            .filter(|(_, s)| s.on_the_line())
+            .map(|(a, s)| {
+                Row::new(vec![
+                    format!("{a:>3}"),
+                    format!("{:>7}", s.requests),
+                    format!("{:>7}", s.responses),
+                    format!("{:>6}", s.tokens),
+                    format!("{:>6}", s.no_answer),
+                    format!("{:>5}", s.negative),
+                ])
+            });
         let table = Table::new(
             rows,
             [
@@ -409,7 +426,7 @@ pub fn skipped_text(what: &str, bytes: &[u8]) -> String {
 mod tests {
     use super::*;
     use crate::screen_text;
-    use profibus_fdl::wire::{DataTelegram, RequestKind, ResponseStatus, StationType};
+    use profibus_fdl::wire::{DataTelegram, ResponseStatus, StationType};
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
     use std::time::Duration;
