@@ -330,8 +330,24 @@ fn demo_shows_every_device_profile_moving() {
         assert!(s.contains(profile), "{profile} missing:\n{s}");
     }
     // The Omega drive's actual value follows its setpoint.
-    t.wait("the drive's actual speed near its setpoint", |s| {
-        omega_follows(s)
+    t.wait("the drive's actual speed near its setpoint", omega_follows);
+    // The BM4's variables move: one written by the master, one by the
+    // module's own PLC program.
+    t.wait("the BM4's variables changing", |s| {
+        value(s, "u_MyWriteVar2").is_some_and(|v| v >= 10.0)
+            && value(s, "ud_MyReadVar1").is_some_and(|v| v >= 70.0)
+    });
+    // The person's write to the echo slave stays (the PLC program leaves
+    // it) and comes back as its inputs.
+    t.keys(&["w"]);
+    t.wait_for(&["write outputs of slave 3 echo (generic)"]);
+    t.type_text("AA BB CC DD");
+    t.keys(&["Enter"]);
+    t.wait("the echo of the written outputs", |s| {
+        line_with(s, "echo (generic)")
+            .matches("AA BB CC DD")
+            .count()
+            == 2
     });
     // The details of the first slave, then quit.
     t.keys(&["Enter"]);
@@ -341,18 +357,20 @@ fn demo_shows_every_device_profile_moving() {
     assert!(s.contains("demo: "), "the summary after the view:\n{s}");
 }
 
+/// The number shown after `NAME=` (the first on the screen).
+fn value(s: &str, name: &str) -> Option<f64> {
+    let at = s.find(&format!("{name}="))? + name.len() + 1;
+    let rest = &s[at..];
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || c == '-' || c == '.'))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
 /// Whether the screen shows the Omega drive's actual value 1 within a
 /// few percent of (and not zero like) setpoint 1.
 fn omega_follows(s: &str) -> bool {
-    let value = |name: &str| -> Option<f64> {
-        let at = s.find(&format!("{name}="))? + name.len() + 1;
-        let rest = &s[at..];
-        let end = rest
-            .find(|c: char| !(c.is_ascii_digit() || c == '-' || c == '.'))
-            .unwrap_or(rest.len());
-        rest[..end].parse().ok()
-    };
-    match (value("setpoint1"), value("actual1")) {
+    match (value(s, "setpoint1"), value(s, "actual1")) {
         (Some(sp), Some(av)) => sp != 0.0 && (av - sp).abs() <= sp.abs() * 0.2 + 2.0,
         _ => false,
     }

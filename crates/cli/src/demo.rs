@@ -333,30 +333,38 @@ async fn demo(args: Args) -> Result<()> {
         if args.cycles.is_some_and(|n| m.cycle_stats().cycles >= n) {
             break;
         }
-        // The "application": a ramp on the echo slave's outputs.
+        // The PLC program: ramps and a speed profile on the outputs, except
+        // those the person wrote on the terminal.
         if now >= next_output {
             next_output = now + Duration::from_millis(100);
             ramp = ramp.wrapping_add(1);
             let r = ramp.to_be_bytes();
-            m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
-            m.set_outputs(4, &[0, 0, r[0], r[1]]);
-            m.set_outputs(JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]);
             // BK3000: a 0..10 V ramp on KL4002 channel 1, a walking bit
             // on the KL2134.
-            let v = ((ramp % 100) as u32 * 32767 / 100) as u16;
-            let v = v.to_be_bytes();
-            m.set_outputs(BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]);
+            let v = (((ramp % 100) as u32 * 32767 / 100) as u16).to_be_bytes();
+            for (a, data) in [
+                (3, &[r[0], r[1], !r[0], !r[1]][..]),
+                (4, &[0, 0, r[0], r[1]]),
+                (JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]),
+                (BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]),
+            ] {
+                if !view.by_hand(a) {
+                    m.set_outputs(a, data);
+                }
+            }
             // Omega: a speed profile up to 3000 and back in 20 s; the
             // drive's actual value follows the setpoint.
             let speed = 3000 - (i64::from(ramp % 200) - 100).abs() * 30;
-            write_channels(m, 25, omega, &[("setpoint1", Value::Int(speed))]);
+            if !view.by_hand(25) {
+                write_channels(m, 25, omega, &[("setpoint1", Value::Int(speed))]);
+            }
             // BM4: the master writes u_MyWriteVar2; the b maXX PLC's own
-            // program counts ud_MyReadVar1 and moves di_MyReadVar3 (read
-            // over PKW).
-            let w = Value::Int(i64::from(ramp % 1000));
-            write_channels(m, 6, bm4_map, &[("u_MyWriteVar2", w)]);
+            // program counts ud_MyReadVar1.
+            if !view.by_hand(6) {
+                let w = Value::Int(i64::from(ramp % 1000));
+                write_channels(m, 6, bm4_map, &[("u_MyWriteVar2", w)]);
+            }
             bm4.push(format!("set ud_MyReadVar1 {}", u32::from(ramp) * 7));
-            bm4.push(format!("set di_MyReadVar3 {}", -i32::from(ramp % 500)));
         }
         for p in pkw.iter_mut() {
             if let Some(e) = p.step(m, now, ramp) {

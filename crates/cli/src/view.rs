@@ -117,6 +117,13 @@ impl View {
         Ok(())
     }
 
+    /// Whether the person wrote the slave's outputs on the terminal.
+    pub fn by_hand(&self, address: u8) -> bool {
+        self.live
+            .as_ref()
+            .is_some_and(|l| l.view().written_by_hand(address))
+    }
+
     /// Give the terminal back (the table disappears).
     pub fn close(&mut self) {
         self.live = None;

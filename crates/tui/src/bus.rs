@@ -214,6 +214,8 @@ pub struct BusView {
     selected: usize,
     mode: Mode,
     message: Option<String>,
+    /// Slaves whose outputs the person wrote.
+    by_hand: Vec<u8>,
 }
 
 /// Lines kept in the log.
@@ -257,7 +259,14 @@ impl BusView {
             selected: 0,
             mode: Mode::Table,
             message: None,
+            by_hand: vec![],
         }
+    }
+
+    /// Whether the person wrote the outputs of the slave at `address`
+    /// (`w`): an application that writes outputs itself leaves them.
+    pub fn written_by_hand(&self, address: u8) -> bool {
+        self.by_hand.contains(&address)
     }
 
     /// Whether the view is paused (`p`).
@@ -441,6 +450,9 @@ impl BusView {
         write: &OutputWrite,
     ) -> Result<(), WriteError> {
         let r = self.try_write(m, address, write);
+        if r.is_ok() && !self.by_hand.contains(&address) {
+            self.by_hand.push(address);
+        }
         self.message = Some(match &r {
             Ok(()) => format!(
                 "slave {address}: outputs {}",
@@ -916,8 +928,10 @@ mod tests {
         let Action::Write { address, write } = a else {
             unreachable!()
         };
+        assert!(!v.written_by_hand(8));
         v.write(&mut m, address, &write).unwrap();
         assert_eq!(m.outputs(8), Some(&[0x7F][..]));
+        assert!(v.written_by_hand(8) && !v.written_by_hand(25));
         assert!(screen(&v).contains("slave 8: outputs 7F"));
 
         // Too long: refused, nothing written.

@@ -88,6 +88,11 @@ impl LiveBus {
     }
 
     /// The view.
+    pub fn view(&self) -> &BusView {
+        &self.view
+    }
+
+    /// The view.
     pub fn view_mut(&mut self) -> &mut BusView {
         &mut self.view
     }
