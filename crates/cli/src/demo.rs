@@ -320,10 +320,13 @@ async fn demo(args: Args) -> Result<()> {
         DemoPkw::new(25, &profibus_devices::omega::PKW, &OMEGA_JOBS),
     ];
     loop {
+        // At most one step of bus time at a time: a machine too slow for
+        // the clock falls behind it, but the plant and the view go on.
+        let wall = Instant::from_nanos(start.elapsed().as_nanos() as u64);
         let target = if args.fast {
             bus.now() + step
         } else {
-            Instant::from_nanos(start.elapsed().as_nanos() as u64)
+            wall.min(bus.now() + step)
         };
         bus.run_until(target);
         let now = bus.now();
@@ -380,9 +383,14 @@ async fn demo(args: Args) -> Result<()> {
             break;
         }
         if !args.fast {
+            let pause = if bus.now() < wall {
+                Duration::ZERO
+            } else {
+                step
+            };
             tokio::select! {
                 _ = &mut shutdown => break,
-                _ = tokio::time::sleep(step) => {}
+                _ = tokio::time::sleep(pause) => {}
             }
         } else if common::stop_requested() {
             break;
