@@ -1001,6 +1001,31 @@ mod tests {
     }
 
     #[test]
+    fn any_terminal_size_draws_without_panicking() {
+        let mut m = master();
+        let mut v = view();
+        m.set_outputs(25, &[1, 2]);
+        v.update(&m, Instant::ZERO);
+        v.log("a line");
+        for (w, h) in [(1, 1), (10, 5), (40, 10), (80, 24), (300, 80)] {
+            for k in [Key::Esc, Key::Enter, Key::Esc, Key::Char('w')] {
+                let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+                t.draw(|f| v.render(f, f.area())).unwrap();
+                v.key(k);
+            }
+            v.key(Key::Esc);
+        }
+        // 80×24: both slaves and the keys are on the screen.
+        let mut t = Terminal::new(TestBackend::new(80, 24)).unwrap();
+        t.draw(|f| v.render(f, f.area())).unwrap();
+        let s = screen_text(t.backend().buffer());
+        assert!(
+            s.contains("pump") && s.contains("drive") && s.contains("q quit"),
+            "{s}"
+        );
+    }
+
+    #[test]
     fn long_values_wrap_between_words_inside_their_column() {
         let w: Vec<String> = ["speed=1500", "actual=1499", "status1=512"]
             .iter()

@@ -10,7 +10,9 @@
 //! - [`sniff::SniffView`]: telegrams seen on a line (`dpctl sniff`), with
 //!   filters by address, service and errors, and per-station statistics.
 //! - [`term::Screen`]: the terminal session (raw mode, alternate screen)
-//!   the views draw on, restored when it is dropped.
+//!   the views draw on, restored when it is dropped; [`term::LiveBus`]
+//!   and [`term::LiveSniff`] run a view on it from an application's loop
+//!   (keys every 20 ms, a frame every 100 ms of wall-clock time).
 //!
 //! The views are plain state: the application feeds them (a
 //! [`DpMaster`](profibus_dp::master::DpMaster) to snapshot, telegrams),

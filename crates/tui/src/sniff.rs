@@ -516,6 +516,28 @@ mod tests {
     }
 
     #[test]
+    fn any_terminal_size_draws_without_panicking() {
+        let mut v = SniffView::new("dpctl sniff");
+        feed(&mut v);
+        for (w, h) in [(1, 1), (10, 5), (40, 10), (80, 24), (300, 80)] {
+            let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+            t.draw(|f| v.render(f, f.area())).unwrap();
+        }
+        for _ in 0..100 {
+            v.key(Key::PageUp);
+        }
+        // Four lines of list for seven entries: scrolled back to the first.
+        let mut t = Terminal::new(TestBackend::new(140, 8)).unwrap();
+        t.draw(|f| v.render(f, f.area())).unwrap();
+        let s = screen_text(t.backend().buffer());
+        assert!(
+            s.contains("(3 lines back)") && s.contains("Slave_Diag"),
+            "{s}"
+        );
+        assert!(!s.contains("bad FCS"), "{s}");
+    }
+
+    #[test]
     fn filters_by_address_service_and_errors() {
         let mut v = SniffView::new("dpctl sniff");
         feed(&mut v);
