@@ -52,9 +52,10 @@ pub struct Args {
     /// Print JSON lines instead of text.
     #[arg(long)]
     json: bool,
-    /// Print status lines even on a terminal. Without it a terminal shows
-    /// a refreshing table: `q` quit, `p` pause, up/down select a slave,
-    /// Enter its details, `w` write its outputs (hex bytes or NAME=VALUE).
+    /// Print status lines even on a terminal. Without it (and without
+    /// `--input -`) a terminal shows a refreshing table: `q` quit, `p`
+    /// pause, up/down select a slave, Enter its details, `w` write its
+    /// outputs (hex bytes or NAME=VALUE).
     #[arg(long, conflicts_with = "json")]
     plain: bool,
     /// Read commands (JSON lines) from this file, or `-` for stdin.
@@ -197,7 +198,9 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         });
     }
     let baud = bus.master.params.baud;
-    if !args.json && !args.plain && std::io::stdout().is_terminal() {
+    // Commands typed on stdin (`--input -`) keep the terminal for lines.
+    let stdin_commands = args.input.as_deref() == Some("-");
+    if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
         view.open_terminal("dpctl master", baud, &info)?;
     }
     let cycles = args.cycles;
