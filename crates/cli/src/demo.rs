@@ -6,12 +6,12 @@
 use crate::common;
 use crate::view::{drain_events, hex, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
-use profibus_devices::channels::ChannelMap;
+use profibus_devices::channels::{ChannelMap, Value};
 use profibus_devices::generic::{GenericDevice, InputPattern};
 use profibus_devices::gsd_files;
 use profibus_devices::jx2::{self, script::Interpreter};
 use profibus_devices::pkw::{self, client::PkwClient};
-use profibus_devices::DeviceOptions;
+use profibus_devices::{ControlInbox, DeviceOptions};
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
 use profibus_dp::slave::{Device, DpSlave};
@@ -41,6 +41,11 @@ pub struct Args {
     /// Print JSON lines instead of text.
     #[arg(long)]
     json: bool,
+    /// Print status lines even on a terminal. Without it a terminal shows
+    /// the plant as a refreshing table: `q` quit, `p` pause, up/down
+    /// select a slave, Enter its details, `w` write its outputs.
+    #[arg(long, conflicts_with = "json")]
+    plain: bool,
     /// Record every telegram on the simulated line into a pcap file
     /// (link type 257, readable by Wireshark/tshark).
     #[arg(long, value_name = "FILE")]
@@ -67,7 +72,14 @@ struct PlantSlave {
 /// A plant slave from the profile registry: `name` with `options`
 /// (`KEY=VALUE`, as `dpctl slave --device-opt` takes them), as a bus file
 /// with `device = "NAME"` would configure it.
-fn profiled(address: u8, label: &str, name: &str, options: &[&str]) -> Result<PlantSlave> {
+/// Its PLC-side commands arrive in `control`.
+fn profiled(
+    address: u8,
+    label: &str,
+    name: &str,
+    options: &[&str],
+    control: Option<ControlInbox>,
+) -> Result<PlantSlave> {
     let mut o = DeviceOptions::new();
     for kv in options {
         o.set_pair(kv)?;
@@ -78,7 +90,7 @@ fn profiled(address: u8, label: &str, name: &str, options: &[&str]) -> Result<Pl
         name: label.into(),
         gsd: p.gsd().clone(),
         modules: p.modules(),
-        device: p.device(None)?,
+        device: p.device(control)?,
         channels: Some(p.channels(&p.chk_cfg()?)?),
     })
 }
@@ -104,7 +116,8 @@ fn generic(
 }
 
 /// The plant's slaves.
-fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
+/// `bm4` takes the commands of the BM4-O-PRO-01's own PLC program.
+fn plant(rfid: crate::rfid::demo::Parts, bm4: ControlInbox) -> Result<Vec<PlantSlave>> {
     let gen = gsd_files::parse(gsd_files::DPCTL_GEN)?;
     Ok(vec![
         generic(
@@ -131,9 +144,10 @@ fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
                 "example=true",
                 r#"variables=["ud_MyReadVar1", "u_MyWriteVar2"]"#,
             ],
+            Some(bm4),
         )?,
         // Omega Drive-Line II: PKW, status / control, 2 values each way.
-        profiled(25, "Omega Drive-Line II (omega)", "omega", &[])?,
+        profiled(25, "Omega Drive-Line II (omega)", "omega", &[], None)?,
         // Beckhoff BK3000 with a mixed terminal strip, from its rotary
         // switches (station 9).
         profiled(
@@ -141,6 +155,7 @@ fn plant(rfid: crate::rfid::demo::Parts) -> Result<Vec<PlantSlave>> {
             "BK3000 bus coupler (bk3000)",
             "bk3000",
             &[&format!("terminals={BK3000_STRIP}"), "switch-ones=9"],
+            None,
         )?,
         PlantSlave {
             address: JX2_ADDRESS,
@@ -239,7 +254,8 @@ async fn demo(args: Args) -> Result<()> {
     // The RFID reader with a tag that comes and goes, and the PLC's
     // commands to it.
     let (mut reader, parts) = crate::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
-    let slaves = plant(parts)?;
+    let bm4 = ControlInbox::new();
+    let slaves = plant(parts, bm4.clone())?;
     let cfg = master_config(params, &slaves)?;
     let info: Vec<SlaveInfo> = slaves
         .iter()
@@ -248,6 +264,7 @@ async fn demo(args: Args) -> Result<()> {
             name: s.name.clone(),
             gsd: Some(s.gsd.clone()),
             channels: s.channels.clone(),
+            modules: s.modules.clone(),
         })
         .collect();
 
@@ -285,11 +302,12 @@ async fn demo(args: Args) -> Result<()> {
         }));
     }
 
-    let mut view = View::new(
-        args.json,
-        !args.json && std::io::stdout().is_terminal(),
-        Duration::from_millis(args.interval.max(10)),
-    );
+    let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
+    if !args.json && !args.plain && std::io::stdout().is_terminal() {
+        view.open_terminal("dpctl demo", baud, &info)?;
+    }
+    let channels = |a: u8| info.iter().find(|s| s.address == a)?.channels.as_ref();
+    let (omega, bm4_map) = (channels(25), channels(6));
     let start = tokio::time::Instant::now();
     let shutdown = common::shutdown();
     tokio::pin!(shutdown);
@@ -302,10 +320,13 @@ async fn demo(args: Args) -> Result<()> {
         DemoPkw::new(25, &profibus_devices::omega::PKW, &OMEGA_JOBS),
     ];
     loop {
+        // At most one step of bus time at a time: a machine too slow for
+        // the clock falls behind it, but the plant and the view go on.
+        let wall = Instant::from_nanos(start.elapsed().as_nanos() as u64);
         let target = if args.fast {
             bus.now() + step
         } else {
-            Instant::from_nanos(start.elapsed().as_nanos() as u64)
+            wall.min(bus.now() + step)
         };
         bus.run_until(target);
         let now = bus.now();
@@ -315,19 +336,38 @@ async fn demo(args: Args) -> Result<()> {
         if args.cycles.is_some_and(|n| m.cycle_stats().cycles >= n) {
             break;
         }
-        // The "application": a ramp on the echo slave's outputs.
+        // The PLC program: ramps and a speed profile on the outputs, except
+        // those the person wrote on the terminal.
         if now >= next_output {
             next_output = now + Duration::from_millis(100);
             ramp = ramp.wrapping_add(1);
             let r = ramp.to_be_bytes();
-            m.set_outputs(3, &[r[0], r[1], !r[0], !r[1]]);
-            m.set_outputs(4, &[0, 0, r[0], r[1]]);
-            m.set_outputs(JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]);
             // BK3000: a 0..10 V ramp on KL4002 channel 1, a walking bit
             // on the KL2134.
-            let v = ((ramp % 100) as u32 * 32767 / 100) as u16;
-            let v = v.to_be_bytes();
-            m.set_outputs(BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]);
+            let v = (((ramp % 100) as u32 * 32767 / 100) as u16).to_be_bytes();
+            for (a, data) in [
+                (3, &[r[0], r[1], !r[0], !r[1]][..]),
+                (4, &[0, 0, r[0], r[1]]),
+                (JX2_ADDRESS, &[r[0], r[1], 0, 0, 0, 0, 0, 0]),
+                (BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]),
+            ] {
+                if !view.by_hand(a) {
+                    m.set_outputs(a, data);
+                }
+            }
+            // Omega: a speed profile up to 3000 and back in 20 s; the
+            // drive's actual value follows the setpoint.
+            let speed = 3000 - (i64::from(ramp % 200) - 100).abs() * 30;
+            if !view.by_hand(25) {
+                write_channels(m, 25, omega, &[("setpoint1", Value::Int(speed))]);
+            }
+            // BM4: the master writes u_MyWriteVar2; the b maXX PLC's own
+            // program counts ud_MyReadVar1.
+            if !view.by_hand(6) {
+                let w = Value::Int(i64::from(ramp % 1000));
+                write_channels(m, 6, bm4_map, &[("u_MyWriteVar2", w)]);
+            }
+            bm4.push(format!("set ud_MyReadVar1 {}", u32::from(ramp) * 7));
         }
         for p in pkw.iter_mut() {
             if let Some(e) = p.step(m, now, ramp) {
@@ -339,15 +379,24 @@ async fn demo(args: Args) -> Result<()> {
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);
+        if view.tick(m, now).is_break() {
+            break;
+        }
         if !args.fast {
+            let pause = if bus.now() < wall {
+                Duration::ZERO
+            } else {
+                step
+            };
             tokio::select! {
                 _ = &mut shutdown => break,
-                _ = tokio::time::sleep(step) => {}
+                _ = tokio::time::sleep(pause) => {}
             }
         } else if common::stop_requested() {
             break;
         }
     }
+    view.close();
     let now = bus.now();
     let m = bus.station_mut::<Master>(master).app_mut();
     drain_events(m, &info, &mut view);
@@ -386,6 +435,15 @@ async fn demo(args: Args) -> Result<()> {
         w.flush()?;
     }
     Ok(())
+}
+
+/// Write named output channels of the slave at `address` (all or none).
+fn write_channels(m: &mut DpMaster, address: u8, map: Option<&ChannelMap>, v: &[(&str, Value)]) {
+    if let (Some(map), Some(h)) = (map, m.handle(address)) {
+        if let Err(e) = map.write_outputs(v.iter().copied(), m.outputs_mut(h)) {
+            tracing::warn!("demo: slave {address}: {e}");
+        }
+    }
 }
 
 /// The demo's last line with `--json`.

@@ -52,6 +52,12 @@ pub struct Args {
     /// Print JSON lines instead of text.
     #[arg(long)]
     json: bool,
+    /// Print status lines even on a terminal. Without it (and without
+    /// `--input -`) a terminal shows a refreshing table: `q` quit, `p`
+    /// pause, up/down select a slave, Enter its details, `w` write its
+    /// outputs (hex bytes or NAME=VALUE).
+    #[arg(long, conflicts_with = "json")]
+    plain: bool,
     /// Read commands (JSON lines) from this file, or `-` for stdin.
     #[arg(long, value_name = "FILE")]
     input: Option<String>,
@@ -176,11 +182,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         });
     }
 
-    let mut view = View::new(
-        args.json,
-        !args.json && std::io::stdout().is_terminal(),
-        Duration::from_millis(args.interval.max(10)),
-    );
+    let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     let mut info: Vec<SlaveInfo> = vec![];
     for s in &bus.slaves {
         let a = s.params.address;
@@ -192,9 +194,15 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
                 .channels(a)
                 .transpose()
                 .with_context(|| format!("slave {a}"))?,
+            modules: s.modules.clone(),
         });
     }
     let baud = bus.master.params.baud;
+    // Commands typed on stdin (`--input -`) keep the terminal for lines.
+    let stdin_commands = args.input.as_deref() == Some("-");
+    if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
+        view.open_terminal("dpctl master", baud, &info)?;
+    }
     let cycles = args.cycles;
     let exchanges = args.exchanges;
     let deadline = match args.timeout {
@@ -239,6 +247,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             }
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);
+            view.tick(m, now)?;
             let exchanged = exchanges.is_some_and(|n| {
                 m.slave_addresses()
                     .all(|a| m.slave_stats(a).is_some_and(|s| s.data_exchanges >= n))
@@ -255,6 +264,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         },
     )
     .await;
+    view.close();
     let m = station.app_mut();
     drain_events(m, &info, &mut view);
     view.status(m, &info, baud, last_now, true);

@@ -7,7 +7,9 @@
 //! with `!! `, with their hex and the errors they raised. `--json` prints
 //! the same as JSON lines (`"error"` marks the skipped bytes); `--pcap`
 //! records the telegrams. On Ctrl-C / SIGTERM it prints a summary line
-//! with the codec counters and stops.
+//! with the codec counters and stops. On a terminal (without `--json` or
+//! `--plain`) it shows the telegrams as a live list with filters and
+//! per-station statistics instead (`profibus_tui::sniff`).
 
 use crate::common;
 use crate::describe::hex;
@@ -19,8 +21,10 @@ use profibus_fdl::tap::{Tap, TapEvent};
 use profibus_fdl::transport::Port;
 use profibus_fdl::wire::{Hex, Telegram};
 use profibus_fdl::{Baud, BusParams, Instant};
+use profibus_tui::sniff::{skipped_text, SniffView};
+use profibus_tui::term::LiveSniff;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
 use tokio::io::AsyncReadExt;
@@ -39,6 +43,11 @@ pub struct Args {
     /// Print one JSON object per line.
     #[arg(long)]
     pub json: bool,
+    /// Print lines even on a terminal. Without it a terminal shows a live
+    /// list with per-station statistics: `q` quit, `p` pause, `a` filter
+    /// by address, `s` by service, `e` errors only, `c` clear filters.
+    #[arg(long, conflicts_with = "json")]
+    pub plain: bool,
     /// Record the telegrams to FILE (pcapng, link type 257 PROFIBUS DL).
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
@@ -95,6 +104,8 @@ struct Skipped<'a> {
 
 struct Printer {
     json: bool,
+    /// The live list on a terminal.
+    live: Option<LiveSniff>,
     out: BufWriter<std::io::Stdout>,
     pcap: Option<PcapWriter<BufWriter<File>>>,
 }
@@ -109,7 +120,9 @@ impl Printer {
                     return Ok(());
                 };
                 let summary = TelegramSummary::new(t, &bytes);
-                if self.json {
+                if let Some(live) = &mut self.live {
+                    live.view_mut().telegram(at, &bytes, summary.to_string());
+                } else if self.json {
                     let line = Seen {
                         t_us: us,
                         what: &summary,
@@ -126,7 +139,9 @@ impl Printer {
             TapEvent::Skipped { at, bytes, errors } => {
                 let us = at.as_nanos() / 1000;
                 let what = error_text(&errors, bytes.len());
-                if self.json {
+                if let Some(live) = &mut self.live {
+                    live.view_mut().skipped(at, skipped_text(&what, &bytes));
+                } else if self.json {
                     let line = Seen {
                         t_us: us,
                         what: Skipped {
@@ -207,8 +222,13 @@ async fn sniff(args: Args) -> Result<()> {
         }
         None => None,
     };
+    let live = (!args.json && !args.plain && std::io::stdout().is_terminal())
+        .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
+        .transpose()?;
+    let mut frames = tokio::time::interval(Duration::from_millis(50));
     let mut printer = Printer {
         json: args.json,
+        live,
         out: BufWriter::new(std::io::stdout()),
         pcap,
     };
@@ -228,6 +248,12 @@ async fn sniff(args: Args) -> Result<()> {
         tokio::select! {
             _ = int.recv() => break,
             _ = term.recv() => break,
+            _ = frames.tick(), if printer.live.is_some() => {
+                if !printer.live.as_mut().is_some_and(|l| l.tick().unwrap_or(false)) {
+                    break;
+                }
+                continue;
+            }
             r = wait => match r {
                 Err(_elapsed) => tap.line_idle(),
                 Ok(Ok(0)) => break,
@@ -246,6 +272,7 @@ async fn sniff(args: Args) -> Result<()> {
         }
         printer.out.flush()?;
     }
+    printer.live = None;
     tap.line_idle();
     while let Some(ev) = tap.poll() {
         printer.event(ev)?;

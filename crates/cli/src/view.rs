@@ -1,5 +1,6 @@
 //! The live view shared by `dpctl master` and `dpctl demo`: events as
-//! lines or JSON, a refreshing table of the slaves on a terminal. What is
+//! lines or JSON, or on a terminal the table view of `profibus_tui`
+//! (`View::open_terminal`). What is
 //! printed comes from the library's types (`Display` for text, `Serialize`
 //! for JSON): `MasterReport`, `MasterStatus`, `SlaveStatus`,
 //! `ImageValues`.
@@ -9,9 +10,11 @@ use profibus_devices::channels::{ChannelMap, ImageValues};
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterReport, MasterStatus, SlaveStatus};
 use profibus_fdl::{Baud, Instant};
+use profibus_tui::bus::{BusView, Decoding, SlaveSpec};
+use profibus_tui::term::LiveBus;
 use serde::Serialize;
 use std::fmt::Display;
-use std::io::Write;
+use std::ops::ControlFlow;
 use std::time::Duration;
 
 /// What the view shows of a slave besides the master's state.
@@ -25,6 +28,8 @@ pub struct SlaveInfo {
     /// Named channels of its process images (a slave given as a device
     /// profile).
     pub channels: Option<ChannelMap>,
+    /// The GSD modules the master configures, in slot order.
+    pub modules: Vec<String>,
 }
 
 /// An event the command line makes itself: `{"event": KIND, …body}` in
@@ -77,21 +82,73 @@ struct StatusLine<'a> {
 }
 
 impl View {
-    pub fn new(json: bool, tty: bool, interval: Duration) -> View {
+    /// Lines (JSON lines with `json`), a status every `interval`.
+    pub fn new(json: bool, interval: Duration) -> View {
         View {
             json,
-            tty,
-            log: Vec::new(),
+            live: None,
             last_print: None,
             interval,
+        }
+    }
+
+    /// Show the slaves `info` as a table on the terminal instead of
+    /// lines, titled `title`, until [`View::close`].
+    pub fn open_terminal(
+        &mut self,
+        title: &str,
+        baud: Baud,
+        info: &[SlaveInfo],
+    ) -> std::io::Result<()> {
+        let specs = info
+            .iter()
+            .map(|s| SlaveSpec {
+                address: s.address,
+                name: s.name.clone(),
+                gsd: s.gsd.clone(),
+                decoding: match (&s.channels, &s.gsd) {
+                    (Some(c), _) => Decoding::Channels(c.clone()),
+                    (None, Some(g)) => Decoding::modules(g, &s.modules),
+                    (None, None) => Decoding::None,
+                },
+            })
+            .collect();
+        self.live = Some(LiveBus::open(BusView::new(title, Some(baud), specs))?);
+        Ok(())
+    }
+
+    /// Whether the person wrote the slave's outputs on the terminal.
+    pub fn by_hand(&self, address: u8) -> bool {
+        self.live
+            .as_ref()
+            .is_some_and(|l| l.view().written_by_hand(address))
+    }
+
+    /// Give the terminal back (the table disappears).
+    pub fn close(&mut self) {
+        self.live = None;
+    }
+
+    /// On the terminal: keys (writes go to `m`) and a frame when due.
+    /// `Break`: the person quit, or the terminal failed.
+    pub fn tick(&mut self, m: &mut DpMaster, now: Instant) -> ControlFlow<()> {
+        let Some(live) = &mut self.live else {
+            return ControlFlow::Continue(());
+        };
+        match live.tick(m, now) {
+            Ok(true) => ControlFlow::Continue(()),
+            Ok(false) => ControlFlow::Break(()),
+            Err(e) => {
+                tracing::warn!("terminal: {e}");
+                ControlFlow::Break(())
+            }
         }
     }
 }
 
 pub struct View {
     pub json: bool,
-    pub tty: bool,
-    log: Vec<String>,
+    live: Option<LiveBus>,
     last_print: Option<Instant>,
     interval: Duration,
 }
@@ -101,20 +158,10 @@ impl View {
     pub fn event<E: Serialize + Display + ?Sized>(&mut self, e: &E) {
         if self.json {
             println!("{}", crate::common::json_line(e));
+        } else if let Some(live) = &mut self.live {
+            live.view_mut().log(e.to_string());
         } else {
-            self.text(e.to_string());
-        }
-    }
-
-    fn text(&mut self, text: String) {
-        if self.tty {
-            self.log.push(text);
-            let n = self.log.len();
-            if n > 12 {
-                self.log.drain(..n - 12);
-            }
-        } else {
-            println!("{text}");
+            println!("{e}");
         }
     }
 
@@ -126,7 +173,8 @@ impl View {
         now: Instant,
         force: bool,
     ) {
-        if !force && self.last_print.is_some_and(|t| now < t + self.interval) {
+        if self.live.is_some() || !force && self.last_print.is_some_and(|t| now < t + self.interval)
+        {
             return;
         }
         self.last_print = Some(now);
@@ -158,9 +206,6 @@ impl View {
             return;
         }
         let mut out = String::new();
-        if self.tty {
-            out.push_str("\x1b[H\x1b[2J");
-        }
         out.push_str(&format!("{master}\n"));
         for s in &slaves {
             out.push_str(&format!("  {}\n", s.status));
@@ -168,14 +213,7 @@ impl View {
                 out.push_str(&format!("      {c}\n"));
             }
         }
-        if self.tty {
-            for l in &self.log {
-                out.push_str(l);
-                out.push('\n');
-            }
-        }
         print!("{out}");
-        let _ = std::io::stdout().flush();
     }
 }
 

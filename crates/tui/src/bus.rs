@@ -1,0 +1,1051 @@
+//! The slaves of a DP master as a refreshing table.
+//!
+//! [`BusView`] takes snapshots of a [`DpMaster`] ([`BusView::update`]),
+//! lines for its log ([`BusView::log`]) and keys
+//! ([`BusView::key`]), and draws itself ([`BusView::render`]). Keys:
+//!
+//! | key | what it does |
+//! |-----|--------------|
+//! | `q`, Ctrl-C | quit ([`Action::Quit`]) |
+//! | `p` | pause / resume the view (the bus keeps running) |
+//! | ↑ / ↓ | select a slave |
+//! | Enter | details of the selected slave (Esc or Enter closes them) |
+//! | `w` | write the selected slave's outputs: hex bytes (`01 FF`), or `NAME=VALUE ...` for named channels ([`Action::Write`]) |
+
+use crate::{fit, hex, Key};
+use profibus_devices::channels::{ChannelError, ChannelMap, Direction, Value};
+use profibus_dp::diag;
+use profibus_dp::gsd::Gsd;
+use profibus_dp::master::{DpMaster, OperatingState, SlaveState, SlaveStats};
+use profibus_fdl::{Baud, Instant};
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::text::{Line, Span, Text};
+use ratatui::widgets::{Block, Borders, Cell, Clear, Paragraph, Row, Table, TableState};
+use ratatui::Frame;
+use std::collections::VecDeque;
+use std::time::Duration;
+
+/// How the view decodes a slave's process images.
+#[derive(Debug, Clone, Default)]
+pub enum Decoding {
+    /// Hex only.
+    #[default]
+    None,
+    /// The named, typed channels of a device profile.
+    Channels(ChannelMap),
+    /// The GSD modules the master configured, in slot order: each
+    /// module's part of the images.
+    Modules(Vec<ModuleSpan>),
+}
+
+/// One configured GSD module and its share of the process images.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ModuleSpan {
+    /// The module's name in the GSD.
+    pub name: String,
+    /// Input bytes.
+    pub inputs: usize,
+    /// Output bytes.
+    pub outputs: usize,
+}
+
+impl Decoding {
+    /// The modules `names` of `gsd` with their input and output sizes;
+    /// [`Decoding::None`] when a name is not in the GSD.
+    pub fn modules<S: AsRef<str>>(gsd: &Gsd, names: &[S]) -> Decoding {
+        let mut spans = vec![];
+        for n in names {
+            let Some(io) = gsd.module(n.as_ref()).and_then(|m| m.io().ok()) else {
+                return Decoding::None;
+            };
+            spans.push(ModuleSpan {
+                name: n.as_ref().to_string(),
+                inputs: io.input_bytes,
+                outputs: io.output_bytes,
+            });
+        }
+        Decoding::Modules(spans)
+    }
+
+    /// One image decoded, one entry per channel or module: `name=value`
+    /// (with the unit of a scaled channel) or `module: hex`.
+    pub fn words(&self, dir: Direction, image: &[u8]) -> Vec<String> {
+        match self {
+            Decoding::None => vec![],
+            Decoding::Channels(map) => map
+                .decode(dir, image)
+                .map(|(c, v)| match &c.scale {
+                    Some(s) => format!("{}={v} {}", c.name, s.unit),
+                    None => format!("{}={v}", c.name),
+                })
+                .collect(),
+            Decoding::Modules(spans) => {
+                let mut at = 0;
+                let mut out = vec![];
+                for s in spans {
+                    let n = match dir {
+                        Direction::Input => s.inputs,
+                        Direction::Output => s.outputs,
+                    };
+                    if n > 0 {
+                        let part = image.get(at..(at + n).min(image.len())).unwrap_or(&[]);
+                        out.push(format!("{}: {}", s.name, hex(part)));
+                    }
+                    at += n;
+                }
+                out
+            }
+        }
+    }
+}
+
+/// What the view knows of a slave besides what the master tells.
+#[derive(Debug, Clone)]
+pub struct SlaveSpec {
+    /// Station address.
+    pub address: u8,
+    /// Name shown.
+    pub name: String,
+    /// The GSD: diagnosis texts and the ident number.
+    pub gsd: Option<Gsd>,
+    /// How its images are decoded.
+    pub decoding: Decoding,
+}
+
+/// A write the person asked for with `w`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OutputWrite {
+    /// Bytes from the start of the output image.
+    Bytes(Vec<u8>),
+    /// Named output channels.
+    Channels(Vec<(String, Value)>),
+}
+
+/// What the application should do after a key.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Nothing.
+    None,
+    /// Stop.
+    Quit,
+    /// Write outputs of the slave at `address`; carry it out with
+    /// [`BusView::write`].
+    Write {
+        /// Station address.
+        address: u8,
+        /// What to write.
+        write: OutputWrite,
+    },
+}
+
+/// Why a write was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// Not hex bytes nor `NAME=VALUE` words.
+    #[error("give hex bytes (01 FF) or NAME=VALUE words: {0}")]
+    Syntax(String),
+    /// More bytes than the slave has outputs.
+    #[error("slave {address} has {len} output bytes, {given} given")]
+    TooLong {
+        /// Station address.
+        address: u8,
+        /// Its output length.
+        len: usize,
+        /// Bytes given.
+        given: usize,
+    },
+    /// Names given for a slave without named channels.
+    #[error("slave {0} has no named channels: give hex bytes")]
+    NoChannels(u8),
+    /// A channel name or value is wrong.
+    #[error(transparent)]
+    Channel(#[from] ChannelError),
+    /// Not a slave of the master.
+    #[error("slave {0} is not configured")]
+    UnknownSlave(u8),
+}
+
+/// A slave as last seen.
+#[derive(Debug, Clone)]
+struct Snapshot {
+    state: SlaveState,
+    inputs: Vec<u8>,
+    outputs: Vec<u8>,
+    stats: SlaveStats,
+    diag: Vec<u8>,
+    /// Diagnosis in words (kept while `diag` stays the same).
+    diag_words: Vec<String>,
+    /// Time between two Data_Exchange cycles of this slave.
+    cycle: Option<Duration>,
+    /// Where the cycle time is measured from: (time, data exchanges).
+    mark: Option<(Instant, u64)>,
+}
+
+/// What the header shows of the master.
+#[derive(Debug, Clone, Copy, Default)]
+struct MasterLine {
+    address: u8,
+    operating: Option<OperatingState>,
+    cycles: u64,
+    min_us: u64,
+    avg_us: u64,
+    max_us: u64,
+    bus_time: Duration,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Mode {
+    Table,
+    Details { scroll: u16 },
+    Prompt(String),
+}
+
+/// The bus view: state of the table, the log and the prompts.
+pub struct BusView {
+    title: String,
+    baud: Option<Baud>,
+    specs: Vec<SlaveSpec>,
+    rows: Vec<Snapshot>,
+    master: MasterLine,
+    log: VecDeque<String>,
+    held: Vec<String>,
+    paused: bool,
+    selected: usize,
+    mode: Mode,
+    message: Option<String>,
+    /// Slaves whose outputs the person wrote.
+    by_hand: Vec<u8>,
+}
+
+/// Lines kept in the log.
+const LOG_LINES: usize = 200;
+
+/// How long the cycle time is measured over.
+const CYCLE_WINDOW: Duration = Duration::from_millis(500);
+
+/// Most lines of one slave in the table (the details show everything).
+const MAX_ROW_LINES: usize = 5;
+
+/// After this long without a Data_Exchange a slave has no cycle time.
+const CYCLE_STALE: Duration = Duration::from_secs(3);
+
+impl BusView {
+    /// A view titled `title` (e.g. `dpctl master`) of the slaves `specs`,
+    /// in that order, on a line at `baud`.
+    pub fn new(title: impl Into<String>, baud: Option<Baud>, specs: Vec<SlaveSpec>) -> BusView {
+        let rows = specs
+            .iter()
+            .map(|_| Snapshot {
+                state: SlaveState::Offline,
+                inputs: vec![],
+                outputs: vec![],
+                stats: SlaveStats::default(),
+                diag: vec![],
+                diag_words: vec![],
+                cycle: None,
+                mark: None,
+            })
+            .collect();
+        BusView {
+            title: title.into(),
+            baud,
+            specs,
+            rows,
+            master: MasterLine::default(),
+            log: VecDeque::new(),
+            held: vec![],
+            paused: false,
+            selected: 0,
+            mode: Mode::Table,
+            message: None,
+            by_hand: vec![],
+        }
+    }
+
+    /// Whether the person wrote the outputs of the slave at `address`
+    /// (`w`): an application that writes outputs itself leaves them.
+    pub fn written_by_hand(&self, address: u8) -> bool {
+        self.by_hand.contains(&address)
+    }
+
+    /// Whether the view is paused (`p`).
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// The station address of the selected slave.
+    pub fn selected(&self) -> Option<u8> {
+        self.specs.get(self.selected).map(|s| s.address)
+    }
+
+    /// Take a snapshot of the master's slaves at `now` (bus time),
+    /// unless the view is paused.
+    pub fn update(&mut self, m: &DpMaster, now: Instant) {
+        if self.paused {
+            return;
+        }
+        let c = m.cycle_stats();
+        self.master = MasterLine {
+            address: m.address(),
+            operating: Some(m.operating_state()),
+            cycles: c.cycles,
+            min_us: c.min_ns / 1000,
+            avg_us: c.avg().as_micros() as u64,
+            max_us: c.max_ns / 1000,
+            bus_time: now - Instant::ZERO,
+        };
+        for (spec, row) in self.specs.iter().zip(self.rows.iter_mut()) {
+            let Some(h) = m.handle(spec.address) else {
+                continue;
+            };
+            let s = m.slave(h);
+            row.state = s.state;
+            row.stats = s.stats;
+            row.inputs.clear();
+            row.inputs.extend_from_slice(s.inputs);
+            row.outputs.clear();
+            row.outputs.extend_from_slice(s.outputs);
+            if row.diag != s.diag {
+                row.diag = s.diag.to_vec();
+                row.diag_words = if s.diag.is_empty() {
+                    vec![]
+                } else {
+                    let dpv1 = m.slave_params(spec.address).is_some_and(|p| p.dpv1);
+                    diag::describe(s.diag, spec.gsd.as_ref(), dpv1)
+                };
+            }
+            let n = s.stats.data_exchanges;
+            match row.mark {
+                Some((t, k)) if n > k && now - t >= CYCLE_WINDOW => {
+                    row.cycle = Some((now - t) / (n - k) as u32);
+                    row.mark = Some((now, n));
+                }
+                Some((t, k)) if n == k && now - t >= CYCLE_STALE => row.cycle = None,
+                Some((_, k)) if n < k => row.mark = Some((now, n)),
+                Some(_) => {}
+                None => row.mark = Some((now, n)),
+            }
+        }
+    }
+
+    /// Add a line to the log (held back while the view is paused).
+    pub fn log(&mut self, line: impl Into<String>) {
+        let line = line.into();
+        if self.paused {
+            self.held.push(line);
+        } else {
+            self.push_log(line);
+        }
+    }
+
+    fn push_log(&mut self, line: String) {
+        self.log.push_back(line);
+        while self.log.len() > LOG_LINES {
+            self.log.pop_front();
+        }
+    }
+
+    /// Handle a key.
+    pub fn key(&mut self, key: Key) -> Action {
+        if key == Key::Interrupt {
+            return Action::Quit;
+        }
+        match &mut self.mode {
+            Mode::Prompt(text) => match key {
+                Key::Char(c) => text.push(c),
+                Key::Backspace => {
+                    text.pop();
+                }
+                Key::Esc => self.mode = Mode::Table,
+                Key::Enter => {
+                    let text = std::mem::take(text);
+                    self.mode = Mode::Table;
+                    return self.parse_write(&text);
+                }
+                _ => {}
+            },
+            Mode::Details { scroll } => match key {
+                Key::Esc | Key::Enter => self.mode = Mode::Table,
+                Key::Char('q') => return Action::Quit,
+                Key::Char('p') => self.toggle_pause(),
+                Key::Up | Key::PageUp => *scroll = scroll.saturating_sub(1),
+                Key::Down | Key::PageDown => *scroll = scroll.saturating_add(1),
+                _ => {}
+            },
+            Mode::Table => match key {
+                Key::Char('q') => return Action::Quit,
+                Key::Char('p') => self.toggle_pause(),
+                Key::Up => self.selected = self.selected.saturating_sub(1),
+                Key::Down => {
+                    self.selected = (self.selected + 1).min(self.specs.len().saturating_sub(1))
+                }
+                Key::PageUp => self.selected = 0,
+                Key::PageDown => self.selected = self.specs.len().saturating_sub(1),
+                Key::Enter if !self.specs.is_empty() => self.mode = Mode::Details { scroll: 0 },
+                Key::Char('w') if !self.specs.is_empty() => {
+                    self.message = None;
+                    self.mode = Mode::Prompt(String::new());
+                }
+                Key::Esc => self.message = None,
+                _ => {}
+            },
+        }
+        Action::None
+    }
+
+    fn toggle_pause(&mut self) {
+        self.paused = !self.paused;
+        if !self.paused {
+            for l in std::mem::take(&mut self.held) {
+                self.push_log(l);
+            }
+        }
+    }
+
+    /// The prompt's text as a write to the selected slave.
+    fn parse_write(&mut self, text: &str) -> Action {
+        let Some(spec) = self.specs.get(self.selected) else {
+            return Action::None;
+        };
+        let address = spec.address;
+        let text = text.trim();
+        if text.is_empty() {
+            return Action::None;
+        }
+        let write = if text.contains('=') {
+            let mut values = vec![];
+            for word in text.split_whitespace() {
+                let Some((name, v)) = word.split_once('=') else {
+                    self.message = Some(WriteError::Syntax(word.into()).to_string());
+                    return Action::None;
+                };
+                match parse_value(v) {
+                    Some(v) => values.push((name.to_string(), v)),
+                    None => {
+                        self.message = Some(WriteError::Syntax(word.into()).to_string());
+                        return Action::None;
+                    }
+                }
+            }
+            OutputWrite::Channels(values)
+        } else {
+            match profibus_fdl::wire::parse_hex(text) {
+                Ok(b) => OutputWrite::Bytes(b),
+                Err(e) => {
+                    self.message = Some(WriteError::Syntax(e.to_string()).to_string());
+                    return Action::None;
+                }
+            }
+        };
+        Action::Write { address, write }
+    }
+
+    /// Carry out a write on the master's output image; the view shows
+    /// what was written or why not.
+    pub fn write(
+        &mut self,
+        m: &mut DpMaster,
+        address: u8,
+        write: &OutputWrite,
+    ) -> Result<(), WriteError> {
+        let r = self.try_write(m, address, write);
+        if r.is_ok() && !self.by_hand.contains(&address) {
+            self.by_hand.push(address);
+        }
+        self.message = Some(match &r {
+            Ok(()) => format!(
+                "slave {address}: outputs {}",
+                hex(m.outputs(address).unwrap_or(&[]))
+            ),
+            Err(e) => format!("not written: {e}"),
+        });
+        r
+    }
+
+    fn try_write(
+        &self,
+        m: &mut DpMaster,
+        address: u8,
+        write: &OutputWrite,
+    ) -> Result<(), WriteError> {
+        let h = m.handle(address).ok_or(WriteError::UnknownSlave(address))?;
+        let out = m.outputs_mut(h);
+        match write {
+            OutputWrite::Bytes(b) if b.len() > out.len() => Err(WriteError::TooLong {
+                address,
+                len: out.len(),
+                given: b.len(),
+            }),
+            OutputWrite::Bytes(b) => {
+                out[..b.len()].copy_from_slice(b);
+                Ok(())
+            }
+            OutputWrite::Channels(values) => {
+                let spec = self.specs.iter().find(|s| s.address == address);
+                let Some(Decoding::Channels(map)) = spec.map(|s| &s.decoding) else {
+                    return Err(WriteError::NoChannels(address));
+                };
+                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), out)?;
+                Ok(())
+            }
+        }
+    }
+
+    /// Draw the view into `area` of a frame.
+    pub fn render(&self, f: &mut Frame<'_>, area: Rect) {
+        let log_height = (self.log.len() as u16).clamp(3, 8) + 2;
+        let [head, table, log, foot] = Layout::vertical([
+            Constraint::Length(1),
+            Constraint::Min(4),
+            Constraint::Length(log_height),
+            Constraint::Length(1),
+        ])
+        .areas(area);
+        f.render_widget(Paragraph::new(self.header_line()), head);
+        self.render_table(f, table);
+        let lines: Vec<Line> = self
+            .log
+            .iter()
+            .skip(self.log.len().saturating_sub(log_height as usize - 2))
+            .map(|l| Line::raw(fit(l, log.width.saturating_sub(2) as usize)))
+            .collect();
+        f.render_widget(
+            Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(" events ")),
+            log,
+        );
+        f.render_widget(Paragraph::new(self.footer_line()), foot);
+        if let Mode::Details { scroll } = self.mode {
+            self.render_details(f, area, scroll);
+        }
+    }
+
+    fn header_line(&self) -> Line<'static> {
+        let m = &self.master;
+        let mut spans = vec![
+            Span::styled(
+                self.title.clone(),
+                Style::default().add_modifier(Modifier::BOLD),
+            ),
+            Span::raw(format!("  master {}", m.address)),
+        ];
+        if let Some(b) = self.baud {
+            spans.push(Span::raw(format!(" at {b}")));
+        }
+        if let Some(o) = m.operating {
+            spans.push(Span::raw(format!("  {}", o.as_str())));
+        }
+        spans.push(Span::raw(format!(
+            "  cycles {}  cycle min/avg/max {}/{}/{} µs  t {:.1} s",
+            m.cycles,
+            m.min_us,
+            m.avg_us,
+            m.max_us,
+            m.bus_time.as_secs_f64()
+        )));
+        if self.paused {
+            spans.push(Span::styled(
+                "  PAUSED",
+                Style::default().add_modifier(Modifier::REVERSED),
+            ));
+        }
+        Line::from(spans)
+    }
+
+    fn footer_line(&self) -> Line<'static> {
+        match &self.mode {
+            Mode::Prompt(text) => {
+                let (a, n) = self
+                    .specs
+                    .get(self.selected)
+                    .map(|s| (s.address, s.name.as_str()))
+                    .unwrap_or((0, ""));
+                Line::from(vec![
+                    Span::styled(
+                        format!("write outputs of slave {a} {n} (hex bytes or NAME=VALUE, Esc cancels): "),
+                        Style::default().add_modifier(Modifier::BOLD),
+                    ),
+                    Span::raw(format!("{text}_")),
+                ])
+            }
+            _ => match &self.message {
+                Some(m) => Line::raw(m.clone()),
+                None => Line::raw(
+                    "q quit  p pause  ↑/↓ select  Enter details  w write outputs".to_string(),
+                ),
+            },
+        }
+    }
+
+    fn render_table(&self, f: &mut Frame<'_>, area: Rect) {
+        let name_w = self
+            .specs
+            .iter()
+            .map(|s| s.name.chars().count())
+            .max()
+            .unwrap_or(0)
+            .clamp(4, 30) as u16;
+        // Addr, Name, State, Cycle, Retries; 7 gaps between 8 columns and
+        // the two borders.
+        let fixed = 4 + name_w + 13 + 9 + 7 + 7 + 2;
+        let rest = area.width.saturating_sub(fixed).max(24);
+        let io_w = rest * 3 / 8;
+        let diag_w = rest - 2 * io_w;
+        let header = Row::new([
+            "Addr",
+            "Name",
+            "State",
+            "Cycle",
+            "Retries",
+            "Inputs",
+            "Outputs",
+            "Diagnosis",
+        ])
+        .style(Style::default().add_modifier(Modifier::BOLD | Modifier::UNDERLINED));
+        let rows = self.specs.iter().zip(&self.rows).map(|(spec, r)| {
+            // Hex, then the decoded values, wrapped into the column.
+            let io = |dir, image: &[u8]| {
+                let bytes: Vec<String> = image.iter().map(|b| format!("{b:02X}")).collect();
+                let mut lines: Vec<Line> = wrap(&bytes, " ", io_w as usize)
+                    .into_iter()
+                    .map(Line::raw)
+                    .collect();
+                let words = spec.decoding.words(dir, image);
+                lines.extend(
+                    wrap(&words, "  ", io_w as usize)
+                        .into_iter()
+                        .map(|l| Line::styled(l, Style::default().fg(Color::Cyan))),
+                );
+                lines
+            };
+            let state_style = match r.state {
+                SlaveState::DataExchange => Style::default().fg(Color::Green),
+                SlaveState::Offline => Style::default().fg(Color::Red),
+                _ => Style::default().fg(Color::Yellow),
+            };
+            let (i, o) = (
+                io(Direction::Input, &r.inputs),
+                io(Direction::Output, &r.outputs),
+            );
+            let diag: Vec<String> = diag_summary(&r.diag_words);
+            let diag = wrap(&diag, "; ", diag_w as usize);
+            let height = i.len().max(o.len()).max(diag.len()).clamp(1, MAX_ROW_LINES);
+            Row::new(vec![
+                Cell::from(format!("{:>3}", spec.address)),
+                Cell::from(fit(&spec.name, name_w as usize)),
+                Cell::from(Span::styled(r.state.name(), state_style)),
+                Cell::from(cycle_text(r.cycle)),
+                Cell::from(format!("{:>7}", r.stats.retries)),
+                Cell::from(Text::from(i)),
+                Cell::from(Text::from(o)),
+                Cell::from(Text::from(diag.join("\n"))),
+            ])
+            .height(height as u16)
+        });
+        let table = Table::new(
+            rows,
+            [
+                Constraint::Length(4),
+                Constraint::Length(name_w),
+                Constraint::Length(13),
+                Constraint::Length(9),
+                Constraint::Length(7),
+                Constraint::Length(io_w),
+                Constraint::Length(io_w),
+                Constraint::Length(diag_w),
+            ],
+        )
+        .header(header)
+        .row_highlight_style(Style::default().add_modifier(Modifier::REVERSED))
+        .block(Block::default().borders(Borders::ALL).title(" slaves "));
+        let mut state = TableState::default().with_selected(Some(self.selected));
+        f.render_stateful_widget(table, area, &mut state);
+    }
+
+    /// The details of the selected slave, as lines.
+    fn details(&self) -> Vec<String> {
+        let (Some(spec), Some(r)) = (self.specs.get(self.selected), self.rows.get(self.selected))
+        else {
+            return vec![];
+        };
+        let mut out = vec![format!("slave {} {}", spec.address, spec.name)];
+        let mut l = format!("state {}", r.state.name());
+        if let Some(g) = &spec.gsd {
+            l.push_str(&format!(
+                "  ident number 0x{:04X}  {} {}",
+                g.ident_number,
+                g.vendor_name.as_deref().unwrap_or(""),
+                g.model_name.as_deref().unwrap_or("")
+            ));
+        }
+        out.push(l);
+        let s = &r.stats;
+        out.push(format!(
+            "cycle {}  data exchanges {}  retries {}  no answer {}  restarts {}  diagnosis reads {}",
+            cycle_text(r.cycle).trim(),
+            s.data_exchanges,
+            s.retries,
+            s.errors,
+            s.restarts,
+            s.diag_reads
+        ));
+        if let Decoding::Modules(spans) = &spec.decoding {
+            out.push(format!(
+                "modules: {}",
+                spans
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        for (what, dir, image) in [
+            ("inputs", Direction::Input, &r.inputs),
+            ("outputs", Direction::Output, &r.outputs),
+        ] {
+            out.push(format!("{what} ({} bytes): {}", image.len(), hex(image)));
+            for w in spec.decoding.words(dir, image) {
+                out.push(format!("    {w}"));
+            }
+        }
+        if r.diag.is_empty() {
+            out.push("diagnosis: none read yet".into());
+        } else {
+            out.push(format!("diagnosis: {}", hex(&r.diag)));
+            for w in &r.diag_words {
+                out.push(format!("    {w}"));
+            }
+        }
+        out
+    }
+
+    fn render_details(&self, f: &mut Frame<'_>, area: Rect, scroll: u16) {
+        let popup = Rect {
+            x: area.x + area.width / 20,
+            y: area.y + area.height / 10,
+            width: area.width - area.width / 10,
+            height: area.height - area.height / 5,
+        };
+        let lines: Vec<Line> = self.details().into_iter().map(Line::raw).collect();
+        f.render_widget(Clear, popup);
+        f.render_widget(
+            Paragraph::new(lines).scroll((scroll, 0)).block(
+                Block::default()
+                    .borders(Borders::ALL)
+                    .title(" details (Esc closes, ↑/↓ scroll) "),
+            ),
+            popup,
+        );
+    }
+}
+
+/// A cycle time for the table.
+fn cycle_text(c: Option<Duration>) -> String {
+    match c {
+        Some(d) if d >= Duration::from_secs(1) => format!("{:>7.2} s", d.as_secs_f64()),
+        Some(d) => format!("{:>6.1} ms", d.as_secs_f64() * 1e3),
+        None => format!("{:>9}", "—"),
+    }
+}
+
+/// The diagnosis in a few words: the station status and the device's
+/// own blocks, without the lines that are always there.
+fn diag_summary(words: &[String]) -> Vec<String> {
+    words
+        .iter()
+        .filter(|w| !w.starts_with("parameterised by") && !w.starts_with("ident number"))
+        .map(|w| w.strip_prefix("station status: ").unwrap_or(w).to_string())
+        .collect()
+}
+
+/// `words` joined by `sep` into lines of at most `width` characters,
+/// breaking between words; a word longer than a line is cut.
+fn wrap(words: &[String], sep: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = vec![];
+    let mut line = String::new();
+    for w in words {
+        let w = fit(w, width.max(1));
+        if !line.is_empty() && line.chars().count() + sep.len() + w.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push_str(sep);
+        }
+        line.push_str(&w);
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
+/// A channel value typed at the prompt: `true`/`false`, an integer
+/// (also `0x…`), or a number.
+fn parse_value(text: &str) -> Option<Value> {
+    match text {
+        "true" => return Some(Value::Bool(true)),
+        "false" => return Some(Value::Bool(false)),
+        _ => {}
+    }
+    if let Some(h) = text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        return i64::from_str_radix(h, 16).ok().map(Value::Int);
+    }
+    if let Ok(i) = text.parse::<i64>() {
+        return Some(Value::Int(i));
+    }
+    text.parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite())
+        .map(Value::Float)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::screen_text;
+    use profibus_devices::channels::ChannelType;
+    use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
+    use profibus_fdl::BusParams;
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+
+    fn master() -> DpMaster {
+        let mut a = SlaveParams::new(8, 0x1234, vec![0x20]);
+        a.name = "pump".into();
+        let b = SlaveParams::new(25, 0x4711, vec![0x31]);
+        DpMaster::new(&MasterConfig {
+            address: 2,
+            params: BusParams::defaults(Baud::B1500000),
+            slaves: vec![a, b],
+            options: MasterOptions::default(),
+        })
+        .unwrap()
+    }
+
+    fn view() -> BusView {
+        let mut map = ChannelMap::new();
+        map.push("speed", Direction::Output, 0, ChannelType::U16);
+        map.push("actual", Direction::Input, 0, ChannelType::U16);
+        BusView::new(
+            "dpctl master",
+            Some(Baud::B1500000),
+            vec![
+                SlaveSpec {
+                    address: 8,
+                    name: "pump".into(),
+                    gsd: None,
+                    decoding: Decoding::None,
+                },
+                SlaveSpec {
+                    address: 25,
+                    name: "drive".into(),
+                    gsd: None,
+                    decoding: Decoding::Channels(map),
+                },
+            ],
+        )
+    }
+
+    fn screen(v: &BusView) -> String {
+        let mut t = Terminal::new(TestBackend::new(160, 30)).unwrap();
+        t.draw(|f| v.render(f, f.area())).unwrap();
+        screen_text(t.backend().buffer())
+    }
+
+    #[test]
+    fn the_table_shows_each_slave_with_state_and_decoded_outputs() {
+        let mut m = master();
+        let mut v = view();
+        m.set_outputs(25, &[0x01, 0x02]);
+        v.update(&m, Instant::ZERO);
+        v.log("slave 8: offline → diag");
+        let s = screen(&v);
+        assert!(s.contains("dpctl master  master 2 at 1.5Mbit/s"), "{s}");
+        for h in [
+            "Addr", "Name", "State", "Cycle", "Retries", "Inputs", "Outputs",
+        ] {
+            assert!(s.contains(h), "{h} missing:\n{s}");
+        }
+        let row = s.lines().find(|l| l.contains("drive")).expect(&s);
+        assert!(row.contains(" 25 ") && row.contains(" diag "), "{row}");
+        assert!(row.contains("01 02"), "{row}");
+        assert!(s.contains("speed=258"), "{s}");
+        assert!(s.contains("slave 8: offline → diag"), "{s}");
+        assert!(s.contains("q quit  p pause"), "{s}");
+    }
+
+    #[test]
+    fn keys_select_open_details_and_pause() {
+        let mut m = master();
+        let mut v = view();
+        v.update(&m, Instant::ZERO);
+        assert_eq!(v.selected(), Some(8));
+        assert_eq!(v.key(Key::Down), Action::None);
+        assert_eq!(v.selected(), Some(25));
+        v.key(Key::Down);
+        assert_eq!(v.selected(), Some(25), "stays on the last slave");
+        v.key(Key::Enter);
+        let s = screen(&v);
+        assert!(s.contains("details (Esc closes"), "{s}");
+        assert!(s.contains("slave 25 drive"), "{s}");
+        assert!(s.contains("outputs (2 bytes): 00 00"), "{s}");
+        assert!(s.contains("speed=0"), "{s}");
+        v.key(Key::Esc);
+        assert!(!screen(&v).contains("details (Esc"));
+
+        v.key(Key::Char('p'));
+        assert!(v.paused());
+        m.set_outputs(25, &[0xAB]);
+        v.update(&m, Instant::ZERO);
+        v.log("while paused");
+        let s = screen(&v);
+        assert!(s.contains("PAUSED") && !s.contains("AB") && !s.contains("while paused"));
+        v.key(Key::Char('p'));
+        v.update(&m, Instant::ZERO);
+        let s = screen(&v);
+        assert!(!s.contains("PAUSED") && s.contains("AB") && s.contains("while paused"));
+        assert_eq!(v.key(Key::Char('q')), Action::Quit);
+        assert_eq!(v.key(Key::Interrupt), Action::Quit);
+    }
+
+    #[test]
+    fn the_prompt_writes_bytes_or_named_channels() {
+        let mut m = master();
+        let mut v = view();
+        v.key(Key::Char('w'));
+        for c in "7F".chars() {
+            v.key(Key::Char(c));
+        }
+        assert!(screen(&v).contains("write outputs of slave 8 pump"));
+        let a = v.key(Key::Enter);
+        assert_eq!(
+            a,
+            Action::Write {
+                address: 8,
+                write: OutputWrite::Bytes(vec![0x7F])
+            }
+        );
+        let Action::Write { address, write } = a else {
+            unreachable!()
+        };
+        assert!(!v.written_by_hand(8));
+        v.write(&mut m, address, &write).unwrap();
+        assert_eq!(m.outputs(8), Some(&[0x7F][..]));
+        assert!(v.written_by_hand(8) && !v.written_by_hand(25));
+        assert!(screen(&v).contains("slave 8: outputs 7F"));
+
+        // Too long: refused, nothing written.
+        let e = v
+            .write(&mut m, 8, &OutputWrite::Bytes(vec![1, 2]))
+            .unwrap_err();
+        assert!(matches!(
+            e,
+            WriteError::TooLong {
+                len: 1,
+                given: 2,
+                ..
+            }
+        ));
+        assert_eq!(m.outputs(8), Some(&[0x7F][..]));
+
+        // Named channels on the drive.
+        v.key(Key::Down);
+        v.key(Key::Char('w'));
+        for c in "speed=0x0102".chars() {
+            v.key(Key::Char(c));
+        }
+        let Action::Write { address, write } = v.key(Key::Enter) else {
+            panic!("no write")
+        };
+        assert_eq!(address, 25);
+        v.write(&mut m, address, &write).unwrap();
+        assert_eq!(m.outputs(25), Some(&[0x01, 0x02][..]));
+        // An unknown name is refused with a message.
+        let e = v
+            .write(
+                &mut m,
+                25,
+                &OutputWrite::Channels(vec![("nope".into(), Value::Int(1))]),
+            )
+            .unwrap_err();
+        assert!(e.to_string().contains("nope"), "{e}");
+        assert!(screen(&v).contains("not written"));
+        // Garbage at the prompt is a message, not a write.
+        v.key(Key::Char('w'));
+        for c in "zz".chars() {
+            v.key(Key::Char(c));
+        }
+        assert_eq!(v.key(Key::Enter), Action::None);
+        assert!(screen(&v).contains("give hex bytes"));
+    }
+
+    #[test]
+    fn modules_split_the_images_by_gsd_module() {
+        let d = Decoding::Modules(vec![
+            ModuleSpan {
+                name: "2 words in".into(),
+                inputs: 4,
+                outputs: 0,
+            },
+            ModuleSpan {
+                name: "1 byte out".into(),
+                inputs: 1,
+                outputs: 1,
+            },
+        ]);
+        assert_eq!(
+            d.words(Direction::Input, &[1, 2, 3, 4, 5]),
+            ["2 words in: 01 02 03 04", "1 byte out: 05"]
+        );
+        assert_eq!(d.words(Direction::Output, &[9]), ["1 byte out: 09"]);
+    }
+
+    #[test]
+    fn any_terminal_size_draws_without_panicking() {
+        let mut m = master();
+        let mut v = view();
+        m.set_outputs(25, &[1, 2]);
+        v.update(&m, Instant::ZERO);
+        v.log("a line");
+        for (w, h) in [(1, 1), (10, 5), (40, 10), (80, 24), (300, 80)] {
+            for k in [Key::Esc, Key::Enter, Key::Esc, Key::Char('w')] {
+                let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+                t.draw(|f| v.render(f, f.area())).unwrap();
+                v.key(k);
+            }
+            v.key(Key::Esc);
+        }
+        // 80×24: both slaves and the keys are on the screen.
+        let mut t = Terminal::new(TestBackend::new(80, 24)).unwrap();
+        t.draw(|f| v.render(f, f.area())).unwrap();
+        let s = screen_text(t.backend().buffer());
+        assert!(
+            s.contains("pump") && s.contains("drive") && s.contains("q quit"),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn long_values_wrap_between_words_inside_their_column() {
+        let w: Vec<String> = ["speed=1500", "actual=1499", "status1=512"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        assert_eq!(
+            wrap(&w, "  ", 24),
+            ["speed=1500  actual=1499", "status1=512"]
+        );
+        assert_eq!(wrap(&w, "  ", 5), ["spee…", "actu…", "stat…"]);
+        assert!(wrap(&[], " ", 10).is_empty());
+    }
+
+    #[test]
+    fn cycle_time_comes_from_data_exchanges_over_time() {
+        assert_eq!(cycle_text(Some(Duration::from_micros(2500))), "   2.5 ms");
+        assert_eq!(cycle_text(None).trim(), "—");
+        assert_eq!(parse_value("-3"), Some(Value::Int(-3)));
+        assert_eq!(parse_value("1.5"), Some(Value::Float(1.5)));
+        assert_eq!(parse_value("true"), Some(Value::Bool(true)));
+        assert_eq!(parse_value("x"), None);
+    }
+}
