@@ -153,6 +153,8 @@ actual_values = 1
 prefix = "profibus"
 bus = "line"
 writable = [3, { address = 25, channels = ["setpoint1"] }]
+outputs_timeout_ms = 300
+safe_state = "zero"
 "#;
 
 #[test]
@@ -167,15 +169,21 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     std::fs::write(&bus, BUS).unwrap();
     let port = free_port();
     let mut mosq = broker(&dir, port);
-    let gw = Proc::spawn_captured({
-        let mut c = Command::new(dpctl());
-        c.arg("gateway")
+    // The gateway's log (stderr) read as it comes: `exec` keeps the pid
+    // for the signals.
+    let mut gw = Proc::spawn(
+        "dpctl gateway",
+        Command::new("sh")
+            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
+            .arg(dpctl())
+            .arg("gateway")
             .arg("--config")
             .arg(&bus)
             .arg("--sim")
-            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
-        c
-    });
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+            .stdout(Stdio::piped()),
+    );
+    let mut log = Lines::from(&mut gw);
 
     // Every slave reaches Data_Exchange; a late subscriber gets the
     // retained status and states.
@@ -313,25 +321,33 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
         );
     }
 
-    // The broker dies and comes back: the gateway reconnects and
+    // The broker dies: after `outputs_timeout_ms` the gateway zeroes
+    // the outputs of the writable slaves (logged). It comes back: the
+    // gateway reconnects, reports the safe state in its status and
     // publishes its retained topics again; the bus kept running (the
-    // echo slave still answers writes).
+    // echo slave echoes the zeroed outputs, then answers writes).
     mosq.signal(9);
     mosq.wait(T);
+    assert!(
+        log.wait_for("outputs to the safe state", T),
+        "no safe state in the log:\n{}",
+        log.1.join("\n")
+    );
     let _mosq = broker(&dir, port);
     let (_sub2, mut again) = subscribe(port);
-    expect(&mut again, "profibus/line/status", &["online"]);
+    let st = expect(&mut again, "profibus/line/status", &["online"]);
+    assert_eq!(st["outputs_timeout"]["safe_state"], "zero", "{st}");
     let st = expect(&mut again, "profibus/line/3/state", &["data_exchange"]);
     assert!(st["cycle"].as_u64().unwrap() > 0);
-    expect(&mut again, "profibus/line/3/inputs", &["\"cafe0001\""]);
+    expect(&mut again, "profibus/line/3/outputs", &["\"00000000\""]);
+    expect(&mut again, "profibus/line/3/inputs", &["\"00000000\""]);
     publish(port, "profibus/line/3/outputs/set", "0badf00d");
     expect(&mut again, "profibus/line/3/inputs", &["\"0badf00d\""]);
 
     // SIGTERM: a clean stop that leaves the status offline.
     gw.signal(15);
     expect(&mut again, "profibus/line/status", &["offline"]);
-    let out = gw.finish(T);
-    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+    assert!(gw.wait(T).success(), "gateway failed:\n{}", log.rest().join("\n"));
 }
 
 /// The gateway as a master on a line: `dpctl bus` with a `dpctl slave`
