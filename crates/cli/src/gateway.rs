@@ -9,9 +9,8 @@ use profibus_dp::master::DpMaster;
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
 use profibus_gateway::link::{flush, pump, wall_ms};
-use profibus_gateway::settings::parse_broker;
 use profibus_gateway::sim::{slave_infos, SimPlant};
-use profibus_gateway::{Gateway, MqttLink, MqttSettings};
+use profibus_gateway::{Connection, Gateway, MqttLink, MqttSettings};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -29,7 +28,8 @@ pub struct Args {
     /// Emulate the bus file's slaves on an in-process simulated bus.
     #[arg(long)]
     sim: bool,
-    /// Broker URL, mqtt://HOST:PORT (default: `[mqtt] broker`).
+    /// Broker URL, mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (TLS)
+    /// (default: `[mqtt] broker`).
     #[arg(long, value_name = "URL")]
     mqtt: Option<String>,
     /// Extra milliseconds on the slot time for the transport's latency
@@ -49,17 +49,20 @@ pub fn run(args: Args) -> Result<()> {
         .and_then(|s| s.to_str())
         .unwrap_or("bus")
         .replace(['/', '+', '#'], "_");
-    let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), &stem)
+    let mut settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), &stem)
         .with_context(|| args.config.display().to_string())?;
+    if let Some(dir) = args.config.parent() {
+        settings.relative_to(dir);
+    }
     let url = args
         .mqtt
         .clone()
         .or_else(|| settings.broker.clone())
-        .context("no broker: give --mqtt mqtt://HOST:PORT or [mqtt] broker")?;
-    let (host, port) = parse_broker(&url)?;
+        .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
+    let conn = Connection::from_settings(&settings, &url)?;
     let gateway = Gateway::new(settings, slave_infos(&profiled)?);
     common::runtime()?.block_on(async move {
-        let link = MqttLink::connect(&host, port, &gateway);
+        let link = MqttLink::connect(&conn, &gateway);
         match &args.port {
             Some(p) => on_line(&args, p, &profiled, gateway, link).await,
             None => on_sim(&profiled, gateway, link).await,
