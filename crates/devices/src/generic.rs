@@ -452,31 +452,6 @@ pub struct GenericOptions {
     pub address_file: Option<PathBuf>,
 }
 
-/// The named channels of a slave given by GSD modules: one `U8` channel
-/// per process data byte of each identifier of `cfg`, named after its
-/// module: `NAME[i]` (`slotN[i]` for identifiers beyond `modules`).
-pub fn module_channels(modules: &[String], cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
-    let mut m = ChannelMap::new();
-    let (mut inp, mut out) = (0, 0);
-    for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
-        let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
-        let name = modules
-            .get(slot)
-            .cloned()
-            .unwrap_or_else(|| format!("slot{slot}"));
-        for (dir, n, at) in [
-            (Direction::Input, id.input_bytes(), &mut inp),
-            (Direction::Output, id.output_bytes(), &mut out),
-        ] {
-            for i in 0..n {
-                m.push(format!("{name}[{i}]"), dir, *at + i, ChannelType::U8);
-            }
-            *at += n;
-        }
-    }
-    Ok(m)
-}
-
 /// The generic device a GSD file and module list describe, as a
 /// profile.
 #[derive(Debug)]
@@ -572,6 +547,31 @@ impl Profile for GenericProfile {
     fn warnings(&self) -> Vec<String> {
         self.warnings.clone()
     }
+}
+
+/// The channels of a slave given by GSD modules: one `U8` channel per
+/// process data byte, named after its module, `NAME[i]` (`slotN[i]` for
+/// identifiers beyond the module names).
+pub fn module_channels(modules: &[String], cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+    let mut m = ChannelMap::new();
+    let (mut inp, mut out) = (0, 0);
+    for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
+        let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
+        let name = modules
+            .get(slot)
+            .cloned()
+            .unwrap_or_else(|| format!("slot{slot}"));
+        for (dir, n, at) in [
+            (Direction::Input, id.input_bytes(), &mut inp),
+            (Direction::Output, id.output_bytes(), &mut out),
+        ] {
+            for i in 0..n {
+                m.push(format!("{name}[{i}]"), dir, *at + i, ChannelType::U8);
+            }
+            *at += n;
+        }
+    }
+    Ok(m)
 }
 
 #[cfg(test)]

@@ -78,7 +78,9 @@ pub mod core;
 pub mod link;
 pub mod settings;
 pub mod sim;
+pub mod sparkplug;
 
 pub use crate::core::{Gateway, Publish, Service, SlaveInfo, Topics};
-pub use link::{Connection, ConnectionError, LinkEvent, MqttLink};
+pub use link::{Connection, ConnectionError, LinkEvent, MqttLink, Session};
 pub use settings::{Broker, MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
+pub use sparkplug::{EdgeNode, SparkplugId};

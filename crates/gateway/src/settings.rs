@@ -17,6 +17,7 @@
 //! password_file = "mqtt.secret"      # its password: the file's first line ...
 //! password_env = "MQTT_PASSWORD"     # ... or this environment variable (not both)
 //! ca_file = "ca.crt"                 # mqtts://: CA certificates (PEM); default: the system's
+//! sparkplug = "plant/line1"          # Sparkplug B mode, GROUP/EDGE (see crate::sparkplug)
 //! ```
 //!
 //! `broker` is `mqtt://HOST[:PORT]` (plain TCP, port 1883) or
@@ -41,6 +42,7 @@
 //! broker is back, when it returns to Operate. It is logged and reported
 //! in the status once the broker is back.
 
+use crate::sparkplug::SparkplugId;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -129,6 +131,9 @@ pub struct MqttSettings {
     pub password: Option<PasswordSource>,
     /// CA certificates (PEM) for `mqtts://`; `None`: the system's.
     pub ca_file: Option<PathBuf>,
+    /// Sparkplug B mode with this group and edge node id (`None`: plain
+    /// JSON topics).
+    pub sparkplug: Option<SparkplugId>,
 }
 
 /// Where the MQTT password comes from.
@@ -193,6 +198,7 @@ const KEYS: &[&str] = &[
     "password_file",
     "password_env",
     "ca_file",
+    "sparkplug",
 ];
 
 fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
@@ -311,6 +317,9 @@ impl MqttSettings {
         if let Some(b) = &broker {
             parse_broker(b)?;
         }
+        let sparkplug = string(t, "sparkplug")?
+            .map(|s| SparkplugId::parse(&s).map_err(|e| bad("sparkplug", e.to_string())))
+            .transpose()?;
         Ok(MqttSettings {
             broker,
             client_id: string(t, "client_id")?.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -326,6 +335,7 @@ impl MqttSettings {
             username,
             password,
             ca_file,
+            sparkplug,
         })
     }
 
