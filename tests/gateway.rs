@@ -410,6 +410,29 @@ fn gateway_on_a_line_with_a_slave_process() {
     expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
     publish(port, "profibus/line/3/outputs/set", "a5a50102");
     expect(&mut lines, "profibus/line/3/inputs", &["\"a5a50102\""]);
+    // DP-V1 (MSAC_C1) over the line: write a record, read it back.
+    publish(
+        port,
+        "profibus/line/3/dpv1/request",
+        r#"{"op": "write", "slot": 1, "index": 4, "hex": "0b0c0d", "id": "dw"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/dpv1/response", &["\"dw\""]);
+    assert_eq!(r["ok"], true, "{r}");
+    publish(
+        port,
+        "profibus/line/3/dpv1/request",
+        r#"{"op": "read", "slot": 1, "index": 4, "id": "dr"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/dpv1/response", &["\"dr\""]);
+    assert_eq!(r["hex"], "0b0c0d", "{r}");
+    // A malformed request is answered, and changes nothing.
+    publish(
+        port,
+        "profibus/line/3/outputs/set",
+        r#"{"hex": "zz", "id": "bad"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/outputs/response", &["\"bad\""]);
+    assert!(r["error"].as_str().unwrap().contains("malformed"), "{r}");
     gw.signal(15);
     expect(&mut lines, "profibus/line/status", &["offline"]);
     let out = gw.finish(T);
