@@ -11,12 +11,9 @@ use crate::common;
 use crate::describe::hex;
 use anyhow::{bail, Context, Result};
 use profibus_dp::busfile::BusFile;
-use profibus_dp::master::{DpMaster, Job, JobId, JobResult, SlaveState};
-use profibus_fdl::driver::{self, Clock, Stop};
-use profibus_fdl::Instant;
+use profibus_dp::master::{Job, JobId, JobResult};
 use serde_json::json;
 use std::ops::ControlFlow;
-use std::time::Duration;
 
 /// Read or write a DP-V1 data record (slot, index) of a slave.
 #[derive(clap::Args)]
@@ -61,11 +58,7 @@ pub fn run(args: Args) -> Result<()> {
 
 async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
     let addr = args.link.slave;
-    let slave = bus
-        .slaves
-        .iter()
-        .find(|s| s.params.address == addr)
-        .with_context(|| format!("slave {addr} is not in {}", args.link.config.display()))?;
+    let slave = args.link.slave_of(&bus)?;
     if !slave.params.dpv1 {
         bail!("slave {addr} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)");
     }
@@ -95,28 +88,13 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
             )
         }
     };
-    let (mut station, mut port) = common::master_station(
-        &args.link.port,
-        &bus,
-        DpMaster::new(&bus.master)?,
-        args.link.latency,
-    )?;
-    let startup = Duration::from_millis(args.link.startup_timeout);
-    let mut started: Option<Instant> = None;
+    let mut wait = args.link.wait();
     let mut job = Some(job);
     let mut id: Option<JobId> = None;
     let mut result: Option<JobResult> = None;
-    let mut failure: Option<String> = None;
-    let stop = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        common::shutdown(),
-        |st, now| {
-            let m = st.app_mut();
-            while m.poll_event().is_some() {}
-            let t0 = *started.get_or_insert(now);
+    let mut failure: Option<anyhow::Error> = None;
+    args.link
+        .run_master(&bus, |m, now| {
             if let Some(i) = id {
                 if let Some(r) = m.take_result(i) {
                     result = Some(r);
@@ -124,36 +102,28 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
                 }
                 return ControlFlow::Continue(());
             }
-            if m.slave_state(addr) != Some(SlaveState::DataExchange) {
-                if now.saturating_duration_since(t0) > startup {
-                    failure = Some(format!(
-                        "slave {addr} did not reach Data_Exchange within {} ms (state {})",
-                        startup.as_millis(),
-                        m.slave_state(addr).map_or("unknown", |s| s.name())
-                    ));
+            match wait.check(m, now, false) {
+                Ok(true) => {}
+                Ok(false) => return ControlFlow::Continue(()),
+                Err(e) => {
+                    failure = Some(e.into());
                     return ControlFlow::Break(());
                 }
-                return ControlFlow::Continue(());
             }
             if let Some(j) = job.take() {
                 match m.submit(j) {
                     Some(i) => id = Some(i),
                     None => {
-                        failure = Some("job queue full".into());
+                        failure = Some(anyhow::anyhow!("job queue full"));
                         return ControlFlow::Break(());
                     }
                 }
             }
             ControlFlow::Continue(())
-        },
-    )
-    .await;
-    match stop.with_context(|| format!("on {}", args.link.port))? {
-        Stop::Shutdown => bail!("interrupted"),
-        Stop::Done => {}
-    }
+        })
+        .await?;
     if let Some(f) = failure {
-        bail!("{f}");
+        return Err(f);
     }
     let (slot, index) = (args.slot, args.index);
     match result.context("no result")? {
