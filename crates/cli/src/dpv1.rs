@@ -12,7 +12,6 @@ use crate::describe::hex;
 use anyhow::{bail, Context, Result};
 use profibus_dp::busfile::BusFile;
 use profibus_dp::master::{Job, JobId, JobResult};
-use serde_json::json;
 use std::ops::ControlFlow;
 
 /// Read or write a DP-V1 data record (slot, index) of a slave.
@@ -126,59 +125,70 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
         return Err(f);
     }
     let (slot, index) = (args.slot, args.index);
-    match result.context("no result")? {
+    let result = result.context("no result")?;
+    let mut rec = Outcome {
+        slave: addr,
+        op,
+        slot,
+        index,
+        ok: matches!(result, JobResult::Data(_) | JobResult::Done),
+        length: None,
+        data: None,
+        error: None,
+        error_decode: None,
+        error_code_1: None,
+        error_code_2: None,
+    };
+    let text = match &result {
         JobResult::Data(d) => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true,
-                           "length": d.len(), "data": hex(&d)})
-                );
-            } else {
-                println!(
-                    "slave {addr} slot {slot} index {index}: {} bytes {}",
-                    d.len(),
-                    hex(&d)
-                );
-            }
-            Ok(())
+            rec.length = Some(d.len());
+            rec.data = Some(d);
+            format!("{} bytes {}", d.len(), hex(d))
         }
-        JobResult::Done => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true})
-                );
-            } else {
-                println!("slave {addr} slot {slot} index {index}: written");
-            }
-            Ok(())
-        }
+        JobResult::Done => "written".to_string(),
         JobResult::Dpv1Error(e) => {
-            let words = e.describe();
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
-                           "error": words, "error_decode": e.error_decode,
-                           "error_code_1": format!("0x{:02X}", e.error_code_1),
-                           "error_code_2": e.error_code_2})
-                );
-            }
-            bail!("slave {addr} slot {slot} index {index}: {words}")
+            rec.error_decode = Some(e.error_decode);
+            rec.error_code_1 = Some(format!("0x{:02X}", e.error_code_1));
+            rec.error_code_2 = Some(e.error_code_2);
+            e.describe()
         }
-        other => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
-                           "error": other.describe()})
-                );
-            }
-            bail!(
-                "slave {addr} slot {slot} index {index}: {}",
-                other.describe()
-            )
-        }
+        other => other.describe(),
+    };
+    if !rec.ok {
+        rec.error = Some(text.clone());
     }
+    if args.json {
+        println!("{}", common::json_line(&rec));
+    } else if rec.ok {
+        println!("slave {addr} slot {slot} index {index}: {text}");
+    }
+    if !rec.ok {
+        bail!("slave {addr} slot {slot} index {index}: {text}");
+    }
+    Ok(())
+}
+
+/// The `--json` line.
+#[derive(serde::Serialize)]
+struct Outcome<'a> {
+    slave: u8,
+    op: &'static str,
+    slot: u8,
+    index: u8,
+    ok: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    length: Option<usize>,
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "profibus_fdl::ser::opt_hex"
+    )]
+    data: Option<&'a Vec<u8>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_decode: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_code_1: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_code_2: Option<u8>,
 }

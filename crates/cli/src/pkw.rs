@@ -12,7 +12,6 @@ use anyhow::{bail, Context, Result};
 use profibus_devices::pkw::client::{PkwAnswer, PkwClient, PkwError};
 use profibus_devices::pkw::{Command, Dialect, Reply};
 use profibus_dp::busfile::{BusFile, BusSlave};
-use serde_json::json;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -318,12 +317,18 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
         Some(Ok(a)) => a,
         Some(Err(e)) => {
             if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "pnu": param.pnu, "index": param.index, "ok": false,
-                           "error": e.to_string(),
-                           "code": match &e { PkwError::Refused { code, .. } => Some(*code), _ => None }})
-                );
+                let line = Refused {
+                    slave: addr,
+                    pnu: param.pnu,
+                    index: param.index,
+                    ok: false,
+                    error: e.to_string(),
+                    code: match &e {
+                        PkwError::Refused { code, .. } => Some(*code),
+                        _ => None,
+                    },
+                };
+                println!("{}", common::json_line(&line));
             }
             bail!("slave {addr} P{}: {e}", param.pnu);
         }
@@ -331,6 +336,39 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
     };
     print_answer(&args, dialect, param, &answer);
     Ok(())
+}
+
+/// `--json`: the slave refused or did not answer.
+#[derive(serde::Serialize)]
+struct Refused {
+    slave: u8,
+    pnu: u16,
+    index: Option<u16>,
+    ok: bool,
+    error: String,
+    code: Option<u16>,
+}
+
+/// `--json`: the answer.
+#[derive(serde::Serialize)]
+struct Answered {
+    slave: u8,
+    device: &'static str,
+    op: &'static str,
+    pnu: u16,
+    index: Option<u16>,
+    ok: bool,
+    format: &'static str,
+    value: u32,
+    signed: i64,
+    hex: String,
+    request: String,
+    response: String,
+    pke: String,
+    ind: u16,
+    pwe1: String,
+    pwe2: String,
+    words: Option<String>,
 }
 
 fn print_answer(args: &Args, dialect: &Dialect, param: Param, a: &PkwAnswer) {
@@ -354,18 +392,27 @@ fn print_answer(args: &Args, dialect: &Dialect, param: Param, a: &PkwAnswer) {
         None => format!("P{}", param.pnu),
     };
     if args.json {
-        println!(
-            "{}",
-            json!({
-                "slave": args.link.slave, "device": dialect.name, "op": op, "pnu": param.pnu,
-                "index": param.index, "ok": true, "format": if a.reply.is_dword() { "dword" } else { "word" },
-                "value": value, "signed": signed, "hex": format!("0x{value:0width$X}", width = if a.reply.is_dword() { 8 } else { 4 }),
-                "request": a.request.to_string(), "response": a.response.to_string(),
-                "pke": format!("0x{:04X}", a.response.pke), "ind": a.response.ind,
-                "pwe1": format!("0x{:04X}", a.response.pwe1), "pwe2": format!("0x{:04X}", a.response.pwe2),
-                "words": element,
-            })
-        );
+        let dword = a.reply.is_dword();
+        let line = Answered {
+            slave: args.link.slave,
+            device: dialect.name,
+            op,
+            pnu: param.pnu,
+            index: param.index,
+            ok: true,
+            format: if dword { "dword" } else { "word" },
+            value,
+            signed,
+            hex: format!("0x{value:0width$X}", width = if dword { 8 } else { 4 }),
+            request: a.request.to_string(),
+            response: a.response.to_string(),
+            pke: format!("0x{:04X}", a.response.pke),
+            ind: a.response.ind,
+            pwe1: format!("0x{:04X}", a.response.pwe1),
+            pwe2: format!("0x{:04X}", a.response.pwe2),
+            words: element,
+        };
+        println!("{}", common::json_line(&line));
     } else {
         let what = match &args.op {
             Op::Describe { attr, .. } => format!("{name} {attr}"),

@@ -16,7 +16,6 @@ use profibus_devices::rfid::{CFG, IDENT};
 use profibus_dp::busfile::BusFile;
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_fdl::Instant;
-use serde_json::json;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -133,25 +132,39 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
 fn print(args: &Args, d: &Done) {
     let ms = d.took.as_secs_f64() * 1000.0;
     match &d.answer {
-        Ok(a) if args.json => println!(
-            "{}",
-            json!({"slave": args.link.slave, "command": d.command, "ok": true,
-                   "answer": String::from_utf8_lossy(a), "answer_hex": crate::describe::hex(a),
-                   "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained,
-                   "restarts": d.restarts})
-        ),
+        Ok(a) if args.json => {
+            let line = Answered {
+                done: RfidDone::new(args.link.slave, d.command.clone(), Ok::<_, String>(a)),
+                bytes: a.len(),
+                ms: (ms * 1000.0).round() / 1000.0,
+                drained: d.drained,
+                restarts: d.restarts,
+            };
+            println!("{}", common::json_line(&line));
+        }
         Ok(a) => {
             let text = String::from_utf8_lossy(a);
             for line in text.split_terminator('\r') {
                 println!("{line}");
             }
         }
-        Err(e) if args.json => println!(
-            "{}",
-            json!({"slave": args.link.slave, "command": d.command, "ok": false, "error": e})
-        ),
+        Err(e) if args.json => {
+            let done = RfidDone::new(args.link.slave, d.command.clone(), Err::<&[u8], _>(e));
+            println!("{}", common::json_line(&done));
+        }
         Err(_) => {}
     }
+}
+
+/// `dpctl rfid --json`: an answered command.
+#[derive(serde::Serialize)]
+struct Answered {
+    #[serde(flatten)]
+    done: RfidDone,
+    bytes: usize,
+    ms: f64,
+    drained: usize,
+    restarts: u64,
 }
 
 /// The demo plant's RFID reader: a tag that comes and goes, and the
