@@ -1,14 +1,16 @@
 //! Scale-out: N gateways × M slaves on one mosquitto.
 //!
 //! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE`
-//! (defaults 16 32 20 change; MODE `change` or `interval:MS`).
+//! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`).
 //!
 //! Each gateway runs in a thread of its own with its own single-threaded
 //! tokio runtime, as `dpctl gateway --sim` does in its own process: a
 //! simulated bus at 1.5 Mbit/s paced on the wall clock with M generic
-//! slaves (2 words in/out, inputs counting up on every Data_Exchange, so
-//! every poll changes them), stepped every 2 ms, publishing to a
-//! mosquitto started here. A `mosquitto_sub` process counts what the
+//! echo slaves (2 words in/out), stepped every 2 ms, publishing to a
+//! mosquitto started here. `change:MS`: every MS ms the application
+//! writes new outputs to every slave (its inputs echo them), images are
+//! published on change, so each slave yields 2 messages per MS.
+//! `interval:MS`: no writes, every image published every MS. A `mosquitto_sub` process counts what the
 //! broker delivers. Measured over SECONDS after a warm-up: messages per
 //! second, CPU seconds of this process (buses + gateways + MQTT clients),
 //! of the time spent in the gateway's own work (step and publish) and in
@@ -56,7 +58,7 @@ fn bus_file(m: usize, mode: &str, g: usize) -> String {
     let mut s = String::from("[master]\naddress = 1\nbaud = \"1.5M\"\n\n");
     for i in 0..m {
         s += &format!(
-            "[[slave]]\naddress = {}\ndevice = \"generic\"\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\ninputs = \"counter\"\n\n",
+            "[[slave]]\naddress = {}\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n",
             3 + i
         );
     }
@@ -75,7 +77,13 @@ struct Counters {
     cycles: AtomicU64,
 }
 
-fn gateway(port: u16, text: String, stop: Arc<AtomicBool>, c: Arc<Counters>) {
+fn gateway(
+    port: u16,
+    text: String,
+    write: Option<Duration>,
+    stop: Arc<AtomicBool>,
+    c: Arc<Counters>,
+) {
     let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/bus.toml"));
     let profiled = ProfiledBus::parse(path, &text).unwrap();
     let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "x").unwrap();
@@ -95,9 +103,19 @@ fn gateway(port: u16, text: String, stop: Arc<AtomicBool>, c: Arc<Counters>) {
         let start = Instant::now();
         let tick = Duration::from_millis(2);
         let mut last_cycles = 0;
+        let mut next_write = Instant::now();
+        let mut value: u32 = 0;
+        let addresses: Vec<u8> = plant.master().slave_addresses().collect();
         while !stop.load(Ordering::Relaxed) {
             let t0 = Instant::now();
             plant.run_until(BusInstant::from_nanos(start.elapsed().as_nanos() as u64));
+            if let Some(w) = write.filter(|_| t0 >= next_write) {
+                next_write = t0 + w;
+                value = value.wrapping_add(1);
+                for &a in &addresses {
+                    plant.master().set_outputs(a, &value.to_be_bytes());
+                }
+            }
             let t1 = Instant::now();
             let now = plant.now();
             let ts = wall_ms();
@@ -125,7 +143,10 @@ fn main() {
     let n: usize = args.first().and_then(|a| a.parse().ok()).unwrap_or(16);
     let m: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(32);
     let secs: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20);
-    let mode = args.get(3).cloned().unwrap_or_else(|| "change".into());
+    let mode = args.get(3).cloned().unwrap_or_else(|| "change:100".into());
+    let write = mode
+        .strip_prefix("change:")
+        .map(|ms| Duration::from_millis(ms.parse().expect("change:MS")));
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -171,7 +192,7 @@ fn main() {
     let threads: Vec<_> = (0..n)
         .map(|g| {
             let (stop, c, text) = (stop.clone(), counters.clone(), bus_file(m, &mode, g));
-            std::thread::spawn(move || gateway(port, text, stop, c))
+            std::thread::spawn(move || gateway(port, text, write, stop, c))
         })
         .collect();
     // Warm-up: connections, start-up of every slave.
