@@ -3,7 +3,8 @@
 //! driver hands in messages and the time, and sends what
 //! [`Gateway::poll_publish`] returns.
 
-use crate::settings::{MqttSettings, PublishMode, SafeState};
+use crate::outage::Outage;
+use crate::settings::{MqttSettings, PublishMode};
 use profibus_devices::channels::{ChannelMap, Direction, Value};
 use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, Dialect, PKW_LEN};
@@ -552,12 +553,8 @@ pub struct Gateway {
     online: bool,
     /// The master state in the last status published (`None`: due).
     status_master: Option<OperatingState>,
-    /// Since when the broker is away (ms).
-    offline_since: Option<u64>,
-    /// When the safe state was applied in this or the last outage (ms).
-    safe_applied: Option<u64>,
-    /// The master's state before [`SafeState::Clear`] put it in Clear.
-    cleared_from: Option<OperatingState>,
+    /// The broker outage and the outputs' safe state.
+    outage: Outage,
 }
 
 impl Gateway {
@@ -585,9 +582,7 @@ impl Gateway {
             next_interval_ms: 0,
             online: false,
             status_master: None,
-            offline_since: None,
-            safe_applied: None,
-            cleared_from: None,
+            outage: Outage::default(),
         }
     }
 
@@ -615,7 +610,7 @@ impl Gateway {
     /// the status (online) and every retained slave topic are published.
     pub fn connected(&mut self, _ts_ms: u64) {
         self.online = true;
-        self.offline_since = None;
+        self.outage.connected();
         self.status_master = None;
         for e in &mut self.slaves {
             e.published = Published::default();
@@ -625,10 +620,7 @@ impl Gateway {
     /// The connection was lost at `ts_ms`: nothing is queued until
     /// [`Gateway::connected`]; after `outputs_timeout` the safe state.
     pub fn disconnected(&mut self, ts_ms: u64) {
-        if self.online || self.offline_since.is_none() {
-            self.offline_since = Some(ts_ms);
-            self.safe_applied = None;
-        }
+        self.outage.disconnected(self.online, ts_ms);
         self.online = false;
         self.out.clear();
     }
@@ -799,7 +791,7 @@ impl Gateway {
                 _ => {}
             }
         }
-        self.safe_state(m, ts_ms);
+        self.outage.step(&self.settings, self.online, m, ts_ms);
         for q in std::mem::take(&mut self.pending) {
             let outcome = self.carry_out(m, &q);
             if let Some(o) = outcome {
@@ -885,56 +877,12 @@ impl Gateway {
         Ok(())
     }
 
-    /// Without a broker for `outputs_timeout`: the safe state, once per
-    /// outage; with the broker back after [`SafeState::Clear`]: the
-    /// master's state from before.
-    fn safe_state(&mut self, m: &mut DpMaster, ts_ms: u64) {
-        if self.online {
-            if let Some(s) = self.cleared_from.take() {
-                tracing::info!(state = s.as_str(), "broker back: master leaves Clear");
-                m.set_operating_state(s);
-            }
-            return;
-        }
-        let since = *self.offline_since.get_or_insert(ts_ms);
-        let Some(timeout) = self.settings.outputs_timeout else {
-            return;
-        };
-        if self.safe_applied.is_some() || ts_ms < since + timeout.as_millis() as u64 {
-            return;
-        }
-        self.safe_applied = Some(ts_ms);
-        let s = self.settings.safe_state;
-        tracing::warn!(
-            safe_state = s.as_str(),
-            "no broker for {} ms: outputs to the safe state",
-            timeout.as_millis()
-        );
-        match s {
-            SafeState::Keep => {}
-            SafeState::Zero => {
-                for w in &self.settings.writable {
-                    if let Some(len) = m.outputs(w.address).map(<[u8]>::len) {
-                        m.set_outputs(w.address, &vec![0; len]);
-                    }
-                }
-            }
-            SafeState::Clear => {
-                let before = m.operating_state();
-                if before != OperatingState::Clear {
-                    self.cleared_from = Some(before);
-                    m.set_operating_state(OperatingState::Clear);
-                }
-            }
-        }
-    }
-
     fn status(&self, m: &DpMaster, ts_ms: u64) -> serde_json::Value {
         let slaves: Vec<u8> = self.slaves.iter().map(|e| e.info.address).collect();
         let writable: Vec<u8> = self.settings.writable.iter().map(|w| w.address).collect();
         let mut o = json!({"state": "online", "master": m.operating_state().as_str(), "ts": ts_ms,
                            "slaves": slaves, "writable": writable});
-        if let Some(at) = self.safe_applied {
+        if let Some(at) = self.outage.safe_applied() {
             o["outputs_timeout"] =
                 json!({"safe_state": self.settings.safe_state.as_str(), "at": at});
         }
@@ -1102,6 +1050,7 @@ fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Targe
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::settings::SafeState;
     use profibus_devices::channels::ChannelType;
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};
