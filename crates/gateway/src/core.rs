@@ -293,10 +293,23 @@ pub enum RequestError {
     /// Too many requests waiting for the slave.
     #[error("slave {0}: too many requests waiting")]
     Busy(u8),
+    /// A payload larger than [`MAX_PAYLOAD`].
+    #[error("payload of {size} bytes is larger than the {limit} bytes a request may have")]
+    TooLarge {
+        /// The payload's size.
+        size: usize,
+        /// [`MAX_PAYLOAD`].
+        limit: usize,
+    },
     /// The job ran and failed.
     #[error("{0}")]
     Failed(String),
 }
+
+/// The largest request payload the gateway reads, in bytes (an output
+/// image is at most 244 bytes, a DP-V1 record 240: this leaves room for
+/// hex, JSON and names, and bounds what one message can cost).
+pub const MAX_PAYLOAD: usize = 64 * 1024;
 
 fn malformed(text: impl Into<String>) -> RequestError {
     RequestError::Malformed(text.into())
@@ -315,6 +328,13 @@ fn publishable(t: &str) -> bool {
 /// topic for the answer instead of the slave's response topic). An
 /// output write may also be a bare hex string (the whole image).
 pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Request, RequestError>) {
+    if payload.len() > MAX_PAYLOAD {
+        let e = RequestError::TooLarge {
+            size: payload.len(),
+            limit: MAX_PAYLOAD,
+        };
+        return (ReplyTo::default(), Err(e));
+    }
     let text = match std::str::from_utf8(payload) {
         Ok(t) => t,
         Err(_) => return (ReplyTo::default(), Err(malformed("payload is not UTF-8"))),
