@@ -62,6 +62,11 @@ fn broker(dir: &TempDir, port: u16) -> Proc {
 /// `mosquitto_sub -v` on the gateway's topics and `client/#` (answers
 /// sent to a request's `reply_to`), its lines collected.
 fn subscribe(port: u16) -> (Proc, Lines) {
+    subscribe_with(port, &[])
+}
+
+/// [`subscribe`] with extra `mosquitto_sub` arguments (TLS, user).
+fn subscribe_with(port: u16, extra: &[&str]) -> (Proc, Lines) {
     common::require("mosquitto_sub");
     let mut p = Proc::spawn(
         "mosquitto_sub",
@@ -77,6 +82,7 @@ fn subscribe(port: u16) -> (Proc, Lines) {
                 "-t",
                 "client/#",
             ])
+            .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::null()),
     );
@@ -85,6 +91,11 @@ fn subscribe(port: u16) -> (Proc, Lines) {
 }
 
 fn publish(port: u16, topic: &str, payload: &str) {
+    publish_with(port, topic, payload, &[])
+}
+
+/// [`publish`] with extra `mosquitto_pub` arguments (TLS, user).
+fn publish_with(port: u16, topic: &str, payload: &str, extra: &[&str]) {
     common::require("mosquitto_pub");
     let ok = Command::new("mosquitto_pub")
         .args([
@@ -99,6 +110,7 @@ fn publish(port: u16, topic: &str, payload: &str) {
             "-m",
             payload,
         ])
+        .args(extra)
         .status()
         .expect("mosquitto_pub")
         .success();
@@ -153,6 +165,8 @@ actual_values = 1
 prefix = "profibus"
 bus = "line"
 writable = [3, { address = 25, channels = ["setpoint1"] }]
+outputs_timeout_ms = 300
+safe_state = "zero"
 "#;
 
 #[test]
@@ -167,15 +181,21 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     std::fs::write(&bus, BUS).unwrap();
     let port = free_port();
     let mut mosq = broker(&dir, port);
-    let gw = Proc::spawn_captured({
-        let mut c = Command::new(dpctl());
-        c.arg("gateway")
+    // The gateway's log (stderr) read as it comes: `exec` keeps the pid
+    // for the signals.
+    let mut gw = Proc::spawn(
+        "dpctl gateway",
+        Command::new("sh")
+            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
+            .arg(dpctl())
+            .arg("gateway")
             .arg("--config")
             .arg(&bus)
             .arg("--sim")
-            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
-        c
-    });
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+            .stdout(Stdio::piped()),
+    );
+    let mut log = Lines::from(&mut gw);
 
     // Every slave reaches Data_Exchange; a late subscriber gets the
     // retained status and states.
@@ -313,25 +333,37 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
         );
     }
 
-    // The broker dies and comes back: the gateway reconnects and
+    // The broker dies: after `outputs_timeout_ms` the gateway zeroes
+    // the outputs of the writable slaves (logged). It comes back: the
+    // gateway reconnects, reports the safe state in its status and
     // publishes its retained topics again; the bus kept running (the
-    // echo slave still answers writes).
+    // echo slave echoes the zeroed outputs, then answers writes).
     mosq.signal(9);
     mosq.wait(T);
+    assert!(
+        log.wait_for("outputs to the safe state", T),
+        "no safe state in the log:\n{}",
+        log.1.join("\n")
+    );
     let _mosq = broker(&dir, port);
     let (_sub2, mut again) = subscribe(port);
-    expect(&mut again, "profibus/line/status", &["online"]);
+    let st = expect(&mut again, "profibus/line/status", &["online"]);
+    assert_eq!(st["outputs_timeout"]["safe_state"], "zero", "{st}");
     let st = expect(&mut again, "profibus/line/3/state", &["data_exchange"]);
     assert!(st["cycle"].as_u64().unwrap() > 0);
-    expect(&mut again, "profibus/line/3/inputs", &["\"cafe0001\""]);
+    expect(&mut again, "profibus/line/3/outputs", &["\"00000000\""]);
+    expect(&mut again, "profibus/line/3/inputs", &["\"00000000\""]);
     publish(port, "profibus/line/3/outputs/set", "0badf00d");
     expect(&mut again, "profibus/line/3/inputs", &["\"0badf00d\""]);
 
     // SIGTERM: a clean stop that leaves the status offline.
     gw.signal(15);
     expect(&mut again, "profibus/line/status", &["offline"]);
-    let out = gw.finish(T);
-    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+    assert!(
+        gw.wait(T).success(),
+        "gateway failed:\n{}",
+        log.rest().join("\n")
+    );
 }
 
 /// The gateway as a master on a line: `dpctl bus` with a `dpctl slave`
@@ -378,6 +410,197 @@ fn gateway_on_a_line_with_a_slave_process() {
     expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
     publish(port, "profibus/line/3/outputs/set", "a5a50102");
     expect(&mut lines, "profibus/line/3/inputs", &["\"a5a50102\""]);
+    // DP-V1 (MSAC_C1) over the line: write a record, read it back.
+    publish(
+        port,
+        "profibus/line/3/dpv1/request",
+        r#"{"op": "write", "slot": 1, "index": 4, "hex": "0b0c0d", "id": "dw"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/dpv1/response", &["\"dw\""]);
+    assert_eq!(r["ok"], true, "{r}");
+    publish(
+        port,
+        "profibus/line/3/dpv1/request",
+        r#"{"op": "read", "slot": 1, "index": 4, "id": "dr"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/dpv1/response", &["\"dr\""]);
+    assert_eq!(r["hex"], "0b0c0d", "{r}");
+    // A malformed request is answered, and changes nothing.
+    publish(
+        port,
+        "profibus/line/3/outputs/set",
+        r#"{"hex": "zz", "id": "bad"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/3/outputs/response", &["\"bad\""]);
+    assert!(r["error"].as_str().unwrap().contains("malformed"), "{r}");
+    gw.signal(15);
+    expect(&mut lines, "profibus/line/status", &["offline"]);
+    let out = gw.finish(T);
+    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+}
+
+/// Run `program` with `args` in `dir`; it must succeed.
+fn run_in(dir: &TempDir, program: &str, args: &[&str]) {
+    common::require(program);
+    let out = Command::new(program)
+        .args(args)
+        .current_dir(&dir.0)
+        .output()
+        .unwrap_or_else(|e| panic!("{program}: {e}"));
+    assert!(
+        out.status.success(),
+        "{program} {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `mqtts://` with a CA made here (openssl), a server certificate for
+/// 127.0.0.1 and a password file: the gateway connects with the
+/// bus file's `ca_file`, `username` and `password_file`, publishes and
+/// takes a write; a client without the password sees nothing.
+#[test]
+fn gateway_over_tls_with_a_password() {
+    let dir = TempDir::new("gateway-tls");
+    run_in(
+        &dir,
+        "openssl",
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "ec",
+            "-pkeyopt",
+            "ec_paramgen_curve:prime256v1",
+            "-nodes",
+            "-keyout",
+            "ca.key",
+            "-out",
+            "ca.crt",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=dpctl test CA",
+        ],
+    );
+    run_in(
+        &dir,
+        "openssl",
+        &[
+            "req",
+            "-newkey",
+            "ec",
+            "-pkeyopt",
+            "ec_paramgen_curve:prime256v1",
+            "-nodes",
+            "-keyout",
+            "server.key",
+            "-out",
+            "server.csr",
+            "-subj",
+            "/CN=127.0.0.1",
+        ],
+    );
+    std::fs::write(
+        dir.path("ext.cnf"),
+        "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
+    )
+    .unwrap();
+    run_in(
+        &dir,
+        "openssl",
+        &[
+            "x509",
+            "-req",
+            "-in",
+            "server.csr",
+            "-CA",
+            "ca.crt",
+            "-CAkey",
+            "ca.key",
+            "-CAcreateserial",
+            "-out",
+            "server.crt",
+            "-days",
+            "2",
+            "-extfile",
+            "ext.cnf",
+        ],
+    );
+    run_in(
+        &dir,
+        "mosquitto_passwd",
+        &["-b", "-c", "passwd", "gw", "s3cret"],
+    );
+    for f in ["ca.crt", "server.crt", "server.key", "passwd"] {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(dir.path(f), std::fs::Permissions::from_mode(0o644)).unwrap();
+    }
+    let port = free_port();
+    let conf = dir.path("mosquitto.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "listener {port} 127.0.0.1\ncafile {d}/ca.crt\ncertfile {d}/server.crt\nkeyfile {d}/server.key\nallow_anonymous false\npassword_file {d}/passwd\npersistence false\n",
+            d = dir.0.display()
+        ),
+    )
+    .unwrap();
+    let _mosq = Proc::spawn(
+        "mosquitto",
+        Command::new(mosquitto())
+            .arg("-c")
+            .arg(&conf)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    wait_for("mosquitto to listen", T, || {
+        TcpStream::connect(("127.0.0.1", port)).is_ok()
+    });
+    std::fs::copy(
+        common::repo().join("gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
+    std::fs::write(dir.path("pw.txt"), "s3cret\n").unwrap();
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nbus = \"line\"\nwritable = [3]\nusername = \"gw\"\npassword_file = \"pw.txt\"\nca_file = \"ca.crt\"\n",
+    )
+    .unwrap();
+    let ca = dir.path("ca.crt");
+    let ca = ca.to_str().unwrap();
+    let tls = ["--cafile", ca, "-u", "gw", "-P", "s3cret"];
+    let (_sub, mut lines) = subscribe_with(port, &tls);
+    let gw = Proc::spawn_captured({
+        let mut c = Command::new(dpctl());
+        c.arg("gateway")
+            .arg("--config")
+            .arg(&bus)
+            .arg("--sim")
+            .args(["--mqtt", &format!("mqtts://127.0.0.1:{port}")]);
+        c
+    });
+    expect(&mut lines, "profibus/line/status", &["online"]);
+    expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
+    publish_with(port, "profibus/line/3/outputs/set", "5aa50102", &tls);
+    expect(&mut lines, "profibus/line/3/inputs", &["\"5aa50102\""]);
+    // Without the password the broker refuses the client.
+    let refused = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "--cafile", ca])
+        .args([
+            "-u",
+            "gw",
+            "-P",
+            "wrong",
+            "-t",
+            "profibus/line/3/outputs/set",
+            "-m",
+            "00000000",
+        ])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success(), "a wrong password was taken");
     gw.signal(15);
     expect(&mut lines, "profibus/line/status", &["offline"]);
     let out = gw.finish(T);

@@ -9,10 +9,9 @@ use profibus_dp::master::DpMaster;
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
 use profibus_gateway::link::{flush, pump, wall_ms};
-use profibus_gateway::settings::parse_broker;
 use profibus_gateway::sim::{slave_infos, SimPlant};
 use profibus_gateway::{
-    sparkplug, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
+    sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
 };
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -31,7 +30,8 @@ pub struct Args {
     /// Emulate the bus file's slaves on an in-process simulated bus.
     #[arg(long)]
     sim: bool,
-    /// Broker URL, mqtt://HOST:PORT (default: `[mqtt] broker`).
+    /// Broker URL, mqtt://HOST[:PORT] or mqtts://HOST[:PORT] (TLS)
+    /// (default: `[mqtt] broker`).
     #[arg(long, value_name = "URL")]
     mqtt: Option<String>,
     /// Sparkplug B mode: publish as edge node EDGE of group GROUP
@@ -55,14 +55,17 @@ pub fn run(args: Args) -> Result<()> {
         .and_then(|s| s.to_str())
         .unwrap_or("bus")
         .replace(['/', '+', '#'], "_");
-    let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), &stem)
+    let mut settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), &stem)
         .with_context(|| args.config.display().to_string())?;
+    if let Some(dir) = args.config.parent() {
+        settings.relative_to(dir);
+    }
     let url = args
         .mqtt
         .clone()
         .or_else(|| settings.broker.clone())
-        .context("no broker: give --mqtt mqtt://HOST:PORT or [mqtt] broker")?;
-    let (host, port) = parse_broker(&url)?;
+        .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
+    let conn = Connection::from_settings(&settings, &url)?;
     match args
         .sparkplug
         .clone()
@@ -70,11 +73,11 @@ pub fn run(args: Args) -> Result<()> {
     {
         Some(id) => {
             let node = EdgeNode::new(settings, id, sparkplug::devices(&profiled)?);
-            serve(args, profiled, node, host, port)
+            serve(args, profiled, node, conn)
         }
         None => {
             let gateway = Gateway::new(settings, slave_infos(&profiled)?);
-            serve(args, profiled, gateway, host, port)
+            serve(args, profiled, gateway, conn)
         }
     }
 }
@@ -83,11 +86,10 @@ fn serve<S: Session>(
     args: Args,
     profiled: ProfiledBus,
     gateway: S,
-    host: String,
-    port: u16,
+    conn: Connection,
 ) -> Result<()> {
     common::runtime()?.block_on(async move {
-        let link = MqttLink::connect(&host, port, &gateway);
+        let link = MqttLink::connect(&conn, &gateway);
         match &args.port {
             Some(p) => on_line(&args, p, &profiled, gateway, link).await,
             None => on_sim(&profiled, gateway, link).await,
@@ -108,15 +110,22 @@ async fn on_sim(profiled: &ProfiledBus, mut gw: impl Session, mut link: MqttLink
     let start = tokio::time::Instant::now();
     let shutdown = common::shutdown();
     tokio::pin!(shutdown);
-    // The simulated line follows the wall clock in steps of 2 ms.
+    // The simulated line follows the wall clock in steps of 2 ms, at
+    // most 20 ms of bus time per step: on a machine too busy to keep up
+    // the line runs slower than real time, and the MQTT link (its keep
+    // alive) still gets its turn after every step.
     let tick = Duration::from_millis(2);
+    let most = Duration::from_millis(20);
     loop {
-        plant.run_until(Instant::from_nanos(start.elapsed().as_nanos() as u64));
+        let wall = Instant::from_nanos(start.elapsed().as_nanos() as u64);
+        let behind = wall > plant.now() + most;
+        plant.run_until(if behind { plant.now() + most } else { wall });
         let now = plant.now();
         step(&mut link, &mut gw, plant.master(), now);
+        let pause = if behind { Duration::ZERO } else { tick };
         tokio::select! {
             _ = &mut shutdown => break,
-            _ = tokio::time::sleep(tick) => {}
+            _ = tokio::time::sleep(pause) => {}
         }
     }
     let last = gw.last_will();

@@ -92,7 +92,14 @@ fn main() {
         .unwrap();
     let (in_ms, write_ms, cycle_us) = rt.block_on(async move {
         let mut gw = Gateway::new(settings, slave_infos(&profiled).unwrap());
-        let mut link = MqttLink::connect("127.0.0.1", port, &gw);
+        let mut link = MqttLink::connect(
+            &profibus_gateway::Connection::plain(profibus_gateway::Broker {
+                host: "127.0.0.1".into(),
+                port,
+                tls: false,
+            }),
+            &gw,
+        );
         // The subscriber.
         let (sub, mut ev) = AsyncClient::new(MqttOptions::new("bench-sub", "127.0.0.1", port), 64);
         sub.subscribe("profibus/bench/3/inputs", QoS::AtMostOnce)

@@ -508,14 +508,6 @@ fn outputs_body(o: &Obj) -> Result<Request, RequestError> {
     Ok(Request::Outputs(req))
 }
 
-fn value_json(v: Value) -> serde_json::Value {
-    match v {
-        Value::Bool(b) => b.into(),
-        Value::Int(i) => i.into(),
-        Value::Float(x) => x.into(),
-    }
-}
-
 /// The last published state of a slave.
 #[derive(Debug, Default, Clone)]
 struct Published {
@@ -966,11 +958,17 @@ impl Gateway {
                     let mut o =
                         json!({"address": addr, "hex": hex(img), "ts": ts_ms, "cycle": cycle});
                     if let Some(map) = &e.info.channels {
-                        let values: Map<String, serde_json::Value> = map
-                            .decode(dir, img)
-                            .map(|(c, val)| (c.name.clone(), value_json(val)))
-                            .collect();
-                        o["values"] = values.into();
+                        // The library's decoded image: `{"name": value}`.
+                        let (i, o_img) = match dir {
+                            Direction::Input => (img, &[][..]),
+                            Direction::Output => (&[][..], img),
+                        };
+                        let iv = map.values(i, o_img);
+                        let part = match dir {
+                            Direction::Input => &iv.inputs,
+                            Direction::Output => &iv.outputs,
+                        };
+                        o["values"] = serde_json::to_value(part).unwrap_or_default();
                     }
                     msgs.push((t, o));
                 }
@@ -1482,10 +1480,12 @@ mod tests {
     fn dpv1_pkw_and_rfid_requests_are_answered() {
         let (mut g, mut p) = plant();
         g.connected(0);
+        let mut seen = vec![];
         for _ in 0..2000 {
             let t = p.now() + std::time::Duration::from_millis(1);
             p.run_until(t);
             g.step(p.master(), t, 0);
+            seen.extend(drain(&mut g));
             let m = p.master();
             if [3, 25, 30]
                 .iter()
@@ -1494,7 +1494,12 @@ mod tests {
                 break;
             }
         }
-        drain(&mut g);
+        // Decoded values next to the hex: GSD module bytes of the generic
+        // slave, the Omega's profile channels.
+        let v = &find(&seen, "profibus/p/3/outputs").unwrap()["values"];
+        assert_eq!(v["2 words in/out[0]"], 0, "{v}");
+        let v = &find(&seen, "profibus/p/25/inputs").unwrap()["values"];
+        assert!(v.get("status1").is_some() && v.get("pke").is_some(), "{v}");
         // DP-V1: write a record, read it back.
         g.handle_message(
             "profibus/p/3/dpv1/request",

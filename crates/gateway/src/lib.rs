@@ -64,6 +64,13 @@
 //! it. (A PKW or RFID job writes its words into the same image: a whole
 //! image written during such a job overwrites them.)
 //!
+//! # Connection
+//!
+//! `mqtt://HOST[:PORT]` is plain TCP, `mqtts://HOST[:PORT]` TLS with
+//! rustls (CA certificates from `[mqtt] ca_file`, else the system's); a
+//! user name and a password from a file or an environment variable (see
+//! [`settings`]); [`Connection::from_settings`] reads them.
+//!
 //! # Broker faults
 //!
 //! The bus keeps running while the broker is away. The link reconnects
@@ -132,6 +139,6 @@ pub mod sim;
 pub mod sparkplug;
 
 pub use crate::core::{Gateway, Publish, Service, SlaveInfo, Topics};
-pub use link::{LinkEvent, MqttLink, Session};
-pub use settings::{MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
+pub use link::{Connection, ConnectionError, LinkEvent, MqttLink, Session};
+pub use settings::{Broker, MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
 pub use sparkplug::{EdgeNode, SparkplugId};

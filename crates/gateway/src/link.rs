@@ -9,10 +9,13 @@
 //! gateway republishes every retained topic when the broker is back.
 
 use crate::core::{Gateway, Publish};
-use crate::settings::MqttSettings;
+use crate::settings::{parse_broker, Broker, MqttSettings, PasswordSource, SettingsError};
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
-use rumqttc::{AsyncClient, Event, LastWill, MqttOptions, Packet, QoS};
+use rumqttc::{
+    AsyncClient, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport,
+};
+use std::path::PathBuf;
 use std::time::Duration;
 use tokio::sync::mpsc;
 
@@ -109,6 +112,115 @@ impl Session for Gateway {
 #[error("MQTT publish failed: {0}")]
 pub struct LinkError(#[from] rumqttc::ClientError);
 
+/// Why a connection cannot be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectionError {
+    /// The broker URL.
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    /// A file named in the settings.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The password's environment variable is not set.
+    #[error("environment variable {0} (password_env) is not set")]
+    NoEnv(String),
+    /// `ca_file` without TLS.
+    #[error("ca_file is set but the broker URL is not mqtts://")]
+    CaWithoutTls,
+}
+
+/// Where and how to connect: the broker, the credentials, the CA
+/// certificates (read when the connection is set up, so a secret is
+/// never in the bus file).
+#[derive(Clone, PartialEq, Eq)]
+pub struct Connection {
+    /// The broker.
+    pub broker: Broker,
+    /// User name and password.
+    pub credentials: Option<(String, String)>,
+    /// CA certificates (PEM) for TLS; `None`: the system's.
+    pub ca_pem: Option<Vec<u8>>,
+}
+
+impl std::fmt::Debug for Connection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Connection")
+            .field("broker", &self.broker)
+            .field("user", &self.credentials.as_ref().map(|c| &c.0))
+            .field("ca_pem", &self.ca_pem.as_ref().map(Vec::len))
+            .finish()
+    }
+}
+
+impl Connection {
+    /// A plain connection to `broker` without credentials.
+    pub fn plain(broker: Broker) -> Connection {
+        Connection {
+            broker,
+            credentials: None,
+            ca_pem: None,
+        }
+    }
+
+    /// The connection `settings` describe, to the broker at `url`: reads
+    /// the password (file or environment) and the CA file.
+    pub fn from_settings(
+        settings: &MqttSettings,
+        url: &str,
+    ) -> Result<Connection, ConnectionError> {
+        let broker = parse_broker(url)?;
+        let read = |path: &PathBuf| {
+            std::fs::read(path).map_err(|source| ConnectionError::Read {
+                path: path.clone(),
+                source,
+            })
+        };
+        let password = match &settings.password {
+            None => String::new(),
+            Some(PasswordSource::File(f)) => {
+                let text = read(f)?;
+                String::from_utf8_lossy(&text)
+                    .lines()
+                    .next()
+                    .unwrap_or("")
+                    .trim_end()
+                    .to_string()
+            }
+            Some(PasswordSource::Env(v)) => {
+                std::env::var(v).map_err(|_| ConnectionError::NoEnv(v.clone()))?
+            }
+        };
+        let ca_pem = settings.ca_file.as_ref().map(read).transpose()?;
+        if ca_pem.is_some() && !broker.tls {
+            return Err(ConnectionError::CaWithoutTls);
+        }
+        Ok(Connection {
+            broker,
+            credentials: settings.username.clone().map(|u| (u, password)),
+            ca_pem,
+        })
+    }
+
+    fn options(&self, client_id: String) -> MqttOptions {
+        let mut o = MqttOptions::new(client_id, self.broker.host.clone(), self.broker.port);
+        if let Some((u, p)) = &self.credentials {
+            o.set_credentials(u.clone(), p.clone());
+        }
+        if self.broker.tls {
+            o.set_transport(match &self.ca_pem {
+                Some(ca) => Transport::tls(ca.clone(), None, None),
+                None => Transport::tls_with_config(TlsConfiguration::default()),
+            });
+        }
+        o
+    }
+}
+
 /// The connection to the broker of one gateway.
 pub struct MqttLink {
     client: AsyncClient,
@@ -130,9 +242,9 @@ fn qos(q: u8) -> QoS {
 const QUEUE: usize = 1024;
 
 impl MqttLink {
-    /// Start connecting to `host:port` for `gateway` (its client id, last
+    /// Start connecting over `conn` for `gateway` (its client id, last
     /// will and subscriptions). Needs a tokio runtime.
-    pub fn connect(host: &str, port: u16, gateway: &impl Session) -> MqttLink {
+    pub fn connect(conn: &Connection, gateway: &impl Session) -> MqttLink {
         let s = gateway.settings();
         let setup = gateway.link_setup();
         let q = qos(setup.qos);
@@ -142,7 +254,7 @@ impl MqttLink {
             let w = next_will();
             LastWill::new(w.topic, w.payload, will_qos, w.retain)
         };
-        let mut o = MqttOptions::new(s.client_id.clone(), host, port);
+        let mut o = conn.options(s.client_id.clone());
         o.set_keep_alive(Duration::from_secs(5));
         o.set_clean_session(true);
         o.set_last_will(will());

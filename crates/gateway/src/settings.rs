@@ -13,8 +13,18 @@
 //! outputs_timeout_ms = 5000          # without a broker this long: safe state
 //! safe_state = "keep"                # "keep" (default), "zero" or "clear"
 //! job_timeout_ms = 2000              # DP-V1, PKW and RFID requests give up after this
+//! username = "gateway1"              # MQTT user name
+//! password_file = "mqtt.secret"      # its password: the file's first line ...
+//! password_env = "MQTT_PASSWORD"     # ... or this environment variable (not both)
+//! ca_file = "ca.crt"                 # mqtts://: CA certificates (PEM); default: the system's
 //! sparkplug = "plant/line1"          # Sparkplug B mode, GROUP/EDGE (see crate::sparkplug)
 //! ```
+//!
+//! `broker` is `mqtt://HOST[:PORT]` (plain TCP, port 1883) or
+//! `mqtts://HOST[:PORT]` (TLS with rustls, port 8883; the server's
+//! certificate must name HOST). Relative paths are relative to the bus
+//! file ([`MqttSettings::relative_to`]). The password never appears in
+//! the bus file.
 //!
 //! `writable` says what MQTT may change (default: nothing). A station
 //! address alone gives full write access to that slave: its whole output
@@ -33,6 +43,7 @@
 //! in the status once the broker is back.
 
 use crate::sparkplug::SparkplugId;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// When process images are published.
@@ -114,9 +125,35 @@ pub struct MqttSettings {
     pub safe_state: SafeState,
     /// How long DP-V1, PKW and RFID requests may take.
     pub job_timeout: Duration,
+    /// MQTT user name.
+    pub username: Option<String>,
+    /// Where the password is.
+    pub password: Option<PasswordSource>,
+    /// CA certificates (PEM) for `mqtts://`; `None`: the system's.
+    pub ca_file: Option<PathBuf>,
     /// Sparkplug B mode with this group and edge node id (`None`: plain
     /// JSON topics).
     pub sparkplug: Option<SparkplugId>,
+}
+
+/// Where the MQTT password comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PasswordSource {
+    /// The first line of this file.
+    File(PathBuf),
+    /// This environment variable.
+    Env(String),
+}
+
+/// A broker's address from its URL.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Broker {
+    /// Host name or IP address.
+    pub host: String,
+    /// TCP port.
+    pub port: u16,
+    /// TLS (`mqtts://`).
+    pub tls: bool,
 }
 
 impl MqttSettings {
@@ -140,8 +177,8 @@ pub enum SettingsError {
         /// What is wrong.
         problem: String,
     },
-    /// A broker URL that is not `mqtt://HOST[:PORT]`.
-    #[error("broker URL `{0}` is not mqtt://HOST[:PORT]")]
+    /// A broker URL that is not `mqtt://HOST[:PORT]` or `mqtts://HOST[:PORT]`.
+    #[error("broker URL `{0}` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")]
     BadUrl(String),
 }
 
@@ -157,6 +194,10 @@ const KEYS: &[&str] = &[
     "outputs_timeout_ms",
     "safe_state",
     "job_timeout_ms",
+    "username",
+    "password_file",
+    "password_env",
+    "ca_file",
     "sparkplug",
 ];
 
@@ -256,6 +297,22 @@ impl MqttSettings {
                 ))
             }
         };
+        let password = match (string(t, "password_file")?, string(t, "password_env")?) {
+            (Some(_), Some(_)) => {
+                return Err(bad(
+                    "password_file",
+                    "and `password_env` exclude each other",
+                ))
+            }
+            (Some(f), None) => Some(PasswordSource::File(f.into())),
+            (None, Some(v)) => Some(PasswordSource::Env(v)),
+            (None, None) => None,
+        };
+        let username = string(t, "username")?;
+        if password.is_some() && username.is_none() {
+            return Err(bad("username", "is needed with a password"));
+        }
+        let ca_file = string(t, "ca_file")?.map(PathBuf::from);
         let broker = string(t, "broker")?;
         if let Some(b) = &broker {
             parse_broker(b)?;
@@ -275,8 +332,22 @@ impl MqttSettings {
             outputs_timeout,
             safe_state,
             job_timeout,
+            username,
+            password,
+            ca_file,
             sparkplug,
         })
+    }
+
+    /// Relative file paths (`password_file`, `ca_file`) taken relative to
+    /// `dir` (the bus file's directory).
+    pub fn relative_to(&mut self, dir: &Path) {
+        if let Some(PasswordSource::File(f)) = &mut self.password {
+            *f = dir.join(&*f);
+        }
+        if let Some(f) = &mut self.ca_file {
+            *f = dir.join(&*f);
+        }
     }
 }
 
@@ -313,22 +384,33 @@ fn access(v: &toml::Value) -> Result<WriteAccess, SettingsError> {
     }
 }
 
-/// Host and port of an `mqtt://HOST[:PORT]` URL (`tcp://` is taken too).
-pub fn parse_broker(url: &str) -> Result<(String, u16), SettingsError> {
+/// The broker of an `mqtt://HOST[:PORT]` (`tcp://` is taken too) or
+/// `mqtts://HOST[:PORT]` (`ssl://`) URL.
+pub fn parse_broker(url: &str) -> Result<Broker, SettingsError> {
     let bad = || SettingsError::BadUrl(url.to_string());
-    let rest = url
-        .strip_prefix("mqtt://")
-        .or_else(|| url.strip_prefix("tcp://"))
-        .ok_or_else(bad)?;
+    let (rest, tls) = [
+        ("mqtt://", false),
+        ("tcp://", false),
+        ("mqtts://", true),
+        ("ssl://", true),
+    ]
+    .iter()
+    .find_map(|(p, tls)| url.strip_prefix(p).map(|r| (r, *tls)))
+    .ok_or_else(bad)?;
     let rest = rest.trim_end_matches('/');
+    let default = if tls { 8883 } else { 1883 };
     let (host, port) = match rest.rsplit_once(':') {
-        Some((h, p)) => (h, p.parse::<u16>().map_err(|_| bad())?),
-        None => (rest, 1883),
+        Some((h, p)) if !h.ends_with(':') => (h, p.parse::<u16>().map_err(|_| bad())?),
+        _ => (rest, default),
     };
     if host.is_empty() || host.contains(['/', '@']) {
         return Err(bad());
     }
-    Ok((host.trim_matches(['[', ']']).to_string(), port))
+    Ok(Broker {
+        host: host.trim_matches(['[', ']']).to_string(),
+        port,
+        tls,
+    })
 }
 
 #[cfg(test)]
@@ -408,14 +490,41 @@ mod tests {
     }
 
     #[test]
+    fn credentials_and_tls() {
+        let mut s =
+            parse("username = \"gw\"\npassword_file = \"pw\"\nca_file = \"/etc/ca.pem\"").unwrap();
+        s.relative_to(Path::new("/plant"));
+        assert_eq!(s.password, Some(PasswordSource::File("/plant/pw".into())));
+        assert_eq!(s.ca_file, Some("/etc/ca.pem".into()));
+        let s = parse("username = \"gw\"\npassword_env = \"PW\"").unwrap();
+        assert_eq!(s.password, Some(PasswordSource::Env("PW".into())));
+        assert!(parse("password_env = \"PW\"").is_err());
+        assert!(parse("username = \"gw\"\npassword_env = \"PW\"\npassword_file = \"f\"").is_err());
+        assert!(parse("password = \"plain\"").is_err());
+    }
+
+    #[test]
     fn broker_urls() {
+        let b = |h: &str, port, tls| Broker {
+            host: h.into(),
+            port,
+            tls,
+        };
         assert_eq!(
             parse_broker("mqtt://127.0.0.1:1884").unwrap(),
-            ("127.0.0.1".into(), 1884)
+            b("127.0.0.1", 1884, false)
         );
         assert_eq!(
             parse_broker("mqtt://broker").unwrap(),
-            ("broker".into(), 1883)
+            b("broker", 1883, false)
+        );
+        assert_eq!(
+            parse_broker("mqtts://broker").unwrap(),
+            b("broker", 8883, true)
+        );
+        assert_eq!(
+            parse_broker("ssl://broker:9000").unwrap(),
+            b("broker", 9000, true)
         );
         assert!(parse_broker("mqtt://:1").is_err());
         assert!(parse_broker("mqtt://h:99999").is_err());

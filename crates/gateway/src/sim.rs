@@ -78,8 +78,9 @@ impl SimPlant {
     }
 }
 
-/// The gateway's view of a bus file's slaves: names, named channels of
-/// profiled slaves, GSDs, PKW dialects, RFID readers.
+/// The gateway's view of a bus file's slaves: names, named channels
+/// (device profiles' channels; `MODULE[i]` bytes for slaves given by GSD
+/// modules), GSDs, PKW dialects, RFID readers.
 pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
     profiled
         .file
@@ -90,10 +91,14 @@ pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
             Ok(SlaveInfo {
                 address: a,
                 name: s.params.name.clone(),
-                channels: profiled
-                    .channels(a)
-                    .transpose()
-                    .map_err(|e| SimError::Profile(a, e))?,
+                channels: Some(
+                    profiled
+                        .channels(a)
+                        .unwrap_or_else(|| {
+                            profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
+                        })
+                        .map_err(|e| SimError::Profile(a, e))?,
+                ),
                 gsd: Some(s.gsd.clone()),
                 dpv1: s.params.dpv1,
                 pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
