@@ -59,7 +59,8 @@ fn broker(dir: &TempDir, port: u16) -> Proc {
     p
 }
 
-/// `mosquitto_sub -v` on the gateway's topics, its lines collected.
+/// `mosquitto_sub -v` on the gateway's topics and `client/#` (answers
+/// sent to a request's `reply_to`), its lines collected.
 fn subscribe(port: u16) -> (Proc, Lines) {
     common::require("mosquitto_sub");
     let mut p = Proc::spawn(
@@ -73,6 +74,8 @@ fn subscribe(port: u16) -> (Proc, Lines) {
                 "-v",
                 "-t",
                 "profibus/line/#",
+                "-t",
+                "client/#",
             ])
             .stdout(Stdio::piped())
             .stderr(Stdio::null()),
@@ -145,12 +148,11 @@ address = 25
 device = "omega"
 setpoints = 1
 actual_values = 1
-pkw = false
 
 [mqtt]
 prefix = "profibus"
 bus = "line"
-writable = [3, 25]
+writable = [3, { address = 25, channels = ["setpoint1"] }]
 "#;
 
 #[test]
@@ -199,7 +201,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     publish(
         port,
         "profibus/line/3/outputs/set",
-        r#"{"hex": "12345678", "correlation_id": "w1"}"#,
+        r#"{"hex": "12345678", "id": "w1"}"#,
     );
     let r = expect(&mut lines, "profibus/line/3/outputs/response", &["w1"]);
     assert_eq!(r["ok"], true, "{r}");
@@ -210,12 +212,12 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     publish(
         port,
         "profibus/line/25/outputs/set",
-        r#"{"channels": {"setpoint1": 4321}, "correlation_id": 7}"#,
+        r#"{"channels": {"setpoint1": 4321}, "id": 7}"#,
     );
     let r = expect(
         &mut lines,
         "profibus/line/25/outputs/response",
-        &["\"correlation_id\":7"],
+        &["\"id\":7"],
     );
     assert_eq!(r["ok"], true, "{r}");
     let o = expect(
@@ -225,12 +227,23 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     );
     assert!(o["hex"].as_str().unwrap().contains("10e1"), "{o}");
 
+    // A PKW job on the drive, answered on the topic the request names.
+    publish(
+        port,
+        "profibus/line/25/pkw/request",
+        r#"{"op": "read", "pnu": 126, "id": "p1", "reply_to": "client/7/pkw"}"#,
+    );
+    let r = expect(&mut lines, "client/7/pkw", &["\"p1\""]);
+    assert_eq!(r["ok"], true, "{r}");
+
     // Refused: a slave not in `writable`, a malformed payload, a wrong
-    // length, an unknown channel. None changes anything.
+    // length, an unknown channel, a channel `writable` does not list, a
+    // PKW write to a slave with channel access only. None changes
+    // anything.
     publish(
         port,
         "profibus/line/4/outputs/set",
-        r#"{"hex": "00000001", "correlation_id": "u"}"#,
+        r#"{"hex": "00000001", "id": "u"}"#,
     );
     let r = expect(&mut lines, "profibus/line/4/outputs/response", &["\"u\""]);
     assert_eq!(r["ok"], false);
@@ -245,7 +258,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     publish(
         port,
         "profibus/line/3/outputs/set",
-        r#"{"hex": "0102", "correlation_id": "len"}"#,
+        r#"{"hex": "0102", "id": "len"}"#,
     );
     let r = expect(&mut lines, "profibus/line/3/outputs/response", &["\"len\""]);
     assert!(
@@ -255,10 +268,36 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     publish(
         port,
         "profibus/line/25/outputs/set",
-        r#"{"channels": {"nope": 1}, "correlation_id": "ch"}"#,
+        r#"{"channels": {"nope": 1}, "id": "ch"}"#,
     );
     let r = expect(&mut lines, "profibus/line/25/outputs/response", &["\"ch\""]);
     assert_eq!(r["ok"], false);
+    publish(
+        port,
+        "profibus/line/25/outputs/set",
+        r#"{"channels": {"control1": 1}, "id": "cw"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/25/outputs/response", &["\"cw\""]);
+    assert!(
+        r["error"]
+            .as_str()
+            .unwrap()
+            .contains("only the output channels"),
+        "{r}"
+    );
+    publish(
+        port,
+        "profibus/line/25/pkw/request",
+        r#"{"op": "write", "pnu": 1000, "value": 1, "id": "pw"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/25/pkw/response", &["\"pw\""]);
+    assert!(
+        r["error"]
+            .as_str()
+            .unwrap()
+            .contains("only the output channels"),
+        "{r}"
+    );
     // A later good write goes through; by then nothing of the refused
     // ones reached an image.
     publish(port, "profibus/line/3/outputs/set", "cafe0001");

@@ -68,10 +68,10 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// One step of the gateway at a cycle boundary.
-fn step(link: &mut MqttLink, gw: &mut Gateway, m: &mut DpMaster) {
+fn step(link: &mut MqttLink, gw: &mut Gateway, m: &mut DpMaster, now: Instant) {
     let ts = wall_ms();
     pump(link, gw, ts);
-    gw.step(m, ts);
+    gw.step(m, now, ts);
     flush(link, gw);
 }
 
@@ -84,7 +84,8 @@ async fn on_sim(profiled: &ProfiledBus, mut gw: Gateway, mut link: MqttLink) -> 
     let tick = Duration::from_millis(2);
     loop {
         plant.run_until(Instant::from_nanos(start.elapsed().as_nanos() as u64));
-        step(&mut link, &mut gw, plant.master());
+        let now = plant.now();
+        step(&mut link, &mut gw, plant.master(), now);
         tokio::select! {
             _ = &mut shutdown => break,
             _ = tokio::time::sleep(tick) => {}
@@ -112,8 +113,8 @@ async fn on_line(
         Clock::start(),
         options,
         common::shutdown(),
-        |st, _now| {
-            step(&mut link, &mut gw, st.app_mut());
+        |st, now| {
+            step(&mut link, &mut gw, st.app_mut(), now);
             ControlFlow::<()>::Continue(())
         },
     )

@@ -117,6 +117,7 @@ fn main() {
         let mut next_write = Instant::now() + Duration::from_millis(500);
         while in_ms.len() < samples {
             plant.run_until(BusInstant::from_nanos(start.elapsed().as_nanos() as u64));
+            let bus_now = plant.now();
             let m = plant.master();
             let now = Instant::now();
             let inputs = profibus_gateway::core::hex(m.inputs(3).unwrap());
@@ -132,7 +133,7 @@ fn main() {
             }
             let ts = wall_ms();
             pump(&mut link, &mut gw, ts);
-            gw.step(m, ts);
+            gw.step(m, bus_now, ts);
             flush(&link, &mut gw);
             while let Ok((at, hex)) = rx.try_recv() {
                 if let (Some(w), Some(s)) = (written.get(&hex), seen.get(&hex)) {

@@ -1,12 +1,18 @@
 //! The sans-IO gateway: topics and payloads from a DP master's slaves,
-//! and output writes from MQTT messages. No broker, no clock: the driver
-//! hands in messages and the wall-clock time, and sends what
+//! and writes and requests from MQTT messages. No broker, no clock: the
+//! driver hands in messages and the time, and sends what
 //! [`Gateway::poll_publish`] returns.
 
-use crate::settings::{MqttSettings, PublishMode};
+use crate::settings::{MqttSettings, PublishMode, SafeState};
 use profibus_devices::channels::{ChannelMap, Direction, Value};
+use profibus_devices::pkw::client::PkwClient;
+use profibus_devices::pkw::{self, Dialect, PKW_LEN};
+use profibus_devices::rfid::client::RfidClient;
 use profibus_dp::gsd::Gsd;
-use profibus_dp::master::{DpMaster, MasterEvent, SlaveState};
+use profibus_dp::master::{
+    DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveState,
+};
+use profibus_fdl::Instant;
 use serde_json::{json, Map};
 use std::collections::VecDeque;
 
@@ -32,14 +38,57 @@ pub struct SlaveInfo {
     pub channels: Option<ChannelMap>,
     /// Its GSD, for diagnosis texts.
     pub gsd: Option<Gsd>,
-    /// Whether it is a DP-V1 slave (diagnosis decoding).
+    /// Whether it is a DP-V1 slave (diagnosis decoding, DP-V1 requests).
     pub dpv1: bool,
+    /// The dialect of its PKW channel, if it has one (PKW requests).
+    pub pkw: Option<&'static Dialect>,
+    /// Whether it is an RFID reader with the 16-byte command handshake
+    /// (RFID requests).
+    pub rfid: bool,
 }
 
 /// The topics of one gateway: `<prefix>/<bus>/…`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Topics {
     base: String,
+}
+
+/// What a request topic asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Service {
+    /// `<addr>/outputs/set`: the output image or named output channels.
+    Outputs,
+    /// `<addr>/dpv1/request`: a DP-V1 (MSAC_C1) data record read or write.
+    Dpv1,
+    /// `<addr>/pkw/request`: a parameter job over the PKW channel.
+    Pkw,
+    /// `<addr>/rfid/request`: one command line to an RFID reader.
+    Rfid,
+}
+
+impl Service {
+    /// Every service.
+    pub const ALL: [Service; 4] = [Service::Outputs, Service::Dpv1, Service::Pkw, Service::Rfid];
+
+    /// The request topic's suffix.
+    pub fn request(self) -> &'static str {
+        match self {
+            Service::Outputs => "outputs/set",
+            Service::Dpv1 => "dpv1/request",
+            Service::Pkw => "pkw/request",
+            Service::Rfid => "rfid/request",
+        }
+    }
+
+    /// The default response topic's suffix.
+    pub fn response(self) -> &'static str {
+        match self {
+            Service::Outputs => "outputs/response",
+            Service::Dpv1 => "dpv1/response",
+            Service::Pkw => "pkw/response",
+            Service::Rfid => "rfid/response",
+        }
+    }
 }
 
 /// The per-slave topics.
@@ -53,10 +102,10 @@ pub enum SlaveTopic {
     Outputs,
     /// `<addr>/diag`: the last diagnosis (retained).
     Diag,
-    /// `<addr>/outputs/set`: writes (subscribed).
-    OutputsSet,
-    /// `<addr>/outputs/response`: the answer to each write.
-    OutputsResponse,
+    /// A request topic (subscribed).
+    Request(Service),
+    /// The default response topic of a service.
+    Response(Service),
 }
 
 impl SlaveTopic {
@@ -66,8 +115,8 @@ impl SlaveTopic {
             SlaveTopic::Inputs => "inputs",
             SlaveTopic::Outputs => "outputs",
             SlaveTopic::Diag => "diag",
-            SlaveTopic::OutputsSet => "outputs/set",
-            SlaveTopic::OutputsResponse => "outputs/response",
+            SlaveTopic::Request(s) => s.request(),
+            SlaveTopic::Response(s) => s.response(),
         }
     }
 }
@@ -91,25 +140,30 @@ impl Topics {
         format!("{}/{address}/{}", self.base, t.suffix())
     }
 
-    /// The filter the gateway subscribes to for writes.
-    pub fn set_filter(&self) -> String {
-        format!("{}/+/outputs/set", self.base)
+    /// The filters the gateway subscribes to: one per [`Service`].
+    pub fn request_filters(&self) -> Vec<String> {
+        Service::ALL
+            .iter()
+            .map(|s| format!("{}/+/{}", self.base, s.request()))
+            .collect()
     }
 
-    /// The station address of a write topic (`<prefix>/<bus>/<addr>/outputs/set`),
-    /// `None` for any other topic. An address that is not a number is
-    /// `Some(Err(text))`.
-    pub fn parse_set(&self, topic: &str) -> Option<Result<u8, String>> {
+    /// The service and station address of a request topic
+    /// (`<prefix>/<bus>/<addr>/outputs/set`, …), `None` for any other
+    /// topic. An address that is not a number is `Err(text)`.
+    pub fn parse_request(&self, topic: &str) -> Option<(Service, Result<u8, String>)> {
         let rest = topic.strip_prefix(&self.base)?.strip_prefix('/')?;
-        let addr = rest.strip_suffix("/outputs/set")?;
-        if addr.contains('/') {
-            return None;
-        }
-        Some(addr.parse::<u8>().map_err(|_| addr.to_string()))
+        Service::ALL.iter().find_map(|&s| {
+            let addr = rest.strip_suffix(s.request())?.strip_suffix('/')?;
+            if addr.contains('/') {
+                return None;
+            }
+            Some((s, addr.parse::<u8>().map_err(|_| addr.to_string())))
+        })
     }
 }
 
-/// Lower-case hex of bytes.
+/// Lower-case hex of bytes, as the payloads carry images.
 pub fn hex(bytes: &[u8]) -> String {
     use std::fmt::Write;
     bytes.iter().fold(String::new(), |mut s, b| {
@@ -118,25 +172,15 @@ pub fn hex(bytes: &[u8]) -> String {
     })
 }
 
-/// Bytes of a non-empty hex string (spaces, `:`, `_` and a `0x` prefix
-/// allowed).
+/// Bytes of a non-empty hex string (as `profibus_fdl::wire::parse_hex`
+/// takes it: `0a0b`, `0a 0b`, `0a:0b`, `0x0a,0x0b`).
 pub fn parse_hex(text: &str) -> Option<Vec<u8>> {
-    let t = text.trim();
-    let t = t.strip_prefix("0x").unwrap_or(t);
-    let digits: Vec<u8> = t
-        .bytes()
-        .filter(|c| !matches!(c, b' ' | b':' | b'_'))
-        .collect();
-    if digits.is_empty() || !digits.len().is_multiple_of(2) {
-        return None;
-    }
-    digits
-        .chunks(2)
-        .map(|p| u8::from_str_radix(std::str::from_utf8(p).ok()?, 16).ok())
-        .collect()
+    profibus_fdl::wire::parse_hex(text)
+        .ok()
+        .filter(|b| !b.is_empty())
 }
 
-/// What a write asks for.
+/// What a write of outputs asks for.
 #[derive(Debug, Clone, PartialEq)]
 pub enum WriteRequest {
     /// The whole output image.
@@ -145,11 +189,69 @@ pub enum WriteRequest {
     Channels(Vec<(String, Value)>),
 }
 
-/// Why a write was refused.
+/// A request from a message, checked for form (not yet for permission).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Set outputs.
+    Outputs(WriteRequest),
+    /// DP-V1 read of a data record.
+    Dpv1Read {
+        /// Slot.
+        slot: u8,
+        /// Index.
+        index: u8,
+        /// Bytes wanted (1..=240).
+        length: u8,
+    },
+    /// DP-V1 write of a data record.
+    Dpv1Write {
+        /// Slot.
+        slot: u8,
+        /// Index.
+        index: u8,
+        /// Data (1..=240 bytes).
+        data: Vec<u8>,
+    },
+    /// A PKW job.
+    Pkw {
+        /// Parameter number (0..=2047).
+        pnu: u16,
+        /// What to do.
+        command: pkw::Command,
+    },
+    /// An RFID command line (without CR).
+    Rfid(Vec<u8>),
+}
+
+impl Request {
+    /// Whether the request changes the slave (needs write access).
+    pub fn writes(&self) -> bool {
+        match self {
+            Request::Outputs(_) | Request::Dpv1Write { .. } | Request::Rfid(_) => true,
+            Request::Dpv1Read { .. } => false,
+            Request::Pkw { command, .. } => !matches!(
+                command,
+                pkw::Command::Read | pkw::Command::ReadElement(_) | pkw::Command::Describe(_)
+            ),
+        }
+    }
+}
+
+/// Where a request's answer goes: the id and topic of the request.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReplyTo {
+    /// The request's `"id"` (any JSON value), repeated in the answer.
+    pub id: Option<serde_json::Value>,
+    /// The request's `"reply_to"` topic; `None`: the service's response
+    /// topic of the slave.
+    pub topic: Option<String>,
+}
+
+/// Why a request was refused or failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum WriteError {
-    /// The payload is neither hex nor a JSON write object.
-    #[error("malformed write: {0}")]
+pub enum RequestError {
+    /// The payload is not a request of this service.
+    #[error("malformed request: {0}")]
     Malformed(String),
     /// The topic's address is not a configured slave.
     #[error("no slave {0} on this bus")]
@@ -157,6 +259,14 @@ pub enum WriteError {
     /// The bus file's `[mqtt] writable` does not list the slave.
     #[error("slave {0} is not writable over MQTT (see [mqtt] writable)")]
     Unauthorised(u8),
+    /// `[mqtt] writable` allows only some named channels of the slave.
+    #[error("slave {address}: only the output channels {allowed:?} are writable over MQTT")]
+    ChannelsOnly {
+        /// Station address.
+        address: u8,
+        /// The writable channels.
+        allowed: Vec<String>,
+    },
     /// A whole image of the wrong length.
     #[error("slave {address} has {expected} output bytes, the write has {got}")]
     Length {
@@ -170,45 +280,185 @@ pub enum WriteError {
     /// A named channel the slave lacks, or a value out of its range.
     #[error("{0}")]
     Channel(String),
+    /// The slave does not offer the service (no PKW channel, not a
+    /// reader, not DP-V1).
+    #[error("slave {address} has no {what}")]
+    Unsupported {
+        /// Station address.
+        address: u8,
+        /// What it lacks.
+        what: &'static str,
+    },
+    /// Too many requests waiting for the slave.
+    #[error("slave {0}: too many requests waiting")]
+    Busy(u8),
+    /// The job ran and failed.
+    #[error("{0}")]
+    Failed(String),
 }
 
-/// A write request parsed from a payload, with its correlation id.
+fn malformed(text: impl Into<String>) -> RequestError {
+    RequestError::Malformed(text.into())
+}
+
+/// Whether `t` may be published to (not empty, no wildcards).
+fn publishable(t: &str) -> bool {
+    !t.is_empty() && !t.contains(['+', '#', '\0'])
+}
+
+/// A request parsed from the payload of `service`'s request topic, and
+/// where its answer goes (known even when the rest is malformed).
 ///
-/// Payloads: a bare hex string (`0a0b`), or a JSON object with `"hex"`
-/// (the whole image) or `"channels"` (`{"name": value}`), and an optional
-/// `"correlation_id"` (any JSON value) that the reply repeats.
-pub fn parse_write(
-    payload: &[u8],
-) -> Result<(WriteRequest, Option<serde_json::Value>), WriteError> {
-    let text = std::str::from_utf8(payload)
-        .map_err(|_| WriteError::Malformed("payload is not UTF-8".into()))?;
-    let v: serde_json::Value = match serde_json::from_str(text) {
-        Ok(v) => v,
-        Err(_) => {
-            return parse_hex(text)
-                .map(|b| (WriteRequest::Image(b), None))
-                .ok_or_else(|| WriteError::Malformed("neither JSON nor hex".into()))
+/// Payloads are JSON objects with the service's fields and optionally
+/// `"id"` (any JSON value, repeated in the answer) and `"reply_to"` (a
+/// topic for the answer instead of the slave's response topic). An
+/// output write may also be a bare hex string (the whole image).
+pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Request, RequestError>) {
+    let text = match std::str::from_utf8(payload) {
+        Ok(t) => t,
+        Err(_) => return (ReplyTo::default(), Err(malformed("payload is not UTF-8"))),
+    };
+    let image = |s: &str| {
+        parse_hex(s)
+            .map(|b| Request::Outputs(WriteRequest::Image(b)))
+            .ok_or_else(|| malformed("neither a JSON object nor hex"))
+    };
+    let o = match serde_json::from_str::<serde_json::Value>(text) {
+        Ok(serde_json::Value::Object(o)) => o,
+        Ok(serde_json::Value::String(s)) if service == Service::Outputs => {
+            return (ReplyTo::default(), image(&s))
         }
+        Err(_) if service == Service::Outputs => return (ReplyTo::default(), image(text)),
+        _ => return (ReplyTo::default(), Err(malformed("expected a JSON object"))),
     };
-    let serde_json::Value::Object(o) = v else {
-        return match v {
-            serde_json::Value::String(s) => parse_hex(&s)
-                .map(|b| (WriteRequest::Image(b), None))
-                .ok_or_else(|| WriteError::Malformed("string is not hex".into())),
-            _ => Err(WriteError::Malformed("expected a JSON object".into())),
-        };
+    let mut to = ReplyTo {
+        id: o.get("id").cloned(),
+        topic: None,
     };
-    let corr = o.get("correlation_id").cloned();
-    if let Some(k) = o
-        .keys()
-        .find(|k| !matches!(k.as_str(), "hex" | "channels" | "correlation_id"))
-    {
-        return Err(WriteError::Malformed(format!("unknown field `{k}`")));
+    match o.get("reply_to") {
+        None => {}
+        Some(serde_json::Value::String(t)) if publishable(t) => to.topic = Some(t.clone()),
+        Some(_) => {
+            return (
+                to,
+                Err(malformed("`reply_to` must be a topic without wildcards")),
+            )
+        }
     }
+    let r = body(service, &o);
+    (to, r)
+}
+
+type Obj = serde_json::Map<String, serde_json::Value>;
+
+fn only(o: &Obj, keys: &[&str]) -> Result<(), RequestError> {
+    match o
+        .keys()
+        .find(|k| !keys.contains(&k.as_str()) && !matches!(k.as_str(), "id" | "reply_to"))
+    {
+        Some(k) => Err(malformed(format!("unknown field `{k}`"))),
+        None => Ok(()),
+    }
+}
+
+fn int(o: &Obj, key: &str, min: i64, max: i64) -> Result<Option<i64>, RequestError> {
+    match o.get(key) {
+        None => Ok(None),
+        Some(v) => match v.as_i64() {
+            Some(n) if (min..=max).contains(&n) => Ok(Some(n)),
+            _ => Err(malformed(format!(
+                "`{key}` must be an integer {min}..={max}"
+            ))),
+        },
+    }
+}
+
+fn need<T>(v: Option<T>, key: &str) -> Result<T, RequestError> {
+    v.ok_or_else(|| malformed(format!("`{key}` is missing")))
+}
+
+fn op(o: &Obj, ops: &[&str]) -> Result<String, RequestError> {
+    match o.get("op") {
+        Some(serde_json::Value::String(s)) if ops.contains(&s.as_str()) => Ok(s.clone()),
+        _ => Err(malformed(format!("`op` must be one of {ops:?}"))),
+    }
+}
+
+fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
+    match service {
+        Service::Outputs => {
+            only(o, &["hex", "channels"])?;
+            outputs_body(o)
+        }
+        Service::Dpv1 => {
+            let slot = need(int(o, "slot", 0, 254)?, "slot")? as u8;
+            let index = need(int(o, "index", 0, 254)?, "index")? as u8;
+            if op(o, &["read", "write"])? == "read" {
+                only(o, &["op", "slot", "index", "length"])?;
+                let length = int(o, "length", 1, 240)?.unwrap_or(240) as u8;
+                Ok(Request::Dpv1Read {
+                    slot,
+                    index,
+                    length,
+                })
+            } else {
+                only(o, &["op", "slot", "index", "hex"])?;
+                let data = match o.get("hex") {
+                    Some(serde_json::Value::String(h)) => parse_hex(h)
+                        .filter(|d| d.len() <= profibus_dp::dpv1::MAX_DATA_LEN)
+                        .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
+                    _ => return Err(malformed("`hex` is missing")),
+                };
+                Ok(Request::Dpv1Write { slot, index, data })
+            }
+        }
+        Service::Pkw => {
+            only(o, &["op", "pnu", "index", "value", "dword", "element"])?;
+            let pnu = need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16;
+            let index = int(o, "index", 0, 0xFFFF)?.map(|i| i as u16);
+            let command = match op(o, &["read", "write", "describe"])?.as_str() {
+                "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
+                "describe" => {
+                    pkw::Command::Describe(need(int(o, "element", 0, 0xFFFF)?, "element")? as u16)
+                }
+                _ => {
+                    let v = need(int(o, "value", i32::MIN as i64, u32::MAX as i64)?, "value")?;
+                    let dword = match o.get("dword") {
+                        None => !(-0x8000..=0xFFFF).contains(&v),
+                        Some(serde_json::Value::Bool(b)) => *b,
+                        Some(_) => return Err(malformed("`dword` must be true or false")),
+                    };
+                    if !dword && !(-0x8000..=0xFFFF).contains(&v) {
+                        return Err(malformed("`value` does not fit a word"));
+                    }
+                    let (w, d) = (v as u16, v as u32);
+                    match (index, dword) {
+                        (None, false) => pkw::Command::WriteWord(w),
+                        (None, true) => pkw::Command::WriteDword(d),
+                        (Some(index), false) => pkw::Command::WriteElementWord { index, value: w },
+                        (Some(index), true) => pkw::Command::WriteElementDword { index, value: d },
+                    }
+                }
+            };
+            Ok(Request::Pkw { pnu, command })
+        }
+        Service::Rfid => {
+            only(o, &["command"])?;
+            match o.get("command") {
+                Some(serde_json::Value::String(c)) if !c.is_empty() && c.is_ascii() => {
+                    Ok(Request::Rfid(c.trim_end_matches('\r').as_bytes().to_vec()))
+                }
+                _ => Err(malformed("`command` must be a non-empty ASCII string")),
+            }
+        }
+    }
+}
+
+fn outputs_body(o: &Obj) -> Result<Request, RequestError> {
     let req = match (o.get("hex"), o.get("channels")) {
-        (Some(serde_json::Value::String(h)), None) => WriteRequest::Image(
-            parse_hex(h).ok_or_else(|| WriteError::Malformed("`hex` is not hex".into()))?,
-        ),
+        (Some(serde_json::Value::String(h)), None) => {
+            WriteRequest::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
+        }
         (None, Some(serde_json::Value::Object(c))) if !c.is_empty() => WriteRequest::Channels(
             c.iter()
                 .map(|(k, v)| {
@@ -219,7 +469,7 @@ pub fn parse_write(
                             None => Value::Float(n.as_f64().unwrap_or(f64::NAN)),
                         },
                         _ => {
-                            return Err(WriteError::Malformed(format!(
+                            return Err(malformed(format!(
                                 "channel `{k}`: value must be a number or a boolean"
                             )))
                         }
@@ -229,12 +479,12 @@ pub fn parse_write(
                 .collect::<Result<_, _>>()?,
         ),
         _ => {
-            return Err(WriteError::Malformed(
-                "give either `hex` (a string) or `channels` (an object)".into(),
+            return Err(malformed(
+                "give either `hex` (a string) or `channels` (an object)",
             ))
         }
     };
-    Ok((req, corr))
+    Ok(Request::Outputs(req))
 }
 
 fn value_json(v: Value) -> serde_json::Value {
@@ -254,20 +504,39 @@ struct Published {
     diag: Option<Vec<u8>>,
 }
 
+/// Where an answer goes: service, slave, id, topic.
+#[derive(Debug, Clone)]
+struct Target {
+    service: Service,
+    address: u8,
+    to: ReplyTo,
+}
+
+/// A PKW or RFID job waiting for the slave's client.
+#[derive(Debug)]
+struct Queued {
+    request: Request,
+    target: Target,
+}
+
+/// Requests waiting per slave before the next is refused as busy.
+const QUEUE_LIMIT: usize = 8;
+
 #[derive(Debug)]
 struct Entry {
     info: SlaveInfo,
     published: Published,
     fault: Option<String>,
+    /// PKW or RFID jobs waiting for the client.
+    queue: VecDeque<Queued>,
+    pkw: Option<PkwClient>,
+    rfid: Option<RfidClient>,
+    /// The job the client runs.
+    running: Option<Target>,
 }
 
-/// A write waiting for the next cycle boundary.
-#[derive(Debug)]
-struct Pending {
-    address: u8,
-    request: WriteRequest,
-    correlation: Option<serde_json::Value>,
-}
+/// An answer's body: extra fields on success, the error otherwise.
+type Outcome = Result<Map<String, serde_json::Value>, RequestError>;
 
 /// The gateway between one DP master and one MQTT broker.
 ///
@@ -276,36 +545,57 @@ struct Pending {
 /// message received, [`Gateway::step`] with the master, then send
 /// everything [`Gateway::poll_publish`] returns. After each (re)connection
 /// call [`Gateway::connected`]: the status and every retained topic are
-/// published again.
+/// published again; after a loss [`Gateway::disconnected`].
 #[derive(Debug)]
 pub struct Gateway {
     settings: MqttSettings,
     topics: Topics,
     slaves: Vec<Entry>,
-    pending: Vec<Pending>,
+    /// Output writes and DP-V1 jobs for the next step.
+    pending: Vec<Queued>,
+    /// DP-V1 jobs the master runs.
+    jobs: Vec<(JobId, Target)>,
     out: VecDeque<Publish>,
     next_interval_ms: u64,
     online: bool,
+    /// The master state in the last status published (`None`: due).
+    status_master: Option<OperatingState>,
+    /// Since when the broker is away (ms).
+    offline_since: Option<u64>,
+    /// When the safe state was applied in this or the last outage (ms).
+    safe_applied: Option<u64>,
+    /// The master's state before [`SafeState::Clear`] put it in Clear.
+    cleared_from: Option<OperatingState>,
 }
 
 impl Gateway {
     /// A gateway for these slaves.
     pub fn new(settings: MqttSettings, slaves: Vec<SlaveInfo>) -> Gateway {
+        let timeout = settings.job_timeout;
         Gateway {
             topics: Topics::new(&settings.prefix, &settings.bus),
             settings,
             slaves: slaves
                 .into_iter()
                 .map(|info| Entry {
+                    pkw: info.pkw.map(|d| PkwClient::new(d, timeout)),
+                    rfid: info.rfid.then(|| RfidClient::new(timeout)),
                     info,
                     published: Published::default(),
                     fault: None,
+                    queue: VecDeque::new(),
+                    running: None,
                 })
                 .collect(),
             pending: vec![],
+            jobs: vec![],
             out: VecDeque::new(),
             next_interval_ms: 0,
             online: false,
+            status_master: None,
+            offline_since: None,
+            safe_applied: None,
+            cleared_from: None,
         }
     }
 
@@ -329,145 +619,341 @@ impl Gateway {
         }
     }
 
-    /// The broker accepted the connection: publish the status (online)
-    /// and, at the next [`Gateway::step`], every retained slave topic.
-    pub fn connected(&mut self, ts_ms: u64) {
+    /// The broker accepted the connection: at the next [`Gateway::step`]
+    /// the status (online) and every retained slave topic are published.
+    pub fn connected(&mut self, _ts_ms: u64) {
         self.online = true;
+        self.offline_since = None;
+        self.status_master = None;
         for e in &mut self.slaves {
             e.published = Published::default();
         }
-        let slaves: Vec<u8> = self.slaves.iter().map(|e| e.info.address).collect();
-        self.push(
-            self.topics.status(),
-            json!({"state": "online", "ts": ts_ms, "slaves": slaves,
-                   "writable": self.settings.writable}),
-            true,
-        );
     }
 
-    /// The connection was lost: nothing is queued until
-    /// [`Gateway::connected`].
-    pub fn disconnected(&mut self) {
+    /// The connection was lost at `ts_ms`: nothing is queued until
+    /// [`Gateway::connected`]; after `outputs_timeout` the safe state.
+    pub fn disconnected(&mut self, ts_ms: u64) {
+        if self.online || self.offline_since.is_none() {
+            self.offline_since = Some(ts_ms);
+            self.safe_applied = None;
+        }
         self.online = false;
         self.out.clear();
     }
 
     fn push(&mut self, topic: String, payload: serde_json::Value, retain: bool) {
-        self.out.push_back(Publish {
-            topic,
-            payload: payload.to_string().into_bytes(),
-            retain,
-        });
+        if self.online {
+            self.out.push_back(Publish {
+                topic,
+                payload: payload.to_string().into_bytes(),
+                retain,
+            });
+        }
     }
 
-    fn reply(
-        &mut self,
-        address: u8,
-        corr: Option<serde_json::Value>,
-        result: Result<(), String>,
-        ts_ms: u64,
-    ) {
+    fn answer(&mut self, t: Target, outcome: Outcome, ts_ms: u64) {
         let mut o = Map::new();
-        o.insert("ok".into(), result.is_ok().into());
-        if let Err(e) = &result {
-            o.insert("error".into(), e.clone().into());
+        o.insert("ok".into(), outcome.is_ok().into());
+        match outcome {
+            Ok(fields) => o.extend(fields),
+            Err(e) => {
+                tracing::warn!(address = t.address, service = t.service.request(), error = %e, "MQTT request refused or failed");
+                o.insert("error".into(), e.to_string().into());
+            }
         }
-        if let Some(c) = corr {
-            o.insert("correlation_id".into(), c);
+        if let Some(c) = t.to.id {
+            o.insert("id".into(), c);
         }
         o.insert("ts".into(), ts_ms.into());
-        self.push(
-            self.topics.slave(address, SlaveTopic::OutputsResponse),
-            serde_json::Value::Object(o),
-            false,
-        );
+        let topic = t.to.topic.unwrap_or_else(|| {
+            self.topics
+                .slave(t.address, SlaveTopic::Response(t.service))
+        });
+        self.push(topic, serde_json::Value::Object(o), false);
     }
 
-    fn refuse(&mut self, address: u8, corr: Option<serde_json::Value>, e: WriteError, ts_ms: u64) {
-        tracing::warn!(address, error = %e, "MQTT write refused");
-        self.reply(address, corr, Err(e.to_string()), ts_ms);
-    }
-
-    /// A message from the broker. Writes are checked now (a refused one
-    /// is answered at once and changes nothing) and applied at the next
-    /// [`Gateway::step`]. Messages on other topics are ignored.
-    pub fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
-        let address = match self.topics.parse_set(topic) {
-            None => return,
-            Some(Ok(a)) => a,
-            Some(Err(text)) => {
-                // No station to answer for: logged only.
-                tracing::warn!(topic, address = text, "MQTT write names no station");
-                return;
-            }
-        };
-        let (request, corr) = match parse_write(payload) {
-            Ok(r) => r,
-            Err(e) => return self.refuse(address, None, e, ts_ms),
-        };
+    /// Check `request` for slave `address` against the configuration and
+    /// the permissions.
+    fn check(&self, address: u8, request: &Request) -> Result<(), RequestError> {
         let Some(entry) = self.slaves.iter().find(|e| e.info.address == address) else {
-            return self.refuse(
-                address,
-                corr,
-                WriteError::UnknownSlave(address.to_string()),
-                ts_ms,
-            );
+            return Err(RequestError::UnknownSlave(address.to_string()));
         };
-        if !self.settings.writable.contains(&address) {
-            return self.refuse(address, corr, WriteError::Unauthorised(address), ts_ms);
+        let unsupported = |what| Err(RequestError::Unsupported { address, what });
+        match request {
+            Request::Dpv1Read { .. } | Request::Dpv1Write { .. } if !entry.info.dpv1 => {
+                return unsupported("DP-V1 (`dpv1 = true` in the bus file)")
+            }
+            Request::Pkw { .. } if entry.info.pkw.is_none() => return unsupported("PKW channel"),
+            Request::Rfid(_) if !entry.info.rfid => return unsupported("RFID reader handshake"),
+            _ => {}
         }
-        if let WriteRequest::Channels(values) = &request {
-            let Some(map) = &entry.info.channels else {
-                return self.refuse(
+        if !request.writes() {
+            return Ok(());
+        }
+        let access = self
+            .settings
+            .access(address)
+            .ok_or(RequestError::Unauthorised(address))?;
+        if let Some(allowed) = &access.channels {
+            let ok = match request {
+                Request::Outputs(WriteRequest::Channels(values)) => {
+                    values.iter().all(|(n, _)| allowed.contains(n))
+                }
+                _ => false,
+            };
+            if !ok {
+                return Err(RequestError::ChannelsOnly {
                     address,
-                    corr,
-                    WriteError::Channel(format!(
-                        "slave {address} has no named channels: write `hex`"
-                    )),
-                    ts_ms,
-                );
+                    allowed: allowed.clone(),
+                });
+            }
+        }
+        if let Request::Outputs(WriteRequest::Channels(values)) = request {
+            let Some(map) = &entry.info.channels else {
+                return Err(RequestError::Channel(format!(
+                    "slave {address} has no named channels: write `hex`"
+                )));
             };
             if let Some((n, _)) = values
                 .iter()
                 .find(|(n, _)| map.find(Direction::Output, n).is_none())
             {
-                let e = WriteError::Channel(format!("slave {address} has no output channel `{n}`"));
-                return self.refuse(address, corr, e, ts_ms);
+                return Err(RequestError::Channel(format!(
+                    "slave {address} has no output channel `{n}`"
+                )));
             }
         }
-        self.pending.push(Pending {
-            address,
-            request,
-            correlation: corr,
-        });
+        Ok(())
     }
 
-    /// One step at a cycle boundary: apply the pending writes (each to
-    /// one slave's whole image at once, so one Data_Exchange carries all
-    /// of it), then queue what changed (and, in interval mode, what is
-    /// due). `ts_ms` is the wall-clock time in ms since the Unix epoch.
-    pub fn step(&mut self, m: &mut DpMaster, ts_ms: u64) {
+    /// A message from the broker. Requests are checked now (a refused
+    /// one is answered at once and changes nothing) and carried out from
+    /// the next [`Gateway::step`]. Messages on other topics are ignored.
+    pub fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        let (service, address) = match self.topics.parse_request(topic) {
+            None => return,
+            Some((s, Ok(a))) => (s, a),
+            Some((_, Err(text))) => {
+                // No station to answer for: logged only.
+                tracing::warn!(topic, address = text, "MQTT request names no station");
+                return;
+            }
+        };
+        let (to, request) = parse_request(service, payload);
+        let target = Target {
+            service,
+            address,
+            to,
+        };
+        let request = match request.and_then(|r| self.check(address, &r).map(|()| r)) {
+            Ok(r) => r,
+            Err(e) => return self.answer(target, Err(e), ts_ms),
+        };
+        let q = Queued { request, target };
+        match q.request {
+            Request::Outputs(_) | Request::Dpv1Read { .. } | Request::Dpv1Write { .. } => {
+                self.pending.push(q)
+            }
+            Request::Pkw { .. } | Request::Rfid(_) => {
+                let e = self
+                    .slaves
+                    .iter_mut()
+                    .find(|e| e.info.address == address)
+                    .expect("checked");
+                if e.queue.len() >= QUEUE_LIMIT {
+                    return self.answer(q.target, Err(RequestError::Busy(address)), ts_ms);
+                }
+                e.queue.push_back(q);
+            }
+        }
+    }
+
+    /// One step at a cycle boundary; `now` is the master's time,
+    /// `ts_ms` the wall-clock time in ms since the Unix epoch.
+    ///
+    /// Takes the master's events (DP-V1 job results, faults), applies the
+    /// pending output writes (each to one slave's whole image at once, so
+    /// one Data_Exchange carries all of it), starts DP-V1 jobs, drives
+    /// the PKW and RFID clients, puts the outputs into the safe state
+    /// when the broker has been away for `outputs_timeout`, then queues
+    /// what changed (and, in interval mode, what is due).
+    pub fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
+        let mut answers: Vec<(Target, Outcome)> = vec![];
         while let Some(ev) = m.poll_event() {
-            if let MasterEvent::Fault { address, reason } = ev {
-                tracing::warn!(address, %reason, "slave fault");
-                if let Some(e) = self.slaves.iter_mut().find(|e| e.info.address == address) {
-                    e.fault = Some(reason.to_string());
-                    e.published.state = None;
+            match ev {
+                MasterEvent::Fault { address, reason } => {
+                    tracing::warn!(address, %reason, "slave fault");
+                    if let Some(e) = self.slaves.iter_mut().find(|e| e.info.address == address) {
+                        e.fault = Some(reason.to_string());
+                        e.published.state = None;
+                    }
                 }
+                MasterEvent::JobDone(id) => {
+                    if let Some(i) = self.jobs.iter().position(|(j, _)| *j == id) {
+                        let t = self.jobs.swap_remove(i).1;
+                        let outcome = match m.take_result(id) {
+                            Some(JobResult::Data(d)) => {
+                                let mut f = Map::new();
+                                f.insert("hex".into(), hex(&d).into());
+                                Ok(f)
+                            }
+                            Some(JobResult::Done) => Ok(Map::new()),
+                            Some(r) => Err(RequestError::Failed(r.describe())),
+                            None => Err(RequestError::Failed("result lost".into())),
+                        };
+                        answers.push((t, outcome));
+                    }
+                }
+                _ => {}
             }
         }
-        for p in std::mem::take(&mut self.pending) {
-            let result = self.apply(m, &p);
-            match result {
-                Ok(()) => {
-                    tracing::info!(address = p.address, "MQTT write applied");
-                    self.reply(p.address, p.correlation, Ok(()), ts_ms);
+        self.safe_state(m, ts_ms);
+        for q in std::mem::take(&mut self.pending) {
+            let outcome = self.carry_out(m, &q);
+            if let Some(o) = outcome {
+                if o.is_ok() {
+                    tracing::info!(address = q.target.address, "MQTT write applied");
                 }
-                Err(e) => self.refuse(p.address, p.correlation, e, ts_ms),
+                answers.push((q.target, o));
             }
         }
-        if !self.online {
+        for e in &mut self.slaves {
+            drive(e, m, now, &mut answers);
+        }
+        for (t, o) in answers {
+            self.answer(t, o, ts_ms);
+        }
+        if self.online {
+            self.publish_state(m, ts_ms);
+        }
+    }
+
+    /// Apply an output write (`Some(outcome)`) or start a DP-V1 job
+    /// (`None` while it runs).
+    fn carry_out(&mut self, m: &mut DpMaster, q: &Queued) -> Option<Outcome> {
+        let a = q.target.address;
+        let job = match &q.request {
+            Request::Outputs(w) => return Some(self.apply(m, a, w).map(|()| Map::new())),
+            Request::Dpv1Read {
+                slot,
+                index,
+                length,
+            } => Job::Dpv1Read {
+                address: a,
+                slot: *slot,
+                index: *index,
+                length: *length,
+            },
+            Request::Dpv1Write { slot, index, data } => Job::Dpv1Write {
+                address: a,
+                slot: *slot,
+                index: *index,
+                data: data.clone(),
+            },
+            Request::Pkw { .. } | Request::Rfid(_) => return None,
+        };
+        match m.submit(job) {
+            Some(id) => {
+                self.jobs.push((id, q.target.clone()));
+                None
+            }
+            None => Some(Err(RequestError::Busy(a))),
+        }
+    }
+
+    fn apply(&self, m: &mut DpMaster, address: u8, w: &WriteRequest) -> Result<(), RequestError> {
+        let current = m
+            .outputs(address)
+            .ok_or_else(|| RequestError::UnknownSlave(address.to_string()))?;
+        let image = match w {
+            WriteRequest::Image(b) => {
+                if b.len() != current.len() {
+                    return Err(RequestError::Length {
+                        address,
+                        expected: current.len(),
+                        got: b.len(),
+                    });
+                }
+                b.clone()
+            }
+            WriteRequest::Channels(values) => {
+                let map = self
+                    .slaves
+                    .iter()
+                    .find(|e| e.info.address == address)
+                    .and_then(|e| e.info.channels.as_ref())
+                    .ok_or_else(|| RequestError::Channel("no named channels".into()))?;
+                let mut img = current.to_vec();
+                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), &mut img)
+                    .map_err(|e| RequestError::Channel(e.to_string()))?;
+                img
+            }
+        };
+        m.set_outputs(address, &image);
+        Ok(())
+    }
+
+    /// Without a broker for `outputs_timeout`: the safe state, once per
+    /// outage; with the broker back after [`SafeState::Clear`]: the
+    /// master's state from before.
+    fn safe_state(&mut self, m: &mut DpMaster, ts_ms: u64) {
+        if self.online {
+            if let Some(s) = self.cleared_from.take() {
+                tracing::info!(state = s.as_str(), "broker back: master leaves Clear");
+                m.set_operating_state(s);
+            }
             return;
+        }
+        let since = *self.offline_since.get_or_insert(ts_ms);
+        let Some(timeout) = self.settings.outputs_timeout else {
+            return;
+        };
+        if self.safe_applied.is_some() || ts_ms < since + timeout.as_millis() as u64 {
+            return;
+        }
+        self.safe_applied = Some(ts_ms);
+        let s = self.settings.safe_state;
+        tracing::warn!(
+            safe_state = s.as_str(),
+            "no broker for {} ms: outputs to the safe state",
+            timeout.as_millis()
+        );
+        match s {
+            SafeState::Keep => {}
+            SafeState::Zero => {
+                for w in &self.settings.writable {
+                    if let Some(len) = m.outputs(w.address).map(<[u8]>::len) {
+                        m.set_outputs(w.address, &vec![0; len]);
+                    }
+                }
+            }
+            SafeState::Clear => {
+                let before = m.operating_state();
+                if before != OperatingState::Clear {
+                    self.cleared_from = Some(before);
+                    m.set_operating_state(OperatingState::Clear);
+                }
+            }
+        }
+    }
+
+    fn status(&self, m: &DpMaster, ts_ms: u64) -> serde_json::Value {
+        let slaves: Vec<u8> = self.slaves.iter().map(|e| e.info.address).collect();
+        let writable: Vec<u8> = self.settings.writable.iter().map(|w| w.address).collect();
+        let mut o = json!({"state": "online", "master": m.operating_state().as_str(), "ts": ts_ms,
+                           "slaves": slaves, "writable": writable});
+        if let Some(at) = self.safe_applied {
+            o["outputs_timeout"] =
+                json!({"safe_state": self.settings.safe_state.as_str(), "at": at});
+        }
+        o
+    }
+
+    fn publish_state(&mut self, m: &mut DpMaster, ts_ms: u64) {
+        if self.status_master != Some(m.operating_state()) {
+            self.status_master = Some(m.operating_state());
+            let s = self.status(m, ts_ms);
+            self.push(self.topics.status(), s, true);
         }
         let interval_due =
             self.settings.publish != PublishMode::OnChange && ts_ms >= self.next_interval_ms;
@@ -539,41 +1025,79 @@ impl Gateway {
         }
     }
 
-    fn apply(&self, m: &mut DpMaster, p: &Pending) -> Result<(), WriteError> {
-        let current = m
-            .outputs(p.address)
-            .ok_or_else(|| WriteError::UnknownSlave(p.address.to_string()))?;
-        let image = match &p.request {
-            WriteRequest::Image(b) => {
-                if b.len() != current.len() {
-                    return Err(WriteError::Length {
-                        address: p.address,
-                        expected: current.len(),
-                        got: b.len(),
-                    });
-                }
-                b.clone()
-            }
-            WriteRequest::Channels(values) => {
-                let map = self
-                    .slaves
-                    .iter()
-                    .find(|e| e.info.address == p.address)
-                    .and_then(|e| e.info.channels.as_ref())
-                    .ok_or_else(|| WriteError::Channel("no named channels".into()))?;
-                let mut img = current.to_vec();
-                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), &mut img)
-                    .map_err(|e| WriteError::Channel(e.to_string()))?;
-                img
-            }
-        };
-        m.set_outputs(p.address, &image);
-        Ok(())
-    }
-
     /// The next message to send, if any.
     pub fn poll_publish(&mut self) -> Option<Publish> {
         self.out.pop_front()
+    }
+}
+
+/// Start the next PKW or RFID job of a slave when its client is idle,
+/// and drive the running one.
+fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Target, Outcome)>) {
+    let Some(h) = m.handle(e.info.address) else {
+        return;
+    };
+    if let Some(c) = &mut e.pkw {
+        while c.is_idle() && e.running.is_none() {
+            let Some(q) = e.queue.pop_front() else { break };
+            let Request::Pkw { pnu, command } = q.request else {
+                continue;
+            };
+            match c.start(now, pnu, command) {
+                Ok(()) => e.running = Some(q.target),
+                Err(err) => answers.push((q.target, Err(RequestError::Failed(err.to_string())))),
+            }
+        }
+        if !c.is_idle() {
+            if let Some(r) = c.drive(now, m, h) {
+                let outcome = r
+                    .map(|a| {
+                        let words = |p: pkw::Pkw| {
+                            let mut b = [0u8; PKW_LEN];
+                            p.emit(&mut b);
+                            hex(&b)
+                        };
+                        let mut f = Map::new();
+                        f.insert("value".into(), a.reply.value().into());
+                        f.insert("dword".into(), a.reply.is_dword().into());
+                        f.insert("request".into(), words(a.request).into());
+                        f.insert("response".into(), words(a.response).into());
+                        f
+                    })
+                    .map_err(|err| RequestError::Failed(err.to_string()));
+                if let Some(t) = e.running.take() {
+                    answers.push((t, outcome));
+                }
+            }
+        }
+    }
+    if let Some(c) = &mut e.rfid {
+        while c.is_idle() && e.running.is_none() {
+            let Some(q) = e.queue.pop_front() else { break };
+            let Request::Rfid(line) = q.request else {
+                continue;
+            };
+            match c.start(now, &line) {
+                Ok(()) => e.running = Some(q.target),
+                Err(err) => answers.push((q.target, Err(RequestError::Failed(err.to_string())))),
+            }
+        }
+        if !c.is_idle() {
+            if let Some(r) = c.poll_master(now, m, h) {
+                let outcome = r
+                    .map(|a| {
+                        let mut f = Map::new();
+                        let text = String::from_utf8_lossy(a);
+                        f.insert("answer".into(), text.trim_end_matches('\r').into());
+                        f.insert("hex".into(), hex(a).into());
+                        f
+                    })
+                    .map_err(|err| RequestError::Failed(err.to_string()));
+                if let Some(t) = e.running.take() {
+                    answers.push((t, outcome));
+                }
+            }
+        }
     }
 }
 
@@ -584,8 +1108,11 @@ mod tests {
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};
 
-    /// A master with slave 3 (2 words in/out, writable, named channels)
-    /// and slave 4 (2 bytes out, not writable).
+    type Msgs = Vec<(String, serde_json::Value, bool)>;
+
+    /// A master with slave 3 (2 words in/out, writable, named channels),
+    /// slave 4 (2 bytes out, not writable) and slave 5 (only channel
+    /// `speed` writable).
     fn setup() -> (Gateway, DpMaster) {
         let cfg = MasterConfig {
             address: 1,
@@ -593,27 +1120,35 @@ mod tests {
             slaves: vec![
                 SlaveParams::new(3, 0x1234, vec![0x71]),
                 SlaveParams::new(4, 0x1234, vec![0x21]),
+                SlaveParams::new(5, 0x1234, vec![0x71]),
             ],
             options: MasterOptions::default(),
         };
         let m = DpMaster::new(&cfg).unwrap();
         let mut ch = ChannelMap::new();
         ch.push("speed", Direction::Output, 0, ChannelType::I16);
+        ch.push("torque", Direction::Output, 2, ChannelType::I16);
         ch.push("actual", Direction::Input, 0, ChannelType::I16);
-        let mut settings = crate::MqttSettings::from_table(None, "l1").unwrap();
-        settings.writable = vec![3];
+        let t: toml::Table =
+            toml::from_str("writable = [3, { address = 5, channels = [\"speed\"] }]").unwrap();
+        let settings = crate::MqttSettings::from_table(Some(&t), "l1").unwrap();
         let info = |address, channels| SlaveInfo {
             address,
             name: format!("s{address}"),
             channels,
             gsd: None,
             dpv1: false,
+            pkw: None,
+            rfid: false,
         };
-        let g = Gateway::new(settings, vec![info(3, Some(ch)), info(4, None)]);
+        let g = Gateway::new(
+            settings,
+            vec![info(3, Some(ch.clone())), info(4, None), info(5, Some(ch))],
+        );
         (g, m)
     }
 
-    fn drain(g: &mut Gateway) -> Vec<(String, serde_json::Value, bool)> {
+    fn drain(g: &mut Gateway) -> Msgs {
         std::iter::from_fn(|| g.poll_publish())
             .map(|p| {
                 (
@@ -625,10 +1160,7 @@ mod tests {
             .collect()
     }
 
-    fn find<'a>(
-        msgs: &'a [(String, serde_json::Value, bool)],
-        topic: &str,
-    ) -> Option<&'a serde_json::Value> {
+    fn find<'a>(msgs: &'a Msgs, topic: &str) -> Option<&'a serde_json::Value> {
         msgs.iter().find(|(t, _, _)| t == topic).map(|(_, v, _)| v)
     }
 
@@ -637,72 +1169,147 @@ mod tests {
         let t = Topics::new("plant/a", "seg1");
         assert_eq!(t.status(), "plant/a/seg1/status");
         assert_eq!(t.slave(7, SlaveTopic::Inputs), "plant/a/seg1/7/inputs");
-        assert_eq!(t.set_filter(), "plant/a/seg1/+/outputs/set");
-        assert_eq!(t.parse_set("plant/a/seg1/7/outputs/set"), Some(Ok(7)));
         assert_eq!(
-            t.parse_set("plant/a/seg1/x/outputs/set"),
-            Some(Err("x".into()))
+            t.request_filters(),
+            [
+                "plant/a/seg1/+/outputs/set",
+                "plant/a/seg1/+/dpv1/request",
+                "plant/a/seg1/+/pkw/request",
+                "plant/a/seg1/+/rfid/request"
+            ]
         );
-        assert_eq!(t.parse_set("plant/a/seg1/7/outputs"), None);
-        assert_eq!(t.parse_set("plant/a/seg2/7/outputs/set"), None);
+        assert_eq!(
+            t.parse_request("plant/a/seg1/7/outputs/set"),
+            Some((Service::Outputs, Ok(7)))
+        );
+        assert_eq!(
+            t.parse_request("plant/a/seg1/7/pkw/request"),
+            Some((Service::Pkw, Ok(7)))
+        );
+        assert_eq!(
+            t.parse_request("plant/a/seg1/x/outputs/set"),
+            Some((Service::Outputs, Err("x".into())))
+        );
+        assert_eq!(t.parse_request("plant/a/seg1/7/outputs"), None);
+        assert_eq!(t.parse_request("plant/a/seg1/7/pkw/response"), None);
+        assert_eq!(t.parse_request("plant/a/seg2/7/outputs/set"), None);
         assert_eq!(hex(&[0, 0xab]), "00ab");
         assert_eq!(parse_hex("0x00 ab:01"), Some(vec![0, 0xab, 1]));
         assert_eq!(parse_hex("abc"), None);
         assert_eq!(parse_hex("zz"), None);
+        assert_eq!(parse_hex(""), None);
     }
 
     #[test]
-    fn write_payloads() {
+    fn request_payloads() {
+        let out = |p: &[u8]| parse_request(Service::Outputs, p);
         assert_eq!(
-            parse_write(b"0102").unwrap().0,
-            WriteRequest::Image(vec![1, 2])
+            out(b"0102").1.unwrap(),
+            Request::Outputs(WriteRequest::Image(vec![1, 2]))
         );
         assert_eq!(
-            parse_write(b"\"0102\"").unwrap().0,
-            WriteRequest::Image(vec![1, 2])
+            out(b"\"0102\"").1.unwrap(),
+            Request::Outputs(WriteRequest::Image(vec![1, 2]))
         );
-        let (r, c) =
-            parse_write(br#"{"channels": {"a": 1, "b": true, "c": 1.5}, "correlation_id": "x"}"#)
-                .unwrap();
-        assert_eq!(c, Some("x".into()));
+        let (to, r) =
+            out(br#"{"channels": {"a": 1, "b": true, "c": 1.5}, "id": "x", "reply_to": "me/r"}"#);
         assert_eq!(
-            r,
-            WriteRequest::Channels(vec![
+            to,
+            ReplyTo {
+                id: Some("x".into()),
+                topic: Some("me/r".into())
+            }
+        );
+        assert_eq!(
+            r.unwrap(),
+            Request::Outputs(WriteRequest::Channels(vec![
                 ("a".into(), Value::Int(1)),
                 ("b".into(), Value::Bool(true)),
                 ("c".into(), Value::Float(1.5)),
-            ])
+            ]))
         );
+        // The id is known even when the rest is malformed.
+        let (to, r) = out(br#"{"hexx": "01", "id": 4}"#);
+        assert_eq!(to.id, Some(4.into()));
+        assert!(matches!(r, Err(RequestError::Malformed(_))));
         for bad in [
             &b"{\"hex\": \"01\", \"channels\": {}}"[..],
-            b"{\"hexx\": \"01\"}",
             b"{\"channels\": {\"a\": \"1\"}}",
+            b"{\"hex\": \"01\", \"reply_to\": \"a/#\"}",
             b"[1]",
             b"\xff",
             b"",
         ] {
             assert!(
-                matches!(parse_write(bad), Err(WriteError::Malformed(_))),
+                matches!(out(bad).1, Err(RequestError::Malformed(_))),
                 "{bad:?}"
             );
         }
+        let pkw = |p: &[u8]| parse_request(Service::Pkw, p).1;
+        assert_eq!(
+            pkw(br#"{"op": "read", "pnu": 1000}"#).unwrap(),
+            Request::Pkw {
+                pnu: 1000,
+                command: pkw::Command::Read
+            }
+        );
+        assert_eq!(
+            pkw(br#"{"op": "write", "pnu": 5, "value": -2}"#).unwrap(),
+            Request::Pkw {
+                pnu: 5,
+                command: pkw::Command::WriteWord(0xfffe)
+            }
+        );
+        assert_eq!(
+            pkw(br#"{"op": "write", "pnu": 5, "value": 70000, "index": 2}"#).unwrap(),
+            Request::Pkw {
+                pnu: 5,
+                command: pkw::Command::WriteElementDword {
+                    index: 2,
+                    value: 70000
+                }
+            }
+        );
+        assert!(pkw(br#"{"op": "write", "pnu": 5, "value": 70000, "dword": false}"#).is_err());
+        assert!(pkw(br#"{"op": "read", "pnu": 3000}"#).is_err());
+        assert!(pkw(br#"{"op": "erase", "pnu": 3}"#).is_err());
+        assert!(pkw(b"0102").is_err());
+        let dpv1 = |p: &[u8]| parse_request(Service::Dpv1, p).1;
+        assert_eq!(
+            dpv1(br#"{"op": "write", "slot": 1, "index": 2, "hex": "0a0b"}"#).unwrap(),
+            Request::Dpv1Write {
+                slot: 1,
+                index: 2,
+                data: vec![10, 11]
+            }
+        );
+        assert!(dpv1(br#"{"op": "read", "slot": 1}"#).is_err());
+        assert!(dpv1(br#"{"op": "read", "slot": 1, "index": 2, "length": 0}"#).is_err());
+        assert_eq!(
+            parse_request(Service::Rfid, br#"{"command": "VER"}"#)
+                .1
+                .unwrap(),
+            Request::Rfid(b"VER".to_vec())
+        );
     }
 
     #[test]
     fn publishes_retained_state_and_republishes_after_reconnect() {
         let (mut g, mut m) = setup();
-        g.step(&mut m, 5);
+        g.step(&mut m, Instant::ZERO, 5);
         assert!(
             drain(&mut g).is_empty(),
             "nothing before the first connection"
         );
         g.connected(10);
-        g.step(&mut m, 11);
+        g.step(&mut m, Instant::ZERO, 11);
         let msgs = drain(&mut g);
+        let st = find(&msgs, "profibus/l1/status").unwrap();
         assert_eq!(
-            find(&msgs, "profibus/l1/status").unwrap()["state"],
-            "online"
+            (st["state"].as_str(), st["master"].as_str()),
+            (Some("online"), Some("operate"))
         );
+        assert_eq!(st["writable"], json!([3, 5]));
         let st = find(&msgs, "profibus/l1/3/state").unwrap();
         assert_eq!(
             (st["state"].as_str(), st["name"].as_str()),
@@ -715,15 +1322,26 @@ mod tests {
             .unwrap()
             .get("values")
             .is_none());
-        assert!(msgs.iter().all(|(t, _, r)| *r || t.ends_with("response")));
+        assert!(msgs.iter().all(|(_, _, r)| *r));
         // Nothing changed: nothing new.
-        g.step(&mut m, 12);
+        g.step(&mut m, Instant::ZERO, 12);
         assert!(drain(&mut g).is_empty());
+        // The master goes to Clear: the status says so at once.
+        m.set_operating_state(OperatingState::Clear);
+        g.step(&mut m, Instant::ZERO, 13);
+        let msgs = drain(&mut g);
+        assert_eq!(
+            find(&msgs, "profibus/l1/status").unwrap()["master"],
+            "clear"
+        );
+        m.set_operating_state(OperatingState::Operate);
+        g.step(&mut m, Instant::ZERO, 14);
+        drain(&mut g);
         // A new connection: everything again.
-        g.disconnected();
+        g.disconnected(15);
         g.connected(20);
-        g.step(&mut m, 21);
-        assert_eq!(drain(&mut g).len(), msgs.len());
+        g.step(&mut m, Instant::ZERO, 21);
+        assert_eq!(drain(&mut g).len(), 1 + 3 * 4);
         assert_eq!(g.last_will().payload, br#"{"state":"offline"}"#);
     }
 
@@ -731,11 +1349,11 @@ mod tests {
     fn writes_are_checked_then_applied_at_the_step() {
         let (mut g, mut m) = setup();
         g.connected(0);
-        g.step(&mut m, 0);
+        g.step(&mut m, Instant::ZERO, 0);
         drain(&mut g);
         g.handle_message(
             "profibus/l1/3/outputs/set",
-            br#"{"channels": {"speed": -2}, "correlation_id": 1}"#,
+            br#"{"channels": {"speed": -2, "torque": 3}, "id": 1}"#,
             1,
         );
         assert_eq!(
@@ -743,18 +1361,25 @@ mod tests {
             [0, 0, 0, 0],
             "applied at the step, not before"
         );
-        g.step(&mut m, 2);
-        assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 0]);
+        g.step(&mut m, Instant::ZERO, 2);
+        assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 3]);
         let msgs = drain(&mut g);
         let r = find(&msgs, "profibus/l1/3/outputs/response").unwrap();
-        assert_eq!(
-            (r["ok"].as_bool(), r["correlation_id"].as_i64()),
-            (Some(true), Some(1))
-        );
+        assert_eq!((r["ok"].as_bool(), r["id"].as_i64()), (Some(true), Some(1)));
         assert_eq!(
             find(&msgs, "profibus/l1/3/outputs").unwrap()["values"]["speed"],
             -2
         );
+        // Slave 5 takes its `speed` channel, answered on `reply_to`.
+        g.handle_message(
+            "profibus/l1/5/outputs/set",
+            br#"{"channels": {"speed": 7}, "id": "s", "reply_to": "client/9"}"#,
+            3,
+        );
+        g.step(&mut m, Instant::ZERO, 4);
+        let msgs = drain(&mut g);
+        assert_eq!(find(&msgs, "client/9").unwrap()["ok"], true);
+        assert_eq!(m.outputs(5).unwrap(), [0, 7, 0, 0]);
 
         // Refused writes change nothing and are answered.
         for (topic, payload, error) in [
@@ -772,20 +1397,198 @@ mod tests {
                 "",
             ),
             ("profibus/l1/3/outputs/set", b"junk", "malformed"),
+            (
+                "profibus/l1/5/outputs/set",
+                b"{\"channels\": {\"speed\": 1, \"torque\": 1}}",
+                "only the output channels [\"speed\"]",
+            ),
+            ("profibus/l1/5/outputs/set", b"00010001", "only the output"),
+            (
+                "profibus/l1/3/pkw/request",
+                b"{\"op\": \"read\", \"pnu\": 1}",
+                "no PKW channel",
+            ),
+            (
+                "profibus/l1/3/rfid/request",
+                b"{\"command\": \"VER\"}",
+                "no RFID",
+            ),
+            (
+                "profibus/l1/3/dpv1/request",
+                b"{\"op\": \"read\", \"slot\": 0, \"index\": 1}",
+                "no DP-V1",
+            ),
         ] {
-            g.handle_message(topic, payload, 3);
-            g.step(&mut m, 4);
+            g.handle_message(topic, payload, 5);
+            g.step(&mut m, Instant::ZERO, 6);
             let msgs = drain(&mut g);
-            let addr = topic.split('/').nth(2).unwrap();
-            let r = find(&msgs, &format!("profibus/l1/{addr}/outputs/response")).unwrap();
+            let response = topic
+                .replace("/set", "/response")
+                .replace("/request", "/response");
+            let r = find(&msgs, &response).unwrap_or_else(|| panic!("{msgs:?}"));
             assert_eq!(r["ok"], false, "{topic} {payload:?}");
             assert!(r["error"].as_str().unwrap().contains(error), "{r}");
-            assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 0]);
+            assert_eq!(m.outputs(3).unwrap(), [0xff, 0xfe, 0, 3]);
             assert_eq!(m.outputs(4).unwrap(), [0, 0]);
+            assert_eq!(m.outputs(5).unwrap(), [0, 7, 0, 0]);
         }
         // Other topics are not ours.
-        g.handle_message("profibus/l1/3/outputs", b"0000", 5);
-        g.step(&mut m, 6);
+        g.handle_message("profibus/l1/3/outputs", b"0000", 7);
+        g.step(&mut m, Instant::ZERO, 8);
         assert!(drain(&mut g).is_empty());
+    }
+
+    #[test]
+    fn outputs_timeout_puts_the_outputs_in_the_safe_state_once() {
+        for (safe, want3, master) in [
+            ("keep", [0xff, 0xfe, 0, 3], "operate"),
+            ("zero", [0, 0, 0, 0], "operate"),
+            ("clear", [0xff, 0xfe, 0, 3], "clear"),
+        ] {
+            let (g, mut m) = setup();
+            let mut s = g.settings().clone();
+            s.outputs_timeout = Some(std::time::Duration::from_millis(100));
+            s.safe_state = match safe {
+                "keep" => SafeState::Keep,
+                "zero" => SafeState::Zero,
+                _ => SafeState::Clear,
+            };
+            let mut g = Gateway::new(s, g.slaves.iter().map(|e| e.info.clone()).collect());
+            g.connected(0);
+            g.handle_message("profibus/l1/3/outputs/set", b"fffe0003", 0);
+            g.step(&mut m, Instant::ZERO, 0);
+            g.disconnected(1000);
+            g.step(&mut m, Instant::ZERO, 1099);
+            assert_eq!(
+                m.outputs(3).unwrap(),
+                [0xff, 0xfe, 0, 3],
+                "{safe}: too early"
+            );
+            g.step(&mut m, Instant::ZERO, 1100);
+            assert_eq!(m.outputs(3).unwrap(), want3, "{safe}");
+            assert_eq!(m.operating_state().as_str(), master, "{safe}");
+            // The broker is back: reported in the status; Clear ends.
+            g.connected(2000);
+            g.step(&mut m, Instant::ZERO, 2000);
+            let msgs = drain(&mut g);
+            let st = find(&msgs, "profibus/l1/status").unwrap();
+            assert_eq!(st["outputs_timeout"]["safe_state"], safe, "{st}");
+            assert_eq!(st["outputs_timeout"]["at"], 1100, "{st}");
+            assert_eq!(st["master"], "operate", "{st}");
+            assert_eq!(m.operating_state(), OperatingState::Operate);
+        }
+    }
+
+    /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
+    /// PKW (25) and an RFID reader (30), all writable but the reader.
+    fn plant() -> (Gateway, crate::sim::SimPlant) {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/plant.toml");
+        let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
+            [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
+            [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\
+            [[slave]]\naddress = 30\ndevice = \"rfid\"\n\n\
+            [mqtt]\nbus = \"p\"\nwritable = [3, 25]\n";
+        let bus = profibus_devices::bus::ProfiledBus::parse(&dir, text).unwrap();
+        let s = crate::MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
+        let g = Gateway::new(s, crate::sim::slave_infos(&bus).unwrap());
+        (g, crate::sim::SimPlant::new(&bus).unwrap())
+    }
+
+    /// Run the plant 1 ms at a time until a message on `topic` (at most
+    /// 2 s of bus time).
+    fn run_until(g: &mut Gateway, p: &mut crate::sim::SimPlant, topic: &str) -> serde_json::Value {
+        for _ in 0..2000 {
+            let t = p.now() + std::time::Duration::from_millis(1);
+            p.run_until(t);
+            let ms = p.now().as_nanos() / 1_000_000;
+            g.step(p.master(), t, ms);
+            if let Some(v) = find(&drain(g), topic) {
+                return v.clone();
+            }
+        }
+        panic!("no message on {topic}");
+    }
+
+    #[test]
+    fn dpv1_pkw_and_rfid_requests_are_answered() {
+        let (mut g, mut p) = plant();
+        g.connected(0);
+        for _ in 0..2000 {
+            let t = p.now() + std::time::Duration::from_millis(1);
+            p.run_until(t);
+            g.step(p.master(), t, 0);
+            let m = p.master();
+            if [3, 25, 30]
+                .iter()
+                .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
+            {
+                break;
+            }
+        }
+        drain(&mut g);
+        // DP-V1: write a record, read it back.
+        g.handle_message(
+            "profibus/p/3/dpv1/request",
+            br#"{"op": "write", "slot": 1, "index": 7, "hex": "cafe", "id": 1}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
+        assert_eq!(
+            (r["ok"].as_bool(), r["id"].as_i64()),
+            (Some(true), Some(1)),
+            "{r}"
+        );
+        g.handle_message(
+            "profibus/p/3/dpv1/request",
+            br#"{"op": "read", "slot": 1, "index": 7, "id": 2}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
+        assert_eq!(r["hex"], "cafe", "{r}");
+        g.handle_message(
+            "profibus/p/3/dpv1/request",
+            br#"{"op": "read", "slot": 1, "index": 99, "id": 3}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
+        assert_eq!(r["ok"], false, "{r}");
+        // PKW: two jobs queued at once run one after the other.
+        g.handle_message(
+            "profibus/p/25/pkw/request",
+            br#"{"op": "write", "pnu": 1000, "value": 305419896, "id": "w"}"#,
+            0,
+        );
+        g.handle_message(
+            "profibus/p/25/pkw/request",
+            br#"{"op": "read", "pnu": 1000, "id": "r", "reply_to": "me/pkw"}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/25/pkw/response");
+        assert_eq!(
+            (r["ok"].as_bool(), r["id"].as_str()),
+            (Some(true), Some("w")),
+            "{r}"
+        );
+        let r = run_until(&mut g, &mut p, "me/pkw");
+        assert_eq!(r["value"], 0x1234_5678, "{r}");
+        assert_eq!(r["response"], "23e8000012345678", "{r}");
+        // RFID: the reader is not writable; a read-only request would be
+        // answered, a command is refused.
+        g.handle_message("profibus/p/30/rfid/request", br#"{"command": "VER"}"#, 0);
+        let r = run_until(&mut g, &mut p, "profibus/p/30/rfid/response");
+        assert!(r["error"].as_str().unwrap().contains("not writable"), "{r}");
+        let mut s = g.settings().clone();
+        s.writable.push(crate::settings::WriteAccess::full(30));
+        let infos = g.slaves.iter().map(|e| e.info.clone()).collect();
+        let mut g = Gateway::new(s, infos);
+        g.connected(0);
+        g.handle_message(
+            "profibus/p/30/rfid/request",
+            br#"{"command": "VER", "id": 5}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/30/rfid/response");
+        assert_eq!(r["ok"], true, "{r}");
+        assert!(!r["answer"].as_str().unwrap().is_empty(), "{r}");
     }
 }

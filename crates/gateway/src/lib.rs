@@ -12,36 +12,58 @@
 //!
 //! | topic | retained | payload |
 //! |---|---|---|
-//! | `status` | yes | `{"state": "online", "ts", "slaves", "writable"}`; the last will sets `{"state": "offline"}` |
-//! | `<addr>/state` | yes | `{"address", "name", "state", "ts", "cycle"}` (+ `"fault"` after a parameterisation/configuration fault) |
+//! | `status` | yes | `{"state": "online", "master", "ts", "slaves", "writable"}` (+ `"outputs_timeout"` after an outage that reached it); `master` is the master's operating state (`operate`, `clear`, `stop`), republished at once when it changes; the last will sets `{"state": "offline"}` |
+//! | `<addr>/state` | yes | `{"address", "name", "state", "ts", "cycle"}` (+ `"fault"` after a parameterisation/configuration fault); published in the step after any change (slave lost, back) |
 //! | `<addr>/inputs` | yes | `{"address", "hex", "values", "ts", "cycle"}`; `values` (named channels) for profiled slaves |
 //! | `<addr>/outputs` | yes | the output image sent, same form |
-//! | `<addr>/diag` | yes | `{"address", "hex", "text", "ts", "cycle"}`: the last diagnosis, decoded |
-//! | `<addr>/outputs/set` | — | written by clients: see below |
-//! | `<addr>/outputs/response` | no | `{"ok", "error"?, "correlation_id"?, "ts"}` |
+//! | `<addr>/diag` | yes | `{"address", "hex", "text", "ts", "cycle"}`: the last diagnosis, decoded, published in the step after it changes |
+//! | `<addr>/outputs/set`, `<addr>/dpv1/request`, `<addr>/pkw/request`, `<addr>/rfid/request` | — | requests from clients: see below |
+//! | `<addr>/outputs/response`, `…/dpv1/response`, `…/pkw/response`, `…/rfid/response` | no | `{"ok", "error"?, "id"?, "ts", …}`: the answers |
 //!
 //! `ts` is the wall-clock time in ms since the Unix epoch, `cycle` the
 //! master's poll cycle counter.
 //!
-//! # Writes
+//! # Requests and answers
 //!
-//! A payload on `<addr>/outputs/set` is a bare hex string (the whole
-//! output image), or a JSON object with `"hex"` (the whole image, exactly
-//! the slave's output length) or `"channels"` (`{"name": value}` for a
-//! profiled slave's named output channels), and optionally
-//! `"correlation_id"` (repeated in the reply; MQTT 3.1.1 has no
-//! correlation data of its own). Only slaves listed in `[mqtt] writable`
-//! may be written. A write is checked as a whole and applied to the
-//! slave's image at once between two polls, so one Data_Exchange carries
-//! all of it; a malformed, unknown or unauthorised write changes nothing,
-//! is logged, and gets `{"ok": false, "error": …}` on
-//! `<addr>/outputs/response`.
+//! The client is MQTT 3.1.1 (one link for both modes; rumqttc's MQTT 5
+//! client is a separate API), so a request carries its correlation in
+//! the payload: every request is a JSON object that may have `"id"` (any
+//! JSON value, repeated in the answer) and `"reply_to"` (a topic without
+//! wildcards for the answer; default: the service's response topic of the
+//! slave). Each request gets exactly one answer: `{"ok": true, …}` with
+//! the result, or `{"ok": false, "error": "…"}`; a malformed, unknown or
+//! unauthorised request changes nothing and is logged.
+//!
+//! | topic | payload | answer fields |
+//! |---|---|---|
+//! | `outputs/set` | a bare hex string (the whole image), `{"hex"}` (the whole image, exactly the output length) or `{"channels": {"name": value}}` (named output channels of a profiled slave) | — |
+//! | `dpv1/request` | `{"op": "read", "slot", "index", "length"?}` (length 1..=240, default 240) or `{"op": "write", "slot", "index", "hex"}` | `"hex"` (read) |
+//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}` | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
+//! | `rfid/request` | `{"command": "RD 00 01"}` (one command line) | `"answer"` (text), `"hex"` |
+//!
+//! Permissions come from `[mqtt] writable` (see [`settings`]): output
+//! writes, DP-V1 writes, PKW writes and RFID commands need the slave
+//! listed; a slave listed with `channels` takes only writes of those
+//! channels. Reads are open for every configured slave. DP-V1 requests
+//! need a DP-V1 slave, PKW requests a slave with a PKW channel (BM4,
+//! Omega), RFID requests a reader; they run through the master's MSAC_C1
+//! jobs and the device crate's `PkwClient` and `RfidClient`, one PKW or
+//! RFID job per slave at a time (up to 8 wait; more are answered busy),
+//! each within `[mqtt] job_timeout_ms`.
+//!
+//! An output write is checked as a whole and applied to the slave's
+//! image at once between two polls, so one Data_Exchange carries all of
+//! it. (A PKW or RFID job writes its words into the same image: a whole
+//! image written during such a job overwrites them.)
 //!
 //! # Broker faults
 //!
 //! The bus keeps running while the broker is away. The link reconnects
-//! with a growing pause; on every connection the status and every
-//! retained topic are published again.
+//! with a growing pause (100 ms doubling to 5 s); on every connection the
+//! status and every retained topic are published again. After
+//! `[mqtt] outputs_timeout_ms` without a broker the outputs go to
+//! `[mqtt] safe_state` once (default `keep`: the last values stay), which
+//! is logged and, once the broker is back, reported in the status.
 //!
 //! [`DpMaster`]: profibus_dp::master::DpMaster
 
@@ -50,6 +72,6 @@ pub mod link;
 pub mod settings;
 pub mod sim;
 
-pub use crate::core::{Gateway, Publish, SlaveInfo, Topics};
+pub use crate::core::{Gateway, Publish, Service, SlaveInfo, Topics};
 pub use link::{LinkEvent, MqttLink};
-pub use settings::{MqttSettings, PublishMode, SettingsError};
+pub use settings::{MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};

@@ -66,7 +66,7 @@ impl MqttLink {
         o.set_last_will(LastWill::new(will.topic, will.payload, q, will.retain));
         let (client, mut eventloop) = AsyncClient::new(o, QUEUE);
         let (tx, events) = mpsc::unbounded_channel();
-        let filter = gateway.topics().set_filter();
+        let filters = gateway.topics().request_filters();
         let sub = client.clone();
         let task = tokio::spawn(async move {
             let mut pause = Duration::from_millis(100);
@@ -75,8 +75,10 @@ impl MqttLink {
                     Ok(Event::Incoming(Packet::ConnAck(_))) => {
                         pause = Duration::from_millis(100);
                         tracing::info!("connected to the MQTT broker");
-                        if let Err(e) = sub.try_subscribe(filter.clone(), q) {
-                            tracing::warn!(error = %e, "cannot subscribe to {filter}");
+                        for f in &filters {
+                            if let Err(e) = sub.try_subscribe(f.clone(), q) {
+                                tracing::warn!(error = %e, "cannot subscribe to {f}");
+                            }
                         }
                         if tx.send(LinkEvent::Connected).is_err() {
                             return;
@@ -148,7 +150,7 @@ pub fn pump(link: &mut MqttLink, gateway: &mut Gateway, ts_ms: u64) {
     while let Some(ev) = link.try_recv() {
         match ev {
             LinkEvent::Connected => gateway.connected(ts_ms),
-            LinkEvent::Disconnected(_) => gateway.disconnected(),
+            LinkEvent::Disconnected(_) => gateway.disconnected(ts_ms),
             LinkEvent::Message { topic, payload } => {
                 gateway.handle_message(&topic, &payload, ts_ms)
             }

@@ -9,8 +9,27 @@
 //! qos = 1                            # 0, 1 or 2
 //! publish = "change"                 # "change", "interval" or "both"
 //! interval_ms = 1000                 # period of "interval" / "both"
-//! writable = [3, 6]                  # slaves whose outputs MQTT may set (default: none)
+//! writable = [3, { address = 6, channels = ["speed"] }]
+//! outputs_timeout_ms = 5000          # without a broker this long: safe state
+//! safe_state = "keep"                # "keep" (default), "zero" or "clear"
+//! job_timeout_ms = 2000              # DP-V1, PKW and RFID requests give up after this
 //! ```
+//!
+//! `writable` says what MQTT may change (default: nothing). A station
+//! address alone gives full write access to that slave: its whole output
+//! image and named channels, DP-V1 writes, PKW writes and RFID commands.
+//! `{ address, channels }` allows only writes of those named output
+//! channels (`outputs/set` with `"channels"`). Reads (DP-V1 read, PKW
+//! read and describe) are allowed for every configured slave.
+//!
+//! `outputs_timeout_ms`: after this long without a broker connection the
+//! gateway puts the outputs into `safe_state` once: `keep` leaves the last
+//! values (the default; also when no timeout is set), `zero` writes zeros
+//! to the whole output image of every writable slave (they stay zero
+//! until the next write), `clear` puts the master into the Clear state
+//! (outputs cleared on the line, Global_Control Clear_Data) until the
+//! broker is back, when it returns to Operate. It is logged and reported
+//! in the status once the broker is back.
 
 use std::time::Duration;
 
@@ -23,6 +42,48 @@ pub enum PublishMode {
     Interval,
     /// On change and every `interval`.
     Both,
+}
+
+/// What the outputs do after `outputs_timeout` without a broker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SafeState {
+    /// Keep the last values.
+    Keep,
+    /// Zero the output images of the writable slaves.
+    Zero,
+    /// Put the master into Clear until the broker is back.
+    Clear,
+}
+
+impl SafeState {
+    /// The name in the bus file and in payloads.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SafeState::Keep => "keep",
+            SafeState::Zero => "zero",
+            SafeState::Clear => "clear",
+        }
+    }
+}
+
+/// What MQTT may change on one slave (`[mqtt] writable`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WriteAccess {
+    /// Station address.
+    pub address: u8,
+    /// `None`: everything (whole image, channels, DP-V1 and PKW writes,
+    /// RFID commands); `Some(names)`: only these named output channels.
+    pub channels: Option<Vec<String>>,
+}
+
+impl WriteAccess {
+    /// Full access to the slave.
+    pub fn full(address: u8) -> WriteAccess {
+        WriteAccess {
+            address,
+            channels: None,
+        }
+    }
 }
 
 /// The MQTT side of a gateway.
@@ -42,8 +103,22 @@ pub struct MqttSettings {
     pub publish: PublishMode,
     /// The period of [`PublishMode::Interval`] and [`PublishMode::Both`].
     pub interval: Duration,
-    /// Station addresses whose outputs may be written over MQTT.
-    pub writable: Vec<u8>,
+    /// What may be written over MQTT, per slave.
+    pub writable: Vec<WriteAccess>,
+    /// Time without a broker after which the outputs go to
+    /// [`MqttSettings::safe_state`] (`None`: never).
+    pub outputs_timeout: Option<Duration>,
+    /// The outputs' safe state.
+    pub safe_state: SafeState,
+    /// How long DP-V1, PKW and RFID requests may take.
+    pub job_timeout: Duration,
+}
+
+impl MqttSettings {
+    /// The write access to slave `address`, if any.
+    pub fn access(&self, address: u8) -> Option<&WriteAccess> {
+        self.writable.iter().find(|w| w.address == address)
+    }
 }
 
 /// A bad `[mqtt]` setting.
@@ -74,6 +149,9 @@ const KEYS: &[&str] = &[
     "publish",
     "interval_ms",
     "writable",
+    "outputs_timeout_ms",
+    "safe_state",
+    "job_timeout_ms",
 ];
 
 fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
@@ -137,16 +215,40 @@ impl MqttSettings {
             Some(toml::Value::Integer(ms @ 1..=86_400_000)) => Duration::from_millis(*ms as u64),
             Some(_) => return Err(bad("interval_ms", "must be 1..=86400000")),
         };
-        let writable = match t.get("writable") {
+        let writable: Vec<WriteAccess> = match t.get("writable") {
             None => vec![],
-            Some(toml::Value::Array(a)) => a
-                .iter()
-                .map(|v| match v {
-                    toml::Value::Integer(n @ 0..=125) => Ok(*n as u8),
-                    _ => Err(bad("writable", "takes station addresses 0..=125")),
-                })
-                .collect::<Result<_, _>>()?,
+            Some(toml::Value::Array(a)) => a.iter().map(access).collect::<Result<_, _>>()?,
             Some(_) => return Err(bad("writable", "must be a list of station addresses")),
+        };
+        if let Some(w) = writable
+            .iter()
+            .enumerate()
+            .find(|(i, w)| writable[..*i].iter().any(|o| o.address == w.address))
+        {
+            return Err(bad(
+                "writable",
+                format!("lists slave {} twice", w.1.address),
+            ));
+        }
+        let ms = |key: &'static str| match t.get(key) {
+            None => Ok(None),
+            Some(toml::Value::Integer(ms @ 1..=86_400_000)) => {
+                Ok(Some(Duration::from_millis(*ms as u64)))
+            }
+            Some(_) => Err(bad(key, "must be 1..=86400000")),
+        };
+        let outputs_timeout = ms("outputs_timeout_ms")?;
+        let job_timeout = ms("job_timeout_ms")?.unwrap_or(Duration::from_secs(2));
+        let safe_state = match string(t, "safe_state")?.as_deref() {
+            None | Some("keep") => SafeState::Keep,
+            Some("zero") => SafeState::Zero,
+            Some("clear") => SafeState::Clear,
+            Some(o) => {
+                return Err(bad(
+                    "safe_state",
+                    format!("`{o}` is not keep, zero or clear"),
+                ))
+            }
         };
         let broker = string(t, "broker")?;
         if let Some(b) = &broker {
@@ -161,7 +263,43 @@ impl MqttSettings {
             publish,
             interval,
             writable,
+            outputs_timeout,
+            safe_state,
+            job_timeout,
         })
+    }
+}
+
+/// One entry of `writable`: `3` or `{ address = 3, channels = ["a"] }`.
+fn access(v: &toml::Value) -> Result<WriteAccess, SettingsError> {
+    let address = |v: Option<&toml::Value>| match v {
+        Some(toml::Value::Integer(n @ 0..=125)) => Ok(*n as u8),
+        _ => Err(bad("writable", "takes station addresses 0..=125")),
+    };
+    match v {
+        toml::Value::Table(t) => {
+            if let Some(k) = t
+                .keys()
+                .find(|k| !matches!(k.as_str(), "address" | "channels"))
+            {
+                return Err(bad("writable", format!("entry has an unknown key `{k}`")));
+            }
+            let channels = match t.get("channels") {
+                Some(toml::Value::Array(a)) => a
+                    .iter()
+                    .map(|c| match c {
+                        toml::Value::String(s) if !s.is_empty() => Ok(s.clone()),
+                        _ => Err(bad("writable", "`channels` takes channel names")),
+                    })
+                    .collect::<Result<_, _>>()?,
+                _ => return Err(bad("writable", "an entry table needs `channels = [..]`")),
+            };
+            Ok(WriteAccess {
+                address: address(t.get("address"))?,
+                channels: Some(channels),
+            })
+        }
+        v => Ok(WriteAccess::full(address(Some(v))?)),
     }
 }
 
@@ -199,15 +337,23 @@ mod tests {
         assert_eq!(s.client_id, "dpctl-gateway-line1");
         assert_eq!((s.qos, s.publish), (1, PublishMode::OnChange));
         assert!(s.writable.is_empty());
+        assert_eq!((s.outputs_timeout, s.safe_state), (None, SafeState::Keep));
         let s = parse(
-            "broker = \"mqtt://h:1884\"\nprefix = \"plant/a\"\nbus = \"seg7\"\nqos = 0\npublish = \"both\"\ninterval_ms = 250\nwritable = [3, 6]",
+            "broker = \"mqtt://h:1884\"\nprefix = \"plant/a\"\nbus = \"seg7\"\nqos = 0\npublish = \"both\"\ninterval_ms = 250\nwritable = [3, { address = 6, channels = [\"speed\"] }]\noutputs_timeout_ms = 1500\nsafe_state = \"zero\"",
         )
         .unwrap();
+        assert_eq!(s.outputs_timeout, Some(Duration::from_millis(1500)));
+        assert_eq!(s.safe_state, SafeState::Zero);
+        assert_eq!(
+            s.access(6).unwrap().channels.as_deref(),
+            Some(&["speed".to_string()][..])
+        );
+        assert_eq!(s.access(3), Some(&WriteAccess::full(3)));
+        assert_eq!(s.access(4), None);
         assert_eq!(s.prefix, "plant/a");
         assert_eq!(s.bus, "seg7");
         assert_eq!(s.publish, PublishMode::Both);
         assert_eq!(s.interval, Duration::from_millis(250));
-        assert_eq!(s.writable, [3, 6]);
     }
 
     #[test]
@@ -223,6 +369,11 @@ mod tests {
         assert!(parse("prefix = \"a/#\"").is_err());
         assert!(parse("publish = \"sometimes\"").is_err());
         assert!(parse("writable = [200]").is_err());
+        assert!(parse("writable = [3, 3]").is_err());
+        assert!(parse("writable = [{ address = 3 }]").is_err());
+        assert!(parse("writable = [{ address = 3, channels = [1] }]").is_err());
+        assert!(parse("safe_state = \"off\"").is_err());
+        assert!(parse("outputs_timeout_ms = 0").is_err());
         assert!(parse("broker = \"http://x\"").is_err());
     }
 
@@ -234,7 +385,7 @@ mod tests {
         let s = MqttSettings::from_table(bus.file.mqtt.as_ref(), "plant").unwrap();
         assert_eq!(
             (s.bus.as_str(), s.writable.as_slice()),
-            ("seg2", &[25u8][..])
+            ("seg2", &[WriteAccess::full(25)][..])
         );
         let bus =
             profibus_devices::bus::ProfiledBus::parse(path, &text[..text.find("[mqtt]").unwrap()])

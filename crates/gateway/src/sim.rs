@@ -79,7 +79,7 @@ impl SimPlant {
 }
 
 /// The gateway's view of a bus file's slaves: names, named channels of
-/// profiled slaves, GSDs.
+/// profiled slaves, GSDs, PKW dialects, RFID readers.
 pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
     profiled
         .file
@@ -96,6 +96,8 @@ pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
                     .map_err(|e| SimError::Profile(a, e))?,
                 gsd: Some(s.gsd.clone()),
                 dpv1: s.params.dpv1,
+                pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
+                rfid: s.params.ident_number == profibus_devices::rfid::IDENT,
             })
         })
         .collect()
