@@ -150,3 +150,15 @@ pub async fn shutdown() {
         std::future::pending::<()>().await;
     }
 }
+
+/// `v` as one JSON line, its keys in alphabetical order (the order
+/// scripts and tests have always seen).
+pub fn json_line<T: serde::Serialize + ?Sized>(v: &T) -> String {
+    match serde_json::to_value(v) {
+        Ok(v) => v.to_string(),
+        Err(e) => {
+            tracing::warn!(%e, "not serialisable");
+            String::new()
+        }
+    }
+}

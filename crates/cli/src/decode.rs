@@ -1,7 +1,8 @@
 //! `dpctl decode HEX...`: decode telegram bytes.
 
-use crate::describe;
+use crate::common;
 use anyhow::Context;
+use profibus_dp::describe::TelegramSummary;
 use profibus_fdl::wire::Telegram;
 
 /// Decode one or more telegrams given as hex bytes.
@@ -28,10 +29,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     while !rest.is_empty() {
         let (t, n) = Telegram::parse(rest)
             .with_context(|| format!("malformed telegram at byte {offset}"))?;
+        let summary = TelegramSummary::new(t, &rest[..n]);
         if args.json {
-            println!("{}", describe::json(&t, &rest[..n]));
+            println!("{}", common::json_line(&summary));
         } else {
-            println!("{}", describe::line(&t));
+            println!("{summary}");
         }
         rest = &rest[n..];
         offset += n;

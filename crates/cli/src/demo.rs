@@ -4,7 +4,7 @@
 //! slaves, shown live.
 
 use crate::common;
-use crate::view::{drain_events, hex, SlaveInfo, View};
+use crate::view::{drain_events, hex, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::channels::ChannelMap;
 use profibus_devices::generic::{GenericDevice, InputPattern};
@@ -247,7 +247,6 @@ async fn demo(args: Args) -> Result<()> {
             address: s.address,
             name: s.name.clone(),
             gsd: Some(s.gsd.clone()),
-            dpv1: s.gsd.dpv1_slave,
             channels: s.channels.clone(),
         })
         .collect();
@@ -331,12 +330,12 @@ async fn demo(args: Args) -> Result<()> {
             m.set_outputs(BK3000_ADDRESS, &[v[0], v[1], 0, 0, 1 << (ramp % 4)]);
         }
         for p in pkw.iter_mut() {
-            if let Some((text, v)) = p.step(m, now, ramp) {
-                view.event(v, text);
+            if let Some(e) = p.step(m, now, ramp) {
+                view.event(&e);
             }
         }
-        for (text, v) in reader.step(m, now, ramp) {
-            view.event(v, text);
+        for e in reader.step(m, now, ramp) {
+            view.event(&e);
         }
         drain_events(m, &info, &mut view);
         view.status(m, &info, baud, now, false);
@@ -364,16 +363,22 @@ async fn demo(args: Args) -> Result<()> {
         telegrams.borrow()
     );
     if args.json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "event": "summary",
-                "cycles": c.cycles,
-                "bus_time_s": now.as_nanos() as f64 / 1e9,
-                "telegrams": *telegrams.borrow(),
-                "inputs": info.iter().map(|s| (s.address.to_string(), serde_json::Value::from(hex(m.inputs(s.address).unwrap_or(&[]))))).collect::<serde_json::Map<_, _>>(),
+        let inputs: std::collections::BTreeMap<String, String> = info
+            .iter()
+            .map(|s| {
+                (
+                    s.address.to_string(),
+                    hex(m.inputs(s.address).unwrap_or(&[])),
+                )
             })
-        );
+            .collect();
+        let line = Summary {
+            cycles: c.cycles,
+            bus_time_s: now,
+            telegrams: *telegrams.borrow(),
+            inputs,
+        };
+        println!("{}", common::json_line(&Line::new("summary", line, "")));
     } else {
         println!("{summary}");
     }
@@ -381,6 +386,25 @@ async fn demo(args: Args) -> Result<()> {
         w.flush()?;
     }
     Ok(())
+}
+
+/// The demo's last line with `--json`.
+#[derive(serde::Serialize)]
+struct Summary {
+    cycles: u64,
+    bus_time_s: Instant,
+    telegrams: u64,
+    inputs: std::collections::BTreeMap<String, String>,
+}
+
+/// A PKW job of the demo that ended.
+#[derive(serde::Serialize)]
+struct PkwDone {
+    slave: u8,
+    pnu: u16,
+    name: &'static str,
+    value: Option<u32>,
+    error: Option<String>,
 }
 
 /// PKW jobs the demo runs in turn: (PNU, command, what it is).
@@ -430,12 +454,7 @@ impl DemoPkw {
         }
     }
 
-    fn step(
-        &mut self,
-        m: &mut DpMaster,
-        now: Instant,
-        ramp: u16,
-    ) -> Option<(String, serde_json::Value)> {
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ramp: u16) -> Option<Line<PkwDone>> {
         let h = m.handle(self.address)?;
         if m.slave(h).state != SlaveState::DataExchange {
             return None;
@@ -455,15 +474,14 @@ impl DemoPkw {
                 ),
                 Err(e) => format!("pkw slave {}: {name} (PNU {pnu}) failed: {e}", self.address),
             };
-            let v = serde_json::json!({
-                "event": "pkw",
-                "slave": self.address,
-                "pnu": pnu,
-                "name": name,
-                "value": r.as_ref().ok().map(|a| a.reply.value()),
-                "error": r.as_ref().err().map(|e| e.to_string()),
-            });
-            report = Some((text, v));
+            let done = PkwDone {
+                slave: self.address,
+                pnu,
+                name,
+                value: r.as_ref().ok().map(|a| a.reply.value()),
+                error: r.as_ref().err().map(|e| e.to_string()),
+            };
+            report = Some(Line::new("pkw", done, text));
             self.due = now + Duration::from_millis(300);
         }
         if self.client.is_idle() && now >= self.due {

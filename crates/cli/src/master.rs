@@ -1,14 +1,14 @@
 //! `dpctl master`: run a DP master from a bus file.
 
 use crate::common;
-use crate::view::{drain_events, SlaveInfo, View};
+use crate::view::{drain_events, Line, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::Value as ChannelValue;
 use profibus_dp::master::{CommandOutcome, DpMaster, MasterCommand, OperatingState, SlaveState};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -115,6 +115,19 @@ fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Resu
     })())
 }
 
+/// The reply to a command.
+#[derive(serde::Serialize)]
+struct CommandReply<'a> {
+    result: &'a str,
+}
+
+/// A refused command line.
+#[derive(serde::Serialize)]
+struct BadCommand<'a> {
+    line: &'a str,
+    error: String,
+}
+
 /// Apply one command line to the master; returns a reply for the log.
 /// A refused command changes nothing.
 pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
@@ -175,7 +188,6 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             address: a,
             name: s.params.name.clone(),
             gsd: Some(s.gsd.clone()),
-            dpv1: s.params.dpv1,
             channels: profiled
                 .channels(a)
                 .transpose()
@@ -209,18 +221,21 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
                     (None, None) => apply_command(m, &line),
                 };
                 match result {
-                    Ok(Some(reply)) => {
-                        view.event(json!({"event": "command", "result": reply}), reply)
-                    }
+                    Ok(Some(reply)) => view.event(&Line::new(
+                        "command",
+                        CommandReply { result: &reply },
+                        reply.as_str(),
+                    )),
                     Ok(None) => {}
-                    Err(e) => view.event(
-                        json!({"event": "error", "line": line, "error": format!("{e:#}")}),
-                        format!("bad command `{line}`: {e:#}"),
-                    ),
+                    Err(e) => {
+                        let error = format!("{e:#}");
+                        let text = format!("bad command `{line}`: {error}");
+                        view.event(&Line::new("error", BadCommand { line: &line, error }, text))
+                    }
                 }
             }
-            for (text, v) in rfid.step(m, now) {
-                view.event(v, text);
+            for e in rfid.step(m, now) {
+                view.event(&e);
             }
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);

@@ -9,6 +9,7 @@
 //! reach Data_Exchange.
 
 use crate::common;
+use crate::view::Line;
 use anyhow::{bail, Context, Result};
 use profibus_devices::rfid::client::RfidClient;
 use profibus_devices::rfid::{CFG, IDENT};
@@ -186,6 +187,7 @@ fn print(args: &Args, d: &Done) {
 /// The demo plant's RFID reader: a tag that comes and goes, and the
 /// PLC's commands over the handshake in turn.
 pub mod demo {
+    use super::{Event, Line, RfidDone, TagMoved};
     use profibus_devices::channels::ChannelMap;
     use profibus_devices::rfid::client::RfidClient;
     use profibus_devices::rfid::tags::TagField;
@@ -195,7 +197,6 @@ pub mod demo {
     use profibus_dp::master::{DpMaster, SlaveState};
     use profibus_dp::slave::Device;
     use profibus_fdl::Instant;
-    use serde_json::{json, Value};
     use std::time::Duration;
 
     /// The tag of the demo.
@@ -274,7 +275,7 @@ pub mod demo {
 
         /// One step of the PLC program; returns what happened, for the
         /// view.
-        pub fn step(&mut self, m: &mut DpMaster, now: Instant, ramp: u16) -> Vec<(String, Value)> {
+        pub fn step(&mut self, m: &mut DpMaster, now: Instant, ramp: u16) -> Vec<Event> {
             let mut out = vec![];
             if now >= self.tag_due {
                 self.tag_in = !self.tag_in;
@@ -285,14 +286,18 @@ pub mod demo {
                     "leave"
                 });
                 let what = if self.tag_in { "enters" } else { "leaves" };
-                out.push((
+                out.push(Event::Tag(Line::new(
+                    "rfid_tag",
+                    TagMoved {
+                        slave: self.address,
+                        tag: "E004015012345678",
+                        in_field: self.tag_in,
+                    },
                     format!(
                         "rfid slave {}: tag E004015012345678 {what} the field",
                         self.address
                     ),
-                    json!({"event": "rfid_tag", "slave": self.address, "tag": "E004015012345678",
-                           "in_field": self.tag_in}),
-                ));
+                )));
             }
             let Some(h) = m.handle(self.address) else {
                 return out;
@@ -302,19 +307,7 @@ pub mod demo {
             }
             if let Some(r) = self.client.poll_master(now, m, h) {
                 let cmd = self.running.take().unwrap_or_default();
-                let (answer, error) = match r {
-                    Ok(a) => (Some(String::from_utf8_lossy(a).into_owned()), None),
-                    Err(e) => (None, Some(e.to_string())),
-                };
-                let shown = answer
-                    .as_deref()
-                    .map(|a| a.trim_end_matches('\r').replace('\r', " | "))
-                    .unwrap_or_else(|| format!("failed: {}", error.as_deref().unwrap_or("")));
-                out.push((
-                    format!("rfid slave {}: {cmd} → {shown}", self.address),
-                    json!({"event": "rfid", "slave": self.address, "command": cmd,
-                           "answer": answer, "error": error}),
-                ));
+                out.push(Event::Done(RfidDone::new(self.address, cmd, r)));
                 self.due = now + PAUSE;
             }
             if self.client.is_idle() && now >= self.due {
@@ -327,6 +320,91 @@ pub mod demo {
             out
         }
     }
+}
+
+/// An RFID command that ended: the `rfid` event of `dpctl master` and
+/// `dpctl demo`.
+#[derive(serde::Serialize)]
+#[serde(tag = "event", rename = "rfid")]
+pub struct RfidDone {
+    slave: u8,
+    command: String,
+    ok: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    answer: Option<String>,
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "profibus_fdl::ser::opt_hex"
+    )]
+    answer_hex: Option<Vec<u8>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+}
+
+impl RfidDone {
+    fn new<E: std::fmt::Display>(slave: u8, command: String, r: Result<&[u8], E>) -> RfidDone {
+        let (answer, answer_hex, error) = match r {
+            Ok(a) => (
+                Some(String::from_utf8_lossy(a).into_owned()),
+                Some(a.to_vec()),
+                None,
+            ),
+            Err(e) => (None, None, Some(e.to_string())),
+        };
+        RfidDone {
+            slave,
+            command,
+            ok: error.is_none(),
+            answer,
+            answer_hex,
+            error,
+        }
+    }
+}
+
+impl std::fmt::Display for RfidDone {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (slave, cmd) = (self.slave, &self.command);
+        match (&self.answer, &self.error) {
+            (Some(a), _) => write!(
+                f,
+                "rfid slave {slave}: {cmd} → {}",
+                a.trim_end_matches('\r').replace('\r', " | ")
+            ),
+            (None, e) => write!(
+                f,
+                "rfid slave {slave}: {cmd} failed: {}",
+                e.as_deref().unwrap_or("")
+            ),
+        }
+    }
+}
+
+/// The demo reader's events.
+#[derive(serde::Serialize)]
+#[serde(untagged)]
+pub enum Event {
+    /// A tag entered or left the field.
+    Tag(Line<TagMoved>),
+    /// A command ended.
+    Done(RfidDone),
+}
+
+impl std::fmt::Display for Event {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Event::Tag(l) => l.fmt(f),
+            Event::Done(d) => d.fmt(f),
+        }
+    }
+}
+
+/// A tag entered or left the reader's field.
+#[derive(serde::Serialize)]
+pub struct TagMoved {
+    slave: u8,
+    tag: &'static str,
+    in_field: bool,
 }
 
 /// RFID commands given to a running `dpctl master` as JSON lines
@@ -389,8 +467,8 @@ impl MasterJobs {
         })())
     }
 
-    /// Drive the clients; returns the finished commands as (text, JSON).
-    pub fn step(&mut self, m: &mut DpMaster, now: Instant) -> Vec<(String, serde_json::Value)> {
+    /// Drive the clients; returns the finished commands.
+    pub fn step(&mut self, m: &mut DpMaster, now: Instant) -> Vec<RfidDone> {
         let mut out = vec![];
         for r in &mut self.readers {
             let Some(h) = m.handle(r.address) else {
@@ -398,36 +476,13 @@ impl MasterJobs {
             };
             if let Some(res) = r.client.poll_master(now, m, h) {
                 let cmd = r.running.take().unwrap_or_default();
-                let (text, v) = match res {
-                    Ok(a) => {
-                        let s = String::from_utf8_lossy(a).into_owned();
-                        (
-                            format!(
-                                "rfid slave {}: {cmd} → {}",
-                                r.address,
-                                s.trim_end_matches('\r').replace('\r', " | ")
-                            ),
-                            json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": true,
-                                   "answer": s, "answer_hex": crate::describe::hex(a)}),
-                        )
-                    }
-                    Err(e) => (
-                        format!("rfid slave {}: {cmd} failed: {e}", r.address),
-                        json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": false,
-                               "error": e.to_string()}),
-                    ),
-                };
-                out.push((text, v));
+                out.push(RfidDone::new(r.address, cmd, res));
             }
             if r.client.is_idle() && m.slave(h).state == SlaveState::DataExchange {
                 if let Some(cmd) = r.queue.pop_front() {
                     match r.client.start(now, cmd.as_bytes()) {
                         Ok(()) => r.running = Some(cmd),
-                        Err(e) => out.push((
-                            format!("rfid slave {}: {cmd}: {e}", r.address),
-                            json!({"event": "rfid", "slave": r.address, "command": cmd, "ok": false,
-                                   "error": e.to_string()}),
-                        )),
+                        Err(e) => out.push(RfidDone::new(r.address, cmd, Err(e))),
                     }
                 }
             }

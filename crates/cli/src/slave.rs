@@ -23,14 +23,13 @@ use profibus_devices::generic::InputPattern;
 use profibus_devices::{
     BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES, STATE_EVENT,
 };
-use profibus_dp::slave::{control_words, Device, DpSlave, OwnAddress, SlaveEvent};
+use profibus_dp::slave::{Device, DpSlave, OwnAddress, SlaveEvent};
 use profibus_fdl::autobaud::AutoBaud;
 use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::transport::Port;
 use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, BusParams, Instant};
-use serde_json::{json, Value};
 use std::cell::Cell;
 use std::io::Write;
 use std::ops::ControlFlow;
@@ -204,8 +203,100 @@ const PTY_NOMINAL: Baud = Baud::B19200;
 /// serial line).
 const RELISTEN_AFTER: Duration = Duration::from_secs(10);
 
-fn hex(b: &[u8]) -> String {
-    format!("{:#}", Hex(b))
+/// What the shell reports besides the slave's own events.
+#[derive(serde::Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+enum Shell<'a> {
+    GsdWarning {
+        text: &'a str,
+    },
+    Start {
+        device: &'a str,
+        ident: String,
+        address: Option<u8>,
+        port: &'a str,
+        baud: String,
+        pty: bool,
+        #[serde(skip)]
+        text: String,
+    },
+    AddressStoreError {
+        text: String,
+    },
+    StateSaved {
+        text: String,
+    },
+    StateStoreError {
+        text: String,
+    },
+    Data {
+        #[serde(serialize_with = "profibus_fdl::ser::hex_compact")]
+        outputs: &'a [u8],
+        #[serde(serialize_with = "profibus_fdl::ser::hex_compact")]
+        inputs: &'a [u8],
+        cycle: u64,
+    },
+    BaudSearch {
+        text: &'a str,
+    },
+    BaudLocked {
+        baud: Baud,
+    },
+    Stopped {
+        state: profibus_dp::slave::SlaveState,
+        #[serde(flatten)]
+        stats: profibus_dp::slave::SlaveStats,
+    },
+}
+
+impl std::fmt::Display for Shell<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Shell::GsdWarning { text } | Shell::BaudSearch { text } => f.write_str(text),
+            Shell::Start { text, .. }
+            | Shell::AddressStoreError { text }
+            | Shell::StateSaved { text }
+            | Shell::StateStoreError { text } => f.write_str(text),
+            Shell::Data {
+                outputs,
+                inputs,
+                cycle,
+            } => write!(
+                f,
+                "data: outputs {:#} inputs {:#} (cycle {cycle})",
+                Hex(outputs),
+                Hex(inputs)
+            ),
+            Shell::BaudLocked { baud } => write!(f, "baud rate {baud} found"),
+            Shell::Stopped { state, stats: s } => write!(
+                f,
+                "stopped in {state}: {} Data_Exchange cycles, {} Slave_Diag, {} refused, {} watchdog expiries",
+                s.data_exchanges, s.diag_requests, s.refused, s.watchdog_expiries
+            ),
+        }
+    }
+}
+
+/// A slave event as printed: its fields, its text.
+#[derive(serde::Serialize)]
+struct WithText<'a> {
+    #[serde(flatten)]
+    event: &'a SlaveEvent,
+    text: String,
+}
+
+impl std::fmt::Display for WithText<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// A line with its time (`"t"`, in s since the start).
+#[derive(serde::Serialize)]
+struct Timed<'a, E: serde::Serialize> {
+    #[serde(flatten)]
+    event: &'a E,
+    t: f64,
 }
 
 /// Prints events as text or JSON lines.
@@ -215,17 +306,17 @@ struct Printer {
 }
 
 impl Printer {
-    fn emit(&self, now: Instant, v: Value, text: String) {
+    fn emit<E: serde::Serialize + std::fmt::Display>(&self, now: Instant, e: &E) {
         let t = now.as_nanos() as f64 / 1e9;
         let mut out = std::io::stdout().lock();
         let _ = if self.json {
-            let mut v = v;
-            if let Value::Object(m) = &mut v {
-                m.insert("t".into(), json!((t * 1e6).round() / 1e6));
-            }
-            writeln!(out, "{v}")
+            let line = Timed {
+                event: e,
+                t: (t * 1e6).round() / 1e6,
+            };
+            writeln!(out, "{}", common::json_line(&line))
         } else {
-            writeln!(out, "[{t:>11.6}] {text}")
+            writeln!(out, "[{t:>11.6}] {e}")
         };
         let _ = out.flush();
     }
@@ -235,96 +326,13 @@ impl Printer {
     }
 
     fn event(&self, now: Instant, e: &SlaveEvent) {
-        let mut v = json!({ "event": e.kind(), "text": e.to_string() });
-        let m = v.as_object_mut().expect("object");
-        match e {
-            SlaveEvent::State { from, to } => {
-                m.insert("from".into(), json!(from.as_str()));
-                m.insert("to".into(), json!(to.as_str()));
-            }
-            SlaveEvent::PrmAccepted {
-                master,
-                locked,
-                watchdog,
-                min_tsdr,
-                group_ident,
-            } => {
-                m.insert("master".into(), json!(master));
-                m.insert("locked".into(), json!(locked));
-                m.insert(
-                    "watchdog_ms".into(),
-                    json!(watchdog.map(|d| d.as_millis() as u64)),
-                );
-                m.insert("min_tsdr".into(), json!(min_tsdr));
-                m.insert("group_ident".into(), json!(group_ident));
-            }
-            SlaveEvent::Unlocked { master } => {
-                m.insert("master".into(), json!(master));
-            }
-            SlaveEvent::PrmFault {
-                master,
-                reason,
-                not_supported,
-            } => {
-                m.insert("master".into(), json!(master));
-                m.insert("reason".into(), json!(reason.as_str()));
-                m.insert("not_supported".into(), json!(not_supported));
-            }
-            SlaveEvent::CfgAccepted {
-                master,
-                inputs,
-                outputs,
-            } => {
-                m.insert("master".into(), json!(master));
-                m.insert("inputs".into(), json!(inputs));
-                m.insert("outputs".into(), json!(outputs));
-            }
-            SlaveEvent::CfgFault { master, reason } => {
-                m.insert("master".into(), json!(master));
-                m.insert("reason".into(), json!(reason.as_str()));
-            }
-            SlaveEvent::WatchdogExpired { master, after } => {
-                m.insert("master".into(), json!(master));
-                m.insert("after_ms".into(), json!(after.as_millis() as u64));
-            }
-            SlaveEvent::OutputsCleared { reason } => {
-                m.insert("reason".into(), json!(reason.as_str()));
-            }
-            SlaveEvent::AddressChanged {
-                old,
-                new,
-                no_add_chg,
-            } => {
-                m.insert("old".into(), json!(old));
-                m.insert("new".into(), json!(new));
-                m.insert("no_add_chg".into(), json!(no_add_chg));
-            }
-            SlaveEvent::GlobalControl {
-                master,
-                command,
-                group_select,
-            } => {
-                m.insert("master".into(), json!(master));
-                m.insert("command".into(), json!(control_words(*command)));
-                m.insert("group_select".into(), json!(group_select));
-            }
-            SlaveEvent::Refused {
-                master,
-                service,
-                reason,
-            } => {
-                m.insert("master".into(), json!(master));
-                m.insert("service".into(), json!(service));
-                m.insert("reason".into(), json!(reason.as_str()));
-            }
-            SlaveEvent::Device(d) => {
-                m.insert("kind".into(), json!(d.kind));
-            }
-            SlaveEvent::Lost(n) => {
-                m.insert("count".into(), json!(n));
-            }
-        }
-        self.emit(now, v, e.to_string());
+        self.emit(
+            now,
+            &WithText {
+                event: e,
+                text: e.to_string(),
+            },
+        );
     }
 }
 
@@ -460,7 +468,7 @@ fn build_device(args: &Args, printer: &Printer) -> anyhow::Result<Built> {
     let profile = entry.configure(&opts, args.addr).map_err(in_words)?;
     for w in profile.warnings() {
         let now = printer.now();
-        printer.emit(now, json!({"event": "gsd_warning", "text": w}), w.clone());
+        printer.emit(now, &Shell::GsdWarning { text: &w });
     }
     let mut jx2 = None;
     let dev = if entry.name == profibus_devices::jx2::profile::NAME {
@@ -587,10 +595,19 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         };
         printer.emit(
             now,
-            json!({"event": "start", "device": name, "ident": format!("0x{ident:04X}"),
-                   "address": address, "port": path, "baud": if search { "auto".to_string() } else { first.bps().to_string() },
-                   "pty": pty}),
-            format!("{name} (ident 0x{ident:04X}) {at} on {path} ({baud_text})"),
+            &Shell::Start {
+                device: &name,
+                ident: format!("0x{ident:04X}"),
+                address,
+                port: &path,
+                baud: if search {
+                    "auto".to_string()
+                } else {
+                    first.bps().to_string()
+                },
+                pty,
+                text: format!("{name} (ident 0x{ident:04X}) {at} on {path} ({baud_text})"),
+            },
         );
     }
 
@@ -626,8 +643,12 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                     if search && matches!(e, SlaveEvent::WatchdogExpired { .. }) {
                         research = true;
                     }
-                    if let (SlaveEvent::AddressChanged { new, no_add_chg, .. }, Some(f)) =
-                        (&e, &address_file)
+                    if let (
+                        SlaveEvent::AddressChanged {
+                            new, no_add_chg, ..
+                        },
+                        Some(f),
+                    ) = (&e, &address_file)
                     {
                         // The device only accepted it: the shell keeps it.
                         let stored = StoredAddress {
@@ -637,22 +658,27 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                         if let Err(err) = stored.save(f) {
                             printer.emit(
                                 now,
-                                json!({"event": "address_store_error", "text": err.to_string()}),
-                                format!("cannot keep the address: {err}"),
+                                &Shell::AddressStoreError {
+                                    text: err.to_string(),
+                                },
                             );
                         }
                     }
                     if let (SlaveEvent::Device(d), Some(f)) = (&e, &state_file) {
                         if d.kind == STATE_EVENT {
                             // The device's new state: the shell keeps it.
-                            let (kind, text) = match std::fs::write(f, &d.text) {
-                                Ok(()) => ("state_saved", format!("state saved to {}", f.display())),
-                                Err(err) => (
-                                    "state_store_error",
-                                    format!("cannot save the state to {}: {err}", f.display()),
-                                ),
+                            let e = match std::fs::write(f, &d.text) {
+                                Ok(()) => Shell::StateSaved {
+                                    text: format!("state saved to {}", f.display()),
+                                },
+                                Err(err) => Shell::StateStoreError {
+                                    text: format!(
+                                        "cannot save the state to {}: {err}",
+                                        f.display()
+                                    ),
+                                },
                             };
-                            printer.emit(now, json!({"event": kind, "text": text}), text.clone());
+                            printer.emit(now, &e);
                             continue;
                         }
                     }
@@ -664,14 +690,11 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                     last_outputs.extend_from_slice(app.outputs());
                     printer.emit(
                         now,
-                        json!({"event": "data", "outputs": hex(app.outputs()), "inputs": hex(app.inputs()),
-                               "cycle": app.stats().data_exchanges}),
-                        format!(
-                            "data: outputs {} inputs {} (cycle {})",
-                            hex(app.outputs()),
-                            hex(app.inputs()),
-                            app.stats().data_exchanges
-                        ),
+                        &Shell::Data {
+                            outputs: app.outputs(),
+                            inputs: app.inputs(),
+                            cycle: app.stats().data_exchanges,
+                        },
                     );
                 }
                 if args.cycles > 0 && app.stats().data_exchanges >= args.cycles {
@@ -703,29 +726,22 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                 let now = printer.now();
                 printer.emit(
                     now,
-                    json!({"event": "baud_search", "text": "searching the baud rate again"}),
-                    "searching the baud rate again".into(),
+                    &Shell::BaudSearch {
+                        text: "searching the baud rate again",
+                    },
                 );
                 continue;
             }
             Ok(Stop::Done) => break,
         }
     }
-    let s = slave.stats();
     let now = printer.now();
     printer.emit(
         now,
-        json!({"event": "stopped", "state": slave.state().as_str(), "data_exchanges": s.data_exchanges,
-               "diag_requests": s.diag_requests, "refused": s.refused,
-               "watchdog_expiries": s.watchdog_expiries}),
-        format!(
-            "stopped in {}: {} Data_Exchange cycles, {} Slave_Diag, {} refused, {} watchdog expiries",
-            slave.state(),
-            s.data_exchanges,
-            s.diag_requests,
-            s.refused,
-            s.watchdog_expiries
-        ),
+        &Shell::Stopped {
+            state: slave.state(),
+            stats: slave.stats(),
+        },
     );
     Ok(())
 }
@@ -759,8 +775,7 @@ async fn search_baud(
                 }
                 if let Some(b) = ab.handle_rx(clock.now(), &buf[..n]) {
                     let now = clock.now();
-                    printer.emit(now, json!({"event": "baud_locked", "baud": b.bps()}),
-                                 format!("baud rate {b} found"));
+                    printer.emit(now, &Shell::BaudLocked { baud: b });
                     return Ok(Some(b));
                 }
             }

@@ -9,16 +9,16 @@
 //! records the telegrams. On Ctrl-C / SIGTERM it prints a summary line
 //! with the codec counters and stops.
 
-use crate::describe;
+use crate::common;
 use crate::describe::hex;
 use anyhow::{Context, Result};
+use profibus_dp::describe::TelegramSummary;
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::pcap::PcapWriter;
 use profibus_fdl::tap::{Tap, TapEvent};
 use profibus_fdl::transport::Port;
-use profibus_fdl::wire::Telegram;
+use profibus_fdl::wire::{Hex, Telegram};
 use profibus_fdl::{Baud, BusParams, Instant};
-use serde_json::json;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
@@ -75,6 +75,24 @@ fn error_text(e: &CodecStats, skipped: usize) -> String {
     parts.join(", ")
 }
 
+/// A line of `--json`: what was seen, and when (µs since the start).
+#[derive(serde::Serialize)]
+struct Seen<T: serde::Serialize> {
+    t_us: u64,
+    #[serde(flatten)]
+    what: T,
+}
+
+/// Bytes the framer skipped, and why.
+#[derive(serde::Serialize)]
+struct Skipped<'a> {
+    error: String,
+    skipped: usize,
+    raw: Hex<'a>,
+    #[serde(flatten)]
+    errors: CodecStats,
+}
+
 struct Printer {
     json: bool,
     out: BufWriter<std::io::Stdout>,
@@ -90,14 +108,15 @@ impl Printer {
                 let Ok((t, _)) = Telegram::parse(&bytes) else {
                     return Ok(());
                 };
+                let summary = TelegramSummary::new(t, &bytes);
                 if self.json {
-                    let mut v = describe::json(&t, &bytes);
-                    if let Some(o) = v.as_object_mut() {
-                        o.insert("t_us".into(), us.into());
-                    }
-                    writeln!(self.out, "{v}")?;
+                    let line = Seen {
+                        t_us: us,
+                        what: &summary,
+                    };
+                    writeln!(self.out, "{}", common::json_line(&line))?;
                 } else {
-                    writeln!(self.out, "{us:>12} {}", describe::line(&t))?;
+                    writeln!(self.out, "{us:>12} {summary}")?;
                 }
                 if let Some(p) = self.pcap.as_mut() {
                     p.write_telegram(at, &bytes)
@@ -108,19 +127,16 @@ impl Printer {
                 let us = at.as_nanos() / 1000;
                 let what = error_text(&errors, bytes.len());
                 if self.json {
-                    let v = json!({
-                        "t_us": us,
-                        "error": what,
-                        "skipped": bytes.len(),
-                        "raw": hex(&bytes),
-                        "garbage_bytes": errors.garbage_bytes,
-                        "bad_fcs": errors.bad_fcs,
-                        "bad_length": errors.bad_length,
-                        "bad_end_delimiter": errors.bad_end_delimiter,
-                        "bad_format": errors.bad_format,
-                        "truncated": errors.truncated,
-                    });
-                    writeln!(self.out, "{v}")?;
+                    let line = Seen {
+                        t_us: us,
+                        what: Skipped {
+                            error: what,
+                            skipped: bytes.len(),
+                            raw: Hex(&bytes),
+                            errors,
+                        },
+                    };
+                    writeln!(self.out, "{}", common::json_line(&line))?;
                 } else {
                     writeln!(
                         self.out,
@@ -136,16 +152,11 @@ impl Printer {
 
     fn summary(&mut self, s: &CodecStats) -> Result<()> {
         if self.json {
-            let v = json!({"summary": {
-                "telegrams": s.telegrams,
-                "garbage_bytes": s.garbage_bytes,
-                "bad_fcs": s.bad_fcs,
-                "bad_length": s.bad_length,
-                "bad_end_delimiter": s.bad_end_delimiter,
-                "bad_format": s.bad_format,
-                "truncated": s.truncated,
-            }});
-            writeln!(self.out, "{v}")?;
+            #[derive(serde::Serialize)]
+            struct Summary<'a> {
+                summary: &'a CodecStats,
+            }
+            writeln!(self.out, "{}", common::json_line(&Summary { summary: s }))?;
         } else {
             writeln!(
                 self.out,

@@ -338,6 +338,25 @@ impl ChannelMap {
         self.of(direction).find(|c| c.name == name)
     }
 
+    /// Both images decoded, for printing and serialising.
+    pub fn values(&self, inputs: &[u8], outputs: &[u8]) -> ImageValues {
+        let of = |dir, image| {
+            ChannelValues(
+                self.decode(dir, image)
+                    .map(|(c, v)| NamedValue {
+                        name: c.name.clone(),
+                        unit: c.scale.as_ref().map(|s| s.unit.clone()),
+                        value: v,
+                    })
+                    .collect(),
+            )
+        };
+        ImageValues {
+            inputs: of(Direction::Input, inputs),
+            outputs: of(Direction::Output, outputs),
+        }
+    }
+
     /// Every channel of one image with its value in `image` (channels
     /// beyond the image's end are left out).
     pub fn decode<'a>(
@@ -430,5 +449,58 @@ mod tests {
             .unwrap();
         assert_eq!(&img[..3], &[0, 0, 1]);
         assert_eq!(m.decode(Direction::Input, &img).count(), 0);
+    }
+}
+
+/// A channel's value with its name and unit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedValue {
+    /// The channel's name.
+    pub name: String,
+    /// Its engineering unit, if scaled.
+    pub unit: Option<String>,
+    /// Its value.
+    pub value: Value,
+}
+
+/// The decoded channels of one image, in image order. Serialises as an
+/// object `{"name": value, …}`; `Display` gives `name=value [unit]` words.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ChannelValues(pub Vec<NamedValue>);
+
+impl Serialize for ChannelValues {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(self.0.iter().map(|n| (&n.name, n.value)))
+    }
+}
+
+impl fmt::Display for ChannelValues {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, n) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{}={}", n.name, n.value)?;
+            if let Some(u) = &n.unit {
+                write!(f, " {u}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Both images of a slave decoded ([`ChannelMap::values`]). `Display`:
+/// `in: … out: …`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct ImageValues {
+    /// The input channels.
+    pub inputs: ChannelValues,
+    /// The output channels.
+    pub outputs: ChannelValues,
+}
+
+impl fmt::Display for ImageValues {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "in: {}  out: {}", self.inputs, self.outputs)
     }
 }

@@ -6,6 +6,8 @@
 //! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
 //!   decoded into I/O lengths.
 //! - [`prm`]: the Set_Prm data unit.
+//! - [`describe`]: telegrams described for people and scripts
+//!   ([`describe::TelegramSummary`]: `dpctl decode`, `dpctl sniff`).
 //! - [`diag`]: Slave_Diag, the station status bytes and extended
 //!   diagnosis blocks, with words for people.
 //! - [`control`]: Global_Control and Set_Slave_Add.
@@ -22,6 +24,7 @@
 pub mod busfile;
 pub mod cfg;
 pub mod control;
+pub mod describe;
 pub mod diag;
 pub mod dpv1;
 pub mod gsd;

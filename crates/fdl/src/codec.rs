@@ -22,6 +22,7 @@ use bytes::Bytes;
 
 /// Error counters of a [`Framer`], by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct CodecStats {
     /// Valid telegrams framed.
     pub telegrams: u64,

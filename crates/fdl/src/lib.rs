@@ -27,6 +27,9 @@
 //! - [`rng`]: the small seeded generator behind fault injection.
 //! - [`sim`]: the in-process simulated bus on virtual time (stations on a
 //!   [`medium`]).
+//! - `ser` (feature `serde`): helpers for `#[serde(serialize_with)]`
+//!   (hex text, durations in ms, `Display` as a string); with the feature
+//!   the events and counters of this crate implement `serde::Serialize`.
 //! - `driver` (feature `transport`): the thin tokio shell that runs a
 //!   station on a byte stream.
 //!
@@ -41,6 +44,8 @@ pub mod driver;
 pub mod medium;
 pub mod pcap;
 pub mod rng;
+#[cfg(feature = "serde")]
+pub mod ser;
 pub mod sim;
 pub mod station;
 pub mod tap;

@@ -77,9 +77,11 @@
 
 mod command;
 mod config;
+mod report;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{MasterConfig, MasterOptions, SlaveParams, DEFAULT_GLOBAL_CONTROL_INTERVAL};
+pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::diag::SlaveDiag;
@@ -377,6 +379,7 @@ pub enum MasterEvent {
 
 /// Counters of one slave.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct SlaveStats {
     /// Data_Exchange cycles completed.
     pub data_exchanges: u64,
@@ -396,6 +399,7 @@ pub struct SlaveStats {
 
 /// Poll-cycle statistics.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct CycleStats {
     /// Completed cycles.
     pub cycles: u64,

@@ -20,6 +20,7 @@ use std::fmt;
 /// an address change), in words for people. It appears in the slave's
 /// events; the master sees only the fault bit.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize), serde(transparent))]
 pub struct Reason(pub Cow<'static, str>);
 
 impl Reason {
@@ -122,6 +123,14 @@ pub enum ClearReason {
     FailSafe,
 }
 
+#[cfg(feature = "serde")]
+impl serde::Serialize for ClearReason {
+    /// In words, as [`ClearReason::as_str`].
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
+
 impl ClearReason {
     /// Words for people.
     pub fn as_str(self) -> &'static str {
@@ -195,10 +204,13 @@ pub enum OwnAddress {
 /// Something a device reports for people (e.g. "PKW job done"); the slave
 /// passes it on as [`SlaveEvent::Device`](super::SlaveEvent::Device).
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct DeviceEvent {
     /// A short machine-readable kind, e.g. `"pkw"`.
     pub kind: &'static str,
-    /// What happened, in words.
+    /// What happened, in words (serialised as `detail`: a printed event's
+    /// `text` is the whole [`SlaveEvent`](super::SlaveEvent) in words).
+    #[cfg_attr(feature = "serde", serde(rename = "detail"))]
     pub text: String,
 }
 

@@ -117,6 +117,7 @@ pub const MAX_SLAVE_ADDRESS: u8 = 125;
 
 /// Counters of a DP slave.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct SlaveStats {
     /// Data_Exchange requests answered with data (or SC) in Data_Exch.
     pub data_exchanges: u64,

@@ -37,9 +37,15 @@ impl fmt::Display for SlaveState {
 }
 
 /// Something the slave reports to its application (the CLI prints them).
+///
+/// With the feature `serde` it serialises as a JSON object whose
+/// `"event"` field is [`SlaveEvent::kind`], durations in ms
+/// (`watchdog_ms`, `after_ms`), reasons and commands in words.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize), serde(tag = "event"))]
 pub enum SlaveEvent {
     /// The DP state changed.
+    #[cfg_attr(feature = "serde", serde(rename = "state"))]
     State {
         /// Previous state.
         from: SlaveState,
@@ -47,12 +53,20 @@ pub enum SlaveEvent {
         to: SlaveState,
     },
     /// A Set_Prm was accepted.
+    #[cfg_attr(feature = "serde", serde(rename = "prm_ok"))]
     PrmAccepted {
         /// The master that sent it (and now owns the slave if `locked`).
         master: u8,
         /// The slave is locked to `master`.
         locked: bool,
         /// Watchdog time, if on.
+        #[cfg_attr(
+            feature = "serde",
+            serde(
+                rename = "watchdog_ms",
+                serialize_with = "profibus_fdl::ser::opt_millis"
+            )
+        )]
         watchdog: Option<Duration>,
         /// min TSDR in force (bit times).
         min_tsdr: u8,
@@ -60,12 +74,14 @@ pub enum SlaveEvent {
         group_ident: u8,
     },
     /// A Set_Prm with Unlock_Req released the slave (Wait_Prm).
+    #[cfg_attr(feature = "serde", serde(rename = "unlocked"))]
     Unlocked {
         /// The master that released it.
         master: u8,
     },
     /// A Set_Prm was rejected: Prm_Fault (and Not_Supported when
     /// `not_supported`) is set, the slave stays in Wait_Prm.
+    #[cfg_attr(feature = "serde", serde(rename = "prm_fault"))]
     PrmFault {
         /// The master that sent it.
         master: u8,
@@ -75,6 +91,7 @@ pub enum SlaveEvent {
         not_supported: bool,
     },
     /// A Chk_Cfg matched; the cyclic layout is fixed.
+    #[cfg_attr(feature = "serde", serde(rename = "cfg_ok"))]
     CfgAccepted {
         /// The master that sent it.
         master: u8,
@@ -84,6 +101,7 @@ pub enum SlaveEvent {
         outputs: usize,
     },
     /// A Chk_Cfg did not match: Cfg_Fault is set.
+    #[cfg_attr(feature = "serde", serde(rename = "cfg_fault"))]
     CfgFault {
         /// The master that sent it.
         master: u8,
@@ -91,18 +109,25 @@ pub enum SlaveEvent {
         reason: Reason,
     },
     /// The watchdog expired: outputs cleared, back to Wait_Prm.
+    #[cfg_attr(feature = "serde", serde(rename = "watchdog"))]
     WatchdogExpired {
         /// The master that stopped talking.
         master: u8,
         /// The watchdog time.
+        #[cfg_attr(
+            feature = "serde",
+            serde(rename = "after_ms", serialize_with = "profibus_fdl::ser::millis")
+        )]
         after: Duration,
     },
     /// The outputs went to their safe state.
+    #[cfg_attr(feature = "serde", serde(rename = "outputs_cleared"))]
     OutputsCleared {
         /// Why.
         reason: ClearReason,
     },
     /// Set_Slave_Add changed the address.
+    #[cfg_attr(feature = "serde", serde(rename = "address"))]
     AddressChanged {
         /// Old address.
         old: u8,
@@ -113,16 +138,19 @@ pub enum SlaveEvent {
     },
     /// A Global_Control from the owning master was executed (only
     /// reported when its command or group differs from the previous one).
+    #[cfg_attr(feature = "serde", serde(rename = "global_control"))]
     GlobalControl {
         /// The master.
         master: u8,
         /// The command bits.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "command_words"))]
         command: ControlCommand,
         /// Group_Select.
         group_select: u8,
     },
     /// A request was refused (answered negatively or ignored), e.g.
     /// because another master owns the slave.
+    #[cfg_attr(feature = "serde", serde(rename = "refused"))]
     Refused {
         /// The master that sent it.
         master: u8,
@@ -132,9 +160,34 @@ pub enum SlaveEvent {
         reason: Reason,
     },
     /// The device reported something.
+    #[cfg_attr(feature = "serde", serde(rename = "device"))]
     Device(DeviceEvent),
     /// Events were dropped because nobody drained the queue.
-    Lost(u64),
+    #[cfg_attr(feature = "serde", serde(rename = "lost"))]
+    Lost(#[cfg_attr(feature = "serde", serde(serialize_with = "lost_count"))] u64),
+}
+
+/// `Lost(n)` as `{"count": n}`.
+#[cfg(feature = "serde")]
+fn lost_count<S: serde::Serializer>(n: &u64, s: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeStruct;
+    let mut st = s.serialize_struct("Lost", 1)?;
+    st.serialize_field("count", n)?;
+    st.end()
+}
+
+/// A Control_Command as [`control_words`].
+#[cfg(feature = "serde")]
+fn command_words<S: serde::Serializer>(c: &ControlCommand, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&control_words(*c))
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for SlaveState {
+    /// The standard's name, as [`SlaveState::as_str`].
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
 }
 
 impl SlaveEvent {

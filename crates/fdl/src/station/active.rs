@@ -187,6 +187,11 @@ pub struct CycleResult<'a> {
 
 /// What the station tells its application about the ring.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum FdlEvent {
     /// The station took part in the ring for the first time (or again).
     EnteredRing,

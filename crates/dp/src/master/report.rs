@@ -1,0 +1,284 @@
+//! What a master tells people: its events resolved to the data they
+//! point to ([`MasterReport`]) and snapshots of its state
+//! ([`MasterStatus`], [`SlaveStatus`]). `Display` gives the text lines
+//! `dpctl master` prints; with the feature `serde` they serialise to its
+//! JSON lines.
+
+use super::{
+    CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState, SlaveState,
+    SlaveStats,
+};
+use crate::gsd::Gsd;
+use profibus_fdl::station::active::FdlEvent;
+use profibus_fdl::wire::Hex;
+use profibus_fdl::{Baud, Instant};
+use std::fmt;
+
+/// A [`MasterEvent`] together with what it refers to: the diagnosis in
+/// words, a job's result. Built with [`MasterReport::new`] right after
+/// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
+/// `diag`, `fault`, `job`, `ring`) and the slave's address as `slave`.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize),
+    serde(tag = "event", rename_all = "snake_case")
+)]
+pub enum MasterReport {
+    /// A slave changed state.
+    State {
+        /// Station address.
+        slave: u8,
+        /// Previous state.
+        from: SlaveState,
+        /// New state.
+        to: SlaveState,
+    },
+    /// A slave's diagnosis changed.
+    Diag {
+        /// Station address.
+        slave: u8,
+        /// The Slave_Diag data unit.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        raw: Vec<u8>,
+        /// The diagnosis in words ([`crate::diag::describe`]).
+        words: Vec<String>,
+    },
+    /// A parameterisation or configuration fault.
+    Fault {
+        /// Station address.
+        slave: u8,
+        /// What is wrong (serialised in words).
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::display")
+        )]
+        reason: FaultReason,
+    },
+    /// A job ended.
+    Job {
+        /// The job's number.
+        id: u32,
+        /// The data it returned, if any.
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::opt_hex")
+        )]
+        data: Option<Vec<u8>>,
+        /// `ok` for data, otherwise [`JobResult::describe`] (`lost` when the
+        /// result was taken already).
+        result: String,
+    },
+    /// The token ring changed.
+    Ring {
+        /// What happened (serialised in words).
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::display")
+        )]
+        what: FdlEvent,
+    },
+}
+
+impl MasterReport {
+    /// Resolve `event` against the master: read the diagnosis (described
+    /// with the slave's `gsd`, when known) or take the job's result.
+    pub fn new(m: &mut DpMaster, event: MasterEvent, gsd: Option<&Gsd>) -> MasterReport {
+        match event {
+            MasterEvent::StateChanged { address, from, to } => MasterReport::State {
+                slave: address,
+                from,
+                to,
+            },
+            MasterEvent::Diag { address } => {
+                let raw = m.diag(address).unwrap_or(&[]).to_vec();
+                let dpv1 = m.slave_params(address).is_some_and(|p| p.dpv1);
+                let words = crate::diag::describe(&raw, gsd, dpv1);
+                MasterReport::Diag {
+                    slave: address,
+                    raw,
+                    words,
+                }
+            }
+            MasterEvent::Fault { address, reason } => MasterReport::Fault {
+                slave: address,
+                reason,
+            },
+            MasterEvent::JobDone(id) => {
+                let (data, result) = match m.take_result(id) {
+                    Some(JobResult::Data(d)) => (Some(d), "ok".to_string()),
+                    Some(other) => (None, other.describe()),
+                    None => (None, "lost".to_string()),
+                };
+                MasterReport::Job {
+                    id: id.0,
+                    data,
+                    result,
+                }
+            }
+            MasterEvent::Ring(what) => MasterReport::Ring { what },
+        }
+    }
+}
+
+impl fmt::Display for MasterReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MasterReport::State { slave, from, to } => {
+                write!(f, "slave {slave}: {} → {}", from.name(), to.name())
+            }
+            MasterReport::Diag { slave, words, .. } => {
+                write!(f, "slave {slave} diagnosis: {}", words.join("; "))
+            }
+            MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
+            MasterReport::Job { id, data, result } => {
+                write!(f, "job {id}: {result}")?;
+                if let Some(d) = data {
+                    write!(f, " [{}]", Hex(d))?;
+                }
+                Ok(())
+            }
+            MasterReport::Ring { what } => write!(f, "ring: {what}"),
+        }
+    }
+}
+
+/// Cycle times in µs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct CycleMicros {
+    /// Shortest cycle.
+    pub min: u64,
+    /// Average cycle.
+    pub avg: u64,
+    /// Longest cycle.
+    pub max: u64,
+}
+
+impl From<CycleStats> for CycleMicros {
+    fn from(c: CycleStats) -> CycleMicros {
+        CycleMicros {
+            min: c.min_ns / 1000,
+            avg: c.avg().as_micros() as u64,
+            max: c.max_ns / 1000,
+        }
+    }
+}
+
+/// A snapshot of the master as a whole (its slaves: [`SlaveStatus`]).
+/// `Display` is the headline `dpctl master` prints.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct MasterStatus {
+    /// When (seconds since the clock's start).
+    pub t: Instant,
+    /// Completed poll cycles.
+    pub cycles: u64,
+    /// Cycle times.
+    pub cycle_us: CycleMicros,
+    /// Operate, clear or stop.
+    pub operating: OperatingState,
+    /// The master's station address.
+    #[cfg_attr(feature = "serde", serde(skip))]
+    pub address: u8,
+    /// The bus's baud rate.
+    #[cfg_attr(feature = "serde", serde(skip))]
+    pub baud: Baud,
+}
+
+impl MasterStatus {
+    /// The master's state at `now`, on a bus at `baud`.
+    pub fn of(m: &DpMaster, baud: Baud, now: Instant) -> MasterStatus {
+        let c = m.cycle_stats();
+        MasterStatus {
+            t: now,
+            cycles: c.cycles,
+            cycle_us: c.into(),
+            operating: m.operating_state(),
+            address: m.address(),
+            baud,
+        }
+    }
+}
+
+impl fmt::Display for MasterStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let c = &self.cycle_us;
+        write!(
+            f,
+            "master {} at {}  {:?}  cycles {}  cycle min/avg/max {}/{}/{} µs",
+            self.address, self.baud, self.operating, self.cycles, c.min, c.avg, c.max
+        )
+    }
+}
+
+/// A snapshot of one slave: state, process images, counters. `Display`
+/// is the slave's line in `dpctl master`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct SlaveStatus {
+    /// Station address.
+    pub address: u8,
+    /// Name from the configuration.
+    pub name: String,
+    /// State (`None`: not a slave of this master).
+    pub state: Option<SlaveState>,
+    /// Input image.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub inputs: Vec<u8>,
+    /// Output image.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub outputs: Vec<u8>,
+    /// Counters.
+    #[cfg_attr(feature = "serde", serde(flatten))]
+    pub stats: SlaveStats,
+}
+
+impl SlaveStatus {
+    /// The slave at `address` now.
+    pub fn of(m: &DpMaster, address: u8) -> SlaveStatus {
+        SlaveStatus {
+            address,
+            name: m
+                .slave_params(address)
+                .map(|p| p.name.clone())
+                .unwrap_or_default(),
+            state: m.slave_state(address),
+            inputs: m.inputs(address).unwrap_or(&[]).to_vec(),
+            outputs: m.outputs(address).unwrap_or(&[]).to_vec(),
+            stats: m.slave_stats(address).unwrap_or_default(),
+        }
+    }
+}
+
+impl fmt::Display for SlaveStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} {:<20} {:<13} in: {}  out: {}  (errors {}, retries {})",
+            self.address,
+            self.name,
+            self.state.map(SlaveState::name).unwrap_or(""),
+            Hex(&self.inputs),
+            Hex(&self.outputs),
+            self.stats.errors,
+            self.stats.retries
+        )
+    }
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for SlaveState {
+    /// [`SlaveState::name`].
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for OperatingState {
+    /// [`OperatingState::as_str`].
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
