@@ -11,7 +11,9 @@ use profibus_fdl::Instant;
 use profibus_gateway::link::{flush, pump, wall_ms};
 use profibus_gateway::settings::parse_broker;
 use profibus_gateway::sim::{slave_infos, SimPlant};
-use profibus_gateway::{Gateway, MqttLink, MqttSettings};
+use profibus_gateway::{
+    sparkplug, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
+};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -32,6 +34,10 @@ pub struct Args {
     /// Broker URL, mqtt://HOST:PORT (default: `[mqtt] broker`).
     #[arg(long, value_name = "URL")]
     mqtt: Option<String>,
+    /// Sparkplug B mode: publish as edge node EDGE of group GROUP
+    /// (default: `[mqtt] sparkplug`; without either, plain JSON topics).
+    #[arg(long, value_name = "GROUP/EDGE")]
+    sparkplug: Option<SparkplugId>,
     /// Extra milliseconds on the slot time for the transport's latency
     /// (with --port).
     #[arg(long, value_name = "MS")]
@@ -57,7 +63,29 @@ pub fn run(args: Args) -> Result<()> {
         .or_else(|| settings.broker.clone())
         .context("no broker: give --mqtt mqtt://HOST:PORT or [mqtt] broker")?;
     let (host, port) = parse_broker(&url)?;
-    let gateway = Gateway::new(settings, slave_infos(&profiled)?);
+    match args
+        .sparkplug
+        .clone()
+        .or_else(|| settings.sparkplug.clone())
+    {
+        Some(id) => {
+            let node = EdgeNode::new(settings, id, sparkplug::devices(&profiled)?);
+            serve(args, profiled, node, host, port)
+        }
+        None => {
+            let gateway = Gateway::new(settings, slave_infos(&profiled)?);
+            serve(args, profiled, gateway, host, port)
+        }
+    }
+}
+
+fn serve<S: Session>(
+    args: Args,
+    profiled: ProfiledBus,
+    gateway: S,
+    host: String,
+    port: u16,
+) -> Result<()> {
     common::runtime()?.block_on(async move {
         let link = MqttLink::connect(&host, port, &gateway);
         match &args.port {
@@ -68,14 +96,14 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// One step of the gateway at a cycle boundary.
-fn step(link: &mut MqttLink, gw: &mut Gateway, m: &mut DpMaster, now: Instant) {
+fn step(link: &mut MqttLink, gw: &mut impl Session, m: &mut DpMaster, now: Instant) {
     let ts = wall_ms();
     pump(link, gw, ts);
     gw.step(m, now, ts);
     flush(link, gw);
 }
 
-async fn on_sim(profiled: &ProfiledBus, mut gw: Gateway, mut link: MqttLink) -> Result<()> {
+async fn on_sim(profiled: &ProfiledBus, mut gw: impl Session, mut link: MqttLink) -> Result<()> {
     let mut plant = SimPlant::new(profiled)?;
     let start = tokio::time::Instant::now();
     let shutdown = common::shutdown();
@@ -100,7 +128,7 @@ async fn on_line(
     args: &Args,
     port: &str,
     profiled: &ProfiledBus,
-    mut gw: Gateway,
+    mut gw: impl Session,
     mut link: MqttLink,
 ) -> Result<()> {
     let bus = &profiled.file;

@@ -9,7 +9,8 @@
 //! Baud rate: `--baud auto` (the default) searches on a serial line like
 //! a real slave with `Auto_Baud_supp` (fastest rate first, lock on the
 //! first valid telegram, search again after a watchdog expiry or 10 s
-//! without a valid telegram). A pty carries bytes, not bits, so there the
+//! without a valid telegram; `profibus_fdl::runner::PassiveRunner`).
+//! A pty carries bytes, not bits, so there the
 //! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
 //! `--baud` names a rate (the rate sets the bit times of min TSDR and of
 //! the receive timeouts). `--latency` (default 5 ms on a pty, 20 ms on a
@@ -24,17 +25,13 @@ use profibus_devices::{
     BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError, PROFILES, STATE_EVENT,
 };
 use profibus_dp::slave::{Device, DpSlave, OwnAddress, SlaveEvent};
-use profibus_fdl::autobaud::AutoBaud;
-use profibus_fdl::driver::{self, Clock, Stop};
-use profibus_fdl::station::passive::PassiveStation;
+use profibus_fdl::driver::Clock;
+use profibus_fdl::runner::{PassiveRunner, RunnerEvent, Step};
 use profibus_fdl::transport::Port;
 use profibus_fdl::wire::Hex;
-use profibus_fdl::{Baud, BusParams, Instant};
-use std::cell::Cell;
+use profibus_fdl::{Baud, Instant};
 use std::io::Write;
-use std::ops::ControlFlow;
 use std::path::PathBuf;
-use std::time::Duration;
 
 /// Emulate a PROFIBUS-DP slave.
 #[derive(clap::Args, Debug)]
@@ -199,10 +196,6 @@ fn parse_baud(s: &str) -> anyhow::Result<BaudChoice> {
 /// Nominal rate on a pty with `--baud auto`.
 const PTY_NOMINAL: Baud = Baud::B19200;
 
-/// Search again after this long without a valid telegram (auto-baud on a
-/// serial line).
-const RELISTEN_AFTER: Duration = Duration::from_secs(10);
-
 /// What the shell reports besides the slave's own events.
 #[derive(serde::Serialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
@@ -236,12 +229,6 @@ enum Shell<'a> {
         inputs: &'a [u8],
         cycle: u64,
     },
-    BaudSearch {
-        text: &'a str,
-    },
-    BaudLocked {
-        baud: Baud,
-    },
     Stopped {
         state: profibus_dp::slave::SlaveState,
         #[serde(flatten)]
@@ -252,7 +239,7 @@ enum Shell<'a> {
 impl std::fmt::Display for Shell<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Shell::GsdWarning { text } | Shell::BaudSearch { text } => f.write_str(text),
+            Shell::GsdWarning { text } => f.write_str(text),
             Shell::Start { text, .. }
             | Shell::AddressStoreError { text }
             | Shell::StateSaved { text }
@@ -267,7 +254,6 @@ impl std::fmt::Display for Shell<'_> {
                 Hex(outputs),
                 Hex(inputs)
             ),
-            Shell::BaudLocked { baud } => write!(f, "baud rate {baud} found"),
             Shell::Stopped { state, stats: s } => write!(
                 f,
                 "stopped in {state}: {} Data_Exchange cycles, {} Slave_Diag, {} refused, {} watchdog expiries",
@@ -577,7 +563,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         BaudChoice::Auto | BaudChoice::Search => profibus_fdl::autobaud::SEARCH_ORDER[0],
     };
     port.set_baud(first)?;
-    let mut slave = DpSlave::new(device, addr);
+    let slave = DpSlave::new(device, addr);
     {
         let ident = slave.device().ident_number();
         let now = printer.now();
@@ -611,37 +597,28 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         );
     }
 
-    let stop_requested = Cell::new(false);
     let mut last_outputs: Vec<u8> = vec![];
-    loop {
-        let baud = if search {
-            match search_baud(&mut port, clock.clone(), &printer, &stop_requested).await? {
-                Some(b) => b,
-                None => break,
-            }
-        } else {
-            port.baud()
-        };
-        if let Some(plc) = &jx2 {
-            plc.lock().module.set_baud(baud.bps());
-        }
-        let mut station =
-            PassiveStation::with_latency_allowance(slave, BusParams::defaults(baud), latency);
-        let mut research = false;
-        let mut seen = (0u64, clock.now());
-        let result = driver::run_with(
-            &mut station,
+    let runner = PassiveRunner::new(search, latency, options);
+    if let (Some(plc), false) = (&jx2, search) {
+        plc.lock().module.set_baud(first.bps());
+    }
+    let (slave, _) = runner
+        .run(
+            slave,
             &mut port,
             clock.clone(),
-            options,
-            async {
-                common::shutdown().await;
-                stop_requested.set(true);
+            common::shutdown(),
+            |now, e| {
+                if let (Some(plc), RunnerEvent::BaudLocked { baud }) = (&jx2, e) {
+                    plc.lock().module.set_baud(baud.bps());
+                }
+                printer.emit(now, &e);
             },
             |st, now| {
+                let mut step = Step::Continue;
                 while let Some(e) = st.app_mut().poll_event() {
-                    if search && matches!(e, SlaveEvent::WatchdogExpired { .. }) {
-                        research = true;
+                    if matches!(e, SlaveEvent::WatchdogExpired { .. }) {
+                        step = Step::SearchAgain;
                     }
                     if let (
                         SlaveEvent::AddressChanged {
@@ -698,43 +675,13 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
                     );
                 }
                 if args.cycles > 0 && app.stats().data_exchanges >= args.cycles {
-                    return ControlFlow::Break(());
+                    return Step::Stop;
                 }
-                if search {
-                    let n = st.codec_stats().telegrams;
-                    if n != seen.0 {
-                        seen = (n, now);
-                    } else if now.saturating_duration_since(seen.1) >= RELISTEN_AFTER {
-                        research = true;
-                    }
-                }
-                if research {
-                    ControlFlow::Break(())
-                } else {
-                    ControlFlow::Continue(())
-                }
+                step
             },
         )
-        .await;
-        slave = station.into_app();
-        match result {
-            Err(e) => {
-                return Err(e).with_context(|| path.clone());
-            }
-            Ok(Stop::Shutdown) => break,
-            Ok(Stop::Done) if research => {
-                let now = printer.now();
-                printer.emit(
-                    now,
-                    &Shell::BaudSearch {
-                        text: "searching the baud rate again",
-                    },
-                );
-                continue;
-            }
-            Ok(Stop::Done) => break,
-        }
-    }
+        .await
+        .with_context(|| path.clone())?;
     let now = printer.now();
     printer.emit(
         now,
@@ -744,46 +691,4 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         },
     );
     Ok(())
-}
-
-/// Listen at each rate until a valid telegram decodes; `None` when a stop
-/// was requested.
-async fn search_baud(
-    port: &mut Port,
-    clock: Clock,
-    printer: &Printer,
-    stop_requested: &Cell<bool>,
-) -> anyhow::Result<Option<Baud>> {
-    use tokio::io::AsyncReadExt;
-    let mut ab = AutoBaud::new(clock.now());
-    port.set_baud(ab.baud())?;
-    let mut buf = [0u8; 512];
-    let stop = common::shutdown();
-    tokio::pin!(stop);
-    loop {
-        let due = ab.poll_timeout().expect("searching");
-        let wait = due.saturating_duration_since(clock.now());
-        tokio::select! {
-            _ = &mut stop => {
-                stop_requested.set(true);
-                return Ok(None);
-            }
-            r = port.read(&mut buf) => {
-                let n = r.context("reading the port")?;
-                if n == 0 {
-                    bail!("{}: port closed", port.name());
-                }
-                if let Some(b) = ab.handle_rx(clock.now(), &buf[..n]) {
-                    let now = clock.now();
-                    printer.emit(now, &Shell::BaudLocked { baud: b });
-                    return Ok(Some(b));
-                }
-            }
-            _ = tokio::time::sleep(wait) => {
-                if let Some(b) = ab.handle_timeout(clock.now()) {
-                    port.set_baud(b)?;
-                }
-            }
-        }
-    }
 }

@@ -539,34 +539,39 @@ impl Profile for GenericProfile {
         Ok(Box::new(dev))
     }
 
-    /// One `U8` channel per process data byte, named after its module:
-    /// `NAME[i]` (`slotN[i]` for identifiers beyond the module list).
+    /// See [`module_channels`].
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
-        let names = self.modules();
-        let mut m = ChannelMap::new();
-        let (mut inp, mut out) = (0, 0);
-        for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
-            let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
-            let name = names
-                .get(slot)
-                .cloned()
-                .unwrap_or_else(|| format!("slot{slot}"));
-            for (dir, n, at) in [
-                (Direction::Input, id.input_bytes(), &mut inp),
-                (Direction::Output, id.output_bytes(), &mut out),
-            ] {
-                for i in 0..n {
-                    m.push(format!("{name}[{i}]"), dir, *at + i, ChannelType::U8);
-                }
-                *at += n;
-            }
-        }
-        Ok(m)
+        module_channels(&self.modules(), cfg)
     }
 
     fn warnings(&self) -> Vec<String> {
         self.warnings.clone()
     }
+}
+
+/// The channels of a slave given by GSD modules: one `U8` channel per
+/// process data byte, named after its module, `NAME[i]` (`slotN[i]` for
+/// identifiers beyond the module names).
+pub fn module_channels(modules: &[String], cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
+    let mut m = ChannelMap::new();
+    let (mut inp, mut out) = (0, 0);
+    for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
+        let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
+        let name = modules
+            .get(slot)
+            .cloned()
+            .unwrap_or_else(|| format!("slot{slot}"));
+        for (dir, n, at) in [
+            (Direction::Input, id.input_bytes(), &mut inp),
+            (Direction::Output, id.output_bytes(), &mut out),
+        ] {
+            for i in 0..n {
+                m.push(format!("{name}[{i}]"), dir, *at + i, ChannelType::U8);
+            }
+            *at += n;
+        }
+    }
+    Ok(m)
 }
 
 #[cfg(test)]

@@ -145,6 +145,48 @@ impl AutoBaud {
     }
 }
 
+/// When a station that found its rate searches again because the line
+/// went quiet: no valid telegram for [`Relisten::after`] (a master always
+/// sends, so silence means the rate changed or the master went away).
+/// Sans-IO: the driver reports the station's telegram count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Relisten {
+    /// How long a silence makes the search start again.
+    pub after: Duration,
+    count: u64,
+    since: Instant,
+}
+
+/// The silence after which a locked station searches again.
+pub const RELISTEN_AFTER: Duration = Duration::from_secs(10);
+
+impl Relisten {
+    /// Watching from `now`, searching again after `after` of silence.
+    pub fn new(now: Instant, after: Duration) -> Relisten {
+        Relisten {
+            after,
+            count: 0,
+            since: now,
+        }
+    }
+
+    /// `telegrams`: the valid telegrams the station has framed so far.
+    /// True when none came for [`Relisten::after`].
+    pub fn is_silent(&mut self, now: Instant, telegrams: u64) -> bool {
+        if telegrams != self.count {
+            self.count = telegrams;
+            self.since = now;
+            return false;
+        }
+        now >= self.deadline()
+    }
+
+    /// When the line counts as silent if no telegram comes before.
+    pub fn deadline(&self) -> Instant {
+        self.since + self.after
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -214,5 +256,18 @@ mod tests {
         }
         assert!(ab.buf.len() <= 2 * crate::wire::consts::MAX_TELEGRAM_LEN);
         assert_eq!(ab.locked(), None);
+    }
+
+    #[test]
+    fn relisten_after_silence_only() {
+        let t0 = Instant::ZERO;
+        let mut r = Relisten::new(t0, Duration::from_secs(10));
+        assert!(!r.is_silent(t0 + Duration::from_secs(9), 0));
+        assert!(
+            !r.is_silent(t0 + Duration::from_secs(9), 3),
+            "telegrams came"
+        );
+        assert!(!r.is_silent(t0 + Duration::from_secs(18), 3));
+        assert!(r.is_silent(t0 + Duration::from_secs(19), 3));
     }
 }

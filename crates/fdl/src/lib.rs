@@ -32,6 +32,9 @@
 //!   the events and counters of this crate implement `serde::Serialize`.
 //! - `driver` (feature `transport`): the thin tokio shell that runs a
 //!   station on a byte stream.
+//! - `runner` (feature `transport`): a slave's station on a port with the
+//!   baud-rate search (`autobaud`), searching again after silence or a
+//!   lost master, rebuilding the station at the new rate.
 //!
 //! Protocol state machines above this layer are sans-IO: they take received
 //! telegrams and the current time and return bytes to send and the next
@@ -44,6 +47,8 @@ pub mod driver;
 pub mod medium;
 pub mod pcap;
 pub mod rng;
+#[cfg(feature = "transport")]
+pub mod runner;
 #[cfg(feature = "serde")]
 pub mod ser;
 pub mod sim;

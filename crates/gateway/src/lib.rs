@@ -71,7 +71,9 @@ pub mod core;
 pub mod link;
 pub mod settings;
 pub mod sim;
+pub mod sparkplug;
 
 pub use crate::core::{Gateway, Publish, Service, SlaveInfo, Topics};
-pub use link::{LinkEvent, MqttLink};
+pub use link::{LinkEvent, MqttLink, Session};
 pub use settings::{MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
+pub use sparkplug::{EdgeNode, SparkplugId};

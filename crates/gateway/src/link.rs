@@ -9,6 +9,9 @@
 //! gateway republishes every retained topic when the broker is back.
 
 use crate::core::{Gateway, Publish};
+use crate::settings::MqttSettings;
+use profibus_dp::master::DpMaster;
+use profibus_fdl::Instant;
 use rumqttc::{AsyncClient, Event, LastWill, MqttOptions, Packet, QoS};
 use std::time::Duration;
 use tokio::sync::mpsc;
@@ -29,6 +32,78 @@ pub enum LinkEvent {
     },
 }
 
+/// A gateway core as the link and the driver see it: the plain JSON
+/// [`Gateway`] or the Sparkplug B [`crate::sparkplug::EdgeNode`]. All
+/// sans-IO: the driver hands in link events and the master, and sends
+/// what [`Session::poll_publish`] returns.
+pub trait Session {
+    /// The settings (client id, QoS, …).
+    fn settings(&self) -> &MqttSettings;
+    /// What the connection needs of this core: subscriptions and wills.
+    fn link_setup(&self) -> LinkSetup;
+    /// The broker accepted the connection.
+    fn connected(&mut self, ts_ms: u64);
+    /// The connection was lost (or a connection attempt failed).
+    fn disconnected(&mut self, ts_ms: u64);
+    /// A message arrived on a subscribed topic.
+    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64);
+    /// One step at a cycle boundary of the master; `now` is the master's
+    /// time, `ts_ms` the wall clock in ms since the Unix epoch.
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64);
+    /// The next message to send, if any.
+    fn poll_publish(&mut self) -> Option<Publish>;
+    /// The message to publish before a clean disconnect (the broker sends
+    /// no will then).
+    fn last_will(&self) -> Publish;
+}
+
+/// What a [`Session`] asks of its connection.
+pub struct LinkSetup {
+    /// QoS of every publish and subscription (0..=2).
+    pub qos: u8,
+    /// QoS of the last will.
+    pub will_qos: u8,
+    /// Topic filters subscribed to on every connection.
+    pub filters: Vec<String>,
+    /// The last will of the next connection attempt, called before the
+    /// first and before every later attempt (after each
+    /// [`LinkEvent::Disconnected`]).
+    pub will: Box<dyn FnMut() -> Publish + Send>,
+}
+
+impl Session for Gateway {
+    fn settings(&self) -> &MqttSettings {
+        Gateway::settings(self)
+    }
+    fn link_setup(&self) -> LinkSetup {
+        let will = Gateway::last_will(self);
+        LinkSetup {
+            qos: self.settings().qos,
+            will_qos: self.settings().qos,
+            filters: self.topics().request_filters(),
+            will: Box::new(move || will.clone()),
+        }
+    }
+    fn connected(&mut self, ts_ms: u64) {
+        Gateway::connected(self, ts_ms)
+    }
+    fn disconnected(&mut self, ts_ms: u64) {
+        Gateway::disconnected(self, ts_ms)
+    }
+    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        Gateway::handle_message(self, topic, payload, ts_ms)
+    }
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
+        Gateway::step(self, m, now, ts_ms)
+    }
+    fn poll_publish(&mut self) -> Option<Publish> {
+        Gateway::poll_publish(self)
+    }
+    fn last_will(&self) -> Publish {
+        Gateway::last_will(self)
+    }
+}
+
 /// A failed publish.
 #[derive(Debug, thiserror::Error)]
 #[error("MQTT publish failed: {0}")]
@@ -38,6 +113,7 @@ pub struct LinkError(#[from] rumqttc::ClientError);
 pub struct MqttLink {
     client: AsyncClient,
     qos: QoS,
+    will_qos: QoS,
     events: mpsc::UnboundedReceiver<LinkEvent>,
     task: tokio::task::JoinHandle<()>,
 }
@@ -55,18 +131,24 @@ const QUEUE: usize = 1024;
 
 impl MqttLink {
     /// Start connecting to `host:port` for `gateway` (its client id, last
-    /// will and write subscription). Needs a tokio runtime.
-    pub fn connect(host: &str, port: u16, gateway: &Gateway) -> MqttLink {
+    /// will and subscriptions). Needs a tokio runtime.
+    pub fn connect(host: &str, port: u16, gateway: &impl Session) -> MqttLink {
         let s = gateway.settings();
-        let q = qos(s.qos);
+        let setup = gateway.link_setup();
+        let q = qos(setup.qos);
+        let will_qos = qos(setup.will_qos);
+        let mut next_will = setup.will;
+        let mut will = move || {
+            let w = next_will();
+            LastWill::new(w.topic, w.payload, will_qos, w.retain)
+        };
         let mut o = MqttOptions::new(s.client_id.clone(), host, port);
         o.set_keep_alive(Duration::from_secs(5));
         o.set_clean_session(true);
-        let will = gateway.last_will();
-        o.set_last_will(LastWill::new(will.topic, will.payload, q, will.retain));
+        o.set_last_will(will());
         let (client, mut eventloop) = AsyncClient::new(o, QUEUE);
         let (tx, events) = mpsc::unbounded_channel();
-        let filters = gateway.topics().request_filters();
+        let filters = setup.filters;
         let sub = client.clone();
         let task = tokio::spawn(async move {
             let mut pause = Duration::from_millis(100);
@@ -99,6 +181,8 @@ impl MqttLink {
                         if tx.send(LinkEvent::Disconnected(e.to_string())).is_err() {
                             return;
                         }
+                        // The next poll connects again, with the next will.
+                        eventloop.mqtt_options.set_last_will(will());
                         // Reconnection backoff, not a wait for an event.
                         tokio::time::sleep(pause).await;
                         pause = (pause * 2).min(Duration::from_secs(5));
@@ -109,6 +193,7 @@ impl MqttLink {
         MqttLink {
             client,
             qos: q,
+            will_qos,
             events,
             task,
         }
@@ -136,7 +221,7 @@ impl MqttLink {
     pub async fn close(self, last: Publish) {
         let _ = self
             .client
-            .publish(last.topic, self.qos, last.retain, last.payload)
+            .publish(last.topic, self.will_qos, last.retain, last.payload)
             .await;
         let _ = self.client.disconnect().await;
         // Let the event loop send both, then stop it.
@@ -144,9 +229,9 @@ impl MqttLink {
     }
 }
 
-/// Hand every link event to `gateway` and every queued message to the
-/// link; `ts_ms` is the wall-clock time in ms since the Unix epoch.
-pub fn pump(link: &mut MqttLink, gateway: &mut Gateway, ts_ms: u64) {
+/// Hand every link event to `gateway`; `ts_ms` is the wall-clock time in
+/// ms since the Unix epoch.
+pub fn pump(link: &mut MqttLink, gateway: &mut impl Session, ts_ms: u64) {
     while let Some(ev) = link.try_recv() {
         match ev {
             LinkEvent::Connected => gateway.connected(ts_ms),
@@ -159,7 +244,7 @@ pub fn pump(link: &mut MqttLink, gateway: &mut Gateway, ts_ms: u64) {
 }
 
 /// Send everything `gateway` has queued.
-pub fn flush(link: &MqttLink, gateway: &mut Gateway) {
+pub fn flush(link: &MqttLink, gateway: &mut impl Session) {
     while let Some(p) = gateway.poll_publish() {
         if let Err(e) = link.publish(p) {
             tracing::debug!(error = %e, "dropped a publish");

@@ -13,6 +13,7 @@
 //! outputs_timeout_ms = 5000          # without a broker this long: safe state
 //! safe_state = "keep"                # "keep" (default), "zero" or "clear"
 //! job_timeout_ms = 2000              # DP-V1, PKW and RFID requests give up after this
+//! sparkplug = "plant/line1"          # Sparkplug B mode, GROUP/EDGE (see crate::sparkplug)
 //! ```
 //!
 //! `writable` says what MQTT may change (default: nothing). A station
@@ -31,6 +32,7 @@
 //! broker is back, when it returns to Operate. It is logged and reported
 //! in the status once the broker is back.
 
+use crate::sparkplug::SparkplugId;
 use std::time::Duration;
 
 /// When process images are published.
@@ -112,6 +114,9 @@ pub struct MqttSettings {
     pub safe_state: SafeState,
     /// How long DP-V1, PKW and RFID requests may take.
     pub job_timeout: Duration,
+    /// Sparkplug B mode with this group and edge node id (`None`: plain
+    /// JSON topics).
+    pub sparkplug: Option<SparkplugId>,
 }
 
 impl MqttSettings {
@@ -152,6 +157,7 @@ const KEYS: &[&str] = &[
     "outputs_timeout_ms",
     "safe_state",
     "job_timeout_ms",
+    "sparkplug",
 ];
 
 fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
@@ -254,6 +260,9 @@ impl MqttSettings {
         if let Some(b) = &broker {
             parse_broker(b)?;
         }
+        let sparkplug = string(t, "sparkplug")?
+            .map(|s| SparkplugId::parse(&s).map_err(|e| bad("sparkplug", e.to_string())))
+            .transpose()?;
         Ok(MqttSettings {
             broker,
             client_id: string(t, "client_id")?.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -266,6 +275,7 @@ impl MqttSettings {
             outputs_timeout,
             safe_state,
             job_timeout,
+            sparkplug,
         })
     }
 }

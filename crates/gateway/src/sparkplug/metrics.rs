@@ -1,0 +1,324 @@
+//! A slave as a Sparkplug device: its metrics (names, datatypes, values
+//! from the master's view of it) and the output writes of a DCMD.
+
+use super::proto::{DataType, Metric, MetricValue};
+use crate::core::SlaveInfo;
+use profibus_devices::channels::{Channel, ChannelMap, ChannelType, Direction, Value};
+use profibus_dp::master::SlaveView;
+
+/// Metric name of the whole input image (Bytes).
+pub const INPUT_IMAGE: &str = "Image/Inputs";
+/// Metric name of the whole output image (Bytes; writable by DCMD).
+pub const OUTPUT_IMAGE: &str = "Image/Outputs";
+/// Metric name of the last diagnosis, raw (Bytes).
+pub const DIAG_BYTES: &str = "Diagnosis/Bytes";
+/// Metric name of the last diagnosis, decoded (String, one line per
+/// finding).
+pub const DIAG_TEXT: &str = "Diagnosis/Text";
+/// Metric name of the station address (UInt8).
+pub const ADDRESS: &str = "Properties/Address";
+/// Metric name of the bus file's name of the slave (String).
+pub const NAME: &str = "Properties/Name";
+/// Metric name of the ident number (UInt16; slaves with a GSD).
+pub const IDENT: &str = "Properties/Ident Number";
+
+/// The folder of a channel's metric: `Inputs/` or `Outputs/`.
+pub fn channel_metric(c: &Channel) -> String {
+    let folder = match c.direction {
+        Direction::Input => "Inputs",
+        Direction::Output => "Outputs",
+    };
+    // `/` separates folders in Sparkplug names: keep a channel one metric.
+    format!("{folder}/{}", c.name.replace('/', "_"))
+}
+
+/// The Sparkplug datatype of a channel: the integer types as they are,
+/// `Boolean` for bits, `Float` for F32, `Double` for a channel in
+/// engineering units (a [`profibus_devices::channels::Scale`]).
+pub fn channel_datatype(c: &Channel) -> DataType {
+    if c.scale.is_some() {
+        return DataType::Double;
+    }
+    match c.ty {
+        ChannelType::Bool { .. } => DataType::Boolean,
+        ChannelType::U8 => DataType::UInt8,
+        ChannelType::I8 => DataType::Int8,
+        ChannelType::U16 => DataType::UInt16,
+        ChannelType::I16 => DataType::Int16,
+        ChannelType::U32 => DataType::UInt32,
+        ChannelType::I32 => DataType::Int32,
+        ChannelType::F32 => DataType::Float,
+    }
+}
+
+/// A channel value on the wire as `datatype`. Signed types up to 32 bits
+/// go into `int_value` as two's complement, 64-bit ones into
+/// `long_value`.
+pub fn encode_value(datatype: DataType, v: Value) -> Option<MetricValue> {
+    let int = |v: Value| match v {
+        Value::Bool(b) => b as i64,
+        Value::Int(i) => i,
+        Value::Float(x) => x as i64,
+    };
+    let float = |v: Value| match v {
+        Value::Bool(b) => b as u8 as f64,
+        Value::Int(i) => i as f64,
+        Value::Float(x) => x,
+    };
+    Some(match datatype {
+        DataType::Boolean => MetricValue::BooleanValue(int(v) != 0),
+        DataType::Int8
+        | DataType::Int16
+        | DataType::Int32
+        | DataType::UInt8
+        | DataType::UInt16
+        | DataType::UInt32 => MetricValue::IntValue(int(v) as i32 as u32),
+        DataType::Int64 | DataType::UInt64 => MetricValue::LongValue(int(v) as u64),
+        DataType::Float => MetricValue::FloatValue(float(v) as f32),
+        DataType::Double => MetricValue::DoubleValue(float(v)),
+        _ => return None,
+    })
+}
+
+/// A value from the wire as a channel value, read as `datatype` (the
+/// metric's type from the birth). `None` when the value does not fit
+/// the type (e.g. a string for an integer).
+pub fn decode_value(datatype: DataType, v: &MetricValue) -> Option<Value> {
+    let signed = matches!(
+        datatype,
+        DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64
+    );
+    Some(match v {
+        MetricValue::BooleanValue(b) => Value::Bool(*b),
+        MetricValue::IntValue(u) if signed => Value::Int(*u as i32 as i64),
+        MetricValue::IntValue(u) => Value::Int(*u as i64),
+        MetricValue::LongValue(u) if signed => Value::Int(*u as i64),
+        MetricValue::LongValue(u) => Value::Int(i64::try_from(*u).ok()?),
+        MetricValue::FloatValue(x) => Value::Float(*x as f64),
+        MetricValue::DoubleValue(x) => Value::Float(*x),
+        _ => return None,
+    })
+}
+
+/// Where a metric's value comes from.
+#[derive(Debug, Clone)]
+enum Source {
+    Address,
+    Name,
+    Ident(u16),
+    Image(Direction),
+    Channel(usize),
+    DiagBytes,
+    DiagText,
+}
+
+/// One metric of a device.
+#[derive(Debug, Clone)]
+pub struct MetricDef {
+    /// Its name.
+    pub name: String,
+    /// Its datatype.
+    pub datatype: DataType,
+    source: Source,
+}
+
+/// A slave as a Sparkplug device: its metrics, in birth order.
+#[derive(Debug, Clone)]
+pub struct Device {
+    /// The slave.
+    pub info: SlaveInfo,
+    /// Its named channels (from the profile, or one byte per GSD module).
+    pub channels: ChannelMap,
+    /// Its metrics.
+    pub metrics: Vec<MetricDef>,
+}
+
+/// Why a DCMD was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    /// Not a Sparkplug payload.
+    #[error("DCMD payload is not a Sparkplug B payload: {0}")]
+    Decode(String),
+    /// A metric without a name (this gateway births no aliases).
+    #[error("DCMD metric without a name")]
+    NoName,
+    /// A metric the device does not have, or one that cannot be written.
+    #[error(
+        "device {device}: metric `{name}` is not writable (write `Outputs/…` or `{OUTPUT_IMAGE}`)"
+    )]
+    NotWritable {
+        /// Device id.
+        device: String,
+        /// Metric name.
+        name: String,
+    },
+    /// A value of the wrong type, or out of the channel's range.
+    #[error("device {device}: metric `{name}`: {problem}")]
+    Value {
+        /// Device id.
+        device: String,
+        /// Metric name.
+        name: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The bus file's `[mqtt] writable` does not list the slave.
+    #[error("slave {0} is not writable over MQTT (see [mqtt] writable)")]
+    Unauthorised(u8),
+    /// A DCMD for a device this edge node does not have.
+    #[error("no device `{0}` on this edge node")]
+    UnknownDevice(String),
+}
+
+/// The writes of one DCMD, checked against the device.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputWrite {
+    /// The whole output image, if the command sets it.
+    pub image: Option<Vec<u8>>,
+    /// Named output channels, applied after the image.
+    pub channels: Vec<(String, Value)>,
+}
+
+impl Device {
+    /// The device of a slave; `channels` as [`SlaveInfo::channels`] or
+    /// derived from its GSD modules.
+    pub fn new(info: SlaveInfo, channels: ChannelMap) -> Device {
+        let mut metrics = vec![
+            MetricDef {
+                name: ADDRESS.into(),
+                datatype: DataType::UInt8,
+                source: Source::Address,
+            },
+            MetricDef {
+                name: NAME.into(),
+                datatype: DataType::String,
+                source: Source::Name,
+            },
+        ];
+        if let Some(g) = &info.gsd {
+            metrics.push(MetricDef {
+                name: IDENT.into(),
+                datatype: DataType::UInt16,
+                source: Source::Ident(g.ident_number),
+            });
+        }
+        for (name, dir) in [
+            (INPUT_IMAGE, Direction::Input),
+            (OUTPUT_IMAGE, Direction::Output),
+        ] {
+            metrics.push(MetricDef {
+                name: name.into(),
+                datatype: DataType::Bytes,
+                source: Source::Image(dir),
+            });
+        }
+        for (i, c) in channels.channels.iter().enumerate() {
+            metrics.push(MetricDef {
+                name: channel_metric(c),
+                datatype: channel_datatype(c),
+                source: Source::Channel(i),
+            });
+        }
+        metrics.push(MetricDef {
+            name: DIAG_BYTES.into(),
+            datatype: DataType::Bytes,
+            source: Source::DiagBytes,
+        });
+        metrics.push(MetricDef {
+            name: DIAG_TEXT.into(),
+            datatype: DataType::String,
+            source: Source::DiagText,
+        });
+        Device {
+            info,
+            channels,
+            metrics,
+        }
+    }
+
+    /// The Sparkplug device id: the station address in decimal.
+    pub fn id(&self) -> String {
+        self.info.address.to_string()
+    }
+
+    /// The value of every metric (in [`Device::metrics`] order) in the
+    /// master's view of the slave; `None` is a null value (a channel
+    /// beyond a short image).
+    pub fn values(&self, v: &SlaveView<'_>) -> Vec<Option<MetricValue>> {
+        self.metrics
+            .iter()
+            .map(|m| match &m.source {
+                Source::Address => Some(MetricValue::IntValue(self.info.address as u32)),
+                Source::Name => Some(MetricValue::StringValue(self.info.name.clone())),
+                Source::Ident(n) => Some(MetricValue::IntValue(*n as u32)),
+                Source::Image(Direction::Input) => Some(MetricValue::BytesValue(v.inputs.to_vec())),
+                Source::Image(Direction::Output) => {
+                    Some(MetricValue::BytesValue(v.outputs.to_vec()))
+                }
+                Source::Channel(i) => {
+                    let c = &self.channels.channels[*i];
+                    let img = match c.direction {
+                        Direction::Input => v.inputs,
+                        Direction::Output => v.outputs,
+                    };
+                    encode_value(m.datatype, c.read(img)?)
+                }
+                Source::DiagBytes => Some(MetricValue::BytesValue(v.diag.to_vec())),
+                Source::DiagText => Some(MetricValue::StringValue(if v.diag.is_empty() {
+                    String::new()
+                } else {
+                    profibus_dp::diag::describe(v.diag, self.info.gsd.as_ref(), self.info.dpv1)
+                        .join("\n")
+                })),
+            })
+            .collect()
+    }
+
+    /// Check the metrics of a DCMD: each must name an output channel
+    /// (`Outputs/…`) or the output image, with a value of its type.
+    /// Nothing is written here.
+    /// The output image's length is checked when the write is applied.
+    pub fn check_command(&self, metrics: &[Metric]) -> Result<OutputWrite, CommandError> {
+        let mut w = OutputWrite {
+            image: None,
+            channels: vec![],
+        };
+        for m in metrics {
+            let name = m.name.as_deref().ok_or(CommandError::NoName)?;
+            let not_writable = || CommandError::NotWritable {
+                device: self.id(),
+                name: name.to_string(),
+            };
+            let bad = |problem: String| CommandError::Value {
+                device: self.id(),
+                name: name.to_string(),
+                problem,
+            };
+            let def = self
+                .metrics
+                .iter()
+                .find(|d| d.name == name)
+                .ok_or_else(not_writable)?;
+            let value = m.value.as_ref().ok_or_else(|| bad("no value".into()))?;
+            match &def.source {
+                Source::Image(Direction::Output) => {
+                    let MetricValue::BytesValue(b) = value else {
+                        return Err(bad("takes a Bytes value".into()));
+                    };
+                    w.image = Some(b.clone());
+                }
+                Source::Channel(i) if self.channels.channels[*i].direction == Direction::Output => {
+                    let c = &self.channels.channels[*i];
+                    let v = decode_value(def.datatype, value)
+                        .ok_or_else(|| bad(format!("not a {:?} value", def.datatype)))?;
+                    // Range and type: try it on a scratch image.
+                    let mut scratch = vec![0u8; c.offset + c.ty.size()];
+                    c.write(v, &mut scratch).map_err(|e| bad(e.to_string()))?;
+                    w.channels.push((c.name.clone(), v));
+                }
+                _ => return Err(not_writable()),
+            }
+        }
+        Ok(w)
+    }
+}

@@ -1,0 +1,910 @@
+//! Sparkplug B mode: the DP master as a Sparkplug edge node, each slave
+//! in Data_Exchange as one of its devices (`dpctl gateway --sparkplug
+//! GROUP/EDGE`, or `sparkplug = "GROUP/EDGE"` in the bus file's `[mqtt]`
+//! table).
+//!
+//! # Topics
+//!
+//! `spBv1.0/GROUP/TYPE/EDGE[/DEVICE]`, where DEVICE is the slave's
+//! station address in decimal (unique on a bus and always a valid topic
+//! level; the bus file's name is the device's `Properties/Name` metric):
+//!
+//! | type | when | payload |
+//! |---|---|---|
+//! | `NBIRTH` | on every connection and on a rebirth request | `seq` 0, `bdSeq`, `Node Control/Rebirth` (false) |
+//! | `NDEATH` | the MQTT last will (QoS 1), and before a clean stop | `bdSeq` only, no `seq` |
+//! | `DBIRTH` | a slave enters Data_Exchange (and after each NBIRTH) | every metric of the device |
+//! | `DDATA` | a metric changed since the last DBIRTH/DDATA | the changed metrics |
+//! | `DDEATH` | the slave leaves Data_Exchange | `seq` and timestamp only |
+//! | `NCMD` (subscribed) | `Node Control/Rebirth` = true | NBIRTH and every DBIRTH again |
+//! | `DCMD` (subscribed) | output writes | see below |
+//!
+//! Everything is published with QoS 0 and without retain, as the
+//! specification asks; `seq` counts 0..=255 and wraps across NBIRTH,
+//! DBIRTH, DDATA and DDEATH (NBIRTH restarts it at 0). `bdSeq` (Int64,
+//! as Eclipse Tahu sends it) starts at 0 and counts every MQTT CONNECT
+//! modulo 256: the last will of each connection attempt carries the
+//! value its NBIRTH will have. Payload and metric timestamps are the
+//! wall clock in ms since the Unix epoch.
+//!
+//! # Metrics of a device
+//!
+//! | name | datatype | |
+//! |---|---|---|
+//! | `Properties/Address` | UInt8 | station address |
+//! | `Properties/Name` | String | the slave's name in the bus file |
+//! | `Properties/Ident Number` | UInt16 | from its GSD |
+//! | `Image/Inputs`, `Image/Outputs` | Bytes | the whole process images |
+//! | `Inputs/<channel>`, `Outputs/<channel>` | see below | one per named channel |
+//! | `Diagnosis/Bytes` | Bytes | the last Slave_Diag response |
+//! | `Diagnosis/Text` | String | it decoded (GSD texts), one finding a line |
+//!
+//! Channels are the device profile's ([`profibus_devices::channels`]:
+//! BK3000 terminals, BM4 variables, Omega words, …) or, for a slave
+//! given by GSD modules, one UInt8 per process data byte named
+//! `MODULE[i]` ([`profibus_devices::generic::module_channels`]); a `/`
+//! in a channel name becomes `_`. Datatypes: bits Boolean, U8/I8/U16/
+//! I16/U32/I32 as UInt8/Int8/UInt16/Int16/UInt32/Int32 (signed values
+//! two's complement in `int_value`), F32 Float, channels in engineering
+//! units Double.
+//!
+//! # Writes (DCMD)
+//!
+//! A DCMD to a slave listed in `[mqtt] writable` may set `Outputs/…`
+//! metrics (by name, with a value of the birth's datatype) and
+//! `Image/Outputs` (Bytes, exactly the output length). The command is
+//! checked as a whole and applied at once between two polls, so one
+//! Data_Exchange carries all of it (the image first, then the
+//! channels). A `{ address, channels = [...] }` entry of `writable`
+//! allows only those output channels (not the image). A command with
+//! one bad metric, or to a slave not writable, changes nothing and is
+//! logged (Sparkplug has no reply
+//! topic: the next DDATA shows the outputs as they are).
+//!
+//! # Not supported
+//!
+//! Metric aliases (names are always sent), NDATA (the node has no
+//! metrics that change), templates, datasets, properties, historical
+//! data, host STATE awareness (the node births whether or not a primary
+//! host is online), MQTT 5, and the plain mode's interval publishing.
+
+pub mod metrics;
+pub mod proto;
+
+use crate::core::{Publish, SlaveInfo};
+use crate::link::{LinkSetup, Session};
+use crate::settings::MqttSettings;
+use crate::sim::SimError;
+use metrics::{CommandError, Device, OutputWrite};
+use profibus_devices::bus::ProfiledBus;
+use profibus_devices::channels::ChannelMap;
+use profibus_dp::master::{DpMaster, MasterEvent, SlaveState};
+use profibus_fdl::Instant;
+use prost::Message;
+use proto::{DataType, Metric, MetricValue, Payload};
+use std::collections::VecDeque;
+use std::fmt;
+
+/// The Sparkplug B topic namespace.
+pub const NAMESPACE: &str = "spBv1.0";
+/// The node metric that asks for a rebirth.
+pub const REBIRTH: &str = "Node Control/Rebirth";
+/// The birth/death sequence metric.
+pub const BD_SEQ: &str = "bdSeq";
+
+/// A Sparkplug group id and edge node id.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SparkplugId {
+    /// Group id.
+    pub group: String,
+    /// Edge node id.
+    pub edge: String,
+}
+
+/// A `GROUP/EDGE` that is not two valid ids.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` is not GROUP/EDGE (two non-empty ids without `/`, `+` or `#`)")]
+pub struct IdError(String);
+
+impl SparkplugId {
+    /// Parse `GROUP/EDGE`.
+    pub fn parse(text: &str) -> Result<SparkplugId, IdError> {
+        let valid = |s: &str| !s.is_empty() && !s.contains(['/', '+', '#', '\0']);
+        match text.split_once('/') {
+            Some((g, e)) if valid(g) && valid(e) => Ok(SparkplugId {
+                group: g.into(),
+                edge: e.into(),
+            }),
+            _ => Err(IdError(text.into())),
+        }
+    }
+
+    /// The topic of an edge node message: `spBv1.0/GROUP/TYPE/EDGE`.
+    pub fn node_topic(&self, t: MessageType) -> String {
+        format!("{NAMESPACE}/{}/{}/{}", self.group, t.name(), self.edge)
+    }
+
+    /// The topic of a device message: `spBv1.0/GROUP/TYPE/EDGE/DEVICE`.
+    pub fn device_topic(&self, t: MessageType, device: &str) -> String {
+        format!("{}/{device}", self.node_topic(t))
+    }
+}
+
+impl std::str::FromStr for SparkplugId {
+    type Err = IdError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        SparkplugId::parse(s)
+    }
+}
+
+impl fmt::Display for SparkplugId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.group, self.edge)
+    }
+}
+
+/// The Sparkplug message types this edge node uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MessageType {
+    /// Edge node birth.
+    NBirth,
+    /// Edge node death (the last will).
+    NDeath,
+    /// Device birth.
+    DBirth,
+    /// Device death.
+    DDeath,
+    /// Device data.
+    DData,
+    /// Edge node command.
+    NCmd,
+    /// Device command.
+    DCmd,
+}
+
+impl MessageType {
+    /// The topic level.
+    pub fn name(self) -> &'static str {
+        match self {
+            MessageType::NBirth => "NBIRTH",
+            MessageType::NDeath => "NDEATH",
+            MessageType::DBirth => "DBIRTH",
+            MessageType::DDeath => "DDEATH",
+            MessageType::DData => "DDATA",
+            MessageType::NCmd => "NCMD",
+            MessageType::DCmd => "DCMD",
+        }
+    }
+}
+
+/// The devices of a bus file's slaves: channels from the device
+/// profiles, or one byte per GSD module.
+pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SimError> {
+    let infos = crate::sim::slave_infos(profiled)?;
+    infos
+        .into_iter()
+        .map(|info| {
+            let channels = match &info.channels {
+                Some(c) => c.clone(),
+                None => {
+                    let s = profiled
+                        .file
+                        .slaves
+                        .iter()
+                        .find(|s| s.params.address == info.address)
+                        .expect("slave_infos lists the bus file's slaves");
+                    profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
+                        .map_err(|e| SimError::Profile(info.address, e))?
+                }
+            };
+            Ok(Device::new(info, channels))
+        })
+        .collect()
+}
+
+/// What the edge node knows of one device.
+#[derive(Debug)]
+struct Entry {
+    device: Device,
+    /// Born (DBIRTH sent, no DDEATH since), with the values last sent.
+    born: Option<Vec<Option<MetricValue>>>,
+}
+
+/// A checked DCMD waiting for the next cycle boundary.
+#[derive(Debug)]
+struct Pending {
+    address: u8,
+    write: OutputWrite,
+}
+
+/// The DP master as a Sparkplug B edge node (sans-IO, like
+/// [`crate::Gateway`]): drive it through [`Session`] at the master's
+/// cycle boundaries.
+#[derive(Debug)]
+pub struct EdgeNode {
+    settings: MqttSettings,
+    id: SparkplugId,
+    devices: Vec<Entry>,
+    pending: Vec<Pending>,
+    out: VecDeque<Publish>,
+    online: bool,
+    /// An NBIRTH is due (new connection or rebirth request).
+    birth_due: bool,
+    bd_seq: u8,
+    seq: u8,
+}
+
+fn metric(name: &str, datatype: DataType, value: Option<MetricValue>, ts: u64) -> Metric {
+    Metric {
+        name: Some(name.into()),
+        timestamp: Some(ts),
+        datatype: Some(datatype.code()),
+        is_null: value.is_none().then_some(true),
+        value,
+        ..Default::default()
+    }
+}
+
+/// The NDEATH payload with `bd_seq`: one metric, no `seq`.
+fn ndeath(bd_seq: u8) -> Vec<u8> {
+    Payload {
+        metrics: vec![Metric {
+            name: Some(BD_SEQ.into()),
+            datatype: Some(DataType::Int64.code()),
+            value: Some(MetricValue::LongValue(bd_seq as u64)),
+            ..Default::default()
+        }],
+        ..Default::default()
+    }
+    .encode_to_vec()
+}
+
+impl EdgeNode {
+    /// An edge node `id` for these devices.
+    pub fn new(settings: MqttSettings, id: SparkplugId, devices: Vec<Device>) -> EdgeNode {
+        EdgeNode {
+            settings,
+            id,
+            devices: devices
+                .into_iter()
+                .map(|device| Entry { device, born: None })
+                .collect(),
+            pending: vec![],
+            out: VecDeque::new(),
+            online: false,
+            birth_due: false,
+            bd_seq: 0,
+            seq: 0,
+        }
+    }
+
+    /// An edge node for slaves described by [`SlaveInfo`]s only (slaves
+    /// without named channels get none).
+    pub fn from_infos(settings: MqttSettings, id: SparkplugId, infos: Vec<SlaveInfo>) -> EdgeNode {
+        let devices = infos
+            .into_iter()
+            .map(|i| {
+                let c = i.channels.clone().unwrap_or_else(ChannelMap::new);
+                Device::new(i, c)
+            })
+            .collect();
+        EdgeNode::new(settings, id, devices)
+    }
+
+    /// The group and edge node id.
+    pub fn id(&self) -> &SparkplugId {
+        &self.id
+    }
+
+    /// The bdSeq of the current (or next) connection.
+    pub fn bd_seq(&self) -> u8 {
+        self.bd_seq
+    }
+
+    fn next_seq(&mut self) -> u64 {
+        let s = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        s as u64
+    }
+
+    fn push(&mut self, topic: String, metrics: Vec<Metric>, ts: u64) {
+        let payload = Payload {
+            timestamp: Some(ts),
+            metrics,
+            seq: Some(self.next_seq()),
+            ..Default::default()
+        };
+        self.out.push_back(Publish {
+            topic,
+            payload: payload.encode_to_vec(),
+            retain: false,
+        });
+    }
+
+    fn nbirth(&mut self, ts: u64) {
+        self.seq = 0;
+        let metrics = vec![
+            metric(
+                BD_SEQ,
+                DataType::Int64,
+                Some(MetricValue::LongValue(self.bd_seq as u64)),
+                ts,
+            ),
+            metric(
+                REBIRTH,
+                DataType::Boolean,
+                Some(MetricValue::BooleanValue(false)),
+                ts,
+            ),
+        ];
+        self.push(self.id.node_topic(MessageType::NBirth), metrics, ts);
+        for e in &mut self.devices {
+            e.born = None;
+        }
+    }
+
+    /// The edge node's response to a command payload on `topic`
+    /// (NCMD: rebirth; DCMD: output writes, applied at the next step).
+    fn command(&mut self, topic: &str, payload: &[u8]) -> Result<(), CommandError> {
+        let ncmd = self.id.node_topic(MessageType::NCmd);
+        let dcmd = self.id.node_topic(MessageType::DCmd);
+        let p = Payload::decode(payload).map_err(|e| CommandError::Decode(e.to_string()))?;
+        if topic == ncmd {
+            for m in &p.metrics {
+                match (m.name.as_deref(), &m.value) {
+                    (Some(REBIRTH), Some(MetricValue::BooleanValue(true))) => {
+                        tracing::info!("Sparkplug rebirth requested");
+                        self.birth_due = true;
+                    }
+                    (name, _) => tracing::warn!(?name, "NCMD metric ignored"),
+                }
+            }
+            return Ok(());
+        }
+        let Some(device) = topic
+            .strip_prefix(dcmd.as_str())
+            .and_then(|r| r.strip_prefix('/'))
+        else {
+            return Ok(());
+        };
+        let Some(e) = self.devices.iter().find(|e| e.device.id() == device) else {
+            return Err(CommandError::UnknownDevice(device.into()));
+        };
+        let address = e.device.info.address;
+        let access = self
+            .settings
+            .access(address)
+            .ok_or(CommandError::Unauthorised(address))?;
+        let write = e.device.check_command(&p.metrics)?;
+        if let Some(allowed) = &access.channels {
+            let refused = match &write.image {
+                Some(_) => Some(metrics::OUTPUT_IMAGE.to_string()),
+                None => write
+                    .channels
+                    .iter()
+                    .find(|(n, _)| !allowed.contains(n))
+                    .map(|(n, _)| n.clone()),
+            };
+            if let Some(name) = refused {
+                return Err(CommandError::NotWritable {
+                    device: device.into(),
+                    name,
+                });
+            }
+        }
+        self.pending.push(Pending { address, write });
+        Ok(())
+    }
+
+    fn apply(m: &mut DpMaster, p: &Pending, device: &Device) -> Result<(), CommandError> {
+        let Some(current) = m.outputs(p.address) else {
+            return Err(CommandError::UnknownDevice(p.address.to_string()));
+        };
+        let mut img = p.write.image.clone().unwrap_or_else(|| current.to_vec());
+        if img.len() != current.len() {
+            return Err(CommandError::Value {
+                device: device.id(),
+                name: metrics::OUTPUT_IMAGE.into(),
+                problem: format!("the slave has {} output bytes", current.len()),
+            });
+        }
+        device
+            .channels
+            .write_outputs(
+                p.write.channels.iter().map(|(n, v)| (n.as_str(), *v)),
+                &mut img,
+            )
+            .map_err(|e| CommandError::Value {
+                device: device.id(),
+                name: "Outputs".into(),
+                problem: e.to_string(),
+            })?;
+        m.set_outputs(p.address, &img);
+        Ok(())
+    }
+
+    /// Queue what changed: an NBIRTH when due, then per device a DBIRTH
+    /// on entering Data_Exchange, a DDEATH on leaving it, a DDATA with
+    /// the metrics that changed.
+    fn publish_changes(&mut self, m: &DpMaster, ts: u64) {
+        if self.birth_due {
+            self.birth_due = false;
+            self.nbirth(ts);
+        }
+        for i in 0..self.devices.len() {
+            let addr = self.devices[i].device.info.address;
+            let Some(h) = m.handle(addr) else { continue };
+            let v = m.slave(h);
+            let exchanging = v.state == SlaveState::DataExchange;
+            let dev = &self.devices[i].device;
+            let topic = |t| self.id.device_topic(t, &dev.id());
+            match (&self.devices[i].born, exchanging) {
+                (None, true) => {
+                    let values = dev.values(&v);
+                    let metrics = dev
+                        .metrics
+                        .iter()
+                        .zip(&values)
+                        .map(|(d, val)| metric(&d.name, d.datatype, val.clone(), ts))
+                        .collect();
+                    let t = topic(MessageType::DBirth);
+                    self.push(t, metrics, ts);
+                    self.devices[i].born = Some(values);
+                }
+                (Some(_), false) => {
+                    let t = topic(MessageType::DDeath);
+                    self.push(t, vec![], ts);
+                    self.devices[i].born = None;
+                }
+                (Some(last), true) => {
+                    let values = dev.values(&v);
+                    let changed: Vec<Metric> = dev
+                        .metrics
+                        .iter()
+                        .zip(values.iter().zip(last))
+                        .filter(|(_, (now, before))| now != before)
+                        .map(|(d, (now, _))| Metric {
+                            // No datatype in data messages (the birth has it).
+                            datatype: None,
+                            ..metric(&d.name, d.datatype, now.clone(), ts)
+                        })
+                        .collect();
+                    if !changed.is_empty() {
+                        let t = topic(MessageType::DData);
+                        self.push(t, changed, ts);
+                        self.devices[i].born = Some(values);
+                    }
+                }
+                (None, false) => {}
+            }
+        }
+    }
+}
+
+impl Session for EdgeNode {
+    fn settings(&self) -> &MqttSettings {
+        &self.settings
+    }
+
+    /// QoS 0 for everything but the will (QoS 1); subscribed to NCMD and
+    /// DCMD; the will is the NDEATH with the bdSeq of each attempt.
+    fn link_setup(&self) -> LinkSetup {
+        let mut bd = self.bd_seq;
+        LinkSetup {
+            qos: 0,
+            will_qos: 1,
+            filters: vec![
+                self.id.node_topic(MessageType::NCmd),
+                self.id.device_topic(MessageType::DCmd, "+"),
+            ],
+            will: Box::new({
+                let topic = self.id.node_topic(MessageType::NDeath);
+                move || {
+                    let p = Publish {
+                        topic: topic.clone(),
+                        payload: ndeath(bd),
+                        retain: false,
+                    };
+                    bd = bd.wrapping_add(1);
+                    p
+                }
+            }),
+        }
+    }
+
+    fn connected(&mut self, _ts_ms: u64) {
+        self.online = true;
+        self.birth_due = true;
+    }
+
+    /// Every lost connection or failed attempt: the next CONNECT carries
+    /// the next bdSeq.
+    fn disconnected(&mut self, _ts_ms: u64) {
+        self.online = false;
+        self.birth_due = false;
+        self.out.clear();
+        self.bd_seq = self.bd_seq.wrapping_add(1);
+        for e in &mut self.devices {
+            e.born = None;
+        }
+    }
+
+    fn handle_message(&mut self, topic: &str, payload: &[u8], _ts_ms: u64) {
+        if let Err(e) = self.command(topic, payload) {
+            tracing::warn!(topic, error = %e, "Sparkplug command refused");
+        }
+    }
+
+    /// Apply the pending DCMD writes (each to one slave's whole image at
+    /// once), then queue births, deaths and data.
+    fn step(&mut self, m: &mut DpMaster, _now: Instant, ts_ms: u64) {
+        while let Some(ev) = m.poll_event() {
+            if let MasterEvent::Fault { address, reason } = ev {
+                tracing::warn!(address, %reason, "slave fault");
+            }
+        }
+        for p in std::mem::take(&mut self.pending) {
+            let Some(e) = self
+                .devices
+                .iter()
+                .find(|e| e.device.info.address == p.address)
+            else {
+                continue;
+            };
+            match Self::apply(m, &p, &e.device) {
+                Ok(()) => tracing::info!(address = p.address, "Sparkplug DCMD applied"),
+                Err(e) => tracing::warn!(address = p.address, error = %e, "Sparkplug DCMD refused"),
+            }
+        }
+        if self.online {
+            self.publish_changes(m, ts_ms);
+        }
+    }
+
+    fn poll_publish(&mut self) -> Option<Publish> {
+        self.out.pop_front()
+    }
+
+    /// The NDEATH of the current connection.
+    fn last_will(&self) -> Publish {
+        Publish {
+            topic: self.id.node_topic(MessageType::NDeath),
+            payload: ndeath(self.bd_seq),
+            retain: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::SimPlant;
+
+    const BUS: &str = r#"[master]
+address = 1
+baud = "1.5M"
+
+[[slave]]
+address = 3
+name = "echo"
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[[slave]]
+address = 4
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[mqtt]
+writable = [3]
+"#;
+
+    struct Rig {
+        plant: SimPlant,
+        node: EdgeNode,
+        t: u64,
+    }
+
+    impl Rig {
+        fn new() -> Rig {
+            let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+            let bus = ProfiledBus::parse(&dir, BUS).unwrap();
+            let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line").unwrap();
+            let node = EdgeNode::new(
+                settings,
+                SparkplugId::parse("G/E").unwrap(),
+                devices(&bus).unwrap(),
+            );
+            Rig {
+                plant: SimPlant::new(&bus).unwrap(),
+                node,
+                t: 0,
+            }
+        }
+
+        /// Run 1 ms of bus time, step the node; what it published.
+        fn tick(&mut self) -> Vec<(String, Payload)> {
+            self.t += 1;
+            self.plant
+                .run_until(Instant::from_nanos(self.t * 1_000_000));
+            let now = self.plant.now();
+            self.node.step(self.plant.master(), now, 1000 + self.t);
+            std::iter::from_fn(|| self.node.poll_publish())
+                .map(|p| {
+                    assert!(!p.retain);
+                    (p.topic, Payload::decode(p.payload.as_slice()).unwrap())
+                })
+                .collect()
+        }
+
+        /// Tick until `topic` is published (at most 2 s of bus time);
+        /// everything published meanwhile.
+        fn until(&mut self, topic: &str) -> Vec<(String, Payload)> {
+            let mut all = vec![];
+            for _ in 0..2000 {
+                all.extend(self.tick());
+                if all.iter().any(|(t, _)| t == topic) {
+                    return all;
+                }
+            }
+            panic!(
+                "no {topic}; got {:?}",
+                all.iter().map(|m| &m.0).collect::<Vec<_>>()
+            );
+        }
+    }
+
+    fn value<'a>(p: &'a Payload, name: &str) -> Option<&'a MetricValue> {
+        p.metrics
+            .iter()
+            .find(|m| m.name.as_deref() == Some(name))
+            .and_then(|m| m.value.as_ref())
+    }
+
+    fn find<'a>(msgs: &'a [(String, Payload)], topic: &str) -> &'a Payload {
+        &msgs.iter().rev().find(|(t, _)| t == topic).unwrap().1
+    }
+
+    fn cmd(metrics: Vec<Metric>) -> Vec<u8> {
+        Payload {
+            timestamp: Some(1),
+            metrics,
+            ..Default::default()
+        }
+        .encode_to_vec()
+    }
+
+    fn write(name: &str, v: MetricValue) -> Metric {
+        Metric {
+            name: Some(name.into()),
+            value: Some(v),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn ids_and_topics() {
+        let id = SparkplugId::parse("plant/line1").unwrap();
+        assert_eq!(id.to_string(), "plant/line1");
+        assert_eq!(
+            id.node_topic(MessageType::NBirth),
+            "spBv1.0/plant/NBIRTH/line1"
+        );
+        assert_eq!(
+            id.device_topic(MessageType::DData, "7"),
+            "spBv1.0/plant/DDATA/line1/7"
+        );
+        for bad in ["plant", "a/b/c", "/e", "g/", "g+/e", "g/#"] {
+            assert!(SparkplugId::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn signed_values_are_twos_complement() {
+        let v = encode_value(DataType::Int16, Value::Int(-2)).unwrap();
+        assert_eq!(v, MetricValue::IntValue(0xFFFF_FFFE));
+        assert_eq!(decode_value(DataType::Int16, &v), Some(Value::Int(-2)));
+        assert_eq!(
+            decode_value(DataType::UInt32, &MetricValue::IntValue(0xFFFF_FFFE)),
+            Some(Value::Int(0xFFFF_FFFE))
+        );
+        assert_eq!(
+            decode_value(DataType::UInt8, &MetricValue::StringValue("1".into())),
+            None
+        );
+    }
+
+    use metrics::{decode_value, encode_value};
+    use profibus_devices::channels::Value;
+
+    #[test]
+    fn births_data_commands_rebirth_and_bdseq() {
+        let mut r = Rig::new();
+        // The wills of successive connection attempts count bdSeq.
+        let mut setup = r.node.link_setup();
+        assert_eq!((setup.qos, setup.will_qos), (0, 1));
+        assert_eq!(setup.filters, ["spBv1.0/G/NCMD/E", "spBv1.0/G/DCMD/E/+"]);
+        for bd in 0..3u64 {
+            let w = (setup.will)();
+            assert_eq!(w.topic, "spBv1.0/G/NDEATH/E");
+            let p = Payload::decode(w.payload.as_slice()).unwrap();
+            assert_eq!((p.seq, p.metrics.len()), (None, 1));
+            assert_eq!(value(&p, BD_SEQ), Some(&MetricValue::LongValue(bd)));
+        }
+        // Nothing before the connection.
+        assert!(r.tick().is_empty());
+        r.node.connected(0);
+        let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
+        let mut msgs = msgs.into_iter();
+        let (t, nbirth) = msgs.next().unwrap();
+        assert_eq!(t, "spBv1.0/G/NBIRTH/E");
+        assert_eq!(nbirth.seq, Some(0));
+        assert_eq!(value(&nbirth, BD_SEQ), Some(&MetricValue::LongValue(0)));
+        assert_eq!(
+            value(&nbirth, REBIRTH),
+            Some(&MetricValue::BooleanValue(false))
+        );
+        let births: Vec<_> = msgs.collect();
+        assert_eq!(births.len(), 2, "{births:?}");
+        assert_eq!(births[0].0, "spBv1.0/G/DBIRTH/E/3");
+        assert_eq!(births[0].1.seq, Some(1));
+        assert_eq!(births[1].1.seq, Some(2));
+        let b3 = &births[0].1;
+        assert_eq!(
+            value(b3, metrics::NAME),
+            Some(&MetricValue::StringValue("echo".into()))
+        );
+        let ch = b3
+            .metrics
+            .iter()
+            .find(|m| m.name.as_deref() == Some("Outputs/2 words in_out[0]"))
+            .unwrap();
+        assert_eq!(ch.datatype, Some(DataType::UInt8.code()));
+        assert!(b3.metrics.iter().all(|m| m.datatype.is_some()));
+
+        // A DCMD: the image and a channel at once; the echo slave's
+        // inputs follow, in one DDATA with only what changed.
+        r.node.handle_message(
+            "spBv1.0/G/DCMD/E/3",
+            &cmd(vec![
+                write(
+                    metrics::OUTPUT_IMAGE,
+                    MetricValue::BytesValue(vec![1, 2, 3, 4]),
+                ),
+                write("Outputs/2 words in_out[3]", MetricValue::IntValue(0xaa)),
+            ]),
+            0,
+        );
+        let msgs = r.until("spBv1.0/G/DDATA/E/3");
+        assert_eq!(r.plant.master().outputs(3).unwrap(), [1, 2, 3, 0xaa]);
+        let mut seen_inputs = false;
+        for _ in 0..200 {
+            let all: Vec<_> = msgs.iter().chain(r.tick().iter()).cloned().collect();
+            if all.iter().any(|(t, p)| {
+                t == "spBv1.0/G/DDATA/E/3"
+                    && value(p, metrics::INPUT_IMAGE)
+                        == Some(&MetricValue::BytesValue(vec![1, 2, 3, 0xaa]))
+            }) {
+                seen_inputs = true;
+                break;
+            }
+        }
+        assert!(seen_inputs, "the echoed inputs in a DDATA");
+        let dd = find(&msgs, "spBv1.0/G/DDATA/E/3");
+        assert!(dd.metrics.iter().all(|m| m.datatype.is_none()));
+        assert!(value(dd, metrics::NAME).is_none(), "only changes");
+        assert!(dd.seq.unwrap() >= 3);
+
+        // Refused, nothing written: a slave not writable, an unknown
+        // metric next to a good one, an input, a value out of range.
+        for (topic, ms) in [
+            (
+                "spBv1.0/G/DCMD/E/4",
+                vec![write(
+                    metrics::OUTPUT_IMAGE,
+                    MetricValue::BytesValue(vec![9; 4]),
+                )],
+            ),
+            (
+                "spBv1.0/G/DCMD/E/3",
+                vec![
+                    write("Outputs/2 words in_out[0]", MetricValue::IntValue(9)),
+                    write("Outputs/nope", MetricValue::IntValue(9)),
+                ],
+            ),
+            (
+                "spBv1.0/G/DCMD/E/3",
+                vec![write("Inputs/2 words in_out[0]", MetricValue::IntValue(9))],
+            ),
+            (
+                "spBv1.0/G/DCMD/E/3",
+                vec![write(
+                    "Outputs/2 words in_out[0]",
+                    MetricValue::IntValue(300),
+                )],
+            ),
+            (
+                "spBv1.0/G/DCMD/E/3",
+                vec![write(
+                    metrics::OUTPUT_IMAGE,
+                    MetricValue::BytesValue(vec![9; 3]),
+                )],
+            ),
+            ("spBv1.0/G/DCMD/E/9", vec![]),
+        ] {
+            r.node.handle_message(topic, &cmd(ms), 0);
+            r.tick();
+            assert_eq!(
+                r.plant.master().outputs(3).unwrap(),
+                [1, 2, 3, 0xaa],
+                "{topic}"
+            );
+            assert_eq!(r.plant.master().outputs(4).unwrap(), [0; 4], "{topic}");
+        }
+        r.node.handle_message("spBv1.0/G/DCMD/E/3", b"\xff\xff", 0);
+
+        // Rebirth: NBIRTH (seq 0, same bdSeq) and both DBIRTHs again.
+        r.node.handle_message(
+            "spBv1.0/G/NCMD/E",
+            &cmd(vec![write(REBIRTH, MetricValue::BooleanValue(true))]),
+            0,
+        );
+        let msgs = r.tick();
+        let topics: Vec<&str> = msgs.iter().map(|(t, _)| t.as_str()).collect();
+        assert_eq!(
+            topics,
+            [
+                "spBv1.0/G/NBIRTH/E",
+                "spBv1.0/G/DBIRTH/E/3",
+                "spBv1.0/G/DBIRTH/E/4"
+            ]
+        );
+        assert_eq!(msgs[0].1.seq, Some(0));
+        assert_eq!(value(&msgs[0].1, BD_SEQ), Some(&MetricValue::LongValue(0)));
+        assert_eq!(msgs[2].1.seq, Some(2));
+
+        // A new connection: bdSeq 1 in the NBIRTH and the will.
+        r.node.disconnected(0);
+        assert!(r.tick().is_empty());
+        r.node.connected(0);
+        let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
+        assert_eq!(value(&msgs[0].1, BD_SEQ), Some(&MetricValue::LongValue(1)));
+        let will = Payload::decode(r.node.last_will().payload.as_slice()).unwrap();
+        assert_eq!(value(&will, BD_SEQ), Some(&MetricValue::LongValue(1)));
+    }
+
+    #[test]
+    fn seq_wraps_after_255() {
+        let mut r = Rig::new();
+        r.node.connected(0);
+        r.until("spBv1.0/G/DBIRTH/E/4");
+        // A rebirth restarts at 0 whatever came before.
+        r.node.seq = 200;
+        r.node.handle_message(
+            "spBv1.0/G/NCMD/E",
+            &cmd(vec![write(REBIRTH, MetricValue::BooleanValue(true))]),
+            0,
+        );
+        let seqs: Vec<_> = r.tick().iter().map(|(_, p)| p.seq).collect();
+        assert_eq!(seqs, [Some(0), Some(1), Some(2)]);
+        // 255, then 0: the DDATA of the outputs written, then the one of
+        // the inputs the echo slave sends back a cycle later.
+        r.node.seq = 255;
+        r.node.handle_message(
+            "spBv1.0/G/DCMD/E/3",
+            &cmd(vec![write(
+                metrics::OUTPUT_IMAGE,
+                MetricValue::BytesValue(vec![7; 4]),
+            )]),
+            0,
+        );
+        let mut seqs = vec![];
+        for _ in 0..2000 {
+            seqs.extend(r.tick().iter().map(|(_, p)| p.seq.unwrap()));
+            if seqs.len() >= 2 {
+                break;
+            }
+        }
+        assert_eq!(seqs[..2], [255, 0]);
+    }
+}
