@@ -10,6 +10,7 @@ mod common;
 use common::{dpctl, repo, Bus, Proc, TempDir};
 use profibus::fdl::pcap::PcapReader;
 use profibus::fdl::wire::{FunctionCode, Telegram};
+use profibus::fdl::{Baud, BusParams};
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
@@ -176,6 +177,8 @@ fn status_all_dx(v: &Value) -> bool {
 #[derive(Debug, Clone, Copy)]
 struct Seen {
     t: f64,
+    /// A token (SD4) from `sa` to `da`.
+    token: bool,
     sa: u8,
     da: u8,
     request: bool,
@@ -187,9 +190,21 @@ fn read_pcap(path: &Path) -> Vec<Seen> {
     let mut r = PcapReader::new(BufReader::new(f)).unwrap();
     let mut out = vec![];
     while let Ok(Some(p)) = r.next_packet() {
+        let t = p.ts.as_secs_f64();
+        if let Ok((Telegram::Token { da, sa }, _)) = Telegram::parse(&p.data) {
+            out.push(Seen {
+                t,
+                token: true,
+                sa,
+                da,
+                request: true,
+                saps: false,
+            });
+        }
         if let Ok((Telegram::Data(d), _)) = Telegram::parse(&p.data) {
             out.push(Seen {
-                t: p.ts.as_secs_f64(),
+                t,
+                token: false,
                 sa: d.sa,
                 da: d.da,
                 request: matches!(d.fc, FunctionCode::Request { .. }),
@@ -403,4 +418,120 @@ fn the_pty_under_a_running_slave_or_master_disappears() {
             p.terminate(Duration::from_secs(10));
         }
     }
+}
+
+/// The token holder of a 3-master ring on `dpctl bus` is killed: the
+/// survivors claim the token after the token-lost timeout and pass it on
+/// (measured on the bus's pcap). Master 2 holds the token for long
+/// stretches (it probes a slave that is not there, waiting the slot time
+/// plus its latency allowance), so a kill usually hits it holding the
+/// token; the pcap tells, and a kill that did not is repeated.
+#[test]
+fn the_token_holder_of_a_three_master_ring_is_killed() {
+    const LATENCY_MS: f64 = 50.0;
+    for attempt in 1..=10 {
+        let dir = TempDir::new("scn-ring");
+        let pcap = dir.path("bus.pcapng");
+        let bus = Bus::start(3, &["--pcap", pcap.to_str().unwrap()]);
+        let mut masters = vec![];
+        for (i, a) in [2u8, 3, 4].into_iter().enumerate() {
+            // Master 2 has a slave that never answers; 3 and 4 none.
+            let slaves: &[(u8, u64)] = if a == 2 { &[(50, 1000)] } else { &[] };
+            let cfg = bus_file(&dir, a, slaves);
+            let mut p = Proc::spawn(
+                &format!("dpctl master {a}"),
+                Command::new(dpctl())
+                    .args(["master", "--json", "--interval", "100"])
+                    .args([
+                        "--latency",
+                        &LATENCY_MS.to_string(),
+                        "--port",
+                        &bus.link_str(i),
+                    ])
+                    .arg("--config")
+                    .arg(&cfg)
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::null()),
+            );
+            let lines = Timed::from(&mut p);
+            masters.push((a, p, lines));
+        }
+        // The ring is formed when every master is in it and cycling.
+        for (a, _, lines) in masters.iter_mut() {
+            lines.wait(&format!("master {a} in the ring"), |v| {
+                v["event"] == "ring" && v["what"] == "in the token ring"
+            });
+            let c = lines.wait("a status", |v| v["event"] == "status").1["cycles"]
+                .as_u64()
+                .unwrap();
+            lines.wait("cycles", |v| {
+                v["event"] == "status" && v["cycles"].as_u64().unwrap() > c + 3
+            });
+        }
+        let killed = wall();
+        masters[0].1.signal(9);
+        masters[0].1.wait(Duration::from_secs(10));
+        // A survivor reports the dead master gone: the ring works again.
+        let (_, _, l3) = &mut masters[1];
+        l3.wait("master 2 removed or the token claimed", |v| {
+            v["event"] == "ring"
+                && v["what"]
+                    .as_str()
+                    .is_some_and(|w| w.contains("claimed the token") || w.contains("master 2 left"))
+        });
+        let (_, _, l4) = &mut masters[2];
+        let c = l4.wait("master 4 status", |v| v["event"] == "status").1["cycles"]
+            .as_u64()
+            .unwrap();
+        l4.wait("master 4 keeps cycling", |v| {
+            v["event"] == "status" && v["cycles"].as_u64().unwrap() > c + 5
+        });
+        for (_, p, _) in masters.iter_mut().skip(1) {
+            p.terminate(Duration::from_secs(10));
+        }
+        bus.stop();
+
+        let seen = read_pcap(&pcap);
+        let before: Vec<&Seen> = seen.iter().filter(|s| s.t <= killed).collect();
+        let holder = before.iter().rev().find(|s| s.token).map(|s| s.da);
+        if holder != Some(2) {
+            eprintln!("attempt {attempt}: master {holder:?} held the token at the kill; again");
+            continue;
+        }
+        // The last telegram before the silence, the claim (token to
+        // itself) and the first pass to the other survivor.
+        let claim = seen
+            .iter()
+            .position(|s| s.t > killed && s.token && s.sa == s.da)
+            .expect("a claim after the kill");
+        let last = seen[..claim].last().expect("activity before the claim").t;
+        let passed = seen[claim..]
+            .iter()
+            .find(|s| s.token && s.sa != s.da && s.sa != 2 && s.da != 2)
+            .expect("a token pass between the survivors");
+        let claimer = seen[claim].sa;
+        let p = BusParams::defaults(Baud::B1500000);
+        let tto_ms = Baud::B1500000
+            .bits_to_duration(p.token_lost_timeout(claimer) as u64)
+            .as_secs_f64()
+            * 1e3
+            + 3.0 * LATENCY_MS;
+        let silence_ms = (seen[claim].t - last) * 1e3;
+        let back_ms = (passed.t - last) * 1e3;
+        eprintln!(
+            "MEASURED ring: holder 2 killed, master {claimer} claimed after {silence_ms:.1} ms of silence \
+             (token-lost timeout {tto_ms:.1} ms incl. 3 latency allowances), ring back after {back_ms:.1} ms"
+        );
+        assert_eq!(claimer, 3, "the survivor with the shortest timeout claims");
+        assert!(
+            silence_ms >= tto_ms - 5.0,
+            "claimed early: {silence_ms:.1} ms"
+        );
+        // One claim: two tokens to itself, then the pass (plus scheduling
+        // of processes on a loaded machine).
+        assert!(back_ms <= tto_ms + 100.0, "ring back after {back_ms:.1} ms");
+        return;
+    }
+    panic!("in 10 attempts the kill never hit the token holder");
 }
