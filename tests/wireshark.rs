@@ -346,3 +346,91 @@ fn dissector_flags_a_wrong_fcs() {
     assert!(rows[1][4].contains("FCS"), "expert info: {:?}", rows[1]);
     assert_eq!(rows[2][0], "SD4");
 }
+
+/// One capture of hand-made telegrams: an SD3 Slave_Diag response (8 data
+/// bytes with the SAPs) and a Set_Slave_Add request to the delivery
+/// address 126.
+#[test]
+fn dissector_decodes_sd3_and_set_slave_add() {
+    use profibus::fdl::wire::{DataTelegram, Format, FunctionCode, RequestKind, ResponseStatus};
+    use profibus::fdl::Telegram;
+    let dir = TempDir::new("wireshark-sd3");
+    let path = dir.path("sd3.pcapng");
+    let emit = |t: Telegram<'_>| {
+        let mut buf = [0u8; 64];
+        let n = t.emit(&mut buf).unwrap();
+        buf[..n].to_vec()
+    };
+    // Slave 10 → master 2: Slave_Diag (SSAP 60 → DSAP 62) in SD3, Prm_Req
+    // and Station_Not_Ready, no master yet, ident 0x0DCE.
+    let sd3 = emit(Telegram::Data(DataTelegram {
+        da: 2,
+        sa: 10,
+        fc: FunctionCode::slave_response(ResponseStatus::Dl),
+        dsap: Some(62),
+        ssap: Some(60),
+        data: &[0x02, 0x05, 0x00, 0xFF, 0x0D, 0xCE],
+        format: Some(Format::Sd3),
+    }));
+    assert_eq!(sd3[0], 0xA2);
+    assert_eq!(sd3.len(), 14);
+    // Master 2 → 126: Set_Slave_Add to 7, ident 0x0DCE, No_Add_Chg 1.
+    let ssa = emit(Telegram::Data(DataTelegram {
+        da: 126,
+        sa: 2,
+        fc: FunctionCode::Request {
+            kind: RequestKind::SdaHigh,
+            fcb: true,
+            fcv: false,
+        },
+        dsap: Some(55),
+        ssap: Some(62),
+        data: &[7, 0x0D, 0xCE, 1],
+        format: None,
+    }));
+    let mut w = PcapWriter::new(
+        std::fs::File::create(&path).unwrap(),
+        Duration::from_secs(1),
+    )
+    .unwrap();
+    w.write_packet(Duration::from_millis(1), &sd3).unwrap();
+    w.write_packet(Duration::from_millis(2), &ssa).unwrap();
+    w.write_packet(Duration::from_millis(3), &[0xE5]).unwrap();
+    w.flush().unwrap();
+    drop(w);
+    let rows = tshark_fields(
+        &path,
+        &[
+            "pbdl.type",
+            "pbdl.sa.addr",
+            "pbdl.da.addr",
+            "pbdl.dsap",
+            "pbdl.ssap",
+            "pbdl.fcs.good",
+            "pbdp.service",
+            "pbdp.diag.prm_req",
+            "pbdp.diag.station_not_ready",
+            "pbdp.diag.master_add",
+            "pbdp.diag.ident",
+            "pbdp.ssa.new_address",
+            "pbdp.ssa.ident",
+            "pbdp.ssa.no_add_chg",
+        ],
+    );
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    let d = &rows[0];
+    assert_eq!(
+        &d[..7],
+        &["SD3", "10", "2", "62", "60", "1", "Slave_Diag"],
+        "{d:?}"
+    );
+    assert_eq!(&d[7..11], &["1", "1", "255", "0x0dce"], "{d:?}");
+    let s = &rows[1];
+    assert_eq!(
+        &s[..7],
+        &["SD2", "2", "126", "55", "62", "1", "Set_Slave_Add"],
+        "{s:?}"
+    );
+    assert_eq!(&s[11..14], &["7", "0x0dce", "1"], "{s:?}");
+    assert_eq!(rows[2][0], "SC");
+}

@@ -10,11 +10,13 @@ mod completions;
 mod decode;
 mod demo;
 mod describe;
+mod doctor;
 mod dpv1;
 mod gateway;
 mod gsd;
 mod jx2;
 mod master;
+mod monitor;
 mod pkw;
 mod rfid;
 mod scan;
@@ -69,6 +71,12 @@ enum Command {
     Completions(completions::Args),
     /// Print the man page dpctl(1), or write all pages with --out-dir.
     Man(completions::ManArgs),
+    /// Listen only (never send) and follow another master's slaves: state,
+    /// data, diagnosis, cycle times, retries, errors, masters in the ring.
+    Monitor(monitor::Args),
+    /// Check a serial port for PROFIBUS (8E1, baud rates, latency timer,
+    /// RS-485 mode, slot time against the adapter's latency).
+    Doctor(doctor::Args),
     /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
     /// take output writes.
     Gateway(gateway::Args),
@@ -102,6 +110,8 @@ fn main() -> ExitCode {
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
         Command::Soak(a) => soak::run(a),
+        Command::Monitor(a) => monitor::run(a),
+        Command::Doctor(a) => doctor::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -398,6 +398,32 @@ impl ChannelMap {
     }
 }
 
+/// The bus monitor decodes a profile's images with its channels.
+impl profibus_dp::monitor::ImageDecoder for ChannelMap {
+    fn decode(
+        &self,
+        image: profibus_dp::monitor::Image,
+        bytes: &[u8],
+    ) -> Vec<profibus_dp::monitor::Reading> {
+        use profibus_dp::monitor::{Image, Reading, ReadingValue};
+        let dir = match image {
+            Image::Inputs => Direction::Input,
+            Image::Outputs => Direction::Output,
+        };
+        ChannelMap::decode(self, dir, bytes)
+            .map(|(c, v)| Reading {
+                name: c.name.clone(),
+                value: match v {
+                    Value::Bool(b) => ReadingValue::Bool(b),
+                    Value::Int(i) => ReadingValue::Int(i),
+                    Value::Float(x) => ReadingValue::Float(x),
+                },
+                unit: c.scale.as_ref().map(|s| s.unit.clone()),
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

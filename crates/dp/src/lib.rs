@@ -15,6 +15,9 @@
 //! - [`master`]: the DP master core (start-up sequence, poll cycle,
 //!   Global_Control, class-2 services, DP-V1 read/write), the application
 //!   of an FDL active station.
+//! - [`monitor`]: a passive observer of another master's traffic: every
+//!   slave's state, data, diagnosis, cycle times, retries and errors, and
+//!   the masters in the token ring (`dpctl monitor`).
 //! - [`scan`]: the live-list scanner behind `dpctl scan`.
 //! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
 //!   module selection → Chk_Cfg / User_Prm_Data, writer.
@@ -29,6 +32,7 @@ pub mod diag;
 pub mod dpv1;
 pub mod gsd;
 pub mod master;
+pub mod monitor;
 pub mod prm;
 pub mod sap;
 pub mod scan;

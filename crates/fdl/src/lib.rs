@@ -24,6 +24,8 @@
 //!   ports and ptys as one async byte stream, `transport::Port`.
 //! - [`tap`]: passive framing of a timed byte stream into telegrams and
 //!   skipped bytes (bus monitors, pcap recording).
+//! - `listen` (feature `transport`): the passive driver of bus monitors:
+//!   reads a line (never writes) and hands the [`tap`]'s events on.
 //! - [`rng`]: the small seeded generator behind fault injection.
 //! - [`sim`]: the in-process simulated bus on virtual time (stations on a
 //!   [`medium`]).
@@ -44,6 +46,8 @@ pub mod autobaud;
 pub mod codec;
 #[cfg(feature = "transport")]
 pub mod driver;
+#[cfg(feature = "transport")]
+pub mod listen;
 pub mod medium;
 pub mod pcap;
 pub mod rng;

@@ -31,10 +31,14 @@
 //! on it: [`Port::is_pty`], [`Port::default_latency`] and
 //! [`Port::may_gather`].
 //!
+//! [`doctor`] checks what can be checked about a port (8E1, baud rates,
+//! an FTDI latency timer, RS-485 mode, slot time against latency).
+//!
 //! [`hub`] is the virtual RS-485 bus of ptys behind `dpctl bus`. The
 //! in-process simulated bus is not a `Port`: it is the sans-IO
 //! [`crate::medium::Medium`] driven on virtual time.
 
+pub mod doctor;
 pub mod hub;
 mod rs485;
 

@@ -1,0 +1,1057 @@
+//! A passive bus monitor: follows a third-party DP master's traffic and
+//! tracks what it does with every slave, without sending a byte.
+//!
+//! [`Monitor`] is sans-IO. Feed it the telegrams a passive listener
+//! frames off the line ([`profibus_fdl::tap::Tap`] gives them with the
+//! time their first byte arrived) with [`Monitor::observe`], and the
+//! bytes the framer had to skip with [`Monitor::observe_skipped`]. It
+//! pairs each request with the telegram that follows it (the response,
+//! or nothing when the next request or token comes first) and keeps, per
+//! slave:
+//!
+//! - the state the observed master has it in, named like the master's own
+//!   [`SlaveState`]: `diag` (start-up seen), `set_prm` (the slave asked
+//!   for parameters, Prm_Req), `chk_cfg` (Set_Prm acknowledged),
+//!   `check_diag` (Chk_Cfg acknowledged), `data_exchange`, `locked`
+//!   (parameterised by another master), `offline` (no reply);
+//! - its process data: the outputs of the last Data_Exchange request and
+//!   the inputs of its response, split by GSD module when the bus file
+//!   names the modules, and decoded into named channels by an
+//!   [`ImageDecoder`] (device profiles give one, `profibus_devices`);
+//! - its last diagnosis, raw and in words ([`crate::diag::describe`]);
+//! - Data_Exchange cycle times, retries (a request repeated with the same
+//!   FCB, IEC 61158-4-3 frame count bit rules), errors (no reply, negative
+//!   responses, corrupt telegrams while a reply was due) and restarts.
+//!
+//! From token telegrams (SD4) it keeps the live list of the masters in
+//! the token ring and their token rotation times, and from Global_Control
+//! broadcasts each master's operating state (Clear_Data → clear).
+//!
+//! Changes come out as [`MonitorEvent`]s ([`Monitor::poll_event`]); a
+//! [`MonitorStatus`] snapshot ([`Monitor::status`]) is the whole picture
+//! for a table or a JSON line. With the `serde` feature both serialise in
+//! the shape `dpctl master --json` prints. Nothing here panics on any
+//! telegram sequence (property-tested).
+
+use crate::busfile::BusFile;
+use crate::control::{ControlCommand, GlobalControl};
+use crate::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
+use crate::gsd::Gsd;
+use crate::master::{OperatingState, SlaveState};
+use crate::sap;
+use profibus_fdl::codec::CodecStats;
+use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, StationType};
+use profibus_fdl::{Instant, Telegram};
+use std::collections::{BTreeMap, VecDeque};
+use std::fmt;
+use std::time::Duration;
+
+#[cfg(test)]
+mod tests;
+
+/// Which process image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
+pub enum Image {
+    /// Slave → master (the Data_Exchange response).
+    Inputs,
+    /// Master → slave (the Data_Exchange request).
+    Outputs,
+}
+
+/// A decoded value of a named channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(untagged))]
+pub enum ReadingValue {
+    /// A bit.
+    Bool(bool),
+    /// An integer.
+    Int(i64),
+    /// A number with a fraction (scaled or floating point channels).
+    Float(f64),
+}
+
+impl fmt::Display for ReadingValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReadingValue::Bool(b) => write!(f, "{}", *b as u8),
+            ReadingValue::Int(i) => write!(f, "{i}"),
+            ReadingValue::Float(x) => write!(f, "{x}"),
+        }
+    }
+}
+
+/// One named value of a process image.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Reading {
+    /// Channel name.
+    pub name: String,
+    /// Its value.
+    pub value: ReadingValue,
+    /// Engineering unit, if the channel has one.
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+    pub unit: Option<String>,
+}
+
+impl fmt::Display for Reading {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.unit {
+            Some(u) => write!(f, "{}={} {u}", self.name, self.value),
+            None => write!(f, "{}={}", self.name, self.value),
+        }
+    }
+}
+
+/// Decodes a slave's process images into named values: what a device
+/// profile knows about its data (implemented for
+/// `profibus_devices::channels::ChannelMap`).
+pub trait ImageDecoder: Send + fmt::Debug {
+    /// The named values in `bytes`, an image of kind `image`.
+    fn decode(&self, image: Image, bytes: &[u8]) -> Vec<Reading>;
+}
+
+/// What the monitor knows of a slave before seeing any traffic: its
+/// entry in a bus file.
+#[derive(Debug, Default)]
+pub struct SlaveInfo {
+    /// Station address.
+    pub address: u8,
+    /// Name for people.
+    pub name: String,
+    /// Its GSD, for diagnosis texts.
+    pub gsd: Option<Gsd>,
+    /// Whether it is a DP-V1 slave (reads its diagnosis blocks as alarms).
+    pub dpv1: bool,
+    /// GSD modules in slot order: name, input bytes, output bytes.
+    pub modules: Vec<(String, usize, usize)>,
+    /// Named channels of its images (a slave given as a device profile).
+    pub decoder: Option<Box<dyn ImageDecoder>>,
+}
+
+impl SlaveInfo {
+    /// The slaves of a bus file, with their GSD modules' sizes.
+    pub fn from_bus(bus: &BusFile) -> Vec<SlaveInfo> {
+        bus.slaves
+            .iter()
+            .map(|s| SlaveInfo {
+                address: s.params.address,
+                name: s.params.name.clone(),
+                gsd: Some(s.gsd.clone()),
+                dpv1: s.params.dpv1,
+                modules: s
+                    .modules
+                    .iter()
+                    .filter_map(|m| {
+                        let io = s.gsd.module(m)?.io().ok()?;
+                        Some((m.clone(), io.input_bytes, io.output_bytes))
+                    })
+                    .collect(),
+                decoder: None,
+            })
+            .collect()
+    }
+}
+
+/// Why a slave counted an error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// A request that needs a reply got none before the next telegram.
+    NoReply,
+    /// The reply was corrupt (bytes the framer skipped while it was due).
+    Corrupt,
+    /// A negative response (UE, RR, RS, RDL, RDH …).
+    Negative(ResponseStatus),
+}
+
+impl fmt::Display for ErrorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ErrorKind::NoReply => f.write_str("no reply"),
+            ErrorKind::Corrupt => f.write_str("corrupt reply"),
+            ErrorKind::Negative(s) => write!(f, "negative response {}", s.mnemonic()),
+        }
+    }
+}
+
+/// A DP service as the monitor names it.
+fn service_name(dsap: Option<u8>) -> &'static str {
+    match dsap {
+        None => "Data_Exchange",
+        Some(s) => sap::name(s).unwrap_or("unknown SAP"),
+    }
+}
+
+/// A change the monitor saw.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(
+    feature = "serde",
+    serde(
+        tag = "event",
+        rename_all = "snake_case",
+        rename_all_fields = "snake_case"
+    )
+)]
+pub enum MonitorEvent {
+    /// A slave changed state.
+    #[cfg_attr(feature = "serde", serde(rename = "state"))]
+    SlaveState {
+        /// The slave.
+        #[cfg_attr(feature = "serde", serde(rename = "slave"))]
+        address: u8,
+        /// The master talking to it.
+        master: u8,
+        /// The state before (`None`: not seen before).
+        from: Option<SlaveState>,
+        /// The new state.
+        to: SlaveState,
+    },
+    /// A slave's diagnosis changed.
+    Diag {
+        /// The slave.
+        #[cfg_attr(feature = "serde", serde(rename = "slave"))]
+        address: u8,
+        /// The Slave_Diag data unit.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        raw: Vec<u8>,
+        /// In words.
+        words: Vec<String>,
+    },
+    /// A request to a slave failed.
+    Fault {
+        /// The slave.
+        #[cfg_attr(feature = "serde", serde(rename = "slave"))]
+        address: u8,
+        /// The service asked for (`Data_Exchange`, `Set_Prm` …).
+        service: &'static str,
+        /// What went wrong.
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::display")
+        )]
+        reason: ErrorKind,
+    },
+    /// A master's Global_Control announced an operating state.
+    Operating {
+        /// The master.
+        master: u8,
+        /// Clear (Clear_Data set) or operate.
+        state: OperatingState,
+    },
+    /// A station appeared in the token ring.
+    MasterJoined {
+        /// Its address.
+        master: u8,
+    },
+    /// A station has not held the token for a while.
+    MasterLeft {
+        /// Its address.
+        master: u8,
+    },
+}
+
+impl fmt::Display for MonitorEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MonitorEvent::SlaveState {
+                address,
+                master,
+                from,
+                to,
+            } => write!(
+                f,
+                "slave {address}: {} → {} (master {master})",
+                from.map_or("unseen", |s| s.name()),
+                to.name()
+            ),
+            MonitorEvent::Diag { address, words, .. } => {
+                write!(f, "slave {address} diagnosis: {}", words.join("; "))
+            }
+            MonitorEvent::Fault {
+                address,
+                service,
+                reason,
+            } => write!(f, "slave {address} fault: {service}: {reason}"),
+            MonitorEvent::Operating { master, state } => {
+                write!(f, "master {master}: operating state {}", state.as_str())
+            }
+            MonitorEvent::MasterJoined { master } => write!(f, "master {master} in the token ring"),
+            MonitorEvent::MasterLeft { master } => write!(f, "master {master} left the token ring"),
+        }
+    }
+}
+
+/// Minimum, average and maximum of a time interval, in µs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Interval {
+    /// Shortest.
+    pub min: u64,
+    /// Mean.
+    pub avg: u64,
+    /// Longest.
+    pub max: u64,
+    /// The last one.
+    pub last: u64,
+    /// How many were measured.
+    #[cfg_attr(feature = "serde", serde(skip))]
+    pub count: u64,
+    #[cfg_attr(feature = "serde", serde(skip))]
+    sum: u64,
+}
+
+impl Interval {
+    fn add(&mut self, d: Duration) {
+        let us = d.as_micros().min(u64::MAX as u128) as u64;
+        self.min = if self.count == 0 {
+            us
+        } else {
+            self.min.min(us)
+        };
+        self.max = self.max.max(us);
+        self.last = us;
+        self.count += 1;
+        self.sum = self.sum.saturating_add(us);
+        self.avg = self.sum / self.count;
+    }
+
+    fn merge(&mut self, o: &Interval) {
+        if o.count == 0 {
+            return;
+        }
+        self.min = if self.count == 0 {
+            o.min
+        } else {
+            self.min.min(o.min)
+        };
+        self.max = self.max.max(o.max);
+        self.last = o.last;
+        self.count += o.count;
+        self.sum = self.sum.saturating_add(o.sum);
+        self.avg = self.sum / self.count;
+    }
+}
+
+/// Counters of one slave.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct SlaveCounters {
+    /// Requests addressed to it (retries included).
+    pub requests: u64,
+    /// Data_Exchange cycles answered.
+    pub data_exchanges: u64,
+    /// Requests repeated with the same FCB.
+    pub retries: u64,
+    /// Requests without a valid positive reply.
+    pub errors: u64,
+    /// Times it left Data_Exchange for a new start-up.
+    pub restarts: u64,
+}
+
+/// A GSD module's part of the process images.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct ModuleData {
+    /// Module name from the GSD.
+    pub name: String,
+    /// Its input bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub inputs: Vec<u8>,
+    /// Its output bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub outputs: Vec<u8>,
+}
+
+/// Named channel values of both images.
+#[derive(Debug, Clone, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Channels {
+    /// Input channels.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::readings"))]
+    pub inputs: Vec<Reading>,
+    /// Output channels.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "ser::readings"))]
+    pub outputs: Vec<Reading>,
+}
+
+/// One slave as the monitor sees it.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct SlaveStatus {
+    /// Station address.
+    pub address: u8,
+    /// Name from the bus file (empty for slaves not in it).
+    pub name: String,
+    /// State (`None`: no traffic seen yet).
+    pub state: Option<SlaveState>,
+    /// The master that talks to it.
+    pub master: Option<u8>,
+    /// Inputs of the last Data_Exchange.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub inputs: Vec<u8>,
+    /// Outputs of the last Data_Exchange.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub outputs: Vec<u8>,
+    /// Counters.
+    #[cfg_attr(feature = "serde", serde(flatten))]
+    pub counters: SlaveCounters,
+    /// Time between its Data_Exchange requests.
+    pub cycle_us: Interval,
+    /// The last diagnosis in words (empty: none seen).
+    pub diag: Vec<String>,
+    /// Its images by GSD module (when the bus file names the modules).
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+    pub modules: Vec<ModuleData>,
+    /// Named channels (a device profile's decoding).
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+    pub channels: Option<Channels>,
+}
+
+/// A master in the token ring.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct MasterStatus {
+    /// Station address.
+    pub address: u8,
+    /// Tokens it passed.
+    pub tokens: u64,
+    /// Time between the tokens it passed (the token rotation it sees).
+    pub rotation_us: Interval,
+    /// Operating state from its Global_Control (`None`: none seen).
+    pub operating: Option<OperatingState>,
+    /// Still passing the token.
+    pub in_ring: bool,
+}
+
+/// Counters of the whole line.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct BusCounters {
+    /// Telegrams observed.
+    pub telegrams: u64,
+    /// Token telegrams.
+    pub tokens: u64,
+    /// Stretches of bytes that were no valid telegram.
+    pub corrupt: u64,
+    /// Requests without the reply they needed.
+    pub no_reply: u64,
+}
+
+/// The whole picture at one moment.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct MonitorStatus {
+    /// Time of the snapshot in seconds (the telegram clock).
+    pub t: f64,
+    /// Data_Exchange cycles: the most any slave has done.
+    pub cycles: u64,
+    /// Data_Exchange intervals over all slaves.
+    pub cycle_us: Interval,
+    /// Operating state of the (first) master seen sending Global_Control.
+    pub operating: Option<OperatingState>,
+    /// Masters seen in the token ring, by address.
+    pub masters: Vec<MasterStatus>,
+    /// Slaves of the bus file and any other slave seen, by address.
+    pub slaves: Vec<SlaveStatus>,
+    /// Line counters.
+    pub bus: BusCounters,
+}
+
+/// Tuning of a [`Monitor`].
+#[derive(Debug, Clone, Copy)]
+pub struct MonitorOptions {
+    /// A master that has not passed the token for this long, and for five
+    /// of its longest rotations, has left the ring.
+    pub master_timeout: Duration,
+    /// Consecutive failed requests after which a slave is `offline`.
+    pub offline_after: u32,
+}
+
+impl Default for MonitorOptions {
+    fn default() -> Self {
+        MonitorOptions {
+            master_timeout: Duration::from_secs(1),
+            offline_after: 2,
+        }
+    }
+}
+
+/// The last request to a slave, to recognise a repetition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct LastRequest {
+    master: u8,
+    dsap: Option<u8>,
+    fcb: bool,
+    fcv: bool,
+    answered: bool,
+}
+
+#[derive(Debug)]
+struct SlaveTrack {
+    info: SlaveInfo,
+    state: Option<SlaveState>,
+    master: Option<u8>,
+    inputs: Vec<u8>,
+    outputs: Vec<u8>,
+    counters: SlaveCounters,
+    cycle: Interval,
+    last_dx: Option<Instant>,
+    diag_raw: Vec<u8>,
+    diag_words: Vec<String>,
+    last: Option<LastRequest>,
+    failures: u32,
+}
+
+impl SlaveTrack {
+    fn new(info: SlaveInfo) -> SlaveTrack {
+        SlaveTrack {
+            info,
+            state: None,
+            master: None,
+            inputs: vec![],
+            outputs: vec![],
+            counters: SlaveCounters::default(),
+            cycle: Interval::default(),
+            last_dx: None,
+            diag_raw: vec![],
+            diag_words: vec![],
+            last: None,
+            failures: 0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct MasterTrack {
+    tokens: u64,
+    last_token: Option<Instant>,
+    last_seen: Instant,
+    rotation: Interval,
+    operating: Option<OperatingState>,
+    in_ring: bool,
+}
+
+/// A request waiting for its reply.
+#[derive(Debug, Clone)]
+struct Pending {
+    master: u8,
+    slave: u8,
+    dsap: Option<u8>,
+    data: Vec<u8>,
+    expects_reply: bool,
+}
+
+/// The passive observer; see the module docs.
+#[derive(Debug)]
+pub struct Monitor {
+    options: MonitorOptions,
+    slaves: BTreeMap<u8, SlaveTrack>,
+    masters: BTreeMap<u8, MasterTrack>,
+    pending: Option<Pending>,
+    events: VecDeque<MonitorEvent>,
+    bus: BusCounters,
+    now: Instant,
+}
+
+/// Events kept at most; the oldest are dropped when nobody polls.
+const MAX_EVENTS: usize = 4096;
+
+impl Monitor {
+    /// A monitor that knows `slaves` (from a bus file; others are added
+    /// as they are seen).
+    pub fn new(slaves: Vec<SlaveInfo>, options: MonitorOptions) -> Monitor {
+        Monitor {
+            options,
+            slaves: slaves
+                .into_iter()
+                .map(|s| (s.address, SlaveTrack::new(s)))
+                .collect(),
+            masters: BTreeMap::new(),
+            pending: None,
+            events: VecDeque::new(),
+            bus: BusCounters::default(),
+            now: Instant::ZERO,
+        }
+    }
+
+    /// A monitor for the slaves of a bus file.
+    pub fn from_bus(bus: &BusFile) -> Monitor {
+        Monitor::new(SlaveInfo::from_bus(bus), MonitorOptions::default())
+    }
+
+    /// Give the slave at `address` a decoder for its process images.
+    pub fn set_decoder(&mut self, address: u8, decoder: Box<dyn ImageDecoder>) {
+        self.slave(address).info.decoder = Some(decoder);
+    }
+
+    /// The next event, oldest first.
+    pub fn poll_event(&mut self) -> Option<MonitorEvent> {
+        self.events.pop_front()
+    }
+
+    /// The state of the slave at `address` (`None`: not seen).
+    pub fn slave_state(&self, address: u8) -> Option<SlaveState> {
+        self.slaves.get(&address).and_then(|s| s.state)
+    }
+
+    /// Counters of the slave at `address`.
+    pub fn slave_counters(&self, address: u8) -> Option<SlaveCounters> {
+        self.slaves.get(&address).map(|s| s.counters)
+    }
+
+    /// Addresses of the masters in the token ring now.
+    pub fn masters(&self) -> impl Iterator<Item = u8> + '_ {
+        self.masters
+            .iter()
+            .filter(|(_, m)| m.in_ring)
+            .map(|(a, _)| *a)
+    }
+
+    /// Line counters.
+    pub fn bus_counters(&self) -> BusCounters {
+        self.bus
+    }
+
+    fn push(&mut self, e: MonitorEvent) {
+        if self.events.len() >= MAX_EVENTS {
+            self.events.pop_front();
+        }
+        tracing::debug!(event = %e, "monitor");
+        self.events.push_back(e);
+    }
+
+    fn slave(&mut self, address: u8) -> &mut SlaveTrack {
+        self.slaves.entry(address).or_insert_with(|| {
+            SlaveTrack::new(SlaveInfo {
+                address,
+                ..SlaveInfo::default()
+            })
+        })
+    }
+
+    /// Time passes without telegrams: masters that stopped passing the
+    /// token leave the live list.
+    pub fn tick(&mut self, now: Instant) {
+        self.now = self.now.max(now);
+        let base = self.options.master_timeout;
+        let mut left = vec![];
+        for (a, m) in self.masters.iter_mut() {
+            let limit = base.max(Duration::from_micros(m.rotation.max.saturating_mul(5)));
+            if m.in_ring && self.now - m.last_seen > limit {
+                m.in_ring = false;
+                left.push(*a);
+            }
+        }
+        for master in left {
+            self.push(MonitorEvent::MasterLeft { master });
+        }
+    }
+
+    /// Bytes that were no valid telegram arrived at `at`: a reply being
+    /// waited for is corrupt.
+    pub fn observe_skipped(&mut self, at: Instant, _errors: &CodecStats) {
+        self.tick(at);
+        self.bus.corrupt += 1;
+        if let Some(p) = self.pending.take() {
+            if p.expects_reply {
+                self.failed(p, ErrorKind::Corrupt);
+            }
+        }
+    }
+
+    /// A telegram the line carried, its first byte at `at`.
+    pub fn observe(&mut self, at: Instant, telegram: &Telegram<'_>) {
+        self.tick(at);
+        self.bus.telegrams += 1;
+        match telegram {
+            Telegram::Token { da, sa } => {
+                self.unanswered();
+                self.token(at, *sa, *da);
+            }
+            Telegram::ShortAck => self.reply(None),
+            Telegram::Data(d) => match d.fc {
+                FunctionCode::Request { kind, fcb, fcv } => {
+                    self.unanswered();
+                    self.request(at, d, kind, fcb, fcv);
+                }
+                FunctionCode::Response { status, station } => {
+                    if station != StationType::Passive {
+                        // A master answering FDL status: it is a master.
+                        self.seen_master(d.sa, at, false);
+                    }
+                    self.reply(Some((d, status)));
+                }
+            },
+        }
+    }
+
+    /// The request before the current telegram got no reply.
+    fn unanswered(&mut self) {
+        if let Some(p) = self.pending.take() {
+            if p.expects_reply {
+                self.bus.no_reply += 1;
+                self.failed(p, ErrorKind::NoReply);
+            }
+        }
+    }
+
+    fn seen_master(&mut self, address: u8, at: Instant, token: bool) {
+        if address > 126 {
+            return;
+        }
+        let m = self.masters.entry(address).or_insert(MasterTrack {
+            tokens: 0,
+            last_token: None,
+            last_seen: at,
+            rotation: Interval::default(),
+            operating: None,
+            in_ring: false,
+        });
+        m.last_seen = m.last_seen.max(at);
+        if token {
+            m.tokens += 1;
+            if let Some(t) = m.last_token {
+                if at > t {
+                    m.rotation.add(at - t);
+                }
+            }
+            m.last_token = Some(at);
+        }
+        if token && !m.in_ring {
+            m.in_ring = true;
+            self.push(MonitorEvent::MasterJoined { master: address });
+        }
+    }
+
+    fn token(&mut self, at: Instant, sa: u8, da: u8) {
+        self.bus.tokens += 1;
+        self.seen_master(sa, at, true);
+        if da != sa && da <= 126 {
+            // The receiver is in the ring too; its own token pass counts
+            // its rotation.
+            let known = self.masters.get(&da).is_some_and(|m| m.in_ring);
+            if !known {
+                self.seen_master(da, at, false);
+                if let Some(m) = self.masters.get_mut(&da) {
+                    m.in_ring = true;
+                }
+                self.push(MonitorEvent::MasterJoined { master: da });
+            }
+        }
+    }
+
+    fn request(
+        &mut self,
+        at: Instant,
+        d: &DataTelegram<'_>,
+        kind: RequestKind,
+        fcb: bool,
+        fcv: bool,
+    ) {
+        if d.is_broadcast() {
+            if d.dsap == Some(sap::GLOBAL_CONTROL) {
+                if let Ok(gc) = GlobalControl::parse(d.data) {
+                    self.global_control(at, d.sa, gc);
+                }
+            }
+            return;
+        }
+        if matches!(
+            kind,
+            RequestKind::FdlStatus | RequestKind::Ident | RequestKind::LsapStatus
+        ) || d.da > 126
+        {
+            // GAP polling and live lists: absent stations are normal.
+            return;
+        }
+        // Only DP traffic (Data_Exchange or a DP SAP from the master SAP)
+        // makes a station a slave worth following.
+        let dp = match d.dsap {
+            None => d.ssap.is_none(),
+            Some(s) => {
+                (sap::MSAC_C1..=sap::CHK_CFG).contains(&(s & 0x3F)) || s == sap::MSAC_C2_INITIATE
+            }
+        };
+        if !dp {
+            return;
+        }
+        let dsap = d.dsap.map(|s| s & 0x3F);
+        let expects_reply = kind.expects_reply();
+        let s = self.slave(d.da);
+        s.counters.requests += 1;
+        let retry = kind.uses_fcb()
+            && s.last.is_some_and(|l| {
+                l.master == d.sa
+                    && l.dsap == dsap
+                    && l.fcb == fcb
+                    && l.fcv == fcv
+                    && (fcv || !l.answered)
+            });
+        if retry {
+            s.counters.retries += 1;
+        }
+        s.last = Some(LastRequest {
+            master: d.sa,
+            dsap,
+            fcb,
+            fcv,
+            answered: false,
+        });
+        if dsap.is_none() && !retry {
+            if let Some(prev) = s.last_dx {
+                if at > prev {
+                    s.cycle.add(at - prev);
+                }
+            }
+            s.last_dx = Some(at);
+        }
+        self.pending = Some(Pending {
+            master: d.sa,
+            slave: d.da,
+            dsap,
+            data: d.data.to_vec(),
+            expects_reply,
+        });
+        if !expects_reply {
+            self.pending = None;
+        }
+    }
+
+    fn global_control(&mut self, at: Instant, master: u8, gc: GlobalControl) {
+        let state = if gc.command.contains(ControlCommand::CLEAR_DATA) {
+            OperatingState::Clear
+        } else {
+            OperatingState::Operate
+        };
+        self.seen_master(master, at, false);
+        let Some(m) = self.masters.get_mut(&master) else {
+            return;
+        };
+        if m.operating != Some(state) {
+            m.operating = Some(state);
+            self.push(MonitorEvent::Operating { master, state });
+        }
+    }
+
+    fn set_state(&mut self, address: u8, master: u8, to: SlaveState) {
+        let s = self.slave(address);
+        s.master = Some(master);
+        let from = s.state;
+        if from == Some(to) {
+            return;
+        }
+        if from == Some(SlaveState::DataExchange) && to != SlaveState::Offline {
+            s.counters.restarts += 1;
+        }
+        if to != SlaveState::DataExchange {
+            s.last_dx = None;
+        }
+        s.state = Some(to);
+        self.push(MonitorEvent::SlaveState {
+            address,
+            master,
+            from,
+            to,
+        });
+    }
+
+    fn failed(&mut self, p: Pending, reason: ErrorKind) {
+        let limit = self.options.offline_after.max(1);
+        let s = self.slave(p.slave);
+        s.counters.errors += 1;
+        s.failures = s.failures.saturating_add(1);
+        let offline = s.failures >= limit;
+        self.push(MonitorEvent::Fault {
+            address: p.slave,
+            service: service_name(p.dsap),
+            reason,
+        });
+        if offline {
+            self.set_state(p.slave, p.master, SlaveState::Offline);
+        }
+    }
+
+    /// A response (`None`: short acknowledge) to the pending request.
+    fn reply(&mut self, response: Option<(&DataTelegram<'_>, ResponseStatus)>) {
+        let Some(p) = self.pending.take() else {
+            return;
+        };
+        if let Some((d, _)) = response {
+            if d.sa != p.slave || d.da != p.master {
+                // Not the answer to this request.
+                self.unanswered_with(p);
+                return;
+            }
+        }
+        let status = response.map_or(ResponseStatus::Ok, |(_, s)| s);
+        let data = response.map_or(&[][..], |(d, _)| d.data);
+        if status.is_negative() {
+            let kind = ErrorKind::Negative(status);
+            let sap_off = matches!(status, ResponseStatus::Rs);
+            self.failed(p.clone(), kind);
+            if sap_off && p.dsap.is_none() {
+                // Data_Exchange refused: the slave is not parameterised.
+                self.set_state(p.slave, p.master, SlaveState::Diag);
+            }
+            return;
+        }
+        {
+            let s = self.slave(p.slave);
+            s.failures = 0;
+            if let Some(l) = s.last.as_mut() {
+                l.answered = true;
+            }
+        }
+        match p.dsap {
+            None => {
+                let s = self.slave(p.slave);
+                s.counters.data_exchanges += 1;
+                s.outputs.clone_from(&p.data);
+                if response.is_some() {
+                    s.inputs.clear();
+                    s.inputs.extend_from_slice(data);
+                }
+                self.set_state(p.slave, p.master, SlaveState::DataExchange);
+            }
+            Some(sap::SLAVE_DIAG) if response.is_some() => self.diag(p.slave, p.master, data),
+            Some(sap::SET_PRM) => self.set_state(p.slave, p.master, SlaveState::ChkCfg),
+            Some(sap::CHK_CFG) => self.set_state(p.slave, p.master, SlaveState::CheckDiag),
+            _ => {}
+        }
+    }
+
+    fn unanswered_with(&mut self, p: Pending) {
+        if p.expects_reply {
+            self.bus.no_reply += 1;
+            self.failed(p, ErrorKind::NoReply);
+        }
+    }
+
+    fn diag(&mut self, address: u8, master: u8, data: &[u8]) {
+        let s = self.slave(address);
+        if s.diag_raw != data {
+            s.diag_raw = data.to_vec();
+            s.diag_words = diag::describe(data, s.info.gsd.as_ref(), s.info.dpv1);
+            let e = MonitorEvent::Diag {
+                address,
+                raw: s.diag_raw.clone(),
+                words: s.diag_words.clone(),
+            };
+            self.push(e);
+        }
+        let Ok(d) = SlaveDiag::parse(data) else {
+            return;
+        };
+        let state = self.slave(address).state;
+        let other = d.master_address != NO_MASTER && d.master_address != master;
+        let to = if other && d.status1.contains(StationStatus1::MASTER_LOCK) {
+            SlaveState::Locked
+        } else if d.status2.contains(StationStatus2::PRM_REQ)
+            || d.status1.contains(StationStatus1::PRM_FAULT)
+        {
+            SlaveState::SetPrm
+        } else if d.ready_for(master) {
+            match state {
+                // Ready: stays where the start-up left it, until the
+                // next Data_Exchange.
+                Some(SlaveState::DataExchange) => SlaveState::DataExchange,
+                _ => SlaveState::CheckDiag,
+            }
+        } else {
+            match state {
+                None | Some(SlaveState::Offline) | Some(SlaveState::Locked) => SlaveState::Diag,
+                Some(s) => s,
+            }
+        };
+        self.set_state(address, master, to);
+    }
+
+    /// The whole picture now.
+    pub fn status(&self) -> MonitorStatus {
+        let mut cycle = Interval::default();
+        let mut cycles = 0;
+        let slaves: Vec<SlaveStatus> = self
+            .slaves
+            .values()
+            .map(|s| {
+                cycle.merge(&s.cycle);
+                cycles = cycles.max(s.counters.data_exchanges);
+                slave_status(s)
+            })
+            .collect();
+        MonitorStatus {
+            t: self.now.as_nanos() as f64 / 1e9,
+            cycles,
+            cycle_us: cycle,
+            operating: self.masters.values().find_map(|m| m.operating),
+            masters: self
+                .masters
+                .iter()
+                .map(|(a, m)| MasterStatus {
+                    address: *a,
+                    tokens: m.tokens,
+                    rotation_us: m.rotation,
+                    operating: m.operating,
+                    in_ring: m.in_ring,
+                })
+                .collect(),
+            slaves,
+            bus: self.bus,
+        }
+    }
+}
+
+fn slave_status(s: &SlaveTrack) -> SlaveStatus {
+    let mut modules = vec![];
+    let (mut i, mut o) = (0usize, 0usize);
+    for (name, ni, no) in &s.info.modules {
+        let slice = |img: &[u8], at: usize, n: usize| {
+            img.get(at.min(img.len())..(at + n).min(img.len()))
+                .unwrap_or(&[])
+                .to_vec()
+        };
+        modules.push(ModuleData {
+            name: name.clone(),
+            inputs: slice(&s.inputs, i, *ni),
+            outputs: slice(&s.outputs, o, *no),
+        });
+        i += ni;
+        o += no;
+    }
+    let channels = s.info.decoder.as_ref().map(|d| Channels {
+        inputs: d.decode(Image::Inputs, &s.inputs),
+        outputs: d.decode(Image::Outputs, &s.outputs),
+    });
+    SlaveStatus {
+        address: s.info.address,
+        name: s.info.name.clone(),
+        state: s.state,
+        master: s.master,
+        inputs: s.inputs.clone(),
+        outputs: s.outputs.clone(),
+        counters: s.counters,
+        cycle_us: s.cycle,
+        diag: s.diag_words.clone(),
+        modules,
+        channels,
+    }
+}
+
+#[cfg(feature = "serde")]
+mod ser {
+    //! Channels as a `name: value` object.
+    use super::Reading;
+    use serde::ser::SerializeMap;
+    use serde::Serializer;
+
+    pub fn readings<S: Serializer>(r: &[Reading], ser: S) -> Result<S::Ok, S::Error> {
+        let mut m = ser.serialize_map(Some(r.len()))?;
+        for x in r {
+            m.serialize_entry(&x.name, &x.value)?;
+        }
+        m.end()
+    }
+}
