@@ -170,4 +170,37 @@ pkw = false
             ProfiledBus::parse(&dir, &text.replace("setpoints = 1", "setpoints = 9")).unwrap_err();
         assert!(e.message.contains("si_NR_WR_VALUE"), "{e}");
     }
+
+    #[test]
+    fn file_options_are_relative_to_the_bus_file() {
+        // Every profile whose options name a file declares them.
+        for (name, key) in [
+            ("bk3000", "terminals_file"),
+            ("jx2", "script"),
+            ("rfid", "tags"),
+            ("bm4", "vars"),
+            ("omega", "params"),
+            ("generic", "gsd"),
+        ] {
+            let p = crate::profile(name).unwrap();
+            assert!(p.path_options.contains(&key), "{name}: {key}");
+        }
+        let dir = std::env::temp_dir().join(format!("bus-paths-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("strip.txt"), "KL1104,KL2134,KL9010").unwrap();
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 11
+device = "bk3000"
+terminals_file = "strip.txt"
+"#;
+        // Read from elsewhere: the file is found next to the bus file.
+        let bus = ProfiledBus::parse(&dir.join("bus.toml"), text);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let bus = bus.unwrap();
+        assert_eq!(bus.file.slaves[0].params.address, 11);
+    }
 }

@@ -554,7 +554,8 @@ impl fmt::Display for CfgError {
 }
 
 /// A configuration the coupler rejected: the error and why, in words.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{error}: {reason}")]
 pub struct CfgReject {
     /// The diagnosis code and byte.
     pub error: CfgError,

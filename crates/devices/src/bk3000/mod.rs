@@ -47,7 +47,7 @@ pub mod profile;
 #[cfg(test)]
 mod tests;
 
-use crate::ControlInbox;
+use crate::{ControlError, ControlInbox};
 use catalogue::{Class, Role, Sim};
 use image::{CfgError, CfgReject, Dir, Image, Options, Owner, Strip};
 use prm::{CouplerDiag, StartupMode, UserPrm};
@@ -116,7 +116,7 @@ impl Bk3000 {
     /// expected when User_Prm_Data selects programmed configuration. The
     /// table must be a valid configuration of the strip (the emulation
     /// maps the data as in automatic configuration).
-    pub fn with_programmed_cfg(mut self, cfg: Vec<u8>) -> Result<Bk3000, String> {
+    pub fn with_programmed_cfg(mut self, cfg: Vec<u8>) -> Result<Bk3000, NotTheStrip> {
         for opts in [
             Options::default(),
             Options {
@@ -137,11 +137,10 @@ impl Bk3000 {
                 return Ok(self);
             }
         }
-        Err(format!(
-            "programmed configuration {} does not describe the strip {}",
-            hex(&cfg),
-            self.strip.names().join(",")
-        ))
+        Err(NotTheStrip {
+            cfg,
+            strip: self.strip.names().join(","),
+        })
     }
 
     /// Read control commands from `inbox` ([`Bk3000::control`]).
@@ -201,11 +200,13 @@ impl Bk3000 {
 
     /// Pin the input channel `name` to the engineering value `v` (digital
     /// 0/1, volts, °C, counts; status bytes raw).
-    pub fn set_input(&mut self, name: &str, v: f64) -> Result<String, String> {
+    pub fn set_input(&mut self, name: &str, v: f64) -> Result<String, ControlError> {
         let e = self
             .image
             .find(name, Some(Dir::In))
-            .ok_or_else(|| format!("no input channel `{name}` (see `status`)"))?
+            .ok_or_else(|| {
+                ControlError::Argument(format!("no input channel `{name}` (see `status`)"))
+            })?
             .clone();
         let raw = match (e.owner, e.role) {
             (Owner::Terminal(p), Role::Value) => {
@@ -231,10 +232,12 @@ impl Bk3000 {
     }
 
     /// Pull terminal `pos` (1-based) from the strip: K-bus error.
-    pub fn pull(&mut self, pos: usize) -> Result<String, String> {
+    pub fn pull(&mut self, pos: usize) -> Result<String, ControlError> {
         self.check_pos(pos)?;
         if !self.present[pos - 1] {
-            return Err(format!("terminal {pos} is already pulled"));
+            return Err(ControlError::Refused(format!(
+                "terminal {pos} is already pulled"
+            )));
         }
         self.present[pos - 1] = false;
         self.update_kbus();
@@ -252,10 +255,12 @@ impl Bk3000 {
     }
 
     /// Plug terminal `pos` back.
-    pub fn plug(&mut self, pos: usize) -> Result<String, String> {
+    pub fn plug(&mut self, pos: usize) -> Result<String, ControlError> {
         self.check_pos(pos)?;
         if self.present[pos - 1] {
-            return Err(format!("terminal {pos} is plugged already"));
+            return Err(ControlError::Refused(format!(
+                "terminal {pos} is plugged already"
+            )));
         }
         self.present[pos - 1] = true;
         self.update_kbus();
@@ -273,12 +278,12 @@ impl Bk3000 {
         ))
     }
 
-    fn check_pos(&self, pos: usize) -> Result<(), String> {
+    fn check_pos(&self, pos: usize) -> Result<(), ControlError> {
         if pos == 0 || pos > self.strip.len() {
-            return Err(format!(
+            return Err(ControlError::Argument(format!(
                 "terminal {pos}: the strip has terminals 1..={}",
                 self.strip.len()
-            ));
+            )));
         }
         Ok(())
     }
@@ -303,22 +308,23 @@ impl Bk3000 {
     /// Apply one control command: `status`, `set NAME VALUE`, `release
     /// NAME|all`, `pull N`, `plug N`, `run` (leave parameter mode),
     /// `outputs` (the terminals' outputs). Returns the answer in words.
-    pub fn control(&mut self, line: &str) -> Result<String, String> {
+    pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
         let mut w = line.split_whitespace();
         let cmd = w.next().unwrap_or("");
-        let num = |s: Option<&str>| -> Result<usize, String> {
+        let arg = |m: &str| ControlError::Argument(m.to_string());
+        let num = |s: Option<&str>| -> Result<usize, ControlError> {
             s.and_then(|s| s.parse().ok())
-                .ok_or_else(|| format!("`{cmd}` needs a terminal position"))
+                .ok_or_else(|| arg(&format!("`{cmd}` needs a terminal position")))
         };
         match cmd {
             "status" => Ok(self.status_text()),
             "outputs" => Ok(self.channel_text(Dir::Out)),
             "set" => {
-                let name = w.next().ok_or("`set NAME VALUE`")?;
+                let name = w.next().ok_or_else(|| arg("`set NAME VALUE`"))?;
                 let v: f64 = w
                     .next()
                     .and_then(|v| v.parse().ok())
-                    .ok_or("`set NAME VALUE` needs a number")?;
+                    .ok_or_else(|| arg("`set NAME VALUE` needs a number"))?;
                 self.set_input(name, v)
             }
             "release" => match w.next() {
@@ -330,7 +336,7 @@ impl Bk3000 {
                     let e = self
                         .image
                         .find(n, Some(Dir::In))
-                        .ok_or_else(|| format!("no input channel `{n}`"))?;
+                        .ok_or_else(|| arg(&format!("no input channel `{n}`")))?;
                     let name = e.name.clone();
                     self.pinned.remove(&name);
                     Ok(format!("input {name} simulated again"))
@@ -347,10 +353,11 @@ impl Bk3000 {
                     Ok("K-bus already running".into())
                 }
             }
-            "" => Err("empty command".into()),
-            other => Err(format!(
-                "unknown command `{other}` (status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)"
-            )),
+            "" => Err(arg("empty command")),
+            other => Err(ControlError::Unknown {
+                command: other.to_string(),
+                known: "status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run",
+            }),
         }
     }
 
@@ -694,7 +701,7 @@ impl Device for Bk3000 {
             match self.control(&line) {
                 Ok(text) if kbus => self.event("kbus", text),
                 Ok(text) => self.event("control", text),
-                Err(text) => self.event("control-error", text),
+                Err(e) => self.event("control-error", e.to_string()),
             }
         }
     }
@@ -729,4 +736,18 @@ impl Class {
             Class::Passive => "no process data",
         }
     }
+}
+
+/// A programmed configuration (table 70) that is no valid configuration
+/// of the strip.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "programmed configuration {} does not describe the strip {strip}",
+    hex(cfg)
+)]
+pub struct NotTheStrip {
+    /// The configuration bytes.
+    pub cfg: Vec<u8>,
+    /// The strip's terminals, comma-separated.
+    pub strip: String,
 }

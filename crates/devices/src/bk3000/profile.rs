@@ -3,7 +3,7 @@
 //! `terminals = [...]` in a bus file.
 
 use super::catalogue::Role;
-use super::image::{self, Dir, Image, Options as ImageOptions, Owner, Strip};
+use super::image::{self, CfgReject, Dir, Image, Options as ImageOptions, Owner, Strip};
 use super::{Bk3000, IDENT};
 use crate::channels::{Channel, ChannelMap, ChannelType, Direction, Scale};
 use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
@@ -133,6 +133,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE, \
 --switch-ones N --switch-tens N (rotary switches, instead of --addr), \
 --device-opt programmed-cfg=HEX (table 70), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
+    const PATH_OPTIONS: &'static [&'static str] = &["terminals_file"];
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
@@ -184,14 +185,14 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE, \
     }
 
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
-        let img = image_of(&self.strip, cfg).map_err(ProfileError::Config)?;
+        let img = image_of(&self.strip, cfg).map_err(|e| ProfileError::Config(e.to_string()))?;
         Ok(channel_map(&self.strip, &img))
     }
 }
 
 /// The image a configuration gives on `strip`: the coupler functions
 /// (PLC interface, cycle counter) as the configuration shows them.
-pub fn image_of(strip: &Strip, cfg: &[u8]) -> Result<Image, String> {
+pub fn image_of(strip: &Strip, cfg: &[u8]) -> Result<Image, CfgReject> {
     let mut first = None;
     for (plc_interface, cycle_counter) in
         [(false, false), (true, false), (false, true), (true, true)]
@@ -210,8 +211,7 @@ pub fn image_of(strip: &Strip, cfg: &[u8]) -> Result<Image, String> {
             }
         }
     }
-    let e = first.expect("tried");
-    Err(format!("{}: {}", e.error, e.reason))
+    Err(first.expect("tried"))
 }
 
 /// The named channels of an image on `strip`: bits, bytes (status and

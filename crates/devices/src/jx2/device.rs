@@ -91,7 +91,7 @@ impl Device for Jx2 {
             }
             Err(reason) => {
                 self.raise(ErrorNumber::Cfg);
-                Err(reason.into())
+                Err(reason.to_string().into())
             }
         }
     }

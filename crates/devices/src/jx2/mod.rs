@@ -1074,14 +1074,14 @@ impl Jx2 {
     }
 
     /// The Chk_Cfg rule (see the module docs); the reason when refused.
-    fn check_cfg_bytes(&self, cfg: &[u8]) -> Result<(usize, usize), String> {
+    fn check_cfg_bytes(&self, cfg: &[u8]) -> Result<(usize, usize), CfgMismatch> {
         let l = &self.layout;
         let mut inputs = 0usize;
         let mut outputs = 0usize;
         let mut cin: Vec<(usize, usize)> = Vec::new();
         let mut cout: Vec<(usize, usize)> = Vec::new();
         for id in profibus_dp::cfg::identifiers(cfg) {
-            let id = id.map_err(|e| e.to_string())?;
+            let id = id?;
             if let Some(len) = id.input {
                 let n = id.input_bytes();
                 if len.consistent {
@@ -1102,10 +1102,12 @@ impl Jx2 {
             2 * l.out_words.max(0) as usize,
         );
         if (inputs, outputs) != want {
-            return Err(format!(
-                "the configuration has {inputs} input and {outputs} output bytes, the module {} and {} (1x102 = {}, 1x103 = {})",
-                want.0, want.1, l.in_words, l.out_words
-            ));
+            return Err(CfgMismatch::Lengths {
+                inputs,
+                outputs,
+                want,
+                words: (l.in_words, l.out_words),
+            });
         }
         let window = |words: i32, offset: i32| {
             if words > 0 {
@@ -1127,15 +1129,48 @@ impl Jx2 {
                         .collect::<Vec<_>>()
                         .join(", "),
                 };
-                return Err(format!(
-                    "consistent {what} identifiers: {}, the module's window: {}",
-                    show(&got),
-                    show(&want)
-                ));
+                return Err(CfgMismatch::Consistent {
+                    what,
+                    got: show(&got),
+                    want: show(&want),
+                });
             }
         }
         Ok((inputs, outputs))
     }
+}
+
+/// Why a Chk_Cfg does not fit the module's register settings.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CfgMismatch {
+    /// An identifier does not decode.
+    #[error(transparent)]
+    Identifier(#[from] profibus_dp::cfg::CfgError),
+    /// The lengths differ from 1x102 / 1x103.
+    #[error(
+        "the configuration has {inputs} input and {outputs} output bytes, the module {} and {} (1x102 = {}, 1x103 = {})",
+        want.0, want.1, words.0, words.1
+    )]
+    Lengths {
+        /// Input bytes configured.
+        inputs: usize,
+        /// Output bytes configured.
+        outputs: usize,
+        /// Input and output bytes the module wants.
+        want: (usize, usize),
+        /// Registers 1x102 and 1x103 (input and output words).
+        words: (i32, i32),
+    },
+    /// The consistent identifiers are not the module's window.
+    #[error("consistent {what} identifiers: {got}, the module's window: {want}")]
+    Consistent {
+        /// `input` or `output`.
+        what: &'static str,
+        /// The consistent ranges configured.
+        got: String,
+        /// The module's consistent window.
+        want: String,
+    },
 }
 
 /// Append identifiers for `words` input or output words.

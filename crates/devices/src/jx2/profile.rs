@@ -80,6 +80,7 @@ impl Profile for Jx2Profile {
 --script FILE (register commands run as the PLC program), --control SOCKET (register commands on a Unix socket; \
 stdin always takes them); bus file: input_words, output_words (default 4), consistent_inputs, consistent_input_offset, \
 consistent_outputs, consistent_output_offset";
+    const PATH_OPTIONS: &'static [&'static str] = &["script"];
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {

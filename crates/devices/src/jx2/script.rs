@@ -47,7 +47,48 @@ pub struct ParseError {
     /// 1-based line number.
     pub line: usize,
     /// What is wrong.
-    pub message: String,
+    pub message: CommandError,
+}
+
+/// What is wrong with a command line.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CommandError {
+    /// Not a register number (0..=99999999).
+    #[error("`{0}` is not a register number")]
+    Register(String),
+    /// Not a number nor `rREG`.
+    #[error("`{0}` is neither a number nor rREG")]
+    Operand(String),
+    /// Not a comparison operator.
+    #[error("`{0}` is not a comparison (== != < <= > >=)")]
+    Comparison(String),
+    /// Not an arithmetic operator.
+    #[error("`{0}` is not an operator (+ - * / % & |)")]
+    Operator(String),
+    /// Not a duration.
+    #[error("`{0}` is not a duration (e.g. 500ms, 5s)")]
+    Duration(String),
+    /// Not a bit number 0..=23.
+    #[error("bit `{0}` is not 0..=23")]
+    Bit(String),
+    /// Neither `set` nor `clear`.
+    #[error("`{0}` is neither `set` nor `clear`")]
+    State(String),
+    /// A `read` count out of range.
+    #[error("COUNT must be 1..=1000")]
+    Count,
+    /// `if … label`.
+    #[error("a label cannot be conditional")]
+    ConditionalLabel,
+    /// Wrong arguments: the command's usage.
+    #[error("usage: {0}")]
+    Usage(&'static str),
+    /// No such command.
+    #[error("unknown command `{0}`")]
+    Unknown(String),
+    /// A `goto` to a label the script does not have.
+    #[error("no label `{0}`")]
+    NoLabel(String),
 }
 
 /// A value: a number or a register's content.
@@ -199,23 +240,23 @@ fn parse_int(s: &str) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
-fn parse_reg(s: &str) -> Result<u32, String> {
+fn parse_reg(s: &str) -> Result<u32, CommandError> {
     parse_int(s)
         .filter(|v| (0..=99_999_999).contains(v))
         .map(|v| v as u32)
-        .ok_or_else(|| format!("`{s}` is not a register number"))
+        .ok_or_else(|| CommandError::Register(s.to_string()))
 }
 
-fn parse_operand(s: &str) -> Result<Operand, String> {
+fn parse_operand(s: &str) -> Result<Operand, CommandError> {
     if let Some(r) = s.strip_prefix(['r', 'R']) {
         return parse_reg(r).map(Operand::Reg);
     }
     parse_int(s)
         .map(Operand::Lit)
-        .ok_or_else(|| format!("`{s}` is neither a number nor rREG"))
+        .ok_or_else(|| CommandError::Operand(s.to_string()))
 }
 
-fn parse_cmp(s: &str) -> Result<Cmp, String> {
+fn parse_cmp(s: &str) -> Result<Cmp, CommandError> {
     Ok(match s {
         "==" | "=" => Cmp::Eq,
         "!=" | "<>" => Cmp::Ne,
@@ -223,13 +264,13 @@ fn parse_cmp(s: &str) -> Result<Cmp, String> {
         "<=" => Cmp::Le,
         ">" => Cmp::Gt,
         ">=" => Cmp::Ge,
-        _ => return Err(format!("`{s}` is not a comparison (== != < <= > >=)")),
+        _ => return Err(CommandError::Comparison(s.to_string())),
     })
 }
 
 /// Parse a duration: `5s`, `500ms`, `2m`, or a number of seconds.
-pub fn parse_duration(s: &str) -> Result<Duration, String> {
-    let bad = || format!("`{s}` is not a duration (e.g. 500ms, 5s)");
+pub fn parse_duration(s: &str) -> Result<Duration, CommandError> {
+    let bad = || CommandError::Duration(s.to_string());
     let (num, scale) = if let Some(n) = s.strip_suffix("ms") {
         (n, 0.001)
     } else if let Some(n) = s.strip_suffix('s') {
@@ -248,7 +289,7 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
 
 impl Command {
     /// Parse one line; `Ok(None)` for a blank or comment line.
-    pub fn parse(line: &str) -> Result<Option<Command>, String> {
+    pub fn parse(line: &str) -> Result<Option<Command>, CommandError> {
         let text = line.split(['#', ';']).next().unwrap_or("").trim();
         if text.is_empty() {
             return Ok(None);
@@ -257,8 +298,8 @@ impl Command {
         Command::parse_words(&words).map(Some)
     }
 
-    fn parse_words(w: &[&str]) -> Result<Command, String> {
-        let usage = |u: &str| Err(format!("usage: {u}"));
+    fn parse_words(w: &[&str]) -> Result<Command, CommandError> {
+        let usage = |u: &'static str| Err(CommandError::Usage(u));
         let timeout = |s: Option<&&str>| s.map_or(Ok(DEFAULT_WAIT), |s| parse_duration(s));
         Ok(match w[0].to_ascii_lowercase().as_str() {
             "read" => match w {
@@ -270,7 +311,7 @@ impl Command {
                     reg: parse_reg(r)?,
                     count: parse_int(n)
                         .filter(|n| (1..=1000).contains(n))
-                        .ok_or("COUNT must be 1..=1000")? as u32,
+                        .ok_or(CommandError::Count)? as u32,
                 },
                 _ => return usage("read REG [COUNT]"),
             },
@@ -310,7 +351,7 @@ impl Command {
                             "%" => Op::Rem,
                             "&" => Op::And,
                             "|" => Op::Or,
-                            _ => return Err(format!("`{op}` is not an operator (+ - * / % & |)")),
+                            _ => return Err(CommandError::Operator(op.to_string())),
                         },
                         parse_operand(b)?,
                     )),
@@ -370,30 +411,30 @@ impl Command {
             },
             "status" if w.len() == 1 => Command::Status,
             "fail-memory-test" if w.len() == 1 => Command::FailMemoryTest,
-            other => return Err(format!("unknown command `{other}`")),
+            other => return Err(CommandError::Unknown(other.to_string())),
         })
     }
 }
 
-fn parse_bit(s: &str) -> Result<u8, String> {
+fn parse_bit(s: &str) -> Result<u8, CommandError> {
     parse_int(s)
         .filter(|b| (0..=23).contains(b))
         .map(|b| b as u8)
-        .ok_or_else(|| format!("bit `{s}` is not 0..=23"))
+        .ok_or_else(|| CommandError::Bit(s.to_string()))
 }
 
-fn parse_state(s: &str) -> Result<bool, String> {
+fn parse_state(s: &str) -> Result<bool, CommandError> {
     match s.to_ascii_lowercase().as_str() {
         "set" | "1" => Ok(true),
         "clear" | "0" => Ok(false),
-        _ => Err(format!("`{s}` is neither `set` nor `clear`")),
+        _ => Err(CommandError::State(s.to_string())),
     }
 }
 
-fn conditional(words: &[&str]) -> Result<Command, String> {
+fn conditional(words: &[&str]) -> Result<Command, CommandError> {
     let then = Command::parse_words(words)?;
     if matches!(then, Command::Label(_)) {
-        return Err("a label cannot be conditional".into());
+        return Err(CommandError::ConditionalLabel);
     }
     Ok(then)
 }
@@ -504,7 +545,7 @@ impl Interpreter {
                 if !it.labels.contains_key(n) {
                     return Err(ParseError {
                         line: l.no,
-                        message: format!("no label `{n}`"),
+                        message: CommandError::NoLabel(n.clone()),
                     });
                 }
             }
@@ -526,7 +567,7 @@ impl Interpreter {
             Ok(Some(cmd)) => self.add(self.lines, cmd),
             Ok(None) => {}
             Err(e) => self.replies.push_back(json!({
-                "line": line.trim(), "ok": false, "error": e,
+                "line": line.trim(), "ok": false, "error": e.to_string(),
             })),
         }
     }

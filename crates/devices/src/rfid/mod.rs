@@ -52,7 +52,7 @@ pub mod tags;
 #[cfg(test)]
 mod tests;
 
-use crate::ControlInbox;
+use crate::{ControlError, ControlInbox};
 use commands::{Nak, Reader};
 use link::{Line, ReaderLink, Received};
 use profibus_dp::prm::SetPrm;
@@ -156,11 +156,11 @@ impl Rfid {
     /// A control command: `enter UID` (a tag enters the field; an unknown
     /// UID is a new blank tag), `leave` (the tag in the field leaves),
     /// `tags` (list the tags), `status`. Returns what it did in words.
-    pub fn control(&mut self, now: Instant, line: &str) -> Result<String, String> {
+    pub fn control(&mut self, now: Instant, line: &str) -> Result<String, ControlError> {
         let mut words = line.split_whitespace();
         let reply = match (words.next(), words.next(), words.next()) {
             (Some("enter"), Some(uid), None) => {
-                let uid = parse_uid(uid).map_err(|e| e.to_string())?;
+                let uid = parse_uid(uid).map_err(|e| ControlError::Argument(e.to_string()))?;
                 self.tag_enters(now, &uid);
                 format!("tag {} in the field", tags::hex(&uid))
             }
@@ -209,9 +209,10 @@ impl Rfid {
                 )
             }
             _ => {
-                return Err(format!(
-                    "unknown control command `{line}` (enter UID, leave, tags, status)"
-                ))
+                return Err(ControlError::Unknown {
+                    command: line.to_string(),
+                    known: "enter UID, leave, tags, status",
+                })
             }
         };
         Ok(reply)
@@ -284,7 +285,7 @@ impl Rfid {
             }
             match self.control(now, line) {
                 Ok(t) => self.note("control", t),
-                Err(e) => self.note("control_error", e),
+                Err(e) => self.note("control_error", e.to_string()),
             }
         }
     }

@@ -43,6 +43,7 @@ impl Profile for RfidProfile {
     const OPTIONS_HELP: &'static str = "--tags FILE.toml (tags with UID and memory, which one is in the field, \
 the reader's timing; rewritten when a tag's memory changes or a tag enters or leaves; default: no tags), \
 --control SOCKET|FILE|- (commands: enter UID, leave, tags, status); bus file: tags";
+    const PATH_OPTIONS: &'static [&'static str] = &["tags"];
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {

@@ -288,7 +288,21 @@ pub enum JobResult {
     /// The job needs the slave in Data_Exchange with this master.
     NotInDataExchange,
     /// The answer could not be decoded.
-    BadResponse(String),
+    BadResponse(BadResponse),
+}
+
+/// Why a job's answer could not be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum BadResponse {
+    /// A DP-V1 PDU that does not answer the request (its function byte).
+    #[error("unexpected DP-V1 PDU, function 0x{function:02X}")]
+    UnexpectedPdu {
+        /// The PDU's function byte.
+        function: u8,
+    },
+    /// A DP-V1 PDU that does not decode.
+    #[error(transparent)]
+    Dpv1(#[from] crate::dpv1::Dpv1ParseError),
 }
 
 impl JobResult {
@@ -1235,8 +1249,10 @@ impl DpMaster {
                     Ok(Pdu::ReadRes { data, .. }) => JobResult::Data(data.to_vec()),
                     Ok(Pdu::WriteRes { .. }) => JobResult::Done,
                     Ok(Pdu::Error(e)) => JobResult::Dpv1Error(e),
-                    Ok(other) => JobResult::BadResponse(format!("unexpected {other:?}")),
-                    Err(e) => JobResult::BadResponse(e.to_string()),
+                    Ok(_) => JobResult::BadResponse(BadResponse::UnexpectedPdu {
+                        function: data.first().copied().unwrap_or(0),
+                    }),
+                    Err(e) => JobResult::BadResponse(e.into()),
                 }
             } else if let Job::SetSlaveAdd { .. } = j.job {
                 JobResult::Done
