@@ -46,6 +46,57 @@ pub struct SlaveArgs {
     pub latency: Option<f64>,
 }
 
+impl SlaveArgs {
+    /// The slave in the bus file.
+    pub fn slave_of<'a>(
+        &self,
+        bus: &'a profibus_dp::busfile::BusFile,
+    ) -> Result<&'a profibus_dp::busfile::BusSlave> {
+        bus.slaves
+            .iter()
+            .find(|s| s.params.address == self.slave)
+            .with_context(|| format!("slave {} is not in {}", self.slave, self.config.display()))
+    }
+
+    /// Waiting for the slave with the start-up timeout.
+    pub fn wait(&self) -> profibus_dp::master::SlaveWait {
+        profibus_dp::master::SlaveWait::new(self.slave, Duration::from_millis(self.startup_timeout))
+    }
+
+    /// Run the master of `bus` on the port until `tick` breaks (its
+    /// events are dropped: one-shot commands look at the slave only).
+    /// An interrupt (Ctrl-C, SIGTERM) is an error.
+    pub async fn run_master(
+        &self,
+        bus: &profibus_dp::busfile::BusFile,
+        mut tick: impl FnMut(
+            &mut profibus_dp::master::DpMaster,
+            profibus_fdl::Instant,
+        ) -> std::ops::ControlFlow<()>,
+    ) -> Result<()> {
+        use profibus_fdl::driver::{self, Clock, Stop};
+        let dp = profibus_dp::master::DpMaster::new(&bus.master)?;
+        let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency)?;
+        let stop = driver::run_with(
+            &mut station,
+            &mut port,
+            Clock::start(),
+            driver::Options::default(),
+            shutdown(),
+            |st, now| {
+                let m = st.app_mut();
+                while m.poll_event().is_some() {}
+                tick(m, now)
+            },
+        )
+        .await;
+        match stop.with_context(|| format!("on {}", self.port))? {
+            Stop::Shutdown => anyhow::bail!("interrupted"),
+            Stop::Done => Ok(()),
+        }
+    }
+}
+
 impl LineArgs {
     /// Open the port.
     pub fn open(&self) -> Result<Port> {

@@ -11,12 +11,8 @@ use crate::common;
 use crate::describe::hex;
 use anyhow::{bail, Context, Result};
 use profibus_dp::busfile::BusFile;
-use profibus_dp::master::{DpMaster, Job, JobId, JobResult, SlaveState};
-use profibus_fdl::driver::{self, Clock, Stop};
-use profibus_fdl::Instant;
-use serde_json::json;
+use profibus_dp::master::{Job, JobId, JobResult};
 use std::ops::ControlFlow;
-use std::time::Duration;
 
 /// Read or write a DP-V1 data record (slot, index) of a slave.
 #[derive(clap::Args)]
@@ -61,11 +57,7 @@ pub fn run(args: Args) -> Result<()> {
 
 async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
     let addr = args.link.slave;
-    let slave = bus
-        .slaves
-        .iter()
-        .find(|s| s.params.address == addr)
-        .with_context(|| format!("slave {addr} is not in {}", args.link.config.display()))?;
+    let slave = args.link.slave_of(&bus)?;
     if !slave.params.dpv1 {
         bail!("slave {addr} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)");
     }
@@ -95,28 +87,13 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
             )
         }
     };
-    let (mut station, mut port) = common::master_station(
-        &args.link.port,
-        &bus,
-        DpMaster::new(&bus.master)?,
-        args.link.latency,
-    )?;
-    let startup = Duration::from_millis(args.link.startup_timeout);
-    let mut started: Option<Instant> = None;
+    let mut wait = args.link.wait();
     let mut job = Some(job);
     let mut id: Option<JobId> = None;
     let mut result: Option<JobResult> = None;
-    let mut failure: Option<String> = None;
-    let stop = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        common::shutdown(),
-        |st, now| {
-            let m = st.app_mut();
-            while m.poll_event().is_some() {}
-            let t0 = *started.get_or_insert(now);
+    let mut failure: Option<anyhow::Error> = None;
+    args.link
+        .run_master(&bus, |m, now| {
             if let Some(i) = id {
                 if let Some(r) = m.take_result(i) {
                     result = Some(r);
@@ -124,91 +101,94 @@ async fn dpv1(args: Args, bus: BusFile) -> Result<()> {
                 }
                 return ControlFlow::Continue(());
             }
-            if m.slave_state(addr) != Some(SlaveState::DataExchange) {
-                if now.saturating_duration_since(t0) > startup {
-                    failure = Some(format!(
-                        "slave {addr} did not reach Data_Exchange within {} ms (state {})",
-                        startup.as_millis(),
-                        m.slave_state(addr).map_or("unknown", |s| s.name())
-                    ));
+            match wait.check(m, now, false) {
+                Ok(true) => {}
+                Ok(false) => return ControlFlow::Continue(()),
+                Err(e) => {
+                    failure = Some(e.into());
                     return ControlFlow::Break(());
                 }
-                return ControlFlow::Continue(());
             }
             if let Some(j) = job.take() {
                 match m.submit(j) {
                     Some(i) => id = Some(i),
                     None => {
-                        failure = Some("job queue full".into());
+                        failure = Some(anyhow::anyhow!("job queue full"));
                         return ControlFlow::Break(());
                     }
                 }
             }
             ControlFlow::Continue(())
-        },
-    )
-    .await;
-    match stop.with_context(|| format!("on {}", args.link.port))? {
-        Stop::Shutdown => bail!("interrupted"),
-        Stop::Done => {}
-    }
+        })
+        .await?;
     if let Some(f) = failure {
-        bail!("{f}");
+        return Err(f);
     }
     let (slot, index) = (args.slot, args.index);
-    match result.context("no result")? {
+    let result = result.context("no result")?;
+    let mut rec = Outcome {
+        slave: addr,
+        op,
+        slot,
+        index,
+        ok: matches!(result, JobResult::Data(_) | JobResult::Done),
+        length: None,
+        data: None,
+        error: None,
+        error_decode: None,
+        error_code_1: None,
+        error_code_2: None,
+    };
+    let text = match &result {
         JobResult::Data(d) => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true,
-                           "length": d.len(), "data": hex(&d)})
-                );
-            } else {
-                println!(
-                    "slave {addr} slot {slot} index {index}: {} bytes {}",
-                    d.len(),
-                    hex(&d)
-                );
-            }
-            Ok(())
+            rec.length = Some(d.len());
+            rec.data = Some(d);
+            format!("{} bytes {}", d.len(), hex(d))
         }
-        JobResult::Done => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": true})
-                );
-            } else {
-                println!("slave {addr} slot {slot} index {index}: written");
-            }
-            Ok(())
-        }
+        JobResult::Done => "written".to_string(),
         JobResult::Dpv1Error(e) => {
-            let words = e.describe();
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
-                           "error": words, "error_decode": e.error_decode,
-                           "error_code_1": format!("0x{:02X}", e.error_code_1),
-                           "error_code_2": e.error_code_2})
-                );
-            }
-            bail!("slave {addr} slot {slot} index {index}: {words}")
+            rec.error_decode = Some(e.error_decode);
+            rec.error_code_1 = Some(format!("0x{:02X}", e.error_code_1));
+            rec.error_code_2 = Some(e.error_code_2);
+            e.describe()
         }
-        other => {
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "op": op, "slot": slot, "index": index, "ok": false,
-                           "error": other.describe()})
-                );
-            }
-            bail!(
-                "slave {addr} slot {slot} index {index}: {}",
-                other.describe()
-            )
-        }
+        other => other.describe(),
+    };
+    if !rec.ok {
+        rec.error = Some(text.clone());
     }
+    if args.json {
+        println!("{}", common::json_line(&rec));
+    } else if rec.ok {
+        println!("slave {addr} slot {slot} index {index}: {text}");
+    }
+    if !rec.ok {
+        bail!("slave {addr} slot {slot} index {index}: {text}");
+    }
+    Ok(())
+}
+
+/// The `--json` line.
+#[derive(serde::Serialize)]
+struct Outcome<'a> {
+    slave: u8,
+    op: &'static str,
+    slot: u8,
+    index: u8,
+    ok: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    length: Option<usize>,
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "profibus_fdl::ser::opt_hex"
+    )]
+    data: Option<&'a Vec<u8>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_decode: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_code_1: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_code_2: Option<u8>,
 }

@@ -12,10 +12,6 @@ use anyhow::{bail, Context, Result};
 use profibus_devices::pkw::client::{PkwAnswer, PkwClient, PkwError};
 use profibus_devices::pkw::{Command, Dialect, Reply};
 use profibus_dp::busfile::{BusFile, BusSlave};
-use profibus_dp::master::{DpMaster, SlaveState};
-use profibus_fdl::driver::{self, Clock, Stop};
-use profibus_fdl::Instant;
-use serde_json::json;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -255,58 +251,26 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 async fn pkw(args: Args, bus: BusFile) -> Result<()> {
-    let slave = bus
-        .slaves
-        .iter()
-        .find(|s| s.params.address == args.link.slave)
-        .with_context(|| {
-            format!(
-                "slave {} is not in {}",
-                args.link.slave,
-                args.link.config.display()
-            )
-        })?
-        .clone();
+    let slave = args.link.slave_of(&bus)?.clone();
     let dialect = profibus_devices::pkw_dialect(slave.params.ident_number, &slave.params.cfg)
         .map_err(|e| anyhow::anyhow!("slave {}: {e}", args.link.slave))?;
     let (param, mut steps) = plan(&args.op, &slave, dialect)?;
     steps.reverse();
-    let (mut station, mut port) = common::master_station(
-        &args.link.port,
-        &bus,
-        DpMaster::new(&bus.master)?,
-        args.link.latency,
-    )?;
-
     let addr = args.link.slave;
     let mut client = PkwClient::new(dialect, Duration::from_millis(args.timeout.max(1)));
-    let startup = Duration::from_millis(args.link.startup_timeout);
-    let mut started: Option<Instant> = None;
+    let mut wait = args.link.wait();
     let mut outcome: Option<Result<PkwAnswer, PkwError>> = None;
-    let mut failure: Option<String> = None;
+    let mut failure: Option<anyhow::Error> = None;
     let mut probe: Option<Reply> = None;
     let mut inflight: Option<Step> = None;
-    let result = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        common::shutdown(),
-        |st, now| {
-            let m = st.app_mut();
-            while m.poll_event().is_some() {}
-            let t0 = *started.get_or_insert(now);
-            if m.slave_state(addr) != Some(SlaveState::DataExchange) {
-                if client.is_idle() && now.saturating_duration_since(t0) > startup {
-                    failure = Some(format!(
-                        "slave {addr} did not reach Data_Exchange within {} ms (state {})",
-                        startup.as_millis(),
-                        m.slave_state(addr).map_or("unknown", |s| s.name())
-                    ));
+    args.link
+        .run_master(&bus, |m, now| {
+            match wait.check(m, now, !client.is_idle()) {
+                Ok(false) if client.is_idle() => return ControlFlow::Continue(()),
+                Ok(_) => {}
+                Err(e) => {
+                    failure = Some(e.into());
                     return ControlFlow::Break(());
-                }
-                if client.is_idle() {
-                    return ControlFlow::Continue(());
                 }
             }
             let Some(h) = m.handle(addr) else {
@@ -338,32 +302,33 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
                     ),
                 };
                 if let Err(e) = client.start(now, param.pnu, cmd) {
-                    failure = Some(e.to_string());
+                    failure = Some(e.into());
                     return ControlFlow::Break(());
                 }
                 inflight = Some(step);
             }
             ControlFlow::Continue(())
-        },
-    )
-    .await;
-    match result.with_context(|| format!("on {}", args.link.port))? {
-        Stop::Shutdown => bail!("interrupted"),
-        Stop::Done => {}
-    }
+        })
+        .await?;
     if let Some(f) = failure {
-        bail!("{f}");
+        return Err(f);
     }
     let answer = match outcome {
         Some(Ok(a)) => a,
         Some(Err(e)) => {
             if args.json {
-                println!(
-                    "{}",
-                    json!({"slave": addr, "pnu": param.pnu, "index": param.index, "ok": false,
-                           "error": e.to_string(),
-                           "code": match &e { PkwError::Refused { code, .. } => Some(*code), _ => None }})
-                );
+                let line = Refused {
+                    slave: addr,
+                    pnu: param.pnu,
+                    index: param.index,
+                    ok: false,
+                    error: e.to_string(),
+                    code: match &e {
+                        PkwError::Refused { code, .. } => Some(*code),
+                        _ => None,
+                    },
+                };
+                println!("{}", common::json_line(&line));
             }
             bail!("slave {addr} P{}: {e}", param.pnu);
         }
@@ -371,6 +336,39 @@ async fn pkw(args: Args, bus: BusFile) -> Result<()> {
     };
     print_answer(&args, dialect, param, &answer);
     Ok(())
+}
+
+/// `--json`: the slave refused or did not answer.
+#[derive(serde::Serialize)]
+struct Refused {
+    slave: u8,
+    pnu: u16,
+    index: Option<u16>,
+    ok: bool,
+    error: String,
+    code: Option<u16>,
+}
+
+/// `--json`: the answer.
+#[derive(serde::Serialize)]
+struct Answered {
+    slave: u8,
+    device: &'static str,
+    op: &'static str,
+    pnu: u16,
+    index: Option<u16>,
+    ok: bool,
+    format: &'static str,
+    value: u32,
+    signed: i64,
+    hex: String,
+    request: String,
+    response: String,
+    pke: String,
+    ind: u16,
+    pwe1: String,
+    pwe2: String,
+    words: Option<String>,
 }
 
 fn print_answer(args: &Args, dialect: &Dialect, param: Param, a: &PkwAnswer) {
@@ -394,18 +392,27 @@ fn print_answer(args: &Args, dialect: &Dialect, param: Param, a: &PkwAnswer) {
         None => format!("P{}", param.pnu),
     };
     if args.json {
-        println!(
-            "{}",
-            json!({
-                "slave": args.link.slave, "device": dialect.name, "op": op, "pnu": param.pnu,
-                "index": param.index, "ok": true, "format": if a.reply.is_dword() { "dword" } else { "word" },
-                "value": value, "signed": signed, "hex": format!("0x{value:0width$X}", width = if a.reply.is_dword() { 8 } else { 4 }),
-                "request": a.request.to_string(), "response": a.response.to_string(),
-                "pke": format!("0x{:04X}", a.response.pke), "ind": a.response.ind,
-                "pwe1": format!("0x{:04X}", a.response.pwe1), "pwe2": format!("0x{:04X}", a.response.pwe2),
-                "words": element,
-            })
-        );
+        let dword = a.reply.is_dword();
+        let line = Answered {
+            slave: args.link.slave,
+            device: dialect.name,
+            op,
+            pnu: param.pnu,
+            index: param.index,
+            ok: true,
+            format: if dword { "dword" } else { "word" },
+            value,
+            signed,
+            hex: format!("0x{value:0width$X}", width = if dword { 8 } else { 4 }),
+            request: a.request.to_string(),
+            response: a.response.to_string(),
+            pke: format!("0x{:04X}", a.response.pke),
+            ind: a.response.ind,
+            pwe1: format!("0x{:04X}", a.response.pwe1),
+            pwe2: format!("0x{:04X}", a.response.pwe2),
+            words: element,
+        };
+        println!("{}", common::json_line(&line));
     } else {
         let what = match &args.op {
             Op::Describe { attr, .. } => format!("{name} {attr}"),

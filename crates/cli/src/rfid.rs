@@ -15,9 +15,7 @@ use profibus_devices::rfid::client::RfidClient;
 use profibus_devices::rfid::{CFG, IDENT};
 use profibus_dp::busfile::BusFile;
 use profibus_dp::master::{DpMaster, SlaveState};
-use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::Instant;
-use serde_json::json;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -56,11 +54,7 @@ pub fn run(args: Args) -> Result<()> {
 
 async fn rfid(args: Args, bus: BusFile) -> Result<()> {
     let addr = args.link.slave;
-    let slave = bus
-        .slaves
-        .iter()
-        .find(|s| s.params.address == addr)
-        .with_context(|| format!("slave {addr} is not in {}", args.link.config.display()))?;
+    let slave = args.link.slave_of(&bus)?;
     if slave.params.cfg != CFG {
         bail!(
             "slave {addr} is configured {:02X?}; the reader has 16 bytes in and out (0x3F, gsd/AEGI0DC4.GSD)",
@@ -73,44 +67,24 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
             "slave {addr} is not ident 0x{IDENT:04X}; trying the reader's handshake anyway"
         );
     }
-    let (mut station, mut port) = common::master_station(
-        &args.link.port,
-        &bus,
-        DpMaster::new(&bus.master)?,
-        args.link.latency,
-    )?;
-    let handle = station
-        .app()
-        .handle(addr)
-        .context("slave not in the master")?;
     let mut client = RfidClient::new(Duration::from_millis(args.timeout.max(1)));
-    let startup = Duration::from_millis(args.link.startup_timeout);
+    let mut wait = args.link.wait();
     let mut todo = args.commands.iter().rev().cloned().collect::<Vec<_>>();
     let mut done: Vec<Done> = vec![];
     let mut running: Option<(String, Instant, u64)> = None;
-    let mut started: Option<Instant> = None;
     let mut failure: Option<String> = None;
-    let result = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        common::shutdown(),
-        |st, now| {
-            let m = st.app_mut();
-            while m.poll_event().is_some() {}
-            let t0 = *started.get_or_insert(now);
-            if m.slave_state(addr) != Some(SlaveState::DataExchange)
-                && client.is_idle()
-                && now.saturating_duration_since(t0) > startup
-            {
-                failure = Some(format!(
-                    "slave {addr} did not reach Data_Exchange within {} ms (state {})",
-                    startup.as_millis(),
-                    m.slave_state(addr).map_or("unknown", |s| s.name())
-                ));
+    args.link
+        .run_master(&bus, |m, now| {
+            let in_dx = match wait.check(m, now, !client.is_idle()) {
+                Ok(dx) => dx,
+                Err(e) => {
+                    failure = Some(e.to_string());
+                    return ControlFlow::Break(());
+                }
+            };
+            let Some(handle) = m.handle(addr) else {
                 return ControlFlow::Break(());
-            }
+            };
             if let Some(r) = client.poll_master(now, m, handle) {
                 let (command, t, r0) = running.take().expect("a command runs");
                 let restarts = m.slave_stats(addr).map_or(0, |s| s.restarts) - r0;
@@ -125,7 +99,7 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
                     return ControlFlow::Break(());
                 }
             }
-            if client.is_idle() && m.slave_state(addr) == Some(SlaveState::DataExchange) {
+            if client.is_idle() && in_dx {
                 let Some(cmd) = todo.pop() else {
                     return ControlFlow::Break(());
                 };
@@ -136,13 +110,8 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
                 running = Some((cmd, now, m.slave_stats(addr).map_or(0, |s| s.restarts)));
             }
             ControlFlow::Continue(())
-        },
-    )
-    .await;
-    match result.with_context(|| format!("on {}", args.link.port))? {
-        Stop::Shutdown => bail!("interrupted"),
-        Stop::Done => {}
-    }
+        })
+        .await?;
     for d in &done {
         print(&args, d);
     }
@@ -163,25 +132,39 @@ async fn rfid(args: Args, bus: BusFile) -> Result<()> {
 fn print(args: &Args, d: &Done) {
     let ms = d.took.as_secs_f64() * 1000.0;
     match &d.answer {
-        Ok(a) if args.json => println!(
-            "{}",
-            json!({"slave": args.link.slave, "command": d.command, "ok": true,
-                   "answer": String::from_utf8_lossy(a), "answer_hex": crate::describe::hex(a),
-                   "bytes": a.len(), "ms": (ms * 1000.0).round() / 1000.0, "drained": d.drained,
-                   "restarts": d.restarts})
-        ),
+        Ok(a) if args.json => {
+            let line = Answered {
+                done: RfidDone::new(args.link.slave, d.command.clone(), Ok::<_, String>(a)),
+                bytes: a.len(),
+                ms: (ms * 1000.0).round() / 1000.0,
+                drained: d.drained,
+                restarts: d.restarts,
+            };
+            println!("{}", common::json_line(&line));
+        }
         Ok(a) => {
             let text = String::from_utf8_lossy(a);
             for line in text.split_terminator('\r') {
                 println!("{line}");
             }
         }
-        Err(e) if args.json => println!(
-            "{}",
-            json!({"slave": args.link.slave, "command": d.command, "ok": false, "error": e})
-        ),
+        Err(e) if args.json => {
+            let done = RfidDone::new(args.link.slave, d.command.clone(), Err::<&[u8], _>(e));
+            println!("{}", common::json_line(&done));
+        }
         Err(_) => {}
     }
+}
+
+/// `dpctl rfid --json`: an answered command.
+#[derive(serde::Serialize)]
+struct Answered {
+    #[serde(flatten)]
+    done: RfidDone,
+    bytes: usize,
+    ms: f64,
+    drained: usize,
+    restarts: u64,
 }
 
 /// The demo plant's RFID reader: a tag that comes and goes, and the

@@ -7,7 +7,6 @@ use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
 use profibus_fdl::wire::StationType;
 use profibus_fdl::BusParams;
-use serde_json::json;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -72,24 +71,29 @@ async fn scan(args: Args) -> Result<()> {
     let mut rows: Vec<_> = station.app().stations().to_vec();
     rows.sort_by_key(|s| s.address);
     if args.json {
-        println!(
-            "{}",
-            json!({"address": own, "type": "active, in ring", "self": true})
-        );
+        let row = Row {
+            address: own,
+            kind: "active, in ring",
+            this: true,
+            ident: None,
+            master: None,
+        };
+        println!("{}", common::json_line(&row));
     } else {
         println!("{own:3}  active, in ring (this scanner)");
     }
     for s in rows {
         let kind = s.station.describe();
         if args.json {
-            let mut v = json!({"address": s.address, "type": kind});
-            if let Some(id) = s.ident_number {
-                v["ident"] = json!(format!("0x{id:04X}"));
-            }
-            if let Some(m) = s.master_address {
-                v["master"] = if m == 255 { json!(null) } else { json!(m) };
-            }
-            println!("{v}");
+            let row = Row {
+                address: s.address,
+                kind,
+                this: false,
+                ident: s.ident_number.map(|id| format!("0x{id:04X}")),
+                // 255: no master (not parameterised).
+                master: s.master_address.map(|m| (m != 255).then_some(m)),
+            };
+            println!("{}", common::json_line(&row));
         } else {
             let mut line = format!("{:3}  {kind}", s.address);
             if s.station == StationType::Passive {
@@ -107,4 +111,18 @@ async fn scan(args: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A station of the live list, `--json`.
+#[derive(serde::Serialize)]
+struct Row {
+    address: u8,
+    #[serde(rename = "type")]
+    kind: &'static str,
+    #[serde(rename = "self", skip_serializing_if = "std::ops::Not::not")]
+    this: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ident: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    master: Option<Option<u8>>,
 }

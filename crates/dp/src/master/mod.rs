@@ -81,10 +81,12 @@
 mod command;
 mod config;
 mod report;
+mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{MasterConfig, MasterOptions, SlaveParams, DEFAULT_GLOBAL_CONTROL_INTERVAL};
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use wait::{SlaveWait, StartupTimeout};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::diag::SlaveDiag;
