@@ -11,7 +11,6 @@ use profibus_dp::monitor::{Monitor, MonitorOptions, MonitorStatus, SlaveInfo};
 use profibus_fdl::listen::{listen, Heard, ListenOptions};
 use profibus_fdl::tap::TapEvent;
 use profibus_fdl::transport::Port;
-use profibus_fdl::wire::Hex;
 use profibus_fdl::{Instant, Telegram};
 use serde_json::json;
 use std::io::Write;
@@ -126,72 +125,9 @@ fn print_status(s: &MonitorStatus, as_json: bool, out: &mut impl Write) -> Resul
     if as_json {
         let mut v = serde_json::to_value(s)?;
         v["event"] = json!("status");
-        return Ok(writeln!(out, "{v}")?);
-    }
-    let masters: Vec<String> = s
-        .masters
-        .iter()
-        .filter(|m| m.in_ring)
-        .map(|m| match m.operating {
-            Some(o) => format!("{} ({})", m.address, o.as_str()),
-            None => m.address.to_string(),
-        })
-        .collect();
-    writeln!(
-        out,
-        "status t={:.1} s  masters in ring: [{}]  cycles {}  cycle min/avg/max {}/{}/{} µs  telegrams {}  corrupt {}  no reply {}",
-        s.t,
-        masters.join(", "),
-        s.cycles,
-        s.cycle_us.min,
-        s.cycle_us.avg,
-        s.cycle_us.max,
-        s.bus.telegrams,
-        s.bus.corrupt,
-        s.bus.no_reply
-    )?;
-    for sl in &s.slaves {
-        writeln!(
-            out,
-            "  {:3} {:<20} {:<13} in: {}  out: {}  (cycle {} µs, errors {}, retries {}, restarts {})",
-            sl.address,
-            sl.name,
-            sl.state.map_or("unseen", |x| x.name()),
-            Hex(&sl.inputs),
-            Hex(&sl.outputs),
-            sl.cycle_us.last,
-            sl.counters.errors,
-            sl.counters.retries,
-            sl.counters.restarts,
-        )?;
-        if let Some(c) = &sl.channels {
-            let words = |r: &[profibus_dp::monitor::Reading]| {
-                r.iter()
-                    .map(|x| x.to_string())
-                    .collect::<Vec<_>>()
-                    .join(" ")
-            };
-            writeln!(
-                out,
-                "      in: {}  out: {}",
-                words(&c.inputs),
-                words(&c.outputs)
-            )?;
-        } else if !sl.modules.is_empty() {
-            let parts: Vec<String> = sl
-                .modules
-                .iter()
-                .map(|m| match (m.inputs.is_empty(), m.outputs.is_empty()) {
-                    (false, true) => format!("{}: in {}", m.name, Hex(&m.inputs)),
-                    (true, false) => format!("{}: out {}", m.name, Hex(&m.outputs)),
-                    _ => format!("{}: in {} out {}", m.name, Hex(&m.inputs), Hex(&m.outputs)),
-                })
-                .collect();
-            writeln!(out, "      {}", parts.join("; "))?;
-        }
-        if !sl.diag.is_empty() {
-            writeln!(out, "      diagnosis: {}", sl.diag.join("; "))?;
-        }
+        writeln!(out, "{v}")?;
+    } else {
+        writeln!(out, "{s}")?;
     }
     Ok(())
 }

@@ -278,6 +278,41 @@ pub const STATE_EVENT: &str = "state";
 /// A device profile: one product, configured from its options. Every
 /// product module implements it the same way and registers with one line
 /// in [`crate::PROFILES`] (`ProfileEntry::of::<MyProfile>()`).
+///
+/// # Example
+///
+/// The Omega Drive-Line II board as a bus file's `device = "omega"` with
+/// `setpoints = 2` and `actual_values = 2` configures it: the GSD modules
+/// and the Chk_Cfg a master sends, the slave the DP slave core runs, and
+/// the named channels of its process images.
+///
+/// ```
+/// use profibus_devices::channels::{Direction, Value};
+/// use profibus_devices::omega::profile::{OmegaProfile, Options};
+/// use profibus_devices::Profile;
+///
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let options = Options {
+///     setpoints: Some(2),
+///     actual_values: Some(2),
+///     ..Options::default()
+/// };
+/// let drive = OmegaProfile::configure(options, Some(25))?;
+/// let gsd = drive.gsd();
+/// let cfg = gsd.chk_cfg(&gsd.select(&drive.modules())?)?;
+/// let _slave = drive.device(None)?; // a `profibus_dp::slave::Device`
+///
+/// // The master side: write a setpoint by name, read it back.
+/// let channels = drive.channels(&cfg)?;
+/// let mut outputs = vec![0u8; profibus_dp::cfg::totals(&cfg)?.output_bytes];
+/// channels.write_output("setpoint1", Value::Int(1500), &mut outputs)?;
+/// let setpoint = channels
+///     .decode(Direction::Output, &outputs)
+///     .find(|(c, _)| c.name == "setpoint1");
+/// assert_eq!(setpoint.map(|(_, v)| v), Some(Value::Int(1500)));
+/// # Ok(())
+/// # }
+/// ```
 pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
     /// The options, decoded from [`DeviceOptions`] (use
     /// `#[serde(default, deny_unknown_fields)]` so that a typo is an

@@ -65,6 +65,55 @@
 //! `[mqtt] safe_state` once (default `keep`: the last values stay), which
 //! is logged and, once the broker is back, reported in the status.
 //!
+//! # Example
+//!
+//! The core without a broker, on the simulated plant of `dpctl gateway
+//! --sim`: the bus file's slaves are emulated on virtual time, the
+//! gateway reads the master at every step and queues its publishes, and
+//! a client's write of a named channel reaches the drive, whose actual
+//! value follows.
+//!
+//! ```
+//! use profibus_devices::bus::ProfiledBus;
+//! use profibus_fdl::Instant;
+//! use profibus_gateway::sim::{slave_infos, SimPlant};
+//! use profibus_gateway::{Gateway, MqttSettings};
+//! use std::path::Path;
+//! use std::time::Duration;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let bus = ProfiledBus::parse(
+//!     Path::new("line.toml"),
+//!     "[master]\naddress = 2\nbaud = \"1.5M\"\n\
+//!      [[slave]]\naddress = 25\ndevice = \"omega\"\n\
+//!      [mqtt]\nwritable = [25]\n",
+//! )?;
+//! let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line")?;
+//! let mut gateway = Gateway::new(settings, slave_infos(&bus)?);
+//! let mut plant = SimPlant::new(&bus)?;
+//! gateway.connected(0);
+//! gateway.handle_message(
+//!     "profibus/line/25/outputs/set",
+//!     br#"{"channels": {"setpoint1": 1500}}"#,
+//!     0,
+//! );
+//! let mut actual = None;
+//! for ms in 1..=300u64 {
+//!     let now = Instant::ZERO + Duration::from_millis(ms);
+//!     plant.run_until(now);
+//!     gateway.step(plant.master(), now, ms);
+//!     while let Some(p) = gateway.poll_publish() {
+//!         if p.topic == "profibus/line/25/inputs" {
+//!             let v: serde_json::Value = serde_json::from_slice(&p.payload)?;
+//!             actual = v["values"]["actual1"].as_i64();
+//!         }
+//!     }
+//! }
+//! assert_eq!(actual, Some(1500));
+//! # Ok(())
+//! # }
+//! ```
+//!
 //! [`DpMaster`]: profibus_dp::master::DpMaster
 
 pub mod core;
