@@ -2,7 +2,8 @@
 //!
 //! (a)  Data_Exchange transactions per second with one slave over a socat
 //!      pty pair and through an unpaced `dpctl bus`: `dpctl master`
-//!      (default, `--busy-poll 300`, `--gather`) and pyprofibus's master
+//!      (default, `--busy-poll 300`, `--gather`, and with several poll
+//!      cycles per token visit, `alone_hold_bits = 3000`) and pyprofibus's master
 //!      against the same `dpctl slave`, next to the raw round trip of the
 //!      same path (a bare echo of a 13-byte telegram) as the physical
 //!      limit, with CPU seconds per 10 000 exchanges of each master.
@@ -187,7 +188,14 @@ fn line(dpctl: &Path, dir: &Path, kind: &Line, tag: &str) -> (PathBuf, PathBuf, 
 /// the slave's Data_Exchange count between the first status line in
 /// Data_Exchange and the last one, over `secs` seconds; CPU per exchange
 /// from the master's whole run (start-up included).
-fn dpctl_rate(dpctl: &Path, dir: &Path, kind: &Line, secs: f64, extra: &[&str]) -> Rate {
+fn dpctl_rate(
+    dpctl: &Path,
+    dir: &Path,
+    kind: &Line,
+    secs: f64,
+    extra: &[&str],
+    options: &str,
+) -> Rate {
     let (a, b, _line) = line(dpctl, dir, kind, "d");
     let _slave = start_slave(dpctl, &b);
     // One slave, one master: HSA = the master's address keeps the GAP
@@ -197,6 +205,7 @@ fn dpctl_rate(dpctl: &Path, dir: &Path, kind: &Line, secs: f64, extra: &[&str]) 
         &cfg,
         format!(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n\
+             [options]\n{options}\n\
              [[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
             repo().join("gsd/DPCTL_GEN.GSD").display()
         ),
@@ -468,22 +477,24 @@ fn main() {
             Line::Socat => "a socat pty pair",
             Line::Hub => "dpctl bus (unpaced)",
         };
-        let mut rows: Vec<[Rate; 5]> = vec![];
+        let mut rows: Vec<[Rate; 6]> = vec![];
         for _ in 0..rounds {
             let raw = Rate {
                 per_s: raw_echo_rate(&dpctl, &dir, &kind, n),
                 cpu_per_10k: 0.0,
             };
-            let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[]);
-            let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"]);
-            let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"]);
+            let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "");
+            let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"], "");
+            let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"], "");
+            let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 0");
             let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
             println!(
-                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
+                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
                 raw.per_s, ours.per_s, ours.cpu_per_10k, busy.per_s, busy.cpu_per_10k,
-                gather.per_s, gather.cpu_per_10k, py.per_s, py.cpu_per_10k
+                gather.per_s, gather.cpu_per_10k, each.per_s, each.cpu_per_10k, py.per_s,
+                py.cpu_per_10k
             );
-            rows.push([raw, ours, busy, gather, py]);
+            rows.push([raw, ours, busy, gather, py, each]);
         }
         let median = |i: usize, cpu: bool| {
             let mut v: Vec<f64> = rows
@@ -494,14 +505,27 @@ fn main() {
             v[v.len() / 2]
         };
         let (raw, py) = (median(0, false), median(4, false));
+        // The fastest a master can poll while keeping the line timing: the
+        // raw round trip plus the slave's min TSDR before its answer and
+        // the master's TID1 (TSYN + safety margin) before its next request.
+        let p = BusParams::defaults(Baud::B1500000);
+        let gaps = p.bits((p.min_tsdr + p.tid1()) as u64).as_secs_f64();
+        let floor = 1.0 / (1.0 / raw + gaps);
         println!("(a) Data_Exchange over {name}, 1 slave, medians of {rounds} rounds");
         println!("| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 |");
         println!("|---|---|---|---|---|");
         println!("| raw round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | | |");
+        println!(
+            "| line-timing floor (raw + min TSDR + TID1 = {:.1} µs) | {floor:.0} | {:.0} % | {:.2}× | |",
+            gaps * 1e6,
+            100.0 * floor / raw,
+            floor / py
+        );
         for (i, label) in [
             (1, "dpctl master"),
             (2, "dpctl master --busy-poll 300"),
             (3, "dpctl master --gather (benchmark option)"),
+            (5, "dpctl master, alone_hold_bits = 3000"),
             (4, "pyprofibus 1.13 master"),
         ] {
             let r = median(i, false);

@@ -366,8 +366,26 @@ fn two_masters_and_a_scanner_share_one_bus() {
             .find(|v| v["address"] == a)
             .map(|v| v["type"].as_str().unwrap().to_string())
     };
-    assert_eq!(kind(2).as_deref(), Some("active, in ring"));
-    assert_eq!(kind(5).as_deref(), Some("active, in ring"));
+    let events = |w: &mut Watch| -> Vec<String> {
+        while w.lines.next_line(Duration::from_millis(10)).is_some() {}
+        w.lines
+            .1
+            .iter()
+            .filter(|l| !l.contains("\"status\""))
+            .cloned()
+            .collect()
+    };
+    let (e2, e5) = (events(&mut l2), events(&mut l5));
+    assert_eq!(
+        kind(2).as_deref(),
+        Some("active, in ring"),
+        "{found:?}\nmaster 2: {e2:#?}\nmaster 5: {e5:#?}"
+    );
+    assert_eq!(
+        kind(5).as_deref(),
+        Some("active, in ring"),
+        "{found:?}\nmaster 2: {e2:#?}\nmaster 5: {e5:#?}"
+    );
     assert_eq!(kind(10).as_deref(), Some("passive"));
     let s11 = found.iter().find(|v| v["address"] == 11).unwrap();
     assert_eq!(s11["ident"], "0x0DCE");

@@ -6,6 +6,7 @@
 use profibus::devices::generic::{GenericDevice, InputPattern};
 use profibus::dp::master::{
     DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
+    ALONE_HOLD_BITS_FAST,
 };
 use profibus::dp::slave::{DpSlave, Features};
 use profibus::fdl::medium::MediumConfig;
@@ -50,10 +51,16 @@ struct Plant {
 }
 
 fn plant(slave_cfgs: &[(u8, &[u8])]) -> Plant {
+    plant_with(slave_cfgs, MasterOptions::default())
+}
+
+fn plant_with(slave_cfgs: &[(u8, &[u8])], options: MasterOptions) -> Plant {
     let params = BusParams::defaults(Baud::B1500000);
     let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
     let addrs: Vec<u8> = slave_cfgs.iter().map(|s| s.0).collect();
-    let dp = DpMaster::new(&master_cfg(2, params, &addrs)).unwrap();
+    let mut cfg = master_cfg(2, params, &addrs);
+    cfg.options = options;
+    let dp = DpMaster::new(&cfg).unwrap();
     let master = bus.add(ActiveStation::new(ActiveConfig::new(2, params), dp));
     let slaves = slave_cfgs
         .iter()
@@ -187,4 +194,161 @@ fn two_masters_each_with_their_own_slaves() {
     assert!(bus.station::<Master>(m2).app().cycle_stats().cycles > c2 + 20);
     assert!(bus.station::<Master>(m1).stats().tokens > 20);
     assert!(bus.station::<Master>(m2).stats().tokens > 20);
+}
+
+/// Steady-state figures of a plant over `window` of bus time after
+/// every slave reached Data_Exchange: (poll cycles, token passes, GAP
+/// polls, longest rotation).
+fn steady_state(p: &mut Plant, window: Duration) -> (u64, u64, u64, Duration) {
+    assert!(p.bus.run_while(Duration::from_secs(2), |b| {
+        let m = b.station::<Master>(p.master).app();
+        m.slave_addresses()
+            .all(|a| m.slave_state(a) == Some(SlaveState::DataExchange))
+    }));
+    let st0 = p.bus.station::<Master>(p.master).stats();
+    p.m().reset_cycle_stats();
+    p.bus.run_for(window);
+    let st = p.bus.station::<Master>(p.master).stats();
+    let cycles = p.m().cycle_stats().cycles;
+    (
+        cycles,
+        st.token_passes - st0.token_passes,
+        st.gap_polls - st0.gap_polls,
+        Duration::from_nanos(st.rotation_max_ns),
+    )
+}
+
+#[test]
+fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
+    let window = Duration::from_millis(500);
+    let fast = MasterOptions {
+        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        ..MasterOptions::default()
+    };
+    let mut hold = plant_with(&[(10, &CFG), (11, &CFG)], fast.clone());
+    let (cycles, passes, gaps, rotation) = steady_state(&mut hold, window);
+    // Two slaves with 2 bytes each way: about 580 bit a cycle, so about
+    // five cycles in each visit of ALONE_HOLD_BITS_FAST, still a GAP
+    // poll in every visit but the G after a sweep (a new master can join),
+    // and rotations no longer
+    // than that share plus a GAP poll, a Global_Control and the token
+    // (the figure includes the start-up).
+    let share = ALONE_HOLD_BITS_FAST as u64;
+    assert!(
+        cycles > 4 * passes,
+        "{cycles} cycles, {passes} token passes"
+    );
+    let g = hold.params.gap_factor as u64;
+    assert!(
+        gaps + g + 2 >= passes,
+        "{gaps} GAP polls, {passes} token passes"
+    );
+    let longest = hold
+        .params
+        .bits(share + 2 * hold.params.slot_time as u64 + 500);
+    assert!(rotation < longest, "rotation {rotation:?}");
+
+    let mut each = plant(&[(10, &CFG), (11, &CFG)]);
+    let (cycles_each, passes_each, _, _) = steady_state(&mut each, window);
+    // One token pass (to itself) per poll cycle, and so fewer cycles.
+    assert!(
+        passes_each + 2 >= cycles_each,
+        "{cycles_each} cycles, {passes_each} passes"
+    );
+    assert!(
+        cycles > cycles_each,
+        "{cycles} held vs {cycles_each} passing"
+    );
+}
+
+#[test]
+fn a_second_master_joins_a_master_that_holds_the_token_alone() {
+    let fast = MasterOptions {
+        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        ..MasterOptions::default()
+    };
+    let mut p = plant_with(&[(10, &CFG)], fast);
+    let params = p.params;
+    let m2 = p.bus.add(ActiveStation::new(
+        ActiveConfig::new(5, params),
+        DpMaster::new(&master_cfg(5, params, &[20])).unwrap(),
+    ));
+    let s20 = p.bus.add(slave(20, params, &CFG));
+    p.bus.set_online(m2, false);
+    p.bus.set_online(s20, false);
+    assert!(p.bus.run_while(Duration::from_secs(2), |b| {
+        let m = b.station::<Master>(p.master).app();
+        m.slave_state(10) == Some(SlaveState::DataExchange)
+    }));
+    let held = p.bus.station::<Master>(p.master).stats();
+    p.bus.run_for(Duration::from_millis(200));
+    let after = p.bus.station::<Master>(p.master).stats();
+    assert!(after.cycles - held.cycles > 3 * (after.token_passes - held.token_passes));
+    // Switched on: the holder's GAP polls find the newcomer, then the
+    // token goes round.
+    let now = p.bus.now();
+    p.bus.station_mut::<Master>(m2).restart(now);
+    p.bus.set_online(m2, true);
+    p.bus.set_online(s20, true);
+    assert!(p.bus.run_while(Duration::from_secs(20), |b| {
+        b.station::<Master>(m2).app().slave_state(20) == Some(SlaveState::DataExchange)
+    }));
+    let passes = p.bus.station::<Master>(p.master).stats().token_passes;
+    let c0 = p.m().cycle_stats().cycles;
+    p.bus.run_for(Duration::from_millis(100));
+    // No longer alone: the token passes after every poll cycle.
+    let passes = p.bus.station::<Master>(p.master).stats().token_passes - passes;
+    let cycles = p.m().cycle_stats().cycles - c0;
+    assert!(
+        cycles > 20 && passes + 2 >= cycles,
+        "{cycles} cycles, {passes} passes"
+    );
+    assert_eq!(p.m().slave_state(10), Some(SlaveState::DataExchange));
+}
+
+#[test]
+fn a_scanner_joining_two_masters_lists_both() {
+    use profibus::dp::scan::LiveListScan;
+    use profibus::fdl::wire::StationType;
+    let params = BusParams::defaults(Baud::B1500000);
+    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+    let m2 = bus.add(ActiveStation::new(
+        ActiveConfig::new(2, params),
+        DpMaster::new(&master_cfg(2, params, &[10])).unwrap(),
+    ));
+    let m5 = bus.add(ActiveStation::new(
+        ActiveConfig::new(5, params),
+        DpMaster::new(&master_cfg(5, params, &[11])).unwrap(),
+    ));
+    for a in [10, 11] {
+        bus.add(slave(a, params, &CFG));
+    }
+    let scan = bus.add(ActiveStation::new(
+        ActiveConfig::new(9, params),
+        LiveListScan::new(9),
+    ));
+    bus.set_online(scan, false);
+    assert!(bus.run_while(Duration::from_secs(2), |b| {
+        [(m2, 10), (m5, 11)].iter().all(|&(m, s)| {
+            b.station::<Master>(m).app().slave_state(s) == Some(SlaveState::DataExchange)
+        })
+    }));
+    let now = bus.now();
+    bus.station_mut::<ActiveStation<LiveListScan>>(scan)
+        .restart(now);
+    bus.set_online(scan, true);
+    assert!(bus.run_while(Duration::from_secs(30), |b| {
+        b.station::<ActiveStation<LiveListScan>>(scan)
+            .app()
+            .is_done()
+    }));
+    let found = bus
+        .station::<ActiveStation<LiveListScan>>(scan)
+        .app()
+        .stations()
+        .to_vec();
+    let kind = |a: u8| found.iter().find(|s| s.address == a).map(|s| s.station);
+    assert_eq!(kind(2), Some(StationType::ActiveInRing), "{found:?}");
+    assert_eq!(kind(5), Some(StationType::ActiveInRing), "{found:?}");
+    assert_eq!(kind(10), Some(StationType::Passive), "{found:?}");
 }

@@ -72,7 +72,11 @@ fn record_startup(dir: &TempDir) -> PathBuf {
     std::fs::write(
         &config,
         format!(
-            "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 10\ngsd = \"{}\"\n\
+            // The capture is under test, not lost-slave detection: a slave
+            // process the loaded VM does not schedule for a few ms must
+            // not drop out between the status line and the DP-V1 jobs.
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n[options]\nlost_after = 20\n\
+             [[slave]]\naddress = 10\ngsd = \"{}\"\n\
              modules = [\"2 words in/out\"]\nwatchdog_ms = 5000\ninitial_outputs = [1, 2, 3, 4]\n",
             gsd.display()
         ),

@@ -16,6 +16,9 @@
 //! reprobe_ms = 100       # how often a lost slave is probed
 //! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
 //! global_control_ms = 100  # repeat operate/clear Global_Control (default 100; 0 = only on change)
+//! alone_hold_bits = 0     # alone in the ring: poll cycles per token visit for up to this
+//!                         # many bit times (default 0: the token to itself after every
+//!                         # cycle; 3000 about doubles the polls of a single small slave)
 //!
 //! [[slave]]
 //! address = 8
@@ -115,6 +118,7 @@ struct RawOptions {
     reprobe_ms: Option<u64>,
     diag_interval_ms: Option<u64>,
     global_control_ms: Option<u64>,
+    alone_hold_bits: Option<u32>,
 }
 
 /// The keys of a `[[slave]]` table; any other key is a profile option
@@ -654,6 +658,7 @@ impl BusFile {
                 Some(v) => ms(Some(v)),
             },
             not_ready_limit: d.not_ready_limit,
+            alone_hold_bits: o.alone_hold_bits.unwrap_or(d.alone_hold_bits),
         };
         Ok(BusFile {
             path: path.to_path_buf(),

@@ -84,7 +84,10 @@ mod report;
 mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
-pub use config::{MasterConfig, MasterOptions, SlaveParams, DEFAULT_GLOBAL_CONTROL_INTERVAL};
+pub use config::{
+    MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
+    DEFAULT_GLOBAL_CONTROL_INTERVAL,
+};
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 pub use wait::{SlaveWait, StartupTimeout};
 
@@ -549,6 +552,10 @@ pub struct DpMaster {
     events: VecDeque<MasterEvent>,
     events_dropped: u64,
     job_sent_this_visit: bool,
+    /// Start of the current token visit.
+    visit_start: Instant,
+    /// [`MasterOptions::alone_hold_bits`] as a duration.
+    alone_hold: Duration,
     live: [Option<StationType>; 128],
     zeros: [u8; 244],
     req: [u8; 248],
@@ -627,6 +634,8 @@ impl DpMaster {
             events: VecDeque::with_capacity(EVENT_LIMIT),
             events_dropped: 0,
             job_sent_this_visit: false,
+            visit_start: Instant::ZERO,
+            alone_hold: cfg.params.bits(cfg.options.alone_hold_bits as u64),
             live: [None; 128],
             zeros: [0; 244],
             req: [0; 248],
@@ -1272,21 +1281,34 @@ impl DpMaster {
 
     fn start_visit(&mut self, now: Instant) {
         self.job_sent_this_visit = false;
+        self.visit_start = now;
         if self.cursor >= self.slaves.len() {
-            self.cursor = 0;
-            for s in &mut self.slaves {
-                s.chain = STARTUP_CHAIN;
-            }
-            if let Some(start) = self.cycle_start {
-                let ns = (now - start).as_nanos() as u64;
-                let c = &mut self.cycle_stats;
-                c.min_ns = if c.cycles == 0 { ns } else { c.min_ns.min(ns) };
-                c.max_ns = c.max_ns.max(ns);
-                c.sum_ns += ns;
-                c.cycles += 1;
-            }
-            self.cycle_start = Some(now);
+            self.start_poll_cycle(now);
         }
+        self.queue_cyclic_global_control(now);
+    }
+
+    /// Begin a new poll cycle (every slave once, from the first) and count
+    /// the cycle time of the one that ended.
+    fn start_poll_cycle(&mut self, now: Instant) {
+        self.cursor = 0;
+        for s in &mut self.slaves {
+            s.chain = STARTUP_CHAIN;
+        }
+        if let Some(start) = self.cycle_start {
+            let ns = (now - start).as_nanos() as u64;
+            let c = &mut self.cycle_stats;
+            c.min_ns = if c.cycles == 0 { ns } else { c.min_ns.min(ns) };
+            c.max_ns = c.max_ns.max(ns);
+            c.sum_ns += ns;
+            c.cycles += 1;
+        }
+        self.cycle_start = Some(now);
+    }
+
+    /// Queue the cyclic operate/clear Global_Control when its period has
+    /// passed.
+    fn queue_cyclic_global_control(&mut self, now: Instant) {
         if let Some(iv) = self.options.global_control_interval {
             if self.state != OperatingState::Stop
                 && self.next_gc.is_none_or(|t| now >= t)
@@ -1305,6 +1327,25 @@ impl DpMaster {
             }
         }
     }
+
+    /// Any slave due for a poll now (its Min_Slave_Interval passed, or its
+    /// probe time come)?
+    fn any_due(&self, now: Instant) -> bool {
+        (0..self.slaves.len()).any(|i| self.due(i, now))
+    }
+
+    /// The broadcast SDN request of a Global_Control.
+    fn global_control_request(&mut self, gc: GlobalControl) -> Request<'_> {
+        self.gc_bytes = gc.to_bytes();
+        self.inflight = Some(Inflight::GlobalControl);
+        Request {
+            da: consts::BROADCAST,
+            service: Service::SdnHigh,
+            dsap: Some(sap::GLOBAL_CONTROL),
+            ssap: Some(sap::MASTER),
+            data: &self.gc_bytes,
+        }
+    }
 }
 
 impl MasterApp for DpMaster {
@@ -1315,15 +1356,7 @@ impl MasterApp for DpMaster {
         }
         // Global_Control first: broadcast SDN.
         if let Some(gc) = self.gc_queue.pop_front() {
-            self.gc_bytes = gc.to_bytes();
-            self.inflight = Some(Inflight::GlobalControl);
-            return Some(Request {
-                da: consts::BROADCAST,
-                service: Service::SdnHigh,
-                dsap: Some(sap::GLOBAL_CONTROL),
-                ssap: Some(sap::MASTER),
-                data: &self.gc_bytes,
-            });
+            return Some(self.global_control_request(gc));
         }
         while self.cursor < self.slaves.len() {
             let i = self.cursor;
@@ -1335,12 +1368,39 @@ impl MasterApp for DpMaster {
         if ctx.high_only {
             return None;
         }
-        // After the pass: at most one acyclic request per visit.
-        if self.job_sent_this_visit {
-            return None;
+        // After the pass: at most one acyclic request per poll cycle.
+        if !self.job_sent_this_visit {
+            self.job_sent_this_visit = true;
+            if self.jobs_pending() {
+                return self.job_request();
+            }
         }
-        self.job_sent_this_visit = true;
-        self.job_request()
+        // Alone in the ring the token only comes back here: rather than
+        // pass it to itself after every poll cycle, start the next cycle
+        // at once when one more cycle as long as the last ends within the
+        // visit's share (alone_hold_bits) and the token hold time, and a
+        // slave is due. The visit still ends with time left, so its GAP
+        // poll (how a new master joins) is made.
+        let fits = self.cycle_start.is_some_and(|start| {
+            let end = now + (now - start);
+            end < ctx.hold_until && end <= self.visit_start + self.alone_hold
+        });
+        if ctx.alone && fits && self.any_due(now) {
+            self.start_poll_cycle(now);
+            self.queue_cyclic_global_control(now);
+            self.job_sent_this_visit = false;
+            if let Some(gc) = self.gc_queue.pop_front() {
+                return Some(self.global_control_request(gc));
+            }
+            while self.cursor < self.slaves.len() {
+                let i = self.cursor;
+                self.cursor += 1;
+                if self.due(i, now) {
+                    return Some(self.slave_request(i, now));
+                }
+            }
+        }
+        None
     }
 
     fn on_result(&mut self, now: Instant, r: &CycleResult<'_>) {

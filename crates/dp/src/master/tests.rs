@@ -32,6 +32,7 @@ fn ctx(now: u64, cycles: u32) -> TokenContext {
         high_only: false,
         hold_until: Instant::from_nanos(u64::MAX),
         cycles,
+        alone: false,
     }
 }
 

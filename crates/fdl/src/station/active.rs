@@ -254,6 +254,11 @@ pub struct TokenContext {
     pub hold_until: Instant,
     /// Cycles already done in this token visit.
     pub cycles: u32,
+    /// No other master is in the ring (the next station NS is this
+    /// station): the token only ever comes back here, so the application
+    /// may start further cycles while the token hold time lasts instead
+    /// of passing the token to itself after each of its polls.
+    pub alone: bool,
 }
 
 /// The application behind an active station (the DP master core, a live
@@ -1138,12 +1143,14 @@ impl Core {
     fn next_action<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
         let time_left = now < self.hold_until;
         let high_only = !time_left && self.cycles_this_visit == 0;
+        let alone = self.ns == self.ts();
         if time_left || high_only {
             let ctx = TokenContext {
                 now,
                 high_only,
                 hold_until: self.hold_until,
                 cycles: self.cycles_this_visit,
+                alone,
             };
             let sent = app
                 .poll_request(&ctx)
@@ -1155,35 +1162,46 @@ impl Core {
                 return;
             }
         }
-        if self.gap_polled_this_visit {
-            // One GAP poll per token visit.
-        } else if time_left && self.gap_wait == 0 {
-            if let Some(address) = self.next_gap_address() {
-                self.gap_polled_this_visit = true;
-                self.stats.gap_polls += 1;
-                let ts = self.ts();
-                let end = self.send(
-                    now,
-                    Telegram::Data(DataTelegram {
-                        da: address,
-                        sa: ts,
-                        fc: FunctionCode::request(RequestKind::FdlStatus),
-                        dsap: None,
-                        ssap: None,
-                        data: &[],
-                        format: None,
-                    }),
-                );
-                self.state = State::AwaitStatus {
-                    address,
-                    deadline: end + self.gap_slot(),
-                };
+        if !self.gap_polled_this_visit && time_left && self.gap_wait == 0 {
+            if self.try_gap_poll(now) {
                 return;
             }
-        } else if self.gap_wait > 0 {
+        } else if !self.gap_polled_this_visit && self.gap_wait > 0 {
             self.gap_wait -= 1;
         }
         self.pass_token(now, 0);
+    }
+
+    /// Send this visit's GAP poll (FDL_Status to the next address of the
+    /// GAP), if one is due: at most one per token visit, none while the
+    /// GAP factor is counting. Returns whether it was sent.
+    fn try_gap_poll(&mut self, now: Instant) -> bool {
+        if self.gap_polled_this_visit || self.gap_wait > 0 {
+            return false;
+        }
+        let Some(address) = self.next_gap_address() else {
+            return false;
+        };
+        self.gap_polled_this_visit = true;
+        self.stats.gap_polls += 1;
+        let ts = self.ts();
+        let end = self.send(
+            now,
+            Telegram::Data(DataTelegram {
+                da: address,
+                sa: ts,
+                fc: FunctionCode::request(RequestKind::FdlStatus),
+                dsap: None,
+                ssap: None,
+                data: &[],
+                format: None,
+            }),
+        );
+        self.state = State::AwaitStatus {
+            address,
+            deadline: end + self.gap_slot(),
+        };
+        true
     }
 
     /// The next address of the GAP sweep, or `None` when the sweep ended

@@ -192,27 +192,32 @@ impl<'a> DataTelegram<'a> {
             needed: len,
             available,
         })?;
-        buf[0] = sd;
-        if head == 4 {
+        // Header, SAPs and the sum of what the FCS covers in one pass; the
+        // data unit is copied and summed on its own (no second read of the
+        // written bytes, no index checks per byte).
+        let (da, sa, fc) = (self.da_byte(), self.sa_byte(), self.fc.to_byte());
+        let mut sum = da.wrapping_add(sa).wrapping_add(fc);
+        let rest = if head == 4 {
             let le = (n + 3) as u8;
-            buf[1..4].copy_from_slice(&[le, le, SD2]);
+            let (h, rest) = buf.split_at_mut(7);
+            h.copy_from_slice(&[sd, le, le, SD2, da, sa, fc]);
+            rest
+        } else {
+            let (h, rest) = buf.split_at_mut(4);
+            h.copy_from_slice(&[sd, da, sa, fc]);
+            rest
+        };
+        let mut rest = rest;
+        for sap in [self.dsap, self.ssap].into_iter().flatten() {
+            let (b, r) = rest.split_at_mut(1);
+            b[0] = sap;
+            sum = sum.wrapping_add(sap);
+            rest = r;
         }
-        buf[head] = self.da_byte();
-        buf[head + 1] = self.sa_byte();
-        buf[head + 2] = self.fc.to_byte();
-        let mut i = head + 3;
-        if let Some(s) = self.dsap {
-            buf[i] = s;
-            i += 1;
-        }
-        if let Some(s) = self.ssap {
-            buf[i] = s;
-            i += 1;
-        }
-        buf[i..i + self.data.len()].copy_from_slice(self.data);
-        i += self.data.len();
-        buf[i] = fcs(&buf[head..i]);
-        buf[i + 1] = ED;
+        let (unit, tail) = rest.split_at_mut(self.data.len());
+        unit.copy_from_slice(self.data);
+        sum = sum.wrapping_add(fcs(self.data));
+        tail.copy_from_slice(&[sum, ED]);
         Ok(len)
     }
 
