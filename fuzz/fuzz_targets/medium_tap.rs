@@ -26,11 +26,23 @@ fuzz_target!(|data: &[u8]| {
     let faults = head[2] & 0x80 != 0;
     let cfg = MediumConfig {
         baud,
-        drop: if faults { (head[2] & 0x0F) as f64 / 64.0 } else { 0.0 },
-        flip_ber: if faults { ((head[2] >> 4) & 0x07) as f64 / 256.0 } else { 0.0 },
+        drop: if faults {
+            (head[2] & 0x0F) as f64 / 64.0
+        } else {
+            0.0
+        },
+        flip_ber: if faults {
+            ((head[2] >> 4) & 0x07) as f64 / 256.0
+        } else {
+            0.0
+        },
         noise_rate: if faults { head[3] as f64 * 10.0 } else { 0.0 },
         seed: head[3] as u64,
-        collisions: if head[2] & 0x40 != 0 { Collisions::Serialize } else { Collisions::Garble },
+        collisions: if head[2] & 0x40 != 0 {
+            Collisions::Serialize
+        } else {
+            Collisions::Garble
+        },
     };
     let clean = !faults && cfg.collisions == Collisions::Serialize;
     let mut m = Medium::new(stations, cfg);
@@ -41,8 +53,12 @@ fuzz_target!(|data: &[u8]| {
     let mut got = vec![Vec::new(); stations];
     let mut delivered = Vec::new();
     let mut tapped = Vec::new();
-    let deliver = |m: &mut Medium, t: Instant, tap: &mut Tap, last_at: &mut Instant,
-                       got: &mut Vec<Vec<u8>>, delivered: &mut Vec<u8>| {
+    let deliver = |m: &mut Medium,
+                   t: Instant,
+                   tap: &mut Tap,
+                   last_at: &mut Instant,
+                   got: &mut Vec<Vec<u8>>,
+                   delivered: &mut Vec<u8>| {
         while let Some(d) = m.poll_delivery(t) {
             assert!(!d.bytes.is_empty());
             assert!(d.at >= *last_at && d.at <= t);
@@ -70,7 +86,14 @@ fuzz_target!(|data: &[u8]| {
         now = t;
         m.transmit(now, from, bytes);
         sent[from].extend_from_slice(bytes);
-        deliver(&mut m, now, &mut tap, &mut last_at, &mut got, &mut delivered);
+        deliver(
+            &mut m,
+            now,
+            &mut tap,
+            &mut last_at,
+            &mut got,
+            &mut delivered,
+        );
         while let Some(ev) = tap.poll() {
             match ev {
                 TapEvent::Telegram { bytes, .. } | TapEvent::Skipped { bytes, .. } => {

@@ -34,6 +34,7 @@ fn device(sel: u8) -> GenericDevice {
         alarms: false,
         fail_safe: sel & 4 != 0,
         max_diag_len: 6 + (sel >> 3),
+        c1_max_data_len: if sel & 0x20 != 0 { 16 } else { 240 },
     };
     let pattern = if sel & 0x80 != 0 {
         InputPattern::Counter
@@ -77,23 +78,23 @@ fuzz_target!(|data: &[u8]| {
             slave.handle_timeout(now);
         }
         let prm;
-        let (da, sa, fc, dsap, ssap, body): (u8, u8, u8, Option<u8>, Option<u8>, &[u8]) =
-            match kind {
-                0 => {
-                    prm = good_prm(dpv1);
-                    (8, 2, 0x6D, Some(61), Some(62), &prm)
-                }
-                1 => (8, 2, 0x5D, Some(62), Some(62), &CFG),
-                2 => (8, 2, 0x7D, None, None, &body[..body.len().min(outputs_len)]),
-                _ => (
-                    da & 0x7F,
-                    sa & 0x7F,
-                    fc,
-                    (dsap != 0xFF).then_some(dsap),
-                    (ssap != 0xFF).then_some(ssap),
-                    body,
-                ),
-            };
+        let (da, sa, fc, dsap, ssap, body): (u8, u8, u8, Option<u8>, Option<u8>, &[u8]) = match kind
+        {
+            0 => {
+                prm = good_prm(dpv1);
+                (8, 2, 0x6D, Some(61), Some(62), &prm)
+            }
+            1 => (8, 2, 0x5D, Some(62), Some(62), &CFG),
+            2 => (8, 2, 0x7D, None, None, &body[..body.len().min(outputs_len)]),
+            _ => (
+                da & 0x7F,
+                sa & 0x7F,
+                fc,
+                (dsap != 0xFF).then_some(dsap),
+                (ssap != 0xFF).then_some(ssap),
+                body,
+            ),
+        };
         let req = DataTelegram {
             da,
             sa,
@@ -119,13 +120,19 @@ fuzz_target!(|data: &[u8]| {
         }
         if slave.state() != SlaveState::DataExch {
             assert!(slave.outputs().iter().all(|&b| b == 0), "stale outputs");
-            assert!(slave.device().outputs().iter().all(|&b| b == 0), "stale device outputs");
+            assert!(
+                slave.device().outputs().iter().all(|&b| b == 0),
+                "stale device outputs"
+            );
         }
         while slave.poll_event().is_some() {}
     }
 
     // The same bytes as a line: framing, FCB rule, then the slave.
-    let mut st = PassiveStation::new(DpSlave::new(device(sel), 8), BusParams::defaults(Baud::B19200));
+    let mut st = PassiveStation::new(
+        DpSlave::new(device(sel), 8),
+        BusParams::defaults(Baud::B19200),
+    );
     let mut t = Instant::ZERO;
     for chunk in data[1..].chunks(37) {
         t += Duration::from_micros(300);

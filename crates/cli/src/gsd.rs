@@ -5,7 +5,7 @@ use crate::describe::hex;
 use anyhow::bail;
 use profibus_dp::cfg::IoLen;
 use profibus_dp::gsd::{
-    Allowed, DiagKind, Diagnostic, Gsd, GsdError, Module, ParamInstance, ParseOptions, Parsed,
+    Allowed, Diagnostic, FileDiagnostic, Gsd, GsdError, Module, ParamInstance, ParseOptions, Parsed,
 };
 use profibus_fdl::timing::Baud;
 use serde_json::{json, Value};
@@ -67,35 +67,17 @@ fn opts(strict: bool) -> ParseOptions {
     ParseOptions { lenient: !strict }
 }
 
-/// `FILE:LINE:COL: severity: message` (or `FILE: …` for the whole file).
-fn diag_line(file: &Path, severity: &str, d: &Diagnostic) -> String {
-    if d.pos.line == 0 {
-        format!("{}: {severity}: {}", file.display(), d.message)
-    } else {
-        format!("{}:{}: {severity}: {}", file.display(), d.pos, d.message)
+/// `d` of `file` as `gsd check` prints it.
+fn located<'a>(file: &'a Path, severity: &'static str, d: &'a Diagnostic) -> FileDiagnostic<'a> {
+    FileDiagnostic {
+        file,
+        severity,
+        diagnostic: d,
     }
 }
 
-fn diag_json(file: &Path, severity: &str, d: &Diagnostic) -> Value {
-    json!({
-        "file": file.display().to_string(),
-        "line": d.pos.line,
-        "col": d.pos.col,
-        "severity": severity,
-        "kind": kind_name(d.kind),
-        "message": d.message,
-    })
-}
-
-fn kind_name(k: DiagKind) -> String {
-    match k {
-        DiagKind::Io => "io".into(),
-        DiagKind::TooLarge => "too-large".into(),
-        DiagKind::Syntax => "syntax".into(),
-        DiagKind::Quirk(q) => format!("quirk:{q:?}"),
-        DiagKind::UnknownKeyword => "unknown-keyword".into(),
-        DiagKind::Semantic => "semantic".into(),
-    }
+fn diag_json(file: &Path, severity: &'static str, d: &Diagnostic) -> Value {
+    serde_json::to_value(located(file, severity, d)).unwrap_or(Value::Null)
 }
 
 fn fail(file: &Path, e: &GsdError) -> anyhow::Error {
@@ -113,13 +95,13 @@ fn show(a: ShowArgs) -> anyhow::Result<()> {
         Ok(p) => p,
         Err(e) => {
             for d in &e.errors {
-                eprintln!("{}", diag_line(&a.file, "error", d));
+                eprintln!("{}", located(&a.file, "error", d));
             }
             return Err(fail(&a.file, &e));
         }
     };
     for w in &parsed.warnings {
-        eprintln!("{}", diag_line(&a.file, "warning", w));
+        eprintln!("{}", located(&a.file, "warning", w));
     }
     if a.json {
         println!("{}", show_json(&a.file, &parsed));
@@ -459,37 +441,19 @@ fn show_json(file: &Path, parsed: &Parsed) -> Value {
     })
 }
 
-/// Problems of the file's modules beyond syntax: a module that alone
-/// breaks the limits. A modular station takes it with others, a compact
-/// station as its one configuration (its modules are alternatives).
-fn module_problems(g: &Gsd) -> Vec<String> {
-    let mut out = Vec::new();
-    for (i, m) in g.modules.iter().enumerate() {
-        for p in g.check_selection(&[i]) {
-            out.push(format!("module {i} `{}` alone: {p}", m.name));
-        }
-    }
-    out
-}
-
 fn check(a: CheckArgs) -> anyhow::Result<()> {
-    let emit = |severity: &str, d: &Diagnostic| {
+    let emit = |severity: &'static str, d: &Diagnostic| {
+        let fd = located(&a.file, severity, d);
         if a.json {
-            println!("{}", diag_json(&a.file, severity, d));
+            println!("{}", crate::common::json_line(&fd));
         } else {
-            println!("{}", diag_line(&a.file, severity, d));
+            println!("{fd}");
         }
     };
     match Gsd::from_file(&a.file, opts(a.strict)) {
         Ok(parsed) => {
             let mut warnings = parsed.warnings.clone();
-            for message in module_problems(&parsed.gsd) {
-                warnings.push(Diagnostic {
-                    pos: Default::default(),
-                    kind: DiagKind::Semantic,
-                    message,
-                });
-            }
+            warnings.extend(parsed.gsd.module_problems());
             for w in &warnings {
                 emit("warning", w);
             }
@@ -504,7 +468,7 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
             Ok(())
         }
         Err(e) => {
-            let mut all: Vec<(&str, &Diagnostic)> = e
+            let mut all: Vec<(&'static str, &Diagnostic)> = e
                 .errors
                 .iter()
                 .map(|d| ("error", d))

@@ -208,6 +208,29 @@ impl DeviceOptions {
     }
 }
 
+/// The most a file named in a profile's options (a table, a terminals,
+/// tags or script file) may have, in bytes (1 MiB: such files are a few
+/// KB; parsing TOML costs up to some 50 times the text's size).
+pub const MAX_OPTION_FILE: u64 = 1 << 20;
+
+/// The UTF-8 text of a file named in a profile's options, at most
+/// [`MAX_OPTION_FILE`] bytes: a file that cannot be read is
+/// [`ProfileError::File`], one too large or not UTF-8
+/// [`ProfileError::Table`].
+pub fn read_option_file(path: &std::path::Path) -> Result<String, ProfileError> {
+    use profibus_dp::file::{read_text, ReadFileError};
+    read_text(path, MAX_OPTION_FILE, "a device option file").map_err(|e| match e {
+        ReadFileError::Io(source) => ProfileError::File {
+            path: path.into(),
+            source,
+        },
+        e => ProfileError::Table {
+            path: path.into(),
+            message: e.to_string(),
+        },
+    })
+}
+
 /// Read the table file `path` (a profile option) and parse it with
 /// `parse`: a missing file is [`ProfileError::File`], a bad one
 /// [`ProfileError::Table`].
@@ -215,10 +238,7 @@ pub fn read_table<T, E: std::fmt::Display>(
     path: &std::path::Path,
     parse: impl FnOnce(&str) -> Result<T, E>,
 ) -> Result<T, ProfileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-        path: path.into(),
-        source,
-    })?;
+    let text = read_option_file(path)?;
     parse(&text).map_err(|e| ProfileError::Table {
         path: path.into(),
         message: e.to_string(),

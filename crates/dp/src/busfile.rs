@@ -57,6 +57,8 @@
 //! [`BusParams::defaults`], raised to the largest `MaxTsdr` of the slaves
 //! for the baud rate (with TSL = max TSDR + 15 at least) unless the file
 //! sets them. Every error names the file and line and says what is wrong.
+//! A file over [`MAX_BUS_FILE`] bytes or not UTF-8 is refused before it is
+//! parsed.
 
 use crate::gsd::{Gsd, ParseOptions, PrmValue};
 use crate::master::{MasterConfig, MasterOptions, SlaveParams};
@@ -298,7 +300,9 @@ impl Ctx<'_> {
     }
 }
 
-const MAX_BUS_FILE: u64 = 4 << 20;
+/// The largest bus file read, in bytes (1 MiB; a bus file of 125 slaves
+/// is some 20 KB). Parsing costs up to some 50 times the file's size.
+pub const MAX_BUS_FILE: u64 = 1 << 20;
 
 impl BusFile {
     /// Read and check a bus file without device profiles; see the module
@@ -320,14 +324,15 @@ impl BusFile {
             column: 0,
             message: m,
         };
-        let meta = std::fs::metadata(path).map_err(|e| io(format!("cannot read: {e}")))?;
-        if meta.len() > MAX_BUS_FILE {
-            return Err(io(format!(
-                "{} bytes is too large for a bus file",
-                meta.len()
-            )));
-        }
-        let text = std::fs::read_to_string(path).map_err(|e| io(format!("cannot read: {e}")))?;
+        let text =
+            crate::file::read_text(path, MAX_BUS_FILE, "a bus file").map_err(|e| match e {
+                crate::file::ReadFileError::NotUtf8 { line, column, .. } => BusFileError {
+                    line,
+                    column,
+                    ..io(e.to_string())
+                },
+                e => io(e.to_string()),
+            })?;
         Self::parse_with(path, &text, resolver)
     }
 

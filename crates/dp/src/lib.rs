@@ -30,6 +30,7 @@ pub mod control;
 pub mod describe;
 pub mod diag;
 pub mod dpv1;
+pub mod file;
 pub mod gsd;
 pub mod master;
 pub mod monitor;

@@ -3,7 +3,8 @@
 //! driver hands in messages and the time, and sends what
 //! [`Gateway::poll_publish`] returns.
 
-use crate::settings::{MqttSettings, PublishMode, SafeState};
+use crate::outage::Outage;
+use crate::settings::{MqttSettings, PublishMode};
 use profibus_devices::channels::{ChannelMap, Direction, Value};
 use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, Dialect, PKW_LEN};
@@ -292,10 +293,23 @@ pub enum RequestError {
     /// Too many requests waiting for the slave.
     #[error("slave {0}: too many requests waiting")]
     Busy(u8),
+    /// A payload larger than [`MAX_PAYLOAD`].
+    #[error("payload of {size} bytes is larger than the {limit} bytes a request may have")]
+    TooLarge {
+        /// The payload's size.
+        size: usize,
+        /// [`MAX_PAYLOAD`].
+        limit: usize,
+    },
     /// The job ran and failed.
     #[error("{0}")]
     Failed(String),
 }
+
+/// The largest request payload the gateway reads, in bytes (an output
+/// image is at most 244 bytes, a DP-V1 record 240: this leaves room for
+/// hex, JSON and names, and bounds what one message can cost).
+pub const MAX_PAYLOAD: usize = 64 * 1024;
 
 fn malformed(text: impl Into<String>) -> RequestError {
     RequestError::Malformed(text.into())
@@ -314,6 +328,13 @@ fn publishable(t: &str) -> bool {
 /// topic for the answer instead of the slave's response topic). An
 /// output write may also be a bare hex string (the whole image).
 pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Request, RequestError>) {
+    if payload.len() > MAX_PAYLOAD {
+        let e = RequestError::TooLarge {
+            size: payload.len(),
+            limit: MAX_PAYLOAD,
+        };
+        return (ReplyTo::default(), Err(e));
+    }
     let text = match std::str::from_utf8(payload) {
         Ok(t) => t,
         Err(_) => return (ReplyTo::default(), Err(malformed("payload is not UTF-8"))),
@@ -560,12 +581,8 @@ pub struct Gateway {
     online: bool,
     /// The master state in the last status published (`None`: due).
     status_master: Option<OperatingState>,
-    /// Since when the broker is away (ms).
-    offline_since: Option<u64>,
-    /// When the safe state was applied in this or the last outage (ms).
-    safe_applied: Option<u64>,
-    /// The master's state before [`SafeState::Clear`] put it in Clear.
-    cleared_from: Option<OperatingState>,
+    /// The broker outage and the outputs' safe state.
+    outage: Outage,
 }
 
 impl Gateway {
@@ -593,9 +610,7 @@ impl Gateway {
             next_interval_ms: 0,
             online: false,
             status_master: None,
-            offline_since: None,
-            safe_applied: None,
-            cleared_from: None,
+            outage: Outage::default(),
         }
     }
 
@@ -623,7 +638,7 @@ impl Gateway {
     /// the status (online) and every retained slave topic are published.
     pub fn connected(&mut self, _ts_ms: u64) {
         self.online = true;
-        self.offline_since = None;
+        self.outage.connected();
         self.status_master = None;
         for e in &mut self.slaves {
             e.published = Published::default();
@@ -633,10 +648,7 @@ impl Gateway {
     /// The connection was lost at `ts_ms`: nothing is queued until
     /// [`Gateway::connected`]; after `outputs_timeout` the safe state.
     pub fn disconnected(&mut self, ts_ms: u64) {
-        if self.online || self.offline_since.is_none() {
-            self.offline_since = Some(ts_ms);
-            self.safe_applied = None;
-        }
+        self.outage.disconnected(self.online, ts_ms);
         self.online = false;
         self.out.clear();
     }
@@ -807,7 +819,7 @@ impl Gateway {
                 _ => {}
             }
         }
-        self.safe_state(m, ts_ms);
+        self.outage.step(&self.settings, self.online, m, ts_ms);
         for q in std::mem::take(&mut self.pending) {
             let outcome = self.carry_out(m, &q);
             if let Some(o) = outcome {
@@ -893,56 +905,12 @@ impl Gateway {
         Ok(())
     }
 
-    /// Without a broker for `outputs_timeout`: the safe state, once per
-    /// outage; with the broker back after [`SafeState::Clear`]: the
-    /// master's state from before.
-    fn safe_state(&mut self, m: &mut DpMaster, ts_ms: u64) {
-        if self.online {
-            if let Some(s) = self.cleared_from.take() {
-                tracing::info!(state = s.as_str(), "broker back: master leaves Clear");
-                m.set_operating_state(s);
-            }
-            return;
-        }
-        let since = *self.offline_since.get_or_insert(ts_ms);
-        let Some(timeout) = self.settings.outputs_timeout else {
-            return;
-        };
-        if self.safe_applied.is_some() || ts_ms < since + timeout.as_millis() as u64 {
-            return;
-        }
-        self.safe_applied = Some(ts_ms);
-        let s = self.settings.safe_state;
-        tracing::warn!(
-            safe_state = s.as_str(),
-            "no broker for {} ms: outputs to the safe state",
-            timeout.as_millis()
-        );
-        match s {
-            SafeState::Keep => {}
-            SafeState::Zero => {
-                for w in &self.settings.writable {
-                    if let Some(len) = m.outputs(w.address).map(<[u8]>::len) {
-                        m.set_outputs(w.address, &vec![0; len]);
-                    }
-                }
-            }
-            SafeState::Clear => {
-                let before = m.operating_state();
-                if before != OperatingState::Clear {
-                    self.cleared_from = Some(before);
-                    m.set_operating_state(OperatingState::Clear);
-                }
-            }
-        }
-    }
-
     fn status(&self, m: &DpMaster, ts_ms: u64) -> serde_json::Value {
         let slaves: Vec<u8> = self.slaves.iter().map(|e| e.info.address).collect();
         let writable: Vec<u8> = self.settings.writable.iter().map(|w| w.address).collect();
         let mut o = json!({"state": "online", "master": m.operating_state().as_str(), "ts": ts_ms,
                            "slaves": slaves, "writable": writable});
-        if let Some(at) = self.safe_applied {
+        if let Some(at) = self.outage.safe_applied() {
             o["outputs_timeout"] =
                 json!({"safe_state": self.settings.safe_state.as_str(), "at": at});
         }
@@ -1104,6 +1072,7 @@ fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Targe
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::settings::SafeState;
     use profibus_devices::channels::ChannelType;
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};

@@ -1,9 +1,17 @@
-//! PROFIBUS-DP to MQTT: a DP master's slaves as JSON topics on a broker.
+//! PROFIBUS-DP to MQTT: a DP master's slaves as JSON topics or a Sparkplug B edge node on a broker.
 //!
 //! A library for gateway makers, used by `dpctl gateway`. The core,
 //! [`Gateway`], is sans-IO: it reads a running [`DpMaster`] at a cycle
 //! boundary and queues [`Publish`]es, and it turns messages into output
 //! writes; [`MqttLink`] is the thin driver on the `rumqttc` client.
+//!
+//! # Sparkplug B mode
+//!
+//! With `--sparkplug GROUP/EDGE` (or `sparkplug` in `[mqtt]`) the
+//! master is a Sparkplug B edge node instead, [`EdgeNode`]: protobuf
+//! payloads under `spBv1.0/…`, births and deaths, DCMD writes. Topics,
+//! metrics, datatypes and what is not supported: [`sparkplug`]. Both
+//! cores implement [`Session`], the interface the link and drivers use.
 //!
 //! # Topics (plain JSON mode)
 //!
@@ -118,6 +126,7 @@
 
 pub mod core;
 pub mod link;
+pub mod outage;
 pub mod settings;
 pub mod sim;
 pub mod sparkplug;

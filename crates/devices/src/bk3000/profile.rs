@@ -69,10 +69,7 @@ pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
         (Some(_), Some(_)) => return Err(invalid("give --terminals or a terminals file, not both")),
         (Some(TerminalList::List(v)), None) => v.join(","),
         (Some(TerminalList::Text(t)), None) => t.clone(),
-        (None, Some(path)) => std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-            path: path.clone(),
-            source,
-        })?,
+        (None, Some(path)) => crate::profile::read_option_file(path)?,
         (None, None) => {
             return Err(invalid(
                 "give the terminal strip: --terminals KL1104,KL2134,...,KL9010 (plug order, end terminal KL9010 last)",

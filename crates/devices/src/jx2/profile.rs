@@ -87,10 +87,7 @@ consistent_outputs, consistent_output_offset";
         Plc::new(options.module_number).map_err(|e| ProfileError::Invalid(e.to_string()))?;
         let script = match &options.script {
             Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-                    path: path.clone(),
-                    source,
-                })?;
+                let text = crate::profile::read_option_file(path)?;
                 Interpreter::script(&text).map_err(|e| ProfileError::Table {
                     path: path.clone(),
                     message: e.to_string(),

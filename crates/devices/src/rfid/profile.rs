@@ -49,10 +49,7 @@ the reader's timing; rewritten when a tag's memory changes or a tag enters or le
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
         let field = match &options.tags {
             Some(path) => {
-                let text = std::fs::read_to_string(path).map_err(|source| ProfileError::File {
-                    path: path.clone(),
-                    source,
-                })?;
+                let text = crate::profile::read_option_file(path)?;
                 TagField::parse(&text).map_err(|e| ProfileError::Table {
                     path: path.clone(),
                     message: e.to_string(),

@@ -33,6 +33,10 @@ pub const MAX_BLOCKS: usize = 256;
 /// Longest UID in bytes.
 pub const MAX_UID_LEN: usize = 10;
 
+/// The most tags a tags file may list (a reader's field holds one tag
+/// at a time; the file is a test fixture, not a database).
+pub const MAX_TAGS: usize = 1024;
+
 /// What is wrong with a tags file or a tag description.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum TagsError {
@@ -63,6 +67,9 @@ pub enum TagsError {
         /// The text.
         text: String,
     },
+    /// More tags than [`MAX_TAGS`].
+    #[error("{0} tags; a tags file may list at most {MAX_TAGS}")]
+    TooMany(usize),
     /// More than one tag marked `in_field`.
     #[error("tags {0} and {1} are both in the field; the reader sees one tag at a time")]
     TwoInField(String, String),
@@ -205,6 +212,9 @@ impl TagField {
             in_field: None,
             timing: raw.reader,
         };
+        if raw.tags.len() > MAX_TAGS {
+            return Err(TagsError::TooMany(raw.tags.len()));
+        }
         for t in raw.tags {
             let uid = parse_uid(&t.uid)?;
             let name = hex(&uid);

@@ -178,6 +178,82 @@ impl fmt::Display for Diagnostic {
     }
 }
 
+impl DiagKind {
+    /// A short name for scripts: `io`, `too-large`, `syntax`,
+    /// `quirk:NAME`, `unknown-keyword`, `semantic`.
+    pub fn name(self) -> String {
+        match self {
+            DiagKind::Io => "io".into(),
+            DiagKind::TooLarge => "too-large".into(),
+            DiagKind::Syntax => "syntax".into(),
+            DiagKind::Quirk(q) => format!("quirk:{q:?}"),
+            DiagKind::UnknownKeyword => "unknown-keyword".into(),
+            DiagKind::Semantic => "semantic".into(),
+        }
+    }
+}
+
+/// A [`Diagnostic`] of a named file with its severity, as `dpctl gsd
+/// check` prints it: `Display` is `FILE:LINE:COL: severity: message`
+/// (`FILE: …` for the whole file); with the feature `serde` it
+/// serialises as `{file, line, col, severity, kind, message}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FileDiagnostic<'a> {
+    /// The file.
+    pub file: &'a std::path::Path,
+    /// `error` or `warning`.
+    pub severity: &'static str,
+    /// The diagnostic.
+    pub diagnostic: &'a Diagnostic,
+}
+
+impl fmt::Display for FileDiagnostic<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (file, d) = (self.file.display(), self.diagnostic);
+        if d.pos.line == 0 {
+            write!(f, "{file}: {}: {}", self.severity, d.message)
+        } else {
+            write!(f, "{file}:{}: {}: {}", d.pos, self.severity, d.message)
+        }
+    }
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for FileDiagnostic<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let d = self.diagnostic;
+        let mut st = s.serialize_struct("FileDiagnostic", 6)?;
+        st.serialize_field("file", &self.file.display().to_string())?;
+        st.serialize_field("line", &d.pos.line)?;
+        st.serialize_field("col", &d.pos.col)?;
+        st.serialize_field("severity", self.severity)?;
+        st.serialize_field("kind", &d.kind.name())?;
+        st.serialize_field("message", &d.message)?;
+        st.end()
+    }
+}
+
+impl Gsd {
+    /// Problems of the file's modules beyond syntax: each module that
+    /// alone breaks the limits (a modular station takes it with others,
+    /// a compact station as its one configuration), as semantic warnings
+    /// of the whole file.
+    pub fn module_problems(&self) -> Vec<Diagnostic> {
+        let mut out = Vec::new();
+        for (i, m) in self.modules.iter().enumerate() {
+            for p in self.check_selection(&[i]) {
+                out.push(Diagnostic {
+                    pos: Pos::default(),
+                    kind: DiagKind::Semantic,
+                    message: format!("module {i} `{}` alone: {p}", m.name),
+                });
+            }
+        }
+        out
+    }
+}
+
 /// A parsed GSD file with the warnings the parser gave.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Parsed {

@@ -137,11 +137,11 @@ impl Parser {
     // ---- diagnostics ----
 
     fn error(&mut self, pos: Pos, kind: DiagKind, message: String) {
-        self.errors.push(Diagnostic { pos, kind, message });
+        push_capped(&mut self.errors, Diagnostic { pos, kind, message });
     }
 
     fn warn(&mut self, pos: Pos, kind: DiagKind, message: String) {
-        self.warnings.push(Diagnostic { pos, kind, message });
+        push_capped(&mut self.warnings, Diagnostic { pos, kind, message });
     }
 
     /// A quirk: a warning when lenient, an error when strict.
@@ -152,9 +152,9 @@ impl Parser {
             message,
         };
         if self.lenient {
-            self.warnings.push(d);
+            push_capped(&mut self.warnings, d);
         } else {
-            self.errors.push(d);
+            push_capped(&mut self.errors, d);
         }
     }
 
@@ -787,6 +787,11 @@ impl Parser {
                         Quirk::ModulesKeyword,
                         format!("expected `Module`, found `{word}`"),
                     );
+                }
+                if self.gsd.modules.len() >= MAX_MODULES {
+                    return Err(c.error(format!(
+                        "more than {MAX_MODULES} modules; a GSD file may define at most {MAX_MODULES}"
+                    )));
                 }
                 let name = self.string_value(ll, c, "the module name", false)?;
                 let cfg = c.bytes("an identifier byte of the module")?;
@@ -1597,10 +1602,30 @@ impl Parser {
         for (pos, kind, message, is_err) in notes {
             let d = Diagnostic { pos, kind, message };
             if is_err {
-                self.errors.push(d);
+                push_capped(&mut self.errors, d);
             } else {
-                self.warnings.push(d);
+                push_capped(&mut self.warnings, d);
             }
         }
+    }
+}
+
+/// Modules a GSD file may define (real files define a few hundred at
+/// most; each costs a few hundred bytes).
+pub(crate) const MAX_MODULES: usize = 4096;
+
+/// Errors or warnings kept per list: a hostile file (a quarter of a
+/// million unclosed modules) must not cost a diagnostic per line. The
+/// last one kept says that more were left out.
+pub(crate) const MAX_DIAGNOSTICS: usize = 1000;
+
+fn push_capped(list: &mut Vec<Diagnostic>, d: Diagnostic) {
+    match list.len() {
+        n if n + 1 < MAX_DIAGNOSTICS => list.push(d),
+        n if n + 1 == MAX_DIAGNOSTICS => list.push(Diagnostic {
+            message: format!("{} (further diagnostics left out)", d.message),
+            ..d
+        }),
+        _ => {}
     }
 }

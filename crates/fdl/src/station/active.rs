@@ -665,10 +665,13 @@ impl Core {
         self.bits(self.p().token_lost_timeout(self.ts())) + 3 * self.cfg.latency_allowance
     }
 
-    /// Distance from `from` to `to` going up and wrapping after HSA.
+    /// Distance from `from` to `to` going up and wrapping after HSA. An
+    /// address above HSA (a foreign token pass, a station outside this
+    /// ring's range) counts as HSA.
     fn dist(&self, from: u8, to: u8) -> u32 {
         let m = self.p().hsa.max(self.ts()) as u32 + 1;
-        (to as u32 + m - from as u32) % m
+        let (from, to) = ((from as u32).min(m - 1), (to as u32).min(m - 1));
+        (to + m - from) % m
     }
 
     fn next_in_las(&self, from: u8) -> u8 {
@@ -1409,6 +1412,28 @@ mod tests {
         let t = st.poll_timeout().unwrap();
         st.handle_timeout(t);
         (t, st.poll_transmit(t).map(|b| b.to_vec()))
+    }
+
+    /// Found by the `master_response` fuzz target: a token passed by a
+    /// station above HSA made the ring-distance arithmetic underflow.
+    #[test]
+    fn token_pass_from_above_hsa_is_no_panic() {
+        let mut params = BusParams::defaults(Baud::B1500000);
+        params.hsa = 4;
+        let mut st = ActiveStation::new(ActiveConfig::new(2, params), Recorder::default());
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        // The fuzzer's bytes: garbage, then SD4 DA=0 SA=0x65 (101).
+        let (t, _) = step(&mut st);
+        st.handle_rx(t, &[0x00, 0xDC, 0x00, 0xE5]);
+        for (da, sa) in [(0, 101), (101, 3), (120, 110), (3, 126)] {
+            st.handle_rx(t, &[0xDC, da, sa]);
+        }
+        for _ in 0..20 {
+            step(&mut st);
+        }
+        assert!(st.poll_timeout().is_some());
     }
 
     #[test]

@@ -391,34 +391,45 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
 
     // Slot time against the latency.
     if let Some(p) = &opts.params {
-        let tsl = p.bits(p.slot_time as u64);
-        match latency {
-            None => r.add(
-                "slot time",
-                Verdict::Unchecked,
-                format!("TSL {} bit = {} µs at {}; the port's latency is unknown", p.slot_time, tsl.as_micros(), p.baud),
-            ),
-            Some(l) if l > tsl => r.add(
-                "slot time",
-                Verdict::Warn,
-                format!(
-                    "TSL {} bit = {} µs at {} is shorter than the adapter's latency ({} µs): replies arrive after the slot time. \
-                     dpctl adds its --latency allowance to its own timeouts, but other masters on the bus will count our replies as lost; \
-                     lower the latency timer or raise slot_time",
-                    p.slot_time,
-                    tsl.as_micros(),
-                    p.baud,
-                    l.as_micros()
-                ),
-            ),
-            Some(l) => r.add(
-                "slot time",
-                Verdict::Ok,
-                format!("TSL {} bit = {} µs at {} covers the adapter's latency ({} µs)", p.slot_time, tsl.as_micros(), p.baud, l.as_micros()),
-            ),
-        }
+        r.checks.push(slot_time_check(p, latency));
     }
     r
+}
+
+/// Whether the slot time of `p` covers an adapter latency of `latency`
+/// (`None`: unknown).
+pub fn slot_time_check(p: &BusParams, latency: Option<Duration>) -> Check {
+    let tsl = p.bits(p.slot_time as u64);
+    let what = format!(
+        "TSL {} bit = {} µs at {}",
+        p.slot_time,
+        tsl.as_micros(),
+        p.baud
+    );
+    let (verdict, detail) = match latency {
+        None => (
+            Verdict::Unchecked,
+            format!("{what}; the port's latency is unknown"),
+        ),
+        Some(l) if l > tsl => (
+            Verdict::Warn,
+            format!(
+                "{what} is shorter than the adapter's latency ({} µs): replies arrive after the slot time. \
+                 dpctl adds its --latency allowance to its own timeouts, but other masters on the bus will count our replies as lost; \
+                 lower the latency timer or raise slot_time",
+                l.as_micros()
+            ),
+        ),
+        Some(l) => (
+            Verdict::Ok,
+            format!("{what} covers the adapter's latency ({} µs)", l.as_micros()),
+        ),
+    };
+    Check {
+        what: "slot time".into(),
+        verdict,
+        detail,
+    }
 }
 
 fn diagnose_tcp(r: &mut Report, addr: &str) {
@@ -486,6 +497,28 @@ mod tests {
         let r = diagnose("/nonexistent/ttyUSB9", &DoctorOptions::default());
         assert!(r.failed());
         assert_eq!(r.checks[0].what, "open");
+    }
+
+    #[test]
+    fn slot_time_against_latency() {
+        // 1.5 Mbit/s, TSL 300 bit = 200 µs: an FTDI adapter at its default
+        // latency timer (16 ms) cannot answer in time, an on-board UART can.
+        let p = BusParams::defaults(Baud::B1500000);
+        let c = slot_time_check(&p, Some(Duration::from_millis(16)));
+        assert_eq!(c.verdict, Verdict::Warn, "{c}");
+        assert!(c.detail.contains("16000 µs"), "{c}");
+        assert_eq!(
+            slot_time_check(&p, Some(Duration::ZERO)).verdict,
+            Verdict::Ok
+        );
+        assert_eq!(slot_time_check(&p, None).verdict, Verdict::Unchecked);
+        // 9.6 kbit/s with a slot time of 100 bit (10.4 ms) covers 1 ms.
+        let mut slow = BusParams::defaults(Baud::B9600);
+        slow.slot_time = 100;
+        assert_eq!(
+            slot_time_check(&slow, Some(Duration::from_millis(1))).verdict,
+            Verdict::Ok
+        );
     }
 
     #[test]

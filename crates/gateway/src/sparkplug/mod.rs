@@ -61,6 +61,13 @@
 //! logged (Sparkplug has no reply
 //! topic: the next DDATA shows the outputs as they are).
 //!
+//! # Broker faults
+//!
+//! As in the plain mode: the bus keeps running, the link reconnects,
+//! and every connection gets a new bdSeq, NBIRTH and DBIRTHs;
+//! `outputs_timeout_ms` / `safe_state` act the same way
+//! ([`crate::outage`]).
+//!
 //! # Not supported
 //!
 //! Metric aliases (names are always sent), NDATA (the node has no
@@ -73,6 +80,7 @@ pub mod proto;
 
 use crate::core::{Publish, SlaveInfo};
 use crate::link::{LinkSetup, Session};
+use crate::outage::Outage;
 use crate::settings::MqttSettings;
 use crate::sim::SimError;
 use metrics::{CommandError, Device, OutputWrite};
@@ -232,6 +240,8 @@ pub struct EdgeNode {
     birth_due: bool,
     bd_seq: u8,
     seq: u8,
+    /// The broker outage and the outputs' safe state.
+    outage: Outage,
 }
 
 fn metric(name: &str, datatype: DataType, value: Option<MetricValue>, ts: u64) -> Metric {
@@ -275,6 +285,7 @@ impl EdgeNode {
             birth_due: false,
             bd_seq: 0,
             seq: 0,
+            outage: Outage::default(),
         }
     }
 
@@ -513,13 +524,15 @@ impl Session for EdgeNode {
     }
 
     fn connected(&mut self, _ts_ms: u64) {
+        self.outage.connected();
         self.online = true;
         self.birth_due = true;
     }
 
     /// Every lost connection or failed attempt: the next CONNECT carries
     /// the next bdSeq.
-    fn disconnected(&mut self, _ts_ms: u64) {
+    fn disconnected(&mut self, ts_ms: u64) {
+        self.outage.disconnected(self.online, ts_ms);
         self.online = false;
         self.birth_due = false;
         self.out.clear();
@@ -536,7 +549,9 @@ impl Session for EdgeNode {
     }
 
     /// Apply the pending DCMD writes (each to one slave's whole image at
-    /// once), then queue births, deaths and data.
+    /// once), put the outputs into the safe state after `outputs_timeout`
+    /// without a broker (see [`crate::outage`]), then queue births,
+    /// deaths and data.
     fn step(&mut self, m: &mut DpMaster, _now: Instant, ts_ms: u64) {
         while let Some(ev) = m.poll_event() {
             if let MasterEvent::Fault { address, reason } = ev {
@@ -556,6 +571,7 @@ impl Session for EdgeNode {
                 Err(e) => tracing::warn!(address = p.address, error = %e, "Sparkplug DCMD refused"),
             }
         }
+        self.outage.step(&self.settings, self.online, m, ts_ms);
         if self.online {
             self.publish_changes(m, ts_ms);
         }
@@ -777,19 +793,21 @@ writable = [3]
         );
         let msgs = r.until("spBv1.0/G/DDATA/E/3");
         assert_eq!(r.plant.master().outputs(3).unwrap(), [1, 2, 3, 0xaa]);
-        let mut seen_inputs = false;
-        for _ in 0..200 {
-            let all: Vec<_> = msgs.iter().chain(r.tick().iter()).cloned().collect();
-            if all.iter().any(|(t, p)| {
+        let echoed = |msgs: &[(String, Payload)]| {
+            msgs.iter().any(|(t, p)| {
                 t == "spBv1.0/G/DDATA/E/3"
                     && value(p, metrics::INPUT_IMAGE)
                         == Some(&MetricValue::BytesValue(vec![1, 2, 3, 0xaa]))
-            }) {
-                seen_inputs = true;
+            })
+        };
+        let mut later = msgs.clone();
+        for _ in 0..2000 {
+            if echoed(&later) {
                 break;
             }
+            later.extend(r.tick());
         }
-        assert!(seen_inputs, "the echoed inputs in a DDATA");
+        assert!(echoed(&later), "the echoed inputs in a DDATA");
         let dd = find(&msgs, "spBv1.0/G/DDATA/E/3");
         assert!(dd.metrics.iter().all(|m| m.datatype.is_none()));
         assert!(value(dd, metrics::NAME).is_none(), "only changes");
@@ -906,5 +924,35 @@ writable = [3]
             }
         }
         assert_eq!(seqs[..2], [255, 0]);
+    }
+
+    #[test]
+    fn outputs_go_to_the_safe_state_without_a_broker() {
+        let mut r = Rig::new();
+        r.node.settings.outputs_timeout = Some(std::time::Duration::from_millis(100));
+        r.node.settings.safe_state = crate::settings::SafeState::Zero;
+        r.node.connected(0);
+        r.until("spBv1.0/G/DBIRTH/E/4");
+        r.node.handle_message(
+            "spBv1.0/G/DCMD/E/3",
+            &cmd(vec![write(
+                metrics::OUTPUT_IMAGE,
+                MetricValue::BytesValue(vec![5; 4]),
+            )]),
+            0,
+        );
+        r.tick();
+        assert_eq!(r.plant.master().outputs(3).unwrap(), [5; 4]);
+        // The broker goes away at ts 1000 + t; 100 ms later the outputs
+        // of the writable slave are zero.
+        r.node.disconnected(1000 + r.t);
+        for _ in 0..99 {
+            r.tick();
+        }
+        assert_eq!(r.plant.master().outputs(3).unwrap(), [5; 4], "not yet");
+        for _ in 0..2 {
+            r.tick();
+        }
+        assert_eq!(r.plant.master().outputs(3).unwrap(), [0; 4]);
     }
 }

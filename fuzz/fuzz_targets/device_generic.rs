@@ -1,0 +1,25 @@
+//! The `generic` device profile's slave device in the DP slave core:
+//! Set_Prm, Chk_Cfg, Data_Exchange, MSAC_C1 and raw requests, and control
+//! lines, in any order at any time (see `profibus_fuzz::run_device`).
+//!
+//! Run: `cd fuzz && cargo +nightly fuzz run device_generic`
+
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use profibus_fuzz::{cached, run_device, Fixture};
+use std::sync::OnceLock;
+
+static FIXTURE: OnceLock<Fixture> = OnceLock::new();
+
+fn fixture() -> Fixture {
+    profibus_fuzz::fixture(
+        "generic",
+        "gsd = \"DPCTL_GEN.GSD\"\nmodules = [\"1 byte in\", \"2 words in/out\", \"1 byte out with filter parameter\"]",
+        "gsd = \"DPCTL_GEN.GSD\"\nmodules = [\"1 byte in\", \"2 words in/out\", \"1 byte out with filter parameter\"]",
+    )
+}
+
+fuzz_target!(|data: &[u8]| {
+    run_device(cached(&FIXTURE, fixture), data);
+});

@@ -1,0 +1,513 @@
+//! `dpctl gateway --sparkplug` against a real broker (mosquitto on a free
+//! localhost port). Every payload is checked by an independent decoder:
+//! `protoc --decode` against crates/gateway/proto/sparkplug_b.proto
+//! (Debian's protobuf-compiler), and the commands are encoded with
+//! `protoc --encode`. Fails (never skips) when mosquitto, its clients or
+//! protoc are missing: run `scripts/setup-test-env`.
+
+mod common;
+
+use common::mqtt::{broker, free_port};
+use common::{dpctl, require, Lines, Proc, TempDir};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const T: Duration = Duration::from_secs(30);
+const MESSAGE: &str = "org.eclipse.tahu.protobuf.Payload";
+
+fn proto_dir() -> PathBuf {
+    common::repo().join("crates/gateway/proto")
+}
+
+/// Run protoc with `mode` (`--decode=…` / `--encode=…`) on `input`.
+fn protoc(mode: &str, input: &[u8]) -> Vec<u8> {
+    require("protoc");
+    let mut p = Command::new("protoc")
+        .arg("-I")
+        .arg(proto_dir())
+        .arg(mode)
+        .arg("sparkplug_b.proto")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("protoc");
+    p.stdin.take().unwrap().write_all(input).unwrap();
+    let out = p.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "protoc {mode} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+/// A payload as protoc decodes it: the top-level fields and the metrics,
+/// each as `field -> value` text (strings keep their quotes).
+#[derive(Debug, Clone)]
+struct Decoded {
+    fields: HashMap<String, String>,
+    metrics: Vec<HashMap<String, String>>,
+}
+
+impl Decoded {
+    fn parse(bytes: &[u8]) -> Decoded {
+        let text = String::from_utf8(protoc(&format!("--decode={MESSAGE}"), bytes)).unwrap();
+        let mut d = Decoded {
+            fields: HashMap::new(),
+            metrics: vec![],
+        };
+        let mut metric: Option<HashMap<String, String>> = None;
+        for line in text.lines() {
+            let l = line.trim();
+            if l == "metrics {" {
+                metric = Some(HashMap::new());
+            } else if l == "}" {
+                d.metrics.extend(metric.take());
+            } else if let Some((k, v)) = l.split_once(": ") {
+                match &mut metric {
+                    Some(m) => m.insert(k.into(), v.into()),
+                    None => d.fields.insert(k.into(), v.into()),
+                };
+            }
+        }
+        d
+    }
+
+    fn seq(&self) -> Option<u64> {
+        self.fields.get("seq").map(|s| s.parse().unwrap())
+    }
+
+    /// The metric named `name`.
+    fn metric(&self, name: &str) -> Option<&HashMap<String, String>> {
+        let quoted = format!("\"{name}\"");
+        self.metrics.iter().find(|m| m.get("name") == Some(&quoted))
+    }
+
+    /// `field` of the metric named `name`.
+    fn get(&self, name: &str, field: &str) -> Option<&str> {
+        self.metric(name)?.get(field).map(String::as_str)
+    }
+}
+
+/// `mosquitto_sub` on everything Sparkplug, payloads in hex.
+struct Sub {
+    _p: Proc,
+    lines: Lines,
+    /// Lines of `lines` decoded so far.
+    decoded: usize,
+    /// Messages seen and decoded, in order.
+    seen: Vec<(String, Decoded)>,
+    /// Messages of `seen` that [`Sub::expect`] went past.
+    next: usize,
+}
+
+const PROBE: &str = "spBv1.0/probe";
+
+impl Sub {
+    /// Subscribe; returns once the subscription is in place (a probe
+    /// message published after it came back).
+    fn start(port: u16) -> Sub {
+        require("mosquitto_sub");
+        let mut p = Proc::spawn(
+            "mosquitto_sub",
+            Command::new("mosquitto_sub")
+                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
+                .args(["-t", "spBv1.0/#", "-F", "%t %x"])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null()),
+        );
+        let mut lines = Lines::from(&mut p);
+        let end = Instant::now() + T;
+        loop {
+            let ok = Command::new("mosquitto_pub")
+                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
+                .args(["-t", PROBE, "-n"])
+                .status()
+                .expect("mosquitto_pub")
+                .success();
+            assert!(ok, "mosquitto_pub failed");
+            if lines.wait_for(PROBE, Duration::from_millis(500)) {
+                break;
+            }
+            assert!(Instant::now() < end, "mosquitto_sub never subscribed");
+        }
+        Sub {
+            _p: p,
+            lines,
+            decoded: 0,
+            seen: vec![],
+            next: 0,
+        }
+    }
+
+    /// Decode the lines received so far.
+    fn pull(&mut self) {
+        while self.decoded < self.lines.1.len() {
+            let l = self.lines.1[self.decoded].clone();
+            self.decoded += 1;
+            let (t, hex) = l.split_once(' ').unwrap_or((&l, ""));
+            if t == PROBE {
+                continue;
+            }
+            let bytes: Vec<u8> = (0..hex.len() / 2)
+                .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+                .collect();
+            self.seen.push((t.to_string(), Decoded::parse(&bytes)));
+        }
+    }
+
+    /// The next message after the last one returned that is on `topic`
+    /// and satisfies `ok` (messages skipped on the way stay in `seen`).
+    fn expect(&mut self, topic: &str, ok: impl Fn(&Decoded) -> bool) -> Decoded {
+        let end = Instant::now() + T;
+        loop {
+            self.pull();
+            while self.next < self.seen.len() {
+                let (t, d) = &self.seen[self.next];
+                self.next += 1;
+                if t == topic && ok(d) {
+                    return d.clone();
+                }
+            }
+            if self
+                .lines
+                .next_line(end.saturating_duration_since(Instant::now()))
+                .is_none()
+            {
+                panic!(
+                    "no matching message on {topic}; got:\n{:#?}",
+                    self.seen
+                        .iter()
+                        .map(|(t, d)| (t, &d.fields))
+                        .collect::<Vec<_>>()
+                );
+            }
+        }
+    }
+
+    /// Every message seen so far on `topic`.
+    fn all(&mut self, topic: &str) -> Vec<Decoded> {
+        self.pull();
+        self.seen
+            .iter()
+            .filter(|(t, _)| t == topic)
+            .map(|(_, d)| d.clone())
+            .collect()
+    }
+}
+
+/// Publish a command written in protobuf text format, encoded by protoc.
+fn command(port: u16, topic: &str, text: &str) {
+    require("mosquitto_pub");
+    let payload = protoc(&format!("--encode={MESSAGE}"), text.as_bytes());
+    let mut p = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string()])
+        .args(["-t", topic, "-s"])
+        .stdin(Stdio::piped())
+        .spawn()
+        .expect("mosquitto_pub");
+    p.stdin.take().unwrap().write_all(&payload).unwrap();
+    assert!(
+        p.wait().unwrap().success(),
+        "mosquitto_pub to {topic} failed"
+    );
+}
+
+const BUS: &str = r#"[master]
+address = 1
+baud = "1.5M"
+
+[[slave]]
+address = 3
+name = "echo"
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[[slave]]
+address = 4
+name = "locked"
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[[slave]]
+address = 25
+device = "omega"
+setpoints = 1
+actual_values = 1
+pkw = false
+
+[mqtt]
+bus = "line"
+writable = [3, 25]
+"#;
+
+fn gateway(bus: &std::path::Path, port: u16, extra: &[&str]) -> Proc {
+    let mut c = Command::new(dpctl());
+    c.arg("gateway")
+        .arg("--config")
+        .arg(bus)
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+        .args(extra);
+    Proc::spawn_captured(c)
+}
+
+const NBIRTH: &str = "spBv1.0/G/NBIRTH/E";
+const NDEATH: &str = "spBv1.0/G/NDEATH/E";
+
+fn dev(t: &str, d: u8) -> String {
+    format!("spBv1.0/G/{t}/E/{d}")
+}
+
+/// The births of the node and its three devices, from the next NBIRTH
+/// on: its bdSeq; checks seq 0, 1, 2, 3 and the birth metrics.
+fn births(sub: &mut Sub) -> u64 {
+    let nb = sub.expect(NBIRTH, |_| true);
+    assert_eq!(nb.seq(), Some(0), "{nb:?}");
+    assert_eq!(nb.get("bdSeq", "datatype"), Some("4"), "Int64");
+    assert_eq!(nb.get("Node Control/Rebirth", "datatype"), Some("11"));
+    assert_eq!(
+        nb.get("Node Control/Rebirth", "boolean_value"),
+        Some("false")
+    );
+    assert!(nb.fields.contains_key("timestamp"));
+    let bd: u64 = nb.get("bdSeq", "long_value").unwrap().parse().unwrap();
+    let mut seqs = vec![];
+    for a in [3, 4, 25] {
+        let b = sub.expect(&dev("DBIRTH", a), |_| true);
+        seqs.push(b.seq().unwrap());
+        // Every metric has a name, a datatype and a value (or is null).
+        for m in &b.metrics {
+            assert!(
+                m.contains_key("name") && m.contains_key("datatype"),
+                "{m:?}"
+            );
+        }
+        assert_eq!(
+            b.get("Properties/Address", "int_value"),
+            Some(a.to_string().as_str())
+        );
+        assert_eq!(b.get("Image/Inputs", "datatype"), Some("17"), "Bytes");
+    }
+    seqs.sort();
+    assert_eq!(seqs, [1, 2, 3], "DBIRTHs follow the NBIRTH");
+    bd
+}
+
+/// The seq of every message the edge node sent, in the order received:
+/// NBIRTH 0, then each one more than the one before, 255 followed by 0.
+fn check_seq(sub: &Sub) {
+    let mut last: Option<u64> = None;
+    for (t, d) in &sub.seen {
+        let Some(s) = d.seq() else { continue };
+        if t == NBIRTH {
+            assert_eq!(s, 0);
+        } else if let Some(l) = last {
+            assert_eq!(s, (l + 1) % 256, "{t} after seq {l}");
+        }
+        last = Some(s);
+    }
+    assert!(last.is_some());
+}
+
+#[test]
+fn sparkplug_births_data_commands_rebirth_and_last_will() {
+    let dir = TempDir::new("sparkplug");
+    std::fs::copy(
+        common::repo().join("gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
+    let bus = dir.path("bus.toml");
+    std::fs::write(&bus, BUS).unwrap();
+    let port = free_port();
+    let mut mosq = broker(&dir, port);
+    let mut sub = Sub::start(port);
+    let gw = gateway(&bus, port, &["--sim", "--sparkplug", "G/E"]);
+
+    // NBIRTH with bdSeq 0, then one DBIRTH per slave in Data_Exchange.
+    assert_eq!(births(&mut sub), 0);
+    let b3 = &sub.all(&dev("DBIRTH", 3))[0];
+    assert_eq!(b3.get("Properties/Name", "string_value"), Some("\"echo\""));
+    // GSD module channels: one UInt8 per byte.
+    assert_eq!(b3.get("Inputs/2 words in_out[0]", "datatype"), Some("5"));
+    let b25 = &sub.all(&dev("DBIRTH", 25))[0];
+    // Omega profile channels with their types: UInt16 status, Int32 setpoint.
+    assert_eq!(b25.get("Inputs/status1", "datatype"), Some("6"));
+    assert_eq!(b25.get("Outputs/setpoint1", "datatype"), Some("3"));
+
+    // DCMD, the whole image: the echo slave's inputs change, reported
+    // by DDATA (only what changed; no datatypes in data messages).
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 1 metrics { name: "Image/Outputs" bytes_value: "\x12\x34\x56\x78" }"#,
+    );
+    let dd = sub.expect(&dev("DDATA", 3), |d| {
+        d.get("Inputs/2 words in_out[3]", "int_value") == Some("120")
+    });
+    assert_eq!(dd.get("Inputs/2 words in_out[0]", "int_value"), Some("18"));
+    assert!(dd.get("Inputs/2 words in_out[0]", "datatype").is_none());
+    assert!(dd.metric("Properties/Name").is_none(), "{dd:?}");
+    assert!(dd.seq().unwrap() >= 4);
+
+    // DCMD by channel name, a negative value on a signed channel (two's
+    // complement in int_value) and a positive one.
+    command(
+        port,
+        &dev("DCMD", 25),
+        r#"timestamp: 2 metrics { name: "Outputs/setpoint1" int_value: 4294967294 }"#,
+    );
+    sub.expect(&dev("DDATA", 25), |d| {
+        d.get("Outputs/setpoint1", "int_value") == Some("4294967294")
+    });
+    command(
+        port,
+        &dev("DCMD", 25),
+        r#"timestamp: 3 metrics { name: "Outputs/setpoint1" int_value: 4321 }"#,
+    );
+    sub.expect(&dev("DDATA", 25), |d| {
+        d.get("Outputs/setpoint1", "int_value") == Some("4321")
+    });
+
+    // Refused, nothing written: a slave not in `writable`, and a command
+    // with one unknown metric next to a good one. A later good write
+    // shows the refused ones never reached an image.
+    command(
+        port,
+        &dev("DCMD", 4),
+        r#"timestamp: 4 metrics { name: "Image/Outputs" bytes_value: "\x01\x01\x01\x01" }"#,
+    );
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 5 metrics { name: "Outputs/2 words in_out[0]" int_value: 99 } metrics { name: "Outputs/nope" int_value: 1 }"#,
+    );
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 6 metrics { name: "Outputs/2 words in_out[1]" int_value: 7 }"#,
+    );
+    let dd = sub.expect(&dev("DDATA", 3), |d| {
+        d.get("Inputs/2 words in_out[1]", "int_value") == Some("7")
+    });
+    assert!(dd.get("Inputs/2 words in_out[0]", "int_value").is_none());
+    assert!(sub
+        .all(&dev("DDATA", 4))
+        .iter()
+        .all(|d| d.metric("Image/Outputs").is_none()));
+    assert!(sub
+        .all(&dev("DDATA", 3))
+        .iter()
+        .all(|d| d.get("Outputs/2 words in_out[0]", "int_value") != Some("99")));
+
+    // NCMD rebirth: NBIRTH (seq 0, same bdSeq) and every DBIRTH again,
+    // with the current values.
+    command(
+        port,
+        "spBv1.0/G/NCMD/E",
+        r#"timestamp: 7 metrics { name: "Node Control/Rebirth" datatype: 11 boolean_value: true }"#,
+    );
+    assert_eq!(births(&mut sub), 0);
+    let b3 = sub.all(&dev("DBIRTH", 3)).pop().unwrap();
+    // (`births` checked the seqs 0..=3.)
+    assert_eq!(b3.get("Inputs/2 words in_out[1]", "int_value"), Some("7"));
+
+    check_seq(&sub);
+
+    // The broker dies and comes back: every CONNECT carries the next
+    // bdSeq in its will, and the NBIRTH after it the same one.
+    mosq.signal(9);
+    mosq.wait(T);
+    let _mosq = broker(&dir, port);
+    let mut sub = Sub::start(port);
+    // The births after the reconnection may have come before the
+    // subscription: ask for them again (the NBIRTH of a rebirth has the
+    // bdSeq of the connection).
+    command(
+        port,
+        "spBv1.0/G/NCMD/E",
+        r#"timestamp: 8 metrics { name: "Node Control/Rebirth" datatype: 11 boolean_value: true }"#,
+    );
+    let bd = births(&mut sub);
+    assert!(bd >= 1, "bdSeq counts the connections: {bd}");
+
+    // Killed: the broker publishes the last will, NDEATH with the bdSeq
+    // of the NBIRTH and no seq.
+    gw.signal(9);
+    let nd = sub.expect(NDEATH, |_| true);
+    assert_eq!(nd.get("bdSeq", "long_value"), Some(bd.to_string().as_str()));
+    assert_eq!(nd.seq(), None);
+    assert_eq!(nd.metrics.len(), 1);
+    let _ = gw.finish(T);
+}
+
+/// The gateway as a master on a line (`dpctl bus`, a `dpctl slave`
+/// process), Sparkplug from the bus file's `[mqtt] sparkplug`: the
+/// slave's process dies (DDEATH) and comes back (DBIRTH); a clean stop
+/// publishes NDEATH.
+#[test]
+fn sparkplug_on_a_line_ddeath_dbirth_and_clean_ndeath() {
+    let dir = TempDir::new("sparkplug-line");
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let line = common::Bus::start(2, &[]);
+    let slave = |line: &common::Bus| {
+        Proc::spawn(
+            "dpctl slave",
+            Command::new(dpctl())
+                .args(["slave", "--port"])
+                .arg(line.link(1))
+                .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
+                .arg(common::repo().join("gsd/DPCTL_GEN.GSD"))
+                .args(["--module", "2 words in/out"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null()),
+        )
+    };
+    let mut s = slave(&line);
+    std::fs::copy(
+        common::repo().join("gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nsparkplug = \"G/E\"\nwritable = [3]\n",
+    )
+    .unwrap();
+    let mut sub = Sub::start(port);
+    let gw = gateway(&bus, port, &["--port", &line.link_str(0)]);
+    let nb = sub.expect(NBIRTH, |_| true);
+    assert_eq!(nb.get("bdSeq", "long_value"), Some("0"));
+    sub.expect(&dev("DBIRTH", 3), |_| true);
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 1 metrics { name: "Image/Outputs" bytes_value: "\xa5\xa5\x01\x02" }"#,
+    );
+    sub.expect(&dev("DDATA", 3), |d| {
+        d.get("Inputs/2 words in_out[0]", "int_value") == Some("165")
+    });
+
+    // The slave's process dies: DDEATH (seq and timestamp only).
+    s.signal(9);
+    s.wait(T);
+    let dd = sub.expect(&dev("DDEATH", 3), |_| true);
+    assert!(dd.metrics.is_empty() && dd.fields.contains_key("timestamp"));
+    // It comes back: DBIRTH again.
+    let _s = slave(&line);
+    sub.expect(&dev("DBIRTH", 3), |_| true);
+
+    // SIGTERM: the gateway publishes NDEATH itself before disconnecting.
+    gw.signal(15);
+    let nd = sub.expect(NDEATH, |_| true);
+    assert_eq!(nd.get("bdSeq", "long_value"), Some("0"));
+    check_seq(&sub);
+    let out = gw.finish(T);
+    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+}
