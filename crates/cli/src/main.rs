@@ -22,6 +22,7 @@ mod rfid;
 mod scan;
 mod slave;
 mod sniff;
+mod soak;
 mod view;
 
 use clap::{Parser, Subcommand};
@@ -79,6 +80,9 @@ enum Command {
     /// Publish a DP master's slaves on an MQTT broker (JSON topics) and
     /// take output writes.
     Gateway(gateway::Args),
+    /// Fault soak on the simulated bus: a master and one slave of every
+    /// device profile with dropped characters, bit errors and noise.
+    Soak(soak::Args),
 }
 
 fn main() -> ExitCode {
@@ -105,6 +109,7 @@ fn main() -> ExitCode {
         Command::Completions(a) => completions::run(a),
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
+        Command::Soak(a) => soak::run(a),
         Command::Monitor(a) => monitor::run(a),
         Command::Doctor(a) => doctor::run(a),
     };

@@ -87,6 +87,7 @@ pub mod omega;
 pub mod pkw;
 pub mod profile;
 pub mod rfid;
+pub mod soak;
 
 pub use profile::{
     Configured, ControlError, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError,

@@ -9,7 +9,10 @@
 //! 61158-6-3): **Slave_Diag → Set_Prm → Chk_Cfg → Slave_Diag** (until the slave
 //! reports no Station_Not_Ready, Cfg_Fault, Prm_Fault, Prm_Req or
 //! Stat_Diag and names this master in Master_Add) **→ Data_Exchange**.
-//! Faults send it back to the right step: Prm_Req or an RS answer to
+//! A step that succeeds is followed by the next one in the same pass
+//! (at most four in a row), so a slave that answers again is back in
+//! Data_Exchange in the pass in which it answers. Faults send it back to
+//! the right step: Prm_Req or an RS answer to
 //! Data_Exchange to Set_Prm; Prm_Fault/Cfg_Fault are reported in words and
 //! the slave is parameterised again; a slave locked by another master is
 //! left alone and watched. A slave that stops answering for
@@ -454,6 +457,8 @@ struct Slave {
     last_poll: Option<Instant>,
     last_diag: Instant,
     stats: SlaveStats,
+    /// Start-up steps still allowed back to back in this pass.
+    chain: u8,
 }
 
 /// What the request in flight was for.
@@ -515,6 +520,15 @@ pub enum MasterConfigError {
 
 const EVENT_LIMIT: usize = 1024;
 const JOB_LIMIT: usize = 64;
+
+/// Start-up steps a slave may take back to back in one pass, right after
+/// the previous one succeeded: Set_Prm after the diagnosis that asks for
+/// it, Chk_Cfg, the checking Slave_Diag and the first Data_Exchange. A
+/// slave that answers again (after a restart, a lost connection) is then
+/// back in Data_Exchange in the pass in which it answers, instead of one
+/// step per pass; a step that fails or repeats (a fault, Station_Not_Ready)
+/// waits for the next pass as before.
+const STARTUP_CHAIN: u8 = 4;
 
 /// The DP master core; see the module docs.
 #[derive(Debug)]
@@ -597,6 +611,7 @@ impl DpMaster {
                 last_poll: None,
                 last_diag: Instant::ZERO,
                 stats: SlaveStats::default(),
+                chain: STARTUP_CHAIN,
             });
         }
         Ok(DpMaster {
@@ -937,6 +952,25 @@ impl DpMaster {
     }
 
     fn slave_result(&mut self, i: usize, step: Step, now: Instant, r: &CycleResult<'_>) {
+        let before = self.slaves[i].state;
+        self.slave_outcome(i, step, now, r);
+        // A start-up step succeeded: take the next one at once (see
+        // STARTUP_CHAIN), if this slave was just polled in the pass.
+        let s = &mut self.slaves[i];
+        let next = matches!(
+            s.state,
+            SlaveState::SetPrm
+                | SlaveState::ChkCfg
+                | SlaveState::CheckDiag
+                | SlaveState::DataExchange
+        );
+        if next && s.state != before && s.chain > 0 && self.cursor == i + 1 {
+            s.chain -= 1;
+            self.cursor = i;
+        }
+    }
+
+    fn slave_outcome(&mut self, i: usize, step: Step, now: Instant, r: &CycleResult<'_>) {
         self.slaves[i].stats.retries += r.retries as u64;
         let acked = matches!(
             r.outcome,
@@ -1258,6 +1292,9 @@ impl DpMaster {
     /// the cycle time of the one that ended.
     fn start_poll_cycle(&mut self, now: Instant) {
         self.cursor = 0;
+        for s in &mut self.slaves {
+            s.chain = STARTUP_CHAIN;
+        }
         if let Some(start) = self.cycle_start {
             let ns = (now - start).as_nanos() as u64;
             let c = &mut self.cycle_stats;

@@ -400,3 +400,56 @@ fn operate_is_announced_with_global_control_cyclically_by_default() {
     let r = m.poll_request(&ctx(2_000_000_000, 0)).unwrap();
     assert_eq!((r.da, r.data.to_vec()), (127, vec![0x02, 0x00]));
 }
+
+#[test]
+fn a_slave_that_answers_again_is_started_up_within_one_pass() {
+    let mut m = master();
+    // One token visit: every start-up step follows the previous one.
+    let visit = |m: &mut DpMaster, cycle: u32| {
+        m.poll_request(&ctx(10 + cycle as u64, cycle))
+            .map(|r| r.dsap)
+    };
+    assert_eq!(visit(&mut m, 0), Some(Some(sap::SLAVE_DIAG)));
+    answer(&mut m, 10, diag_resp(&FRESH));
+    assert_eq!(visit(&mut m, 1), Some(Some(sap::SET_PRM)));
+    answer(&mut m, 11, Outcome::ShortAck);
+    assert_eq!(visit(&mut m, 2), Some(Some(sap::CHK_CFG)));
+    answer(&mut m, 12, Outcome::ShortAck);
+    assert_eq!(visit(&mut m, 3), Some(Some(sap::SLAVE_DIAG)));
+    answer(&mut m, 13, diag_resp(&READY));
+    assert_eq!(
+        visit(&mut m, 4),
+        Some(None),
+        "Data_Exchange in the same pass"
+    );
+    assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+    answer(
+        &mut m,
+        14,
+        Outcome::Response {
+            status: ResponseStatus::Dl,
+            station: StationType::Passive,
+            dsap: None,
+            ssap: None,
+            data: &[1, 2],
+        },
+    );
+    // The pass is over: nothing more in this visit.
+    assert_eq!(visit(&mut m, 5), None);
+    assert_eq!(m.inputs(8), Some(&[1u8, 2][..]));
+
+    // A step that does not succeed waits for the next pass: a slave still
+    // not ready after Chk_Cfg is asked again in the next pass only.
+    let mut m = master();
+    assert_eq!(visit(&mut m, 0), Some(Some(sap::SLAVE_DIAG)));
+    answer(&mut m, 10, diag_resp(&FRESH));
+    visit(&mut m, 1);
+    answer(&mut m, 11, Outcome::ShortAck);
+    visit(&mut m, 2);
+    answer(&mut m, 12, Outcome::ShortAck);
+    assert_eq!(visit(&mut m, 3), Some(Some(sap::SLAVE_DIAG)));
+    let not_ready = [0x02, 0x0C, 0x00, 0x02, 0x12, 0x34];
+    answer(&mut m, 13, diag_resp(&not_ready));
+    assert_eq!(visit(&mut m, 4), None);
+    assert_eq!(m.slave_state(8), Some(SlaveState::CheckDiag));
+}

@@ -1,0 +1,64 @@
+use super::*;
+
+fn short(cycles: u64) -> SoakConfig {
+    SoakConfig {
+        cycles,
+        max_rss_growth: None,
+        ..SoakConfig::default()
+    }
+}
+
+#[test]
+fn every_profile_has_a_slave_and_reaches_data_exchange() {
+    let slaves = plant::slaves(&SoakConfig::default()).unwrap();
+    let names: Vec<&str> = slaves.iter().map(|s| s.profile).collect();
+    for p in crate::PROFILES {
+        assert!(names.contains(&p.name), "{} missing", p.name);
+    }
+    // A clean line: no disturbance at all.
+    let cfg = SoakConfig {
+        drop: 0.0,
+        flip_ber: 0.0,
+        noise_rate: 0.0,
+        ..short(300)
+    };
+    let r = run(&cfg, |_| {}).unwrap();
+    assert!(r.passed(), "{:?}", r.violations);
+    assert_eq!(r.cycles, 300);
+    assert_eq!(r.disturbances, 0);
+    assert_eq!(r.integrity.corrupted, 0, "{:?}", r.integrity);
+    assert_eq!(r.integrity.undetected, 0);
+    for s in &r.slaves {
+        assert!(s.data_exchanges >= 250, "{s:?}");
+    }
+}
+
+#[test]
+fn a_short_soak_sees_faults_and_recovers() {
+    let r = run(&short(2000), |_| {}).unwrap();
+    assert!(r.passed(), "{:?}", r.violations);
+    assert!(r.medium.dropped > 0 && r.medium.bits_flipped > 0 && r.medium.noise_bursts > 0);
+    assert!(r.integrity.corrupted > 0 && r.receiver_errors > 0, "{r:?}");
+    assert!(r.disturbances > 0 && r.recovery.count() == r.disturbances);
+    // The same seed gives the same run.
+    let again = run(&short(2000), |_| {}).unwrap();
+    assert_eq!((again.medium, again.integrity), (r.medium, r.integrity));
+}
+
+#[test]
+fn an_unplugged_slave_breaks_the_recovery_invariant() {
+    let cfg = SoakConfig {
+        unplug: Some((5, 200)),
+        ..short(3000)
+    };
+    let r = run(&cfg, |_| {}).unwrap();
+    match &r.violations[..] {
+        [Violation::NotRecovered { address: 5, .. }] => {}
+        v => panic!("{v:?}"),
+    }
+    let text = r.violations[0].to_string();
+    assert!(
+        text.contains("slave 5 (omega)") && text.contains("Data_Exchange"),
+        "{text}"
+    );
+}
