@@ -589,7 +589,14 @@ fn the_token_holder_of_a_three_master_ring_is_killed() {
         );
         // One claim: two tokens to itself, then the pass (plus scheduling
         // of processes on a loaded machine).
-        assert!(back_ms <= tto_ms + 100.0, "ring back after {back_ms:.1} ms");
+        // Master 4's successor is the dead master 2: its first pass goes
+        // there and is retried before master 3 gets the token (about
+        // 100 ms more with the latency allowances).
+        let pass_to_the_dead = if claimer == 4 { 150.0 } else { 0.0 };
+        assert!(
+            back_ms <= tto_ms + 100.0 + pass_to_the_dead,
+            "ring back after {back_ms:.1} ms"
+        );
         return;
     }
     panic!("in 10 attempts the kill never hit the token holder");
