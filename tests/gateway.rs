@@ -5,59 +5,13 @@
 
 mod common;
 
-use common::{dpctl, need, wait_for, Lines, Proc, TempDir};
-use std::net::{TcpListener, TcpStream};
-use std::path::PathBuf;
+use common::mqtt::{broker, free_port, mosquitto};
+use common::{dpctl, wait_for, Lines, Proc, TempDir};
+use std::net::TcpStream;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const T: Duration = Duration::from_secs(30);
-
-/// The mosquitto broker binary (Debian puts it in /usr/sbin).
-fn mosquitto() -> PathBuf {
-    let on_path = std::env::var_os("PATH").and_then(|p| {
-        std::env::split_paths(&p)
-            .map(|d| d.join("mosquitto"))
-            .find(|f| f.is_file())
-    });
-    match on_path {
-        Some(p) => p,
-        None if std::path::Path::new("/usr/sbin/mosquitto").is_file() => {
-            "/usr/sbin/mosquitto".into()
-        }
-        None => need("mosquitto (Debian package mosquitto)"),
-    }
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// A broker on `port`, accepting connections when this returns.
-fn broker(dir: &TempDir, port: u16) -> Proc {
-    let conf = dir.path("mosquitto.conf");
-    std::fs::write(
-        &conf,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"),
-    )
-    .unwrap();
-    let p = Proc::spawn(
-        "mosquitto",
-        Command::new(mosquitto())
-            .arg("-c")
-            .arg(&conf)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
-    wait_for("mosquitto to listen", T, || {
-        TcpStream::connect(("127.0.0.1", port)).is_ok()
-    });
-    p
-}
 
 /// `mosquitto_sub -v` on the gateway's topics and `client/#` (answers
 /// sent to a request's `reply_to`), its lines collected.
