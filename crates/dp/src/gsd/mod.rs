@@ -35,9 +35,11 @@ mod lexer;
 pub mod model;
 mod parser;
 pub mod semantic;
+mod summary;
 mod writer;
 
 pub use model::*;
+pub use summary::GsdSummary;
 pub use semantic::{
     LookupError, ModuleIo, ParamInstance, PrmInput, PrmValue, PrmValueParseError, Problem,
     SelectionError,
@@ -205,6 +207,17 @@ pub struct FileDiagnostic<'a> {
     pub severity: &'static str,
     /// The diagnostic.
     pub diagnostic: &'a Diagnostic,
+}
+
+impl<'a> FileDiagnostic<'a> {
+    /// `diagnostic` of `file` as an `error` or `warning` (`severity`).
+    pub fn new(file: &'a std::path::Path, severity: &'static str, diagnostic: &'a Diagnostic) -> Self {
+        FileDiagnostic {
+            file,
+            severity,
+            diagnostic,
+        }
+    }
 }
 
 impl fmt::Display for FileDiagnostic<'_> {
