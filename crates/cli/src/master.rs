@@ -225,7 +225,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             while let Ok(line) = rx.try_recv() {
                 let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
                     (Some(r), _) => r.map(|_| None),
-                    (None, Some(r)) => r.map(Some),
+                    (None, Some(r)) => r.map(Some).map_err(Into::into),
                     (None, None) => apply_command(m, &line),
                 };
                 match result {

@@ -56,6 +56,11 @@ impl<T: SlaveTask> TaskRun<T> {
         }
     }
 
+    /// The task, also after it failed.
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+
     /// The task, or why it failed.
     pub fn finish(self) -> Result<T, T::Error> {
         match self.error {
