@@ -11,8 +11,8 @@
 use crate::common;
 use anyhow::Result;
 pub use profibus_devices::rfid::demo;
-pub use profibus_devices::rfid::jobs::MasterJobs;
 use profibus_devices::rfid::jobs::CommandRun;
+pub use profibus_devices::rfid::jobs::MasterJobs;
 use profibus_dp::master::TaskRun;
 use std::time::Duration;
 

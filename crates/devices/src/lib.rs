@@ -85,6 +85,7 @@ pub mod gsd_files;
 pub mod jx2;
 pub mod omega;
 pub mod pkw;
+pub mod pkw_task;
 pub mod profile;
 pub mod rfid;
 pub mod soak;

@@ -7,12 +7,12 @@ use super::tags::TagField;
 use super::Rfid;
 use crate::channels::ChannelMap;
 use crate::{ControlInbox, DeviceOptions, ProfileError};
-use serde::Serialize;
-use std::fmt;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_dp::slave::Device;
 use profibus_fdl::Instant;
+use serde::Serialize;
+use std::fmt;
 use std::time::Duration;
 
 /// The tag of the demo.

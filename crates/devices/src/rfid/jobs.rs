@@ -101,7 +101,12 @@ pub struct CommandResult {
 
 impl fmt::Display for CommandResult {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        for line in self.done.answer.iter().flat_map(|a| a.split_terminator('\r')) {
+        for line in self
+            .done
+            .answer
+            .iter()
+            .flat_map(|a| a.split_terminator('\r'))
+        {
             writeln!(f, "{line}")?;
         }
         Ok(())

@@ -39,11 +39,11 @@ mod summary;
 mod writer;
 
 pub use model::*;
-pub use summary::GsdSummary;
 pub use semantic::{
     LookupError, ModuleIo, ParamInstance, PrmInput, PrmValue, PrmValueParseError, Problem,
     SelectionError,
 };
+pub use summary::GsdSummary;
 
 use std::fmt;
 use std::io::Read;
@@ -211,7 +211,11 @@ pub struct FileDiagnostic<'a> {
 
 impl<'a> FileDiagnostic<'a> {
     /// `diagnostic` of `file` as an `error` or `warning` (`severity`).
-    pub fn new(file: &'a std::path::Path, severity: &'static str, diagnostic: &'a Diagnostic) -> Self {
+    pub fn new(
+        file: &'a std::path::Path,
+        severity: &'static str,
+        diagnostic: &'a Diagnostic,
+    ) -> Self {
         FileDiagnostic {
             file,
             severity,

@@ -55,7 +55,11 @@ impl fmt::Display for ParamLine<'_> {
             "byte"
         };
         let (offset, ty) = (p.offset - self.2, d.data_type.gsd_name());
-        write!(f, "{at} {offset}: \"{}\" {ty} default {}", d.name, d.default)?;
+        write!(
+            f,
+            "{at} {offset}: \"{}\" {ty} default {}",
+            d.name, d.default
+        )?;
         if let Some(t) = g.value_text(d, d.default) {
             write!(f, " ({t})")?;
         }
@@ -94,7 +98,10 @@ impl GsdSummary<'_> {
 
     /// Length of the station's own User_Prm_Data.
     fn base(&self) -> usize {
-        self.parsed.gsd.user_prm_data(&[], &[]).map_or(0, |d| d.len())
+        self.parsed
+            .gsd
+            .user_prm_data(&[], &[])
+            .map_or(0, |d| d.len())
     }
 }
 
@@ -229,7 +236,6 @@ mod ser {
     use crate::cfg::IoLen;
     use crate::gsd::{FileDiagnostic, Gsd, PrmTextValue, UnitDiagText};
     use serde::{Serialize, Serializer};
-
 
     #[derive(Serialize)]
     struct Len {

@@ -230,7 +230,11 @@ pub struct RecordOutcome<'a> {
 
 impl fmt::Display for RecordOutcome<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "slave {} slot {} index {}: ", self.slave, self.slot, self.index)?;
+        write!(
+            f,
+            "slave {} slot {} index {}: ",
+            self.slave, self.slot, self.index
+        )?;
         match (&self.data, &self.error) {
             (Some(d), _) => write!(f, "{} bytes {}", d.len(), profibus_fdl::wire::Hex(d)),
             (None, Some(e)) => f.write_str(e),
