@@ -179,7 +179,7 @@ impl SlaveTask for RecordTask {
             self.result = m.take_result(id);
             return Ok(self.result.is_some());
         }
-        if let Some(job) = self.job.take().filter(|_| in_dx) {
+        if let Some(job) = self.job.take_if(|_| in_dx) {
             self.id = Some(m.submit(job).ok_or(RecordError::QueueFull)?);
         }
         Ok(false)
@@ -240,5 +240,62 @@ impl fmt::Display for RecordOutcome<'_> {
             (None, Some(e)) => f.write_str(e),
             (None, None) => f.write_str("written"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+    use profibus_fdl::{Baud, BusParams};
+    use std::time::Duration;
+
+    #[test]
+    fn a_record_job_waits_for_data_exchange_and_a_start_up_timeout_ends_the_run() {
+        let cfg = MasterConfig {
+            address: 1,
+            params: BusParams::defaults(Baud::B1500000),
+            slaves: vec![SlaveParams::new(8, 0x0DCE, vec![0x11, 0x21])],
+            options: MasterOptions::default(),
+        };
+        let mut m = DpMaster::new(&cfg).unwrap();
+        let mut task = RecordTask::read(8, 1, 2, 5);
+        assert_eq!(task.step(&mut m, Instant::ZERO, false), Ok(false));
+        assert!(
+            !task.busy() && task.job.is_some(),
+            "kept until the slave is in DX"
+        );
+        assert_eq!(task.step(&mut m, Instant::ZERO, true), Ok(false));
+        assert!(task.busy(), "submitted");
+        assert_eq!(task.outcome(), None);
+        assert_eq!(
+            RecordTask::write(8, 0, 0, vec![]).unwrap_err(),
+            RecordError::Length(0)
+        );
+        let wait = SlaveWait::new(8, Duration::from_millis(10));
+        let mut run = TaskRun::new(RecordTask::read(8, 1, 2, 5), wait);
+        let t = |ms| Instant::ZERO + Duration::from_millis(ms);
+        assert_eq!(run.tick(&mut m, t(0)), ControlFlow::Continue(()));
+        assert_eq!(run.tick(&mut m, t(20)), ControlFlow::Break(()));
+        let e = run.finish().unwrap_err();
+        assert!(e.to_string().contains("did not reach Data_Exchange"), "{e}");
+    }
+
+    #[test]
+    fn record_outcome_lines() {
+        let mut task = RecordTask::read(8, 1, 2, 5);
+        task.result = Some(JobResult::Data(vec![1, 2, 3]));
+        let o = task.outcome().unwrap();
+        assert!(o.ok);
+        assert_eq!(o.to_string(), "slave 8 slot 1 index 2: 3 bytes 01 02 03");
+        let mut task = RecordTask::write(8, 0, 5, vec![1]).unwrap();
+        task.result = Some(JobResult::Done);
+        assert_eq!(
+            task.outcome().unwrap().to_string(),
+            "slave 8 slot 0 index 5: written"
+        );
+        task.result = Some(JobResult::Timeout);
+        let o = task.outcome().unwrap();
+        assert!(!o.ok && o.error.is_some());
     }
 }
