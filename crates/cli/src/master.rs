@@ -3,12 +3,10 @@
 use crate::common;
 use crate::view::{drain_events, Line, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
-use profibus_devices::bus::ProfiledBus;
-use profibus_devices::channels::Value as ChannelValue;
-use profibus_dp::master::{CommandOutcome, DpMaster, MasterCommand, OperatingState, SlaveState};
+use profibus_devices::bus::{ProfiledBus, SetChannels};
+use profibus_dp::master::{DpMaster, OperatingState};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
-use serde_json::Value;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -88,37 +86,11 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(master(args, bus))
 }
 
-/// `{"slave": N, "set": {"NAME": VALUE, …}}`: outputs by channel name.
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SetChannels {
-    slave: u8,
-    set: std::collections::BTreeMap<String, ChannelValue>,
-}
-
 /// Apply a channel command; `None` when `line` is none.
 fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Result<()>> {
-    let v: Value = serde_json::from_str(line).ok()?;
-    v.get("set")?;
-    Some((|| {
-        let c: SetChannels = serde_json::from_value(v)?;
-        let map = info
-            .iter()
-            .find(|s| s.address == c.slave)
-            .and_then(|s| s.channels.as_ref())
-            .with_context(|| {
-                format!(
-                    "slave {} has no named channels (give it as `device = …` in the bus file)",
-                    c.slave
-                )
-            })?;
-        let h = m.handle(c.slave).context("slave not in the bus file")?;
-        map.write_outputs(
-            c.set.iter().map(|(k, v)| (k.as_str(), *v)),
-            m.outputs_mut(h),
-        )?;
-        Ok(())
-    })())
+    let c = SetChannels::from_json(line)?;
+    let map = |a| info.iter().find(|s| s.address == a)?.channels.as_ref();
+    Some(c.and_then(|c| c.apply(m, map(c.slave))).map_err(Into::into))
 }
 
 /// The reply to a command.
@@ -132,20 +104,6 @@ struct CommandReply<'a> {
 struct BadCommand<'a> {
     line: &'a str,
     error: String,
-}
-
-/// Apply one command line to the master; returns a reply for the log.
-/// A refused command changes nothing.
-pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
-    let command = MasterCommand::from_json(line)?;
-    let reply = match &command {
-        MasterCommand::Operating(s) => Some(format!("operating state {}", s.as_str())),
-        _ => None,
-    };
-    Ok(match m.apply(command)? {
-        CommandOutcome::JobQueued(id) => Some(format!("job {} queued", id.0)),
-        CommandOutcome::Applied => reply,
-    })
 }
 
 async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
@@ -226,7 +184,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
                 let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
                     (Some(r), _) => r.map(|_| None),
                     (None, Some(r)) => r.map(Some),
-                    (None, None) => apply_command(m, &line),
+                    (None, None) => m.execute_json(&line).map_err(Into::into),
                 };
                 match result {
                     Ok(Some(reply)) => view.event(&Line::new(
@@ -248,10 +206,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);
             view.tick(m, now)?;
-            let exchanged = exchanges.is_some_and(|n| {
-                m.slave_addresses()
-                    .all(|a| m.slave_stats(a).is_some_and(|s| s.data_exchanges >= n))
-            });
+            let exchanged = exchanges.is_some_and(|n| m.all_exchanged(n));
             if deadline.is_some_and(|d| now - Instant::ZERO >= d) {
                 timed_out = true;
                 return ControlFlow::Break(());
@@ -269,12 +224,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     drain_events(m, &info, &mut view);
     view.status(m, &info, baud, last_now, true);
     result.with_context(|| format!("on {}", args.port))?;
-    let stuck: Vec<u8> = bus
-        .slaves
-        .iter()
-        .map(|s| s.params.address)
-        .filter(|&a| m.slave_state(a) != Some(SlaveState::DataExchange))
-        .collect();
+    let stuck = m.not_exchanging();
     if cycles.is_some() && !stuck.is_empty() {
         tracing::info!(?stuck, "slaves not in data exchange at the end");
     }
