@@ -4,7 +4,8 @@ use crate::common;
 use crate::view::{drain_events, Line, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::{ProfiledBus, SetChannels};
-use profibus_dp::master::{DpMaster, OperatingState};
+use profibus_devices::control_io::lines_on_a_thread;
+use profibus_dp::master::{DpMaster, OperatingState, StopReason, StopWhen};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
 use std::io::IsTerminal;
@@ -120,25 +121,10 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
 
     // Commands come from a plain thread: a blocking read of stdin must not
     // keep the runtime from shutting down on Ctrl-C / SIGTERM.
-    let (tx, mut rx) = tokio::sync::mpsc::channel::<String>(256);
-    if let Some(input) = args.input.clone() {
-        let reader: Box<dyn std::io::Read + Send> = if input == "-" {
-            Box::new(std::io::stdin())
-        } else {
-            Box::new(std::fs::File::open(&input).with_context(|| format!("cannot open {input}"))?)
-        };
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            for l in std::io::BufReader::new(reader)
-                .lines()
-                .map_while(Result::ok)
-            {
-                if !l.trim().is_empty() && tx.blocking_send(l).is_err() {
-                    break;
-                }
-            }
-        });
-    }
+    let mut rx = match &args.input {
+        Some(input) => Some(lines_on_a_thread(input)?),
+        None => None,
+    };
 
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     let mut info: Vec<SlaveInfo> = vec![];
@@ -161,12 +147,15 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
         view.open_terminal("dpctl master", baud, &info)?;
     }
-    let cycles = args.cycles;
-    let exchanges = args.exchanges;
     let deadline = match args.timeout {
         Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
         Some(t) => bail!("--timeout takes a positive number of seconds, not {t}"),
         None => None,
+    };
+    let stop_when = StopWhen {
+        cycles: args.cycles,
+        exchanges: args.exchanges,
+        deadline,
     };
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
@@ -180,7 +169,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         |st, now| {
             last_now = now;
             let m = st.app_mut();
-            while let Ok(line) = rx.try_recv() {
+            while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
                 let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
                     (Some(r), _) => r.map(|_| None),
                     (None, Some(r)) => r.map(Some),
@@ -206,15 +195,12 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);
             view.tick(m, now)?;
-            let exchanged = exchanges.is_some_and(|n| m.all_exchanged(n));
-            if deadline.is_some_and(|d| now - Instant::ZERO >= d) {
-                timed_out = true;
-                return ControlFlow::Break(());
-            }
-            match cycles {
-                Some(n) if m.cycle_stats().cycles >= n => ControlFlow::Break(()),
-                _ if exchanged => ControlFlow::Break(()),
-                _ => ControlFlow::Continue(()),
+            match stop_when.check(m, now) {
+                Some(why) => {
+                    timed_out = why == StopReason::Deadline;
+                    ControlFlow::Break(())
+                }
+                None => ControlFlow::Continue(()),
             }
         },
     )
@@ -225,14 +211,14 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     view.status(m, &info, baud, last_now, true);
     result.with_context(|| format!("on {}", args.port))?;
     let stuck = m.not_exchanging();
-    if cycles.is_some() && !stuck.is_empty() {
+    if args.cycles.is_some() && !stuck.is_empty() {
         tracing::info!(?stuck, "slaves not in data exchange at the end");
     }
-    if timed_out && exchanges.is_some() {
+    if timed_out && args.exchanges.is_some() {
         bail!(
             "timeout after {:.1} s: {} Data_Exchange cycles not reached (not in Data_Exchange: {stuck:?})",
             args.timeout.unwrap_or(0.0),
-            exchanges.unwrap_or(0)
+            args.exchanges.unwrap_or(0)
         );
     }
     Ok(())

@@ -99,6 +99,33 @@ impl ControlSource {
     }
 }
 
+/// The non-empty lines of `src` (a file, or `-` for stdin), read on a
+/// plain thread so that a blocking read of stdin never keeps a runtime
+/// from shutting down; the channel closes at the end of the input.
+pub fn lines_on_a_thread(
+    src: &str,
+) -> Result<tokio::sync::mpsc::Receiver<String>, ControlSourceError> {
+    use std::io::BufRead;
+    let reader: Box<dyn io::Read + Send> = if src == "-" {
+        Box::new(io::stdin())
+    } else {
+        let f = std::fs::File::open(src).map_err(|source| ControlSourceError::Open {
+            path: src.into(),
+            source,
+        })?;
+        Box::new(f)
+    };
+    let (tx, rx) = tokio::sync::mpsc::channel(256);
+    std::thread::spawn(move || {
+        for l in io::BufReader::new(reader).lines().map_while(Result::ok) {
+            if !l.trim().is_empty() && tx.blocking_send(l).is_err() {
+                break;
+            }
+        }
+    });
+    Ok(rx)
+}
+
 /// Lines from `r` into `inbox`, in a task.
 fn feed(r: impl AsyncRead + Unpin + Send + 'static, inbox: ControlInbox) {
     tokio::spawn(async move {
@@ -152,6 +179,11 @@ mod tests {
         assert_eq!(source, ControlSource::File(file.clone()));
         source.spawn(inbox.clone()).unwrap();
         assert_eq!(next(&inbox).await, "leave");
+        std::fs::write(&file, "a\n\n  \nb\n").unwrap();
+        let mut rx = lines_on_a_thread(file.to_str().unwrap()).unwrap();
+        assert_eq!(rx.recv().await.as_deref(), Some("a"));
+        assert_eq!(rx.recv().await.as_deref(), Some("b"));
+        assert_eq!(rx.recv().await, None);
         let missing = ControlSource::File(dir.join("missing"));
         let err = missing.spawn(inbox).unwrap_err().to_string();
         assert!(err.starts_with("cannot open "), "{err}");

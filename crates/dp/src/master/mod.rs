@@ -81,6 +81,7 @@
 mod command;
 mod config;
 mod report;
+mod stop;
 mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
@@ -89,6 +90,7 @@ pub use config::{
     DEFAULT_GLOBAL_CONTROL_INTERVAL,
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use stop::{StopReason, StopWhen};
 pub use wait::{SlaveWait, StartupTimeout};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
