@@ -248,9 +248,16 @@ pub enum AddressingError {
     /// us_DEVICE outside its values.
     #[error("us_DEVICE {0} is invalid (1..125, 126, 127, 128): PROFIBUS_INIT_SL u_ERROR 4")]
     UsDevice(u8),
-    /// The state file cannot be read.
+    /// The state file cannot be read (the message includes the cause,
+    /// which is therefore not also returned as `source()`).
     #[error("state file {0}")]
-    StateFile(#[from] AddressFileError),
+    StateFile(AddressFileError),
+}
+
+impl From<AddressFileError> for AddressingError {
+    fn from(e: AddressFileError) -> Self {
+        AddressingError::StateFile(e)
+    }
 }
 
 /// The module's status as its LEDs show it (L1158-1166, L2041-2049).
