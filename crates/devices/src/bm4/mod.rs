@@ -122,9 +122,15 @@ const INBOX_PERIOD: Duration = Duration::from_millis(20);
 
 /// The default GSD, parsed.
 pub fn default_gsd() -> Gsd {
-    Gsd::parse(&decode_latin1(DEFAULT_GSD), ParseOptions { lenient: true })
-        .expect("BM4OPRO1.GSD parses leniently")
-        .gsd
+    // Parsed once (about 2 ms in a debug build): every new module needs it.
+    static PARSED: std::sync::OnceLock<Gsd> = std::sync::OnceLock::new();
+    PARSED
+        .get_or_init(|| {
+            Gsd::parse(&decode_latin1(DEFAULT_GSD), ParseOptions { lenient: true })
+                .expect("BM4OPRO1.GSD parses leniently")
+                .gsd
+        })
+        .clone()
 }
 
 /// How the station address was chosen (`us_DEVICE` of FB
