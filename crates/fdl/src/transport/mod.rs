@@ -101,12 +101,13 @@ impl PortOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum TransportError {
     /// The path could not be opened as a tty.
-    #[error("cannot open {path}: {source}")]
+    #[error("cannot open {path}: {error}")]
     Open {
         /// The path.
         path: String,
-        /// The cause.
-        source: io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
     },
     /// The adapter does not accept the baud rate (or runs at another).
     #[error("{path} does not support {baud} ({detail})")]
@@ -119,12 +120,13 @@ pub enum TransportError {
         detail: String,
     },
     /// RTS control could not be set up.
-    #[error("{path}: RTS direction control failed: {source}")]
+    #[error("{path}: RTS direction control failed: {error}")]
     Rts {
         /// The path.
         path: String,
-        /// The cause.
-        source: io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
     },
 }
 
@@ -202,9 +204,9 @@ impl Port {
 
     /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
-        let open_err = |source| TransportError::Open {
+        let open_err = |error| TransportError::Open {
             path: path.to_string(),
-            source,
+            error,
         };
         if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
             return Self::open_tcp(path, addr, opts);
@@ -235,11 +237,10 @@ impl Port {
                 Ok(()) => RtsMechanism::Kernel,
                 Err(e) => {
                     tracing::debug!(path, error = %e, "no kernel RS-485 mode; toggling RTS around writes");
-                    port.write_rts(false)
-                        .map_err(|source| TransportError::Rts {
-                            path: path.to_string(),
-                            source,
-                        })?;
+                    port.write_rts(false).map_err(|error| TransportError::Rts {
+                        path: path.to_string(),
+                        error,
+                    })?;
                     RtsMechanism::Manual
                 }
             };
@@ -252,14 +253,14 @@ impl Port {
     /// leaves at once.
     fn open_tcp(path: &str, addr: &str, opts: PortOptions) -> Result<Port, TransportError> {
         use std::net::ToSocketAddrs;
-        let open_err = |source| TransportError::Open {
+        let open_err = |error| TransportError::Open {
             path: path.to_string(),
-            source,
+            error,
         };
         if opts.rts == RtsControl::OnSend {
             return Err(TransportError::Rts {
                 path: path.to_string(),
-                source: io::Error::new(
+                error: io::Error::new(
                     io::ErrorKind::Unsupported,
                     "a serial device server drives its transceiver itself",
                 ),
