@@ -519,3 +519,23 @@ fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
     let s = t.wait_for(&["[exit 0]"]);
     assert!(!s.contains("Addr"), "the table is gone after q:\n{s}");
 }
+
+#[test]
+fn monitor_plain_prints_lines_on_a_terminal() {
+    let bus = Bus::start(2, &[]);
+    let config = bus_file(&bus.dir().0);
+    let port = bus.link_str(0);
+    let t = Tmux::start(&[
+        "monitor",
+        "--plain",
+        "--interval",
+        "100",
+        "--port",
+        &port,
+        "--config",
+        &config.to_string_lossy(),
+    ]);
+    let s = t.wait_for(&["status t=", "masters in ring: []"]);
+    assert!(s.contains("  8 echo"), "{s}");
+    assert!(!s.contains("Addr"), "no table with --plain:\n{s}");
+}

@@ -27,7 +27,6 @@ use profibus_devices::{
 use profibus_dp::slave::{Device, DpSlave, OwnAddress, SlaveEvent};
 use profibus_fdl::driver::Clock;
 use profibus_fdl::runner::{PassiveRunner, RunnerEvent, Step};
-use profibus_fdl::transport::Port;
 use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, Instant};
 use std::io::Write;
@@ -160,6 +159,8 @@ pub struct Args {
     /// adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    #[command(flatten)]
+    rts: common::RtsArg,
     /// After each telegram keep polling the port for this many µs instead
     /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
     #[arg(long, default_value_t = 0, value_name = "US")]
@@ -549,7 +550,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     };
     let address_file = profile.address_file();
     let state_file = profile.state_file();
-    let mut port = Port::open(&path, PTY_NOMINAL)?;
+    let mut port = args.rts.open(&path, PTY_NOMINAL)?;
     let pty = port.is_pty();
     // Through a serial device server (tcp://) every byte arrives intact
     // whatever the rate: the server's setting is the rate, no search.
