@@ -83,6 +83,7 @@ pub mod channels;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;
+mod kit;
 pub mod omega;
 pub mod pkw;
 pub mod profile;
