@@ -67,6 +67,8 @@ pub struct Args {
     /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    #[command(flatten)]
+    rts: common::RtsArg,
     /// Start in the clear state (outputs zero) instead of operate.
     #[arg(long)]
     clear: bool,
@@ -116,7 +118,8 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if args.clear {
         dp.set_operating_state(OperatingState::Clear);
     }
-    let (mut station, mut port) = common::master_station(&args.port, bus, dp, args.latency)?;
+    let (mut station, mut port) =
+        common::master_station(&args.port, bus, dp, args.latency, args.rts)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
 
     // Commands come from a plain thread: a blocking read of stdin must not
