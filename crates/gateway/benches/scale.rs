@@ -3,11 +3,12 @@
 //! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE`
 //! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`).
 //!
-//! Each gateway runs in a thread of its own with its own single-threaded
-//! tokio runtime, as `dpctl gateway --sim` does in its own process: a
-//! simulated bus at 1.5 Mbit/s paced on the wall clock with M generic
-//! echo slaves (2 words in/out), stepped every 2 ms, publishing to a
-//! mosquitto started here. `change:MS`: every MS ms the application
+//! Each gateway runs as `dpctl gateway --sim` does in its own process: a
+//! thread with a simulated bus at 1.5 Mbit/s paced on the wall clock by
+//! the library's `Pacer` with M generic echo slaves (2 words in/out), the
+//! gateway stepped after every turn, and its MQTT client on a
+//! single-threaded tokio runtime of its own, publishing to a mosquitto
+//! started here. `change:MS`: every MS ms the application
 //! writes new outputs to every slave (its inputs echo them), images are
 //! published on change, so each slave yields 2 messages per MS.
 //! `interval:MS`: no writes, every image published every MS. A `mosquitto_sub` process counts what the
@@ -18,31 +19,15 @@
 //! per second against the rate the simulated bus should reach, and the
 //! load average.
 
-use profibus_devices::bus::ProfiledBus;
-use profibus_fdl::Instant as BusInstant;
-use profibus_gateway::link::{flush, pump, wall_ms};
-use profibus_gateway::sim::{slave_infos, SimPlant};
-use profibus_gateway::{Broker, Connection, Gateway, MqttLink, MqttSettings};
+mod support;
+
+use profibus_gateway::link;
 use std::io::BufRead;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-fn mosquitto() -> String {
-    for p in ["mosquitto", "/usr/sbin/mosquitto"] {
-        if Command::new(p)
-            .arg("-h")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok()
-        {
-            return p.into();
-        }
-    }
-    panic!("mosquitto is missing: run scripts/setup-test-env");
-}
+use support::{run_gateway, Broker};
 
 /// User + system CPU seconds of a process (`/proc/PID/stat`).
 fn cpu_s(pid: &str) -> f64 {
@@ -84,31 +69,14 @@ fn gateway(
     stop: Arc<AtomicBool>,
     c: Arc<Counters>,
 ) {
-    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/bus.toml"));
-    let profiled = ProfiledBus::parse(path, &text).unwrap();
-    let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "x").unwrap();
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async move {
-        let mut gw = Gateway::new(settings, slave_infos(&profiled).unwrap());
-        let conn = Connection::plain(Broker {
-            host: "127.0.0.1".into(),
-            port,
-            tls: false,
-        });
-        let mut link = MqttLink::connect(&conn, &gw);
-        let mut plant = SimPlant::new(&profiled).unwrap();
-        let start = Instant::now();
-        let tick = Duration::from_millis(2);
+    run_gateway(&text, port, |plant, pacer, gw, link| {
         let mut last_cycles = 0;
         let mut next_write = Instant::now();
         let mut value: u32 = 0;
         let addresses: Vec<u8> = plant.master().slave_addresses().collect();
         while !stop.load(Ordering::Relaxed) {
             let t0 = Instant::now();
-            plant.run_until(BusInstant::from_nanos(start.elapsed().as_nanos() as u64));
+            let pause = pacer.advance(plant);
             if let Some(w) = write.filter(|_| t0 >= next_write) {
                 next_write = t0 + w;
                 value = value.wrapping_add(1);
@@ -118,10 +86,7 @@ fn gateway(
             }
             let t1 = Instant::now();
             let now = plant.now();
-            let ts = wall_ms();
-            pump(&mut link, &mut gw, ts);
-            gw.step(plant.master(), now, ts);
-            flush(&link, &mut gw);
+            link::step(link, gw, plant.master(), now);
             let t2 = Instant::now();
             c.sim_ns
                 .fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
@@ -130,7 +95,7 @@ fn gateway(
             let cycles = plant.master().cycle_stats().cycles;
             c.cycles.fetch_add(cycles - last_cycles, Ordering::Relaxed);
             last_cycles = cycles;
-            tokio::time::sleep(tick).await;
+            std::thread::sleep(pause);
         }
     });
 }
@@ -147,29 +112,8 @@ fn main() {
     let write = mode
         .strip_prefix("change:")
         .map(|ms| Duration::from_millis(ms.parse().expect("change:MS")));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let dir = std::env::temp_dir().join(format!("gw-scale-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let conf = dir.join("mosquitto.conf");
-    std::fs::write(
-        &conf,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 100000\n"),
-    )
-    .unwrap();
-    let mut broker = Command::new(mosquitto())
-        .arg("-c")
-        .arg(&conf)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let broker = Broker::start("scale", "persistence false\nmax_queued_messages 100000\n");
+    let port = broker.port;
     let mut sub = Command::new("mosquitto_sub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-q", "0"])
         .args(["-t", "scale/+/+/inputs", "-t", "scale/+/+/outputs"])
@@ -197,7 +141,7 @@ fn main() {
         .collect();
     // Warm-up: connections, start-up of every slave.
     std::thread::sleep(Duration::from_secs(5));
-    let (bpid, spid) = (broker.id().to_string(), sub.id().to_string());
+    let (bpid, spid) = (broker.pid().to_string(), sub.id().to_string());
     let snap = |c: &Counters| {
         (
             cpu_s("self"),
@@ -220,9 +164,7 @@ fn main() {
     }
     let _ = sub.kill();
     let _ = sub.wait();
-    let _ = broker.kill();
-    let _ = broker.wait();
-    let _ = std::fs::remove_dir_all(&dir);
+    drop(broker);
 
     let wall = (b.7 - a.7).as_secs_f64();
     let msgs = (b.3 - a.3) as f64;
