@@ -19,14 +19,16 @@
 //! [`GenericProfile`] is the `generic` entry of the profile registry: the
 //! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`.
 
+use crate::kit::EventQueue;
 use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
-    expect_cfg, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
-    Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX, ERR_INVALID_SLOT,
+    expect_cfg, expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome,
+    Features, IoLayout, Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX,
+    ERR_INVALID_SLOT,
 };
 use profibus_fdl::Instant;
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use crate::address::StoredAddress;
@@ -127,7 +129,7 @@ pub struct GenericDevice {
     ext_diag_fault: bool,
     static_diag: bool,
     new_diag: bool,
-    events: VecDeque<DeviceEvent>,
+    events: EventQueue,
 }
 
 impl std::fmt::Debug for GenericDevice {
@@ -167,7 +169,7 @@ impl GenericDevice {
             ext_diag_fault: false,
             static_diag: false,
             new_diag: false,
-            events: VecDeque::new(),
+            events: EventQueue::default(),
         }
     }
 
@@ -293,12 +295,6 @@ impl GenericDevice {
         self.static_diag = static_diag;
         self.new_diag = true;
     }
-
-    fn note(&mut self, kind: &'static str, text: String) {
-        if self.events.len() < 64 {
-            self.events.push_back(DeviceEvent { kind, text });
-        }
-    }
 }
 
 impl Device for GenericDevice {
@@ -315,16 +311,10 @@ impl Device for GenericDevice {
     }
 
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
-        let data = prm.user_prm_data;
         if let Some(len) = self.user_prm_len {
-            if data.len() != len {
-                return Err(format!(
-                    "User_Prm_Data has {} bytes, the GSD gives {len}",
-                    data.len()
-                )
-                .into());
-            }
+            expect_user_prm_len(prm, len)?;
         }
+        let data = prm.user_prm_data;
         for check in &self.prm_checks {
             check(data)?;
         }
@@ -402,7 +392,7 @@ impl Device for GenericDevice {
             return Dpv1Outcome::write_error(ERR_CLASS_RESOURCE, 1);
         }
         self.records.insert((slot, index), data.to_vec());
-        self.note(
+        self.events.note(
             "record",
             format!(
                 "DP-V1 write slot {slot} index {index}: {} bytes",
@@ -424,12 +414,13 @@ impl Device for GenericDevice {
             );
         }
         self.no_add_chg = no_add_chg;
-        self.note("address", format!("address {new_address} accepted"));
+        self.events
+            .note("address", format!("address {new_address} accepted"));
         Ok(())
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 }
 

@@ -198,12 +198,7 @@ fn gsd() -> impl Strategy<Value = Gsd> {
         proptest::option::of(any::<u16>()),
         proptest::option::of(any::<u8>()),
         family(),
-        [
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-        ],
+        prop::array::uniform4(proptest::option::of(any::<u8>())),
         proptest::option::of(any::<u16>()),
     );
     let prm = (
@@ -220,12 +215,7 @@ fn gsd() -> impl Strategy<Value = Gsd> {
     );
     let dpv1 = (
         any::<[bool; 12]>(),
-        [
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-            proptest::option::of(any::<u8>()),
-        ],
+        prop::array::uniform4(proptest::option::of(any::<u8>())),
         proptest::option::of(any::<u16>()),
         proptest::option::of(any::<u16>()),
     );

@@ -29,12 +29,8 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .canonicalize()
-        .unwrap()
-}
+mod common;
+use common::{gsd_files, root};
 
 fn python() -> PathBuf {
     let py = root().join(".venv/bin/python");
@@ -44,20 +40,6 @@ fn python() -> PathBuf {
         py.display()
     );
     py
-}
-
-fn gsd_files() -> Vec<PathBuf> {
-    let mut v = Vec::new();
-    for dir in ["gsd", "gsd/corpus"] {
-        for e in std::fs::read_dir(root().join(dir)).unwrap() {
-            let p = e.unwrap().path();
-            if profibus_dp::gsd::is_gsd_file_name(&p) {
-                v.push(p);
-            }
-        }
-    }
-    v.sort();
-    v
 }
 
 /// Run the pyprofibus reader on `files`; one JSON object per file (with

@@ -5,28 +5,14 @@
 //! Run: `cargo bench -p profibus-fdl --bench wire`
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
+use profibus_fdl::wire::Telegram;
 use std::hint::black_box;
+
+mod support;
 
 fn data_exchange(len: usize) -> Vec<u8> {
     let data: Vec<u8> = (0..len as u8).collect();
-    let t = Telegram::Data(DataTelegram {
-        da: 8,
-        sa: 2,
-        fc: FunctionCode::Request {
-            kind: RequestKind::SrdHigh,
-            fcb: true,
-            fcv: true,
-        },
-        dsap: None,
-        ssap: None,
-        data: &data,
-        format: None,
-    });
-    let mut b = vec![0u8; 255];
-    let n = t.emit(&mut b).unwrap();
-    b.truncate(n);
-    b
+    support::data_exchange(&data).to_vec().unwrap()
 }
 
 fn decode(c: &mut Criterion) {
@@ -60,33 +46,13 @@ fn encode(c: &mut Criterion) {
         g.bench_with_input(BenchmarkId::new("profibus-fdl", len), &data, |b, data| {
             let mut buf = [0u8; 255];
             b.iter(|| {
-                let t = Telegram::Data(DataTelegram {
-                    da: 8,
-                    sa: 2,
-                    fc: FunctionCode::Request {
-                        kind: RequestKind::SrdHigh,
-                        fcb: true,
-                        fcv: true,
-                    },
-                    dsap: None,
-                    ssap: None,
-                    data: black_box(data),
-                    format: None,
-                });
+                let t = support::data_exchange(black_box(data));
                 black_box(t.emit(&mut buf).unwrap())
             })
         });
         g.bench_with_input(BenchmarkId::new("profirust", len), &data, |b, data| {
             let mut buf = [0u8; 255];
-            let h = profirust::fdl::DataTelegramHeader {
-                da: 8,
-                sa: 2,
-                dsap: None,
-                ssap: None,
-                fc: profirust::fdl::FunctionCode::new_srd_high(
-                    profirust::fdl::FrameCountBit::from_fcv_fcb(true, true),
-                ),
-            };
+            let h = support::profirust_data_exchange();
             b.iter(|| {
                 let d = black_box(data);
                 black_box(h.serialize(&mut buf, d.len(), |pdu| pdu.copy_from_slice(d)))

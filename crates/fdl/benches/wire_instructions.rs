@@ -12,8 +12,9 @@
 //! and FCV set, no SAPs) with a 2- or 244-byte data unit, encoded
 //! [`ITERATIONS`] times into a stack buffer.
 
-use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
 use std::hint::black_box;
+
+mod support;
 
 /// Encodes per run.
 const ITERATIONS: usize = 100_000;
@@ -22,33 +23,11 @@ const ITERATIONS: usize = 100_000;
 type Encode = fn(&[u8], &mut [u8; 255]) -> usize;
 
 fn ours(data: &[u8], buf: &mut [u8; 255]) -> usize {
-    let t = Telegram::Data(DataTelegram {
-        da: 8,
-        sa: 2,
-        fc: FunctionCode::Request {
-            kind: RequestKind::SrdHigh,
-            fcb: true,
-            fcv: true,
-        },
-        dsap: None,
-        ssap: None,
-        data,
-        format: None,
-    });
-    t.emit(buf).unwrap()
+    support::data_exchange(data).emit(buf).unwrap()
 }
 
 fn profirust(data: &[u8], buf: &mut [u8; 255]) -> usize {
-    let h = profirust::fdl::DataTelegramHeader {
-        da: 8,
-        sa: 2,
-        dsap: None,
-        ssap: None,
-        fc: profirust::fdl::FunctionCode::new_srd_high(
-            profirust::fdl::FrameCountBit::from_fcv_fcb(true, true),
-        ),
-    };
-    h.serialize(buf, data.len(), |pdu| pdu.copy_from_slice(data))
+    support::profirust_data_exchange().serialize(buf, data.len(), |pdu| pdu.copy_from_slice(data))
 }
 
 fn main() {

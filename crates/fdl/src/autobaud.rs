@@ -190,23 +190,7 @@ impl Relisten {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wire::{DataTelegram, FunctionCode, RequestKind};
-
-    fn fdl_status() -> Vec<u8> {
-        let mut b = [0u8; 16];
-        let n = Telegram::Data(DataTelegram {
-            da: 5,
-            sa: 1,
-            fc: FunctionCode::request(RequestKind::FdlStatus),
-            dsap: None,
-            ssap: None,
-            data: &[],
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        b[..n].to_vec()
-    }
+    use crate::testing::fdl_status;
 
     #[test]
     fn walks_the_rates_and_locks_on_a_valid_telegram() {
@@ -232,7 +216,7 @@ mod tests {
             Some(now + Baud::B19200.chars_to_duration(512))
         );
         // A telegram split over two reads, after garbage.
-        let t = fdl_status();
+        let t = fdl_status(5, 1);
         assert_eq!(ab.handle_rx(now, &[0x68, 0x10, 0x99]), None);
         assert_eq!(ab.handle_rx(now, &t[..3]), None);
         assert_eq!(ab.handle_rx(now, &t[3..]), Some(Baud::B19200));

@@ -275,32 +275,22 @@ mod tokio_codec {
 #[cfg(all(test, feature = "tokio-codec"))]
 mod tests {
     use super::*;
-    use crate::wire::{DataTelegram, FunctionCode, RequestKind};
+    use crate::testing::fdl_status;
     use bytes::BytesMut;
     use tokio_util::codec::Decoder;
-
-    fn fdl_status(da: u8) -> Vec<u8> {
-        let mut b = [0u8; 6];
-        Telegram::Data(DataTelegram {
-            da,
-            sa: 1,
-            fc: FunctionCode::request(RequestKind::FdlStatus),
-            dsap: None,
-            ssap: None,
-            data: &[],
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        b.to_vec()
-    }
 
     #[test]
     fn fragments_one_byte_at_a_time() {
         let mut codec = FdlCodec::new();
         let mut buf = BytesMut::new();
         let mut out = vec![];
-        let stream: Vec<u8> = [fdl_status(3), vec![0xE5], vec![0xDC, 2, 1], fdl_status(4)].concat();
+        let stream: Vec<u8> = [
+            fdl_status(3, 1),
+            vec![0xE5],
+            vec![0xDC, 2, 1],
+            fdl_status(4, 1),
+        ]
+        .concat();
         for b in stream {
             buf.extend_from_slice(&[b]);
             while let Some(t) = codec.decode(&mut buf).unwrap() {
@@ -316,11 +306,11 @@ mod tests {
     #[test]
     fn resyncs_after_corrupted_telegram() {
         let mut codec = FdlCodec::new();
-        let mut bad = fdl_status(3);
+        let mut bad = fdl_status(3, 1);
         bad[4] ^= 1; // FCS
-        let mut buf = BytesMut::from(&[bad, vec![0x00, 0x42], fdl_status(5)].concat()[..]);
+        let mut buf = BytesMut::from(&[bad, vec![0x00, 0x42], fdl_status(5, 1)].concat()[..]);
         let t = codec.decode(&mut buf).unwrap().unwrap();
-        assert_eq!(t.as_bytes(), &fdl_status(5)[..]);
+        assert_eq!(t.as_bytes(), &fdl_status(5, 1)[..]);
         let s = codec.stats();
         assert_eq!(s.bad_fcs, 1);
         assert!(s.garbage_bytes >= 2);
@@ -331,10 +321,11 @@ mod tests {
         let mut codec = FdlCodec::new();
         // "68 F0 F0 68" announces 246 more bytes; the valid telegram after it
         // is held back until the line goes idle.
-        let mut buf = BytesMut::from(&[vec![0x68, 0xF0, 0xF0, 0x68], fdl_status(9)].concat()[..]);
+        let mut buf =
+            BytesMut::from(&[vec![0x68, 0xF0, 0xF0, 0x68], fdl_status(9, 1)].concat()[..]);
         assert!(codec.decode(&mut buf).unwrap().is_none());
         let t = codec.line_idle(&mut buf).unwrap();
-        assert_eq!(t.as_bytes(), &fdl_status(9)[..]);
+        assert_eq!(t.as_bytes(), &fdl_status(9, 1)[..]);
         assert_eq!(codec.stats().truncated, 1);
     }
 }

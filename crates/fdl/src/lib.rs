@@ -58,6 +58,8 @@ pub mod ser;
 pub mod sim;
 pub mod station;
 pub mod tap;
+#[cfg(test)]
+mod testing;
 pub mod time;
 pub mod timing;
 #[cfg(feature = "transport")]

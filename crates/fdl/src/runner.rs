@@ -235,7 +235,8 @@ async fn search<F: Future<Output = ()>>(
 mod tests {
     use super::*;
     use crate::station::passive::Reply;
-    use crate::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
+    use crate::testing::fdl_status;
+    use crate::wire::{DataTelegram, ResponseStatus};
     use tokio::io::AsyncWriteExt;
 
     struct Quiet;
@@ -251,22 +252,6 @@ mod tests {
                 len: 0,
             }
         }
-    }
-
-    fn request() -> Vec<u8> {
-        let mut b = [0u8; 16];
-        let n = Telegram::Data(DataTelegram {
-            da: 5,
-            sa: 1,
-            fc: FunctionCode::request(RequestKind::FdlStatus),
-            dsap: None,
-            ssap: None,
-            data: &[],
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        b[..n].to_vec()
     }
 
     /// Locks, searches again when the application asks, locks, searches
@@ -310,7 +295,7 @@ mod tests {
                     return;
                 }
                 if searching {
-                    master.write_all(&request()).await.unwrap();
+                    master.write_all(&fdl_status(5, 1)).await.unwrap();
                 }
                 tokio::select! {
                     _ = rx.changed() => {}

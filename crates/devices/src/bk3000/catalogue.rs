@@ -107,6 +107,28 @@ pub struct Variant {
     pub source: &'static str,
 }
 
+/// A [`Variant`] in one line: mapping, identifier bytes, input bytes and
+/// fields, output bytes and fields, source.
+const fn v(
+    mapping: Mapping,
+    cfg: &'static [u8],
+    in_len: u8,
+    inputs: &'static [Field],
+    out_len: u8,
+    outputs: &'static [Field],
+    source: &'static str,
+) -> Variant {
+    Variant {
+        mapping,
+        cfg,
+        in_len,
+        out_len,
+        inputs,
+        outputs,
+        source,
+    }
+}
+
 /// How the value of a channel is scaled for people.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Scale {
@@ -286,83 +308,21 @@ const CB2: &[Field] = &[f(1, Control, 0, 1), f(2, Control, 1, 1)];
 const SB2: &[Field] = &[f(1, Status, 0, 1), f(2, Status, 1, 1)];
 
 /// KL3xx2: two analog input channels (manual p. 49).
+#[rustfmt::skip]
 const ANALOG_IN2: &[Variant] = &[
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0x50, 0x50],
-        in_len: 4,
-        out_len: 0,
-        inputs: WORDS2,
-        outputs: &[],
-        source: P49,
-    },
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0x51],
-        in_len: 4,
-        out_len: 0,
-        inputs: WORDS2,
-        outputs: &[],
-        source: INFOSYS,
-    },
-    Variant {
-        mapping: Mapping::Complete,
-        cfg: &[0xB2, 0xB2],
-        in_len: 6,
-        out_len: 6,
-        inputs: SB_WORD2,
-        outputs: CB_WORD2,
-        source: P49,
-    },
-    Variant {
-        mapping: Mapping::StatusControl,
-        cfg: &[0xC0, 0x00, 0x82, 0xC0, 0x00, 0x82],
-        in_len: 6,
-        out_len: 2,
-        inputs: SB_WORD2,
-        outputs: CB2,
-        source: P49,
-    },
+    v(Mapping::Compact, &[0x50, 0x50], 4, WORDS2, 0, &[], P49),
+    v(Mapping::Compact, &[0x51], 4, WORDS2, 0, &[], INFOSYS),
+    v(Mapping::Complete, &[0xB2, 0xB2], 6, SB_WORD2, 6, CB_WORD2, P49),
+    v(Mapping::StatusControl, &[0xC0, 0x00, 0x82, 0xC0, 0x00, 0x82], 6, SB_WORD2, 2, CB2, P49),
 ];
 
 /// KL4xx2: two analog output channels (inferred from KL3xx2).
+#[rustfmt::skip]
 const ANALOG_OUT2: &[Variant] = &[
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0x60, 0x60],
-        in_len: 0,
-        out_len: 4,
-        inputs: &[],
-        outputs: WORDS2,
-        source: INFERRED,
-    },
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0x61],
-        in_len: 0,
-        out_len: 4,
-        inputs: &[],
-        outputs: WORDS2,
-        source: INFERRED,
-    },
-    Variant {
-        mapping: Mapping::Complete,
-        cfg: &[0xB2, 0xB2],
-        in_len: 6,
-        out_len: 6,
-        inputs: SB_WORD2,
-        outputs: CB_WORD2,
-        source: INFERRED,
-    },
-    Variant {
-        mapping: Mapping::StatusControl,
-        cfg: &[0xC0, 0x82, 0x00, 0xC0, 0x82, 0x00],
-        in_len: 2,
-        out_len: 6,
-        inputs: SB2,
-        outputs: CB_WORD2,
-        source: INFERRED,
-    },
+    v(Mapping::Compact, &[0x60, 0x60], 0, &[], 4, WORDS2, INFERRED),
+    v(Mapping::Compact, &[0x61], 0, &[], 4, WORDS2, INFERRED),
+    v(Mapping::Complete, &[0xB2, 0xB2], 6, SB_WORD2, 6, CB_WORD2, INFERRED),
+    v(Mapping::StatusControl, &[0xC0, 0x82, 0x00, 0xC0, 0x82, 0x00], 2, SB2, 6, CB_WORD2, INFERRED),
 ];
 
 const SB_DW: &[Field] = &[f(1, Status, 0, 1), f(1, Value, 1, 4)];
@@ -373,98 +333,29 @@ const CB_PAD_DW: &[Field] = &[f(1, Control, 0, 1), f(1, Reserved, 1, 1), f(1, Va
 const CB: &[Field] = &[f(1, Control, 0, 1)];
 
 /// KL1501 up/down counter (manual p. 50).
+#[rustfmt::skip]
 const COUNTER: &[Variant] = &[
-    Variant {
-        mapping: Mapping::Standard,
-        cfg: &[0xB4],
-        in_len: 5,
-        out_len: 5,
-        inputs: SB_DW,
-        outputs: CB_DW,
-        source: P50,
-    },
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0xB3],
-        in_len: 4,
-        out_len: 4,
-        inputs: DW,
-        outputs: DW,
-        source: P50,
-    },
-    Variant {
-        mapping: Mapping::Complete,
-        cfg: &[0xB5],
-        in_len: 6,
-        out_len: 6,
-        inputs: SB_PAD_DW,
-        outputs: CB_PAD_DW,
-        source: P50,
-    },
+    v(Mapping::Standard, &[0xB4], 5, SB_DW, 5, CB_DW, P50),
+    v(Mapping::Compact, &[0xB3], 4, DW, 4, DW, P50),
+    v(Mapping::Complete, &[0xB5], 6, SB_PAD_DW, 6, CB_PAD_DW, P50),
 ];
 
 /// KL2502 two PWM channels (manual p. 50): 0xB2 per channel or 0xB5 for
 /// both, the same bytes either way.
+#[rustfmt::skip]
 const PWM2: &[Variant] = &[
-    Variant {
-        mapping: Mapping::Complete,
-        cfg: &[0xB2, 0xB2],
-        in_len: 6,
-        out_len: 6,
-        inputs: SB_WORD2,
-        outputs: CB_WORD2,
-        source: P50,
-    },
-    Variant {
-        mapping: Mapping::Standard,
-        cfg: &[0xB5],
-        in_len: 6,
-        out_len: 6,
-        inputs: SB_WORD2,
-        outputs: CB_WORD2,
-        source: P50,
-    },
+    v(Mapping::Complete, &[0xB2, 0xB2], 6, SB_WORD2, 6, CB_WORD2, P50),
+    v(Mapping::Standard, &[0xB5], 6, SB_WORD2, 6, CB_WORD2, P50),
 ];
 
 /// KL5001 SSI encoder (manual p. 50; English edition p. 48 lists the
 /// 0xC0/0x40 formats).
+#[rustfmt::skip]
 const SSI: &[Variant] = &[
-    Variant {
-        mapping: Mapping::Compact,
-        cfg: &[0x93],
-        in_len: 4,
-        out_len: 0,
-        inputs: DW,
-        outputs: &[],
-        source: P50,
-    },
-    Variant {
-        mapping: Mapping::Complete,
-        cfg: &[0xB4],
-        in_len: 5,
-        out_len: 5,
-        inputs: SB_DW,
-        outputs: CB_DW,
-        source: P50,
-    },
-    Variant {
-        mapping: Mapping::StatusControl,
-        cfg: &[0xC0, 0x00, 0x84],
-        in_len: 5,
-        out_len: 1,
-        inputs: SB_DW,
-        outputs: CB,
-        source: "manual (English ed.) p. 48",
-    },
-    Variant {
-        mapping: Mapping::Standard,
-        cfg: &[0x40, 0x84],
-        in_len: 5,
-        out_len: 0,
-        inputs: SB_DW,
-        outputs: &[],
-        source: "manual (English ed.) p. 48",
-    },
+    v(Mapping::Compact, &[0x93], 4, DW, 0, &[], P50),
+    v(Mapping::Complete, &[0xB4], 5, SB_DW, 5, CB_DW, P50),
+    v(Mapping::StatusControl, &[0xC0, 0x00, 0x84], 5, SB_DW, 1, CB, "manual (English ed.) p. 48"),
+    v(Mapping::Standard, &[0x40, 0x84], 5, SB_DW, 0, &[], "manual (English ed.) p. 48"),
 ];
 
 const fn digital(
@@ -505,125 +396,56 @@ const VOLT10: Scale = Scale::Signed {
     unit: "V",
 };
 
+/// A complex terminal (its own bytes in the process image).
+const fn complex(
+    name: &'static str,
+    summary: &'static str,
+    channels: u8,
+    scale: Scale,
+    variants: &'static [Variant],
+    sim: Sim,
+) -> TerminalType {
+    TerminalType {
+        name,
+        summary,
+        class: Class::Complex,
+        channels,
+        scale,
+        variants,
+        sim,
+    }
+}
+
+const VOLT10_POSITIVE: Scale = Scale::Positive {
+    full: 10.0,
+    unit: "V",
+};
+const PT100: Scale = Scale::Digit {
+    per_digit: 0.1,
+    unit: "°C",
+};
+const PERCENT: Scale = Scale::Positive {
+    full: 100.0,
+    unit: "%",
+};
+
 /// Every terminal the emulation knows.
+#[rustfmt::skip]
 pub const CATALOGUE: &[TerminalType] = &[
-    digital(
-        "KL1002",
-        "2 digital inputs 24 V DC, 3 ms",
-        Class::DigitalIn,
-        2,
-    ),
-    digital(
-        "KL1104",
-        "4 digital inputs 24 V DC, 3 ms",
-        Class::DigitalIn,
-        4,
-    ),
-    digital(
-        "KL1408",
-        "8 digital inputs 24 V DC, 3 ms",
-        Class::DigitalIn,
-        8,
-    ),
-    digital(
-        "KL2012",
-        "2 digital outputs 24 V DC, 0.5 A",
-        Class::DigitalOut,
-        2,
-    ),
-    digital(
-        "KL2134",
-        "4 digital outputs 24 V DC, 0.5 A",
-        Class::DigitalOut,
-        4,
-    ),
-    digital(
-        "KL2408",
-        "8 digital outputs 24 V DC, 0.5 A",
-        Class::DigitalOut,
-        8,
-    ),
-    TerminalType {
-        name: "KL3002",
-        summary: "2 analog inputs -10..+10 V, differential",
-        class: Class::Complex,
-        channels: 2,
-        scale: VOLT10,
-        variants: ANALOG_IN2,
-        sim: Sim::Sine,
-    },
-    TerminalType {
-        name: "KL3102",
-        summary: "2 analog inputs -10..+10 V, differential, 16 bit",
-        class: Class::Complex,
-        channels: 2,
-        scale: VOLT10,
-        variants: ANALOG_IN2,
-        sim: Sim::Sine,
-    },
-    TerminalType {
-        name: "KL3202",
-        summary: "2 analog inputs PT100 (RTD), 0.1 °C per digit",
-        class: Class::Complex,
-        channels: 2,
-        scale: Scale::Digit {
-            per_digit: 0.1,
-            unit: "°C",
-        },
-        variants: ANALOG_IN2,
-        sim: Sim::Temperature,
-    },
-    TerminalType {
-        name: "KL4002",
-        summary: "2 analog outputs 0..10 V",
-        class: Class::Complex,
-        channels: 2,
-        scale: Scale::Positive {
-            full: 10.0,
-            unit: "V",
-        },
-        variants: ANALOG_OUT2,
-        sim: Sim::None,
-    },
-    TerminalType {
-        name: "KL4032",
-        summary: "2 analog outputs -10..+10 V",
-        class: Class::Complex,
-        channels: 2,
-        scale: VOLT10,
-        variants: ANALOG_OUT2,
-        sim: Sim::None,
-    },
-    TerminalType {
-        name: "KL1501",
-        summary: "32-bit up/down counter, 100 kHz",
-        class: Class::Complex,
-        channels: 1,
-        scale: Scale::Count,
-        variants: COUNTER,
-        sim: Sim::Counter,
-    },
-    TerminalType {
-        name: "KL2502",
-        summary: "2 PWM outputs 24 V DC (duty cycle 0..0x7FFF = 0..100 %)",
-        class: Class::Complex,
-        channels: 2,
-        scale: Scale::Positive {
-            full: 100.0,
-            unit: "%",
-        },
-        variants: PWM2,
-        sim: Sim::Echo,
-    },
-    TerminalType {
-        name: "KL5001",
-        summary: "SSI encoder interface, 32-bit position",
-        class: Class::Complex,
-        channels: 1,
-        scale: Scale::Count,
-        variants: SSI,
-        sim: Sim::Encoder,
-    },
+    digital("KL1002", "2 digital inputs 24 V DC, 3 ms", Class::DigitalIn, 2),
+    digital("KL1104", "4 digital inputs 24 V DC, 3 ms", Class::DigitalIn, 4),
+    digital("KL1408", "8 digital inputs 24 V DC, 3 ms", Class::DigitalIn, 8),
+    digital("KL2012", "2 digital outputs 24 V DC, 0.5 A", Class::DigitalOut, 2),
+    digital("KL2134", "4 digital outputs 24 V DC, 0.5 A", Class::DigitalOut, 4),
+    digital("KL2408", "8 digital outputs 24 V DC, 0.5 A", Class::DigitalOut, 8),
+    complex("KL3002", "2 analog inputs -10..+10 V, differential", 2, VOLT10, ANALOG_IN2, Sim::Sine),
+    complex("KL3102", "2 analog inputs -10..+10 V, differential, 16 bit", 2, VOLT10, ANALOG_IN2, Sim::Sine),
+    complex("KL3202", "2 analog inputs PT100 (RTD), 0.1 °C per digit", 2, PT100, ANALOG_IN2, Sim::Temperature),
+    complex("KL4002", "2 analog outputs 0..10 V", 2, VOLT10_POSITIVE, ANALOG_OUT2, Sim::None),
+    complex("KL4032", "2 analog outputs -10..+10 V", 2, VOLT10, ANALOG_OUT2, Sim::None),
+    complex("KL1501", "32-bit up/down counter, 100 kHz", 1, Scale::Count, COUNTER, Sim::Counter),
+    complex("KL2502", "2 PWM outputs 24 V DC (duty cycle 0..0x7FFF = 0..100 %)", 2, PERCENT, PWM2, Sim::Echo),
+    complex("KL5001", "SSI encoder interface, 32-bit position", 1, Scale::Count, SSI, Sim::Encoder),
     passive("KL9100", "power feed terminal 24 V DC (no process data)"),
     passive("KL9400", "K-bus power supply terminal (no process data)"),
     passive("KL9010", "end terminal"),

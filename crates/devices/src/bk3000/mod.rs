@@ -47,6 +47,7 @@ pub mod profile;
 #[cfg(test)]
 mod tests;
 
+use crate::kit::{EventQueue, InboxSchedule};
 use crate::{ControlError, ControlInbox};
 use catalogue::{Class, Role, Sim};
 use image::{CfgError, CfgReject, Dir, Image, Options, Owner, Strip};
@@ -56,8 +57,7 @@ use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };
 use profibus_fdl::Instant;
-use std::collections::{BTreeMap, VecDeque};
-use std::time::Duration;
+use std::collections::BTreeMap;
 
 /// The ident number (`BK30BECF.GSD`; the manual does not print it, the
 /// file name carries it).
@@ -66,8 +66,6 @@ pub const IDENT: u16 = 0xBECF;
 /// Longest diagnosis (`Max_Diag_Data_Len`): 6 + length byte + reserved +
 /// 7 messages of 8 bytes.
 pub const MAX_DIAG_LEN: u8 = 64;
-
-const INBOX_PERIOD: Duration = Duration::from_millis(20);
 
 /// The emulated coupler; see the module docs.
 #[derive(Debug)]
@@ -84,9 +82,8 @@ pub struct Bk3000 {
     inputs: Vec<u8>,
     pinned: BTreeMap<String, i64>,
     counter: u8,
-    events: VecDeque<DeviceEvent>,
-    inbox: Option<ControlInbox>,
-    next_inbox: Instant,
+    events: EventQueue,
+    inbox: InboxSchedule,
 }
 
 impl Bk3000 {
@@ -106,9 +103,8 @@ impl Bk3000 {
             inputs: vec![],
             pinned: BTreeMap::new(),
             counter: 0,
-            events: VecDeque::new(),
-            inbox: None,
-            next_inbox: Instant::ZERO,
+            events: EventQueue::with_limit(256),
+            inbox: InboxSchedule::default(),
         }
     }
 
@@ -145,7 +141,7 @@ impl Bk3000 {
 
     /// Read control commands from `inbox` ([`Bk3000::control`]).
     pub fn with_inbox(mut self, inbox: ControlInbox) -> Bk3000 {
-        self.inbox = Some(inbox);
+        self.inbox.set(inbox);
         self
     }
 
@@ -187,11 +183,6 @@ impl Bk3000 {
             .get(pos.wrapping_sub(1))
             .copied()
             .unwrap_or(false)
-    }
-
-    fn event(&mut self, kind: &'static str, text: String) {
-        tracing::debug!(kind, %text, "bk3000");
-        self.events.push_back(DeviceEvent { kind, text });
     }
 
     fn kbus_ok(&self) -> bool {
@@ -499,7 +490,7 @@ impl Bk3000 {
             .map(|e| format!("{}={}", e.name, self.show(e, Image::get(e, outputs))))
             .collect();
         if !changed.is_empty() {
-            self.event(
+            self.events.note(
                 "outputs",
                 format!("terminal outputs: {}", changed.join(", ")),
             );
@@ -511,7 +502,7 @@ impl Bk3000 {
         self.diag.cfg = (rej.error.code(), rej.error.byte());
         self.diag_changed = true;
         let text = format!("{}: {}; {}", rej.error, rej.reason, prm::blink_text(p, n));
-        self.event(
+        self.events.note(
             "io-err",
             format!("I/O-ERR {p} pulses, then {n}: {}", rej.error),
         );
@@ -651,7 +642,7 @@ impl Device for Bk3000 {
         let zero = vec![0; self.outputs.len()];
         if self.outputs != zero {
             self.outputs = zero;
-            self.event(
+            self.events.note(
                 "outputs",
                 format!("terminal outputs cleared ({})", why.as_str()),
             );
@@ -677,31 +668,20 @@ impl Device for Bk3000 {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        self.inbox.as_ref().map(|_| self.next_inbox)
+        self.inbox.deadline()
     }
 
     fn handle_timeout(&mut self, now: Instant) {
-        let Some(inbox) = self.inbox.clone() else {
-            return;
-        };
-        if now < self.next_inbox {
-            return;
-        }
-        self.next_inbox = now + INBOX_PERIOD;
-        while let Some(line) = inbox.take() {
-            let line = line.trim().to_string();
-            if line.is_empty() {
-                continue;
-            }
+        for line in self.inbox.due(now) {
             let kbus = line.starts_with("pull") || line.starts_with("plug");
             match self.control(&line) {
-                Ok(text) if kbus => self.event("kbus", text),
-                Ok(text) => self.event("control", text),
-                Err(e) => self.event("control-error", e.to_string()),
+                Ok(text) if kbus => self.events.note("kbus", text),
+                Ok(text) => self.events.note("control", text),
+                Err(e) => self.events.note("control-error", e.to_string()),
             }
         }
     }

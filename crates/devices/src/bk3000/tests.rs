@@ -7,6 +7,7 @@ use profibus_dp::sap;
 use profibus_dp::slave::{DpSlave, SlaveState};
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::{DataTelegram, FunctionCode, RequestKind};
+use std::time::Duration;
 
 const T0: Instant = Instant::ZERO;
 const MASTER: u8 = 2;

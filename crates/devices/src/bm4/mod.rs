@@ -63,15 +63,15 @@ pub mod profile;
 pub mod vars;
 
 use crate::address::{AddressFileError, StoredAddress};
+use crate::kit::{EventQueue, InboxSchedule};
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN, PKW_MODULE};
 use crate::{ControlError, ControlInbox};
 use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
-    ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
+    expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };
 use profibus_fdl::Instant;
-use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use vars::{IecType, VarModule, VarTable, Variable};
@@ -116,9 +116,6 @@ pub const USER_PRM_LEN: usize = 3;
 pub const SDIAG_MAX: usize = 60;
 /// Fewest user diagnosis bytes.
 pub const SDIAG_MIN: usize = 3;
-
-/// How often the control inbox is looked at.
-const INBOX_PERIOD: Duration = Duration::from_millis(20);
 
 /// The default GSD, parsed.
 pub fn default_gsd() -> Gsd {
@@ -619,9 +616,8 @@ pub struct Bm4 {
     sdiag: Option<Sdiag>,
     new_diag: bool,
     led: Led,
-    events: VecDeque<DeviceEvent>,
-    inbox: Option<ControlInbox>,
-    next_inbox: Instant,
+    events: EventQueue,
+    inbox: InboxSchedule,
 }
 
 impl Bm4 {
@@ -654,9 +650,8 @@ impl Bm4 {
             sdiag: None,
             new_diag: false,
             led: Led::ParameteriseConfigure,
-            events: VecDeque::new(),
-            inbox: None,
-            next_inbox: Instant::ZERO,
+            events: EventQueue::default(),
+            inbox: InboxSchedule::default(),
         }
     }
 
@@ -668,7 +663,7 @@ impl Bm4 {
 
     /// Read control commands from `inbox` (see [`Bm4::control`]).
     pub fn with_inbox(mut self, inbox: ControlInbox) -> Bm4 {
-        self.inbox = Some(inbox);
+        self.inbox.set(inbox);
         self
     }
 
@@ -880,33 +875,10 @@ impl Bm4 {
         }
     }
 
-    fn note(&mut self, kind: &'static str, text: String) {
-        if self.events.len() < 64 {
-            self.events.push_back(DeviceEvent { kind, text });
-        }
-    }
-
     fn set_led(&mut self, led: Led) {
         if self.led != led {
             self.led = led;
-            self.note("led", led.as_str().to_string());
-        }
-    }
-
-    fn run_inbox(&mut self, now: Instant) {
-        let Some(inbox) = self.inbox.clone() else {
-            return;
-        };
-        self.next_inbox = now + INBOX_PERIOD;
-        while let Some(line) = inbox.take() {
-            let line = line.trim().to_string();
-            if line.is_empty() {
-                continue;
-            }
-            match self.control(&line) {
-                Ok(t) => self.note("control", t),
-                Err(e) => self.note("control_error", format!("`{line}`: {e}")),
-            }
+            self.events.note("led", led.as_str().to_string());
         }
     }
 }
@@ -937,13 +909,7 @@ impl Device for Bm4 {
     }
 
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
-        if prm.user_prm_data.len() != USER_PRM_LEN {
-            return Err(format!(
-                "User_Prm_Data has {} bytes, the GSD gives {USER_PRM_LEN}",
-                prm.user_prm_data.len()
-            )
-            .into());
-        }
+        expect_user_prm_len(prm, USER_PRM_LEN)?;
         if self.led != Led::ConfigurationError {
             self.set_led(Led::ParameteriseConfigure);
         }
@@ -979,7 +945,8 @@ impl Device for Bm4 {
         if self.pkw {
             if let Some(req) = Pkw::parse(outputs) {
                 if let Some(job) = self.engine.on_request(now, req, &mut self.vars) {
-                    self.note("pkw", format!("PKW {} -> {}", job.request, job.response));
+                    self.events
+                        .note("pkw", format!("PKW {} -> {}", job.request, job.response));
                 }
             }
         }
@@ -1030,7 +997,8 @@ impl Device for Bm4 {
             s.fetched = true;
         }
         if fetched_now {
-            self.note("diag", "user diagnosis fetched by the master (x_OK)".into());
+            self.events
+                .note("diag", "user diagnosis fetched by the master (x_OK)".into());
         }
     }
 
@@ -1056,12 +1024,12 @@ impl Device for Bm4 {
                     Some(p) => format!("address {new_address} set once, kept in {}", p.display()),
                     None => format!("address {new_address} set once"),
                 };
-                self.note("address", text);
+                self.events.note("address", text);
                 self.addressing.stored = true;
                 Ok(())
             }
             AddressMode::EveryStart => {
-                self.note(
+                self.events.note(
                     "address",
                     format!("address {new_address} set for this start (not stored)"),
                 );
@@ -1071,16 +1039,19 @@ impl Device for Bm4 {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        self.inbox.as_ref().map(|_| self.next_inbox)
+        self.inbox.deadline()
     }
 
     fn handle_timeout(&mut self, now: Instant) {
-        if self.inbox.is_some() && now >= self.next_inbox {
-            self.run_inbox(now);
+        for line in self.inbox.due(now) {
+            match self.control(&line) {
+                Ok(t) => self.events.note("control", t),
+                Err(e) => self.events.note("control_error", format!("`{line}`: {e}")),
+            }
         }
     }
 }

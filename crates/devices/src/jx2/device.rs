@@ -77,7 +77,8 @@ impl Device for Jx2 {
 
     fn prm_refused(&mut self, _now: Instant, reason: &Reason) {
         self.raise(ErrorNumber::Prm);
-        self.note("jx2", format!("Set_Prm refused: {reason}"));
+        self.events
+            .note("jx2", format!("Set_Prm refused: {reason}"));
     }
 
     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
@@ -154,7 +155,7 @@ impl Device for Jx2 {
     fn dpv1_write(&mut self, _now: Instant, slot: u8, index: u8, data: &[u8]) -> Dpv1Outcome {
         let room = 2 * self.layout.dsw_words.max(0) as usize;
         if data.len() > room {
-            self.note(
+            self.events.note(
                 "jx2",
                 format!(
                     "data-record write of {} bytes refused: the area holds {room}",
@@ -223,7 +224,7 @@ impl Device for Jx2 {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {

@@ -79,11 +79,11 @@ mod scripted;
 mod shared;
 
 pub use scripted::ScriptedJx2;
-pub use shared::{Plc, SharedJx2};
+pub use shared::{BadModuleNumber, Plc, SharedJx2};
 
-use profibus_dp::slave::{DeviceEvent, SlaveState};
+use crate::kit::EventQueue;
+use profibus_dp::slave::SlaveState;
 use profibus_fdl::Instant;
-use std::collections::VecDeque;
 use std::fmt;
 use std::time::Duration;
 
@@ -558,7 +558,7 @@ pub struct Jx2 {
     memory: Vec<u16>,
     restart: bool,
     memory_fault: bool,
-    events: VecDeque<DeviceEvent>,
+    events: EventQueue,
 }
 
 impl Default for Jx2 {
@@ -606,7 +606,7 @@ impl Jx2 {
             memory: vec![0; (reg::DATA_LAST - reg::DATA_FIRST + 1) as usize],
             restart: false,
             memory_fault: false,
-            events: VecDeque::new(),
+            events: EventQueue::default(),
         };
         j.reset_diag();
         j.real_cfg = j.build_real_cfg();
@@ -634,7 +634,7 @@ impl Jx2 {
                 if self.address.is_some() && !self.initialised {
                     self.initialised = true;
                     self.restart = true;
-                    self.note(
+                    self.events.note(
                         "jx2",
                         format!(
                             "controller initialised, station address {}",
@@ -649,12 +649,6 @@ impl Jx2 {
     /// When [`Jx2::settle`] has something to do.
     pub fn next_deadline(&self) -> Option<Instant> {
         self.busy_until
-    }
-
-    fn note(&mut self, kind: &'static str, text: String) {
-        if self.events.len() < 64 {
-            self.events.push_back(DeviceEvent { kind, text });
-        }
     }
 
     // ----- state for people ---------------------------------------------
@@ -741,7 +735,7 @@ impl Jx2 {
     fn raise(&mut self, e: ErrorNumber) {
         self.error = Some(e);
         self.error_count += 1;
-        self.note("jx2_error", e.to_string());
+        self.events.note("jx2_error", e.to_string());
     }
 
     // ----- registers ----------------------------------------------------
@@ -1043,7 +1037,7 @@ impl Jx2 {
         if keep.3 {
             self.raise(ErrorNumber::MemoryTest);
         }
-        self.note("jx2", "module reset".into());
+        self.events.note("jx2", "module reset".into());
     }
 
     // ----- the layout on the bus ----------------------------------------

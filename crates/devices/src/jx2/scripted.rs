@@ -4,6 +4,7 @@
 
 use super::script::{Interpreter, Progress};
 use super::Plc;
+use crate::kit::INBOX_PERIOD;
 use crate::profile::ControlInbox;
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
@@ -12,10 +13,6 @@ use profibus_dp::slave::{
 };
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
-use std::time::Duration;
-
-/// How often the control inbox is looked at.
-const INBOX_PERIOD: Duration = Duration::from_millis(20);
 
 /// A [`Plc`] whose program ([`Interpreter`]) runs at every bus event and
 /// timeout. Replies to inbox commands, and the program's failed commands

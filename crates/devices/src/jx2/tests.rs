@@ -77,15 +77,9 @@ impl Rig {
     fn req(&mut self, dsap: Option<u8>, data: &[u8]) -> (Reply, Vec<u8>) {
         self.now += Duration::from_millis(1);
         self.slave.handle_timeout(self.now);
-        let req = DataTelegram {
-            da: self.slave.address(),
-            sa: MASTER,
-            fc: FunctionCode::request(RequestKind::SrdHigh),
-            dsap,
-            ssap: dsap.map(|_| 62),
-            data,
-            format: None,
-        };
+        let fc = FunctionCode::request(RequestKind::SrdHigh);
+        let req = DataTelegram::new(self.slave.address(), MASTER, fc, data)
+            .with_saps(dsap, dsap.map(|_| 62));
         let mut out = [0u8; 246];
         let r = self.slave.on_request(self.now, &req, &mut out);
         let n = match r {

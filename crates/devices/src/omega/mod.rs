@@ -77,6 +77,7 @@
 pub mod params;
 pub mod profile;
 
+use crate::kit::{EventQueue, InboxSchedule};
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
 use crate::ControlError;
 use crate::ControlInbox;
@@ -84,10 +85,9 @@ use params::ParamTable;
 use profibus_dp::cfg::{identifiers, CfgError};
 use profibus_dp::prm::SetPrm;
 use profibus_dp::slave::{
-    ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
+    expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };
 use profibus_fdl::Instant;
-use std::collections::VecDeque;
 use std::time::Duration;
 
 /// Omega Drive-Line II option board (Omega manual L871-926): requests 1
@@ -154,8 +154,6 @@ pub const STATUS_REMOTE: u16 = 1 << 9;
 
 /// b_ERR bit 7: cyclic data transmission timeout.
 pub const B_ERR_CYCLIC_TIMEOUT: u8 = 1 << 7;
-
-const INBOX_PERIOD: Duration = Duration::from_millis(20);
 
 /// The data layout a configuration gives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -450,9 +448,8 @@ pub struct Omega {
     t_pb_dp: Duration,
     t_cyclic: Duration,
     last_exchange: Option<Instant>,
-    events: VecDeque<DeviceEvent>,
-    inbox: Option<ControlInbox>,
-    next_inbox: Instant,
+    events: EventQueue,
+    inbox: InboxSchedule,
 }
 
 /// The default Get_Cfg before a configuration: service data,
@@ -482,9 +479,8 @@ impl Omega {
             t_pb_dp: DEFAULT_TIMEOUT,
             t_cyclic: DEFAULT_TIMEOUT,
             last_exchange: None,
-            events: VecDeque::new(),
-            inbox: None,
-            next_inbox: Instant::ZERO,
+            events: EventQueue::default(),
+            inbox: InboxSchedule::default(),
         }
     }
 
@@ -526,7 +522,7 @@ impl Omega {
 
     /// Read control commands from `inbox` (see [`Omega::control`]).
     pub fn with_inbox(mut self, inbox: ControlInbox) -> Omega {
-        self.inbox = Some(inbox);
+        self.inbox.set(inbox);
         self
     }
 
@@ -627,15 +623,9 @@ impl Omega {
         }
     }
 
-    fn note(&mut self, kind: &'static str, text: String) {
-        if self.events.len() < 64 {
-            self.events.push_back(DeviceEvent { kind, text });
-        }
-    }
-
     fn report(&mut self) {
         let t = self.status_text();
-        self.note("status", t);
+        self.events.note("status", t);
     }
 
     fn set_message(&mut self, m: i8) {
@@ -679,13 +669,7 @@ impl Device for Omega {
     }
 
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
-        if prm.user_prm_data.len() != USER_PRM_LEN {
-            return Err(format!(
-                "User_Prm_Data has {} bytes, the GSD gives {USER_PRM_LEN}",
-                prm.user_prm_data.len()
-            )
-            .into());
-        }
+        expect_user_prm_len(prm, USER_PRM_LEN)?;
         Ok(())
     }
 
@@ -733,7 +717,8 @@ impl Device for Omega {
         if l.pkw {
             if let Some(req) = Pkw::parse(outputs) {
                 if let Some(job) = self.engine.on_request(now, req, &mut self.drive) {
-                    self.note("pkw", format!("PKW {} -> {}", job.request, job.response));
+                    self.events
+                        .note("pkw", format!("PKW {} -> {}", job.request, job.response));
                 }
             }
             at = PKW_LEN;
@@ -794,12 +779,12 @@ impl Device for Omega {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
         let (pb, cyc) = self.deadlines();
-        let inbox = self.inbox.as_ref().map(|_| self.next_inbox);
+        let inbox = self.inbox.deadline();
         // The PKW engine needs no wake-up: a held response is shown by the
         // first read_inputs after its time.
         [pb, cyc, inbox].into_iter().flatten().min()
@@ -814,15 +799,10 @@ impl Device for Omega {
             self.b_err |= B_ERR_CYCLIC_TIMEOUT;
             self.report();
         }
-        if let Some(inbox) = self.inbox.clone() {
-            if now >= self.next_inbox {
-                self.next_inbox = now + INBOX_PERIOD;
-                while let Some(line) = inbox.take() {
-                    match self.control(line.trim()) {
-                        Ok(t) => self.note("control", t),
-                        Err(e) => self.note("control_error", e.to_string()),
-                    }
-                }
+        for line in self.inbox.due(now) {
+            match self.control(&line) {
+                Ok(t) => self.events.note("control", t),
+                Err(e) => self.events.note("control_error", e.to_string()),
             }
         }
     }

@@ -52,6 +52,7 @@ pub mod tags;
 #[cfg(test)]
 mod tests;
 
+use crate::kit::{EventQueue, InboxSchedule};
 use crate::{ControlError, ControlInbox};
 use commands::{Nak, Reader};
 use link::{Line, ReaderLink, Received};
@@ -60,8 +61,6 @@ use profibus_dp::slave::{
     expect_cfg, ClearReason, Device, DeviceEvent, Features, IoLayout, Reason,
 };
 use profibus_fdl::Instant;
-use std::collections::VecDeque;
-use std::time::Duration;
 use tags::{parse_uid, TagField};
 
 /// The ident number (our choice, `gsd/AEGI0DC4.GSD`).
@@ -89,17 +88,13 @@ pub const DATA_FLAG: u8 = 0x08;
 /// The command-line terminator (L97).
 pub const CR: u8 = 0x0D;
 
-/// How often the control inbox is looked at.
-const INBOX_PERIOD: Duration = Duration::from_millis(20);
-
 /// The emulated reader: a [`Device`] for the DP slave core.
 #[derive(Debug)]
 pub struct Rfid {
     link: ReaderLink,
     reader: Reader,
-    events: VecDeque<DeviceEvent>,
-    inbox: Option<ControlInbox>,
-    next_inbox: Instant,
+    events: EventQueue,
+    inbox: InboxSchedule,
     state_events: bool,
 }
 
@@ -109,9 +104,8 @@ impl Rfid {
         Rfid {
             link: ReaderLink::new(),
             reader: Reader::new(field),
-            events: VecDeque::new(),
-            inbox: None,
-            next_inbox: Instant::ZERO,
+            events: EventQueue::with_limit(256),
+            inbox: InboxSchedule::default(),
             state_events: false,
         }
     }
@@ -127,7 +121,7 @@ impl Rfid {
 
     /// Read control commands from `inbox` (see [`Rfid::control`]).
     pub fn with_inbox(mut self, inbox: ControlInbox) -> Rfid {
-        self.inbox = Some(inbox);
+        self.inbox.set(inbox);
         self
     }
 
@@ -218,13 +212,6 @@ impl Rfid {
         Ok(reply)
     }
 
-    fn note(&mut self, kind: &'static str, text: String) {
-        tracing::debug!(kind, "{text}");
-        if self.events.len() < 256 {
-            self.events.push_back(DeviceEvent { kind, text });
-        }
-    }
-
     /// Advance the running command, start queued ones, save the field.
     fn run(&mut self, now: Instant) {
         loop {
@@ -238,7 +225,8 @@ impl Rfid {
             match self.link.take_command() {
                 None => break,
                 Some(Line::Overflow) => {
-                    self.note("rfid", "command line too long: NAK #05".into());
+                    self.events
+                        .note("rfid", "command line too long: NAK #05".into());
                     self.answer(&Nak::BufferOverflow.answer());
                 }
                 Some(Line::Text(t)) => {
@@ -249,17 +237,17 @@ impl Rfid {
             }
         }
         while let Some(e) = self.reader.take_event() {
-            self.note("rfid", e);
+            self.events.note("rfid", e);
         }
         if self.reader.take_changed() && self.state_events {
             let text = self.reader.field().to_toml();
-            self.note(crate::STATE_EVENT, text);
+            self.events.note(crate::STATE_EVENT, text);
         }
     }
 
     fn answer(&mut self, bytes: &[u8]) {
         while let Some(e) = self.reader.take_event() {
-            self.note("rfid", e);
+            self.events.note("rfid", e);
         }
         self.link.push_answer(bytes);
         let text = format!(
@@ -267,25 +255,14 @@ impl Rfid {
             bytes.len(),
             String::from_utf8_lossy(bytes).replace('\r', "\\r")
         );
-        self.note("rfid", text);
+        self.events.note("rfid", text);
     }
 
     fn poll_inbox(&mut self, now: Instant) {
-        let Some(inbox) = self.inbox.clone() else {
-            return;
-        };
-        if now < self.next_inbox {
-            return;
-        }
-        self.next_inbox = now + INBOX_PERIOD;
-        while let Some(line) = inbox.take() {
-            let line = line.trim();
-            if line.is_empty() {
-                continue;
-            }
-            match self.control(now, line) {
-                Ok(t) => self.note("control", t),
-                Err(e) => self.note("control_error", e.to_string()),
+        for line in self.inbox.due(now) {
+            match self.control(now, &line) {
+                Ok(t) => self.events.note("control", t),
+                Err(e) => self.events.note("control_error", e.to_string()),
             }
         }
     }
@@ -328,13 +305,13 @@ impl Device for Rfid {
         self.run(now);
         let busy = self.reader.busy();
         match self.link.request(outputs, busy) {
-            Received::Ignored => self.note(
+            Received::Ignored => self.events.note(
                 "rfid",
                 "send job while the data flag is set: ignored (the manual allows sending only with the flag 0)".into(),
             ),
             Received::Job { bytes, lines } if bytes > 0 => {
                 let text = format!("send job: {bytes} bytes, {lines} command line(s) complete");
-                self.note("rfid", text)
+                self.events.note("rfid", text)
             }
             _ => {}
         }
@@ -352,7 +329,7 @@ impl Device for Rfid {
             self.link.reset();
             self.reader.abort();
             if busy {
-                self.note(
+                self.events.note(
                     "rfid",
                     format!("{}: command and answer dropped", why.as_str()),
                 );
@@ -362,11 +339,11 @@ impl Device for Rfid {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
-        self.events.pop_front()
+        self.events.pop()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        let inbox = self.inbox.as_ref().map(|_| self.next_inbox);
+        let inbox = self.inbox.deadline();
         [inbox, self.reader.next_wake()].into_iter().flatten().min()
     }
 

@@ -2,6 +2,7 @@ use super::client::{RfidClient, RfidError, Stage, StartError};
 use super::commands::{NO_READ, VERSION};
 use super::tags::TagField;
 use super::*;
+use std::time::Duration;
 
 fn ms(n: u64) -> Instant {
     Instant::ZERO + Duration::from_millis(n)

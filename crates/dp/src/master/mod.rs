@@ -461,6 +461,12 @@ struct Slave {
     chain: u8,
 }
 
+/// The next request of a poll cycle ([`DpMaster::next_cyclic`]).
+enum Cyclic {
+    GlobalControl(GlobalControl),
+    Slave(usize),
+}
+
 /// What the request in flight was for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Inflight {
@@ -1335,6 +1341,29 @@ impl DpMaster {
     }
 
     /// The broadcast SDN request of a Global_Control.
+    /// What the running poll cycle sends next: a queued Global_Control
+    /// first (broadcast SDN), then the next due slave.
+    fn next_cyclic(&mut self, now: Instant) -> Option<Cyclic> {
+        if let Some(gc) = self.gc_queue.pop_front() {
+            return Some(Cyclic::GlobalControl(gc));
+        }
+        while self.cursor < self.slaves.len() {
+            let i = self.cursor;
+            self.cursor += 1;
+            if self.due(i, now) {
+                return Some(Cyclic::Slave(i));
+            }
+        }
+        None
+    }
+
+    fn cyclic_request(&mut self, next: Cyclic, now: Instant) -> Request<'_> {
+        match next {
+            Cyclic::GlobalControl(gc) => self.global_control_request(gc),
+            Cyclic::Slave(i) => self.slave_request(i, now),
+        }
+    }
+
     fn global_control_request(&mut self, gc: GlobalControl) -> Request<'_> {
         self.gc_bytes = gc.to_bytes();
         self.inflight = Some(Inflight::GlobalControl);
@@ -1354,16 +1383,8 @@ impl MasterApp for DpMaster {
         if ctx.cycles == 0 {
             self.start_visit(now);
         }
-        // Global_Control first: broadcast SDN.
-        if let Some(gc) = self.gc_queue.pop_front() {
-            return Some(self.global_control_request(gc));
-        }
-        while self.cursor < self.slaves.len() {
-            let i = self.cursor;
-            self.cursor += 1;
-            if self.due(i, now) {
-                return Some(self.slave_request(i, now));
-            }
+        if let Some(next) = self.next_cyclic(now) {
+            return Some(self.cyclic_request(next, now));
         }
         if ctx.high_only {
             return None;
@@ -1389,15 +1410,8 @@ impl MasterApp for DpMaster {
             self.start_poll_cycle(now);
             self.queue_cyclic_global_control(now);
             self.job_sent_this_visit = false;
-            if let Some(gc) = self.gc_queue.pop_front() {
-                return Some(self.global_control_request(gc));
-            }
-            while self.cursor < self.slaves.len() {
-                let i = self.cursor;
-                self.cursor += 1;
-                if self.due(i, now) {
-                    return Some(self.slave_request(i, now));
-                }
+            if let Some(next) = self.next_cyclic(now) {
+                return Some(self.cyclic_request(next, now));
             }
         }
         None

@@ -54,6 +54,17 @@ fn answer(m: &mut DpMaster, now: u64, outcome: Outcome<'_>) {
     );
 }
 
+/// A data response without SAPs (Data_Exchange).
+fn data_resp(status: ResponseStatus, data: &[u8]) -> Outcome<'_> {
+    Outcome::Response {
+        status,
+        station: StationType::Passive,
+        dsap: None,
+        ssap: None,
+        data,
+    }
+}
+
 fn diag_resp(data: &[u8]) -> Outcome<'_> {
     Outcome::Response {
         status: ResponseStatus::Dl,
@@ -105,17 +116,7 @@ fn start_up_sequence_reaches_data_exchange() {
     );
     let (dsap, out) = next(&mut m, 5).unwrap();
     assert_eq!((dsap, out), (None, vec![0xA0, 0xA1]));
-    answer(
-        &mut m,
-        5,
-        Outcome::Response {
-            status: ResponseStatus::Dl,
-            station: StationType::Passive,
-            dsap: None,
-            ssap: None,
-            data: &[7, 9],
-        },
-    );
+    answer(&mut m, 5, data_resp(ResponseStatus::Dl, &[7, 9]));
     assert_eq!(m.inputs(8), Some(&[7u8, 9][..]));
     assert!(m.set_outputs(8, &[1, 2]));
     assert_eq!(next(&mut m, 6).unwrap().1, vec![1, 2]);
@@ -126,17 +127,7 @@ fn data_high_triggers_diag_read_and_prm_req_restarts() {
     let mut m = master();
     bring_up(&mut m);
     next(&mut m, 5).unwrap();
-    answer(
-        &mut m,
-        5,
-        Outcome::Response {
-            status: ResponseStatus::Dh,
-            station: StationType::Passive,
-            dsap: None,
-            ssap: None,
-            data: &[0, 0],
-        },
-    );
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
     assert_eq!(next(&mut m, 6).unwrap().0, Some(sap::SLAVE_DIAG));
     // The slave lost its parameters (watchdog): Prm_Req.
     answer(&mut m, 6, diag_resp(&[0x02, 0x05, 0x00, 0xFF, 0x12, 0x34]));
@@ -278,17 +269,7 @@ fn an_invalid_diagnosis_is_counted_read_again_and_never_acted_on() {
     bring_up(&mut m);
     states(&mut m);
     next(&mut m, 5).unwrap();
-    answer(
-        &mut m,
-        5,
-        Outcome::Response {
-            status: ResponseStatus::Dh,
-            station: StationType::Passive,
-            dsap: None,
-            ssap: None,
-            data: &[0, 0],
-        },
-    );
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
     // The observed failure: 20 bytes of process data taken as Slave_Diag
     // (Master_Lock set, always-1 bit clear, ident 0). Then a 3-byte one.
     let bogus = [
@@ -423,17 +404,7 @@ fn a_slave_that_answers_again_is_started_up_within_one_pass() {
         "Data_Exchange in the same pass"
     );
     assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
-    answer(
-        &mut m,
-        14,
-        Outcome::Response {
-            status: ResponseStatus::Dl,
-            station: StationType::Passive,
-            dsap: None,
-            ssap: None,
-            data: &[1, 2],
-        },
-    );
+    answer(&mut m, 14, data_resp(ResponseStatus::Dl, &[1, 2]));
     // The pass is over: nothing more in this visit.
     assert_eq!(visit(&mut m, 5), None);
     assert_eq!(m.inputs(8), Some(&[1u8, 2][..]));

@@ -631,6 +631,20 @@ pub fn expect_cfg(expected: &[u8], got: &[u8]) -> Result<IoLayout, Reason> {
     layout_of(got)
 }
 
+/// Check that a Set_Prm carries the `len` bytes of User_Prm_Data the
+/// device's GSD gives (`User_Prm_Data_Len`).
+pub fn expect_user_prm_len(prm: &SetPrm<'_>, len: usize) -> Result<(), Reason> {
+    if prm.user_prm_data.len() == len {
+        Ok(())
+    } else {
+        Err(format!(
+            "User_Prm_Data has {} bytes, the GSD gives {len}",
+            prm.user_prm_data.len()
+        )
+        .into())
+    }
+}
+
 /// The cyclic layout of a configuration (sum of its identifiers), or why
 /// it cannot be decoded or exceeds 244 bytes in a direction.
 pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {

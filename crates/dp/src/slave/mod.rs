@@ -83,10 +83,10 @@ mod state;
 
 pub use device::Device;
 pub use device::{
-    expect_cfg, layout_of, ClearReason, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout,
-    OwnAddress, Reason, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_CLASS_RESOURCE,
-    ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE, ERR_INVALID_SLOT,
-    ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
+    expect_cfg, expect_user_prm_len, layout_of, ClearReason, DeviceEvent, DiagWriter, Dpv1Outcome,
+    Features, IoLayout, OwnAddress, Reason, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION,
+    ERR_CLASS_RESOURCE, ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE,
+    ERR_INVALID_SLOT, ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
 };
 pub use state::{control_words, SlaveEvent, SlaveState};
 

@@ -793,14 +793,9 @@ fn no_inputs_answers_short_ack_or_dh() {
     }
     let mut s = DpSlave::new(OutOnly, ADDR);
     let mut out = [0u8; 246];
-    let mk = |dsap: Option<u8>, data: &'static [u8]| DataTelegram {
-        da: ADDR,
-        sa: MASTER,
-        fc: FunctionCode::request(RequestKind::SrdHigh),
-        dsap,
-        ssap: dsap.map(|_| 62),
-        data,
-        format: None,
+    let mk = |dsap: Option<u8>, data: &'static [u8]| {
+        let fc = FunctionCode::request(RequestKind::SrdHigh);
+        DataTelegram::new(ADDR, MASTER, fc, data).with_saps(dsap, dsap.map(|_| 62))
     };
     s.on_request(
         t(0),
@@ -1021,20 +1016,9 @@ fn unknown_saps_and_odd_requests() {
 }
 
 fn wire_request(da: u8, sa: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
-    let mut b = vec![0u8; 300];
-    let n = Telegram::Data(DataTelegram {
-        da,
-        sa,
-        fc: FunctionCode::from_byte(fc),
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data,
-        format: None,
-    })
-    .emit(&mut b)
-    .unwrap();
-    b.truncate(n);
-    b
+    let t = DataTelegram::new(da, sa, FunctionCode::from_byte(fc), data)
+        .with_saps(saps.map(|s| s.0), saps.map(|s| s.1));
+    Telegram::Data(t).to_vec().unwrap()
 }
 
 /// The passive station plus the slave, at the byte level.
@@ -1211,14 +1195,9 @@ fn a_device_sets_its_address_and_restarts_the_slave() {
     let mut s = DpSlave::new(PlcModule::default(), ADDR);
     assert_eq!(s.address(), NO_ADDRESS, "no address yet: off the bus");
     let mut out = [0u8; 246];
-    let req = |da: u8, dsap: Option<u8>, data: &'static [u8]| DataTelegram {
-        da,
-        sa: MASTER,
-        fc: FunctionCode::request(RequestKind::SrdHigh),
-        dsap,
-        ssap: dsap.map(|_| sap::MASTER),
-        data,
-        format: None,
+    let req = |da: u8, dsap: Option<u8>, data: &'static [u8]| {
+        let fc = FunctionCode::request(RequestKind::SrdHigh);
+        DataTelegram::new(da, MASTER, fc, data).with_saps(dsap, dsap.map(|_| sap::MASTER))
     };
     assert_eq!(
         s.on_request(t(0), &req(ADDR, Some(sap::SLAVE_DIAG), &[]), &mut out),

@@ -1371,6 +1371,7 @@ impl Core {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::fdl_status;
     use crate::timing::Baud;
 
     #[derive(Default)]
@@ -1470,22 +1471,12 @@ mod tests {
         saps: Option<(u8, u8)>,
         data: &[u8],
     ) -> Vec<u8> {
-        let mut b = [0u8; 255];
-        let n = Telegram::Data(DataTelegram {
-            da,
-            sa,
-            fc: FunctionCode::Response {
-                status,
-                station: StationType::Passive,
-            },
-            dsap: saps.map(|s| s.0),
-            ssap: saps.map(|s| s.1),
-            data,
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        b[..n].to_vec()
+        let fc = FunctionCode::Response {
+            status,
+            station: StationType::Passive,
+        };
+        let t = DataTelegram::new(da, sa, fc, data).with_saps(saps.map(|s| s.0), saps.map(|s| s.1));
+        Telegram::Data(t).to_vec().unwrap()
     }
 
     #[test]
@@ -1617,19 +1608,7 @@ mod tests {
     fn listener_answers_not_ready_then_goes_offline_on_own_address() {
         let params = BusParams::defaults(Baud::B19200);
         let mut st = ActiveStation::new(ActiveConfig::new(5, params), Recorder::default());
-        let mut b = [0u8; 6];
-        let n = Telegram::Data(DataTelegram {
-            da: 5,
-            sa: 2,
-            fc: FunctionCode::request(RequestKind::FdlStatus),
-            dsap: None,
-            ssap: None,
-            data: &[],
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        st.handle_rx(Instant::ZERO, &b[..n]);
+        st.handle_rx(Instant::ZERO, &fdl_status(5, 2));
         let (t, _) = (st.poll_timeout().unwrap(), ());
         let tx = st.poll_transmit(t).unwrap().to_vec();
         assert_eq!(tx[3], 0x10, "not ready while the LAS is unknown");

@@ -304,6 +304,7 @@ impl<R: Responder> Station for PassiveStation<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::fdl_status;
     use crate::timing::Baud;
 
     /// Echoes the request's data unit with DL, counting executions.
@@ -329,24 +330,14 @@ mod tests {
     }
 
     fn req(da: u8, sa: u8, fcb: bool, fcv: bool, data: &[u8]) -> Vec<u8> {
-        let mut b = vec![0u8; 300];
-        let n = Telegram::Data(DataTelegram {
-            da,
-            sa,
-            fc: FunctionCode::Request {
-                kind: RequestKind::SrdHigh,
-                fcb,
-                fcv,
-            },
-            dsap: None,
-            ssap: None,
-            data,
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
-        b.truncate(n);
-        b
+        let fc = FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb,
+            fcv,
+        };
+        Telegram::Data(DataTelegram::new(da, sa, fc, data))
+            .to_vec()
+            .unwrap()
     }
 
     fn station() -> PassiveStation<Echo> {
@@ -405,18 +396,7 @@ mod tests {
     #[test]
     fn fdl_status_and_foreign_addresses() {
         let mut st = station();
-        let mut b = [0u8; 6];
-        Telegram::Data(DataTelegram {
-            da: 8,
-            sa: 1,
-            fc: FunctionCode::request(RequestKind::FdlStatus),
-            dsap: None,
-            ssap: None,
-            data: &[],
-            format: None,
-        })
-        .emit(&mut b)
-        .unwrap();
+        let b = fdl_status(8, 1);
         let r = exchange(&mut st, Instant::ZERO, &b).unwrap();
         assert_eq!(r, vec![0x10, 0x01, 0x08, 0x00, 0x09, 0x16]);
         assert!(exchange(&mut st, Instant::ZERO, &req(9, 2, true, false, &[1])).is_none());

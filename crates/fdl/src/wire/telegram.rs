@@ -142,6 +142,25 @@ pub struct DataTelegram<'a> {
 }
 
 impl<'a> DataTelegram<'a> {
+    /// A telegram from `sa` to `da` with frame control `fc` and data unit
+    /// `data`, without SAPs, in the format the emitter chooses.
+    pub const fn new(da: u8, sa: u8, fc: FunctionCode, data: &'a [u8]) -> DataTelegram<'a> {
+        DataTelegram {
+            da,
+            sa,
+            fc,
+            dsap: None,
+            ssap: None,
+            data,
+            format: None,
+        }
+    }
+
+    /// The same telegram with these address extensions (DSAP, SSAP).
+    pub const fn with_saps(self, dsap: Option<u8>, ssap: Option<u8>) -> DataTelegram<'a> {
+        DataTelegram { dsap, ssap, ..self }
+    }
+
     /// Length of the data field on the wire: SAP bytes plus data unit.
     #[inline]
     pub fn data_field_len(&self) -> usize {
@@ -484,6 +503,14 @@ impl<'a> Telegram<'a> {
         self.emit(&mut out[start..])
     }
 
+    /// The telegram's bytes in a new `Vec` (for tools and tests; the
+    /// steady-state paths emit into their own buffers).
+    pub fn to_vec(&self) -> Result<Vec<u8>, EmitError> {
+        let mut out = vec![0; self.check()?];
+        self.emit(&mut out)?;
+        Ok(out)
+    }
+
     fn check(&self) -> Result<usize, EmitError> {
         match *self {
             Telegram::ShortAck => {}
@@ -570,18 +597,14 @@ mod tests {
         // Master 2 → slave 6, SRD high FCB=1 FCV=1, no SAPs, data unit = the
         // BM4-O-PRO-01 PKW read request PKE=0x1004 IND=0 PWE1=0 PWE2=0 as
         // 8 bytes: SD3 frame. FCS = 06+02+7D+10+04 = 0x99.
+        let fc = FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb: true,
+            fcv: true,
+        };
         let t = Telegram::Data(DataTelegram {
-            da: 6,
-            sa: 2,
-            fc: FunctionCode::Request {
-                kind: RequestKind::SrdHigh,
-                fcb: true,
-                fcv: true,
-            },
-            dsap: None,
-            ssap: None,
-            data: &[0x10, 0x04, 0, 0, 0, 0, 0, 0],
             format: Some(Format::Sd3),
+            ..DataTelegram::new(6, 2, fc, &[0x10, 0x04, 0, 0, 0, 0, 0, 0])
         });
         let mut out = [0u8; 32];
         let n = t.emit(&mut out).unwrap();
