@@ -1,7 +1,9 @@
 //! Scale-out: N gateways × M slaves on one mosquitto.
 //!
-//! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE`
-//! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`).
+//! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE [sparkplug]`
+//! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`;
+//! `sparkplug`: each gateway a Sparkplug B edge node `scale/segG`, and
+//! the DDATA messages are counted).
 //!
 //! Each gateway runs as `dpctl gateway --sim` does in its own process: a
 //! thread with a simulated bus at 1.5 Mbit/s paced on the wall clock by
@@ -22,12 +24,14 @@
 mod support;
 
 use profibus_gateway::link;
+use profibus_gateway::sim::{Pacer, SimPlant};
+use profibus_gateway::{sparkplug, EdgeNode, MqttLink, Session, SparkplugId};
 use std::io::BufRead;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use support::{run_gateway, Broker};
+use support::{run_gateway, run_session, Broker};
 
 /// User + system CPU seconds of a process (`/proc/PID/stat`).
 fn cpu_s(pid: &str) -> f64 {
@@ -66,38 +70,61 @@ fn gateway(
     port: u16,
     text: String,
     write: Option<Duration>,
+    sparkplug_node: Option<SparkplugId>,
     stop: Arc<AtomicBool>,
     c: Arc<Counters>,
 ) {
-    run_gateway(&text, port, |plant, pacer, gw, link| {
-        let mut last_cycles = 0;
-        let mut next_write = Instant::now();
-        let mut value: u32 = 0;
-        let addresses: Vec<u8> = plant.master().slave_addresses().collect();
-        while !stop.load(Ordering::Relaxed) {
-            let t0 = Instant::now();
-            let pause = pacer.advance(plant);
-            if let Some(w) = write.filter(|_| t0 >= next_write) {
-                next_write = t0 + w;
-                value = value.wrapping_add(1);
-                for &a in &addresses {
-                    plant.master().set_outputs(a, &value.to_be_bytes());
-                }
+    match sparkplug_node {
+        None => run_gateway(&text, port, |plant, pacer, gw, link| {
+            drive(plant, pacer, gw, link, write, &stop, &c)
+        }),
+        Some(id) => run_session(
+            &text,
+            port,
+            |p, s| EdgeNode::new(s, id, sparkplug::devices(p).unwrap()),
+            |plant, pacer, gw, link| drive(plant, pacer, gw, link, write, &stop, &c),
+        ),
+    }
+}
+
+/// The loop of one gateway: the plant paced, new outputs every `write`,
+/// the core stepped after every turn; timed into `c`.
+fn drive(
+    plant: &mut SimPlant,
+    pacer: &Pacer,
+    gw: &mut impl Session,
+    link: &mut MqttLink,
+    write: Option<Duration>,
+    stop: &AtomicBool,
+    c: &Counters,
+) {
+    let mut last_cycles = 0;
+    let mut next_write = Instant::now();
+    let mut value: u32 = 0;
+    let addresses: Vec<u8> = plant.master().slave_addresses().collect();
+    while !stop.load(Ordering::Relaxed) {
+        let t0 = Instant::now();
+        let pause = pacer.advance(plant);
+        if let Some(w) = write.filter(|_| t0 >= next_write) {
+            next_write = t0 + w;
+            value = value.wrapping_add(1);
+            for &a in &addresses {
+                plant.master().set_outputs(a, &value.to_be_bytes());
             }
-            let t1 = Instant::now();
-            let now = plant.now();
-            link::step(link, gw, plant.master(), now);
-            let t2 = Instant::now();
-            c.sim_ns
-                .fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
-            c.gw_ns
-                .fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
-            let cycles = plant.master().cycle_stats().cycles;
-            c.cycles.fetch_add(cycles - last_cycles, Ordering::Relaxed);
-            last_cycles = cycles;
-            std::thread::sleep(pause);
         }
-    });
+        let t1 = Instant::now();
+        let now = plant.now();
+        link::step(link, gw, plant.master(), now);
+        let t2 = Instant::now();
+        c.sim_ns
+            .fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
+        c.gw_ns
+            .fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
+        let cycles = plant.master().cycle_stats().cycles;
+        c.cycles.fetch_add(cycles - last_cycles, Ordering::Relaxed);
+        last_cycles = cycles;
+        std::thread::sleep(pause);
+    }
 }
 
 fn main() {
@@ -109,6 +136,7 @@ fn main() {
     let m: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(32);
     let secs: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20);
     let mode = args.get(3).cloned().unwrap_or_else(|| "change:100".into());
+    let spb = args.get(4).map(String::as_str) == Some("sparkplug");
     let write = mode
         .strip_prefix("change:")
         .map(|ms| Duration::from_millis(ms.parse().expect("change:MS")));
@@ -116,7 +144,11 @@ fn main() {
     let port = broker.port;
     let mut sub = Command::new("mosquitto_sub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-q", "0"])
-        .args(["-t", "scale/+/+/inputs", "-t", "scale/+/+/outputs"])
+        .args(match spb {
+            // One line per message: the topic (the payload is protobuf).
+            true => vec!["-t", "spBv1.0/scale/DDATA/+/+", "-F", "%t"],
+            false => vec!["-t", "scale/+/+/inputs", "-t", "scale/+/+/outputs"],
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -136,7 +168,8 @@ fn main() {
     let threads: Vec<_> = (0..n)
         .map(|g| {
             let (stop, c, text) = (stop.clone(), counters.clone(), bus_file(m, &mode, g));
-            std::thread::spawn(move || gateway(port, text, write, stop, c))
+            let id = spb.then(|| format!("scale/seg{g}").parse().unwrap());
+            std::thread::spawn(move || gateway(port, text, write, id, stop, c))
         })
         .collect();
     // Warm-up: connections, start-up of every slave.
@@ -179,7 +212,12 @@ fn main() {
     let sim = (b.4 - a.4) as f64 / 1e9;
     let gw = (b.5 - a.5) as f64 / 1e9;
     let cycles = (b.6 - a.6) as f64 / wall / n as f64;
-    println!("{n} gateways x {m} slaves, publish {mode}, {secs} s measured");
+    let kind = if spb {
+        "Sparkplug B DDATA"
+    } else {
+        "JSON inputs+outputs"
+    };
+    println!("{n} gateways x {m} slaves, publish {mode}, {secs} s measured, counting {kind}");
     println!(
         "messages received by the subscriber: {msgs:.0} ({:.0}/s)",
         msgs / wall

@@ -40,6 +40,8 @@ pub struct SlaveInfo {
     pub address: u8,
     /// Name from the bus file.
     pub name: String,
+    /// Ident number (PKW parameters by name: [`profibus_devices::pkw_parameter`]).
+    pub ident_number: u16,
     /// Named channels of its images (device profiles), if any.
     pub channels: Option<ChannelMap>,
     /// Its GSD, for diagnosis texts.
@@ -221,6 +223,14 @@ pub enum Request {
         /// What to do.
         command: pkw::Command,
     },
+    /// A PKW job on a parameter the device names (a BM4 variable module);
+    /// [`Gateway::handle_message`] resolves the name into [`Request::Pkw`].
+    PkwNamed {
+        /// The parameter's name.
+        name: String,
+        /// What to do.
+        command: pkw::Command,
+    },
     /// An RFID command line (without CR).
     Rfid(Vec<u8>),
 }
@@ -231,7 +241,7 @@ impl Request {
         match self {
             Request::Outputs(_) | Request::Dpv1Write { .. } | Request::Rfid(_) => true,
             Request::Dpv1Read { .. } => false,
-            Request::Pkw { command, .. } => !matches!(
+            Request::Pkw { command, .. } | Request::PkwNamed { command, .. } => !matches!(
                 command,
                 pkw::Command::Read | pkw::Command::ReadElement(_) | pkw::Command::Describe(_)
             ),
@@ -290,6 +300,14 @@ pub enum RequestError {
         address: u8,
         /// What it lacks.
         what: &'static str,
+    },
+    /// A PKW request names a parameter the slave's device does not have.
+    #[error("slave {address} has no parameter named `{name}`")]
+    NoParameter {
+        /// Station address.
+        address: u8,
+        /// The name.
+        name: String,
     },
     /// Too many requests waiting for the slave ([`QUEUE_LIMIT`]).
     #[error("slave {0}: too many requests waiting (at most {QUEUE_LIMIT})")]
@@ -436,7 +454,10 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
         }
         Service::Pkw => {
             only(o, &["op", "pnu", "index", "value", "dword", "element"])?;
-            let pnu = need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16;
+            let pnu = match o.get("pnu") {
+                Some(serde_json::Value::String(n)) if !n.is_empty() => Err(n.clone()),
+                _ => Ok(need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16),
+            };
             let index = int(o, "index", 0, 0xFFFF)?.map(|i| i as u16);
             let command = match op(o, &["read", "write", "describe"])?.as_str() {
                 "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
@@ -462,7 +483,10 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
                     }
                 }
             };
-            Ok(Request::Pkw { pnu, command })
+            Ok(match pnu {
+                Ok(pnu) => Request::Pkw { pnu, command },
+                Err(name) => Request::PkwNamed { name, command },
+            })
         }
         Service::Rfid => {
             only(o, &["command"])?;
@@ -692,7 +716,9 @@ impl Gateway {
             Request::Dpv1Read { .. } | Request::Dpv1Write { .. } if !entry.info.dpv1 => {
                 return unsupported("DP-V1 (`dpv1 = true` in the bus file)")
             }
-            Request::Pkw { .. } if entry.info.pkw.is_none() => return unsupported("PKW channel"),
+            Request::Pkw { .. } | Request::PkwNamed { .. } if entry.info.pkw.is_none() => {
+                return unsupported("PKW channel")
+            }
             Request::Rfid(_) if !entry.info.rfid => return unsupported("RFID reader handshake"),
             _ => {}
         }
@@ -735,6 +761,25 @@ impl Gateway {
         Ok(())
     }
 
+    /// A PKW request by name as one by number: the device profile's
+    /// parameter of that name ([`profibus_devices::pkw_parameter`]).
+    fn resolve(&self, address: u8, r: Request) -> Result<Request, RequestError> {
+        let Request::PkwNamed { name, command } = r else {
+            return Ok(r);
+        };
+        let info = &self
+            .slaves
+            .iter()
+            .find(|e| e.info.address == address)
+            .expect("checked")
+            .info;
+        info.gsd
+            .as_ref()
+            .and_then(|g| profibus_devices::pkw_parameter(info.ident_number, g, &name))
+            .map(|pnu| Request::Pkw { pnu, command })
+            .ok_or(RequestError::NoParameter { address, name })
+    }
+
     /// A message from the broker. Requests are checked now (a refused
     /// one is answered at once and changes nothing) and carried out from
     /// the next [`Gateway::step`]. Messages on other topics are ignored.
@@ -754,7 +799,10 @@ impl Gateway {
             address,
             to,
         };
-        let request = match request.and_then(|r| self.check(address, &r).map(|()| r)) {
+        let request = request
+            .and_then(|r| self.check(address, &r).map(|()| r))
+            .and_then(|r| self.resolve(address, r));
+        let request = match request {
             Ok(r) => r,
             Err(e) => return self.answer(target, Err(e), ts_ms),
         };
@@ -768,7 +816,7 @@ impl Gateway {
             Request::Outputs(_) | Request::Dpv1Read { .. } | Request::Dpv1Write { .. } => {
                 &mut e.pending
             }
-            Request::Pkw { .. } | Request::Rfid(_) => &mut e.queue,
+            Request::Pkw { .. } | Request::PkwNamed { .. } | Request::Rfid(_) => &mut e.queue,
         };
         if waiting.len() >= QUEUE_LIMIT {
             return self.answer(q.target, Err(RequestError::Busy(address)), ts_ms);
@@ -861,7 +909,7 @@ impl Gateway {
                 index: *index,
                 data: data.clone(),
             },
-            Request::Pkw { .. } | Request::Rfid(_) => return None,
+            Request::Pkw { .. } | Request::PkwNamed { .. } | Request::Rfid(_) => return None,
         };
         match m.submit(job) {
             Some(id) => {
@@ -1132,6 +1180,7 @@ mod tests {
         let info = |address, channels| SlaveInfo {
             address,
             name: format!("s{address}"),
+            ident_number: 0x1234,
             channels,
             gsd: None,
             dpv1: false,
@@ -1529,6 +1578,7 @@ mod tests {
             [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\
             [[slave]]\naddress = 30\ndevice = \"rfid\"\n\n\
             [[slave]]\naddress = 40\ndevice = \"bk3000\"\nterminals = [\"KL3102\", \"KL9010\"]\n\n\
+            [[slave]]\naddress = 26\ndevice = \"bm4\"\nexample = true\nvariables = [\"ud_MyReadVar1\"]\n\n\
             [mqtt]\nbus = \"p\"\nwritable = [3, 25]\n";
         let bus = profibus_devices::bus::ProfiledBus::parse(&dir, text).unwrap();
         let s = crate::MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
@@ -1562,7 +1612,7 @@ mod tests {
             g.step(p.master(), t, 0);
             seen.extend(drain(&mut g));
             let m = p.master();
-            if [3, 25, 30, 40]
+            if [3, 25, 26, 30, 40]
                 .iter()
                 .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
             {
@@ -1637,6 +1687,27 @@ mod tests {
         let r = run_until(&mut g, &mut p, "me/pkw");
         assert_eq!(r["value"], 0x1234_5678, "{r}");
         assert_eq!(r["response"], "23e8000012345678", "{r}");
+        // PKW by name: a BM4 variable module of the GSD is its parameter
+        // (`di_MyReadVar3`: PNU 4); an unknown name is refused.
+        g.handle_message(
+            "profibus/p/26/pkw/request",
+            br#"{"op": "read", "pnu": "di_MyReadVar3", "id": "n"}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
+        assert_eq!(
+            (r["ok"].as_bool(), r["id"].as_str()),
+            (Some(true), Some("n")),
+            "{r}"
+        );
+        assert_eq!(&r["request"].as_str().unwrap()[..4], "1004", "{r}");
+        g.handle_message(
+            "profibus/p/26/pkw/request",
+            br#"{"op": "read", "pnu": "nope"}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
+        assert_eq!(r["error"], "slave 26 has no parameter named `nope`", "{r}");
         // RFID: the reader is not writable; a read-only request would be
         // answered, a command is refused.
         g.handle_message("profibus/p/30/rfid/request", br#"{"command": "VER"}"#, 0);

@@ -47,7 +47,7 @@
 //! |---|---|---|
 //! | `outputs/set` | a bare hex string (the whole image), `{"hex"}` (the whole image, exactly the output length) or `{"channels": {"name": value}}` (named output channels of a profiled slave) | — |
 //! | `dpv1/request` | `{"op": "read", "slot", "index", "length"?}` (length 1..=240, default 240) or `{"op": "write", "slot", "index", "hex"}` | `"hex"` (read) |
-//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}` | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
+//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}`; `"pnu"` is a number 0..=2047 or the name the device gives the parameter (a BM4 variable module of its GSD, e.g. `"di_MyReadVar3"`) | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
 //! | `rfid/request` | `{"command": "RD 00 01"}` (one command line) | `"answer"` (text), `"hex"` |
 //!
 //! Permissions come from `[mqtt] writable` (see [`settings`]): output

@@ -96,6 +96,7 @@ pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
             Ok(SlaveInfo {
                 address: a,
                 name: s.params.name.clone(),
+                ident_number: s.params.ident_number,
                 channels: Some(
                     profiled
                         .channels(a)

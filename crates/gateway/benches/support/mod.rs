@@ -7,7 +7,7 @@
 
 use profibus_devices::bus::ProfiledBus;
 use profibus_gateway::sim::{slave_infos, Pacer, SimPlant};
-use profibus_gateway::{Broker as BrokerUrl, Connection, Gateway, MqttLink, MqttSettings};
+use profibus_gateway::{Broker as BrokerUrl, Connection, Gateway, MqttLink, MqttSettings, Session};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -82,18 +82,31 @@ pub fn bus(text: &str) -> ProfiledBus {
     ProfiledBus::parse(path, text).unwrap()
 }
 
-/// Run the gateway of the bus file `text` against the broker on `port`:
-/// its MQTT client on a current-thread runtime of its own (as `dpctl
-/// gateway` has), the plant and the gateway on this thread in `turns`
-/// (which paces them with the given [`Pacer`]) until it returns.
+/// Run the plain JSON gateway of the bus file `text` against the broker
+/// on `port`: [`run_session`].
 pub fn run_gateway<R>(
     text: &str,
     port: u16,
     turns: impl FnOnce(&mut SimPlant, &Pacer, &mut Gateway, &mut MqttLink) -> R,
 ) -> R {
+    let make = |p: &ProfiledBus, s| Gateway::new(s, slave_infos(p).unwrap());
+    run_session(text, port, make, turns)
+}
+
+/// Run the gateway core `make` builds for the bus file `text` against
+/// the broker on `port`: its MQTT client on a current-thread runtime of
+/// its own (as `dpctl gateway` has), the plant and the core on this
+/// thread in `turns` (which paces them with the given [`Pacer`]) until it
+/// returns.
+pub fn run_session<S: Session, R>(
+    text: &str,
+    port: u16,
+    make: impl FnOnce(&ProfiledBus, MqttSettings) -> S,
+    turns: impl FnOnce(&mut SimPlant, &Pacer, &mut S, &mut MqttLink) -> R,
+) -> R {
     let profiled = bus(text);
     let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "bench").unwrap();
-    let mut gw = Gateway::new(settings, slave_infos(&profiled).unwrap());
+    let mut gw = make(&profiled, settings);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
