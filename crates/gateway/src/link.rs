@@ -372,6 +372,15 @@ pub fn flush(link: &MqttLink, gateway: &mut impl Session) {
     }
 }
 
+/// One step of `gateway` at a cycle boundary of the master `m` (bus time
+/// `now`): hand it the link's events, step it, send what it queued.
+pub fn step(link: &mut MqttLink, gateway: &mut impl Session, m: &mut DpMaster, now: Instant) {
+    let ts = wall_ms();
+    pump(link, gateway, ts);
+    gateway.step(m, now, ts);
+    flush(link, gateway);
+}
+
 /// Milliseconds since the Unix epoch, for payload timestamps.
 pub fn wall_ms() -> u64 {
     std::time::SystemTime::now()
