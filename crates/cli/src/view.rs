@@ -5,7 +5,6 @@
 //! for JSON): `MasterReport`, `MasterStatus`, `SlaveStatus`,
 //! `ImageValues`.
 
-pub use crate::describe::hex;
 use profibus_devices::channels::{ChannelMap, ImageValues};
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterReport, MasterStatus, SlaveStatus};
