@@ -47,7 +47,10 @@ fn a_short_soak_holds_its_invariants_under_faults() {
     assert!(i["forged_tokens"].as_u64().unwrap() <= i["undetected"].as_u64().unwrap());
     let ring = &r["token_ring"];
     let claims = ring["claims"].as_u64().unwrap();
-    assert!(claims > ring["duplicate_tokens"].as_u64().unwrap(), "{ring}");
+    assert!(
+        claims > ring["duplicate_tokens"].as_u64().unwrap(),
+        "{ring}"
+    );
     let disturbances = r["disturbances"].as_u64().unwrap();
     assert!(disturbances > 0);
     assert_eq!(r["recovery"]["count"], disturbances);
