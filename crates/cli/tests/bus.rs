@@ -348,7 +348,8 @@ async fn pcap_files_are_read_by_tshark() {
         expect += 4;
         tokio::time::sleep(Duration::from_millis(1)).await;
     }
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // The sniffer has printed every telegram and garbage run.
+    sniff.wait_stdout("telegrams and errors", expect + 30, |_| true);
     let sniffed = sniff.stop();
     drop((a, b));
     let out = bus.stop();
@@ -403,7 +404,7 @@ async fn sniff_marks_errors_for_humans() {
     a.write_all(&fdl_status(3, 1)).await.unwrap();
     a.write_all(&bad).await.unwrap();
     a.write_all(&[0xDC, 3, 1]).await.unwrap();
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    sniff.wait_stdout("lines", 3, |_| true);
     let out = sniff.stop();
     drop(a);
     bus.stop();

@@ -109,9 +109,9 @@ pub struct Proc {
     /// [`Proc::spawn_captured`]: threads collecting stdout and stderr
     /// while the process runs (so it never blocks on a full pipe).
     captured: Option<(Drain, Drain)>,
-    /// [`Proc::spawn_captured`]: the lines of stderr as they come (they
-    /// are in [`Output::stderr`] too).
-    stderr_lines: Option<Receiver<String>>,
+    /// [`Proc::spawn_captured`]: the lines of stdout and stderr as they
+    /// come (they are in [`Output`] too).
+    lines: Option<(Receiver<String>, Receiver<String>)>,
 }
 
 type Drain = std::thread::JoinHandle<String>;
@@ -141,7 +141,7 @@ impl Proc {
             child: Some(child),
             name: name.to_string(),
             captured: None,
-            stderr_lines: None,
+            lines: None,
         }
     }
 
@@ -157,19 +157,39 @@ impl Proc {
             .stderr(Stdio::piped());
         let mut p = Proc::spawn(&name, &mut cmd);
         let c = p.child.as_mut().expect("just spawned");
-        let out = drain(c.stdout.take().expect("piped"), None);
-        let (tx, rx) = std::sync::mpsc::channel();
-        let err = drain(c.stderr.take().expect("piped"), Some(tx));
+        let (out_tx, out_rx) = std::sync::mpsc::channel();
+        let (err_tx, err_rx) = std::sync::mpsc::channel();
+        let out = drain(c.stdout.take().expect("piped"), Some(out_tx));
+        let err = drain(c.stderr.take().expect("piped"), Some(err_tx));
         p.captured = Some((out, err));
-        p.stderr_lines = Some(rx);
+        p.lines = Some((out_rx, err_rx));
         p
     }
 
-    /// The next line on stderr of a [`Proc::spawn_captured`] process,
+    /// The next line on stdout of a [`Proc::spawn_captured`] process,
     /// waiting at most `timeout`.
-    pub fn stderr_line(&self, timeout: Duration) -> Option<String> {
-        let rx = self.stderr_lines.as_ref().expect("spawn_captured");
+    pub fn stdout_line(&self, timeout: Duration) -> Option<String> {
+        let (rx, _) = self.lines.as_ref().expect("spawn_captured");
         rx.recv_timeout(timeout).ok()
+    }
+
+    /// The next line on stderr, as [`Proc::stdout_line`].
+    pub fn stderr_line(&self, timeout: Duration) -> Option<String> {
+        let (_, rx) = self.lines.as_ref().expect("spawn_captured");
+        rx.recv_timeout(timeout).ok()
+    }
+
+    /// Wait until `n` lines on stdout satisfied `ok` (counted from the
+    /// last call); fails after 30 s.
+    pub fn wait_stdout(&self, what: &str, n: usize, ok: impl Fn(&str) -> bool) {
+        let end = Instant::now() + Duration::from_secs(30);
+        let mut seen = 0;
+        while seen < n {
+            let left = end.saturating_duration_since(Instant::now());
+            let l = self.stdout_line(left);
+            let l = l.unwrap_or_else(|| panic!("{}: {seen} of {n} {what}", self.name));
+            seen += ok(&l) as usize;
+        }
     }
 
     /// Send signal number `sig` (e.g. 2 SIGINT, 15 SIGTERM).
