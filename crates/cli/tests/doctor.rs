@@ -64,3 +64,103 @@ fn doctor_fails_on_a_missing_port() {
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.contains("not fit for PROFIBUS"), "{err}");
 }
+
+#[test]
+fn doctor_json_is_one_object_with_every_check() {
+    let dir = TempDir::new("doctor-json");
+    let (a, b) = (dir.path("a"), dir.path("b"));
+    let _socat = pty_pair(&a, &b);
+    let run = |rts: &str| {
+        Command::new(dpctl())
+            .args(["doctor", "--json", "--rts", rts, "--port"])
+            .arg(&a)
+            .output()
+            .unwrap()
+    };
+    let out = run("off");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert_eq!(text.lines().count(), 1, "one JSON object: {text}");
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["path"], a.to_string_lossy().as_ref());
+    assert!(
+        v["device"].as_str().unwrap().starts_with("/dev/pts/"),
+        "{v}"
+    );
+    assert_eq!(v["kind"]["type"], "pty");
+    assert_eq!(v["rts"], "off");
+    assert_eq!(v["failed"], false);
+    assert_eq!(v["unchecked"], 4);
+    let checks = v["checks"].as_array().unwrap();
+    let verdict = |what: &str| {
+        checks
+            .iter()
+            .find(|c| c["what"] == what)
+            .unwrap_or_else(|| panic!("{what} missing: {v}"))["verdict"]
+            .clone()
+    };
+    assert_eq!(verdict("open"), "ok");
+    assert_eq!(verdict("8E1"), "unchecked");
+    assert_eq!(verdict("RTS control"), "ok");
+
+    // RTS direction control cannot work on a pty: the check fails, the
+    // exit status says so, stdout is still the JSON report.
+    let out = run("on-send");
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (v["rts"].as_str(), v["failed"].as_bool()),
+        (Some("on-send"), Some(true))
+    );
+    let rts = v["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["what"] == "RTS control")
+        .unwrap()
+        .clone();
+    assert_eq!(rts["verdict"], "fail");
+    assert!(
+        rts["detail"]
+            .as_str()
+            .unwrap()
+            .contains("a pty has no RTS line"),
+        "{rts}"
+    );
+}
+
+#[test]
+fn rts_on_send_on_a_pty_is_a_clear_one_line_error() {
+    let dir = TempDir::new("rts");
+    let (a, b) = (dir.path("a"), dir.path("b"));
+    let _socat = pty_pair(&a, &b);
+    let bus = dir.path("bus.toml");
+    std::fs::write(&bus, "[master]\naddress = 2\nbaud = \"1.5M\"\n").unwrap();
+    let slave = ["slave", "--addr", "8", "--device", "omega"];
+    let master = ["master", "--config", bus.to_str().unwrap()];
+    let scan = ["scan"];
+    for args in [&slave[..], &master, &scan] {
+        let out = Command::new(dpctl())
+            .args(args)
+            .args(["--rts", "on-send", "--port"])
+            .arg(&a)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(
+            err.contains("--rts on-send needs an RTS line") && err.contains("leave --rts off"),
+            "{args:?}: {err}"
+        );
+    }
+    // A bad value is a usage error that lists the values.
+    let out = Command::new(dpctl())
+        .args(["scan", "--rts", "always", "--port"])
+        .arg(&a)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("off") && err.contains("on-send"), "{err}");
+}
