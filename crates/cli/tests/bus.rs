@@ -545,9 +545,13 @@ async fn zero_faults_carry_100000_telegrams_unchanged() {
     let mut r = profibus::fdl::rng::Rng::new(77);
     let sent: Vec<Vec<u8>> = (0..100_000).map(|_| random_telegram(&mut r)).collect();
     let stream: Vec<u8> = sent.concat();
+    // Writer and reader share this test's one thread: the writer yields
+    // after each chunk so that the reader keeps up (the hub drops bytes
+    // for a station that does not read, as overruns).
     let writer = tokio::spawn(async move {
         for c in stream.chunks(1000) {
             a.write_all(c).await.unwrap();
+            tokio::task::yield_now().await;
         }
         a
     });
