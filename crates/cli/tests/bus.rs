@@ -545,13 +545,16 @@ async fn zero_faults_carry_100000_telegrams_unchanged() {
     let mut r = profibus::fdl::rng::Rng::new(77);
     let sent: Vec<Vec<u8>> = (0..100_000).map(|_| random_telegram(&mut r)).collect();
     let stream: Vec<u8> = sent.concat();
-    // Writer and reader share this test's one thread: the writer yields
-    // after each chunk so that the reader keeps up (the hub drops bytes
-    // for a station that does not read, as overruns).
+    // Writer and reader share this test's one thread, and the hub drops
+    // bytes for a station that does not read (overruns): the writer keeps
+    // at most 256 KiB ahead of what the reader has received.
+    let (read_tx, mut read_rx) = tokio::sync::watch::channel(0usize);
     let writer = tokio::spawn(async move {
-        for c in stream.chunks(1000) {
+        for (k, c) in stream.chunks(1000).enumerate() {
+            while k * 1000 > *read_rx.borrow() + (256 << 10) {
+                read_rx.changed().await.unwrap();
+            }
             a.write_all(c).await.unwrap();
-            tokio::task::yield_now().await;
         }
         a
     });
@@ -564,6 +567,7 @@ async fn zero_faults_carry_100000_telegrams_unchanged() {
             .expect("telegrams stopped arriving")
             .unwrap();
         tap.push(profibus::fdl::Instant::ZERO, &buf[..n]);
+        read_tx.send_modify(|r| *r += n);
         while let Some(ev) = tap.poll() {
             match ev {
                 TapEvent::Telegram { bytes, .. } => got.push(bytes),
