@@ -413,7 +413,7 @@ impl Port {
         }
     }
 
-    fn fd(&self) -> BorrowedFd<'_> {
+    pub(crate) fn fd(&self) -> BorrowedFd<'_> {
         // SAFETY: the fd belongs to `self.stream`, which outlives the
         // returned borrow (tied to `&self`).
         unsafe { BorrowedFd::borrow_raw(self.stream.as_raw_fd()) }
