@@ -206,6 +206,17 @@ mod tests {
     }
 
     #[test]
+    fn registry_rows_list_name_summary_and_options() {
+        let omega = profile("omega").unwrap().to_string();
+        let (first, options) = omega.split_once('\n').unwrap();
+        assert!(
+            first.starts_with("omega    ") && first.contains("Omega"),
+            "{omega}"
+        );
+        assert!(options.starts_with("         options: "), "{omega}");
+    }
+
+    #[test]
     fn pkw_dialect_by_ident_and_configuration() {
         assert_eq!(
             pkw_dialect(bm4::IDENT, &[0x73]).unwrap().name,
