@@ -67,6 +67,8 @@ pub struct Args {
     /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    #[command(flatten)]
+    rts: common::RtsArg,
     /// Start in the clear state (outputs zero) instead of operate.
     #[arg(long)]
     clear: bool,
@@ -116,7 +118,8 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if args.clear {
         dp.set_operating_state(OperatingState::Clear);
     }
-    let (mut station, mut port) = common::master_station(&args.port, bus, dp, args.latency)?;
+    let (mut station, mut port) =
+        common::master_station(&args.port, bus, dp, args.latency, args.rts)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
 
     // Commands come from a plain thread: a blocking read of stdin must not
@@ -172,7 +175,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
                 let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
                     (Some(r), _) => r.map(|_| None),
-                    (None, Some(r)) => r.map(Some),
+                    (None, Some(r)) => r.map(Some).map_err(Into::into),
                     (None, None) => m.execute_json(&line).map_err(Into::into),
                 };
                 match result {

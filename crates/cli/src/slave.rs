@@ -25,7 +25,6 @@ use profibus_devices::{ControlInbox, DeviceOptions, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
 use profibus_fdl::driver::Clock;
 use profibus_fdl::runner::{PassiveRunner, RunnerEvent};
-use profibus_fdl::transport::Port;
 use profibus_fdl::Instant;
 use std::io::Write;
 use std::path::PathBuf;
@@ -62,6 +61,8 @@ pub struct Args {
     /// adapter).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    #[command(flatten)]
+    rts: common::RtsArg,
     /// After each telegram keep polling the port for this many µs instead
     /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
     #[arg(long, default_value_t = 0, value_name = "US")]
@@ -160,7 +161,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         None if device.own_address() != OwnAddress::Slave => 0,
         None => bail!("give --addr N"),
     };
-    let mut port = Port::open(&path, BaudChoice::NOMINAL)?;
+    let mut port = args.rts.open(&path, BaudChoice::NOMINAL)?;
     let latency = common::latency(args.latency, &port)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
     let (search, first) = choice.plan(&port);

@@ -296,4 +296,49 @@ terminals_file = "strip.txt"
         let bus = bus.unwrap();
         assert_eq!(bus.file.slaves[0].params.address, 11);
     }
+
+    #[test]
+    fn profile_options_named_like_slave_keys_go_under_the_profile_name() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        // Omega's `params` (a parameter file) and generic's `gsd` and
+        // `modules`: under the profile's name, relative to the bus file.
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 25
+device = "omega"
+pkw = false
+omega.params = "../crates/devices/data/omega_vparams.toml"
+
+[[slave]]
+address = 7
+device = "generic"
+generic.gsd = "BNF_00D0.GSD"
+generic.modules = ["Status / control module", "1 actual value, 1 setpoint"]
+lenient = true
+"#;
+        let bus = ProfiledBus::parse(&dir, text).unwrap();
+        let omega = &bus.file.slaves[0];
+        let params = omega.device.as_ref().unwrap().options.get("params");
+        assert_eq!(
+            params.and_then(|v| v.as_str()),
+            Some("../crates/devices/data/omega_vparams.toml")
+        );
+        let generic = &bus.file.slaves[1];
+        assert_eq!(generic.modules.len(), 2, "{:?}", generic.modules);
+        assert_eq!(bus.profile(7).unwrap().name(), "generic");
+        // The file is read by the profile: a wrong name says so.
+        let e = ProfiledBus::parse(&dir, &text.replace("omega_vparams", "nope")).unwrap_err();
+        assert!(e.message.contains("nope"), "{e}");
+        // At the top of the table they are slave keys, refused with the
+        // place the option goes.
+        let e = ProfiledBus::parse(&dir, &text.replace("omega.params", "params")).unwrap_err();
+        assert_eq!(e.line, 9, "{e}");
+        assert!(e.message.contains("`omega.params = …`"), "{e}");
+        let e = ProfiledBus::parse(&dir, &text.replace("generic.gsd", "gsd")).unwrap_err();
+        assert_eq!(e.line, 14, "{e}");
+        assert!(e.message.contains("`generic.gsd = …`"), "{e}");
+    }
 }

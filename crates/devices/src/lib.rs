@@ -105,6 +105,7 @@ pub mod jx2;
 mod kit;
 pub mod omega;
 pub mod pkw;
+pub mod pkw_task;
 pub mod profile;
 pub mod rfid;
 pub mod soak;

@@ -82,6 +82,7 @@ mod command;
 mod config;
 mod report;
 mod stop;
+mod task;
 mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
@@ -91,6 +92,7 @@ pub use config::{
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 pub use stop::{StopReason, StopWhen};
+pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
