@@ -1,9 +1,7 @@
 //! `dpctl decode HEX...`: decode telegram bytes.
 
 use crate::common;
-use anyhow::Context;
-use profibus_dp::describe::TelegramSummary;
-use profibus_fdl::wire::Telegram;
+use profibus_dp::describe::summaries;
 
 /// Decode one or more telegrams given as hex bytes.
 #[derive(clap::Args)]
@@ -24,19 +22,13 @@ pub fn parse_hex(parts: &[String]) -> anyhow::Result<Vec<u8>> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let bytes = parse_hex(&args.hex)?;
-    let mut rest = &bytes[..];
-    let mut offset = 0;
-    while !rest.is_empty() {
-        let (t, n) = Telegram::parse(rest)
-            .with_context(|| format!("malformed telegram at byte {offset}"))?;
-        let summary = TelegramSummary::new(t, &rest[..n]);
+    for summary in summaries(&bytes) {
+        let summary = summary?;
         if args.json {
             println!("{}", common::json_line(&summary));
         } else {
             println!("{summary}");
         }
-        rest = &rest[n..];
-        offset += n;
     }
     Ok(())
 }

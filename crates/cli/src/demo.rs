@@ -70,14 +70,12 @@ async fn demo(args: Args) -> Result<()> {
             modules: s.modules.clone(),
         })
         .collect();
-    let pcap = match &args.pcap {
-        Some(path) => {
-            let f = std::fs::File::create(path)
-                .with_context(|| format!("cannot create {}", path.display()))?;
-            Some(PcapWriter::new(std::io::BufWriter::new(f), Duration::ZERO)?)
-        }
-        None => None,
-    };
+    let pcap = (args.pcap.as_deref())
+        .map(|p| {
+            PcapWriter::create(p, Duration::ZERO)
+                .with_context(|| format!("cannot create {}", p.display()))
+        })
+        .transpose()?;
     let pcap = Rc::new(RefCell::new(pcap));
     let recorder = pcap.clone();
     plant.on_telegram(move |at, bytes| {

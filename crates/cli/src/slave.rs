@@ -109,18 +109,9 @@ fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::
     })
 }
 
-fn list_devices() {
-    for p in PROFILES {
-        println!("{:<8} {}", p.name, p.summary);
-        if !p.options_help.is_empty() {
-            println!("         options: {}", p.options_help);
-        }
-    }
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.profile.list_devices {
-        list_devices();
+        PROFILES.iter().for_each(|p| println!("{p}"));
         return Ok(());
     }
     let rt = common::runtime()?;

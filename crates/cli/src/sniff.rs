@@ -151,14 +151,11 @@ async fn sniff(args: Args) -> Result<()> {
     let epoch = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap_or_default();
-    let pcap = match &args.pcap {
-        Some(path) => {
-            let f =
-                File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-            Some(PcapWriter::new(BufWriter::new(f), epoch)?)
-        }
-        None => None,
-    };
+    let pcap = (args.pcap.as_deref())
+        .map(|p| {
+            PcapWriter::create(p, epoch).with_context(|| format!("cannot create {}", p.display()))
+        })
+        .transpose()?;
     let live = (!args.json && !args.plain && std::io::stdout().is_terminal())
         .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
         .transpose()?;

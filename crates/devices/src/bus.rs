@@ -149,6 +149,45 @@ mod tests {
     use crate::channels::{Direction, Value};
 
     #[test]
+    fn set_channels_commands_write_named_outputs_all_or_none() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let text = "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 25\n\
+                    device = \"omega\"\nsetpoints = 1\nactual_values = 1\npkw = false\n";
+        let bus = ProfiledBus::parse(&dir, text).unwrap();
+        let map = bus.channels(25).unwrap().unwrap();
+        let mut m = DpMaster::new(&bus.file.master).unwrap();
+        assert!(SetChannels::from_json(r#"{"operating": "clear"}"#).is_none());
+        assert!(SetChannels::from_json("not json").is_none());
+        let parse = |line: &str| SetChannels::from_json(line).unwrap();
+        let set = parse(r#"{"slave": 25, "set": {"setpoint1": 1500}}"#).unwrap();
+        set.apply(&mut m, Some(&map)).unwrap();
+        let written: Vec<(String, Value)> = map
+            .decode(Direction::Output, m.outputs(25).unwrap())
+            .map(|(c, v)| (c.name.clone(), v))
+            .collect();
+        assert!(
+            written.contains(&("setpoint1".into(), Value::Int(1500))),
+            "{written:?}"
+        );
+        // Refused: nothing changes.
+        let before = m.outputs(25).unwrap().to_vec();
+        let bad = parse(r#"{"slave": 25, "set": {"setpoint1": 1, "nope": 2}}"#).unwrap();
+        assert!(matches!(
+            bad.apply(&mut m, Some(&map)),
+            Err(SetChannelsError::Channel(_))
+        ));
+        assert_eq!(m.outputs(25).unwrap(), before);
+        let e = set.apply(&mut m, None).unwrap_err().to_string();
+        assert!(e.starts_with("slave 25 has no named channels"), "{e}");
+        assert!(parse(r#"{"slave": 25, "set": {}, "x": 1}"#).is_err());
+        let other = parse(r#"{"slave": 9, "set": {"setpoint1": 1}}"#).unwrap();
+        assert!(matches!(
+            other.apply(&mut m, Some(&map)),
+            Err(SetChannelsError::UnknownSlave)
+        ));
+    }
+
+    #[test]
     fn bm4_and_omega_from_a_bus_file() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
         let text = r#"[master]

@@ -35,6 +35,21 @@
 //! device state is reported as a [`STATE_EVENT`] device event and kept in
 //! [`Profile::state_file`].
 //!
+//! # Running devices
+//!
+//! - [`emulation`]: a device as a DP slave on a port, what `dpctl slave`
+//!   does: [`emulation::ProfileArgs`] (the device and its options; clap
+//!   flags with the `clap` feature), [`emulation::BaudChoice`] and
+//!   [`emulation::SlaveShell`] (the baud-rate search runner, keeping
+//!   Set_Slave_Add addresses and device state in files, events for text
+//!   and JSON).
+//! - `control_io` (feature `tokio`): control lines for a
+//!   [`ControlInbox`] from a file, stdin or a Unix socket, and command
+//!   lines read on a thread.
+//! - [`demo`]: the demo plant of `dpctl demo` (a master and a slave of
+//!   every profile on the simulated bus, with the PLC program that moves
+//!   them), sans-IO.
+//!
 //! # How to add a profile
 //!
 //! 1. Create `src/<name>/mod.rs` (the device: `impl Device`, its docs with
@@ -189,6 +204,17 @@ mod tests {
             assert_eq!(PROFILES.iter().filter(|q| q.name == p.name).count(), 1);
         }
         assert!(matches!(profile("nope"), Err(ProfileError::Unknown { .. })));
+    }
+
+    #[test]
+    fn registry_rows_list_name_summary_and_options() {
+        let omega = profile("omega").unwrap().to_string();
+        let (first, options) = omega.split_once('\n').unwrap();
+        assert!(
+            first.starts_with("omega    ") && first.contains("Omega"),
+            "{omega}"
+        );
+        assert!(options.starts_with("         options: "), "{omega}");
     }
 
     #[test]

@@ -522,6 +522,18 @@ pub struct ProfileEntry {
     pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
 }
 
+impl std::fmt::Display for ProfileEntry {
+    /// The row of a profile list (`dpctl slave --list-devices`): name and
+    /// summary, then its options on a second line where it has any.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:<8} {}", self.name, self.summary)?;
+        if !self.options_help.is_empty() {
+            write!(f, "\n         options: {}", self.options_help)?;
+        }
+        Ok(())
+    }
+}
+
 fn configure_boxed<P: Profile>(
     options: &DeviceOptions,
     address: Option<u8>,

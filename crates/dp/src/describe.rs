@@ -4,8 +4,39 @@
 //! stands for.
 
 use crate::sap;
-use profibus_fdl::wire::{Format, FunctionCode, Hex, Telegram};
+use profibus_fdl::wire::{Format, FunctionCode, Hex, ParseError, Telegram};
 use std::fmt;
+
+/// A malformed telegram in a row of telegrams ([`summaries`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("malformed telegram at byte {offset}")]
+pub struct Malformed {
+    /// Where it starts.
+    pub offset: usize,
+    /// What is wrong.
+    #[source]
+    pub error: ParseError,
+}
+
+/// The telegrams of `bytes`, one after another (`dpctl decode`): each
+/// described, up to the first malformed one.
+pub fn summaries(bytes: &[u8]) -> impl Iterator<Item = Result<TelegramSummary<'_>, Malformed>> {
+    let mut offset = 0;
+    std::iter::from_fn(move || {
+        let rest = bytes.get(offset..).filter(|r| !r.is_empty())?;
+        match Telegram::parse(rest) {
+            Ok((t, n)) => {
+                offset += n;
+                Some(Ok(TelegramSummary::new(t, &rest[..n])))
+            }
+            Err(error) => {
+                let at = offset;
+                offset = bytes.len();
+                Some(Err(Malformed { offset: at, error }))
+            }
+        }
+    })
+}
 
 /// A valid telegram described: its fields, its service in DP terms, its
 /// raw bytes.
@@ -200,5 +231,22 @@ impl fmt::Display for TelegramSummary<'_> {
                 f.write_str(" FCS ok")
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn summaries_of_telegrams_in_a_row_stop_at_the_first_malformed_one() {
+        let bytes = [0xE5, 0x10, 0x02, 0x01, 0x49, 0x4C, 0x16, 0x10, 0x02];
+        let got: Vec<_> = super::summaries(&bytes).collect();
+        assert_eq!(got.len(), 3);
+        assert!(got[0].is_ok() && got[1].is_ok());
+        let e = got[2].as_ref().unwrap_err();
+        assert_eq!(
+            (e.offset, e.to_string().as_str()),
+            (7, "malformed telegram at byte 7")
+        );
+        assert_eq!(super::summaries(&[]).count(), 0);
     }
 }

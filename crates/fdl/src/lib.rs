@@ -18,14 +18,16 @@
 //!   the active station (token ring, GAP, requester; DP master side).
 //! - [`medium`]: a sans-IO model of the RS-485 line (broadcast, pacing at
 //!   the baud rate, collisions, fault injection) shared by `dpctl bus` and
-//!   the in-process simulator.
+//!   the in-process simulator; `medium::MediumArgs` (feature `clap`) are
+//!   its options as command-line flags.
 //! - [`pcap`]: pcap files of telegrams (link type 257, PROFIBUS DL).
 //! - `transport` (feature `transport`, on by default; tokio): serial
 //!   ports and ptys as one async byte stream, `transport::Port`.
 //! - [`tap`]: passive framing of a timed byte stream into telegrams and
 //!   skipped bytes (bus monitors, pcap recording).
 //! - `listen` (feature `transport`): the passive driver of bus monitors:
-//!   reads a line (never writes) and hands the [`tap`]'s events on.
+//!   reads a line (never writes) and hands the [`tap`]'s events on
+//!   (`dpctl sniff`, `dpctl monitor`).
 //! - [`rng`]: the small seeded generator behind fault injection.
 //! - [`sim`]: the in-process simulated bus on virtual time (stations on a
 //!   [`medium`]).

@@ -69,6 +69,16 @@ fn pad4(n: usize) -> usize {
     (4 - n % 4) % 4
 }
 
+impl PcapWriter<io::BufWriter<std::fs::File>> {
+    /// A new pcapng file at `path` (replacing one that exists), buffered;
+    /// see [`PcapWriter::with_format`]. Call [`PcapWriter::flush`] or
+    /// [`PcapWriter::into_inner`] at the end.
+    pub fn create(path: &std::path::Path, epoch: Duration) -> io::Result<Self> {
+        let f = std::fs::File::create(path)?;
+        Self::new(io::BufWriter::new(f), epoch)
+    }
+}
+
 impl<W: Write> PcapWriter<W> {
     /// A pcapng file on `sink`; see [`PcapWriter::with_format`].
     pub fn new(sink: W, epoch: Duration) -> io::Result<Self> {
@@ -456,6 +466,20 @@ mod tests {
             .unwrap();
         assert_eq!(w.packets(), 2);
         w.into_inner().unwrap()
+    }
+
+    #[test]
+    fn create_writes_a_pcapng_file() {
+        let path = std::env::temp_dir().join(format!("pcap-create-{}.pcapng", std::process::id()));
+        let mut w = PcapWriter::create(&path, Duration::ZERO).unwrap();
+        w.write_telegram(Instant::from_nanos(1_000), &[0xE5])
+            .unwrap();
+        w.into_inner().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let packets: Vec<_> = PcapReader::new(&bytes[..]).unwrap().collect();
+        assert_eq!(packets.len(), 1);
+        assert_eq!(packets[0].as_ref().unwrap().data, [0xE5]);
     }
 
     fn check_packets(file: &[u8]) {

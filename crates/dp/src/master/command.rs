@@ -490,6 +490,34 @@ fn ident<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u16>, D::Error> {
 mod tests {
     use super::*;
 
+    #[test]
+    fn command_lines_execute_with_a_reply_in_words() {
+        use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+        use profibus_fdl::{Baud, BusParams};
+        let mut m = DpMaster::new(&MasterConfig {
+            address: 2,
+            params: BusParams::defaults(Baud::B1500000),
+            slaves: vec![SlaveParams::new(8, 0x1234, vec![0x11, 0x21])],
+            options: MasterOptions::default(),
+        })
+        .unwrap();
+        let reply = m.execute_json(r#"{"operating": "clear"}"#).unwrap();
+        assert_eq!(reply.as_deref(), Some("operating state clear"));
+        assert_eq!(
+            m.execute_json(r#"{"slave": 8, "outputs": "01 02"}"#)
+                .unwrap(),
+            None
+        );
+        assert_eq!(m.outputs(8).unwrap(), [1, 2]);
+        let reply = m.execute_json(r#"{"read_diag": 8}"#).unwrap().unwrap();
+        assert!(
+            reply.starts_with("job ") && reply.ends_with(" queued"),
+            "{reply}"
+        );
+        assert!(m.execute_json(r#"{"slave": 8, "outputs": "01"}"#).is_err());
+        assert_eq!(m.outputs(8).unwrap(), [1, 2]);
+    }
+
     fn ok(text: &str) -> MasterCommand {
         MasterCommand::from_json(text).unwrap_or_else(|e| panic!("{text}: {e}"))
     }
