@@ -622,7 +622,7 @@ pub fn check_cfg(strip: &Strip, opts: Options, cfg: &[u8]) -> Result<Image, CfgR
                     .variants
                     .iter()
                     .map(|v| {
-                        let cfg = profibus_fdl::wire::Hex(&v.cfg);
+                        let cfg = profibus_fdl::wire::Hex(v.cfg);
                         format!("{} {cfg}", v.mapping.as_str())
                     })
                     .collect();
