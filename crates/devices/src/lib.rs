@@ -84,6 +84,8 @@ pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
+#[cfg(feature = "tokio")]
+pub mod control_io;
 pub mod demo;
 pub mod emulation;
 pub mod generic;

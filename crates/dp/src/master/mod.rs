@@ -84,6 +84,7 @@
 mod command;
 mod config;
 mod report;
+mod stop;
 mod task;
 mod wait;
 
@@ -93,6 +94,7 @@ pub use config::{
     DEFAULT_GLOBAL_CONTROL_INTERVAL,
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use stop::{StopReason, StopWhen};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
