@@ -1,7 +1,7 @@
 //! `dpctl dpv1 read|write`: one DP-V1 class-1 data-record read or write.
 //!
 //! Runs the DP master of the bus file like `dpctl master`; once the slave
-//! is in Data_Exchange, the master's MSAC_C1 job runs (request, then
+//! is in Data_Exchange, `profibus_dp::master::RecordTask` runs (request, then
 //! polls until the slave answers or the slave's C1 response timeout of
 //! the bus file passes). Exit 0 with the data (or one JSON line), 1 with
 //! the slave's negative answer decoded in words, a timeout, or a slave

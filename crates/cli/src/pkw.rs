@@ -2,7 +2,7 @@
 //! channel (BM4-O-PRO-01, Omega Drive-Line II).
 //!
 //! Runs the DP master of the bus file like `dpctl master`; once the slave
-//! is in Data_Exchange, the PKW client (`profibus_devices::pkw::client`)
+//! is in Data_Exchange, `profibus_devices::pkw_task::PkwTask`
 //! runs the handshake over its cyclic data. Exit 0 with the result in
 //! words (or one JSON line), 1 with the decoded error on a PKW error, a
 //! timeout, or a slave that does not reach Data_Exchange.

@@ -2,7 +2,7 @@
 //! over its 16-byte handshake.
 //!
 //! Runs the DP master of the bus file like `dpctl master`; once the reader
-//! is in Data_Exchange, the client (`profibus_devices::rfid::client`)
+//! is in Data_Exchange, `profibus_devices::rfid::jobs::CommandRun`
 //! sends each command and fetches the whole answer. Prints each answer
 //! (its lines; or one JSON object per command with `--json`). Exit 0 when
 //! every command was answered, 1 on a timeout or a reader that does not

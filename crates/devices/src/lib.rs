@@ -20,7 +20,11 @@
 //! - **the master side**: the named, typed [`channels`] of the process
 //!   images a configuration gives ([`Profile::channels`]) and its PKW
 //!   dialect ([`Profile::pkw_dialect`]; the [`pkw`] module itself knows
-//!   no device).
+//!   no device). Acyclic jobs over a running master are
+//!   [`profibus_dp::master::SlaveTask`]s with typed results (`Display` and
+//!   `Serialize`): [`pkw_task::PkwTask`] (a parameter as people name it,
+//!   through the registry), [`rfid::jobs::CommandRun`] and
+//!   [`rfid::jobs::MasterJobs`] (reader commands).
 //!
 //! [`PROFILES`] is the registry: name → [`ProfileEntry`]. `dpctl slave
 //! --device NAME` and bus files with `device = "NAME"` go through it

@@ -474,3 +474,104 @@ impl fmt::Display for PkwAnswered {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pkw::Pkw;
+    use profibus_dp::master::SlaveParams;
+
+    fn slave(ident: u16, cfg: Vec<u8>) -> BusSlave {
+        BusSlave {
+            params: SlaveParams::new(5, ident, cfg),
+            gsd_path: "<omega>".into(),
+            device: None,
+            gsd: Default::default(),
+            modules: vec![],
+        }
+    }
+
+    #[test]
+    fn parameters_and_values_as_people_write_them() {
+        assert_eq!(parse_num(" 0x7E"), Some(126));
+        assert_eq!(parse_num("16#1_0"), Some(16));
+        assert_eq!(parse_num("-5"), Some(-5));
+        assert_eq!(parse_num("x"), None);
+        let s = slave(crate::omega::IDENT, vec![0x73, 0x71, 0x53, 0x63]);
+        let p = ParamRef::parse("P5[2]", &s).unwrap();
+        assert_eq!(
+            (p.pnu, p.index, p.to_string()),
+            (5, Some(2), "P5[2]".into())
+        );
+        assert_eq!(ParamRef::parse("0x7E", &s).unwrap().pnu, 126);
+        let e = |t: &str| ParamRef::parse(t, &s).unwrap_err().to_string();
+        assert_eq!(e("P2048"), "parameter number 2048 is outside 0..=2047");
+        assert_eq!(e("P5[x]"), "bad array index in `P5[x]`");
+        assert_eq!(
+            e("speed"),
+            "`speed` is neither a parameter number nor a variable module of <omega>"
+        );
+    }
+
+    #[test]
+    fn jobs_are_checked_before_they_run() {
+        let t = Duration::from_secs(1);
+        let omega = slave(crate::omega::IDENT, vec![0x73, 0x71, 0x53, 0x63]);
+        let bm4 = slave(crate::bm4::IDENT, vec![0x73]);
+        let e = |r: Result<PkwTask, PkwTaskError>| r.unwrap_err().to_string();
+        assert_eq!(e(PkwTask::write(&omega, "P5", None, t)), "write takes P=V");
+        assert_eq!(
+            e(PkwTask::write(&omega, "P5=1x", None, t)),
+            "`1x` is not a number"
+        );
+        assert_eq!(
+            e(PkwTask::write(&omega, "P5=0x100000000", None, t)),
+            "4294967296 does not fit 32 bits"
+        );
+        assert!(e(PkwTask::describe(&omega, "P5", "unit", t)).contains("`unit`"));
+        assert!(e(PkwTask::describe(&bm4, "P5", "min", t)).contains("no parameter description"));
+        let e = e(PkwTask::read(&slave(0x1234, vec![0x73]), "P5", t));
+        assert!(e.starts_with("slave 5: ident 0x1234"), "{e}");
+        // A write of unknown width reads first; P ≥ 1000 on the Omega is
+        // a double word.
+        let w = PkwTask::write(&omega, "P5=-1", None, t).unwrap();
+        assert!(matches!(w.steps.front(), Some(Step::Probe(Command::Read))));
+        let w = PkwTask::write(&omega, "P1000=7", None, t).unwrap();
+        assert!(matches!(
+            w.steps.front(),
+            Some(Step::Write {
+                value: 7,
+                dword: Some(true)
+            })
+        ));
+    }
+
+    #[test]
+    fn answers_in_words_and_json_fields() {
+        let omega = slave(crate::omega::IDENT, vec![0x73, 0x71, 0x53, 0x63]);
+        let mut task =
+            PkwTask::describe(&omega, "P5", "attribute", Duration::from_secs(1)).unwrap();
+        task.outcome = Some(Ok(crate::pkw::client::PkwAnswer {
+            request: Pkw::new(4, 5, 1, 0),
+            response: Pkw::new(3, 5, 1, 0x0105),
+            reply: Reply::Element(0x0105),
+        }));
+        let a = task.outcome().unwrap().unwrap();
+        assert_eq!(
+            (a.op, a.format, a.hex.as_str()),
+            ("describe", "word", "0x0105")
+        );
+        assert_eq!(
+            a.to_string(),
+            format!(
+                "P5 attribute = 261 (0x105, word): 2 bytes, UNSIGNED, FIXED, DATA, display DEC, 0 decimals  [request {}, response {}]",
+                Pkw::new(4, 5, 1, 0),
+                Pkw::new(3, 5, 1, 0x0105)
+            )
+        );
+        task.outcome = Some(Err(PkwError::Refused { code: 2, text: "x" }));
+        let r = task.outcome().unwrap().unwrap_err();
+        assert_eq!((r.ok, r.code), (false, Some(2)));
+        assert!(r.to_string().starts_with("slave 5 P5: "), "{r}");
+    }
+}

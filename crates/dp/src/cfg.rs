@@ -120,10 +120,8 @@ impl fmt::Display for Identifier<'_> {
             (Some(i), Some(o)) => write!(f, "{o} out + {i} in")?,
         }
         if !self.manufacturer.is_empty() {
-            f.write_str("; manufacturer bytes")?;
-            for b in self.manufacturer {
-                write!(f, " {b:02X}")?;
-            }
+            let bytes = profibus_fdl::wire::Hex(self.manufacturer);
+            write!(f, "; manufacturer bytes {bytes}")?;
         }
         Ok(())
     }

@@ -11,6 +11,7 @@
 //! DP-V1 alarm/status blocks) and [`ExtDiagBlock::describe`] puts them into
 //! words.
 
+use profibus_fdl::wire::Hex;
 use std::fmt::Write as _;
 
 bitflags::bitflags! {
@@ -379,10 +380,6 @@ pub fn status_type_text(t: u8) -> &'static str {
     }
 }
 
-fn hex(bytes: &[u8]) -> String {
-    profibus_fdl::wire::Hex(bytes).to_string()
-}
-
 impl ExtDiagBlock<'_> {
     /// The block in words. `dpv1` interprets device-related blocks as
     /// DP-V1 alarm/status blocks (`type, slot, specifier, data`).
@@ -412,11 +409,11 @@ impl ExtDiagBlock<'_> {
                         spec >> 3
                     );
                     if data.len() > 3 {
-                        let _ = write!(s, ": {}", hex(&data[3..]));
+                        let _ = write!(s, ": {}", Hex(&data[3..]));
                     }
                     s
                 } else {
-                    format!("device-related diagnosis: {}", hex(data))
+                    format!("device-related diagnosis: {}", Hex(data))
                 }
             }
             ExtDiagBlock::Identifier { bits } => {
@@ -456,7 +453,7 @@ impl ExtDiagBlock<'_> {
                     channel_error_text(error_type)
                 )
             }
-            ExtDiagBlock::Unknown { raw } => format!("undecoded diagnosis bytes: {}", hex(raw)),
+            ExtDiagBlock::Unknown { raw } => format!("undecoded diagnosis bytes: {}", Hex(raw)),
         }
     }
 }

@@ -67,7 +67,7 @@ fn pyprofibus(files: &[PathBuf], fix_quirks: bool) -> Vec<Value> {
 }
 
 fn hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02x}")).collect()
+    format!("{:#}", profibus_fdl::wire::Hex(b)).to_lowercase()
 }
 
 /// Where pyprofibus's reading `py` differs from our model, in words.

@@ -622,15 +622,8 @@ pub fn check_cfg(strip: &Strip, opts: Options, cfg: &[u8]) -> Result<Image, CfgR
                     .variants
                     .iter()
                     .map(|v| {
-                        format!(
-                            "{} {}",
-                            v.mapping.as_str(),
-                            v.cfg
-                                .iter()
-                                .map(|b| format!("{b:02X}"))
-                                .collect::<Vec<_>>()
-                                .join(" ")
-                        )
+                        let cfg = profibus_fdl::wire::Hex(v.cfg);
+                        format!("{} {cfg}", v.mapping.as_str())
                     })
                     .collect();
                 return Err(faulty(

@@ -700,10 +700,7 @@ fn hex(b: &[u8]) -> String {
     if b.is_empty() {
         return "(none)".into();
     }
-    b.iter()
-        .map(|x| format!("{x:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
+    profibus_fdl::wire::Hex(b).to_string()
 }
 
 impl Class {

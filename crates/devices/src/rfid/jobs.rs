@@ -319,3 +319,74 @@ impl MasterJobs {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
+    use profibus_fdl::{Baud, BusParams};
+
+    #[test]
+    fn results_in_words_and_json() {
+        let ok = RfidDone::new::<RfidError>(12, "VER".into(), Ok(b"V1.0\rOK\r"));
+        assert_eq!(ok.to_string(), "rfid slave 12: VER → V1.0 | OK");
+        assert_eq!(ok.answer_hex.as_deref(), Some("56 31 2E 30 0D 4F 4B 0D"));
+        let r = CommandResult {
+            done: ok,
+            bytes: Some(8),
+            ms: Some(1.5),
+            drained: Some(0),
+            restarts: Some(0),
+        };
+        assert_eq!(r.to_string(), "V1.0\nOK\n");
+        let failed = RfidDone::new(12, "GT".into(), Err::<&[u8], _>("gone"));
+        assert_eq!(failed.to_string(), "rfid slave 12: GT failed: gone");
+        let v = serde_json::to_value(&failed).unwrap();
+        assert_eq!(v["event"], "rfid");
+        assert_eq!(v["ok"], false);
+        assert!(v.get("answer").is_none());
+    }
+
+    #[test]
+    fn commands_for_a_running_master_are_checked() {
+        let cfg = MasterConfig {
+            address: 1,
+            params: BusParams::defaults(Baud::B1500000),
+            slaves: vec![SlaveParams::new(12, IDENT, CFG.to_vec())],
+            options: MasterOptions::default(),
+        };
+        let m = DpMaster::new(&cfg).unwrap();
+        let mut jobs = MasterJobs::default();
+        assert_eq!(
+            jobs.command(&m, r#"{"slot": 1}"#),
+            None,
+            "not an RFID command"
+        );
+        let mut c = |l: &str| jobs.command(&m, l).unwrap();
+        assert_eq!(
+            c(r#"{"rfid": 300, "command": "VER"}"#),
+            Err(QueueError::Address)
+        );
+        assert_eq!(c(r#"{"rfid": 12}"#), Err(QueueError::Command));
+        assert_eq!(
+            c(r#"{"rfid": 7, "command": "VER"}"#),
+            Err(QueueError::NoSlave(7))
+        );
+        assert_eq!(
+            c(r#"{"rfid": 12, "command": "VER"}"#).unwrap(),
+            "rfid slave 12: `VER` queued"
+        );
+        let wrong = BusSlave {
+            params: SlaveParams::new(12, IDENT, vec![0x11]),
+            gsd_path: "x".into(),
+            device: None,
+            gsd: Default::default(),
+            modules: vec![],
+        };
+        let e = CommandRun::new(&wrong, &[], Duration::from_secs(1)).unwrap_err();
+        assert!(
+            e.to_string().starts_with("slave 12 is configured [11]"),
+            "{e}"
+        );
+    }
+}

@@ -18,7 +18,6 @@
 //! ```
 
 use serde::{Deserialize, Serialize};
-use std::fmt;
 use std::time::Duration;
 
 /// Bytes per memory block (the readers' 32-bit blocks).
@@ -131,12 +130,7 @@ impl Tag {
 
 /// Upper-case hex of `bytes`, no separators.
 pub fn hex(bytes: &[u8]) -> String {
-    use fmt::Write as _;
-    let mut s = String::with_capacity(bytes.len() * 2);
-    for b in bytes {
-        let _ = write!(s, "{b:02X}");
-    }
-    s
+    format!("{:#}", profibus_fdl::wire::Hex(bytes))
 }
 
 /// Bytes from hex digits (an even number of them, no separators).

@@ -26,6 +26,9 @@
 //! the master sends at most one acyclic request per token visit: queued
 //! Global_Control commands, class-2 services ([`Job`]) and DP-V1
 //! MSAC_C1 read/write, which is polled until the slave's answer is ready.
+//! A one-shot job on one slave (a DP-V1 record: [`RecordTask`]; a PKW
+//! job or RFID commands in `profibus-devices`) is a [`SlaveTask`], run
+//! from a driver's tick by [`TaskRun`] once the slave is in Data_Exchange.
 //!
 //! The master owns the process images: [`DpMaster::inputs`] and
 //! [`DpMaster::set_outputs`] read and write them between calls; nothing is

@@ -246,19 +246,11 @@ impl fmt::Display for RecordOutcome<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::master::{MasterConfig, MasterOptions, SlaveParams};
-    use profibus_fdl::{Baud, BusParams};
     use std::time::Duration;
 
     #[test]
     fn a_record_job_waits_for_data_exchange_and_a_start_up_timeout_ends_the_run() {
-        let cfg = MasterConfig {
-            address: 1,
-            params: BusParams::defaults(Baud::B1500000),
-            slaves: vec![SlaveParams::new(8, 0x0DCE, vec![0x11, 0x21])],
-            options: MasterOptions::default(),
-        };
-        let mut m = DpMaster::new(&cfg).unwrap();
+        let mut m = crate::master::tests::master(); // slave 8
         let mut task = RecordTask::read(8, 1, 2, 5);
         assert_eq!(task.step(&mut m, Instant::ZERO, false), Ok(false));
         assert!(

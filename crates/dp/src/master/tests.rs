@@ -7,7 +7,7 @@ use profibus_fdl::wire::StationType;
 
 /// A master with one slave; no cyclic Global_Control, so that the tests
 /// of the poll sequence see only the slave's requests.
-fn master() -> DpMaster {
+pub(super) fn master() -> DpMaster {
     master_with(MasterOptions {
         global_control_interval: None,
         ..MasterOptions::default()
