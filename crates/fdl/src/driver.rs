@@ -636,30 +636,14 @@ async fn wait_for(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::station::passive::{PassiveStation, Reply, Responder};
+    use crate::station::echo::Echo;
+    use crate::station::passive::PassiveStation;
     use crate::timing::{Baud, BusParams};
-    use crate::wire::{DataTelegram, ResponseStatus};
-
-    struct Echo;
-    impl Responder for Echo {
-        fn address(&self) -> u8 {
-            4
-        }
-        fn on_request(&mut self, _: Instant, req: &DataTelegram<'_>, out: &mut [u8]) -> Reply {
-            out[..req.data.len()].copy_from_slice(req.data);
-            Reply::Data {
-                status: ResponseStatus::Dl,
-                dsap: req.ssap,
-                ssap: req.dsap,
-                len: req.data.len(),
-            }
-        }
-    }
 
     #[tokio::test]
     async fn passive_station_answers_over_a_duplex_stream() {
         let (mut a, mut b) = tokio::io::duplex(1024);
-        let mut st = PassiveStation::new(Echo, BusParams::defaults(Baud::B12000000));
+        let mut st = PassiveStation::new(Echo::new(4), BusParams::defaults(Baud::B12000000));
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let server = tokio::spawn(async move {
             run(

@@ -47,6 +47,29 @@ type Index = Option<(i64, usize)>;
 /// A statement head: keyword, index, whether `=` follows.
 type Head<'t> = (&'t str, Index, bool);
 
+/// A block of value texts: `PrmText` (its `Text(v)` lines) or
+/// `Unit_Diag_Area` (its `Value(v)` lines).
+struct TextBlock {
+    /// The block in words, for messages.
+    name: &'static str,
+    /// The keyword that closes it.
+    end: &'static str,
+    /// The key of its text lines.
+    item: &'static str,
+}
+
+const PRM_TEXT: TextBlock = TextBlock {
+    name: "`PrmText` block",
+    end: "EndPrmText",
+    item: "Text",
+};
+
+const DIAG_AREA: TextBlock = TextBlock {
+    name: "`Unit_Diag_Area` block",
+    end: "Unit_Diag_Area_End",
+    item: "Value",
+};
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Owner {
     Global,
@@ -1292,24 +1315,35 @@ impl Parser {
     }
 
     fn prm_text_line(&mut self, ll: &LogicalLine<'_>, index: usize, start: Pos) {
-        let mut c = Cursor::new(&ll.text);
-        let Some((word, idx, eq)) = self.head(ll, &mut c) else {
-            return;
-        };
-        let key = word.to_ascii_lowercase();
-        match key.as_str() {
-            "endprmtext" => {
-                if let Err(e) = c.end("`EndPrmText`") {
-                    self.syntax(ll, e);
-                }
-                self.state = State::Global;
-            }
-            "text" if eq => match self.value_text(ll, &mut c, word, idx) {
-                Ok(t) => self.gsd.prm_texts[index].texts.push(t),
-                Err(e) => self.syntax(ll, e),
-            },
-            _ => self.missing_end(ll, "`PrmText` block", start, "EndPrmText"),
+        if let Some(t) = self.text_block_line(ll, &PRM_TEXT, start) {
+            self.gsd.prm_texts[index].texts.push(t);
         }
+    }
+
+    /// A line inside a block of value texts: its end keyword closes the
+    /// block, an `item(value) = "text"` line gives a text (returned).
+    fn text_block_line(
+        &mut self,
+        ll: &LogicalLine<'_>,
+        block: &TextBlock,
+        start: Pos,
+    ) -> Option<PrmTextValue> {
+        let mut c = Cursor::new(&ll.text);
+        let (word, idx, eq) = self.head(ll, &mut c)?;
+        if word.eq_ignore_ascii_case(block.end) {
+            if let Err(e) = c.end(&format!("`{}`", block.end)) {
+                self.syntax(ll, e);
+            }
+            self.state = State::Global;
+        } else if eq && word.eq_ignore_ascii_case(block.item) {
+            match self.value_text(ll, &mut c, word, idx) {
+                Ok(t) => return Some(t),
+                Err(e) => self.syntax(ll, e),
+            }
+        } else {
+            self.missing_end(ll, block.name, start, block.end);
+        }
+        None
     }
 
     fn slot_line(&mut self, ll: &LogicalLine<'_>, start: Pos) {
@@ -1360,23 +1394,8 @@ impl Parser {
     }
 
     fn diag_area_line(&mut self, ll: &LogicalLine<'_>, index: usize, start: Pos) {
-        let mut c = Cursor::new(&ll.text);
-        let Some((word, idx, eq)) = self.head(ll, &mut c) else {
-            return;
-        };
-        let key = word.to_ascii_lowercase();
-        match key.as_str() {
-            "unit_diag_area_end" => {
-                if let Err(e) = c.end("`Unit_Diag_Area_End`") {
-                    self.syntax(ll, e);
-                }
-                self.state = State::Global;
-            }
-            "value" if eq => match self.value_text(ll, &mut c, word, idx) {
-                Ok(t) => self.gsd.unit_diag_areas[index].values.push(t),
-                Err(e) => self.syntax(ll, e),
-            },
-            _ => self.missing_end(ll, "`Unit_Diag_Area` block", start, "Unit_Diag_Area_End"),
+        if let Some(t) = self.text_block_line(ll, &DIAG_AREA, start) {
+            self.gsd.unit_diag_areas[index].values.push(t);
         }
     }
 

@@ -329,6 +329,10 @@ fn start_up_sequence_like_a_master() {
 
 #[test]
 fn prm_faults_keep_the_slave_in_wait_prm() {
+    let dpv1 = Features {
+        dpv1: true,
+        ..Features::default()
+    };
     let cases: Vec<(Vec<u8>, Features, bool, &str, bool)> = vec![
         // (prm, features, device rejects, reason contains, not supported)
         (
@@ -361,32 +365,17 @@ fn prm_faults_keep_the_slave_in_wait_prm() {
             "byte 0 out of range",
             false,
         ),
-        (
-            prm(0x88),
-            Features {
-                dpv1: true,
-                ..Features::default()
-            },
-            false,
-            "3 DPV1_Status bytes",
-            false,
-        ),
+        (prm(0x88), dpv1, false, "3 DPV1_Status bytes", false),
         (
             [prm(0x88), vec![0x80, 0x20, 0x00]].concat(),
-            Features {
-                dpv1: true,
-                ..Features::default()
-            },
+            dpv1,
             false,
             "alarms enabled",
             true,
         ),
         (
             [prm(0x88), vec![0xA0, 0x00, 0x00]].concat(),
-            Features {
-                dpv1: true,
-                ..Features::default()
-            },
+            dpv1,
             false,
             "DP-V2",
             true,
