@@ -2,7 +2,7 @@
 //! a port with the line options every station command takes.
 
 use anyhow::{Context, Result};
-use profibus_fdl::transport::Port;
+use profibus_fdl::transport::{Port, PortOptions, RtsControl, TransportError};
 use profibus_fdl::Baud;
 use std::time::Duration;
 
@@ -21,6 +21,51 @@ pub struct LineArgs {
     /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     pub latency: Option<f64>,
+    #[command(flatten)]
+    pub rts: RtsArg,
+}
+
+/// `--rts MODE`: RS-485 direction control, for commands that send.
+#[derive(clap::Args, Debug, Clone, Copy, Default)]
+pub struct RtsArg {
+    /// RS-485 direction control (transmit enable on RTS): `off` leaves RTS
+    /// alone (adapters that switch direction themselves, ptys, tcp://);
+    /// `on-send` asserts RTS while sending (the kernel's RS-485 mode, else
+    /// RTS toggled around each write). See docs/hardware.md.
+    #[arg(long, value_enum, default_value_t, value_name = "MODE")]
+    pub rts: Rts,
+}
+
+/// The values of `--rts`, named as `RtsControl::as_str` names them.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Rts {
+    #[default]
+    Off,
+    OnSend,
+}
+
+impl RtsArg {
+    /// The transport's setting.
+    pub fn control(self) -> RtsControl {
+        match self.rts {
+            Rts::Off => RtsControl::Off,
+            Rts::OnSend => RtsControl::OnSend,
+        }
+    }
+
+    /// Open `path` at `baud` with this RTS control.
+    pub fn open(self, path: &str, baud: Baud) -> Result<Port> {
+        let rts = self.control();
+        match Port::open_with(path, PortOptions { baud, rts }) {
+            Err(TransportError::Rts { error: source, .. }) => anyhow::bail!(
+                "{path}: --rts {} needs an RTS line the port can drive, and this one has none \
+                 (a pty, a serial device server, or a driver without modem lines: {source}); \
+                 leave --rts off, and see `dpctl doctor --port {path} --rts {0}`",
+                rts.as_str()
+            ),
+            r => r.with_context(|| format!("opening {path}")),
+        }
+    }
 }
 
 /// What every one-shot command on one slave takes (`dpctl pkw`, `dpv1`,
@@ -44,6 +89,8 @@ pub struct SlaveArgs {
     /// (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
     pub latency: Option<f64>,
+    #[command(flatten)]
+    pub rts: RtsArg,
 }
 
 impl SlaveArgs {
@@ -76,7 +123,7 @@ impl SlaveArgs {
     ) -> Result<()> {
         use profibus_fdl::driver::{self, Clock, Stop};
         let dp = profibus_dp::master::DpMaster::new(&bus.master)?;
-        let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency)?;
+        let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency, self.rts)?;
         let stop = driver::run_with(
             &mut station,
             &mut port,
@@ -100,7 +147,7 @@ impl SlaveArgs {
 impl LineArgs {
     /// Open the port.
     pub fn open(&self) -> Result<Port> {
-        Port::open(&self.port, self.baud).with_context(|| format!("opening {}", self.port))
+        self.rts.open(&self.port, self.baud)
     }
 }
 
@@ -114,19 +161,20 @@ pub fn latency(ms: Option<f64>, port: &Port) -> Result<Duration> {
     }
 }
 
-/// The FDL master station of a bus file (running `dp`) and its port.
+/// The FDL master station of a bus file (running `dp`) and its port
+/// (opened with `rts`).
 pub fn master_station(
     port: &str,
     bus: &profibus_dp::busfile::BusFile,
     dp: profibus_dp::master::DpMaster,
     latency_ms: Option<f64>,
+    rts: RtsArg,
 ) -> Result<(
     profibus_fdl::station::active::ActiveStation<profibus_dp::master::DpMaster>,
     Port,
 )> {
     use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-    let port_ =
-        Port::open(port, bus.master.params.baud).with_context(|| format!("opening {port}"))?;
+    let port_ = rts.open(port, bus.master.params.baud)?;
     let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
     cfg.latency_allowance = latency(latency_ms, &port_)?;
     Ok((ActiveStation::new(cfg, dp), port_))

@@ -93,7 +93,8 @@ async fn on_line(
 ) -> Result<()> {
     let bus = &profiled.file;
     let dp = DpMaster::new(&bus.master)?;
-    let (mut station, mut line) = common::master_station(port, bus, dp, args.latency)?;
+    let (mut station, mut line) =
+        common::master_station(port, bus, dp, args.latency, Default::default())?;
     let options = common::driver_options(&line, 0, false)?;
     let result = driver::run_with(
         &mut station,

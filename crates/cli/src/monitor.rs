@@ -1,26 +1,27 @@
 //! `dpctl monitor`: follow another master's slaves, listening only.
 //!
 //! `profibus_fdl::listen` reads the line (it cannot write) and
-//! `profibus_dp::monitor::Monitor` tracks the traffic; this prints its
-//! events and a status every `--interval`.
+//! `profibus_dp::monitor::Monitor` tracks the traffic; its events and
+//! status go to the view (`crate::view`): a table on a terminal, else
+//! lines or JSON lines every `--interval`.
 
 use crate::common;
+use crate::view::{Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
-use profibus_dp::monitor::{Monitor, MonitorOptions, MonitorStatus, SlaveInfo};
+use profibus_dp::monitor::{Monitor, MonitorOptions};
 use profibus_fdl::listen::{listen, Heard, ListenOptions};
-use profibus_fdl::tap::TapEvent;
 use profibus_fdl::transport::Port;
-use profibus_fdl::{Instant, Telegram};
-use serde_json::json;
-use std::io::Write;
-use std::ops::ControlFlow;
+use profibus_tui::lines::monitor_slaves;
+use profibus_tui::term::LiveBus;
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
 
 /// Listen to a bus (never send) and follow the master(s) on it: every
 /// slave's state, data, diagnosis, cycle times, retries and errors, and
-/// the masters in the token ring.
+/// the masters in the token ring. On a terminal a refreshing table: `q`
+/// quit, `p` pause, up/down select a slave, Enter its details.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
@@ -33,7 +34,10 @@ pub struct Args {
     /// Print JSON lines (events and status, shaped like `dpctl master --json`).
     #[arg(long)]
     json: bool,
-    /// Milliseconds between status prints.
+    /// Print status lines even on a terminal (no table).
+    #[arg(long, conflicts_with = "json")]
+    plain: bool,
+    /// Milliseconds between status prints (lines and JSON lines).
     #[arg(long, default_value_t = 1000, value_name = "MS")]
     interval: u64,
     /// A master that has not passed the token for this many milliseconds
@@ -44,90 +48,50 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let bus = ProfiledBus::load(&args.config)?;
-    let mut slaves = SlaveInfo::from_bus(&bus.file);
-    for s in &mut slaves {
-        if let Some(map) = bus.channels(s.address).transpose()? {
-            s.decoder = Some(Box::new(map));
-        }
-    }
+    let info = SlaveInfo::of_bus(&bus)?;
     let options = MonitorOptions {
         master_timeout: Duration::from_millis(args.master_timeout),
         ..MonitorOptions::default()
     };
-    let mut monitor = Monitor::new(slaves, options);
+    let mut monitor = Monitor::new(monitor_slaves(&bus.file, &info), options);
     let rt = common::runtime()?;
+    let baud = bus.file.master.params.baud;
     let mut port = {
         let _guard = rt.enter();
-        Port::open(&args.port, bus.file.master.params.baud)?
+        Port::open(&args.port, baud).with_context(|| format!("opening {}", args.port))?
     };
-    let listen_opts = ListenOptions::for_port(&port);
-    let interval = Duration::from_millis(args.interval.max(10));
-    let mut out = std::io::stdout().lock();
-    let mut next_status = Instant::ZERO + interval;
-    let mut failure = None;
-    let stats = rt.block_on(listen(
-        &mut port,
-        listen_opts,
-        common::shutdown(),
-        |heard| {
-            let now = match heard {
-                Heard::Event(TapEvent::Telegram { at, bytes }) => {
-                    if let Ok((t, _)) = Telegram::parse(&bytes) {
-                        monitor.observe(at, &t);
-                    }
-                    at
-                }
-                Heard::Event(TapEvent::Skipped { at, errors, .. }) => {
-                    monitor.observe_skipped(at, &errors);
-                    at
-                }
-                Heard::Tick(at) => {
-                    monitor.tick(at);
-                    at
-                }
-            };
-            let mut r = print_events(&mut monitor, args.json, &mut out);
-            if r.is_ok() && now >= next_status {
-                next_status = now + interval;
-                r = print_status(&monitor.status(), args.json, &mut out);
-            }
-            match r.and_then(|()| Ok(out.flush()?)) {
-                Ok(()) => ControlFlow::Continue(()),
-                Err(e) => {
-                    failure = Some(e);
-                    ControlFlow::Break(())
-                }
-            }
-        },
-    ));
-    if let Some(e) = failure {
-        return Err(e);
+    let mut listen_opts = ListenOptions::for_port(&port);
+    let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
+    if !args.json && !args.plain && std::io::stdout().is_terminal() {
+        view.open_listening("dpctl monitor", baud, &info)?;
+        listen_opts.tick = LiveBus::KEYS;
     }
+    let on_heard = |heard| {
+        let now = match heard {
+            Heard::Event(e) => monitor.hear(&e),
+            Heard::Tick(at) => {
+                monitor.tick(at);
+                at
+            }
+        };
+        show(&mut monitor, &mut view, now, false);
+        view.tick(&mut monitor, now)
+    };
+    let stats = rt.block_on(listen(&mut port, listen_opts, common::shutdown(), on_heard));
+    view.close();
     let stats = stats.with_context(|| format!("reading {}", args.port))?;
-    print_events(&mut monitor, args.json, &mut out)?;
-    print_status(&monitor.status(), args.json, &mut out)?;
+    show(&mut monitor, &mut view, profibus_fdl::Instant::ZERO, true);
     tracing::info!(?stats, "line counters");
     Ok(())
 }
 
-fn print_events(m: &mut Monitor, as_json: bool, out: &mut impl Write) -> Result<()> {
+/// The monitor's events, and its status when due.
+fn show(m: &mut Monitor, view: &mut View, now: profibus_fdl::Instant, force: bool) {
     while let Some(e) = m.poll_event() {
-        if as_json {
-            writeln!(out, "{}", serde_json::to_string(&e)?)?;
-        } else {
-            writeln!(out, "{e}")?;
-        }
+        view.event(&e);
     }
-    Ok(())
-}
-
-fn print_status(s: &MonitorStatus, as_json: bool, out: &mut impl Write) -> Result<()> {
-    if as_json {
-        let mut v = serde_json::to_value(s)?;
-        v["event"] = json!("status");
-        writeln!(out, "{v}")?;
-    } else {
-        writeln!(out, "{s}")?;
+    if view.due(now, force) {
+        let s = m.status();
+        view.event(&Line::new("status", &s, s.to_string()));
     }
-    Ok(())
 }

@@ -1,83 +1,28 @@
-//! The live view shared by `dpctl master` and `dpctl demo`: events as
-//! lines or JSON, or on a terminal the table view of `profibus_tui`
-//! (`View::open_terminal`). What is
-//! printed comes from the library's types (`Display` for text, `Serialize`
-//! for JSON): `MasterReport`, `MasterStatus`, `SlaveStatus`,
-//! `ImageValues`.
+//! The live view shared by `dpctl master`, `dpctl demo` and `dpctl
+//! monitor`: events as lines or JSON, or on a terminal the table view of
+//! `profibus_tui` (`View::open_terminal`). What is printed comes from the
+//! libraries' types (`Display` for text, `Serialize` for JSON):
+//! `MasterReport`, `profibus_tui::lines::StatusLine`, `MonitorStatus`.
 
-use profibus_devices::channels::{ChannelMap, ImageValues};
-use profibus_dp::gsd::Gsd;
-use profibus_dp::master::{DpMaster, MasterReport, MasterStatus, SlaveStatus};
+use profibus_dp::master::{DpMaster, MasterReport};
 use profibus_fdl::{Baud, Instant};
-use profibus_tui::bus::{BusView, Decoding, SlaveSpec};
+use profibus_tui::bus::BusView;
+use profibus_tui::lines::StatusLine;
+pub use profibus_tui::lines::{EventLine as Line, SlaveInfo};
+use profibus_tui::source::BusSource;
 use profibus_tui::term::LiveBus;
 use serde::Serialize;
 use std::fmt::Display;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
-/// What the view shows of a slave besides the master's state.
-pub struct SlaveInfo {
-    /// Station address.
-    pub address: u8,
-    /// Name.
-    pub name: String,
-    /// The GSD, for diagnosis texts.
-    pub gsd: Option<Gsd>,
-    /// Named channels of its process images (a slave given as a device
-    /// profile).
-    pub channels: Option<ChannelMap>,
-    /// The GSD modules the master configures, in slot order.
-    pub modules: Vec<String>,
-}
-
-/// An event the command line makes itself: `{"event": KIND, …body}` in
-/// JSON, `text` as text.
-#[derive(Serialize)]
-pub struct Line<T: Serialize> {
-    /// The event's kind.
-    pub event: &'static str,
-    /// Its fields.
-    #[serde(flatten)]
-    pub body: T,
-    /// The event in words.
-    #[serde(skip)]
-    pub text: String,
-}
-
-impl<T: Serialize> Line<T> {
-    /// An event `kind` with fields `body`, shown as `text`.
-    pub fn new(event: &'static str, body: T, text: impl Into<String>) -> Line<T> {
-        Line {
-            event,
-            body,
-            text: text.into(),
-        }
-    }
-}
-
-impl<T: Serialize> Display for Line<T> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.text)
-    }
-}
-
-/// One slave of a status line.
-#[derive(Serialize)]
-struct SlaveLine {
-    #[serde(flatten)]
-    status: SlaveStatus,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    channels: Option<ImageValues>,
-}
-
-/// A status line: the master and its slaves.
-#[derive(Serialize)]
-struct StatusLine<'a> {
-    event: &'static str,
-    #[serde(flatten)]
-    master: MasterStatus,
-    slaves: &'a [SlaveLine],
+/// Lines or JSON lines, or a table on the terminal.
+pub struct View {
+    /// JSON lines.
+    pub json: bool,
+    live: Option<LiveBus>,
+    last_print: Option<Instant>,
+    interval: Duration,
 }
 
 impl View {
@@ -99,20 +44,22 @@ impl View {
         baud: Baud,
         info: &[SlaveInfo],
     ) -> std::io::Result<()> {
-        let specs = info
-            .iter()
-            .map(|s| SlaveSpec {
-                address: s.address,
-                name: s.name.clone(),
-                gsd: s.gsd.clone(),
-                decoding: match (&s.channels, &s.gsd) {
-                    (Some(c), _) => Decoding::Channels(c.clone()),
-                    (None, Some(g)) => Decoding::modules(g, &s.modules),
-                    (None, None) => Decoding::None,
-                },
-            })
-            .collect();
+        let specs = info.iter().map(SlaveInfo::spec).collect();
         self.live = Some(LiveBus::open(BusView::new(title, Some(baud), specs))?);
+        Ok(())
+    }
+
+    /// [`View::open_terminal`] for a source that never sends (`dpctl
+    /// monitor`): no writes.
+    pub fn open_listening(
+        &mut self,
+        title: &str,
+        baud: Baud,
+        info: &[SlaveInfo],
+    ) -> std::io::Result<()> {
+        let specs = info.iter().map(SlaveInfo::spec).collect();
+        let view = BusView::new(title, Some(baud), specs).listen_only();
+        self.live = Some(LiveBus::open(view)?);
         Ok(())
     }
 
@@ -128,13 +75,13 @@ impl View {
         self.live = None;
     }
 
-    /// On the terminal: keys (writes go to `m`) and a frame when due.
-    /// `Break`: the person quit, or the terminal failed.
-    pub fn tick(&mut self, m: &mut DpMaster, now: Instant) -> ControlFlow<()> {
+    /// On the terminal: keys (writes go to `source`) and a frame when
+    /// due. `Break`: the person quit, or the terminal failed.
+    pub fn tick<S: BusSource + ?Sized>(&mut self, source: &mut S, now: Instant) -> ControlFlow<()> {
         let Some(live) = &mut self.live else {
             return ControlFlow::Continue(());
         };
-        match live.tick(m, now) {
+        match live.tick(source, now) {
             Ok(true) => ControlFlow::Continue(()),
             Ok(false) => ControlFlow::Break(()),
             Err(e) => {
@@ -143,17 +90,9 @@ impl View {
             }
         }
     }
-}
 
-pub struct View {
-    pub json: bool,
-    live: Option<LiveBus>,
-    last_print: Option<Instant>,
-    interval: Duration,
-}
-
-impl View {
-    /// Show an event: its JSON with `--json`, else its `Display` text.
+    /// Show an event: its JSON with `--json`, else its `Display` text
+    /// (in the table's log on the terminal).
     pub fn event<E: Serialize + Display + ?Sized>(&mut self, e: &E) {
         if self.json {
             println!("{}", crate::common::json_line(e));
@@ -164,58 +103,33 @@ impl View {
         }
     }
 
+    /// Whether a status line is due at `now` (always with `force`; never
+    /// while the table is on the terminal).
+    pub fn due(&mut self, now: Instant, force: bool) -> bool {
+        if self.live.is_some() || !force && self.last_print.is_some_and(|t| now < t + self.interval)
+        {
+            return false;
+        }
+        self.last_print = Some(now);
+        true
+    }
+
+    /// The master's status line, when due.
     pub fn status(
         &mut self,
         m: &DpMaster,
-        slaves_info: &[SlaveInfo],
+        info: &[SlaveInfo],
         baud: Baud,
         now: Instant,
         force: bool,
     ) {
-        if self.live.is_some() || !force && self.last_print.is_some_and(|t| now < t + self.interval)
-        {
-            return;
+        if self.due(now, force) {
+            self.event(&StatusLine::of(m, info, baud, now));
         }
-        self.last_print = Some(now);
-        let master = MasterStatus::of(m, baud, now);
-        let slaves: Vec<SlaveLine> = slaves_info
-            .iter()
-            .map(|s| {
-                let status = SlaveStatus::of(m, s.address);
-                let channels = s
-                    .channels
-                    .as_ref()
-                    .map(|map| map.values(&status.inputs, &status.outputs));
-                SlaveLine {
-                    status: SlaveStatus {
-                        name: s.name.clone(),
-                        ..status
-                    },
-                    channels,
-                }
-            })
-            .collect();
-        if self.json {
-            let line = StatusLine {
-                event: "status",
-                master,
-                slaves: &slaves,
-            };
-            println!("{}", crate::common::json_line(&line));
-            return;
-        }
-        let mut out = String::new();
-        out.push_str(&format!("{master}\n"));
-        for s in &slaves {
-            out.push_str(&format!("  {}\n", s.status));
-            if let Some(c) = &s.channels {
-                out.push_str(&format!("      {c}\n"));
-            }
-        }
-        print!("{out}");
     }
 }
 
+/// Show the master's events.
 pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View) {
     while let Some(e) = m.poll_event() {
         let gsd = match &e {

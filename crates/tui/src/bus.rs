@@ -1,8 +1,11 @@
-//! The slaves of a DP master as a refreshing table.
+//! The slaves of a DP bus as a refreshing table.
 //!
-//! [`BusView`] takes snapshots of a [`DpMaster`] ([`BusView::update`]),
-//! lines for its log ([`BusView::log`]) and keys
-//! ([`BusView::key`]), and draws itself ([`BusView::render`]). Keys:
+//! [`BusView`] takes snapshots of a [`BusSource`] (a DP master, or a
+//! passive monitor of another master's bus) with [`BusView::update`] or
+//! [`BusView::show`], lines for its log ([`BusView::log`]) and keys
+//! ([`BusView::key`]), and draws itself ([`BusView::render`]). A
+//! monitor's view also shows the masters in the token ring and the line's
+//! counters, and is [`BusView::listen_only`]: no writes. Keys:
 //!
 //! | key | what it does |
 //! |-----|--------------|
@@ -10,13 +13,15 @@
 //! | `p` | pause / resume the view (the bus keeps running) |
 //! | ↑ / ↓ | select a slave |
 //! | Enter | details of the selected slave (Esc or Enter closes them) |
-//! | `w` | write the selected slave's outputs: hex bytes (`01 FF`), or `NAME=VALUE ...` for named channels ([`Action::Write`]) |
+//! | `w` | write the selected slave's outputs: hex bytes (`01 FF`), or `NAME=VALUE ...` for named channels ([`Action::Write`]; not in a listen-only view) |
 
+use crate::source::{BusSnapshot, BusSource, Counters, Diagnosis};
 use crate::{fit, hex, Key};
 use profibus_devices::channels::{ChannelError, ChannelMap, Direction, Value};
 use profibus_dp::diag;
 use profibus_dp::gsd::Gsd;
-use profibus_dp::master::{DpMaster, OperatingState, SlaveState, SlaveStats};
+use profibus_dp::master::{OperatingState, SlaveState};
+use profibus_dp::monitor::{BusCounters, MasterStatus};
 use profibus_fdl::{Baud, Instant};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -161,18 +166,19 @@ pub enum WriteError {
     /// A channel name or value is wrong.
     #[error(transparent)]
     Channel(#[from] ChannelError),
-    /// Not a slave of the master.
-    #[error("slave {0} is not configured")]
+    /// Not a slave of the master, or a view that only listens.
+    #[error("slave {0}: no outputs to write here")]
     UnknownSlave(u8),
 }
 
 /// A slave as last seen.
 #[derive(Debug, Clone)]
 struct Snapshot {
-    state: SlaveState,
+    state: Option<SlaveState>,
+    master: Option<u8>,
     inputs: Vec<u8>,
     outputs: Vec<u8>,
-    stats: SlaveStats,
+    stats: Counters,
     diag: Vec<u8>,
     /// Diagnosis in words (kept while `diag` stays the same).
     diag_words: Vec<String>,
@@ -182,16 +188,34 @@ struct Snapshot {
     mark: Option<(Instant, u64)>,
 }
 
-/// What the header shows of the master.
-#[derive(Debug, Clone, Copy, Default)]
+impl Snapshot {
+    fn new() -> Snapshot {
+        Snapshot {
+            state: None,
+            master: None,
+            inputs: vec![],
+            outputs: vec![],
+            stats: Counters::default(),
+            diag: vec![],
+            diag_words: vec![],
+            cycle: None,
+            mark: None,
+        }
+    }
+}
+
+/// What the header shows of the master(s) and the line.
+#[derive(Debug, Clone, Default)]
 struct MasterLine {
-    address: u8,
+    address: Option<u8>,
     operating: Option<OperatingState>,
     cycles: u64,
     min_us: u64,
     avg_us: u64,
     max_us: u64,
     bus_time: Duration,
+    ring: Option<Vec<MasterStatus>>,
+    line: Option<BusCounters>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -216,6 +240,8 @@ pub struct BusView {
     message: Option<String>,
     /// Slaves whose outputs the person wrote.
     by_hand: Vec<u8>,
+    /// No writes (a passive monitor's view).
+    listen_only: bool,
 }
 
 /// Lines kept in the log.
@@ -234,19 +260,7 @@ impl BusView {
     /// A view titled `title` (e.g. `dpctl master`) of the slaves `specs`,
     /// in that order, on a line at `baud`.
     pub fn new(title: impl Into<String>, baud: Option<Baud>, specs: Vec<SlaveSpec>) -> BusView {
-        let rows = specs
-            .iter()
-            .map(|_| Snapshot {
-                state: SlaveState::Offline,
-                inputs: vec![],
-                outputs: vec![],
-                stats: SlaveStats::default(),
-                diag: vec![],
-                diag_words: vec![],
-                cycle: None,
-                mark: None,
-            })
-            .collect();
+        let rows = specs.iter().map(|_| Snapshot::new()).collect();
         BusView {
             title: title.into(),
             baud,
@@ -260,7 +274,15 @@ impl BusView {
             mode: Mode::Table,
             message: None,
             by_hand: vec![],
+            listen_only: false,
         }
+    }
+
+    /// The same view without writes (`w`): for a source that never
+    /// sends, such as a passive monitor.
+    pub fn listen_only(mut self) -> BusView {
+        self.listen_only = true;
+        self
     }
 
     /// Whether the person wrote the outputs of the slave at `address`
@@ -279,43 +301,66 @@ impl BusView {
         self.specs.get(self.selected).map(|s| s.address)
     }
 
-    /// Take a snapshot of the master's slaves at `now` (bus time),
-    /// unless the view is paused.
-    pub fn update(&mut self, m: &DpMaster, now: Instant) {
+    /// Take a snapshot of `source` at `now` (bus time), unless the view
+    /// is paused.
+    pub fn update<S: BusSource + ?Sized>(&mut self, source: &S, now: Instant) {
+        if !self.paused {
+            self.show(&source.snapshot(now));
+        }
+    }
+
+    /// Show `snap`, unless the view is paused. Slaves of the snapshot the
+    /// view does not know yet (heard by a monitor, not in the bus file)
+    /// get a row at the end.
+    pub fn show(&mut self, snap: &BusSnapshot) {
         if self.paused {
             return;
         }
-        let c = m.cycle_stats();
+        let now = Instant::ZERO + snap.bus_time;
         self.master = MasterLine {
-            address: m.address(),
-            operating: Some(m.operating_state()),
-            cycles: c.cycles,
-            min_us: c.min_ns / 1000,
-            avg_us: c.avg().as_micros() as u64,
-            max_us: c.max_ns / 1000,
-            bus_time: now - Instant::ZERO,
+            address: snap.station,
+            operating: snap.operating,
+            cycles: snap.cycles,
+            min_us: snap.cycle_us[0],
+            avg_us: snap.cycle_us[1],
+            max_us: snap.cycle_us[2],
+            bus_time: snap.bus_time,
+            ring: snap.ring.clone(),
+            line: snap.line,
         };
-        for (spec, row) in self.specs.iter().zip(self.rows.iter_mut()) {
-            let Some(h) = m.handle(spec.address) else {
-                continue;
+        for s in &snap.slaves {
+            let i = match self.specs.iter().position(|x| x.address == s.address) {
+                Some(i) => i,
+                None => {
+                    self.specs.push(SlaveSpec {
+                        address: s.address,
+                        name: String::new(),
+                        gsd: None,
+                        decoding: Decoding::None,
+                    });
+                    self.rows.push(Snapshot::new());
+                    self.specs.len() - 1
+                }
             };
-            let s = m.slave(h);
+            let (spec, row) = (&self.specs[i], &mut self.rows[i]);
             row.state = s.state;
-            row.stats = s.stats;
-            row.inputs.clear();
-            row.inputs.extend_from_slice(s.inputs);
-            row.outputs.clear();
-            row.outputs.extend_from_slice(s.outputs);
-            if row.diag != s.diag {
-                row.diag = s.diag.to_vec();
-                row.diag_words = if s.diag.is_empty() {
-                    vec![]
-                } else {
-                    let dpv1 = m.slave_params(spec.address).is_some_and(|p| p.dpv1);
-                    diag::describe(s.diag, spec.gsd.as_ref(), dpv1)
-                };
+            row.master = s.master;
+            row.stats = s.counters;
+            row.inputs.clone_from(&s.inputs);
+            row.outputs.clone_from(&s.outputs);
+            match &s.diag {
+                Diagnosis::Raw { bytes, dpv1 } if *bytes != row.diag => {
+                    row.diag.clone_from(bytes);
+                    row.diag_words = if bytes.is_empty() {
+                        vec![]
+                    } else {
+                        diag::describe(bytes, spec.gsd.as_ref(), *dpv1)
+                    };
+                }
+                Diagnosis::Raw { .. } => {}
+                Diagnosis::Words(w) => row.diag_words.clone_from(w),
             }
-            let n = s.stats.data_exchanges;
+            let n = s.counters.data_exchanges;
             match row.mark {
                 Some((t, k)) if n > k && now - t >= CYCLE_WINDOW => {
                     row.cycle = Some((now - t) / (n - k) as u32);
@@ -383,7 +428,7 @@ impl BusView {
                 Key::PageUp => self.selected = 0,
                 Key::PageDown => self.selected = self.specs.len().saturating_sub(1),
                 Key::Enter if !self.specs.is_empty() => self.mode = Mode::Details { scroll: 0 },
-                Key::Char('w') if !self.specs.is_empty() => {
+                Key::Char('w') if !self.specs.is_empty() && !self.listen_only => {
                     self.message = None;
                     self.mode = Mode::Prompt(String::new());
                 }
@@ -441,36 +486,40 @@ impl BusView {
         Action::Write { address, write }
     }
 
-    /// Carry out a write on the master's output image; the view shows
-    /// what was written or why not.
-    pub fn write(
+    /// Carry out a write on the source's output image (a master's); the
+    /// view shows what was written or why not.
+    pub fn write<S: BusSource + ?Sized>(
         &mut self,
-        m: &mut DpMaster,
+        source: &mut S,
         address: u8,
         write: &OutputWrite,
     ) -> Result<(), WriteError> {
-        let r = self.try_write(m, address, write);
+        let r = self.try_write(source, address, write);
         if r.is_ok() && !self.by_hand.contains(&address) {
             self.by_hand.push(address);
         }
         self.message = Some(match &r {
             Ok(()) => format!(
                 "slave {address}: outputs {}",
-                hex(m.outputs(address).unwrap_or(&[]))
+                hex(source.outputs_mut(address).as_deref().unwrap_or(&[]))
             ),
             Err(e) => format!("not written: {e}"),
         });
         r
     }
 
-    fn try_write(
+    fn try_write<S: BusSource + ?Sized>(
         &self,
-        m: &mut DpMaster,
+        source: &mut S,
         address: u8,
         write: &OutputWrite,
     ) -> Result<(), WriteError> {
-        let h = m.handle(address).ok_or(WriteError::UnknownSlave(address))?;
-        let out = m.outputs_mut(h);
+        if self.listen_only {
+            return Err(WriteError::UnknownSlave(address));
+        }
+        let out = source
+            .outputs_mut(address)
+            .ok_or(WriteError::UnknownSlave(address))?;
         match write {
             OutputWrite::Bytes(b) if b.len() > out.len() => Err(WriteError::TooLong {
                 address,
@@ -495,14 +544,15 @@ impl BusView {
     /// Draw the view into `area` of a frame.
     pub fn render(&self, f: &mut Frame<'_>, area: Rect) {
         let log_height = (self.log.len() as u16).clamp(3, 8) + 2;
+        let head_lines = self.header_lines();
         let [head, table, log, foot] = Layout::vertical([
-            Constraint::Length(1),
+            Constraint::Length(head_lines.len() as u16),
             Constraint::Min(4),
             Constraint::Length(log_height),
             Constraint::Length(1),
         ])
         .areas(area);
-        f.render_widget(Paragraph::new(self.header_line()), head);
+        f.render_widget(Paragraph::new(head_lines), head);
         self.render_table(f, table);
         let lines: Vec<Line> = self
             .log
@@ -520,15 +570,18 @@ impl BusView {
         }
     }
 
-    fn header_line(&self) -> Line<'static> {
+    /// The header: the master (or the bus) and its cycle; for a monitor
+    /// a second line with the token ring and the line's counters.
+    fn header_lines(&self) -> Vec<Line<'static>> {
         let m = &self.master;
-        let mut spans = vec![
-            Span::styled(
-                self.title.clone(),
-                Style::default().add_modifier(Modifier::BOLD),
-            ),
-            Span::raw(format!("  master {}", m.address)),
-        ];
+        let mut spans = vec![Span::styled(
+            self.title.clone(),
+            Style::default().add_modifier(Modifier::BOLD),
+        )];
+        spans.push(Span::raw(match m.address {
+            Some(a) => format!("  master {a}"),
+            None => "  listening".to_string(),
+        }));
         if let Some(b) = self.baud {
             spans.push(Span::raw(format!(" at {b}")));
         }
@@ -549,7 +602,35 @@ impl BusView {
                 Style::default().add_modifier(Modifier::REVERSED),
             ));
         }
-        Line::from(spans)
+        let mut lines = vec![Line::from(spans)];
+        if let Some(ring) = &m.ring {
+            let masters: Vec<String> = ring
+                .iter()
+                .map(|r| {
+                    let mut t = format!("{} (", r.address);
+                    if let Some(o) = r.operating {
+                        t.push_str(&format!("{}, ", o.as_str()));
+                    }
+                    t.push_str(&format!(
+                        "rotation {})",
+                        cycle_text(Some(Duration::from_micros(r.rotation_us.avg))).trim()
+                    ));
+                    t
+                })
+                .collect();
+            let mut text = format!("token ring: masters {}", masters.join(", "));
+            if masters.is_empty() {
+                text = "token ring: no master heard".into();
+            }
+            if let Some(l) = m.line {
+                text.push_str(&format!(
+                    "  line: telegrams {}  corrupt {}  no reply {}",
+                    l.telegrams, l.corrupt, l.no_reply
+                ));
+            }
+            lines.push(Line::raw(text));
+        }
+        lines
     }
 
     fn footer_line(&self) -> Line<'static> {
@@ -570,9 +651,10 @@ impl BusView {
             }
             _ => match &self.message {
                 Some(m) => Line::raw(m.clone()),
-                None => Line::raw(
-                    "q quit  p pause  ↑/↓ select  Enter details  w write outputs".to_string(),
+                None if self.listen_only => Line::raw(
+                    "q quit  p pause  ↑/↓ select  Enter details  (listening only: no writes)",
                 ),
+                None => Line::raw("q quit  p pause  ↑/↓ select  Enter details  w write outputs"),
             },
         }
     }
@@ -619,8 +701,9 @@ impl BusView {
                 lines
             };
             let state_style = match r.state {
-                SlaveState::DataExchange => Style::default().fg(Color::Green),
-                SlaveState::Offline => Style::default().fg(Color::Red),
+                Some(SlaveState::DataExchange) => Style::default().fg(Color::Green),
+                Some(SlaveState::Offline) => Style::default().fg(Color::Red),
+                None => Style::default(),
                 _ => Style::default().fg(Color::Yellow),
             };
             let (i, o) = (
@@ -633,7 +716,7 @@ impl BusView {
             Row::new(vec![
                 Cell::from(format!("{:>3}", spec.address)),
                 Cell::from(fit(&spec.name, name_w as usize)),
-                Cell::from(Span::styled(r.state.name(), state_style)),
+                Cell::from(Span::styled(state_name(r.state), state_style)),
                 Cell::from(cycle_text(r.cycle)),
                 Cell::from(format!("{:>7}", r.stats.retries)),
                 Cell::from(Text::from(i)),
@@ -669,7 +752,10 @@ impl BusView {
             return vec![];
         };
         let mut out = vec![format!("slave {} {}", spec.address, spec.name)];
-        let mut l = format!("state {}", r.state.name());
+        let mut l = format!("state {}", state_name(r.state));
+        if let Some(m) = r.master {
+            l.push_str(&format!("  polled by master {m}"));
+        }
         if let Some(g) = &spec.gsd {
             l.push_str(&format!(
                 "  ident number 0x{:04X}  {} {}",
@@ -680,15 +766,18 @@ impl BusView {
         }
         out.push(l);
         let s = &r.stats;
-        out.push(format!(
-            "cycle {}  data exchanges {}  retries {}  no answer {}  restarts {}  diagnosis reads {}",
+        let mut l = format!(
+            "cycle {}  data exchanges {}  retries {}  errors {}  restarts {}",
             cycle_text(r.cycle).trim(),
             s.data_exchanges,
             s.retries,
             s.errors,
             s.restarts,
-            s.diag_reads
-        ));
+        );
+        if let Some(n) = s.diag_reads {
+            l.push_str(&format!("  diagnosis reads {n}"));
+        }
+        out.push(l);
         if let Decoding::Modules(spans) = &spec.decoding {
             out.push(format!(
                 "modules: {}",
@@ -708,7 +797,7 @@ impl BusView {
                 out.push(format!("    {w}"));
             }
         }
-        if r.diag.is_empty() {
+        if r.diag.is_empty() && r.diag_words.is_empty() {
             out.push("diagnosis: none read yet".into());
         } else {
             out.push(format!("diagnosis: {}", hex(&r.diag)));
@@ -737,6 +826,11 @@ impl BusView {
             popup,
         );
     }
+}
+
+/// A state for the table (`unseen`: no traffic heard yet).
+fn state_name(s: Option<SlaveState>) -> &'static str {
+    s.map_or("unseen", SlaveState::name)
 }
 
 /// A cycle time for the table.
@@ -804,7 +898,7 @@ mod tests {
     use super::*;
     use crate::screen_text;
     use profibus_devices::channels::ChannelType;
-    use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
+    use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::BusParams;
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
@@ -977,6 +1071,82 @@ mod tests {
         }
         assert_eq!(v.key(Key::Enter), Action::None);
         assert!(screen(&v).contains("give hex bytes"));
+    }
+
+    #[test]
+    fn a_monitor_view_shows_the_ring_and_unknown_slaves_and_never_writes() {
+        use crate::source::{BusSnapshot, SlaveSnapshot};
+        use profibus_dp::monitor::Interval;
+        let mut v = view().listen_only();
+        let mut rotation = Interval::default();
+        rotation.avg = 2500;
+        let slave = |address, state, diag: &[&str]| SlaveSnapshot {
+            address,
+            state,
+            master: Some(2),
+            inputs: vec![0x00, 0x7B],
+            outputs: vec![0x01, 0x02],
+            counters: Counters::default(),
+            diag: Diagnosis::Words(diag.iter().map(|w| w.to_string()).collect()),
+        };
+        let snap = BusSnapshot {
+            station: None,
+            operating: Some(OperatingState::Operate),
+            cycles: 7,
+            cycle_us: [900, 1000, 1100],
+            bus_time: Duration::from_secs(2),
+            ring: Some(vec![MasterStatus {
+                address: 2,
+                tokens: 40,
+                rotation_us: rotation,
+                operating: Some(OperatingState::Operate),
+                in_ring: true,
+            }]),
+            line: Some(BusCounters {
+                telegrams: 99,
+                ..BusCounters::default()
+            }),
+            slaves: vec![
+                slave(25, Some(SlaveState::DataExchange), &[]),
+                slave(40, None, &["station status: station not existent"]),
+            ],
+        };
+        v.show(&snap);
+        let s = screen(&v);
+        assert!(!s.contains("master 2 at"), "a monitor is no master:\n{s}");
+        assert!(s.contains("dpctl master  listening at 1.5Mbit/s"), "{s}");
+        assert!(
+            s.contains("token ring: masters 2 (operate, rotation 2.5 ms)"),
+            "{s}"
+        );
+        assert!(s.contains("line: telegrams 99"), "{s}");
+        let drive = s.lines().find(|l| l.contains("drive")).expect(&s);
+        assert!(drive.contains("data_exchange"), "{drive}");
+        assert!(s.contains("speed=258") && s.contains("actual=123"), "{s}");
+        // Slave 8 of the bus file is not heard; 40 is heard, not in it.
+        assert!(
+            s.lines()
+                .any(|l| l.contains("  8 ") && l.contains("unseen")),
+            "{s}"
+        );
+        let other = s.lines().find(|l| l.contains(" 40 ")).expect(&s);
+        assert!(
+            other.contains("unseen") && other.contains("station not existent"),
+            "{other}"
+        );
+        assert!(s.contains("listening only: no writes"), "{s}");
+        // `w` opens no prompt, and a write is refused.
+        v.key(Key::Char('w'));
+        assert!(!screen(&v).contains("write outputs of"));
+        let mut m = master();
+        assert!(v.write(&mut m, 25, &OutputWrite::Bytes(vec![1])).is_err());
+        assert_eq!(m.outputs(25), Some(&[0, 0][..]));
+        // Details name the master that polls the slave.
+        v.key(Key::Down);
+        v.key(Key::Enter);
+        let s = screen(&v);
+        assert!(s.contains("state data_exchange  polled by master 2"), "{s}");
+        assert!(!s.contains("diagnosis reads"), "{s}");
     }
 
     #[test]

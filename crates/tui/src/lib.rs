@@ -1,12 +1,18 @@
 //! Terminal views of a PROFIBUS-DP bus, on [ratatui].
 //!
 //! - [`bus::BusView`]: the slaves of a DP master (`dpctl master`,
-//!   `dpctl demo`) as a refreshing table: address, name, start-up state,
+//!   `dpctl demo`), or of a bus a passive monitor listens to (`dpctl
+//!   monitor`: also the masters in the token ring; no writes), as a
+//!   refreshing table: address, name, start-up state,
 //!   the slave's Data_Exchange cycle time, retries, inputs and outputs in
 //!   hex and decoded (by the device profile's named channels, or by the
 //!   GSD modules the master configured), the last diagnosis in words, and
 //!   a log of the master's events. Keys pause the view, select a slave,
 //!   show its details and write its outputs.
+//! - [`source`]: what the bus view shows, a [`source::BusSnapshot`]
+//!   taken from a [`source::BusSource`] (a `DpMaster` or a `Monitor`).
+//! - [`lines`]: the same as text and JSON lines when stdout is no
+//!   terminal (`dpctl master --plain`, `--json`).
 //! - [`sniff::SniffView`]: telegrams seen on a line (`dpctl sniff`), with
 //!   filters by address, service and errors, and per-station statistics.
 //! - [`term::Screen`]: the terminal session (raw mode, alternate screen)
@@ -15,7 +21,8 @@
 //!   (keys every 20 ms, a frame every 100 ms of wall-clock time).
 //!
 //! The views are plain state: the application feeds them (a
-//! [`DpMaster`](profibus_dp::master::DpMaster) to snapshot, telegrams),
+//! [`DpMaster`](profibus_dp::master::DpMaster) or a
+//! [`Monitor`](profibus_dp::monitor::Monitor) to snapshot, telegrams),
 //! gives them [`Key`]s and draws them into any ratatui backend. Tests
 //! draw them on a `TestBackend` and read the screen as text
 //! ([`screen_text`]). Nothing here decodes process data or diagnosis by
@@ -24,7 +31,9 @@
 //! `profibus_dp::diag`, telegrams from `profibus_fdl::wire`.
 
 pub mod bus;
+pub mod lines;
 pub mod sniff;
+pub mod source;
 pub mod term;
 
 pub use ratatui;

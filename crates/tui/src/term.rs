@@ -4,8 +4,8 @@
 
 use crate::bus::{Action, BusView};
 use crate::sniff::SniffView;
+use crate::source::BusSource;
 use crate::Key;
-use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
 use ratatui::crossterm::event::{self, Event};
 use ratatui::{DefaultTerminal, Frame};
@@ -60,7 +60,7 @@ impl Drop for Screen {
 }
 
 /// A [`BusView`] on the terminal, for an application loop that runs a
-/// master: keys are read and the screen is drawn at most every
+/// master or a monitor: keys are read and the screen is drawn at most every
 /// [`LiveBus::FRAME`] of wall-clock time, however often the loop calls
 /// [`LiveBus::tick`].
 pub struct LiveBus {
@@ -97,10 +97,14 @@ impl LiveBus {
         &mut self.view
     }
 
-    /// Read the keys (carrying out writes on `m`), and when a frame is
-    /// due take a snapshot of `m` at `now` and draw it. `Ok(false)`: the
-    /// person asked to quit.
-    pub fn tick(&mut self, m: &mut DpMaster, now: Instant) -> io::Result<bool> {
+    /// Read the keys (carrying out writes on `source`), and when a frame
+    /// is due take a snapshot of `source` at `now` and draw it.
+    /// `Ok(false)`: the person asked to quit.
+    pub fn tick<S: BusSource + ?Sized>(
+        &mut self,
+        source: &mut S,
+        now: Instant,
+    ) -> io::Result<bool> {
         let wall = std::time::Instant::now();
         let mut redraw = false;
         if self.last_keys.is_none_or(|t| wall - t >= Self::KEYS) {
@@ -111,7 +115,7 @@ impl LiveBus {
                     Action::Quit => return Ok(false),
                     Action::Write { address, write } => {
                         // The view shows the outcome.
-                        let _ = self.view.write(m, address, &write);
+                        let _ = self.view.write(source, address, &write);
                     }
                     Action::None => {}
                 }
@@ -119,7 +123,7 @@ impl LiveBus {
         }
         if redraw || self.last_draw.is_none_or(|t| wall - t >= Self::FRAME) {
             self.last_draw = Some(wall);
-            self.view.update(m, now);
+            self.view.update(source, now);
             self.draw()?;
         }
         Ok(true)

@@ -72,6 +72,7 @@ use crate::gsd::Gsd;
 use crate::master::{OperatingState, SlaveState};
 use crate::sap;
 use profibus_fdl::codec::CodecStats;
+use profibus_fdl::tap::TapEvent;
 use profibus_fdl::wire::{
     DataTelegram, FunctionCode, Hex, RequestKind, ResponseStatus, StationType,
 };
@@ -692,6 +693,24 @@ impl Monitor {
         if let Some(p) = self.pending.take() {
             if p.expects_reply {
                 self.failed(p, ErrorKind::Corrupt);
+            }
+        }
+    }
+
+    /// What a passive tap framed off the line: a telegram (bytes that
+    /// do not parse count as corrupt) or skipped bytes. Returns its time.
+    pub fn hear(&mut self, e: &TapEvent) -> Instant {
+        match e {
+            TapEvent::Telegram { at, bytes } => {
+                match Telegram::parse(bytes) {
+                    Ok((t, _)) => self.observe(*at, &t),
+                    Err(_) => self.observe_skipped(*at, &CodecStats::default()),
+                }
+                *at
+            }
+            TapEvent::Skipped { at, errors, .. } => {
+                self.observe_skipped(*at, errors);
+                *at
             }
         }
     }

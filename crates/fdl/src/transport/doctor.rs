@@ -6,12 +6,23 @@
 //! the kernel's RS-485 mode (`TIOCGRS485`); and whether the configured
 //! slot time can be met with the adapter's latency.
 //!
+//! With [`DoctorOptions::rts`] it also checks the RTS direction control
+//! a command would ask for (`--rts`): the kernel's RS-485 mode, or RTS
+//! toggled around writes, or neither.
+//!
 //! A pty carries bytes, not bits: rates, parity, latency and RS-485 mode
 //! mean nothing there, and the report says so instead of passing them. A
 //! `tcp://` port is a serial device server whose own settings decide all
 //! of it; only the connection is checked.
+//!
+//! The [`Report`] is text ([`fmt::Display`]: the lines `dpctl doctor`
+//! prints) and, with the `serde` feature, one JSON object (`dpctl doctor
+//! --json`): `path`, `device`, `kind` (`{"type": "usb", "driver": …}`),
+//! `rts`, `checks` (`what`, `verdict`: `ok` | `warn` | `fail` |
+//! `unchecked`, `detail`), `failed` and `unchecked` (the number of
+//! checks that could not be made).
 
-use super::{is_pty_fd, TCP_SCHEME};
+use super::{is_pty_fd, RtsControl, TCP_SCHEME};
 use crate::timing::{Baud, BusParams};
 use std::fmt;
 use std::io;
@@ -20,8 +31,21 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPort, StopBits};
 
+impl RtsControl {
+    /// The name of the value on the command line (`--rts`) and in
+    /// reports: `off`, `on-send`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RtsControl::Off => "off",
+            RtsControl::OnSend => "on-send",
+        }
+    }
+}
+
 /// The outcome of one check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum Verdict {
     /// Fine.
     Ok,
@@ -47,6 +71,7 @@ impl Verdict {
 
 /// One check and what it found.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Check {
     /// What was checked (`open`, `8E1`, `baud 1.5Mbit/s`, `latency timer` …).
     pub what: String,
@@ -70,6 +95,8 @@ impl fmt::Display for Check {
 
 /// The kind of port, as far as it can be told.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(tag = "type", rename_all = "snake_case"))]
 pub enum PortKind {
     /// A pseudo terminal (socat pair, `dpctl bus` link).
     Pty,
@@ -96,6 +123,8 @@ pub struct Report {
     pub device: Option<PathBuf>,
     /// Its kind.
     pub kind: PortKind,
+    /// The RTS direction control checked for.
+    pub rts: RtsControl,
     /// The checks in order.
     pub checks: Vec<Check>,
 }
@@ -104,6 +133,14 @@ impl Report {
     /// Whether any check failed.
     pub fn failed(&self) -> bool {
         self.checks.iter().any(|c| c.verdict == Verdict::Fail)
+    }
+
+    /// How many checks could not be made on this port.
+    pub fn unchecked(&self) -> usize {
+        self.checks
+            .iter()
+            .filter(|c| c.verdict == Verdict::Unchecked)
+            .count()
     }
 
     fn add(&mut self, what: impl Into<String>, verdict: Verdict, detail: impl Into<String>) {
@@ -115,12 +152,63 @@ impl Report {
     }
 }
 
+/// The path, the device it leads to, the checks one per line, and how
+/// many could not be made.
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.device {
+            Some(d) if d.as_os_str() != self.path.as_str() => {
+                write!(f, "{} → {}", self.path, d.display())?
+            }
+            _ => f.write_str(&self.path)?,
+        }
+        for c in &self.checks {
+            write!(f, "\n  {c}")?;
+        }
+        match self.unchecked() {
+            0 => Ok(()),
+            n => write!(
+                f,
+                "\n{n} check(s) could not be made on this port (see above)"
+            ),
+        }
+    }
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for Report {
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        #[derive(serde::Serialize)]
+        struct Shape<'a> {
+            path: &'a str,
+            device: Option<&'a Path>,
+            kind: &'a PortKind,
+            rts: &'static str,
+            checks: &'a [Check],
+            failed: bool,
+            unchecked: usize,
+        }
+        Shape {
+            path: &self.path,
+            device: self.device.as_deref(),
+            kind: &self.kind,
+            rts: self.rts.as_str(),
+            checks: &self.checks,
+            failed: self.failed(),
+            unchecked: self.unchecked(),
+        }
+        .serialize(ser)
+    }
+}
+
 /// What to check the port for.
 #[derive(Debug, Clone)]
 pub struct DoctorOptions {
     /// The bus parameters to be used (rate and slot time), e.g. from a
     /// bus file; `None`: check every PROFIBUS rate, no timing check.
     pub params: Option<BusParams>,
+    /// The RTS direction control the port is to be opened with.
+    pub rts: RtsControl,
     /// Where sysfs is mounted (`/sys`; tests give a fake tree).
     pub sysfs: PathBuf,
 }
@@ -129,6 +217,7 @@ impl Default for DoctorOptions {
     fn default() -> Self {
         DoctorOptions {
             params: None,
+            rts: RtsControl::Off,
             sysfs: PathBuf::from("/sys"),
         }
     }
@@ -201,6 +290,7 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
         path: path.to_string(),
         device: None,
         kind: PortKind::Unknown,
+        rts: opts.rts,
         checks: vec![],
     };
     if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
@@ -330,7 +420,7 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
             Ok(_) => r.add(
                 "RS-485 mode",
                 Verdict::Ok,
-                "the driver has an RS-485 mode, now off (RtsControl::OnSend switches it on)",
+                "the driver has an RS-485 mode, now off (--rts on-send switches it on)",
             ),
             Err(e) => r.add(
                 "RS-485 mode",
@@ -339,6 +429,8 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
             ),
         }
     }
+
+    rts_check(&mut r, opts.rts, &mut port, fd);
 
     // Latency.
     let latency: Option<Duration> = if pty {
@@ -432,6 +524,44 @@ pub fn slot_time_check(p: &BusParams, latency: Option<Duration>) -> Check {
     }
 }
 
+/// Whether the RTS direction control `rts` can work on the port.
+fn rts_check(r: &mut Report, rts: RtsControl, port: &mut dyn SerialPort, fd: BorrowedFd<'_>) {
+    let pty = r.kind == PortKind::Pty;
+    match rts {
+        RtsControl::Off if pty => r.add("RTS control", Verdict::Ok, "off (a pty has no RTS line)"),
+        RtsControl::Off => r.add(
+            "RTS control",
+            Verdict::Ok,
+            "off: RTS is left alone; the adapter must switch direction itself (--rts on-send if it needs RTS)",
+        ),
+        RtsControl::OnSend if pty => r.add(
+            "RTS control",
+            Verdict::Fail,
+            "on-send cannot work: a pty has no RTS line (leave --rts off)",
+        ),
+        RtsControl::OnSend => match rs485_flags(fd) {
+            Ok(_) => r.add(
+                "RTS control",
+                Verdict::Ok,
+                "on-send: the kernel's RS-485 mode will assert RTS while sending",
+            ),
+            Err(_) => match port.write_request_to_send(false) {
+                Ok(()) => r.add(
+                    "RTS control",
+                    Verdict::Warn,
+                    "on-send: no kernel RS-485 mode, RTS is toggled around each write and released after tcdrain; \
+                     the release can come late (the next reply may be lost): prefer an adapter with automatic direction control",
+                ),
+                Err(e) => r.add(
+                    "RTS control",
+                    Verdict::Fail,
+                    format!("on-send cannot work: RTS cannot be set ({e})"),
+                ),
+            },
+        },
+    }
+}
+
 fn diagnose_tcp(r: &mut Report, addr: &str) {
     use std::net::ToSocketAddrs;
     r.kind = PortKind::Tcp;
@@ -454,6 +584,13 @@ fn diagnose_tcp(r: &mut Report, addr: &str) {
         Verdict::Unchecked,
         "the server's own settings give its line the rate, 8E1, latency and direction control: check them in its configuration",
     );
+    if r.rts == RtsControl::OnSend {
+        r.add(
+            "RTS control",
+            Verdict::Fail,
+            "on-send cannot work: a serial device server drives its transceiver itself (leave --rts off)",
+        );
+    }
 }
 
 #[cfg(test)]
@@ -490,6 +627,35 @@ mod tests {
             let c = r.checks.iter().find(|c| c.what == what).unwrap();
             assert_eq!(c.verdict, Verdict::Unchecked, "{c}");
         }
+    }
+
+    #[test]
+    fn rts_on_send_fails_on_a_pty_and_the_text_says_why() {
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let name = nix::unistd::ttyname(&pty.slave).unwrap();
+        let path = name.to_str().unwrap();
+        let off = diagnose(path, &DoctorOptions::default());
+        let c = off.checks.iter().find(|c| c.what == "RTS control").unwrap();
+        assert_eq!(c.verdict, Verdict::Ok, "{c}");
+        let r = diagnose(
+            path,
+            &DoctorOptions {
+                rts: RtsControl::OnSend,
+                ..DoctorOptions::default()
+            },
+        );
+        assert!(r.failed());
+        let text = r.to_string();
+        assert!(text.starts_with(path), "{text}");
+        assert!(
+            text.contains("FAIL        RTS control: on-send cannot work: a pty has no RTS line"),
+            "{text}"
+        );
+        assert!(
+            text.ends_with("4 check(s) could not be made on this port (see above)"),
+            "{text}"
+        );
+        assert_eq!(r.unchecked(), 4);
     }
 
     #[test]

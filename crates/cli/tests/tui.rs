@@ -445,3 +445,97 @@ fn sniff_lists_telegrams_with_filters_and_station_statistics() {
     let s = t.wait_for(&["[exit 0]"]);
     assert!(s.contains("summary: "), "the summary after the view:\n{s}");
 }
+
+#[test]
+fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
+    let bus = Bus::start(4, &[]);
+    let gsd = gen_gsd();
+    let _echo = slave(
+        &bus.link(1),
+        &[
+            "--addr",
+            "8",
+            "--gsd",
+            &gsd.to_string_lossy(),
+            "--module",
+            "2 words in/out",
+        ],
+    );
+    let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
+    let config = bus_file(&bus.dir().0);
+    let _master = Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--json", "--latency", "100", "--port"])
+            .arg(bus.link(0))
+            .arg("--config")
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    let port = bus.link_str(3);
+    let t = Tmux::start(&[
+        "monitor",
+        "--port",
+        &port,
+        "--config",
+        &config.to_string_lossy(),
+    ]);
+    // Both slaves in Data_Exchange, decoded, and master 2 in the ring.
+    let s = t.wait(
+        "both slaves in data exchange and master 2 in the ring",
+        |s| s.matches("data_exchange").count() >= 2 && s.contains("token ring: masters 2 ("),
+    );
+    assert!(s.contains("dpctl monitor  listening at 1.5Mbit/s"), "{s}");
+    assert!(!s.contains("master 2 at"), "the monitor is no master:\n{s}");
+    assert!(s.contains("line: telegrams "), "{s}");
+    assert!(line_with(&s, "echo").contains("  8 "), "{s}");
+    assert!(s.contains("2 words in/out: "), "{s}");
+    assert!(s.contains("setpoint1=") && s.contains("actual1="), "{s}");
+    assert!(s.contains("listening only: no writes"), "{s}");
+    t.wait("a cycle time", |s| line_with(s, "echo").contains(" ms "));
+
+    // No write prompt: the monitor never sends.
+    t.keys(&["w"]);
+    // Details of the drive: who polls it.
+    t.keys(&["Down", "Enter"]);
+    let s = t.wait_for(&["details (Esc closes", "slave 25 drive"]);
+    assert!(s.contains("polled by master 2"), "{s}");
+    assert!(!s.contains("write outputs of"), "{s}");
+    t.keys(&["Escape"]);
+    t.wait("details closed", |s| !s.contains("details (Esc"));
+
+    // Pause: the telegram counter stands still, then runs on.
+    t.keys(&["p"]);
+    let s = t.wait_for(&["PAUSED"]);
+    let counted = |s: &str| line_with(s, "line: telegrams").to_string();
+    let before = counted(&s);
+    t.wait("a frame later, the same", |s| counted(s) == before);
+    t.keys(&["p"]);
+    t.wait("running again", |s| {
+        !s.contains("PAUSED") && counted(s) != before
+    });
+    t.keys(&["q"]);
+    let s = t.wait_for(&["[exit 0]"]);
+    assert!(!s.contains("Addr"), "the table is gone after q:\n{s}");
+}
+
+#[test]
+fn monitor_plain_prints_lines_on_a_terminal() {
+    let bus = Bus::start(2, &[]);
+    let config = bus_file(&bus.dir().0);
+    let port = bus.link_str(0);
+    let t = Tmux::start(&[
+        "monitor",
+        "--plain",
+        "--interval",
+        "100",
+        "--port",
+        &port,
+        "--config",
+        &config.to_string_lossy(),
+    ]);
+    let s = t.wait_for(&["status t=", "masters in ring: []"]);
+    assert!(s.contains("  8 echo"), "{s}");
+    assert!(!s.contains("Addr"), "no table with --plain:\n{s}");
+}

@@ -1,0 +1,188 @@
+//! The views as lines, for output that is no terminal: events and
+//! statuses that are text (`Display`) and JSON (`Serialize`) at once, in
+//! the shape `dpctl master --json` prints.
+
+use crate::bus::{Decoding, SlaveSpec};
+use profibus_devices::bus::ProfiledBus;
+use profibus_devices::channels::{ChannelMap, ImageValues};
+use profibus_devices::profile::ProfileError;
+use profibus_dp::busfile::BusFile;
+use profibus_dp::gsd::Gsd;
+use profibus_dp::master::{DpMaster, MasterStatus, SlaveStatus};
+use profibus_dp::monitor;
+use profibus_fdl::{Baud, Instant};
+use serde::Serialize;
+use std::fmt;
+
+/// What a view shows of a slave of a bus file besides the master's
+/// state.
+#[derive(Debug, Clone)]
+pub struct SlaveInfo {
+    /// Station address.
+    pub address: u8,
+    /// Name.
+    pub name: String,
+    /// The GSD, for diagnosis texts.
+    pub gsd: Option<Gsd>,
+    /// Named channels of its process images (a slave given as a device
+    /// profile).
+    pub channels: Option<ChannelMap>,
+    /// The GSD modules the master configures, in slot order.
+    pub modules: Vec<String>,
+}
+
+/// A slave's device profile could not give its channels.
+#[derive(Debug, thiserror::Error)]
+#[error("slave {address}: {source}")]
+pub struct SlaveProfileError {
+    /// Station address.
+    pub address: u8,
+    /// Why.
+    #[source]
+    pub source: ProfileError,
+}
+
+impl SlaveInfo {
+    /// The slaves of a bus file, with the named channels of those given
+    /// as device profiles; the error names the slave whose profile failed.
+    pub fn of_bus(bus: &ProfiledBus) -> Result<Vec<SlaveInfo>, SlaveProfileError> {
+        bus.file
+            .slaves
+            .iter()
+            .map(|s| {
+                let a = s.params.address;
+                Ok(SlaveInfo {
+                    address: a,
+                    name: s.params.name.clone(),
+                    gsd: Some(s.gsd.clone()),
+                    channels: bus
+                        .channels(a)
+                        .transpose()
+                        .map_err(|source| SlaveProfileError { address: a, source })?,
+                    modules: s.modules.clone(),
+                })
+            })
+            .collect()
+    }
+
+    /// The slave for a [`BusView`](crate::bus::BusView): decoded by its
+    /// channels, else by its GSD modules.
+    pub fn spec(&self) -> SlaveSpec {
+        SlaveSpec {
+            address: self.address,
+            name: self.name.clone(),
+            gsd: self.gsd.clone(),
+            decoding: match (&self.channels, &self.gsd) {
+                (Some(c), _) => Decoding::Channels(c.clone()),
+                (None, Some(g)) => Decoding::modules(g, &self.modules),
+                (None, None) => Decoding::None,
+            },
+        }
+    }
+}
+
+/// The slaves of `bus` for a passive monitor
+/// ([`profibus_dp::monitor`]): their GSD modules, and the named channels
+/// of `info` (of the same bus, [`SlaveInfo::of_bus`]) as decoders.
+pub fn monitor_slaves(bus: &BusFile, info: &[SlaveInfo]) -> Vec<monitor::SlaveInfo> {
+    let mut slaves = monitor::SlaveInfo::from_bus(bus);
+    for s in &mut slaves {
+        let channels = info.iter().find(|i| i.address == s.address);
+        if let Some(c) = channels.and_then(|i| i.channels.clone()) {
+            s.decoder = Some(Box::new(c));
+        }
+    }
+    slaves
+}
+
+/// An event an application makes itself: `{"event": KIND, …body}` in
+/// JSON, `text` as text.
+#[derive(Serialize)]
+pub struct EventLine<T: Serialize> {
+    /// The event's kind.
+    pub event: &'static str,
+    /// Its fields.
+    #[serde(flatten)]
+    pub body: T,
+    /// The event in words.
+    #[serde(skip)]
+    pub text: String,
+}
+
+impl<T: Serialize> EventLine<T> {
+    /// An event `kind` with fields `body`, shown as `text`.
+    pub fn new(event: &'static str, body: T, text: impl Into<String>) -> EventLine<T> {
+        EventLine {
+            event,
+            body,
+            text: text.into(),
+        }
+    }
+}
+
+impl<T: Serialize> fmt::Display for EventLine<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// One slave of a status line.
+#[derive(Serialize)]
+struct SlaveLine {
+    #[serde(flatten)]
+    status: SlaveStatus,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    channels: Option<ImageValues>,
+}
+
+/// A master's status: `{"event": "status", …master, "slaves": […]}` in
+/// JSON; as text the master's headline, then a line per slave (and one
+/// with its named channels).
+#[derive(Serialize)]
+pub struct StatusLine {
+    event: &'static str,
+    #[serde(flatten)]
+    master: MasterStatus,
+    slaves: Vec<SlaveLine>,
+}
+
+impl StatusLine {
+    /// The master `m` on a bus at `baud` and its slaves `info` at `now`.
+    pub fn of(m: &DpMaster, info: &[SlaveInfo], baud: Baud, now: Instant) -> StatusLine {
+        let slaves = info
+            .iter()
+            .map(|s| {
+                let status = SlaveStatus::of(m, s.address);
+                let channels = s
+                    .channels
+                    .as_ref()
+                    .map(|map| map.values(&status.inputs, &status.outputs));
+                SlaveLine {
+                    status: SlaveStatus {
+                        name: s.name.clone(),
+                        ..status
+                    },
+                    channels,
+                }
+            })
+            .collect();
+        StatusLine {
+            event: "status",
+            master: MasterStatus::of(m, baud, now),
+            slaves,
+        }
+    }
+}
+
+impl fmt::Display for StatusLine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.master)?;
+        for s in &self.slaves {
+            write!(f, "\n  {}", s.status)?;
+            if let Some(c) = &s.channels {
+                write!(f, "\n      {c}")?;
+            }
+        }
+        Ok(())
+    }
+}
