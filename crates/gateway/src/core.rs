@@ -1050,11 +1050,15 @@ impl Gateway {
     }
 }
 
+fn failed(e: impl std::fmt::Display) -> RequestError {
+    RequestError::Failed(e.to_string())
+}
+
 /// A slave's job client as [`drive`] runs it: PKW or RFID.
 trait JobClient {
     fn is_idle(&self) -> bool;
     /// Start `r`; `None` when it is not this client's kind.
-    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>>;
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), RequestError>>;
     /// Drive the running job; its outcome when it ends.
     fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome>;
 }
@@ -1063,11 +1067,11 @@ impl JobClient for PkwClient {
     fn is_idle(&self) -> bool {
         PkwClient::is_idle(self)
     }
-    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>> {
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), RequestError>> {
         let Request::Pkw { pnu, command } = r else {
             return None;
         };
-        Some(self.start(now, *pnu, *command).map_err(|e| e.to_string()))
+        Some(self.start(now, *pnu, *command).map_err(failed))
     }
     fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome> {
         let words = |p: pkw::Pkw| {
@@ -1085,7 +1089,7 @@ impl JobClient for PkwClient {
                     response: words(a.response),
                 })
             })
-            .map_err(|e| RequestError::Failed(e.to_string())),
+            .map_err(failed),
         )
     }
 }
@@ -1094,11 +1098,11 @@ impl JobClient for RfidClient {
     fn is_idle(&self) -> bool {
         RfidClient::is_idle(self)
     }
-    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>> {
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), RequestError>> {
         let Request::Rfid(line) = r else {
             return None;
         };
-        Some(self.start(now, line).map_err(|e| e.to_string()))
+        Some(self.start(now, line).map_err(failed))
     }
     fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome> {
         let r = self.poll_master(now, m, h)?;
@@ -1110,7 +1114,7 @@ impl JobClient for RfidClient {
                     hex: hex(a),
                 })
             })
-            .map_err(|e| RequestError::Failed(e.to_string())),
+            .map_err(failed),
         )
     }
 }
@@ -1132,7 +1136,7 @@ fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Targe
         match c.begin(now, &q.request) {
             None => continue,
             Some(Ok(())) => e.running = Some(q.target),
-            Some(Err(err)) => answers.push((q.target, Err(RequestError::Failed(err)))),
+            Some(Err(err)) => answers.push((q.target, Err(err))),
         }
     }
     if !c.is_idle() {
