@@ -4,7 +4,6 @@
 //! libraries' types (`Display` for text, `Serialize` for JSON):
 //! `MasterReport`, `profibus_tui::lines::StatusLine`, `MonitorStatus`.
 
-pub use crate::describe::hex;
 use profibus_dp::master::{DpMaster, MasterReport};
 use profibus_fdl::{Baud, Instant};
 use profibus_tui::bus::BusView;

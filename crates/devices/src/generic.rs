@@ -698,12 +698,18 @@ Module="2 words in/out" 0x71
 EndModule
 "#;
 
+    fn gsd() -> Gsd {
+        Gsd::parse(GSD, Default::default()).unwrap().gsd
+    }
+
+    /// The device of [`GSD`] with the modules "2 words" and "1 byte in".
+    fn two_words_and_a_byte() -> GenericDevice {
+        GenericDevice::from_gsd(&gsd(), &["2 words", "1 byte in"]).unwrap()
+    }
+
     #[test]
     fn dpv1_slots_and_lengths_come_from_the_gsd() {
-        let gsd = profibus_dp::gsd::Gsd::parse(GSD, Default::default())
-            .unwrap()
-            .gsd;
-        let mut d = GenericDevice::from_gsd(&gsd, &["2 words", "1 byte in"]).unwrap();
+        let mut d = two_words_and_a_byte();
         assert_eq!(d.features().c1_max_data_len, 32);
         // Max_Module = 4: slots 0 (the device) to 4.
         let slot_error = |o: Dpv1Outcome| match o {
@@ -729,10 +735,7 @@ EndModule
 
     #[test]
     fn from_gsd_checks_what_the_file_says() {
-        let gsd = profibus_dp::gsd::Gsd::parse(GSD, Default::default())
-            .unwrap()
-            .gsd;
-        let mut d = GenericDevice::from_gsd(&gsd, &["2 words", "1 byte in"]).unwrap();
+        let mut d = two_words_and_a_byte();
         assert_eq!(d.ident_number(), 0x0DCE);
         assert_eq!(d.real_cfg(), &[0x71, 0x10]);
         let f = d.features();
@@ -756,11 +759,11 @@ EndModule
         let short = mk(&[0x80, 0, 0, 1]);
         assert!(d.check_prm(&SetPrm::parse(&short).unwrap()).is_err());
         assert!(matches!(
-            GenericDevice::from_gsd(&gsd, &["no such module at all"]),
+            GenericDevice::from_gsd(&gsd(), &["no such module at all"]),
             Err(GenericError::Module(_))
         ));
         assert!(matches!(
-            GenericDevice::from_gsd(&gsd, &["1 byte in"; 5]),
+            GenericDevice::from_gsd(&gsd(), &["1 byte in"; 5]),
             Err(GenericError::Limits(_))
         ));
     }

@@ -80,6 +80,8 @@ pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
+pub mod demo;
+pub mod emulation;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;

@@ -461,6 +461,17 @@ impl ExtDiagBlock<'_> {
     }
 }
 
+/// The channel block the tests write and read: module 3, input channel 2
+/// (word), line break.
+#[cfg(test)]
+pub(crate) const LINE_BREAK_3_2: ExtDiagBlock<'static> = ExtDiagBlock::Channel {
+    identifier: 3,
+    channel: 2,
+    io: ChannelIo::Input,
+    channel_type: 5,
+    error_type: 6,
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -491,16 +502,7 @@ mod tests {
         let d = SlaveDiag::parse(&du).unwrap();
         assert!(!d.ready_for(2) || d.status1.contains(StationStatus1::EXT_DIAG));
         let b = ext_blocks(d.ext_diag).next().unwrap();
-        assert_eq!(
-            b,
-            ExtDiagBlock::Channel {
-                identifier: 3,
-                channel: 2,
-                io: ChannelIo::Input,
-                channel_type: 5,
-                error_type: 6
-            }
-        );
+        assert_eq!(b, LINE_BREAK_3_2);
         assert_eq!(
             b.describe(false),
             "channel diagnosis: module 3 input channel 2 (word): line break (error type 6)"

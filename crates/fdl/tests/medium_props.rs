@@ -58,15 +58,9 @@ impl Receiver {
     fn push(&mut self, bytes: &[u8]) {
         self.buf.extend_from_slice(bytes);
         loop {
-            match self.framer.frame(&self.buf) {
-                Framed::Telegram { skip, len } => {
-                    self.out.push(self.buf[skip..skip + len].to_vec());
-                    self.buf.drain(..skip + len);
-                }
-                Framed::NeedMore { skip } => {
-                    self.buf.drain(..skip);
-                    break;
-                }
+            let framed = self.framer.frame(&self.buf);
+            if !self.take(framed) {
+                break;
             }
         }
     }
@@ -74,16 +68,25 @@ impl Receiver {
     /// The line went idle: give up incomplete candidates.
     fn idle(&mut self) {
         while !self.buf.is_empty() {
-            match self.framer.line_idle(&self.buf) {
-                Framed::Telegram { skip, len } => {
-                    self.out.push(self.buf[skip..skip + len].to_vec());
-                    self.buf.drain(..skip + len);
-                }
-                Framed::NeedMore { skip } => {
-                    self.buf.drain(..skip);
-                }
-            }
+            let framed = self.framer.line_idle(&self.buf);
+            self.take(framed);
             self.push(&[]);
+        }
+    }
+
+    /// Take what the framer found off the buffer; whether it was a
+    /// telegram.
+    fn take(&mut self, framed: Framed) -> bool {
+        match framed {
+            Framed::Telegram { skip, len } => {
+                self.out.push(self.buf[skip..skip + len].to_vec());
+                self.buf.drain(..skip + len);
+                true
+            }
+            Framed::NeedMore { skip } => {
+                self.buf.drain(..skip);
+                false
+            }
         }
     }
 }

@@ -9,9 +9,10 @@ use profibus_fdl::station::active::{
     ActiveConfig, ActiveStation, CycleResult, FdlEvent, MasterApp, Outcome, Request, RingState,
     Service, TokenContext,
 };
-use profibus_fdl::station::passive::{PassiveStation, Reply, Responder};
+use profibus_fdl::station::echo::Echo;
+use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::station::Station;
-use profibus_fdl::wire::{DataTelegram, ResponseStatus, Telegram};
+use profibus_fdl::wire::Telegram;
 use profibus_fdl::{Baud, BusParams, Instant};
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -55,23 +56,6 @@ impl MasterApp for Poller {
 
     fn on_event(&mut self, _now: Instant, e: FdlEvent) {
         self.events.push(e);
-    }
-}
-
-struct Echo(u8);
-
-impl Responder for Echo {
-    fn address(&self) -> u8 {
-        self.0
-    }
-    fn on_request(&mut self, _: Instant, req: &DataTelegram<'_>, out: &mut [u8]) -> Reply {
-        out[..req.data.len()].copy_from_slice(req.data);
-        Reply::Data {
-            status: ResponseStatus::Dl,
-            dsap: req.ssap,
-            ssap: req.dsap,
-            len: req.data.len(),
-        }
     }
 }
 
@@ -140,7 +124,7 @@ fn plant(baud: Baud, ttr: u32, greedy: bool, collisions: Collisions) -> Plant {
     }
     let slaves = [10u8, 20, 30, 40]
         .iter()
-        .map(|&a| bus.add(PassiveStation::new(Echo(a), params)))
+        .map(|&a| bus.add(PassiveStation::new(Echo::new(a), params)))
         .collect();
     let tokens = Rc::new(RefCell::new(vec![]));
     bus.set_tap(token_tap(tokens.clone()));

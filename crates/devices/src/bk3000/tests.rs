@@ -311,20 +311,19 @@ impl Bench {
         }
     }
 
+    /// A coupler with the terminals `list` in data exchange with a master
+    /// configured for the same strip.
+    fn started(list: &str) -> (Bench, Bk3000Master) {
+        let mut b = Bench::new(list);
+        let m = Bk3000Master::from_names(&list.split(',').collect::<Vec<_>>()).unwrap();
+        b.start(&m.user_prm_data(), m.chk_cfg());
+        (b, m)
+    }
+
     fn req(&mut self, dsap: Option<u8>, data: &[u8]) -> (Reply, Vec<u8>) {
-        let req = DataTelegram {
-            da: ADDR,
-            sa: MASTER,
-            fc: FunctionCode::Request {
-                kind: RequestKind::SrdHigh,
-                fcb: false,
-                fcv: false,
-            },
-            dsap,
-            ssap: dsap.map(|_| sap::MASTER),
-            data,
-            format: None,
-        };
+        let fc = FunctionCode::request(RequestKind::SrdHigh);
+        let req =
+            DataTelegram::new(ADDR, MASTER, fc, data).with_saps(dsap, dsap.map(|_| sap::MASTER));
         let mut out = [0u8; 246];
         let r = self.slave.on_request(T0, &req, &mut out);
         let len = match r {
@@ -398,10 +397,7 @@ fn cfg_fault_gives_cfgdata_bytes_and_blink_code() {
 
 #[test]
 fn data_exchange_outputs_named_and_inputs_simulated() {
-    let list = "KL1104,KL2134,KL3102,KL4002,KL9010";
-    let mut b = Bench::new(list);
-    let m = Bk3000Master::from_names(&list.split(',').collect::<Vec<_>>()).unwrap();
-    b.start(&m.user_prm_data(), m.chk_cfg());
+    let (mut b, m) = Bench::started("KL1104,KL2134,KL3102,KL4002,KL9010");
     assert_eq!(b.slave.state(), SlaveState::DataExch);
     let mut out = vec![0u8; m.image().out_len];
     m.encode("2.KL2134.3", 1.0, &mut out).unwrap();
@@ -447,10 +443,7 @@ fn data_exchange_outputs_named_and_inputs_simulated() {
 
 #[test]
 fn pulled_terminal_is_a_kbus_error() {
-    let list = "KL1104,KL2134,KL3102,KL4002,KL9010";
-    let mut b = Bench::new(list);
-    let m = Bk3000Master::from_names(&list.split(',').collect::<Vec<_>>()).unwrap();
-    b.start(&m.user_prm_data(), m.chk_cfg());
+    let (mut b, m) = Bench::started("KL1104,KL2134,KL3102,KL4002,KL9010");
     b.dx(&vec![0; m.image().out_len]);
     let text = b.slave.device_mut().pull(3).unwrap();
     assert!(text.contains("4 pulses, then 2"), "{text}");

@@ -37,6 +37,11 @@ fn pkw_job(d: &mut Bm4, req: Pkw) -> Pkw {
     Pkw::parse(&i).unwrap()
 }
 
+/// `d` answers the PKW request `req` with `want` (as printed).
+fn assert_job(d: &mut Bm4, req: Pkw, want: &str) {
+    assert_eq!(pkw_job(d, req).to_string(), want, "{req:?}");
+}
+
 #[test]
 fn generated_gsd_has_the_example_files_modules() {
     let d = example();
@@ -138,10 +143,7 @@ fn pkw_examples_of_the_manual() {
     assert_eq!(d.value(2, 0), Some(0x1234_5678));
     // A variable that does not exist: 7xxx, PWE2 0x000B.
     let mut d = example();
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(1, 9, 0, 0)).to_string(),
-        "7009 0000 0000 000B"
-    );
+    assert_job(&mut d, Pkw::new(1, 9, 0, 0), "7009 0000 0000 000B");
 }
 
 #[test]
@@ -182,28 +184,13 @@ fn pkw_arrays_of_the_default_table() {
     let r = pkw_job(&mut d, Pkw::new(6, 2, 3, 0));
     assert_eq!(r.to_string(), "5002 0003 DEAD BEEF");
     // b_RefValue (PNU 0, BYTE): word element write, range checked.
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(7, 0, 15, 0x7F)).to_string(),
-        "4000 000F 0000 007F"
-    );
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(7, 0, 15, 0x100)).to_string(),
-        "7000 000F 0000 0005"
-    );
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(6, 0, 16, 0)).to_string(),
-        "7000 0010 0000 0003"
-    );
+    assert_job(&mut d, Pkw::new(7, 0, 15, 0x7F), "4000 000F 0000 007F");
+    assert_job(&mut d, Pkw::new(7, 0, 15, 0x100), "7000 000F 0000 0005");
+    assert_job(&mut d, Pkw::new(6, 0, 16, 0), "7000 0010 0000 0003");
     // Actual values (PNU 4) are read only; a plain read of an array is
     // the wrong type.
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(7, 4, 0, 1)).to_string(),
-        "7004 0000 0000 0001"
-    );
-    assert_eq!(
-        pkw_job(&mut d, Pkw::new(1, 4, 0, 0)).to_string(),
-        "7004 0000 0000 0005"
-    );
+    assert_job(&mut d, Pkw::new(7, 4, 0, 1), "7004 0000 0000 0001");
+    assert_job(&mut d, Pkw::new(1, 4, 0, 0), "7004 0000 0000 0005");
 }
 
 #[test]

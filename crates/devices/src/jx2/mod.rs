@@ -79,7 +79,7 @@ mod scripted;
 mod shared;
 
 pub use scripted::ScriptedJx2;
-pub use shared::{Plc, SharedJx2};
+pub use shared::{BadModuleNumber, Plc, SharedJx2};
 
 use crate::kit::EventQueue;
 use profibus_dp::slave::SlaveState;

@@ -27,6 +27,11 @@ fn job(d: &mut Omega, req: Pkw) -> Pkw {
     Pkw::parse(&i).unwrap()
 }
 
+/// `d` answers the PKW request `req` with `want` (as printed).
+fn assert_job(d: &mut Omega, req: Pkw, want: &str) {
+    assert_eq!(job(d, req).to_string(), want, "{req:?}");
+}
+
 #[test]
 fn configuration_rules() {
     let ok = |c: &[u8]| check_configuration(c).unwrap();
@@ -96,39 +101,25 @@ fn pkw_examples_of_the_manual() {
     // Read P218 (double word): 10DA → 20DA, value in PWE1/PWE2 (L1028-1047);
     // it follows setpoint 1, here 0.
     let mut d = Omega::with_defaults();
-    assert_eq!(
-        job(&mut d, Pkw::new(1, 218, 0, 0)).to_string(),
-        "20DA 0000 0000 0000"
-    );
+    assert_job(&mut d, Pkw::new(1, 218, 0, 0), "20DA 0000 0000 0000");
     // P127 := 4: 207F 0000 0000 0004 → 107F 0000 0000 0004 (L1080-1097).
     let mut d = Omega::with_defaults();
-    assert_eq!(
-        job(&mut d, Pkw::new(2, 127, 0, 4)).to_string(),
-        "107F 0000 0000 0004"
-    );
+    assert_job(&mut d, Pkw::new(2, 127, 0, 4), "107F 0000 0000 0004");
     assert_eq!(d.parameter(127), Some(4));
     // Maximum of P126: 407E 0006 → 307E 0006 0000 000F (L1161-1178).
     let mut d = Omega::with_defaults();
-    assert_eq!(
-        job(&mut d, Pkw::new(4, 126, 6, 0)).to_string(),
-        "307E 0006 0000 000F"
-    );
+    assert_job(&mut d, Pkw::new(4, 126, 6, 0), "307E 0006 0000 000F");
     // P003 = 0x0064 (L1901-1906).
     let mut d = Omega::with_defaults();
-    assert_eq!(
-        job(&mut d, Pkw::new(1, 3, 0, 0)).to_string(),
-        "1003 0000 0000 0064"
-    );
+    assert_job(&mut d, Pkw::new(1, 3, 0, 0), "1003 0000 0000 0064");
     // PNU 1000 := 0x12345678, read back (L1859-1870).
     let mut d = Omega::with_defaults();
-    assert_eq!(
-        job(&mut d, Pkw::new(3, 1000, 0, 0x1234_5678)).to_string(),
-        "23E8 0000 1234 5678"
+    assert_job(
+        &mut d,
+        Pkw::new(3, 1000, 0, 0x1234_5678),
+        "23E8 0000 1234 5678",
     );
-    assert_eq!(
-        job(&mut d, Pkw::new(1, 1000, 0, 0)).to_string(),
-        "23E8 0000 1234 5678"
-    );
+    assert_job(&mut d, Pkw::new(1, 1000, 0, 0), "23E8 0000 1234 5678");
     assert_eq!(d.omega_value(1000), Some(0x1234_5678));
 }
 

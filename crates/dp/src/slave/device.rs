@@ -673,7 +673,7 @@ pub(crate) fn hex(bytes: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diag::{ext_blocks, ExtDiagBlock};
+    use crate::diag::{ext_blocks, ExtDiagBlock, LINE_BREAK_3_2};
 
     #[test]
     fn diag_writer_blocks_and_overflow() {
@@ -695,16 +695,7 @@ mod tests {
                 data: &[0xAA, 0xBB]
             }
         );
-        assert!(matches!(
-            blocks[1],
-            ExtDiagBlock::Channel {
-                identifier: 3,
-                channel: 2,
-                io: ChannelIo::Input,
-                channel_type: 5,
-                error_type: 6
-            }
-        ));
+        assert_eq!(blocks[1], LINE_BREAK_3_2);
     }
 
     #[test]

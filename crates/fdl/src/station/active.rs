@@ -1415,6 +1415,19 @@ mod tests {
         (t, st.poll_transmit(t).map(|b| b.to_vec()))
     }
 
+    /// Master 3 alone at 19.2 kbit/s after its first request, an SRD to
+    /// station 8 with `saps`: the station, when it sent it, the bytes.
+    fn srd_to_8(saps: Option<(u8, u8)>) -> (ActiveStation<Recorder>, Instant, Vec<u8>) {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
+        st.app_mut().saps = saps;
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        let (t, tx) = step(&mut st);
+        (st, t, tx.unwrap())
+    }
+
     /// Found by the `master_response` fuzz target: a token passed by a
     /// station above HSA made the ring-distance arithmetic underflow.
     #[test]
@@ -1482,14 +1495,9 @@ mod tests {
     #[test]
     fn only_a_reply_with_the_requests_saps_swapped_answers_it() {
         let params = BusParams::defaults(Baud::B19200);
-        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
         // Slave_Diag: DSAP 60, SSAP 62.
-        st.app_mut().saps = Some((60, 62));
-        st.app_mut().queue.push((8, Service::SrdHigh));
-        step(&mut st);
-        step(&mut st);
-        let (t, tx) = step(&mut st);
-        assert_eq!(tx.unwrap()[..4], [0x68, 5, 5, 0x68]);
+        let (mut st, t, tx) = srd_to_8(Some((60, 62)));
+        assert_eq!(tx[..4], [0x68, 5, 5, 0x68]);
         let at = t + params.bits(11);
         // A late Data_Exchange answer (20 bytes of inputs, no SAPs) is not
         // the diagnosis: counted and ignored.
@@ -1524,12 +1532,7 @@ mod tests {
             (ResponseStatus::Dl, &[1, 2, 3][..], false),
             (ResponseStatus::Rs, &[1][..], false),
         ] {
-            let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
-            st.app_mut().saps = Some((61, 62));
-            st.app_mut().queue.push((8, Service::SrdHigh));
-            step(&mut st);
-            step(&mut st);
-            let (t, _) = step(&mut st);
+            let (mut st, t, _) = srd_to_8(Some((61, 62)));
             st.handle_rx(t + params.bits(11), &reply(3, 8, status, None, data));
             assert_eq!(st.app().results.len(), accepted as usize, "{status:?}");
             assert_eq!(st.stats().late_replies, !accepted as u64, "{status:?}");
@@ -1542,11 +1545,7 @@ mod tests {
         // station) arrives after the GAP wait, while a Data_Exchange to the
         // same station is pending: not its answer.
         let params = BusParams::defaults(Baud::B19200);
-        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
-        st.app_mut().queue.push((8, Service::SrdHigh));
-        step(&mut st);
-        step(&mut st);
-        let (t, _) = step(&mut st);
+        let (mut st, t, _) = srd_to_8(None);
         st.handle_rx(t + params.bits(11), &[0x10, 3, 8, 0x00, 0x0B, 0x16]);
         assert!(st.app().results.is_empty());
         assert_eq!(st.stats().late_replies, 1);
@@ -1560,11 +1559,7 @@ mod tests {
     #[test]
     fn a_reply_with_saps_does_not_answer_a_request_without() {
         let params = BusParams::defaults(Baud::B19200);
-        let mut st = ActiveStation::new(ActiveConfig::new(3, params), Recorder::default());
-        st.app_mut().queue.push((8, Service::SrdHigh));
-        step(&mut st);
-        step(&mut st);
-        let (t, _) = step(&mut st);
+        let (mut st, t, _) = srd_to_8(None);
         let late_diag = reply(
             3,
             8,

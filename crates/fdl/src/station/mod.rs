@@ -24,6 +24,7 @@
 //!   for an [`active::MasterApp`].
 
 pub mod active;
+pub mod echo;
 pub mod passive;
 
 mod rx;

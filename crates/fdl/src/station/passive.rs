@@ -304,30 +304,9 @@ impl<R: Responder> Station for PassiveStation<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::station::echo::Echo;
     use crate::testing::fdl_status;
     use crate::timing::Baud;
-
-    /// Echoes the request's data unit with DL, counting executions.
-    struct Echo {
-        addr: u8,
-        executed: u32,
-    }
-
-    impl Responder for Echo {
-        fn address(&self) -> u8 {
-            self.addr
-        }
-        fn on_request(&mut self, _now: Instant, req: &DataTelegram<'_>, out: &mut [u8]) -> Reply {
-            self.executed += 1;
-            out[..req.data.len()].copy_from_slice(req.data);
-            Reply::Data {
-                status: ResponseStatus::Dl,
-                dsap: req.ssap,
-                ssap: req.dsap,
-                len: req.data.len(),
-            }
-        }
-    }
 
     fn req(da: u8, sa: u8, fcb: bool, fcv: bool, data: &[u8]) -> Vec<u8> {
         let fc = FunctionCode::Request {
@@ -341,13 +320,7 @@ mod tests {
     }
 
     fn station() -> PassiveStation<Echo> {
-        PassiveStation::new(
-            Echo {
-                addr: 8,
-                executed: 0,
-            },
-            BusParams::defaults(Baud::B1500000),
-        )
+        PassiveStation::new(Echo::new(8), BusParams::defaults(Baud::B1500000))
     }
 
     fn exchange(st: &mut PassiveStation<Echo>, now: Instant, bytes: &[u8]) -> Option<Vec<u8>> {
