@@ -486,7 +486,7 @@ fn main() {
             let ours = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "");
             let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"], "");
             let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"], "");
-            let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 0");
+            let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 3000");
             let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
             println!(
                 "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",

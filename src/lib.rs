@@ -10,8 +10,9 @@
 //!   with slave emulation and master-side helpers.
 //!
 //! The command line tool `dpctl` (crate `crates/cli`) is built on top of
-//! these. The end-to-end tests in this package's `tests/` drive real `dpctl`
-//! processes.
+//! these. This package's `tests/` run the crates together in process (the
+//! simulated bus, hostile inputs, allocation counts); the end-to-end tests
+//! that drive real `dpctl` processes live in `crates/cli/tests/`.
 
 pub use profibus_devices as devices;
 pub use profibus_dp as dp;

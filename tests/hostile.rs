@@ -317,6 +317,7 @@ fn gateway() -> Gateway {
         vec![SlaveInfo {
             address: 8,
             name: "s8".into(),
+            ident_number: 0x0815,
             channels: None,
             gsd: None,
             dpv1: true,

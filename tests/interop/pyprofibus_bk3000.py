@@ -3,7 +3,7 @@
 (`dpctl slave --device bk3000`) with the modules of gsd/BK30BECF.GSD and
 sends fixed outputs.
 
-Used by tests/bk3000.rs. Prints {"event": "dx", "cycle": n, "inputs": HEX}
+Used by crates/cli/tests/bk3000.rs. Prints {"event": "dx", "cycle": n, "inputs": HEX}
 for every Data_Exchange answer and a final {"event": "summary", ...}.
 Exit status 0 when `--cycles` answers came with the expected length.
 """

@@ -2,7 +2,7 @@
 """pyprofibus (an independent DP master) brings a JX2-PROFI1 emulation
 (`dpctl slave --device jx2`) into Data_Exchange with the modules
 "INPUT : 4 words" and "OUTPUT : 4 words" and checks the process data the
-PLC script of tests/jx2.rs provides: input word 0 is 0x4A58, and input
+PLC script of crates/cli/tests/jx2.rs provides: input word 0 is 0x4A58, and input
 word 1 becomes the output word 0 the master sends (0x0102) once the PLC
 copied it.
 

@@ -4,7 +4,7 @@
 cyclic data: PKW words zero for a few cycles, then the request, until the
 expected response appears, then zero again until the slave answers zero.
 
-Used by tests/device_profiles.rs. Prints one JSON summary line; exit
+Used by crates/cli/tests/device_profiles.rs. Prints one JSON summary line; exit
 status 0 when the response came and the handshake ended, 1 otherwise.
 """
 

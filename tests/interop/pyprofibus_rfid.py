@@ -5,7 +5,7 @@ the 16-byte handshake of the manual: the command with its length, then
 S + 1; once the data flag (status bit 3) is set, R + 1 and wait until E
 changes; take L bytes; again while the flag stays set.
 
-Used by tests/rfid.rs. Prints one JSON summary line (the answer in hex,
+Used by crates/cli/tests/rfid.rs. Prints one JSON summary line (the answer in hex,
 the distinct request/response pairs); exit status 0 when the whole answer
 came, 1 otherwise.
 """

@@ -7,9 +7,8 @@
 use anyhow::{Context, Result};
 use nix::sys::signal::{SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
-use profibus_fdl::medium::{Collisions, MediumConfig};
+use profibus_fdl::medium::{parse_rate, MediumArgs};
 use profibus_fdl::transport::hub::{Hub, HubError};
-use profibus_fdl::Baud;
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
 use std::os::fd::AsFd;
@@ -27,58 +26,16 @@ pub struct Args {
     /// is an error).
     #[arg(long, value_name = "PREFIX")]
     pub link: String,
-    /// Pace the line at this rate (9600 … 12M; 11 bit per character, one
-    /// transmitter at a time). Without it bytes pass as fast as they come.
-    #[arg(long, value_name = "B")]
-    pub baud: Option<Baud>,
-    /// Probability of losing each character (0 … 1).
-    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = probability)]
-    pub drop: f64,
-    /// Bit error rate: probability of flipping each data bit (0 … 1).
-    #[arg(long, value_name = "BER", default_value_t = 0.0, value_parser = probability)]
-    pub flip: f64,
-    /// Bursts of random characters per second of idle line.
-    #[arg(long, value_name = "RATE", default_value_t = 0.0, value_parser = rate)]
-    pub noise: f64,
-    /// Seed of the fault injection, for reproducible runs (default: from
-    /// the clock; printed at start).
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-    /// What two stations sending at once do on a paced line: garble each
-    /// other (as on a real line) or serialize (the later one waits).
-    #[arg(long, value_enum, default_value_t = CollisionMode::Garble)]
-    pub collisions: CollisionMode,
+    #[command(flatten)]
+    pub line: MediumArgs,
     /// Also print the counters every SECS seconds (they are printed on
     /// SIGUSR1 and at exit anyway).
-    #[arg(long, value_name = "SECS", value_parser = rate)]
+    #[arg(long, value_name = "SECS", value_parser = parse_rate)]
     pub stats: Option<f64>,
     /// Record every telegram on the line to FILE (pcapng, link type 257
     /// PROFIBUS DL; tshark and Wireshark read it).
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
-}
-
-/// `--collisions`.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CollisionMode {
-    /// Overlapping characters of both transmissions are corrupted.
-    Garble,
-    /// A station that starts while the line is busy waits its turn.
-    Serialize,
-}
-
-fn probability(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
-        _ => Err(format!("`{s}` is not a probability between 0 and 1")),
-    }
-}
-
-fn rate(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(r) if r >= 0.0 && r.is_finite() => Ok(r),
-        _ => Err(format!("`{s}` is not a number ≥ 0")),
-    }
 }
 
 /// A usage error found after parsing: one line, exit status 2.
@@ -93,26 +50,8 @@ pub fn run(args: Args) -> Result<()> {
     let links: Vec<PathBuf> = (0..n)
         .map(|i| PathBuf::from(format!("{}{i}", args.link)))
         .collect();
-    let seed = args.seed.unwrap_or_else(|| {
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos() as u64)
-            .unwrap_or(0)
-    });
-    let cfg = MediumConfig {
-        baud: args.baud,
-        drop: args.drop,
-        flip_ber: args.flip,
-        noise_rate: args.noise,
-        seed,
-        collisions: match args.collisions {
-            CollisionMode::Garble => Collisions::Garble,
-            CollisionMode::Serialize => Collisions::Serialize,
-        },
-    };
-    if let Err(e) = cfg.validate() {
-        usage(e);
-    }
+    let cfg = args.line.config().unwrap_or_else(|e| usage(e));
+    let seed = cfg.seed;
 
     // Signals arrive through a signalfd the hub also waits on.
     let mut mask = SigSet::empty();
@@ -141,6 +80,7 @@ pub fn run(args: Args) -> Result<()> {
             writeln!(out, "{} -> {}", link.display(), tty.display())?;
         }
         let pace = args
+            .line
             .baud
             .map_or("unpaced".to_string(), |b| format!("paced at {b}"));
         writeln!(out, "bus of {n} stations, {pace}, seed {seed}")?;

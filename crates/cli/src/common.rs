@@ -57,7 +57,7 @@ impl RtsArg {
     pub fn open(self, path: &str, baud: Baud) -> Result<Port> {
         let rts = self.control();
         match Port::open_with(path, PortOptions { baud, rts }) {
-            Err(TransportError::Rts { source, .. }) => anyhow::bail!(
+            Err(TransportError::Rts { error: source, .. }) => anyhow::bail!(
                 "{path}: --rts {} needs an RTS line the port can drive, and this one has none \
                  (a pty, a serial device server, or a driver without modem lines: {source}); \
                  leave --rts off, and see `dpctl doctor --port {path} --rts {0}`",

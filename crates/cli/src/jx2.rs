@@ -10,11 +10,10 @@
 //! write of another client.
 
 use anyhow::{Context, Result};
-use profibus_devices::jx2::script::{Interpreter, Progress};
+use profibus_devices::jx2::script::{Interpreter, Progress, Reply};
 use profibus_devices::jx2::{Plc, SharedJx2};
 use profibus_devices::BoxedDevice;
 use profibus_fdl::driver::Clock;
-use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncWrite, AsyncWriteExt, BufReader};
@@ -61,11 +60,11 @@ pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
             let mut out = tokio::io::stdout();
             let none = BufReader::new(tokio::io::empty());
             serve(c, it, none, &mut out, Some("script")).await;
-            let _ = out
-                .write_all(
-                    format!("{}\n", json!({"src": "script", "cmd": "end", "ok": true})).as_bytes(),
-                )
-                .await;
+            let end = Reply {
+                src: Some("script"),
+                ..Reply::new("end", true)
+            };
+            let _ = out.write_all(format!("{end}\n").as_bytes()).await;
             let _ = out.flush().await;
         });
     }
@@ -123,8 +122,13 @@ impl Drop for SocketFile {
 
 /// Run `it` with lines from `input`, writing replies to `out`, until the
 /// input ends and everything queued ran.
-async fn serve<R, W>(ctx: Ctx, mut it: Interpreter, input: R, out: &mut W, src: Option<&str>)
-where
+async fn serve<R, W>(
+    ctx: Ctx,
+    mut it: Interpreter,
+    input: R,
+    out: &mut W,
+    src: Option<&'static str>,
+) where
     R: AsyncBufRead + Unpin,
     W: AsyncWrite + Unpin,
 {
@@ -142,9 +146,7 @@ where
         let mut wrote = false;
         while let Some(mut r) = it.take_reply() {
             wrote = true;
-            if let (Some(s), Value::Object(m)) = (src, &mut r) {
-                m.insert("src".into(), json!(s));
-            }
+            r.src = src;
             if out.write_all(format!("{r}\n").as_bytes()).await.is_err() {
                 return;
             }

@@ -9,7 +9,6 @@ mod common;
 mod completions;
 mod decode;
 mod demo;
-mod describe;
 mod doctor;
 mod dpv1;
 mod gateway;

@@ -3,12 +3,11 @@
 use crate::common;
 use crate::view::{drain_events, Line, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
-use profibus_devices::bus::ProfiledBus;
-use profibus_devices::channels::Value as ChannelValue;
-use profibus_dp::master::{CommandOutcome, DpMaster, MasterCommand, OperatingState, SlaveState};
+use profibus_devices::bus::{ProfiledBus, SetChannels};
+use profibus_devices::control_io::lines_on_a_thread;
+use profibus_dp::master::{DpMaster, OperatingState, StopReason, StopWhen};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
-use serde_json::Value;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -90,37 +89,11 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(master(args, bus))
 }
 
-/// `{"slave": N, "set": {"NAME": VALUE, …}}`: outputs by channel name.
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SetChannels {
-    slave: u8,
-    set: std::collections::BTreeMap<String, ChannelValue>,
-}
-
 /// Apply a channel command; `None` when `line` is none.
 fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Result<()>> {
-    let v: Value = serde_json::from_str(line).ok()?;
-    v.get("set")?;
-    Some((|| {
-        let c: SetChannels = serde_json::from_value(v)?;
-        let map = info
-            .iter()
-            .find(|s| s.address == c.slave)
-            .and_then(|s| s.channels.as_ref())
-            .with_context(|| {
-                format!(
-                    "slave {} has no named channels (give it as `device = …` in the bus file)",
-                    c.slave
-                )
-            })?;
-        let h = m.handle(c.slave).context("slave not in the bus file")?;
-        map.write_outputs(
-            c.set.iter().map(|(k, v)| (k.as_str(), *v)),
-            m.outputs_mut(h),
-        )?;
-        Ok(())
-    })())
+    let c = SetChannels::from_json(line)?;
+    let map = |a| info.iter().find(|s| s.address == a)?.channels.as_ref();
+    Some(c.and_then(|c| c.apply(m, map(c.slave))).map_err(Into::into))
 }
 
 /// The reply to a command.
@@ -134,20 +107,6 @@ struct CommandReply<'a> {
 struct BadCommand<'a> {
     line: &'a str,
     error: String,
-}
-
-/// Apply one command line to the master; returns a reply for the log.
-/// A refused command changes nothing.
-pub fn apply_command(m: &mut DpMaster, line: &str) -> Result<Option<String>> {
-    let command = MasterCommand::from_json(line)?;
-    let reply = match &command {
-        MasterCommand::Operating(s) => Some(format!("operating state {}", s.as_str())),
-        _ => None,
-    };
-    Ok(match m.apply(command)? {
-        CommandOutcome::JobQueued(id) => Some(format!("job {} queued", id.0)),
-        CommandOutcome::Applied => reply,
-    })
 }
 
 async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
@@ -165,25 +124,10 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
 
     // Commands come from a plain thread: a blocking read of stdin must not
     // keep the runtime from shutting down on Ctrl-C / SIGTERM.
-    let (tx, mut rx) = tokio::sync::mpsc::channel::<String>(256);
-    if let Some(input) = args.input.clone() {
-        let reader: Box<dyn std::io::Read + Send> = if input == "-" {
-            Box::new(std::io::stdin())
-        } else {
-            Box::new(std::fs::File::open(&input).with_context(|| format!("cannot open {input}"))?)
-        };
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            for l in std::io::BufReader::new(reader)
-                .lines()
-                .map_while(Result::ok)
-            {
-                if !l.trim().is_empty() && tx.blocking_send(l).is_err() {
-                    break;
-                }
-            }
-        });
-    }
+    let mut rx = match &args.input {
+        Some(input) => Some(lines_on_a_thread(input)?),
+        None => None,
+    };
 
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     let mut info: Vec<SlaveInfo> = vec![];
@@ -206,12 +150,15 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
         view.open_terminal("dpctl master", baud, &info)?;
     }
-    let cycles = args.cycles;
-    let exchanges = args.exchanges;
     let deadline = match args.timeout {
         Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
         Some(t) => bail!("--timeout takes a positive number of seconds, not {t}"),
         None => None,
+    };
+    let stop_when = StopWhen {
+        cycles: args.cycles,
+        exchanges: args.exchanges,
+        deadline,
     };
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
@@ -225,11 +172,11 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         |st, now| {
             last_now = now;
             let m = st.app_mut();
-            while let Ok(line) = rx.try_recv() {
+            while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
                 let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
                     (Some(r), _) => r.map(|_| None),
-                    (None, Some(r)) => r.map(Some),
-                    (None, None) => apply_command(m, &line),
+                    (None, Some(r)) => r.map(Some).map_err(Into::into),
+                    (None, None) => m.execute_json(&line).map_err(Into::into),
                 };
                 match result {
                     Ok(Some(reply)) => view.event(&Line::new(
@@ -251,18 +198,12 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             drain_events(m, &info, &mut view);
             view.status(m, &info, baud, now, false);
             view.tick(m, now)?;
-            let exchanged = exchanges.is_some_and(|n| {
-                m.slave_addresses()
-                    .all(|a| m.slave_stats(a).is_some_and(|s| s.data_exchanges >= n))
-            });
-            if deadline.is_some_and(|d| now - Instant::ZERO >= d) {
-                timed_out = true;
-                return ControlFlow::Break(());
-            }
-            match cycles {
-                Some(n) if m.cycle_stats().cycles >= n => ControlFlow::Break(()),
-                _ if exchanged => ControlFlow::Break(()),
-                _ => ControlFlow::Continue(()),
+            match stop_when.check(m, now) {
+                Some(why) => {
+                    timed_out = why == StopReason::Deadline;
+                    ControlFlow::Break(())
+                }
+                None => ControlFlow::Continue(()),
             }
         },
     )
@@ -272,20 +213,15 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     drain_events(m, &info, &mut view);
     view.status(m, &info, baud, last_now, true);
     result.with_context(|| format!("on {}", args.port))?;
-    let stuck: Vec<u8> = bus
-        .slaves
-        .iter()
-        .map(|s| s.params.address)
-        .filter(|&a| m.slave_state(a) != Some(SlaveState::DataExchange))
-        .collect();
-    if cycles.is_some() && !stuck.is_empty() {
+    let stuck = m.not_exchanging();
+    if args.cycles.is_some() && !stuck.is_empty() {
         tracing::info!(?stuck, "slaves not in data exchange at the end");
     }
-    if timed_out && exchanges.is_some() {
+    if timed_out && args.exchanges.is_some() {
         bail!(
             "timeout after {:.1} s: {} Data_Exchange cycles not reached (not in Data_Exchange: {stuck:?})",
             args.timeout.unwrap_or(0.0),
-            exchanges.unwrap_or(0)
+            args.exchanges.unwrap_or(0)
         );
     }
     Ok(())

@@ -2,10 +2,9 @@
 
 use crate::common::{self, LineArgs};
 use anyhow::{bail, Result};
-use profibus_dp::scan::LiveListScan;
+use profibus_dp::scan::{LiveListScan, LiveRow};
 use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
-use profibus_fdl::wire::StationType;
 use profibus_fdl::BusParams;
 use std::ops::ControlFlow;
 use std::time::Duration;
@@ -67,62 +66,15 @@ async fn scan(args: Args) -> Result<()> {
         }
         bail!("scan did not finish within {:.0} s", limit.as_secs_f64());
     }
-    let own = args.addr;
-    let mut rows: Vec<_> = station.app().stations().to_vec();
-    rows.sort_by_key(|s| s.address);
-    if args.json {
-        let row = Row {
-            address: own,
-            kind: "active, in ring",
-            this: true,
-            ident: None,
-            master: None,
-        };
-        println!("{}", common::json_line(&row));
-    } else {
-        println!("{own:3}  active, in ring (this scanner)");
-    }
-    for s in rows {
-        let kind = s.station.describe();
+    let mut rows: Vec<LiveRow> = vec![LiveRow::scanner(args.addr)];
+    rows.extend(station.app().stations().iter().map(|&s| LiveRow::from(s)));
+    rows[1..].sort_by_key(|r| r.station.address);
+    for row in rows {
         if args.json {
-            let row = Row {
-                address: s.address,
-                kind,
-                this: false,
-                ident: s.ident_number.map(|id| format!("0x{id:04X}")),
-                // 255: no master (not parameterised).
-                master: s.master_address.map(|m| (m != 255).then_some(m)),
-            };
             println!("{}", common::json_line(&row));
         } else {
-            let mut line = format!("{:3}  {kind}", s.address);
-            if s.station == StationType::Passive {
-                match (s.ident_number, s.master_address) {
-                    (Some(id), Some(255)) => {
-                        line.push_str(&format!(", DP slave ident 0x{id:04X}, not parameterised"))
-                    }
-                    (Some(id), Some(m)) => line.push_str(&format!(
-                        ", DP slave ident 0x{id:04X}, parameterised by master {m}"
-                    )),
-                    _ => line.push_str(", no DP diagnosis"),
-                }
-            }
-            println!("{line}");
+            println!("{row}");
         }
     }
     Ok(())
-}
-
-/// A station of the live list, `--json`.
-#[derive(serde::Serialize)]
-struct Row {
-    address: u8,
-    #[serde(rename = "type")]
-    kind: &'static str,
-    #[serde(rename = "self", skip_serializing_if = "std::ops::Not::not")]
-    this: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    ident: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    master: Option<Option<u8>>,
 }

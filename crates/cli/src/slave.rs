@@ -19,6 +19,7 @@
 
 use crate::common;
 use anyhow::bail;
+use profibus_devices::control_io::ControlSource;
 use profibus_devices::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
 use profibus_devices::{ControlInbox, DeviceOptions, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
@@ -98,56 +99,6 @@ fn emit(json: bool, now: Instant, e: &Emitted<'_>) {
     let _ = out.flush();
 }
 
-/// Lines from `src` (a file, or `-` for stdin) into `inbox`.
-fn spawn_control_reader(src: String, inbox: ControlInbox) {
-    use tokio::io::AsyncBufReadExt;
-    let path = std::path::Path::new(&src);
-    if src != "-" && (!path.exists() || is_socket(path)) {
-        // A Unix socket we create (removed at the end, see `run`): every
-        // connection sends lines.
-        let _ = std::fs::remove_file(path);
-        match tokio::net::UnixListener::bind(path) {
-            Ok(listener) => {
-                tokio::spawn(async move {
-                    while let Ok((conn, _)) = listener.accept().await {
-                        let inbox = inbox.clone();
-                        tokio::spawn(async move {
-                            let mut lines = tokio::io::BufReader::new(conn).lines();
-                            while let Ok(Some(l)) = lines.next_line().await {
-                                inbox.push(l);
-                            }
-                        });
-                    }
-                });
-            }
-            Err(e) => eprintln!("dpctl slave: cannot listen on {src}: {e}"),
-        }
-        return;
-    }
-    tokio::spawn(async move {
-        let reader: Box<dyn tokio::io::AsyncRead + Unpin + Send> = if src == "-" {
-            Box::new(tokio::io::stdin())
-        } else {
-            match tokio::fs::File::open(&src).await {
-                Ok(f) => Box::new(f),
-                Err(e) => {
-                    eprintln!("dpctl slave: cannot open {src}: {e}");
-                    return;
-                }
-            }
-        };
-        let mut lines = tokio::io::BufReader::new(reader).lines();
-        while let Ok(Some(l)) = lines.next_line().await {
-            inbox.push(l);
-        }
-    });
-}
-
-fn is_socket(path: &std::path::Path) -> bool {
-    use std::os::unix::fs::FileTypeExt;
-    std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_socket())
-}
-
 /// What the jx2 register clients need.
 fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::Options> {
     let o: profibus_devices::jx2::profile::Options = opts.decode()?;
@@ -173,15 +124,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let rt = common::runtime()?;
-    let socket = args.profile.control.clone().filter(|c| {
-        let p = std::path::Path::new(c);
-        c != "-" && (!p.exists() || is_socket(p))
-    });
+    let source = args.profile.control.as_deref().map(ControlSource::of);
     let result = rt.block_on(run_async(args));
-    if let Some(s) = socket.filter(|s| is_socket(std::path::Path::new(s))) {
-        // The control socket we created (its listener may outlive the
-        // runtime).
-        let _ = std::fs::remove_file(s);
+    // The control socket we created.
+    if let Some(s) = &source {
+        s.remove_socket();
     }
     // A --control reader may be blocked on stdin: do not wait for it.
     rt.shutdown_background();
@@ -208,9 +155,11 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         jx2 = Some(plc);
         dev
     } else {
-        let control = args.profile.control.as_ref().map(|src| {
+        let control = args.profile.control.as_deref().map(|src| {
             let inbox = ControlInbox::new();
-            spawn_control_reader(src.clone(), inbox.clone());
+            if let Err(e) = ControlSource::of(src).spawn(inbox.clone()) {
+                eprintln!("dpctl slave: {e}");
+            }
             inbox
         });
         args.profile.device(&emulated, control)?

@@ -12,23 +12,22 @@
 //! per-station statistics instead (`profibus_tui::sniff`).
 
 use crate::common;
-use crate::describe::hex;
 use anyhow::{Context, Result};
 use profibus_dp::describe::TelegramSummary;
 use profibus_fdl::codec::CodecStats;
+use profibus_fdl::listen::{listen, Heard, ListenOptions};
 use profibus_fdl::pcap::PcapWriter;
-use profibus_fdl::tap::{Tap, TapEvent};
+use profibus_fdl::tap::{Skipped, TapEvent};
 use profibus_fdl::transport::Port;
-use profibus_fdl::wire::{Hex, Telegram};
-use profibus_fdl::{Baud, BusParams, Instant};
+use profibus_fdl::wire::Telegram;
+use profibus_fdl::Baud;
 use profibus_tui::sniff::{skipped_text, SniffView};
 use profibus_tui::term::LiveSniff;
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
-use tokio::io::AsyncReadExt;
-use tokio::signal::unix::{signal, SignalKind};
 
 /// Listen passively on a line and print every telegram.
 #[derive(clap::Args, Debug)]
@@ -57,49 +56,12 @@ pub struct Args {
     pub idle_ms: Option<f64>,
 }
 
-/// The kinds of error in `e`, for humans.
-fn error_text(e: &CodecStats, skipped: usize) -> String {
-    let mut parts = vec![];
-    for (n, what) in [
-        (e.bad_fcs, "bad FCS"),
-        (e.bad_length, "bad length"),
-        (e.bad_end_delimiter, "missing end delimiter"),
-        (e.bad_format, "bad format"),
-        (e.truncated, "truncated"),
-    ] {
-        if n > 0 {
-            parts.push(if n == 1 {
-                what.to_string()
-            } else {
-                format!("{n}× {what}")
-            });
-        }
-    }
-    if e.garbage_bytes > 0 {
-        parts.push(format!("{} garbage bytes", e.garbage_bytes));
-    }
-    if parts.is_empty() {
-        parts.push(format!("{skipped} bytes skipped"));
-    }
-    parts.join(", ")
-}
-
 /// A line of `--json`: what was seen, and when (µs since the start).
 #[derive(serde::Serialize)]
 struct Seen<T: serde::Serialize> {
     t_us: u64,
     #[serde(flatten)]
     what: T,
-}
-
-/// Bytes the framer skipped, and why.
-#[derive(serde::Serialize)]
-struct Skipped<'a> {
-    error: String,
-    skipped: usize,
-    raw: Hex<'a>,
-    #[serde(flatten)]
-    errors: CodecStats,
 }
 
 struct Printer {
@@ -114,22 +76,18 @@ impl Printer {
     fn event(&mut self, ev: TapEvent) -> Result<()> {
         match ev {
             TapEvent::Telegram { at, bytes } => {
-                let us = at.as_nanos() / 1000;
+                let t_us = at.as_nanos() / 1000;
                 // The tap only yields telegrams that parse.
                 let Ok((t, _)) = Telegram::parse(&bytes) else {
                     return Ok(());
                 };
-                let summary = TelegramSummary::new(t, &bytes);
+                let what = TelegramSummary::new(t, &bytes);
                 if let Some(live) = &mut self.live {
-                    live.view_mut().telegram(at, &bytes, summary.to_string());
+                    live.view_mut().telegram(at, &bytes, what.to_string());
                 } else if self.json {
-                    let line = Seen {
-                        t_us: us,
-                        what: &summary,
-                    };
-                    writeln!(self.out, "{}", common::json_line(&line))?;
+                    writeln!(self.out, "{}", common::json_line(&Seen { t_us, what }))?;
                 } else {
-                    writeln!(self.out, "{us:>12} {summary}")?;
+                    writeln!(self.out, "{t_us:>12} {what}")?;
                 }
                 if let Some(p) = self.pcap.as_mut() {
                     p.write_telegram(at, &bytes)
@@ -137,30 +95,20 @@ impl Printer {
                 }
             }
             TapEvent::Skipped { at, bytes, errors } => {
-                let us = at.as_nanos() / 1000;
-                let what = error_text(&errors, bytes.len());
+                let t_us = at.as_nanos() / 1000;
+                let what = Skipped::new(&bytes, errors);
                 if let Some(live) = &mut self.live {
-                    live.view_mut().skipped(at, skipped_text(&what, &bytes));
+                    live.view_mut()
+                        .skipped(at, skipped_text(&what.error, &bytes));
                 } else if self.json {
-                    let line = Seen {
-                        t_us: us,
-                        what: Skipped {
-                            error: what,
-                            skipped: bytes.len(),
-                            raw: Hex(&bytes),
-                            errors,
-                        },
-                    };
-                    writeln!(self.out, "{}", common::json_line(&line))?;
+                    writeln!(self.out, "{}", common::json_line(&Seen { t_us, what }))?;
                 } else {
-                    writeln!(
-                        self.out,
-                        "!! {us:>9} {what}: {} bytes skipped: {}",
-                        bytes.len(),
-                        hex(&bytes)
-                    )?;
+                    writeln!(self.out, "!! {t_us:>9} {what}")?;
                 }
             }
+        }
+        if self.live.is_none() {
+            self.out.flush()?;
         }
         Ok(())
     }
@@ -173,17 +121,7 @@ impl Printer {
             }
             writeln!(self.out, "{}", common::json_line(&Summary { summary: s }))?;
         } else {
-            writeln!(
-                self.out,
-                "summary: {} telegrams, {} garbage bytes, {} bad FCS, {} bad length, {} missing end delimiter, {} bad format, {} truncated",
-                s.telegrams,
-                s.garbage_bytes,
-                s.bad_fcs,
-                s.bad_length,
-                s.bad_end_delimiter,
-                s.bad_format,
-                s.truncated
-            )?;
+            writeln!(self.out, "summary: {s}")?;
         }
         self.out.flush()?;
         Ok(())
@@ -192,25 +130,24 @@ impl Printer {
 
 /// Listen until Ctrl-C / SIGTERM (or until the line goes away).
 pub fn run(args: Args) -> Result<()> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the runtime")?;
-    rt.block_on(sniff(args))
+    common::runtime()?.block_on(sniff(args))
 }
 
 async fn sniff(args: Args) -> Result<()> {
-    let mut port = Port::open(&args.port, args.baud)?;
-    let idle = match args.idle_ms {
-        Some(ms) if ms > 0.0 && ms.is_finite() => Duration::from_secs_f64(ms / 1000.0),
+    let port = Port::open(&args.port, args.baud)?;
+    let mut options = ListenOptions::for_port(&port);
+    // The live list redraws every 50 ms.
+    options.tick = Duration::from_millis(50);
+    match args.idle_ms {
+        Some(ms) if ms > 0.0 && ms.is_finite() => {
+            options.idle = Duration::from_secs_f64(ms / 1000.0)
+        }
         Some(ms) => {
             eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
             std::process::exit(2)
         }
-        None if port.is_pty() || port.is_tcp() => Duration::from_millis(5),
-        None => (BusParams::defaults(args.baud).bits(33) * 2).max(Duration::from_millis(2)),
-    };
-    let clock = std::time::Instant::now();
+        None => {}
+    }
     let epoch = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap_or_default();
@@ -225,64 +162,47 @@ async fn sniff(args: Args) -> Result<()> {
     let live = (!args.json && !args.plain && std::io::stdout().is_terminal())
         .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
         .transpose()?;
-    let mut frames = tokio::time::interval(Duration::from_millis(50));
     let mut printer = Printer {
         json: args.json,
         live,
         out: BufWriter::new(std::io::stdout()),
         pcap,
     };
-    let mut int = signal(SignalKind::interrupt())?;
-    let mut term = signal(SignalKind::terminate())?;
-    let mut tap = Tap::new();
-    let mut buf = [0u8; 4096];
+    let mut port = port;
     let mut failure = None;
-    loop {
-        let wait = async {
-            if tap.pending() > 0 {
-                tokio::time::timeout(idle, port.read(&mut buf)).await
-            } else {
-                Ok(port.read(&mut buf).await)
+    let heard = listen(&mut port, options, common::shutdown(), |heard| {
+        let r = match heard {
+            Heard::Event(ev) => printer.event(ev),
+            Heard::Tick(_) => {
+                let live = printer.live.as_mut();
+                if live.is_some_and(|l| !l.tick().unwrap_or(false)) {
+                    return ControlFlow::Break(());
+                }
+                Ok(())
             }
         };
-        tokio::select! {
-            _ = int.recv() => break,
-            _ = term.recv() => break,
-            _ = frames.tick(), if printer.live.is_some() => {
-                if !printer.live.as_mut().is_some_and(|l| l.tick().unwrap_or(false)) {
-                    break;
-                }
-                continue;
+        match r {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                failure = Some(e);
+                ControlFlow::Break(())
             }
-            r = wait => match r {
-                Err(_elapsed) => tap.line_idle(),
-                Ok(Ok(0)) => break,
-                Ok(Ok(n)) => {
-                    let at = Instant::from_nanos(clock.elapsed().as_nanos() as u64);
-                    tap.push(at, &buf[..n]);
-                }
-                Ok(Err(e)) => {
-                    failure = Some(anyhow::Error::new(e).context(format!("reading {}", args.port)));
-                    break;
-                }
-            },
         }
-        while let Some(ev) = tap.poll() {
-            printer.event(ev)?;
-        }
-        printer.out.flush()?;
-    }
+    })
+    .await;
     printer.live = None;
-    tap.line_idle();
-    while let Some(ev) = tap.poll() {
-        printer.event(ev)?;
+    if let Some(e) = failure {
+        return Err(e);
     }
-    printer.summary(&tap.stats())?;
+    let stats = match &heard {
+        Ok(s) => *s,
+        Err(e) => e.stats,
+    };
+    printer.summary(&stats)?;
     if let Some(p) = printer.pcap.take() {
         p.into_inner().context("writing the pcap file")?;
     }
-    match failure {
-        Some(e) => Err(e),
-        None => Ok(()),
-    }
+    heard
+        .map(drop)
+        .with_context(|| format!("reading {}", args.port))
 }

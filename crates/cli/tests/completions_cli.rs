@@ -1,26 +1,19 @@
 //! `dpctl completions`, `dpctl man` and `dpctl --version`.
 
-use std::process::Command;
+mod common;
 
-fn dpctl(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_dpctl"))
-        .args(args)
-        .output()
-        .expect("run dpctl")
-}
+use common::{run_dpctl as dpctl, TempDir};
 
 #[test]
 fn completions_know_the_subcommands_and_their_options() {
     let out = dpctl(&["completions", "bash"]);
     assert!(out.status.success(), "{out:?}");
-    let text = String::from_utf8(out.stdout).unwrap();
+    let text = out.stdout;
     for word in ["master", "slave", "sniff", "--port", "--config", "--pcap"] {
         assert!(text.contains(word), "bash completion without {word}");
     }
     let out = dpctl(&["completions", "zsh"]);
-    assert!(
-        out.status.success() && String::from_utf8_lossy(&out.stdout).contains("#compdef dpctl")
-    );
+    assert!(out.status.success() && out.stdout.contains("#compdef dpctl"));
     let out = dpctl(&["completions", "tcsh"]);
     assert_eq!(out.status.code(), Some(2), "unknown shell is a usage error");
 }
@@ -29,13 +22,14 @@ fn completions_know_the_subcommands_and_their_options() {
 fn man_pages_describe_every_subcommand() {
     let out = dpctl(&["man"]);
     assert!(out.status.success(), "{out:?}");
-    let page = String::from_utf8(out.stdout).unwrap();
+    let page = out.stdout;
     assert!(
         page.starts_with(".ie") || page.contains(".TH dpctl"),
         "{page}"
     );
     assert!(page.contains("master") && page.contains("sniff"));
-    let dir = std::env::temp_dir().join(format!("dpctl-man-{}", std::process::id()));
+    let tmp = TempDir::new("man");
+    let dir = &tmp.0;
     let out = dpctl(&["man", "--out-dir", dir.to_str().unwrap()]);
     assert!(out.status.success(), "{out:?}");
     for page in [
@@ -48,14 +42,13 @@ fn man_pages_describe_every_subcommand() {
     }
     let master = std::fs::read_to_string(dir.join("dpctl-master.1")).unwrap();
     assert!(master.contains("config"), "{master}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn version_names_the_git_revision() {
     let out = dpctl(&["--version"]);
     assert!(out.status.success());
-    let v = String::from_utf8(out.stdout).unwrap();
+    let v = out.stdout;
     assert!(
         v.starts_with(concat!("dpctl ", env!("CARGO_PKG_VERSION"), " (git ")),
         "{v}"

@@ -1,21 +1,16 @@
 //! `dpctl demo` and `dpctl decode` as a user runs them.
 
 use serde_json::Value;
-use std::process::Command;
+mod common;
 
-fn dpctl(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_dpctl"))
-        .args(args)
-        .output()
-        .expect("run dpctl")
-}
+use common::run_dpctl as dpctl;
 
 #[test]
 fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
     let o = dpctl(&["demo", "--fast", "--cycles", "3000", "--json"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let lines: Vec<Value> = String::from_utf8(o.stdout)
-        .unwrap()
+    assert!(o.status.success(), "{}", o.stderr);
+    let lines: Vec<Value> = o
+        .stdout
         .lines()
         .map(|l| serde_json::from_str(l).expect("JSON line"))
         .collect();
@@ -86,11 +81,11 @@ fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
 fn decode_reports_malformed_telegrams_with_exit_1() {
     let o = dpctl(&["decode", "10", "02", "08", "00", "0B", "16"]);
     assert_eq!(o.status.code(), Some(1));
-    let err = String::from_utf8(o.stderr).unwrap();
+    let err = o.stderr;
     assert!(err.contains("FCS mismatch"), "{err}");
     let o = dpctl(&["decode", "--json", "10 02 08 00 0A 16", "E5"]);
     assert!(o.status.success());
-    let out = String::from_utf8(o.stdout).unwrap();
+    let out = o.stdout;
     let v: Vec<Value> = out
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -113,7 +108,7 @@ fn decode_shows_the_start_delimiter_received() {
         "a2828b083e3c020900ff002bc416",
     ]);
     assert!(o.status.success());
-    let out = String::from_utf8(o.stdout).unwrap();
+    let out = o.stdout;
     let v: Vec<Value> = out
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -122,6 +117,6 @@ fn decode_shows_the_start_delimiter_received() {
     assert_eq!(v[1]["format"], "SD3");
     assert_eq!(v[0]["data"], v[1]["data"]);
     let o = dpctl(&["decode", "680b0b68828b083e3c020900ff002bc416"]);
-    let text = String::from_utf8(o.stdout).unwrap();
+    let text = o.stdout;
     assert!(text.starts_with("SD2 "), "{text}");
 }

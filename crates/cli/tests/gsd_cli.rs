@@ -1,35 +1,20 @@
 //! `dpctl gsd show` and `dpctl gsd check` as a user runs them.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use common::{repo, run_dpctl as dpctl, TempDir};
+use std::path::PathBuf;
 
 fn gsd(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../gsd")
-        .join(name)
-}
-
-fn dpctl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dpctl"))
-        .args(args)
-        .output()
-        .expect("run dpctl")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8(o.stdout.clone()).unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8(o.stderr.clone()).unwrap()
+    repo().join("gsd").join(name)
 }
 
 #[test]
 fn show_prints_identity_bauds_modules_and_parameters() {
     let f = gsd("DPCTL_GEN.GSD");
     let o = dpctl(&["gsd", "show", f.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let out = stdout(&o);
+    assert!(o.status.success(), "{}", o.stderr);
+    let out = o.stdout;
     for want in [
         "Ident number:  0x0DCE",
         "  12Mbit/s         800",
@@ -47,8 +32,8 @@ fn show_prints_identity_bauds_modules_and_parameters() {
 fn show_json_is_one_object() {
     let f = gsd("BNF_00D0.GSD");
     let o = dpctl(&["gsd", "show", "--json", f.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let out = stdout(&o);
+    assert!(o.status.success(), "{}", o.stderr);
+    let out = o.stdout;
     assert_eq!(out.lines().count(), 1);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["ident"], "0x00D0");
@@ -59,9 +44,9 @@ fn show_json_is_one_object() {
     assert_eq!(v["bauds"][8]["max_tsdr"], 800);
     // Lenient by default: the quirks are warnings, on stderr and in the
     // object.
-    assert!(
-        stderr(&o).contains("BNF_00D0.GSD:49:1: warning: expected `MaxTsdr_…`, found `MaxTsd_9.6`")
-    );
+    assert!(o
+        .stderr
+        .contains("BNF_00D0.GSD:49:1: warning: expected `MaxTsdr_…`, found `MaxTsd_9.6`"));
     assert!(!v["warnings"].as_array().unwrap().is_empty());
 }
 
@@ -72,8 +57,10 @@ fn strict_show_and_check_fail_on_quirks() {
     assert_eq!(o.status.code(), Some(1));
     let o = dpctl(&["gsd", "check", "--strict", f.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stdout(&o).contains("BNF_00D0.GSD:91:1: error: expected `Module`, found `Modules`"));
-    let err = stderr(&o);
+    assert!(o
+        .stdout
+        .contains("BNF_00D0.GSD:91:1: error: expected `Module`, found `Modules`"));
+    let err = o.stderr;
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
         err.starts_with("dpctl: ") && err.contains("73 error(s)"),
@@ -82,13 +69,13 @@ fn strict_show_and_check_fail_on_quirks() {
     // Lenient check: warnings only, exit 0.
     let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
     assert!(o.status.success());
-    assert!(stdout(&o).contains("ok, 32 module(s)"));
+    assert!(o.stdout.contains("ok, 32 module(s)"));
 }
 
 #[test]
 fn check_reports_errors_with_positions() {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("gsd_cli");
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = TempDir::new("gsd_cli");
+    let dir = &tmp.0;
     let f = dir.join("broken.gsd");
     std::fs::write(
         &f,
@@ -97,7 +84,7 @@ fn check_reports_errors_with_positions() {
     .unwrap();
     let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
-    let out = stdout(&o);
+    let out = o.stdout;
     let p = f.display();
     assert!(
         out.contains(&format!(
@@ -114,7 +101,8 @@ fn check_reports_errors_with_positions() {
     // JSON: one object per diagnostic.
     let o = dpctl(&["gsd", "check", "--json", f.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
-    let lines: Vec<serde_json::Value> = stdout(&o)
+    let lines: Vec<serde_json::Value> = o
+        .stdout
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
@@ -124,11 +112,7 @@ fn check_reports_errors_with_positions() {
     // A missing file: one line on stderr, exit 1.
     let o = dpctl(&["gsd", "show", dir.join("nope.gsd").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("cannot read the file"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(o.stderr.contains("cannot read the file"), "{}", o.stderr);
 }
 
 #[test]
@@ -137,11 +121,11 @@ fn check_reports_selection_problems_of_modules() {
     let o = dpctl(&["gsd", "check", f.to_str().unwrap()]);
     assert!(o.status.success());
     assert!(
-        stdout(&o).contains(
+        o.stdout.contains(
             "module 0 `Bedarfsdaten PKW` alone: 8 output bytes; the limit is 6 (Max_Output_Len)"
         ),
         "{}",
-        stdout(&o)
+        o.stdout
     );
 }
 
@@ -149,8 +133,8 @@ fn check_reports_selection_problems_of_modules() {
 fn localised_extensions_are_read_like_gsd() {
     // `.gse`, `.gsg`, … are GSD files in other languages: `gsd show`,
     // `gsd check` and `slave --gsd` take them like `.gsd`.
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("gsd_cli_ext");
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = TempDir::new("gsd_cli_ext");
+    let dir = &tmp.0;
     let en = gsd("corpus/siemens_dp_rs232c_link.gse");
     let mut files = vec![en.clone(), gsd("corpus/siemens_dp_rs232c_link.gsg")];
     for ext in ["gsp", "gst", "GSE"] {
@@ -161,17 +145,17 @@ fn localised_extensions_are_read_like_gsd() {
     for f in &files {
         let f = f.to_str().unwrap();
         let o = dpctl(&["gsd", "show", f]);
-        assert!(o.status.success(), "{f}: {}", stderr(&o));
-        assert!(stdout(&o).contains("Ident number:  0x8042"), "{f}");
+        assert!(o.status.success(), "{f}: {}", o.stderr);
+        assert!(o.stdout.contains("Ident number:  0x8042"), "{f}");
         let o = dpctl(&["gsd", "show", "--json", f]);
-        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
         assert_eq!(v["other"][0], "Periphery=\"DPS\"", "{f}");
         let o = dpctl(&["gsd", "check", f]);
-        assert!(o.status.success(), "{f}: {}", stderr(&o));
+        assert!(o.status.success(), "{f}: {}", o.stderr);
         assert!(
-            stdout(&o).contains("ok, 193 module(s), 0 warning(s)"),
+            o.stdout.contains("ok, 193 module(s), 0 warning(s)"),
             "{f}: {}",
-            stdout(&o)
+            o.stdout
         );
         // The slave reads the file and looks the module up before it
         // opens its port.
@@ -188,9 +172,9 @@ fn localised_extensions_are_read_like_gsd() {
         ]);
         assert_eq!(o.status.code(), Some(1), "{f}");
         assert!(
-            stderr(&o).contains("no module named `no such module`"),
+            o.stderr.contains("no module named `no such module`"),
             "{f}: {}",
-            stderr(&o)
+            o.stderr
         );
     }
 }

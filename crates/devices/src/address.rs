@@ -39,12 +39,13 @@ fn flag<'de, D: Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
 #[derive(Debug, thiserror::Error)]
 pub enum AddressFileError {
     /// Reading or writing failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
-        /// The error.
-        source: std::io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: std::io::Error,
     },
     /// The file is not an address file.
     #[error("{}: {message}", path.display())]
@@ -63,10 +64,10 @@ impl StoredAddress {
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(source) => {
+            Err(error) => {
                 return Err(AddressFileError::Io {
                     path: path.into(),
-                    source,
+                    error,
                 })
             }
         };
@@ -84,9 +85,9 @@ impl StoredAddress {
 
     /// Write to `path` (a temporary file first, then renamed over it).
     pub fn save(&self, path: &Path) -> Result<(), AddressFileError> {
-        let io = |source| AddressFileError::Io {
+        let io = |error| AddressFileError::Io {
             path: path.into(),
-            source,
+            error,
         };
         let text = toml::to_string(self).expect("two plain fields serialise");
         let tmp = path.with_extension("tmp");

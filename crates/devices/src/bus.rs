@@ -3,10 +3,12 @@
 //! as the bus file's [`DeviceResolver`], and the named channels of those
 //! slaves for the master.
 
-use crate::channels::ChannelMap;
+use crate::channels::{ChannelError, ChannelMap, Value};
 use crate::profile::{Configured, DeviceOptions, ProfileError};
 use profibus_dp::busfile::{BusFile, BusFileError, DeviceEntry, DeviceResolver, ResolvedDevice};
+use profibus_dp::master::DpMaster;
 use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// A loaded bus file with the configured profiles of its `device`
@@ -86,6 +88,58 @@ impl ProfiledBus {
             .iter()
             .find(|s| s.params.address == address)?;
         Some(profile.channels(&slave.params.cfg))
+    }
+}
+
+/// `{"slave": N, "set": {"NAME": VALUE, …}}`: a master command (`dpctl
+/// master --input`) that writes outputs by channel name, for slaves with
+/// named channels (given as `device = …` in the bus file).
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetChannels {
+    /// Station address of the slave.
+    pub slave: u8,
+    /// The values, by channel name.
+    pub set: BTreeMap<String, Value>,
+}
+
+/// Why a [`SetChannels`] command was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum SetChannelsError {
+    /// The line is not a valid command.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// The slave has no named channels.
+    #[error("slave {0} has no named channels (give it as `device = …` in the bus file)")]
+    NoChannels(u8),
+    /// The master has no such slave.
+    #[error("slave not in the bus file")]
+    UnknownSlave,
+    /// A name or value does not fit the channels.
+    #[error(transparent)]
+    Channel(#[from] ChannelError),
+}
+
+impl SetChannels {
+    /// The command in `line`; `None` when `line` is not a channel command
+    /// (not a JSON object with `"set"`).
+    pub fn from_json(line: &str) -> Option<Result<SetChannels, SetChannelsError>> {
+        let v: serde_json::Value = serde_json::from_str(line).ok()?;
+        v.get("set")?;
+        Some(serde_json::from_value(v).map_err(Into::into))
+    }
+
+    /// Write the slave's outputs in `m` through `map`, its channels: all
+    /// values or none.
+    pub fn apply(
+        &self,
+        m: &mut DpMaster,
+        map: Option<&ChannelMap>,
+    ) -> Result<(), SetChannelsError> {
+        let map = map.ok_or(SetChannelsError::NoChannels(self.slave))?;
+        let h = m.handle(self.slave).ok_or(SetChannelsError::UnknownSlave)?;
+        let values = self.set.iter().map(|(k, v)| (k.as_str(), *v));
+        Ok(map.write_outputs(values, m.outputs_mut(h))?)
     }
 }
 
@@ -202,5 +256,50 @@ terminals_file = "strip.txt"
         std::fs::remove_dir_all(&dir).unwrap();
         let bus = bus.unwrap();
         assert_eq!(bus.file.slaves[0].params.address, 11);
+    }
+
+    #[test]
+    fn profile_options_named_like_slave_keys_go_under_the_profile_name() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        // Omega's `params` (a parameter file) and generic's `gsd` and
+        // `modules`: under the profile's name, relative to the bus file.
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 25
+device = "omega"
+pkw = false
+omega.params = "../crates/devices/data/omega_vparams.toml"
+
+[[slave]]
+address = 7
+device = "generic"
+generic.gsd = "BNF_00D0.GSD"
+generic.modules = ["Status / control module", "1 actual value, 1 setpoint"]
+lenient = true
+"#;
+        let bus = ProfiledBus::parse(&dir, text).unwrap();
+        let omega = &bus.file.slaves[0];
+        let params = omega.device.as_ref().unwrap().options.get("params");
+        assert_eq!(
+            params.and_then(|v| v.as_str()),
+            Some("../crates/devices/data/omega_vparams.toml")
+        );
+        let generic = &bus.file.slaves[1];
+        assert_eq!(generic.modules.len(), 2, "{:?}", generic.modules);
+        assert_eq!(bus.profile(7).unwrap().name(), "generic");
+        // The file is read by the profile: a wrong name says so.
+        let e = ProfiledBus::parse(&dir, &text.replace("omega_vparams", "nope")).unwrap_err();
+        assert!(e.message.contains("nope"), "{e}");
+        // At the top of the table they are slave keys, refused with the
+        // place the option goes.
+        let e = ProfiledBus::parse(&dir, &text.replace("omega.params", "params")).unwrap_err();
+        assert_eq!(e.line, 9, "{e}");
+        assert!(e.message.contains("`omega.params = …`"), "{e}");
+        let e = ProfiledBus::parse(&dir, &text.replace("generic.gsd", "gsd")).unwrap_err();
+        assert_eq!(e.line, 14, "{e}");
+        assert!(e.message.contains("`generic.gsd = …`"), "{e}");
     }
 }

@@ -80,6 +80,8 @@ pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
+#[cfg(feature = "tokio")]
+pub mod control_io;
 pub mod demo;
 pub mod emulation;
 pub mod generic;
@@ -88,6 +90,7 @@ pub mod jx2;
 mod kit;
 pub mod omega;
 pub mod pkw;
+pub mod pkw_task;
 pub mod profile;
 pub mod rfid;
 pub mod soak;

@@ -37,12 +37,13 @@ pub enum ProfileError {
     #[error("options: {0}")]
     Options(String),
     /// A file named in the options cannot be read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     File {
         /// The file.
         path: PathBuf,
-        /// The error.
-        source: std::io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: std::io::Error,
     },
     /// A table file (variables, parameters) named in the options is
     /// invalid.
@@ -220,9 +221,9 @@ pub const MAX_OPTION_FILE: u64 = 1 << 20;
 pub fn read_option_file(path: &std::path::Path) -> Result<String, ProfileError> {
     use profibus_dp::file::{read_text, ReadFileError};
     read_text(path, MAX_OPTION_FILE, "a device option file").map_err(|e| match e {
-        ReadFileError::Io(source) => ProfileError::File {
+        ReadFileError::Io(error) => ProfileError::File {
             path: path.into(),
-            source,
+            error,
         },
         e => ProfileError::Table {
             path: path.into(),
@@ -562,5 +563,28 @@ impl ProfileEntry {
     /// See [`Profile::pkw_parameter`].
     pub fn pkw_parameter(&self, gsd: &Gsd, name: &str) -> Option<u16> {
         (self.pkw_parameter)(gsd, name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_option_file_is_named_once() {
+        let e = read_option_file(std::path::Path::new("/nonexistent/params.toml")).unwrap_err();
+        assert!(matches!(e, ProfileError::File { .. }), "{e}");
+        assert!(
+            e.to_string().starts_with("/nonexistent/params.toml: "),
+            "{e}"
+        );
+        // The cause is in the message and not also the source, so that a
+        // printed chain (`dpctl: {e:#}`) names it once.
+        assert!(std::error::Error::source(&e).is_none());
+        let e = crate::soak::SoakError::Profile {
+            name: "omega",
+            error: e,
+        };
+        assert!(std::error::Error::source(&e).is_none());
     }
 }

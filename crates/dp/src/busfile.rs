@@ -40,10 +40,17 @@
 //! device = "omega"                       # a device profile instead of gsd/modules
 //! setpoints = 2                          # … with its options
 //! actual_values = 2
+//! omega.params = "omega-params.toml"     # an option named like a slave key
 //! ```
 //!
 //! A slave names either a GSD file and its modules, or a device profile
-//! (`device = "NAME"`) with the profile's options as further keys. This
+//! (`device = "NAME"`) with the profile's options as further keys. An
+//! option named like a slave key (see [`SLAVE_KEYS`]: the `omega`
+//! profile's `params` file, the `generic` profile's `gsd` and `modules`)
+//! goes into the sub-table named after the profile, `omega.params =
+//! "params.toml"` (any option may); `params`, `gsd` or `modules` at the
+//! top of a `device` slave's table stay slave keys and are refused where a
+//! device slave cannot take them, naming where the option goes. This
 //! crate knows no profile: [`BusFile::load_with`] takes a
 //! [`DeviceResolver`] (the `profibus-devices` registry is one) that turns
 //! the name and options into the profile's GSD and modules; from there
@@ -124,8 +131,11 @@ struct RawOptions {
 }
 
 /// The keys of a `[[slave]]` table; any other key is a profile option
-/// (only with `device`).
-const SLAVE_KEYS: &[&str] = &[
+/// (only with `device`). A profile option with the name of a slave key
+/// (the Omega profile's `params` file, the generic profile's `gsd` and
+/// `modules`) goes into the sub-table named after the profile:
+/// `omega.params = "params.toml"`.
+pub const SLAVE_KEYS: &[&str] = &[
     "address",
     "name",
     "gsd",
@@ -139,6 +149,13 @@ const SLAVE_KEYS: &[&str] = &[
     "initial_outputs",
     "dpv1",
 ];
+
+/// The `[[slave]]` tables as plain tables, for the profile options.
+#[derive(Deserialize)]
+struct SlaveTables {
+    #[serde(default)]
+    slave: Vec<Spanned<toml::Table>>,
+}
 
 #[derive(Deserialize)]
 struct RawSlave {
@@ -167,7 +184,9 @@ pub struct DeviceEntry {
     /// The bus file's directory: relative file names in the options are
     /// relative to it (as `gsd` is).
     pub dir: PathBuf,
-    /// The profile's options (the table's keys that are not slave keys).
+    /// The profile's options: the table's keys that are not slave keys,
+    /// and the entries of its sub-table named after the profile
+    /// (`omega.params = …`, for an option named like a slave key).
     pub options: toml::Table,
 }
 
@@ -298,6 +317,87 @@ impl Ctx<'_> {
             message: message.into(),
         }
     }
+
+    /// The profile options of a `[[slave]]` table: its keys that are not
+    /// slave keys and, with `device = "NAME"`, the entries of its sub-table
+    /// `NAME` (where an option named like a slave key goes). A slave key
+    /// that a `device` slave cannot take as such (`gsd`, `modules`, or a
+    /// `params` that is not a table) is refused with a message that says
+    /// where the profile's option of that name goes.
+    fn profile_options(&self, t: &Spanned<toml::Table>) -> Result<toml::Table, BusFileError> {
+        let table = t.get_ref();
+        let at = |key: &str| key_span(self.text, t.span(), key);
+        let addr = table
+            .get("address")
+            .and_then(|v| v.as_integer())
+            .map_or_else(|| "?".to_string(), |a| a.to_string());
+        let mut options: toml::Table = table
+            .iter()
+            .filter(|(k, _)| !SLAVE_KEYS.contains(&k.as_str()))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        let Some(name) = table.get("device").and_then(|v| v.as_str()) else {
+            return Ok(options);
+        };
+        if SLAVE_KEYS.contains(&name) {
+            // No profile has a slave key's name; the resolver says so.
+            return Ok(options);
+        }
+        let under = |key: &str| {
+            format!("an option `{key}` of the `{name}` profile goes under `{name}.{key} = …`")
+        };
+        if table.contains_key("gsd") {
+            return Err(self.err(
+                at("gsd"),
+                format!(
+                    "slave {addr}: give either `gsd` (with `modules`) or `device`; {}",
+                    under("gsd")
+                ),
+            ));
+        }
+        if table.contains_key("modules") {
+            return Err(self.err(
+                at("modules"),
+                format!(
+                    "slave {addr}: a device profile chooses its modules; {}",
+                    under("modules")
+                ),
+            ));
+        }
+        if table.get("params").is_some_and(|v| !v.is_table()) {
+            return Err(self.err(
+                at("params"),
+                format!(
+                    "slave {addr}: `params` is the slave's User_Prm_Data by name \
+                     (`params = {{ NAME = VALUE }}`); {}",
+                    under("params")
+                ),
+            ));
+        }
+        if let Some(ns) = options.remove(name) {
+            let toml::Value::Table(ns) = ns else {
+                return Err(self.err(
+                    at(name),
+                    format!(
+                        "slave {addr}: `{name}` must be a table of the `{name}` profile's options \
+                         (`{name}.KEY = VALUE`)"
+                    ),
+                ));
+            };
+            for (k, v) in ns {
+                if options.contains_key(&k) {
+                    return Err(self.err(
+                        at(name),
+                        format!(
+                            "slave {addr}: option `{k}` given twice, as `{k}` and as `{name}.{k}`"
+                        ),
+                    ));
+                }
+                options.insert(k, v);
+            }
+        }
+        Ok(options)
+    }
 }
 
 /// The largest bus file read, in bytes (1 MiB; a bus file of 125 slaves
@@ -350,22 +450,17 @@ impl BusFile {
         resolver: &dyn DeviceResolver,
     ) -> Result<BusFile, BusFileError> {
         let cx = Ctx { path, text };
-        let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
         // The slaves' tables once more as plain tables: the keys that are
-        // not slave keys are a profile's options.
-        let tables: Vec<toml::Table> = match toml::from_str::<toml::Table>(text)
-            .map_err(|e| cx.err(e.span(), e.message()))?
-            .remove("slave")
-        {
-            Some(toml::Value::Array(a)) => a
-                .into_iter()
-                .map(|v| match v {
-                    toml::Value::Table(t) => t,
-                    _ => toml::Table::new(),
-                })
-                .collect(),
-            _ => vec![],
-        };
+        // not slave keys are a profile's options. Checked first, so that a
+        // profile option given where a slave key of the same name goes
+        // gets its own message rather than the slave key's type error.
+        let tables: SlaveTables =
+            toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
+        let mut profile_options = Vec::with_capacity(tables.slave.len());
+        for t in &tables.slave {
+            profile_options.push(cx.profile_options(t)?);
+        }
+        let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
         let mut warnings = Vec::new();
 
         let m = raw.master.get_ref();
@@ -395,13 +490,7 @@ impl BusFile {
         for (n, rs) in raw.slave.iter().enumerate() {
             let s = rs.get_ref();
             let addr = *s.address.get_ref();
-            let options: toml::Table = tables
-                .get(n)
-                .into_iter()
-                .flatten()
-                .filter(|(k, _)| !SLAVE_KEYS.contains(&k.as_str()))
-                .map(|(k, v)| (k.clone(), v.clone()))
-                .collect();
+            let options = profile_options.get(n).cloned().unwrap_or_default();
             if addr > 125 || addr == address {
                 return Err(cx.err(
                     Some(s.address.span()),
@@ -688,7 +777,7 @@ fn key_span(text: &str, span: std::ops::Range<usize>, key: &str) -> Option<std::
     for line in body.split_inclusive('\n') {
         let t = line.trim_start();
         if t.strip_prefix(key)
-            .is_some_and(|r| r.trim_start().starts_with('='))
+            .is_some_and(|r| r.trim_start().starts_with('=') || r.starts_with('.'))
         {
             let start = span.start + at + (line.len() - t.len());
             return Some(start..start + key.len());
@@ -864,5 +953,70 @@ watchdog_ms = 300
         )
         .unwrap_err();
         assert!(e.message.contains("either"), "{e}");
+    }
+
+    #[test]
+    fn profile_options_named_like_slave_keys_go_under_the_profile_name() {
+        let text = r#"[master]
+address = 2
+baud = "1.5M"
+
+[[slave]]
+address = 25
+device = "omega2"
+watchdog_ms = 300
+omega2.pkw = false
+"#;
+        let b = BusFile::parse_with(&gsd_dir(), text, &OneProfile).unwrap();
+        let d = b.slaves[0].device.as_ref().unwrap();
+        assert_eq!(d.options.get("pkw"), Some(&toml::Value::Boolean(false)));
+        assert!(!d.options.contains_key("omega2"));
+        assert_eq!(
+            b.slaves[0].params.cfg,
+            [0x71, 0x53, 0x63],
+            "the option took"
+        );
+        let with = |line: &str| {
+            BusFile::parse_with(
+                &gsd_dir(),
+                &text.replace("watchdog_ms = 300", line),
+                &OneProfile,
+            )
+            .unwrap_err()
+        };
+        // A slave key the device slave cannot take: the key's line and
+        // where the profile's option of that name goes.
+        for (line, says) in [
+            (
+                "params = \"omega-params.toml\"",
+                "`params` is the slave's User_Prm_Data",
+            ),
+            ("gsd = \"BNF_00D0.GSD\"", "either `gsd`"),
+            ("modules = [\"x\"]", "chooses its modules"),
+        ] {
+            let e = with(line);
+            let key = line.split(' ').next().unwrap();
+            assert_eq!(e.line, 8, "{line}: {e}");
+            assert!(e.message.contains(says), "{line}: {e}");
+            assert!(
+                e.message
+                    .contains(&format!("goes under `omega2.{key} = …`")),
+                "{line}: {e}"
+            );
+        }
+        // The same option twice; the namespace not a table.
+        let e = with("pkw = true");
+        assert!(e.message.contains("option `pkw` given twice"), "{e}");
+        let e = BusFile::parse_with(
+            &gsd_dir(),
+            &text.replace("omega2.pkw = false", "omega2 = 1"),
+            &OneProfile,
+        )
+        .unwrap_err();
+        assert_eq!(e.line, 9, "{e}");
+        assert!(e.message.contains("must be a table"), "{e}");
+        // `params` as a table stays the slave's User_Prm_Data.
+        let e = with("params = { \"No such parameter\" = 1 }");
+        assert!(!e.message.contains("omega2.params"), "{e}");
     }
 }

@@ -12,9 +12,10 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum ReadFileError {
     /// The operating system refused (missing file, no permission, a
-    /// directory).
+    /// directory). The message includes the cause, which is therefore not
+    /// also returned as `source()`: a printed error chain names it once.
     #[error("cannot read: {0}")]
-    Io(#[from] std::io::Error),
+    Io(std::io::Error),
     /// The file is larger than what this kind of file may have.
     #[error("the file is {} the {limit} bytes {what} may have", match size {
         Some(n) => format!("{n} bytes long, more than"),
@@ -38,6 +39,12 @@ pub enum ReadFileError {
         /// The byte.
         byte: u8,
     },
+}
+
+impl From<std::io::Error> for ReadFileError {
+    fn from(e: std::io::Error) -> Self {
+        ReadFileError::Io(e)
+    }
 }
 
 /// The bytes of `path`, at most `limit` of them; `what` names the kind
@@ -108,5 +115,13 @@ mod tests {
             "the file is longer than the 1000 bytes a test file may have"
         );
         assert_eq!(read_limited(Path::new("/dev/null"), 10, "x").unwrap(), b"");
+    }
+
+    #[test]
+    fn a_failed_read_names_its_cause_once() {
+        let e = read_limited(Path::new("/nonexistent/bus.toml"), 10, "x").unwrap_err();
+        assert!(e.to_string().starts_with("cannot read: "), "{e}");
+        // In the message, so not also the source: `{:#}` prints it once.
+        assert!(std::error::Error::source(&e).is_none());
     }
 }

@@ -28,6 +28,93 @@ pub struct LiveStation {
     pub master_address: Option<u8>,
 }
 
+/// A row of the live list as programs print it: a station found, or the
+/// scanner itself ([`LiveRow::scanner`]). Text: `  8  passive, DP slave
+/// ident 0x1234, parameterised by master 2`. JSON (`serde` feature):
+/// `address`, `type`, `self` (the scanner only), `ident` (`0x…`) and
+/// `master` (`null`: not parameterised) where known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LiveRow {
+    /// The station.
+    pub station: LiveStation,
+    /// Whether it is the scanner.
+    pub scanner: bool,
+}
+
+impl LiveRow {
+    /// The scanner at `address` (active, in the ring).
+    pub fn scanner(address: u8) -> LiveRow {
+        let station = LiveStation {
+            address,
+            station: StationType::ActiveInRing,
+            ident_number: None,
+            master_address: None,
+        };
+        LiveRow {
+            station,
+            scanner: true,
+        }
+    }
+}
+
+impl From<LiveStation> for LiveRow {
+    fn from(station: LiveStation) -> LiveRow {
+        LiveRow {
+            station,
+            scanner: false,
+        }
+    }
+}
+
+impl std::fmt::Display for LiveRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = &self.station;
+        write!(f, "{:3}  {}", s.address, s.station.describe())?;
+        if self.scanner {
+            return f.write_str(" (this scanner)");
+        }
+        if s.station != StationType::Passive {
+            return Ok(());
+        }
+        match (s.ident_number, s.master_address) {
+            (Some(id), Some(255)) => write!(f, ", DP slave ident 0x{id:04X}, not parameterised"),
+            (Some(id), Some(m)) => write!(
+                f,
+                ", DP slave ident 0x{id:04X}, parameterised by master {m}"
+            ),
+            _ => f.write_str(", no DP diagnosis"),
+        }
+    }
+}
+
+#[cfg(feature = "serde")]
+impl serde::Serialize for LiveRow {
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        #[derive(serde::Serialize)]
+        struct Row {
+            address: u8,
+            #[serde(rename = "type")]
+            kind: &'static str,
+            #[serde(rename = "self", skip_serializing_if = "std::ops::Not::not")]
+            this: bool,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            ident: Option<String>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            master: Option<Option<u8>>,
+        }
+        let s = &self.station;
+        Row {
+            address: s.address,
+            kind: s.station.describe(),
+            this: self.scanner,
+            ident: s.ident_number.map(|id| format!("0x{id:04X}")),
+            // 255: no master (not parameterised).
+            master: s.master_address.map(|m| (m != 255).then_some(m)),
+        }
+        .serialize(ser)
+    }
+}
+
 /// The live-list scanner; see the module docs.
 #[derive(Debug)]
 pub struct LiveListScan {
@@ -128,6 +215,47 @@ impl MasterApp for LiveListScan {
                 }
             }
             _ => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{LiveRow, LiveStation, StationType};
+
+    #[test]
+    fn live_rows_in_words_and_json() {
+        let slave = |master| {
+            LiveRow::from(LiveStation {
+                address: 8,
+                station: StationType::Passive,
+                ident_number: Some(0x1234),
+                master_address: Some(master),
+            })
+        };
+        assert_eq!(
+            LiveRow::scanner(1).to_string(),
+            "  1  active, in ring (this scanner)"
+        );
+        assert_eq!(
+            slave(2).to_string(),
+            "  8  passive, DP slave ident 0x1234, parameterised by master 2"
+        );
+        assert_eq!(
+            slave(255).to_string(),
+            "  8  passive, DP slave ident 0x1234, not parameterised"
+        );
+        #[cfg(feature = "serde")]
+        {
+            let json = |r: LiveRow| serde_json::to_value(r).unwrap().to_string();
+            assert_eq!(
+                json(LiveRow::scanner(1)),
+                r#"{"address":1,"self":true,"type":"active, in ring"}"#
+            );
+            assert_eq!(
+                json(slave(255)),
+                r#"{"address":8,"ident":"0x1234","master":null,"type":"passive"}"#
+            );
         }
     }
 }

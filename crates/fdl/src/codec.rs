@@ -48,6 +48,47 @@ impl CodecStats {
     pub fn errors(&self) -> u64 {
         self.bad_fcs + self.bad_length + self.bad_end_delimiter + self.bad_format + self.truncated
     }
+
+    /// The kinds of error counted, in words (`bad FCS`, `2× bad length`,
+    /// `3 garbage bytes`), or `None` when there are none: why a
+    /// [`TapEvent::Skipped`](crate::tap::TapEvent::Skipped) was skipped.
+    pub fn error_kinds(&self) -> Option<String> {
+        let mut parts = vec![];
+        for (n, what) in [
+            (self.bad_fcs, "bad FCS"),
+            (self.bad_length, "bad length"),
+            (self.bad_end_delimiter, "missing end delimiter"),
+            (self.bad_format, "bad format"),
+            (self.truncated, "truncated"),
+        ] {
+            match n {
+                0 => {}
+                1 => parts.push(what.to_string()),
+                n => parts.push(format!("{n}× {what}")),
+            }
+        }
+        if self.garbage_bytes > 0 {
+            parts.push(format!("{} garbage bytes", self.garbage_bytes));
+        }
+        (!parts.is_empty()).then(|| parts.join(", "))
+    }
+}
+
+impl std::fmt::Display for CodecStats {
+    /// Every counter: `N telegrams, N garbage bytes, N bad FCS, …`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} telegrams, {} garbage bytes, {} bad FCS, {} bad length, {} missing end delimiter, {} bad format, {} truncated",
+            self.telegrams,
+            self.garbage_bytes,
+            self.bad_fcs,
+            self.bad_length,
+            self.bad_end_delimiter,
+            self.bad_format,
+            self.truncated
+        )
+    }
 }
 
 /// What [`Framer::frame`] found at the start of a buffer.
@@ -274,6 +315,24 @@ mod tokio_codec {
 
 #[cfg(all(test, feature = "tokio-codec"))]
 mod tests {
+    #[test]
+    fn error_kinds_and_counters_in_words() {
+        let mut s = super::CodecStats::default();
+        assert_eq!(s.error_kinds(), None);
+        s.bad_fcs = 1;
+        s.bad_length = 2;
+        s.garbage_bytes = 3;
+        assert_eq!(
+            s.error_kinds().unwrap(),
+            "bad FCS, 2× bad length, 3 garbage bytes"
+        );
+        s.telegrams = 9;
+        assert_eq!(
+            s.to_string(),
+            "9 telegrams, 3 garbage bytes, 1 bad FCS, 2 bad length, 0 missing end delimiter, 0 bad format, 0 truncated"
+        );
+    }
+
     use super::*;
     use crate::testing::fdl_status;
     use bytes::BytesMut;

@@ -53,14 +53,25 @@ impl ListenOptions {
     }
 }
 
+/// Reading the line failed; the counters up to then come with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{io}")]
+pub struct ListenError {
+    /// Why reading failed.
+    pub io: io::Error,
+    /// The codec counters up to the failure.
+    pub stats: CodecStats,
+}
+
 /// Read `line` until `stop` completes, the line ends (EOF) or `f` breaks;
-/// returns the codec counters. Never writes.
+/// returns the codec counters. Never writes. An incomplete telegram is
+/// given up after [`ListenOptions::idle`] without a byte.
 pub async fn listen<R, S, F>(
     line: &mut R,
     options: ListenOptions,
     stop: S,
     mut f: F,
-) -> io::Result<CodecStats>
+) -> Result<CodecStats, ListenError>
 where
     R: AsyncRead + Unpin,
     S: Future<Output = ()>,
@@ -71,24 +82,31 @@ where
     let mut tap = Tap::new();
     let mut buf = [0u8; 4096];
     let mut next_tick = clock + options.tick;
+    let mut last_byte = clock;
     tokio::pin!(stop);
     let mut result = Ok(());
     'outer: loop {
+        let to_tick = next_tick.saturating_duration_since(std::time::Instant::now());
         let wait = if tap.pending() > 0 {
-            options.idle.min(options.tick)
+            (last_byte + options.idle)
+                .saturating_duration_since(std::time::Instant::now())
+                .min(to_tick)
         } else {
-            next_tick.saturating_duration_since(std::time::Instant::now())
+            to_tick
         };
         tokio::select! {
             _ = &mut stop => break,
             r = tokio::time::timeout(wait, line.read(&mut buf)) => match r {
                 Err(_elapsed) => {
-                    if tap.pending() > 0 {
+                    if tap.pending() > 0 && last_byte.elapsed() >= options.idle {
                         tap.line_idle();
                     }
                 }
                 Ok(Ok(0)) => break,
-                Ok(Ok(n)) => tap.push(now(), &buf[..n]),
+                Ok(Ok(n)) => {
+                    last_byte = std::time::Instant::now();
+                    tap.push(now(), &buf[..n]);
+                }
                 Ok(Err(e)) => {
                     result = Err(e);
                     break;
@@ -113,7 +131,10 @@ where
             break;
         }
     }
-    result.map(|()| tap.stats())
+    let stats = tap.stats();
+    result
+        .map(|()| stats)
+        .map_err(|io| ListenError { io, stats })
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@
 //! the part needed is small (pcapng section header, interface description
 //! with `if_tsresol` = 9 for nanoseconds, enhanced packet blocks; the
 //! classic header with the nanosecond magic) and is checked against
-//! Wireshark's reader by `tests/wireshark.rs`; `profibus-fdl` keeps its
+//! Wireshark's reader by `crates/cli/tests/wireshark.rs`; `profibus-fdl` keeps its
 //! promise of no dependencies beyond `bytes`, `thiserror` and `tracing`
 //! without features; and whether a crate writes link type 257 with
 //! nanosecond pcapng stamps exactly this way was not verified (the

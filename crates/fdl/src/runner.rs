@@ -66,7 +66,7 @@ impl std::fmt::Display for RunnerEvent {
 #[derive(Debug, thiserror::Error)]
 pub enum RunnerError {
     /// Reading or writing the port failed (or its other side went away).
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     /// The port refused a rate.
     #[error(transparent)]
@@ -237,6 +237,31 @@ mod tests {
     use crate::station::passive::Reply;
     use crate::testing::fdl_status;
     use crate::wire::{DataTelegram, ResponseStatus};
+
+    /// The error and its sources as `{:#}` of anyhow prints them.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut s = e.to_string();
+        let mut next = e.source();
+        while let Some(c) = next {
+            s += &format!(": {c}");
+            next = c.source();
+        }
+        s
+    }
+
+    #[test]
+    fn a_closed_port_is_named_once_in_the_error_chain() {
+        let e = RunnerError::from(std::io::Error::new(
+            std::io::ErrorKind::UnexpectedEof,
+            "/tmp/pty-a: port closed",
+        ));
+        assert_eq!(chain(&e), "/tmp/pty-a: port closed");
+        let e = RunnerError::from(TransportError::Open {
+            path: "/dev/ttyX".into(),
+            error: std::io::Error::from(std::io::ErrorKind::NotFound),
+        });
+        assert_eq!(chain(&e), "cannot open /dev/ttyX: entity not found");
+    }
     use tokio::io::AsyncWriteExt;
 
     struct Quiet;

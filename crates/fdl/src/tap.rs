@@ -10,6 +10,7 @@
 
 use crate::codec::{CodecStats, Framed, Framer};
 use crate::time::Instant;
+use crate::wire::Hex;
 use std::collections::VecDeque;
 
 /// What a [`Tap`] found on the line.
@@ -31,6 +32,50 @@ pub enum TapEvent {
         /// The codec counters these bytes raised (bad FCS, garbage, …).
         errors: CodecStats,
     },
+}
+
+/// Skipped bytes as a bus monitor reports them (`dpctl sniff`): JSON
+/// fields `error`, `skipped`, `raw` and the counters; text
+/// `WHY: N bytes skipped: HEX`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct Skipped<'a> {
+    /// Why, in words ([`Skipped::why`]).
+    pub error: String,
+    /// How many bytes.
+    pub skipped: usize,
+    /// The bytes.
+    pub raw: Hex<'a>,
+    /// The counters they raised.
+    #[cfg_attr(feature = "serde", serde(flatten))]
+    pub errors: CodecStats,
+}
+
+impl<'a> Skipped<'a> {
+    /// `bytes`, skipped with `errors`.
+    pub fn new(bytes: &'a [u8], errors: CodecStats) -> Self {
+        Skipped {
+            error: Self::why(bytes.len(), &errors),
+            skipped: bytes.len(),
+            raw: Hex(bytes),
+            errors,
+        }
+    }
+
+    /// Why `n` bytes were skipped with `errors`, in words: the kinds of
+    /// error ([`CodecStats::error_kinds`]), else `N bytes skipped`.
+    pub fn why(n: usize, errors: &CodecStats) -> String {
+        errors
+            .error_kinds()
+            .unwrap_or_else(|| format!("{n} bytes skipped"))
+    }
+}
+
+impl std::fmt::Display for Skipped<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (why, n, raw) = (&self.error, self.skipped, self.raw);
+        write!(f, "{why}: {n} bytes skipped: {raw}")
+    }
 }
 
 /// Frames a timed byte stream; see the module docs.
@@ -166,6 +211,18 @@ impl Tap {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn skipped_bytes_in_words() {
+        let errors = CodecStats {
+            bad_fcs: 1,
+            ..CodecStats::default()
+        };
+        let s = Skipped::new(&[0x68, 0x01], errors);
+        assert_eq!(s.to_string(), "bad FCS: 2 bytes skipped: 68 01");
+        let quiet = Skipped::new(&[0xFF], CodecStats::default());
+        assert_eq!(quiet.error, "1 bytes skipped");
+    }
+
     use super::*;
 
     const STATUS: [u8; 6] = [0x10, 0x02, 0x01, 0x49, 0x4C, 0x16];

@@ -322,12 +322,14 @@ fn lost_token_is_claimed_by_exactly_one_master() {
 #[test]
 fn simultaneous_claims_resolve_to_one_token() {
     // Give master 2 a latency allowance that makes its token-lost timeout
-    // (TTO + 3 allowances) equal master 5's (TTO(2) + 6 TSL), so both
+    // (TTO(2) + 5 allowances) equal master 5's (TTO(2) + 6 TSL), so both
     // claim at the same instant and collide.
     let params = BusParams::defaults(Baud::B1500000);
     let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
     let mut c2 = ActiveConfig::new(2, params);
-    c2.latency_allowance = params.bits(2 * params.slot_time as u64);
+    c2.latency_allowance = params.bits(6 * params.slot_time as u64 / 5);
+    let c5 = ActiveConfig::new(5, params);
+    assert_eq!(c2.token_lost_timeout(), c5.token_lost_timeout());
     let a = bus.add(ActiveStation::new(c2, Poller::default()));
     let b = bus.add(ActiveStation::new(
         ActiveConfig::new(5, params),
@@ -421,5 +423,147 @@ fn a_duplicate_token_is_dropped() {
     );
     for i in 0..3 {
         assert!(q.master(i).app().answered > 10);
+    }
+}
+
+/// A station behind a transport that hands it what arrives on the line
+/// `lag` later (a pty, a USB adapter): the latency a station's latency
+/// allowance is meant to cover.
+struct Lagging<S> {
+    inner: S,
+    lag: Duration,
+    queue: std::collections::VecDeque<(Instant, Vec<u8>)>,
+}
+
+impl<S: Station> Station for Lagging<S> {
+    fn handle_rx(&mut self, now: Instant, bytes: &[u8]) {
+        self.queue.push_back((now + self.lag, bytes.to_vec()));
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        while self.queue.front().is_some_and(|(t, _)| *t <= now) {
+            let (t, bytes) = self.queue.pop_front().unwrap();
+            self.inner.handle_rx(t, &bytes);
+        }
+        self.inner.handle_timeout(now);
+    }
+    fn poll_transmit(&mut self, now: Instant) -> Option<&[u8]> {
+        self.inner.poll_transmit(now)
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        let q = self.queue.front().map(|(t, _)| *t);
+        match (q, self.inner.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+}
+
+/// Masters 2, 3 and 4, each behind a transport with `lag` of latency once
+/// the ring has formed, and
+/// a latency allowance of 50 ms (as `dpctl master --latency 50` on
+/// `dpctl bus`); master 2 polls a slave that never answers. Master 2
+/// dies while it holds the token, after the start of a telegram (a
+/// truncated SD2 header) has gone out. Returns the claims of masters 3
+/// and 4 and the token telegrams since (ms after the death, SA, DA).
+fn b_inner(bus: &SimBus, m: StationId) -> &Master {
+    &bus.station::<Lagging<Master>>(m).inner
+}
+
+fn holder_dies(lag: Duration) -> (Vec<u64>, Vec<(f64, u8, u8)>) {
+    type Lagged = Lagging<Master>;
+    let mut params = BusParams::defaults(Baud::B1500000);
+    // Room for master 2's unanswered poll and a GAP poll in a token visit.
+    params.ttr = 300_000;
+    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+    let mut masters = vec![];
+    for (addr, targets) in [(2u8, vec![50u8]), (3, vec![]), (4, vec![])] {
+        let mut cfg = ActiveConfig::new(addr, params);
+        cfg.latency_allowance = Duration::from_millis(50);
+        let app = Poller {
+            targets,
+            ..Poller::default()
+        };
+        masters.push(bus.add(Lagging {
+            inner: ActiveStation::new(cfg, app),
+            lag: Duration::ZERO,
+            queue: Default::default(),
+        }));
+    }
+    let inj = bus.add(Injector {
+        plan: vec![],
+        out: vec![],
+    });
+    let tokens = Rc::new(RefCell::new(vec![]));
+    bus.set_tap(token_tap(tokens.clone()));
+    let ids = masters.clone();
+    let formed = bus.run_while(Duration::from_secs(30), |b| {
+        ids.iter()
+            .all(|&m| b.station::<Lagged>(m).inner.las().eq([2, 3, 4]))
+    });
+    let states: Vec<_> = ids
+        .iter()
+        .map(|&m| {
+            let s = &b_inner(&bus, m);
+            (
+                s.las().collect::<Vec<_>>(),
+                s.ring_state(),
+                s.app().events.clone(),
+                s.stats(),
+            )
+        })
+        .collect();
+    assert!(formed, "the ring 2 → 3 → 4 forms: {states:#?}");
+    // The ring formed without latency (GAP polls wait at most 1 ms of
+    // the allowance); from now on each master hears the line `lag` late.
+    for &m in &masters {
+        bus.station_mut::<Lagged>(m).lag = lag;
+    }
+    bus.run_for(Duration::from_millis(500));
+    let m2 = masters[0];
+    let sent = bus.station::<Lagged>(m2).inner.app().next;
+    assert!(bus.run_while(Duration::from_secs(2), |b| {
+        let m = &b.station::<Lagged>(m2).inner;
+        m.app().next > sent && m.ring_state() == RingState::UseToken
+    }));
+    // Master 2 dies while it sends the retry of its request: the line
+    // carries the start of an SD2 telegram and then nothing.
+    bus.run_for(Duration::from_millis(20));
+    bus.set_online(m2, false);
+    let died = bus.now();
+    bus.station_mut::<Injector>(inj).plan = vec![(died, vec![0x68, 0x05, 0x05, 0x68, 50, 0x82])];
+    bus.run_for(Duration::from_secs(1));
+    let claims = (1..3)
+        .map(|i| bus.station::<Lagged>(masters[i]).inner.stats().claims)
+        .collect();
+    let passes = tokens
+        .borrow()
+        .iter()
+        .filter(|t| t.0 >= died)
+        .map(|t| ((t.0 - died).as_secs_f64() * 1e3, t.1, t.2))
+        .collect();
+    (claims, passes)
+}
+
+/// The token holder of a 3-master ring dies right after a truncated
+/// telegram: master 3, the lowest survivor, claims the token, once, and
+/// master 4 never does; the ring 3 → 4 → 3 is back. Without transport
+/// latency, and with a latency far below the stations' allowance (the
+/// case of `dpctl bus`, issue 18's scenario): a claim must reach the next
+/// address before its own timeout runs out.
+#[test]
+fn the_lowest_survivor_claims_the_token_of_a_dead_holder() {
+    for lag_us in [0, 300, 1_000, 5_000, 20_000, 45_000] {
+        let (claims, passes) = holder_dies(Duration::from_micros(lag_us));
+        assert_eq!(
+            claims,
+            [1, 0],
+            "lag {lag_us} µs: master 3 claims once, master 4 never: {passes:?}"
+        );
+        let between: Vec<_> = passes
+            .iter()
+            .filter(|p| p.1 != p.2 && p.1 != 2 && p.2 != 2)
+            .map(|p| (p.1, p.2))
+            .collect();
+        assert!(between.len() > 3, "lag {lag_us} µs: {passes:?}");
     }
 }

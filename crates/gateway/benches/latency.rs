@@ -1,24 +1,30 @@
 //! Latency of the gateway: a slave's input change on the simulated bus
-//! (1.5 Mbit/s, paced on the wall clock, the loop of `dpctl gateway
+//! (1.5 Mbit/s, paced on the wall clock by the `Pacer` of `dpctl gateway
 //! --sim`) to its receipt by an MQTT subscriber, through a real mosquitto
 //! started here on a free localhost port.
 //!
 //! `cargo bench -p profibus-gateway --bench latency [-- SAMPLES]`
 //!
 //! The slave echoes its outputs into its inputs; every 50 ms the bench
-//! writes a new output value. Measured per sample: from the moment the
-//! master holds the new inputs (seen after a bus step) and from the
-//! output write, to the subscriber's receipt of `…/3/inputs` with it.
+//! writes a new output value. The bus runs each turn in 25 µs pieces, so
+//! the bench knows when (in bus time, i.e. on the wall clock the line is
+//! paced on) the master first held the new inputs. Measured per sample:
+//! that input change, the gateway's step that sent the message (the
+//! `…/3/inputs` publish handed to the MQTT client), the subscriber's
+//! receipt (its own client and runtime, like another process), and the
+//! output write that caused it.
 
-use profibus_devices::bus::ProfiledBus;
-use profibus_fdl::Instant as BusInstant;
-use profibus_gateway::link::{flush, pump, wall_ms};
-use profibus_gateway::sim::{slave_infos, SimPlant};
-use profibus_gateway::{Gateway, MqttLink, MqttSettings};
+mod support;
+
+use profibus_gateway::core::hex;
+use profibus_gateway::link;
+use profibus_gateway::sim::Pacer;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use std::collections::HashMap;
-use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use support::{pct, run_gateway, Broker};
 
 const BUS: &str = r#"[master]
 address = 1
@@ -34,24 +40,17 @@ bus = "bench"
 writable = [3]
 "#;
 
-fn mosquitto() -> String {
-    for p in ["mosquitto", "/usr/sbin/mosquitto"] {
-        if Command::new(p)
-            .arg("-h")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok()
-        {
-            return p.into();
-        }
-    }
-    panic!("mosquitto is missing: run scripts/setup-test-env");
+/// The times of one sample, by the inputs' hex.
+#[derive(Default, Clone, Copy)]
+struct Sample {
+    write: Option<Instant>,
+    change: Option<Instant>,
+    step: Option<Instant>,
+    receipt: Option<Instant>,
 }
 
-fn pct(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[((v.len() - 1) as f64 * p).round() as usize]
+fn ms(a: Instant, b: Instant) -> f64 {
+    b.saturating_duration_since(a).as_secs_f64() * 1e3
 }
 
 fn main() {
@@ -59,114 +58,134 @@ fn main() {
         .skip(1)
         .find_map(|a| a.parse().ok())
         .unwrap_or(300);
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let dir = std::env::temp_dir().join(format!("gw-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let conf = dir.join("mosquitto.conf");
-    std::fs::write(
-        &conf,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\n"),
-    )
-    .unwrap();
-    let mut broker = Command::new(mosquitto())
-        .arg("-c")
-        .arg(&conf)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let broker = Broker::start("latency", "");
+    let port = broker.port;
+    let book: Arc<Mutex<HashMap<String, Sample>>> = Arc::default();
+    let done = Arc::new(AtomicBool::new(false));
 
-    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/bus.toml"));
-    let profiled = ProfiledBus::parse(path, BUS).unwrap();
-    let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "bench").unwrap();
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    let (in_ms, write_ms, cycle_us) = rt.block_on(async move {
-        let mut gw = Gateway::new(settings, slave_infos(&profiled).unwrap());
-        let mut link = MqttLink::connect(
-            &profibus_gateway::Connection::plain(profibus_gateway::Broker {
-                host: "127.0.0.1".into(),
-                port,
-                tls: false,
-            }),
-            &gw,
-        );
-        // The subscriber.
-        let (sub, mut ev) = AsyncClient::new(MqttOptions::new("bench-sub", "127.0.0.1", port), 64);
-        sub.subscribe("profibus/bench/3/inputs", QoS::AtMostOnce)
-            .await
+    // The subscriber: a runtime of its own on another thread.
+    let (b2, d2) = (book.clone(), done.clone());
+    let subscriber = std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
             .unwrap();
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<(Instant, String)>();
-        tokio::spawn(async move {
+        rt.block_on(async move {
+            let (sub, mut ev) =
+                AsyncClient::new(MqttOptions::new("bench-sub", "127.0.0.1", port), 64);
+            sub.subscribe("profibus/bench/3/inputs", QoS::AtMostOnce)
+                .await
+                .unwrap();
+            let mut received = 0;
             while let Ok(e) = ev.poll().await {
                 if let Event::Incoming(Packet::Publish(p)) = e {
+                    let at = Instant::now();
                     let v: serde_json::Value = serde_json::from_slice(&p.payload).unwrap();
-                    let _ = tx.send((Instant::now(), v["hex"].as_str().unwrap_or("").to_string()));
+                    let h = v["hex"].as_str().unwrap_or("").to_string();
+                    if let Some(s) = b2.lock().unwrap().get_mut(&h) {
+                        if s.change.is_some() && s.receipt.is_none() {
+                            s.receipt = Some(at);
+                            received += 1;
+                        }
+                    }
+                }
+                if received >= samples {
+                    d2.store(true, Ordering::Relaxed);
+                    return;
                 }
             }
         });
-        let mut plant = SimPlant::new(&profiled).unwrap();
-        let start = tokio::time::Instant::now();
-        let tick = Duration::from_millis(2);
-        let mut written: HashMap<String, Instant> = HashMap::new();
-        let mut seen: HashMap<String, Instant> = HashMap::new();
-        let (mut in_ms, mut write_ms) = (vec![], vec![]);
+    });
+
+    let cycle_us = run_gateway(BUS, port, |plant, pacer, gw, link| {
+        let piece = Duration::from_micros(25);
         let mut value: u32 = 0;
         let mut next_write = Instant::now() + Duration::from_millis(500);
-        while in_ms.len() < samples {
-            plant.run_until(BusInstant::from_nanos(start.elapsed().as_nanos() as u64));
-            let bus_now = plant.now();
-            let m = plant.master();
-            let now = Instant::now();
-            let inputs = profibus_gateway::core::hex(m.inputs(3).unwrap());
-            if written.contains_key(&inputs) && !seen.contains_key(&inputs) {
-                seen.insert(inputs.clone(), now);
+        let mut unseen: Option<String> = None;
+        // A bound in case messages are lost: three times the planned run.
+        let deadline = Instant::now() + Duration::from_millis(150 * samples as u64 + 10_000);
+        while !done.load(Ordering::Relaxed) && Instant::now() < deadline {
+            let (target, behind) = pacer.target(plant);
+            while plant.now() < target {
+                let t = (plant.now() + piece).min(target);
+                plant.run_until(t);
+                let Some(h) = unseen.as_ref() else { continue };
+                if hex(plant.master().inputs(3).unwrap()) == *h {
+                    let at = pacer.wall_time(plant.now());
+                    book.lock().unwrap().entry(h.clone()).or_default().change = Some(at);
+                    unseen = None;
+                }
             }
-            if now >= next_write && m.slave_state(3).map(|s| s.name()) == Some("data_exchange") {
+            let now = Instant::now();
+            let m = plant.master();
+            if unseen.is_none()
+                && now >= next_write
+                && m.slave_state(3).map(|s| s.name()) == Some("data_exchange")
+            {
                 next_write = now + Duration::from_millis(50);
                 value += 1;
                 let b = value.to_be_bytes();
                 m.set_outputs(3, &b);
-                written.insert(profibus_gateway::core::hex(&b), now);
+                let h = hex(&b);
+                book.lock().unwrap().entry(h.clone()).or_default().write = Some(now);
+                unseen = Some(h);
             }
-            let ts = wall_ms();
-            pump(&mut link, &mut gw, ts);
-            gw.step(m, bus_now, ts);
-            flush(&link, &mut gw);
-            while let Ok((at, hex)) = rx.try_recv() {
-                if let (Some(w), Some(s)) = (written.get(&hex), seen.get(&hex)) {
-                    write_ms.push((at - *w).as_secs_f64() * 1e3);
-                    in_ms.push((at - *s).as_secs_f64() * 1e3);
+            let bus_now = plant.now();
+            link::step(link, gw, plant.master(), bus_now);
+            let sent = Instant::now();
+            for s in book.lock().unwrap().values_mut() {
+                if s.change.is_some() && s.step.is_none() {
+                    s.step = Some(sent);
                 }
             }
-            tokio::time::sleep(tick).await;
+            if !behind {
+                std::thread::sleep(Pacer::TICK);
+            }
         }
-        (
-            in_ms,
-            write_ms,
-            plant.master().cycle_stats().avg().as_micros(),
-        )
+        plant.master().cycle_stats().avg().as_micros()
     });
-    let _ = broker.kill();
-    let _ = broker.wait();
-    let _ = std::fs::remove_dir_all(&dir);
-    let (mut a, mut b) = (in_ms, write_ms);
+    // The subscriber thread ends with the process.
+    drop(subscriber);
+    drop(broker);
+
+    let book = book.lock().unwrap();
+    let full: Vec<Sample> = book
+        .values()
+        .filter(|s| s.receipt.is_some())
+        .copied()
+        .collect();
+    let col = |f: &dyn Fn(&Sample) -> f64| -> Vec<f64> { full.iter().map(f).collect() };
+    let rows: [(&str, Vec<f64>); 4] = [
+        (
+            "slave input change -> subscriber",
+            col(&|s| ms(s.change.unwrap(), s.receipt.unwrap())),
+        ),
+        (
+            "  input change -> gateway step sent (pacing)",
+            col(&|s| ms(s.change.unwrap(), s.step.unwrap())),
+        ),
+        (
+            "  gateway step sent -> subscriber (client, broker)",
+            col(&|s| ms(s.step.unwrap(), s.receipt.unwrap())),
+        ),
+        (
+            "output write -> echoed inputs at the subscriber",
+            col(&|s| ms(s.write.unwrap(), s.receipt.unwrap())),
+        ),
+    ];
     let cyc = cycle_us as f64 / 1e3;
     println!(
-        "samples {}, bus cycle avg {cyc:.3} ms (1.5 Mbit/s, 1 slave)",
-        a.len()
+        "samples {}, bus cycle avg {cyc:.3} ms (1.5 Mbit/s, 1 slave), tick {} us, target p99 <= {:.2} ms",
+        full.len(),
+        Pacer::TICK.as_micros(),
+        cyc + 2.0
     );
-    let (a50, a99) = (pct(&mut a, 0.5), pct(&mut a, 0.99));
-    let (b50, b99) = (pct(&mut b, 0.5), pct(&mut b, 0.99));
-    println!("inputs at the master -> subscriber: p50 {a50:.2} ms ({:.1} cycles), p99 {a99:.2} ms ({:.1} cycles)", a50 / cyc, a99 / cyc);
-    println!("output write -> echoed inputs at the subscriber: p50 {b50:.2} ms ({:.1} cycles), p99 {b99:.2} ms ({:.1} cycles)", b50 / cyc, b99 / cyc);
+    for (name, mut v) in rows {
+        let (p50, p99) = (pct(&mut v, 0.5), pct(&mut v, 0.99));
+        println!(
+            "{name}: p50 {p50:.2} ms ({:.1} cycles), p99 {p99:.2} ms ({:.1} cycles)",
+            p50 / cyc,
+            p99 / cyc
+        );
+    }
 }

@@ -1,13 +1,16 @@
 //! Scale-out: N gateways × M slaves on one mosquitto.
 //!
-//! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE`
-//! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`).
+//! `cargo bench -p profibus-gateway --bench scale -- N M SECONDS MODE [sparkplug]`
+//! (defaults 16 32 20 change:100; MODE `change:MS` or `interval:MS`;
+//! `sparkplug`: each gateway a Sparkplug B edge node `scale/segG`, and
+//! the DDATA messages are counted).
 //!
-//! Each gateway runs in a thread of its own with its own single-threaded
-//! tokio runtime, as `dpctl gateway --sim` does in its own process: a
-//! simulated bus at 1.5 Mbit/s paced on the wall clock with M generic
-//! echo slaves (2 words in/out), stepped every 2 ms, publishing to a
-//! mosquitto started here. `change:MS`: every MS ms the application
+//! Each gateway runs as `dpctl gateway --sim` does in its own process: a
+//! thread with a simulated bus at 1.5 Mbit/s paced on the wall clock by
+//! the library's `Pacer` with M generic echo slaves (2 words in/out), the
+//! gateway stepped after every turn, and its MQTT client on a
+//! single-threaded tokio runtime of its own, publishing to a mosquitto
+//! started here. `change:MS`: every MS ms the application
 //! writes new outputs to every slave (its inputs echo them), images are
 //! published on change, so each slave yields 2 messages per MS.
 //! `interval:MS`: no writes, every image published every MS. A `mosquitto_sub` process counts what the
@@ -18,31 +21,17 @@
 //! per second against the rate the simulated bus should reach, and the
 //! load average.
 
-use profibus_devices::bus::ProfiledBus;
-use profibus_fdl::Instant as BusInstant;
-use profibus_gateway::link::{flush, pump, wall_ms};
-use profibus_gateway::sim::{slave_infos, SimPlant};
-use profibus_gateway::{Broker, Connection, Gateway, MqttLink, MqttSettings};
+mod support;
+
+use profibus_gateway::link;
+use profibus_gateway::sim::{Pacer, SimPlant};
+use profibus_gateway::{sparkplug, EdgeNode, MqttLink, Session, SparkplugId};
 use std::io::BufRead;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-fn mosquitto() -> String {
-    for p in ["mosquitto", "/usr/sbin/mosquitto"] {
-        if Command::new(p)
-            .arg("-h")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok()
-        {
-            return p.into();
-        }
-    }
-    panic!("mosquitto is missing: run scripts/setup-test-env");
-}
+use support::{run_gateway, run_session, Broker};
 
 /// User + system CPU seconds of a process (`/proc/PID/stat`).
 fn cpu_s(pid: &str) -> f64 {
@@ -81,58 +70,61 @@ fn gateway(
     port: u16,
     text: String,
     write: Option<Duration>,
+    sparkplug_node: Option<SparkplugId>,
     stop: Arc<AtomicBool>,
     c: Arc<Counters>,
 ) {
-    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/bus.toml"));
-    let profiled = ProfiledBus::parse(path, &text).unwrap();
-    let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "x").unwrap();
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async move {
-        let mut gw = Gateway::new(settings, slave_infos(&profiled).unwrap());
-        let conn = Connection::plain(Broker {
-            host: "127.0.0.1".into(),
+    match sparkplug_node {
+        None => run_gateway(&text, port, |plant, pacer, gw, link| {
+            drive(plant, pacer, gw, link, write, &stop, &c)
+        }),
+        Some(id) => run_session(
+            &text,
             port,
-            tls: false,
-        });
-        let mut link = MqttLink::connect(&conn, &gw);
-        let mut plant = SimPlant::new(&profiled).unwrap();
-        let start = Instant::now();
-        let tick = Duration::from_millis(2);
-        let mut last_cycles = 0;
-        let mut next_write = Instant::now();
-        let mut value: u32 = 0;
-        let addresses: Vec<u8> = plant.master().slave_addresses().collect();
-        while !stop.load(Ordering::Relaxed) {
-            let t0 = Instant::now();
-            plant.run_until(BusInstant::from_nanos(start.elapsed().as_nanos() as u64));
-            if let Some(w) = write.filter(|_| t0 >= next_write) {
-                next_write = t0 + w;
-                value = value.wrapping_add(1);
-                for &a in &addresses {
-                    plant.master().set_outputs(a, &value.to_be_bytes());
-                }
+            |p, s| EdgeNode::new(s, id, sparkplug::devices(p).unwrap()),
+            |plant, pacer, gw, link| drive(plant, pacer, gw, link, write, &stop, &c),
+        ),
+    }
+}
+
+/// The loop of one gateway: the plant paced, new outputs every `write`,
+/// the core stepped after every turn; timed into `c`.
+fn drive(
+    plant: &mut SimPlant,
+    pacer: &Pacer,
+    gw: &mut impl Session,
+    link: &mut MqttLink,
+    write: Option<Duration>,
+    stop: &AtomicBool,
+    c: &Counters,
+) {
+    let mut last_cycles = 0;
+    let mut next_write = Instant::now();
+    let mut value: u32 = 0;
+    let addresses: Vec<u8> = plant.master().slave_addresses().collect();
+    while !stop.load(Ordering::Relaxed) {
+        let t0 = Instant::now();
+        let pause = pacer.advance(plant);
+        if let Some(w) = write.filter(|_| t0 >= next_write) {
+            next_write = t0 + w;
+            value = value.wrapping_add(1);
+            for &a in &addresses {
+                plant.master().set_outputs(a, &value.to_be_bytes());
             }
-            let t1 = Instant::now();
-            let now = plant.now();
-            let ts = wall_ms();
-            pump(&mut link, &mut gw, ts);
-            gw.step(plant.master(), now, ts);
-            flush(&link, &mut gw);
-            let t2 = Instant::now();
-            c.sim_ns
-                .fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
-            c.gw_ns
-                .fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
-            let cycles = plant.master().cycle_stats().cycles;
-            c.cycles.fetch_add(cycles - last_cycles, Ordering::Relaxed);
-            last_cycles = cycles;
-            tokio::time::sleep(tick).await;
         }
-    });
+        let t1 = Instant::now();
+        let now = plant.now();
+        link::step(link, gw, plant.master(), now);
+        let t2 = Instant::now();
+        c.sim_ns
+            .fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
+        c.gw_ns
+            .fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
+        let cycles = plant.master().cycle_stats().cycles;
+        c.cycles.fetch_add(cycles - last_cycles, Ordering::Relaxed);
+        last_cycles = cycles;
+        std::thread::sleep(pause);
+    }
 }
 
 fn main() {
@@ -144,35 +136,19 @@ fn main() {
     let m: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(32);
     let secs: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20);
     let mode = args.get(3).cloned().unwrap_or_else(|| "change:100".into());
+    let spb = args.get(4).map(String::as_str) == Some("sparkplug");
     let write = mode
         .strip_prefix("change:")
         .map(|ms| Duration::from_millis(ms.parse().expect("change:MS")));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let dir = std::env::temp_dir().join(format!("gw-scale-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let conf = dir.join("mosquitto.conf");
-    std::fs::write(
-        &conf,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 100000\n"),
-    )
-    .unwrap();
-    let mut broker = Command::new(mosquitto())
-        .arg("-c")
-        .arg(&conf)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let broker = Broker::start("scale", "persistence false\nmax_queued_messages 100000\n");
+    let port = broker.port;
     let mut sub = Command::new("mosquitto_sub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-q", "0"])
-        .args(["-t", "scale/+/+/inputs", "-t", "scale/+/+/outputs"])
+        .args(match spb {
+            // One line per message: the topic (the payload is protobuf).
+            true => vec!["-t", "spBv1.0/scale/DDATA/+/+", "-F", "%t"],
+            false => vec!["-t", "scale/+/+/inputs", "-t", "scale/+/+/outputs"],
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -192,12 +168,13 @@ fn main() {
     let threads: Vec<_> = (0..n)
         .map(|g| {
             let (stop, c, text) = (stop.clone(), counters.clone(), bus_file(m, &mode, g));
-            std::thread::spawn(move || gateway(port, text, write, stop, c))
+            let id = spb.then(|| format!("scale/seg{g}").parse().unwrap());
+            std::thread::spawn(move || gateway(port, text, write, id, stop, c))
         })
         .collect();
     // Warm-up: connections, start-up of every slave.
     std::thread::sleep(Duration::from_secs(5));
-    let (bpid, spid) = (broker.id().to_string(), sub.id().to_string());
+    let (bpid, spid) = (broker.pid().to_string(), sub.id().to_string());
     let snap = |c: &Counters| {
         (
             cpu_s("self"),
@@ -220,9 +197,7 @@ fn main() {
     }
     let _ = sub.kill();
     let _ = sub.wait();
-    let _ = broker.kill();
-    let _ = broker.wait();
-    let _ = std::fs::remove_dir_all(&dir);
+    drop(broker);
 
     let wall = (b.7 - a.7).as_secs_f64();
     let msgs = (b.3 - a.3) as f64;
@@ -237,7 +212,12 @@ fn main() {
     let sim = (b.4 - a.4) as f64 / 1e9;
     let gw = (b.5 - a.5) as f64 / 1e9;
     let cycles = (b.6 - a.6) as f64 / wall / n as f64;
-    println!("{n} gateways x {m} slaves, publish {mode}, {secs} s measured");
+    let kind = if spb {
+        "Sparkplug B DDATA"
+    } else {
+        "JSON inputs+outputs"
+    };
+    println!("{n} gateways x {m} slaves, publish {mode}, {secs} s measured, counting {kind}");
     println!(
         "messages received by the subscriber: {msgs:.0} ({:.0}/s)",
         msgs / wall

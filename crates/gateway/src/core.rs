@@ -4,6 +4,10 @@
 //! [`Gateway::poll_publish`] returns.
 
 use crate::outage::Outage;
+use crate::payload::{
+    to_bytes, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout, SlaveStatePayload,
+    Status,
+};
 use crate::settings::{MqttSettings, PublishMode};
 use profibus_devices::channels::{ChannelMap, Direction, Value};
 use profibus_devices::pkw::client::PkwClient;
@@ -11,11 +15,12 @@ use profibus_devices::pkw::{self, Dialect, PKW_LEN};
 use profibus_devices::rfid::client::RfidClient;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{
-    DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveState,
+    DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveHandle, SlaveState,
 };
 use profibus_fdl::Instant;
-use serde_json::{json, Map};
 use std::collections::VecDeque;
+
+pub use crate::payload::hex;
 
 /// A message for the broker.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -35,6 +40,8 @@ pub struct SlaveInfo {
     pub address: u8,
     /// Name from the bus file.
     pub name: String,
+    /// Ident number (PKW parameters by name: [`profibus_devices::pkw_parameter`]).
+    pub ident_number: u16,
     /// Named channels of its images (device profiles), if any.
     pub channels: Option<ChannelMap>,
     /// Its GSD, for diagnosis texts.
@@ -151,27 +158,23 @@ impl Topics {
 
     /// The service and station address of a request topic
     /// (`<prefix>/<bus>/<addr>/outputs/set`, …), `None` for any other
-    /// topic. An address that is not a number is `Err(text)`.
-    pub fn parse_request(&self, topic: &str) -> Option<(Service, Result<u8, String>)> {
+    /// topic. An address that is not a number is an error.
+    pub fn parse_request(&self, topic: &str) -> Option<(Service, Result<u8, BadAddress>)> {
         let rest = topic.strip_prefix(&self.base)?.strip_prefix('/')?;
         Service::ALL.iter().find_map(|&s| {
             let addr = rest.strip_suffix(s.request())?.strip_suffix('/')?;
             if addr.contains('/') {
                 return None;
             }
-            Some((s, addr.parse::<u8>().map_err(|_| addr.to_string())))
+            Some((s, addr.parse::<u8>().map_err(|_| BadAddress(addr.into()))))
         })
     }
 }
 
-/// Lower-case hex of bytes, as the payloads carry images.
-pub fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write;
-    bytes.iter().fold(String::new(), |mut s, b| {
-        let _ = write!(s, "{b:02x}");
-        s
-    })
-}
+/// The address part of a request topic is not a station address.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` in a request topic is not a station address")]
+pub struct BadAddress(pub String);
 
 /// Bytes of a non-empty hex string (as `profibus_fdl::wire::parse_hex`
 /// takes it: `0a0b`, `0a 0b`, `0a:0b`, `0x0a,0x0b`).
@@ -220,6 +223,14 @@ pub enum Request {
         /// What to do.
         command: pkw::Command,
     },
+    /// A PKW job on a parameter the device names (a BM4 variable module);
+    /// [`Gateway::handle_message`] resolves the name into [`Request::Pkw`].
+    PkwNamed {
+        /// The parameter's name.
+        name: String,
+        /// What to do.
+        command: pkw::Command,
+    },
     /// An RFID command line (without CR).
     Rfid(Vec<u8>),
 }
@@ -230,7 +241,7 @@ impl Request {
         match self {
             Request::Outputs(_) | Request::Dpv1Write { .. } | Request::Rfid(_) => true,
             Request::Dpv1Read { .. } => false,
-            Request::Pkw { command, .. } => !matches!(
+            Request::Pkw { command, .. } | Request::PkwNamed { command, .. } => !matches!(
                 command,
                 pkw::Command::Read | pkw::Command::ReadElement(_) | pkw::Command::Describe(_)
             ),
@@ -290,8 +301,16 @@ pub enum RequestError {
         /// What it lacks.
         what: &'static str,
     },
-    /// Too many requests waiting for the slave.
-    #[error("slave {0}: too many requests waiting")]
+    /// A PKW request names a parameter the slave's device does not have.
+    #[error("slave {address} has no parameter named `{name}`")]
+    NoParameter {
+        /// Station address.
+        address: u8,
+        /// The name.
+        name: String,
+    },
+    /// Too many requests waiting for the slave ([`QUEUE_LIMIT`]).
+    #[error("slave {0}: too many requests waiting (at most {QUEUE_LIMIT})")]
     Busy(u8),
     /// A payload larger than [`MAX_PAYLOAD`].
     #[error("payload of {size} bytes is larger than the {limit} bytes a request may have")]
@@ -435,7 +454,10 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
         }
         Service::Pkw => {
             only(o, &["op", "pnu", "index", "value", "dword", "element"])?;
-            let pnu = need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16;
+            let pnu = match o.get("pnu") {
+                Some(serde_json::Value::String(n)) if !n.is_empty() => Err(n.clone()),
+                _ => Ok(need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16),
+            };
             let index = int(o, "index", 0, 0xFFFF)?.map(|i| i as u16);
             let command = match op(o, &["read", "write", "describe"])?.as_str() {
                 "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
@@ -461,7 +483,10 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
                     }
                 }
             };
-            Ok(Request::Pkw { pnu, command })
+            Ok(match pnu {
+                Ok(pnu) => Request::Pkw { pnu, command },
+                Err(name) => Request::PkwNamed { name, command },
+            })
         }
         Service::Rfid => {
             only(o, &["command"])?;
@@ -532,14 +557,19 @@ struct Queued {
     target: Target,
 }
 
-/// Requests waiting per slave before the next is refused as busy.
-const QUEUE_LIMIT: usize = 8;
+/// Requests one slave may have waiting in each of its two queues: output
+/// writes and DP-V1 jobs until the next [`Gateway::step`], PKW or RFID
+/// jobs for the slave's client. One more is answered
+/// [`RequestError::Busy`] and changes nothing.
+pub const QUEUE_LIMIT: usize = 8;
 
 #[derive(Debug)]
 struct Entry {
     info: SlaveInfo,
     published: Published,
     fault: Option<String>,
+    /// Output writes and DP-V1 jobs for the next step.
+    pending: VecDeque<Queued>,
     /// PKW or RFID jobs waiting for the client.
     queue: VecDeque<Queued>,
     pkw: Option<PkwClient>,
@@ -548,8 +578,8 @@ struct Entry {
     running: Option<Target>,
 }
 
-/// An answer's body: extra fields on success, the error otherwise.
-type Outcome = Result<Map<String, serde_json::Value>, RequestError>;
+/// An answer's body: the result's fields on success, the error otherwise.
+type Outcome = Result<Option<AnswerData>, RequestError>;
 
 /// The gateway between one DP master and one MQTT broker.
 ///
@@ -564,8 +594,6 @@ pub struct Gateway {
     settings: MqttSettings,
     topics: Topics,
     slaves: Vec<Entry>,
-    /// Output writes and DP-V1 jobs for the next step.
-    pending: Vec<Queued>,
     /// DP-V1 jobs the master runs.
     jobs: Vec<(JobId, Target)>,
     out: VecDeque<Publish>,
@@ -592,11 +620,11 @@ impl Gateway {
                     info,
                     published: Published::default(),
                     fault: None,
+                    pending: VecDeque::new(),
                     queue: VecDeque::new(),
                     running: None,
                 })
                 .collect(),
-            pending: vec![],
             jobs: vec![],
             out: VecDeque::new(),
             next_interval_ms: 0,
@@ -621,7 +649,7 @@ impl Gateway {
     pub fn last_will(&self) -> Publish {
         Publish {
             topic: self.topics.status(),
-            payload: json!({"state": "offline"}).to_string().into_bytes(),
+            payload: to_bytes(&Status::Offline),
             retain: true,
         }
     }
@@ -645,35 +673,36 @@ impl Gateway {
         self.out.clear();
     }
 
-    fn push(&mut self, topic: String, payload: serde_json::Value, retain: bool) {
+    fn push(&mut self, topic: String, payload: &impl serde::Serialize, retain: bool) {
         if self.online {
             self.out.push_back(Publish {
                 topic,
-                payload: payload.to_string().into_bytes(),
+                payload: to_bytes(payload),
                 retain,
             });
         }
     }
 
     fn answer(&mut self, t: Target, outcome: Outcome, ts_ms: u64) {
-        let mut o = Map::new();
-        o.insert("ok".into(), outcome.is_ok().into());
-        match outcome {
-            Ok(fields) => o.extend(fields),
+        let (data, error) = match outcome {
+            Ok(data) => (data, None),
             Err(e) => {
                 tracing::warn!(address = t.address, service = t.service.request(), error = %e, "MQTT request refused or failed");
-                o.insert("error".into(), e.to_string().into());
+                (None, Some(e.to_string()))
             }
-        }
-        if let Some(c) = t.to.id {
-            o.insert("id".into(), c);
-        }
-        o.insert("ts".into(), ts_ms.into());
+        };
+        let a = Answer {
+            ok: error.is_none(),
+            error,
+            data,
+            id: t.to.id,
+            ts: ts_ms,
+        };
         let topic = t.to.topic.unwrap_or_else(|| {
             self.topics
                 .slave(t.address, SlaveTopic::Response(t.service))
         });
-        self.push(topic, serde_json::Value::Object(o), false);
+        self.push(topic, &a, false);
     }
 
     /// Check `request` for slave `address` against the configuration and
@@ -687,7 +716,9 @@ impl Gateway {
             Request::Dpv1Read { .. } | Request::Dpv1Write { .. } if !entry.info.dpv1 => {
                 return unsupported("DP-V1 (`dpv1 = true` in the bus file)")
             }
-            Request::Pkw { .. } if entry.info.pkw.is_none() => return unsupported("PKW channel"),
+            Request::Pkw { .. } | Request::PkwNamed { .. } if entry.info.pkw.is_none() => {
+                return unsupported("PKW channel")
+            }
             Request::Rfid(_) if !entry.info.rfid => return unsupported("RFID reader handshake"),
             _ => {}
         }
@@ -730,6 +761,25 @@ impl Gateway {
         Ok(())
     }
 
+    /// A PKW request by name as one by number: the device profile's
+    /// parameter of that name ([`profibus_devices::pkw_parameter`]).
+    fn resolve(&self, address: u8, r: Request) -> Result<Request, RequestError> {
+        let Request::PkwNamed { name, command } = r else {
+            return Ok(r);
+        };
+        let info = &self
+            .slaves
+            .iter()
+            .find(|e| e.info.address == address)
+            .expect("checked")
+            .info;
+        info.gsd
+            .as_ref()
+            .and_then(|g| profibus_devices::pkw_parameter(info.ident_number, g, &name))
+            .map(|pnu| Request::Pkw { pnu, command })
+            .ok_or(RequestError::NoParameter { address, name })
+    }
+
     /// A message from the broker. Requests are checked now (a refused
     /// one is answered at once and changes nothing) and carried out from
     /// the next [`Gateway::step`]. Messages on other topics are ignored.
@@ -737,9 +787,9 @@ impl Gateway {
         let (service, address) = match self.topics.parse_request(topic) {
             None => return,
             Some((s, Ok(a))) => (s, a),
-            Some((_, Err(text))) => {
+            Some((_, Err(e))) => {
                 // No station to answer for: logged only.
-                tracing::warn!(topic, address = text, "MQTT request names no station");
+                tracing::warn!(topic, error = %e, "MQTT request refused");
                 return;
             }
         };
@@ -749,27 +799,29 @@ impl Gateway {
             address,
             to,
         };
-        let request = match request.and_then(|r| self.check(address, &r).map(|()| r)) {
+        let request = request
+            .and_then(|r| self.check(address, &r).map(|()| r))
+            .and_then(|r| self.resolve(address, r));
+        let request = match request {
             Ok(r) => r,
             Err(e) => return self.answer(target, Err(e), ts_ms),
         };
         let q = Queued { request, target };
-        match q.request {
+        let e = self
+            .slaves
+            .iter_mut()
+            .find(|e| e.info.address == address)
+            .expect("checked");
+        let waiting = match q.request {
             Request::Outputs(_) | Request::Dpv1Read { .. } | Request::Dpv1Write { .. } => {
-                self.pending.push(q)
+                &mut e.pending
             }
-            Request::Pkw { .. } | Request::Rfid(_) => {
-                let e = self
-                    .slaves
-                    .iter_mut()
-                    .find(|e| e.info.address == address)
-                    .expect("checked");
-                if e.queue.len() >= QUEUE_LIMIT {
-                    return self.answer(q.target, Err(RequestError::Busy(address)), ts_ms);
-                }
-                e.queue.push_back(q);
-            }
+            Request::Pkw { .. } | Request::PkwNamed { .. } | Request::Rfid(_) => &mut e.queue,
+        };
+        if waiting.len() >= QUEUE_LIMIT {
+            return self.answer(q.target, Err(RequestError::Busy(address)), ts_ms);
         }
+        waiting.push_back(q);
     }
 
     /// One step at a cycle boundary; `now` is the master's time,
@@ -797,11 +849,9 @@ impl Gateway {
                         let t = self.jobs.swap_remove(i).1;
                         let outcome = match m.take_result(id) {
                             Some(JobResult::Data(d)) => {
-                                let mut f = Map::new();
-                                f.insert("hex".into(), hex(&d).into());
-                                Ok(f)
+                                Ok(Some(AnswerData::Record { hex: hex(&d) }))
                             }
-                            Some(JobResult::Done) => Ok(Map::new()),
+                            Some(JobResult::Done) => Ok(None),
                             Some(r) => Err(RequestError::Failed(r.describe())),
                             None => Err(RequestError::Failed("result lost".into())),
                         };
@@ -812,7 +862,12 @@ impl Gateway {
             }
         }
         self.outage.step(&self.settings, self.online, m, ts_ms);
-        for q in std::mem::take(&mut self.pending) {
+        let pending: Vec<Queued> = self
+            .slaves
+            .iter_mut()
+            .flat_map(|e| e.pending.drain(..))
+            .collect();
+        for q in pending {
             let outcome = self.carry_out(m, &q);
             if let Some(o) = outcome {
                 if o.is_ok() {
@@ -837,7 +892,7 @@ impl Gateway {
     fn carry_out(&mut self, m: &mut DpMaster, q: &Queued) -> Option<Outcome> {
         let a = q.target.address;
         let job = match &q.request {
-            Request::Outputs(w) => return Some(self.apply(m, a, w).map(|()| Map::new())),
+            Request::Outputs(w) => return Some(self.apply(m, a, w).map(|()| None)),
             Request::Dpv1Read {
                 slot,
                 index,
@@ -854,7 +909,7 @@ impl Gateway {
                 index: *index,
                 data: data.clone(),
             },
-            Request::Pkw { .. } | Request::Rfid(_) => return None,
+            Request::Pkw { .. } | Request::PkwNamed { .. } | Request::Rfid(_) => return None,
         };
         match m.submit(job) {
             Some(id) => {
@@ -897,23 +952,24 @@ impl Gateway {
         Ok(())
     }
 
-    fn status(&self, m: &DpMaster, ts_ms: u64) -> serde_json::Value {
-        let slaves: Vec<u8> = self.slaves.iter().map(|e| e.info.address).collect();
-        let writable: Vec<u8> = self.settings.writable.iter().map(|w| w.address).collect();
-        let mut o = json!({"state": "online", "master": m.operating_state().as_str(), "ts": ts_ms,
-                           "slaves": slaves, "writable": writable});
-        if let Some(at) = self.outage.safe_applied() {
-            o["outputs_timeout"] =
-                json!({"safe_state": self.settings.safe_state.as_str(), "at": at});
+    fn status(&self, m: &DpMaster, ts_ms: u64) -> Status {
+        Status::Online {
+            master: m.operating_state(),
+            ts: ts_ms,
+            slaves: self.slaves.iter().map(|e| e.info.address).collect(),
+            writable: self.settings.writable.iter().map(|w| w.address).collect(),
+            outputs_timeout: self.outage.safe_applied().map(|at| OutputsTimeout {
+                safe_state: self.settings.safe_state,
+                at,
+            }),
         }
-        o
     }
 
     fn publish_state(&mut self, m: &mut DpMaster, ts_ms: u64) {
         if self.status_master != Some(m.operating_state()) {
             self.status_master = Some(m.operating_state());
             let s = self.status(m, ts_ms);
-            self.push(self.topics.status(), s, true);
+            self.push(self.topics.status(), &s, true);
         }
         let interval_due =
             self.settings.publish != PublishMode::OnChange && ts_ms >= self.next_interval_ms;
@@ -927,16 +983,18 @@ impl Gateway {
             let Some(h) = m.handle(addr) else { continue };
             let v = m.slave(h);
             let e = &mut self.slaves[i];
-            let name = e.info.name.clone();
             let mut msgs = vec![];
             if e.published.state != Some(v.state) {
                 e.published.state = Some(v.state);
-                let mut o = json!({"address": addr, "name": name, "state": v.state.name(),
-                                   "ts": ts_ms, "cycle": cycle});
-                if let Some(f) = &e.fault {
-                    o["fault"] = f.clone().into();
-                }
-                msgs.push((SlaveTopic::State, o));
+                let p = SlaveStatePayload {
+                    address: addr,
+                    name: &e.info.name,
+                    state: v.state,
+                    fault: e.fault.as_deref(),
+                    ts: ts_ms,
+                    cycle,
+                };
+                msgs.push((SlaveTopic::State, to_bytes(&p)));
             }
             for (t, dir, img, last) in [
                 (
@@ -955,22 +1013,13 @@ impl Gateway {
                 let changed = last.as_deref() != Some(img);
                 if (on_change && changed) || interval_due || last.is_none() {
                     *last = Some(img.to_vec());
-                    let mut o =
-                        json!({"address": addr, "hex": hex(img), "ts": ts_ms, "cycle": cycle});
-                    if let Some(map) = &e.info.channels {
-                        // The library's decoded image: `{"name": value}`.
-                        let (i, o_img) = match dir {
-                            Direction::Input => (img, &[][..]),
-                            Direction::Output => (&[][..], img),
-                        };
-                        let iv = map.values(i, o_img);
-                        let part = match dir {
-                            Direction::Input => &iv.inputs,
-                            Direction::Output => &iv.outputs,
-                        };
-                        o["values"] = serde_json::to_value(part).unwrap_or_default();
-                    }
-                    msgs.push((t, o));
+                    // The library's decoded image: `{"name": value}`.
+                    let values = e.info.channels.as_ref().map(|map| match dir {
+                        Direction::Input => map.values(img, &[]).inputs,
+                        Direction::Output => map.values(&[], img).outputs,
+                    });
+                    let p = ImagePayload::new(addr, img, values, ts_ms, cycle);
+                    msgs.push((t, to_bytes(&p)));
                 }
             }
             if e.published.diag.as_deref() != Some(v.diag) {
@@ -980,13 +1029,17 @@ impl Gateway {
                 } else {
                     profibus_dp::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
                 };
-                msgs.push((
-                    SlaveTopic::Diag,
-                    json!({"address": addr, "hex": hex(v.diag), "text": text, "ts": ts_ms, "cycle": cycle}),
-                ));
+                let p = DiagPayload::new(addr, v.diag, text, ts_ms, cycle);
+                msgs.push((SlaveTopic::Diag, to_bytes(&p)));
             }
-            for (t, o) in msgs {
-                self.push(self.topics.slave(addr, t), o, true);
+            if self.online {
+                for (t, payload) in msgs {
+                    self.out.push_back(Publish {
+                        topic: self.topics.slave(addr, t),
+                        payload,
+                        retain: true,
+                    });
+                }
             }
         }
     }
@@ -997,71 +1050,95 @@ impl Gateway {
     }
 }
 
+/// A slave's job client as [`drive`] runs it: PKW or RFID.
+trait JobClient {
+    fn is_idle(&self) -> bool;
+    /// Start `r`; `None` when it is not this client's kind.
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>>;
+    /// Drive the running job; its outcome when it ends.
+    fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome>;
+}
+
+impl JobClient for PkwClient {
+    fn is_idle(&self) -> bool {
+        PkwClient::is_idle(self)
+    }
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>> {
+        let Request::Pkw { pnu, command } = r else {
+            return None;
+        };
+        Some(self.start(now, *pnu, *command).map_err(|e| e.to_string()))
+    }
+    fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome> {
+        let words = |p: pkw::Pkw| {
+            let mut b = [0u8; PKW_LEN];
+            p.emit(&mut b);
+            hex(&b)
+        };
+        let r = self.drive(now, m, h)?;
+        Some(
+            r.map(|a| {
+                Some(AnswerData::Pkw {
+                    value: a.reply.value(),
+                    dword: a.reply.is_dword(),
+                    request: words(a.request),
+                    response: words(a.response),
+                })
+            })
+            .map_err(|e| RequestError::Failed(e.to_string())),
+        )
+    }
+}
+
+impl JobClient for RfidClient {
+    fn is_idle(&self) -> bool {
+        RfidClient::is_idle(self)
+    }
+    fn begin(&mut self, now: Instant, r: &Request) -> Option<Result<(), String>> {
+        let Request::Rfid(line) = r else {
+            return None;
+        };
+        Some(self.start(now, line).map_err(|e| e.to_string()))
+    }
+    fn poll(&mut self, now: Instant, m: &mut DpMaster, h: SlaveHandle) -> Option<Outcome> {
+        let r = self.poll_master(now, m, h)?;
+        Some(
+            r.map(|a| {
+                let text = String::from_utf8_lossy(a);
+                Some(AnswerData::Rfid {
+                    answer: text.trim_end_matches('\r').into(),
+                    hex: hex(a),
+                })
+            })
+            .map_err(|e| RequestError::Failed(e.to_string())),
+        )
+    }
+}
+
 /// Start the next PKW or RFID job of a slave when its client is idle,
 /// and drive the running one.
 fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Target, Outcome)>) {
     let Some(h) = m.handle(e.info.address) else {
         return;
     };
-    if let Some(c) = &mut e.pkw {
-        while c.is_idle() && e.running.is_none() {
-            let Some(q) = e.queue.pop_front() else { break };
-            let Request::Pkw { pnu, command } = q.request else {
-                continue;
-            };
-            match c.start(now, pnu, command) {
-                Ok(()) => e.running = Some(q.target),
-                Err(err) => answers.push((q.target, Err(RequestError::Failed(err.to_string())))),
-            }
-        }
-        if !c.is_idle() {
-            if let Some(r) = c.drive(now, m, h) {
-                let outcome = r
-                    .map(|a| {
-                        let words = |p: pkw::Pkw| {
-                            let mut b = [0u8; PKW_LEN];
-                            p.emit(&mut b);
-                            hex(&b)
-                        };
-                        let mut f = Map::new();
-                        f.insert("value".into(), a.reply.value().into());
-                        f.insert("dword".into(), a.reply.is_dword().into());
-                        f.insert("request".into(), words(a.request).into());
-                        f.insert("response".into(), words(a.response).into());
-                        f
-                    })
-                    .map_err(|err| RequestError::Failed(err.to_string()));
-                if let Some(t) = e.running.take() {
-                    answers.push((t, outcome));
-                }
-            }
+    let client: Option<&mut dyn JobClient> = match (&mut e.pkw, &mut e.rfid) {
+        (Some(c), _) => Some(c),
+        (None, Some(c)) => Some(c),
+        (None, None) => None,
+    };
+    let Some(c) = client else { return };
+    while c.is_idle() && e.running.is_none() {
+        let Some(q) = e.queue.pop_front() else { break };
+        match c.begin(now, &q.request) {
+            None => continue,
+            Some(Ok(())) => e.running = Some(q.target),
+            Some(Err(err)) => answers.push((q.target, Err(RequestError::Failed(err)))),
         }
     }
-    if let Some(c) = &mut e.rfid {
-        while c.is_idle() && e.running.is_none() {
-            let Some(q) = e.queue.pop_front() else { break };
-            let Request::Rfid(line) = q.request else {
-                continue;
-            };
-            match c.start(now, &line) {
-                Ok(()) => e.running = Some(q.target),
-                Err(err) => answers.push((q.target, Err(RequestError::Failed(err.to_string())))),
-            }
-        }
-        if !c.is_idle() {
-            if let Some(r) = c.poll_master(now, m, h) {
-                let outcome = r
-                    .map(|a| {
-                        let mut f = Map::new();
-                        let text = String::from_utf8_lossy(a);
-                        f.insert("answer".into(), text.trim_end_matches('\r').into());
-                        f.insert("hex".into(), hex(a).into());
-                        f
-                    })
-                    .map_err(|err| RequestError::Failed(err.to_string()));
-                if let Some(t) = e.running.take() {
-                    answers.push((t, outcome));
-                }
+    if !c.is_idle() {
+        if let Some(outcome) = c.poll(now, m, h) {
+            if let Some(t) = e.running.take() {
+                answers.push((t, outcome));
             }
         }
     }
@@ -1074,6 +1151,7 @@ mod tests {
     use profibus_devices::channels::ChannelType;
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};
+    use serde_json::json;
 
     type Msgs = Vec<(String, serde_json::Value, bool)>;
 
@@ -1102,6 +1180,7 @@ mod tests {
         let info = |address, channels| SlaveInfo {
             address,
             name: format!("s{address}"),
+            ident_number: 0x1234,
             channels,
             gsd: None,
             dpv1: false,
@@ -1155,7 +1234,7 @@ mod tests {
         );
         assert_eq!(
             t.parse_request("plant/a/seg1/x/outputs/set"),
-            Some((Service::Outputs, Err("x".into())))
+            Some((Service::Outputs, Err(BadAddress("x".into()))))
         );
         assert_eq!(t.parse_request("plant/a/seg1/7/outputs"), None);
         assert_eq!(t.parse_request("plant/a/seg1/7/pkw/response"), None);
@@ -1406,6 +1485,50 @@ mod tests {
     }
 
     #[test]
+    fn a_full_write_queue_refuses_the_next_write_and_changes_nothing() {
+        let (mut g, mut m) = setup();
+        g.connected(0);
+        g.step(&mut m, Instant::ZERO, 0);
+        drain(&mut g);
+        for i in 0..=QUEUE_LIMIT {
+            let p = format!(r#"{{"hex": "000000{i:02x}", "id": {i}}}"#);
+            g.handle_message("profibus/l1/3/outputs/set", p.as_bytes(), 1);
+        }
+        // The write over the limit is answered at once: busy.
+        let msgs = drain(&mut g);
+        assert_eq!(msgs.len(), 1, "{msgs:?}");
+        let r = find(&msgs, "profibus/l1/3/outputs/response").unwrap();
+        assert_eq!(
+            (r["ok"].as_bool(), r["id"].as_u64()),
+            (Some(false), Some(QUEUE_LIMIT as u64))
+        );
+        let e = r["error"].as_str().unwrap();
+        assert!(e.contains("too many requests waiting (at most 8)"), "{e}");
+        // Another slave has a queue of its own.
+        g.handle_message(
+            "profibus/l1/5/outputs/set",
+            br#"{"channels": {"speed": 9}}"#,
+            1,
+        );
+        g.step(&mut m, Instant::ZERO, 2);
+        let msgs = drain(&mut g);
+        let ok = |t: &str| {
+            msgs.iter()
+                .filter(|(topic, v, _)| topic == t && v["ok"] == true)
+                .count()
+        };
+        assert_eq!(ok("profibus/l1/3/outputs/response"), QUEUE_LIMIT);
+        assert_eq!(ok("profibus/l1/5/outputs/response"), 1);
+        // The queued writes applied in order; the refused one did not.
+        assert_eq!(m.outputs(3).unwrap(), [0, 0, 0, QUEUE_LIMIT as u8 - 1]);
+        assert_eq!(m.outputs(5).unwrap(), [0, 9, 0, 0]);
+        // The step emptied the queue: writes are taken again.
+        g.handle_message("profibus/l1/3/outputs/set", b"00000063", 3);
+        g.step(&mut m, Instant::ZERO, 4);
+        assert_eq!(m.outputs(3).unwrap(), [0, 0, 0, 0x63]);
+    }
+
+    #[test]
     fn outputs_timeout_puts_the_outputs_in_the_safe_state_once() {
         for (safe, want3, master) in [
             ("keep", [0xff, 0xfe, 0, 3], "operate"),
@@ -1454,6 +1577,8 @@ mod tests {
             [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
             [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\
             [[slave]]\naddress = 30\ndevice = \"rfid\"\n\n\
+            [[slave]]\naddress = 40\ndevice = \"bk3000\"\nterminals = [\"KL3102\", \"KL9010\"]\n\n\
+            [[slave]]\naddress = 26\ndevice = \"bm4\"\nexample = true\nvariables = [\"ud_MyReadVar1\"]\n\n\
             [mqtt]\nbus = \"p\"\nwritable = [3, 25]\n";
         let bus = profibus_devices::bus::ProfiledBus::parse(&dir, text).unwrap();
         let s = crate::MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
@@ -1487,7 +1612,7 @@ mod tests {
             g.step(p.master(), t, 0);
             seen.extend(drain(&mut g));
             let m = p.master();
-            if [3, 25, 30]
+            if [3, 25, 26, 30, 40]
                 .iter()
                 .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
             {
@@ -1500,6 +1625,22 @@ mod tests {
         assert_eq!(v["2 words in/out[0]"], 0, "{v}");
         let v = &find(&seen, "profibus/p/25/inputs").unwrap()["values"];
         assert!(v.get("status1").is_some() && v.get("pke").is_some(), "{v}");
+        // Units where the profile scales a channel: the BK3000's KL3102
+        // (±10 V); the diagnosis decoded by its standard bytes.
+        let last = |topic: &str| {
+            seen.iter()
+                .rev()
+                .find(|(t, _, _)| t == topic)
+                .map(|(_, v, _)| v.clone())
+                .unwrap()
+        };
+        let bk = last("profibus/p/40/inputs");
+        assert_eq!(bk["units"]["1.KL3102.1"], "V", "{bk}");
+        assert!(bk["values"]["1.KL3102.1"].is_f64(), "{bk}");
+        let d = last("profibus/p/3/diag");
+        assert_eq!(d["master"], 1, "{d}");
+        assert_eq!(d["station_status"], "WD_On", "{d}");
+        assert!(d["ident_number"].is_u64() && d["text"].is_array(), "{d}");
         // DP-V1: write a record, read it back.
         g.handle_message(
             "profibus/p/3/dpv1/request",
@@ -1546,6 +1687,27 @@ mod tests {
         let r = run_until(&mut g, &mut p, "me/pkw");
         assert_eq!(r["value"], 0x1234_5678, "{r}");
         assert_eq!(r["response"], "23e8000012345678", "{r}");
+        // PKW by name: a BM4 variable module of the GSD is its parameter
+        // (`di_MyReadVar3`: PNU 4); an unknown name is refused.
+        g.handle_message(
+            "profibus/p/26/pkw/request",
+            br#"{"op": "read", "pnu": "di_MyReadVar3", "id": "n"}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
+        assert_eq!(
+            (r["ok"].as_bool(), r["id"].as_str()),
+            (Some(true), Some("n")),
+            "{r}"
+        );
+        assert_eq!(&r["request"].as_str().unwrap()[..4], "1004", "{r}");
+        g.handle_message(
+            "profibus/p/26/pkw/request",
+            br#"{"op": "read", "pnu": "nope"}"#,
+            0,
+        );
+        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
+        assert_eq!(r["error"], "slave 26 has no parameter named `nope`", "{r}");
         // RFID: the reader is not writable; a read-only request would be
         // answered, a command is refused.
         g.handle_message("profibus/p/30/rfid/request", br#"{"command": "VER"}"#, 0);

@@ -22,14 +22,15 @@
 //! |---|---|---|
 //! | `status` | yes | `{"state": "online", "master", "ts", "slaves", "writable"}` (+ `"outputs_timeout"` after an outage that reached it); `master` is the master's operating state (`operate`, `clear`, `stop`), republished at once when it changes; the last will sets `{"state": "offline"}` |
 //! | `<addr>/state` | yes | `{"address", "name", "state", "ts", "cycle"}` (+ `"fault"` after a parameterisation/configuration fault); published in the step after any change (slave lost, back) |
-//! | `<addr>/inputs` | yes | `{"address", "hex", "values", "ts", "cycle"}`; `values` (named channels) for profiled slaves |
+//! | `<addr>/inputs` | yes | `{"address", "hex", "values", "units", "ts", "cycle"}`; `values` (`{"name": value}`, named channels) for slaves with a device profile or GSD modules, scaled channels in their unit; `units` (`{"name": "V"}`) only when some channel is scaled |
 //! | `<addr>/outputs` | yes | the output image sent, same form |
-//! | `<addr>/diag` | yes | `{"address", "hex", "text", "ts", "cycle"}`: the last diagnosis, decoded, published in the step after it changes |
+//! | `<addr>/diag` | yes | `{"address", "hex", "station_status", "master", "ident_number", "text", "ts", "cycle"}`: the last Slave_Diag, published in the step after it changes; `station_status` (the status bits in words, `"OK"` when none is set), `master` (the parameterising master, `null` for none) and `ident_number` when it has its 6 standard bytes; `text` the whole diagnosis in words (GSD texts where known) |
 //! | `<addr>/outputs/set`, `<addr>/dpv1/request`, `<addr>/pkw/request`, `<addr>/rfid/request` | — | requests from clients: see below |
 //! | `<addr>/outputs/response`, `…/dpv1/response`, `…/pkw/response`, `…/rfid/response` | no | `{"ok", "error"?, "id"?, "ts", …}`: the answers |
 //!
 //! `ts` is the wall-clock time in ms since the Unix epoch, `cycle` the
-//! master's poll cycle counter.
+//! master's poll cycle counter. The payloads are the typed values of
+//! [`payload`].
 //!
 //! # Requests and answers
 //!
@@ -46,7 +47,7 @@
 //! |---|---|---|
 //! | `outputs/set` | a bare hex string (the whole image), `{"hex"}` (the whole image, exactly the output length) or `{"channels": {"name": value}}` (named output channels of a profiled slave) | — |
 //! | `dpv1/request` | `{"op": "read", "slot", "index", "length"?}` (length 1..=240, default 240) or `{"op": "write", "slot", "index", "hex"}` | `"hex"` (read) |
-//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}` | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
+//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}`; `"pnu"` is a number 0..=2047 or the name the device gives the parameter (a BM4 variable module of its GSD, e.g. `"di_MyReadVar3"`) | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
 //! | `rfid/request` | `{"command": "RD 00 01"}` (one command line) | `"answer"` (text), `"hex"` |
 //!
 //! Permissions come from `[mqtt] writable` (see [`settings`]): output
@@ -56,8 +57,13 @@
 //! need a DP-V1 slave, PKW requests a slave with a PKW channel (BM4,
 //! Omega), RFID requests a reader; they run through the master's MSAC_C1
 //! jobs and the device crate's `PkwClient` and `RfidClient`, one PKW or
-//! RFID job per slave at a time (up to 8 wait; more are answered busy),
-//! each within `[mqtt] job_timeout_ms`.
+//! RFID job per slave at a time, each within `[mqtt] job_timeout_ms`.
+//!
+//! Queues are bounded per slave: at most [`core::QUEUE_LIMIT`] (8) output
+//! writes and DP-V1 requests wait for the next cycle boundary, and 8 PKW
+//! or RFID jobs for the slave's client; one more is answered
+//! `{"ok": false, "error": "slave N: too many requests waiting (at most 8)"}`
+//! on its response topic and changes nothing.
 //!
 //! An output write is checked as a whole and applied to the slave's
 //! image at once between two polls, so one Data_Exchange carries all of
@@ -134,6 +140,7 @@
 pub mod core;
 pub mod link;
 pub mod outage;
+pub mod payload;
 pub mod settings;
 pub mod sim;
 pub mod sparkplug;

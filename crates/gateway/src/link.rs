@@ -107,10 +107,17 @@ impl Session for Gateway {
     }
 }
 
-/// A failed publish.
+/// A failed publish. The message includes the cause, which is therefore
+/// not also returned as `source()`: a printed error chain names it once.
 #[derive(Debug, thiserror::Error)]
 #[error("MQTT publish failed: {0}")]
-pub struct LinkError(#[from] rumqttc::ClientError);
+pub struct LinkError(rumqttc::ClientError);
+
+impl From<rumqttc::ClientError> for LinkError {
+    fn from(e: rumqttc::ClientError) -> Self {
+        LinkError(e)
+    }
+}
 
 /// Why a connection cannot be set up.
 #[derive(Debug, thiserror::Error)]
@@ -119,12 +126,13 @@ pub enum ConnectionError {
     #[error(transparent)]
     Settings(#[from] SettingsError),
     /// A file named in the settings.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
-        /// Why.
-        source: std::io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: std::io::Error,
     },
     /// The password's environment variable is not set.
     #[error("environment variable {0} (password_env) is not set")]
@@ -175,9 +183,9 @@ impl Connection {
     ) -> Result<Connection, ConnectionError> {
         let broker = parse_broker(url)?;
         let read = |path: &PathBuf| {
-            std::fs::read(path).map_err(|source| ConnectionError::Read {
+            std::fs::read(path).map_err(|error| ConnectionError::Read {
                 path: path.clone(),
-                source,
+                error,
             })
         };
         let password = match &settings.password {
@@ -362,6 +370,15 @@ pub fn flush(link: &MqttLink, gateway: &mut impl Session) {
             tracing::debug!(error = %e, "dropped a publish");
         }
     }
+}
+
+/// One step of `gateway` at a cycle boundary of the master `m` (bus time
+/// `now`): hand it the link's events, step it, send what it queued.
+pub fn step(link: &mut MqttLink, gateway: &mut impl Session, m: &mut DpMaster, now: Instant) {
+    let ts = wall_ms();
+    pump(link, gateway, ts);
+    gateway.step(m, now, ts);
+    flush(link, gateway);
 }
 
 /// Milliseconds since the Unix epoch, for payload timestamps.

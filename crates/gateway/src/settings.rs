@@ -216,6 +216,26 @@ fn string(t: &toml::Table, key: &'static str) -> Result<Option<String>, Settings
     }
 }
 
+/// A string key naming one of `choices` (absent: the first).
+fn choice<T: Copy>(
+    t: &toml::Table,
+    key: &'static str,
+    choices: &[(&str, T)],
+) -> Result<T, SettingsError> {
+    let Some(name) = string(t, key)? else {
+        return Ok(choices[0].1);
+    };
+    match choices.iter().find(|(n, _)| *n == name) {
+        Some(&(_, v)) => Ok(v),
+        None => {
+            let names: Vec<&str> = choices.iter().map(|c| c.0).collect();
+            let (last, rest) = names.split_last().expect("choices");
+            let list = format!("{} or {last}", rest.join(", "));
+            Err(bad(key, format!("`{name}` is not {list}")))
+        }
+    }
+}
+
 /// Whether `s` is usable as one topic level (no wildcards, no `/`).
 fn topic_level(s: &str) -> bool {
     !s.is_empty() && !s.contains(['/', '+', '#', '\0'])
@@ -246,17 +266,15 @@ impl MqttSettings {
             Some(toml::Value::Integer(q @ 0..=2)) => *q as u8,
             Some(_) => return Err(bad("qos", "must be 0, 1 or 2")),
         };
-        let publish = match string(t, "publish")?.as_deref() {
-            None | Some("change") => PublishMode::OnChange,
-            Some("interval") => PublishMode::Interval,
-            Some("both") => PublishMode::Both,
-            Some(o) => {
-                return Err(bad(
-                    "publish",
-                    format!("`{o}` is not change, interval or both"),
-                ))
-            }
-        };
+        let publish = choice(
+            t,
+            "publish",
+            &[
+                ("change", PublishMode::OnChange),
+                ("interval", PublishMode::Interval),
+                ("both", PublishMode::Both),
+            ],
+        )?;
         let interval = match t.get("interval_ms") {
             None => Duration::from_secs(1),
             Some(toml::Value::Integer(ms @ 1..=86_400_000)) => Duration::from_millis(*ms as u64),
@@ -286,17 +304,15 @@ impl MqttSettings {
         };
         let outputs_timeout = ms("outputs_timeout_ms")?;
         let job_timeout = ms("job_timeout_ms")?.unwrap_or(Duration::from_secs(2));
-        let safe_state = match string(t, "safe_state")?.as_deref() {
-            None | Some("keep") => SafeState::Keep,
-            Some("zero") => SafeState::Zero,
-            Some("clear") => SafeState::Clear,
-            Some(o) => {
-                return Err(bad(
-                    "safe_state",
-                    format!("`{o}` is not keep, zero or clear"),
-                ))
-            }
-        };
+        let safe_state = choice(
+            t,
+            "safe_state",
+            &[
+                ("keep", SafeState::Keep),
+                ("zero", SafeState::Zero),
+                ("clear", SafeState::Clear),
+            ],
+        )?;
         let password = match (string(t, "password_file")?, string(t, "password_env")?) {
             (Some(_), Some(_)) => {
                 return Err(bad(
@@ -348,6 +364,26 @@ impl MqttSettings {
         if let Some(f) = &mut self.ca_file {
             *f = dir.join(&*f);
         }
+    }
+
+    /// The settings of the bus file at `path` from its `[mqtt]` table:
+    /// the bus named after the file's stem (wildcards and `/` replaced by
+    /// `_`) unless the table names it, files relative to the bus file's
+    /// directory.
+    pub fn for_bus_file(
+        table: Option<&toml::Table>,
+        path: &Path,
+    ) -> Result<MqttSettings, SettingsError> {
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("bus")
+            .replace(['/', '+', '#'], "_");
+        let mut s = MqttSettings::from_table(table, &stem)?;
+        if let Some(dir) = path.parent() {
+            s.relative_to(dir);
+        }
+        Ok(s)
     }
 }
 

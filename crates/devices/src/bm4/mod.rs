@@ -119,9 +119,15 @@ pub const SDIAG_MIN: usize = 3;
 
 /// The default GSD, parsed.
 pub fn default_gsd() -> Gsd {
-    Gsd::parse(&decode_latin1(DEFAULT_GSD), ParseOptions { lenient: true })
-        .expect("BM4OPRO1.GSD parses leniently")
-        .gsd
+    // Parsed once (about 2 ms in a debug build): every new module needs it.
+    static PARSED: std::sync::OnceLock<Gsd> = std::sync::OnceLock::new();
+    PARSED
+        .get_or_init(|| {
+            Gsd::parse(&decode_latin1(DEFAULT_GSD), ParseOptions { lenient: true })
+                .expect("BM4OPRO1.GSD parses leniently")
+                .gsd
+        })
+        .clone()
 }
 
 /// How the station address was chosen (`us_DEVICE` of FB
@@ -245,9 +251,16 @@ pub enum AddressingError {
     /// us_DEVICE outside its values.
     #[error("us_DEVICE {0} is invalid (1..125, 126, 127, 128): PROFIBUS_INIT_SL u_ERROR 4")]
     UsDevice(u8),
-    /// The state file cannot be read.
+    /// The state file cannot be read (the message includes the cause,
+    /// which is therefore not also returned as `source()`).
     #[error("state file {0}")]
-    StateFile(#[from] AddressFileError),
+    StateFile(AddressFileError),
+}
+
+impl From<AddressFileError> for AddressingError {
+    fn from(e: AddressFileError) -> Self {
+        AddressingError::StateFile(e)
+    }
 }
 
 /// The module's status as its LEDs show it (L1158-1166, L2041-2049).

@@ -90,9 +90,9 @@ example = true (the manual's example table instead of --vars); master side: vari
         let dev = Bm4::new(table.clone(), addressing.clone());
         let (gsd, gsd_file) = (dev.gsd().clone(), dev.gsd_file());
         if let Some(path) = &options.write_gsd {
-            std::fs::write(path, &gsd_file).map_err(|source| ProfileError::File {
+            std::fs::write(path, &gsd_file).map_err(|error| ProfileError::File {
                 path: path.clone(),
-                source,
+                error,
             })?;
         }
         Ok(Bm4Profile {

@@ -33,8 +33,9 @@
 
 use super::{status, ErrorNumber, Plc, WriteEffect};
 use profibus_fdl::Instant;
-use serde_json::{json, Value};
+use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
+use std::fmt;
 use std::time::Duration;
 
 /// Default timeout of `wait-bit` and `wait`.
@@ -479,6 +480,181 @@ pub fn status_bits(s: i32) -> Vec<&'static str> {
     .collect()
 }
 
+/// The reply to one command: `cmd` and `ok`, and the fields the command
+/// has (see the module docs). `Serialize` gives the JSON object (fields
+/// that a command does not have are left out); `Display` the same as one
+/// line, keys sorted.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct Reply {
+    /// The client it answers (`stdin`, `script`), set by the program that
+    /// serves several.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub src: Option<&'static str>,
+    /// The command (`read`, `write`, …); none for a line that does not
+    /// parse.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cmd: Option<&'static str>,
+    /// The line that does not parse.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<String>,
+    /// It did what it says.
+    pub ok: bool,
+    /// Register (`read`, `write`, `calc`, `wait-bit`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reg: Option<u32>,
+    /// The one value read, written or waited on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub value: Option<i64>,
+    /// The values read or written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub values: Option<Vec<i64>>,
+    /// Status bits by name, or the bits a `wait-bit` waits on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bits: Option<Bits>,
+    /// What the module ignored.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ignored: Option<Ignored>,
+    /// Registers copied.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub count: Option<i64>,
+    /// First register copied from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub from: Option<u32>,
+    /// First register copied to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub to: Option<u32>,
+    /// The module's error number (1x134), or why the command failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<ErrorField>,
+    /// The module's error in words (`null` in a `status` without error).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_text: Option<Option<&'static str>>,
+    /// `set` or `clear` (`wait-bit`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub state: Option<&'static str>,
+    /// A wait ended by its timeout.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timeout: Option<bool>,
+    /// Milliseconds waited.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub waited_ms: Option<u64>,
+    /// The one bit a `wait-bit` waits on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bit: Option<u32>,
+    /// The bits of several that are so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hit: Option<Vec<u32>>,
+    /// The values compared by `wait`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub a: Option<i64>,
+    /// See `a`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub b: Option<i64>,
+    /// Whether an `if`'s command ran (only `false` is reported: a taken
+    /// `if` replies as its command).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub taken: Option<bool>,
+    /// The label jumped to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub label: Option<String>,
+    /// `status`: the LEDs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub leds: Option<Leds>,
+    /// `status`: the status register.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub status: Option<i32>,
+    /// `status`: the initialisation error register.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init_error: Option<i32>,
+    /// `status`: the DP state register.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dp_state: Option<i32>,
+    /// `status`: the station address (`null` while unset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub address: Option<Option<u8>>,
+    /// `status`: diagnosis pending register.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub diag_pending: Option<i32>,
+}
+
+impl Reply {
+    /// `cmd` answered `ok`.
+    pub fn new(cmd: &'static str, ok: bool) -> Reply {
+        Reply {
+            cmd: Some(cmd),
+            ok,
+            ..Reply::default()
+        }
+    }
+
+    /// `cmd` failed for `why`.
+    fn failed(cmd: &'static str, why: String) -> Reply {
+        Reply {
+            error: Some(ErrorField::Text(why)),
+            ..Reply::new(cmd, false)
+        }
+    }
+}
+
+impl fmt::Display for Reply {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match serde_json::to_value(self) {
+            Ok(v) => v.fmt(f),
+            Err(_) => Err(fmt::Error),
+        }
+    }
+}
+
+/// `bits` of a [`Reply`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(untagged)]
+pub enum Bits {
+    /// Status bits that are set, by name.
+    Names(Vec<&'static str>),
+    /// Bit numbers.
+    Numbers(Vec<u32>),
+}
+
+/// `ignored` of a [`Reply`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(untagged)]
+pub enum Ignored {
+    /// Why the one write was ignored.
+    Why(&'static str),
+    /// The registers of a multi-register write that were ignored.
+    Registers(Vec<IgnoredWrite>),
+    /// How many registers of a copy were ignored.
+    Count(u32),
+}
+
+/// One ignored write of several.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct IgnoredWrite {
+    /// The register.
+    pub reg: u32,
+    /// Why.
+    pub why: &'static str,
+}
+
+/// `error` of a [`Reply`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(untagged)]
+pub enum ErrorField {
+    /// The module's error number.
+    Number(u8),
+    /// Why the command failed.
+    Text(String),
+}
+
+/// `leds` of a `status` [`Reply`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Leds {
+    /// The DX LED is on.
+    pub dx: bool,
+    /// The ERR LED's state.
+    pub err: &'static str,
+}
+
 /// What [`Interpreter::run`] needs next.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Progress {
@@ -506,7 +682,7 @@ pub struct Interpreter {
     pc: usize,
     /// The running wait: (start, deadline).
     wait: Option<(Instant, Instant)>,
-    replies: VecDeque<Value>,
+    replies: VecDeque<Reply>,
     lines: usize,
 }
 
@@ -566,14 +742,16 @@ impl Interpreter {
         match Command::parse(line) {
             Ok(Some(cmd)) => self.add(self.lines, cmd),
             Ok(None) => {}
-            Err(e) => self.replies.push_back(json!({
-                "line": line.trim(), "ok": false, "error": e.to_string(),
-            })),
+            Err(e) => self.replies.push_back(Reply {
+                line: Some(line.trim().to_string()),
+                error: Some(ErrorField::Text(e.to_string())),
+                ..Reply::default()
+            }),
         }
     }
 
     /// The next reply.
-    pub fn take_reply(&mut self) -> Option<Value> {
+    pub fn take_reply(&mut self) -> Option<Reply> {
         self.replies.pop_front()
     }
 
@@ -610,15 +788,18 @@ impl Interpreter {
     fn exec(&mut self, plc: &mut Plc, now: Instant, cmd: &Command) -> Step {
         match cmd {
             Command::Read { reg, count } => {
-                let values: Vec<i32> = (0..*count).map(|i| plc.read(now, reg + i)).collect();
-                let mut r = json!({"cmd": "read", "reg": reg, "ok": true});
+                let values: Vec<i64> = (0..*count).map(|i| plc.read(now, reg + i) as i64).collect();
+                let mut r = Reply {
+                    reg: Some(*reg),
+                    ..Reply::new("read", true)
+                };
                 if *count == 1 {
-                    r["value"] = json!(values[0]);
+                    r.value = Some(values[0]);
                     if plc.local(*reg) == Some(super::reg::STATUS) {
-                        r["bits"] = json!(status_bits(values[0]));
+                        r.bits = Some(Bits::Names(status_bits(values[0] as i32)));
                     }
                 } else {
-                    r["values"] = json!(values);
+                    r.values = Some(values);
                 }
                 Step::Next(Some(r))
             }
@@ -628,19 +809,21 @@ impl Interpreter {
                 let mut ignored = Vec::new();
                 for (i, v) in vals.iter().enumerate() {
                     if let WriteEffect::Ignored(why) = plc.write(now, reg + i as u32, *v) {
-                        ignored.push(json!({"reg": reg + i as u32, "why": why}));
+                        let reg = reg + i as u32;
+                        ignored.push(IgnoredWrite { reg, why });
                     }
                 }
-                let mut r = json!({"cmd": "write", "reg": reg, "ok": ignored.is_empty()});
+                let mut r = Reply {
+                    reg: Some(*reg),
+                    ..Reply::new("write", ignored.is_empty())
+                };
                 if vals.len() == 1 {
-                    r["value"] = json!(vals[0]);
-                    if let Some(i) = ignored.first() {
-                        r["ignored"] = i["why"].clone();
-                    }
+                    r.value = Some(vals[0]);
+                    r.ignored = ignored.first().map(|i| Ignored::Why(i.why));
                 } else {
-                    r["values"] = json!(vals);
+                    r.values = Some(vals);
                     if !ignored.is_empty() {
-                        r["ignored"] = json!(ignored);
+                        r.ignored = Some(Ignored::Registers(ignored));
                     }
                 }
                 error_fields(plc, before, &mut r);
@@ -649,8 +832,8 @@ impl Interpreter {
             Command::Copy { count, from, to } => {
                 let n = value(plc, now, *count);
                 if !(0..=10_000).contains(&n) {
-                    return Step::Next(Some(json!({"cmd": "copy", "ok": false,
-                        "error": format!("count {n} is outside 0..=10000")})));
+                    let why = format!("count {n} is outside 0..=10000");
+                    return Step::Next(Some(Reply::failed("copy", why)));
                 }
                 let before = plc.module.error_count();
                 let mut ignored = 0;
@@ -660,11 +843,13 @@ impl Interpreter {
                         ignored += 1;
                     }
                 }
-                let mut r = json!({"cmd": "copy", "count": n, "from": from, "to": to,
-                                   "ok": ignored == 0});
-                if ignored > 0 {
-                    r["ignored"] = json!(ignored);
-                }
+                let mut r = Reply {
+                    count: Some(n),
+                    from: Some(*from),
+                    to: Some(*to),
+                    ignored: (ignored > 0).then_some(Ignored::Count(ignored)),
+                    ..Reply::new("copy", ignored == 0)
+                };
                 error_fields(plc, before, &mut r);
                 Step::Next(Some(r))
             }
@@ -686,9 +871,11 @@ impl Interpreter {
                     }
                 };
                 let ok = plc.write(now, *dest, v) == WriteEffect::Applied;
-                Step::Next(Some(
-                    json!({"cmd": "calc", "reg": dest, "value": v, "ok": ok}),
-                ))
+                Step::Next(Some(Reply {
+                    reg: Some(*dest),
+                    value: Some(v),
+                    ..Reply::new("calc", ok)
+                }))
             }
             Command::WaitBit {
                 reg,
@@ -706,13 +893,19 @@ impl Interpreter {
                 let list: Vec<u32> = (0..24).filter(|b| bits & 1 << b != 0).collect();
                 let which: Vec<u32> = (0..24).filter(|b| hit & 1 << b != 0).collect();
                 self.wait_step(now, *timeout, hit != 0, |waited, ok| {
-                    let mut r = json!({"cmd": "wait-bit", "reg": reg, "state": state,
-                           "value": v, "ok": ok, "timeout": !ok, "waited_ms": waited});
+                    let mut r = Reply {
+                        reg: Some(*reg),
+                        state: Some(state),
+                        value: Some(v as i64),
+                        timeout: Some(!ok),
+                        waited_ms: Some(waited),
+                        ..Reply::new("wait-bit", ok)
+                    };
                     if list.len() == 1 {
-                        r["bit"] = json!(list[0]);
+                        r.bit = Some(list[0]);
                     } else {
-                        r["bits"] = json!(list);
-                        r["hit"] = json!(which);
+                        r.bits = Some(Bits::Numbers(list));
+                        r.hit = Some(which);
                     }
                     r
                 })
@@ -725,15 +918,21 @@ impl Interpreter {
             } => {
                 let v = plc.read(now, *reg);
                 if (v & (1 << bit) != 0) != *set {
-                    return Step::Next(Some(json!({"cmd": "if-bit", "taken": false, "ok": true})));
+                    return Step::Next(Some(Reply {
+                        taken: Some(false),
+                        ..Reply::new("if-bit", true)
+                    }));
                 }
                 self.exec(plc, now, then)
             }
             Command::Wait { a, cmp, b, timeout } => {
                 let (x, y) = (value(plc, now, *a), value(plc, now, *b));
-                self.wait_step(now, *timeout, holds(x, *cmp, y), |waited, ok| {
-                    json!({"cmd": "wait", "a": x, "b": y, "ok": ok, "timeout": !ok,
-                           "waited_ms": waited})
+                self.wait_step(now, *timeout, holds(x, *cmp, y), |waited, ok| Reply {
+                    a: Some(x),
+                    b: Some(y),
+                    timeout: Some(!ok),
+                    waited_ms: Some(waited),
+                    ..Reply::new("wait", ok)
                 })
             }
             Command::Delay(d) => {
@@ -742,41 +941,53 @@ impl Interpreter {
                     return Step::Blocked(until);
                 }
                 self.wait = None;
-                Step::Next(Some(json!({"cmd": "delay", "ok": true,
-                    "waited_ms": now.saturating_duration_since(start).as_millis() as u64})))
+                Step::Next(Some(Reply {
+                    waited_ms: Some(now.saturating_duration_since(start).as_millis() as u64),
+                    ..Reply::new("delay", true)
+                }))
             }
             Command::If { a, cmp, b, then } => {
                 let (x, y) = (value(plc, now, *a), value(plc, now, *b));
                 if !holds(x, *cmp, y) {
-                    return Step::Next(Some(json!({"cmd": "if", "taken": false, "ok": true})));
+                    return Step::Next(Some(Reply {
+                        taken: Some(false),
+                        ..Reply::new("if", true)
+                    }));
                 }
                 self.exec(plc, now, then)
             }
             Command::Label(_) => Step::Next(None),
             Command::Goto(n) => match self.labels.get(n) {
-                Some(&to) => Step::Jump(to, json!({"cmd": "goto", "label": n, "ok": true})),
-                None => Step::Next(Some(
-                    json!({"cmd": "goto", "ok": false, "error": format!("no label `{n}`")}),
-                )),
+                Some(&to) => Step::Jump(
+                    to,
+                    Reply {
+                        label: Some(n.clone()),
+                        ..Reply::new("goto", true)
+                    },
+                ),
+                None => Step::Next(Some(Reply::failed("goto", format!("no label `{n}`")))),
             },
             Command::Status => {
                 let m = &mut plc.module;
                 let s = m.read(now, super::reg::STATUS);
                 let e = m.error();
                 let (dx, err) = m.leds();
-                Step::Next(Some(json!({
-                    "leds": {"dx": dx, "err": err},
-                    "cmd": "status", "ok": true, "status": s, "bits": status_bits(s),
-                    "error": e.map_or(0, |e| e.number()), "error_text": e.map(|e| e.as_str()),
-                    "init_error": m.read(now, super::reg::INIT_ERROR),
-                    "dp_state": m.read(now, super::reg::DP_STATE),
-                    "address": m.station_address(),
-                    "diag_pending": m.read(now, super::reg::DIAG_PENDING),
-                })))
+                Step::Next(Some(Reply {
+                    leds: Some(Leds { dx, err }),
+                    status: Some(s),
+                    bits: Some(Bits::Names(status_bits(s))),
+                    error: Some(ErrorField::Number(e.map_or(0, |e| e.number()))),
+                    error_text: Some(e.map(|e| e.as_str())),
+                    init_error: Some(m.read(now, super::reg::INIT_ERROR)),
+                    dp_state: Some(m.read(now, super::reg::DP_STATE)),
+                    address: Some(m.station_address()),
+                    diag_pending: Some(m.read(now, super::reg::DIAG_PENDING)),
+                    ..Reply::new("status", true)
+                }))
             }
             Command::FailMemoryTest => {
                 plc.module.fail_memory_test();
-                Step::Next(Some(json!({"cmd": "fail-memory-test", "ok": true})))
+                Step::Next(Some(Reply::new("fail-memory-test", true)))
             }
         }
     }
@@ -786,7 +997,7 @@ impl Interpreter {
         now: Instant,
         timeout: Duration,
         done: bool,
-        reply: impl FnOnce(u64, bool) -> Value,
+        reply: impl FnOnce(u64, bool) -> Reply,
     ) -> Step {
         let (start, deadline) = *self.wait.get_or_insert((now, now + timeout));
         let waited = now.saturating_duration_since(start).as_millis() as u64;
@@ -798,19 +1009,19 @@ impl Interpreter {
     }
 }
 
-fn error_fields(plc: &Plc, before: u64, r: &mut Value) {
+fn error_fields(plc: &Plc, before: u64, r: &mut Reply) {
     if plc.module.error_count() != before {
         if let Some(e) = plc.module.error() {
-            r["error"] = json!(e.number());
-            r["error_text"] = json!(e.as_str());
-            r["ok"] = json!(false);
+            r.error = Some(ErrorField::Number(e.number()));
+            r.error_text = Some(Some(e.as_str()));
+            r.ok = false;
         }
     }
 }
 
 enum Step {
-    Next(Option<Value>),
-    Jump(usize, Value),
+    Next(Option<Reply>),
+    Jump(usize, Reply),
     Blocked(Instant),
 }
 

@@ -55,7 +55,7 @@ impl ScriptedJx2 {
         };
         merge(self.program.run(&mut self.plc, now));
         while let Some(r) = self.program.take_reply() {
-            let notable = r["ok"] != true || r["cmd"] == "read" || r["cmd"] == "status";
+            let notable = !r.ok || matches!(r.cmd, Some("read" | "status"));
             if notable && self.replies.len() < 256 {
                 self.replies.push_back(DeviceEvent {
                     kind: "jx2",

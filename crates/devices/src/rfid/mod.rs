@@ -45,6 +45,8 @@
 
 pub mod client;
 pub mod commands;
+pub mod demo;
+pub mod jobs;
 pub mod link;
 pub mod profile;
 pub mod tags;

@@ -34,8 +34,17 @@ pub struct Integrity {
     /// form: corruptions the 8-bit FCS cannot see. Counted, never taken
     /// as sent.
     pub undetected: u64,
+    /// Of `undetected`, token telegrams (SD4 `DC DA SA`): they have no
+    /// FCS at all, so any bit error in DA or SA that keeps both addresses
+    /// valid, or a bit error that turns another byte into SD4, forges
+    /// one. A forged token the master receives while it holds the real
+    /// one makes it drop its own (duplicate token, see
+    /// `SoakReport::token_ring`).
+    pub forged_tokens: u64,
     /// Telegrams with valid framing and FCS made of noise alone.
     pub noise_telegrams: u64,
+    /// Of `noise_telegrams`, token telegrams.
+    pub noise_tokens: u64,
     /// Framer rejections on the transmissions' bytes (a corrupted
     /// transmission may raise several, or share one with its neighbour).
     pub framer_errors: u64,
@@ -73,7 +82,9 @@ pub(super) struct Ledger {
     sent: u64,
     intact: u64,
     undetected: u64,
+    forged_tokens: u64,
     noise_telegrams: u64,
+    noise_tokens: u64,
 }
 
 impl Ledger {
@@ -84,7 +95,9 @@ impl Ledger {
             sent: 0,
             intact: 0,
             undetected: 0,
+            forged_tokens: 0,
             noise_telegrams: 0,
+            noise_tokens: 0,
         }
     }
 
@@ -108,10 +121,17 @@ impl Ledger {
             match s.framer.frame(&s.buf) {
                 Framed::Telegram { skip, len } => {
                     let t = &s.buf[skip..skip + len];
+                    let token = t.first() == Some(&profibus_fdl::wire::consts::SD4);
                     match from {
-                        None => self.noise_telegrams += 1,
+                        None => {
+                            self.noise_telegrams += 1;
+                            self.noise_tokens += u64::from(token);
+                        }
                         Some(_) if s.sent(t) => self.intact += 1,
-                        Some(_) => self.undetected += 1,
+                        Some(_) => {
+                            self.undetected += 1;
+                            self.forged_tokens += u64::from(token);
+                        }
                     }
                     s.buf.drain(..skip + len);
                 }
@@ -147,7 +167,9 @@ impl Ledger {
             corrupted,
             rejected: corrupted.saturating_sub(self.undetected),
             undetected: self.undetected,
+            forged_tokens: self.forged_tokens,
             noise_telegrams: self.noise_telegrams,
+            noise_tokens: self.noise_tokens,
             framer_errors: self.sources.iter().map(|s| s.framer.stats().errors()).sum(),
         }
     }

@@ -41,7 +41,7 @@ const SLAVES: &[(&str, u8, &[&str])] = &[
 ];
 
 fn err(name: &'static str) -> impl Fn(crate::ProfileError) -> SoakError {
-    move |source| SoakError::Profile { name, source }
+    move |error| SoakError::Profile { name, error }
 }
 
 /// One slave per registry profile.

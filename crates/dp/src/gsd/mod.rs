@@ -35,6 +35,7 @@ mod lexer;
 pub mod model;
 mod parser;
 pub mod semantic;
+mod summary;
 mod writer;
 
 pub use model::*;
@@ -42,6 +43,7 @@ pub use semantic::{
     LookupError, ModuleIo, ParamInstance, PrmInput, PrmValue, PrmValueParseError, Problem,
     SelectionError,
 };
+pub use summary::GsdSummary;
 
 use std::fmt;
 use std::io::Read;
@@ -205,6 +207,21 @@ pub struct FileDiagnostic<'a> {
     pub severity: &'static str,
     /// The diagnostic.
     pub diagnostic: &'a Diagnostic,
+}
+
+impl<'a> FileDiagnostic<'a> {
+    /// `diagnostic` of `file` as an `error` or `warning` (`severity`).
+    pub fn new(
+        file: &'a std::path::Path,
+        severity: &'static str,
+        diagnostic: &'a Diagnostic,
+    ) -> Self {
+        FileDiagnostic {
+            file,
+            severity,
+            diagnostic,
+        }
+    }
 }
 
 impl fmt::Display for FileDiagnostic<'_> {

@@ -193,6 +193,7 @@ pub struct ExtUserPrmData {
 
 /// One `Text(value) = "text"` line of a `PrmText` block.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct PrmTextValue {
     /// The parameter value.
     pub value: i64,
@@ -251,6 +252,7 @@ pub struct Slot {
 
 /// `Unit_Diag_Bit(bit) = "text"` or `Unit_Diag_Not_Bit(bit) = "text"`.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct UnitDiagText {
     /// Bit number in the device-related diagnosis, as the GSD numbers it
     /// (this stack reads bit 0 as bit 0 of the first byte after the

@@ -95,6 +95,35 @@ impl MasterCommand {
 }
 
 impl DpMaster {
+    /// Read and execute one command line ([`MasterCommand::from_json`]);
+    /// returns what to tell the sender, if anything (`operating state
+    /// clear`, `job 3 queued`). A refused command changes nothing.
+    pub fn execute_json(&mut self, line: &str) -> Result<Option<String>, CommandError> {
+        let command = MasterCommand::from_json(line)?;
+        let reply = match &command {
+            MasterCommand::Operating(s) => Some(format!("operating state {}", s.as_str())),
+            _ => None,
+        };
+        Ok(match self.apply(command)? {
+            CommandOutcome::JobQueued(id) => Some(format!("job {} queued", id.0)),
+            CommandOutcome::Applied => reply,
+        })
+    }
+
+    /// Whether every slave has completed at least `n` Data_Exchange
+    /// cycles (however long its start-up took).
+    pub fn all_exchanged(&self, n: u64) -> bool {
+        self.slave_addresses()
+            .all(|a| self.slave_stats(a).is_some_and(|s| s.data_exchanges >= n))
+    }
+
+    /// The slaves not in Data_Exchange, by address.
+    pub fn not_exchanging(&self) -> Vec<u8> {
+        self.slave_addresses()
+            .filter(|&a| self.slave_state(a) != Some(super::SlaveState::DataExchange))
+            .collect()
+    }
+
     /// Execute a command. Errors leave the master as it was.
     pub fn apply(&mut self, command: MasterCommand) -> Result<CommandOutcome, CommandError> {
         match command {

@@ -81,6 +81,8 @@
 mod command;
 mod config;
 mod report;
+mod stop;
+mod task;
 mod wait;
 
 pub use command::{CommandError, CommandOutcome, MasterCommand};
@@ -89,6 +91,8 @@ pub use config::{
     DEFAULT_GLOBAL_CONTROL_INTERVAL,
 };
 pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use stop::{StopReason, StopWhen};
+pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
 use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};

@@ -56,9 +56,8 @@
 //!
 //! Timeouts get an extra `latency_allowance` for transports that add
 //! latency (ptys, USB adapters): one allowance on the slot time and the
-//! token-pass check, three on the token-lost timeout (so that a station
-//! waiting a stretched slot time never looks like a lost token to the
-//! others). On the simulator it is zero.
+//! token-pass check, 3 + n on the token-lost timeout of address n (see
+//! [`ActiveConfig::token_lost_timeout`]). On the simulator it is zero.
 
 use super::{earliest, RxPath, Station};
 use crate::time::Instant;
@@ -84,6 +83,28 @@ pub struct ActiveConfig {
 }
 
 impl ActiveConfig {
+    /// The silence after which this station claims the token: the
+    /// standard's TTO = 6·TSL + 2·n·TSL (n = own address) plus 3 + n
+    /// latency allowances.
+    ///
+    /// Three allowances because the line may be silent for a slot time
+    /// plus one allowance while any station awaits a reply, and scheduling
+    /// jitter on a slow transport must not make a station claim a token
+    /// that is not lost. One more per address because the standard's step
+    /// of 2·TSL between the timeouts of neighbouring addresses (0.4 ms at
+    /// 1.5 Mbit/s) is what lets the claim of the lowest address reach the
+    /// next one before that one's own timeout runs out; behind a transport
+    /// with latency (a pty, a USB adapter) the claim arrives up to an
+    /// allowance later, and without the extra step the next address
+    /// claims as well (issue 18: in a 3-master ring on `dpctl bus`, master
+    /// 4 claimed next to master 3 in about a third of the runs).
+    pub fn token_lost_timeout(&self) -> Duration {
+        let n = self.address.min(125) as u32;
+        self.params
+            .bits(self.params.token_lost_timeout(n as u8) as u64)
+            + (3 + n) * self.latency_allowance
+    }
+
     /// Configuration with default token retry (1) and no latency allowance.
     pub fn new(address: u8, params: BusParams) -> Self {
         ActiveConfig {
@@ -647,11 +668,6 @@ impl Core {
         self.bits(self.p().slot_time) + self.cfg.latency_allowance
     }
 
-    /// TTO plus three latency allowances: the line may be silent for a
-    /// slot time plus one allowance while any station awaits a reply, and
-    /// scheduling jitter on a slow transport must not make a station
-    /// claim a token that is not lost. Every station adds the same amount,
-    /// so the lowest address still claims first.
     /// The wait for the answer to a GAP poll: the slot time plus at most
     /// 1 ms of the latency allowance. Most GAP addresses are empty, so this
     /// wait is paid on almost every poll; an answer that comes later only
@@ -662,7 +678,7 @@ impl Core {
     }
 
     fn token_lost_timeout(&self) -> Duration {
-        self.bits(self.p().token_lost_timeout(self.ts())) + 3 * self.cfg.latency_allowance
+        self.cfg.token_lost_timeout()
     }
 
     /// Distance from `from` to `to` going up and wrapping after HSA. An

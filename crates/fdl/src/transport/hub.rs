@@ -74,12 +74,13 @@ pub enum HubError {
     #[error("{} exists and is not a symlink; refusing to replace it", .0.display())]
     NotASymlink(PathBuf),
     /// A link could not be checked, created or replaced.
-    #[error("cannot create link {}: {source}", .path.display())]
+    #[error("cannot create link {}: {error}", .path.display())]
     Link {
         /// The link.
         path: PathBuf,
-        /// The cause.
-        source: io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
     },
     /// A pty could not be made or configured.
     #[error("cannot set up a pty: {0}")]
@@ -191,10 +192,10 @@ impl Hub {
                 Ok(m) if m.file_type().is_symlink() => {}
                 Ok(_) => return Err(HubError::NotASymlink(l.clone())),
                 Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-                Err(source) => {
+                Err(error) => {
                     return Err(HubError::Link {
                         path: l.clone(),
-                        source,
+                        error,
                     })
                 }
             }
@@ -220,12 +221,12 @@ impl Hub {
             // Pushed first, so that a failure removes the links made so far.
             stations.push(st);
             let st = stations.last().expect("pushed");
-            if let Err(source) = replace_symlink(&st.tty, link) {
+            if let Err(error) = replace_symlink(&st.tty, link) {
                 stations.pop();
                 remove_links(&stations);
                 return Err(HubError::Link {
                     path: link.clone(),
-                    source,
+                    error,
                 });
             }
         }

@@ -43,17 +43,17 @@ pub mod hub;
 mod rs485;
 
 use crate::timing::Baud;
+use mio_serial::SerialStream;
 use std::future::Future;
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
 use std::pin::Pin;
 use std::task::{ready, Context, Poll};
 use std::time::Duration;
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::io::unix::AsyncFd;
+use tokio::io::{AsyncRead, AsyncWrite, Interest, ReadBuf};
 use tokio::task::JoinHandle;
-use tokio_serial::{
-    DataBits, FlowControl, Parity, SerialPort, SerialPortBuilderExt, SerialStream, StopBits,
-};
+use tokio_serial::{DataBits, FlowControl, Parity, SerialPort, StopBits};
 
 /// How the port drives RTS for the transceiver's transmit enable.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -101,12 +101,13 @@ impl PortOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum TransportError {
     /// The path could not be opened as a tty.
-    #[error("cannot open {path}: {source}")]
+    #[error("cannot open {path}: {error}")]
     Open {
         /// The path.
         path: String,
-        /// The cause.
-        source: io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
     },
     /// The adapter does not accept the baud rate (or runs at another).
     #[error("{path} does not support {baud} ({detail})")]
@@ -119,12 +120,13 @@ pub enum TransportError {
         detail: String,
     },
     /// RTS control could not be set up.
-    #[error("{path}: RTS direction control failed: {source}")]
+    #[error("{path}: RTS direction control failed: {error}")]
     Rts {
         /// The path.
         path: String,
-        /// The cause.
-        source: io::Error,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
     },
 }
 
@@ -133,11 +135,12 @@ fn serial_err(e: tokio_serial::Error) -> io::Error {
 }
 
 /// What a [`Port`] reads and writes: a tty, or a TCP connection to a
-/// serial device server.
+/// serial device server; non-blocking, registered with the runtime for
+/// readability only (see [`Port`]'s I/O notes).
 #[derive(Debug)]
 enum Link {
-    Serial(SerialStream),
-    Tcp(tokio::net::TcpStream),
+    Serial(AsyncFd<SerialStream>),
+    Tcp(AsyncFd<std::net::TcpStream>),
 }
 
 impl AsRawFd for Link {
@@ -149,6 +152,14 @@ impl AsRawFd for Link {
     }
 }
 
+/// Register `io` (already non-blocking) with the runtime for readability
+/// only.
+fn readable<T: AsRawFd>(io: T) -> io::Result<AsyncFd<T>> {
+    // SAFETY: `T` is a serial stream or a TCP stream, which own their fd
+    // and keep it open, the same one, until they are dropped.
+    Ok(unsafe { AsyncFd::register_with_interest(io, Interest::READABLE) }?)
+}
+
 /// The scheme of a serial device server's address: `tcp://HOST:PORT`.
 pub const TCP_SCHEME: &str = "tcp://";
 
@@ -157,6 +168,17 @@ pub const TCP_SCHEME: &str = "tcp://";
 pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// An async byte stream to an FDL medium; see the module docs.
+///
+/// I/O: the descriptor is registered with the runtime for readability
+/// only. Writes go straight to the kernel (a telegram always fits its
+/// buffer unless the far end stops reading); only a write that would
+/// block registers a duplicate descriptor for writability until it has
+/// gone through. A port registered for both (as `tokio-serial` and
+/// `tokio::net` register theirs) wakes its task's thread each time the far
+/// end has read what was written: two needless wake-ups per exchange on a
+/// pty, in the middle of the round trip. A read shorter than the buffer
+/// has emptied the kernel's queue, so the next read waits for the runtime
+/// without trying the descriptor first.
 #[derive(Debug)]
 pub struct Port {
     stream: Link,
@@ -169,6 +191,9 @@ pub struct Port {
     rts_raised: bool,
     /// Manual RTS: `tcdrain` running on a duplicate of the fd.
     drain: Option<JoinHandle<io::Result<()>>>,
+    /// A write would block: a duplicate of the fd registered for
+    /// writability, dropped after the next write that goes through.
+    write_wait: Option<AsyncFd<OwnedFd>>,
 }
 
 impl Port {
@@ -179,30 +204,30 @@ impl Port {
 
     /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
-        let open_err = |source| TransportError::Open {
+        let open_err = |error| TransportError::Open {
             path: path.to_string(),
-            source,
+            error,
         };
         if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
             return Self::open_tcp(path, addr, opts);
         }
         // Open at a standard rate first so that a refused PROFIBUS rate is
         // reported as such, not as a failure to open.
-        let stream = tokio_serial::new(path, 9600)
+        let builder = tokio_serial::new(path, 9600)
             .data_bits(DataBits::Eight)
             .parity(Parity::Even)
             .stop_bits(StopBits::One)
-            .flow_control(FlowControl::None)
-            .open_native_async()
-            .map_err(|e| open_err(serial_err(e)))?;
+            .flow_control(FlowControl::None);
+        let stream = SerialStream::open(&builder).map_err(|e| open_err(serial_err(e)))?;
         let mut port = Port {
-            stream: Link::Serial(stream),
+            stream: Link::Serial(readable(stream).map_err(open_err)?),
             name: path.to_string(),
             baud: opts.baud,
             rts: RtsMechanism::None,
             pty: false,
             rts_raised: false,
             drain: None,
+            write_wait: None,
         };
         port.pty = is_pty_fd(port.fd());
         port.check_parity_on_input().map_err(open_err)?;
@@ -212,11 +237,10 @@ impl Port {
                 Ok(()) => RtsMechanism::Kernel,
                 Err(e) => {
                     tracing::debug!(path, error = %e, "no kernel RS-485 mode; toggling RTS around writes");
-                    port.write_rts(false)
-                        .map_err(|source| TransportError::Rts {
-                            path: path.to_string(),
-                            source,
-                        })?;
+                    port.write_rts(false).map_err(|error| TransportError::Rts {
+                        path: path.to_string(),
+                        error,
+                    })?;
                     RtsMechanism::Manual
                 }
             };
@@ -229,14 +253,14 @@ impl Port {
     /// leaves at once.
     fn open_tcp(path: &str, addr: &str, opts: PortOptions) -> Result<Port, TransportError> {
         use std::net::ToSocketAddrs;
-        let open_err = |source| TransportError::Open {
+        let open_err = |error| TransportError::Open {
             path: path.to_string(),
-            source,
+            error,
         };
         if opts.rts == RtsControl::OnSend {
             return Err(TransportError::Rts {
                 path: path.to_string(),
-                source: io::Error::new(
+                error: io::Error::new(
                     io::ErrorKind::Unsupported,
                     "a serial device server drives its transceiver itself",
                 ),
@@ -251,15 +275,15 @@ impl Port {
                 Ok(s) => {
                     s.set_nodelay(true).map_err(open_err)?;
                     s.set_nonblocking(true).map_err(open_err)?;
-                    let stream = tokio::net::TcpStream::from_std(s).map_err(open_err)?;
                     return Ok(Port {
-                        stream: Link::Tcp(stream),
+                        stream: Link::Tcp(readable(s).map_err(open_err)?),
                         name: path.to_string(),
                         baud: opts.baud,
                         rts: RtsMechanism::None,
                         pty: false,
                         rts_raised: false,
                         drain: None,
+                        write_wait: None,
                     });
                 }
                 Err(e) => last = e,
@@ -272,16 +296,19 @@ impl Port {
     /// written to one end are read from the other).
     pub fn pty_pair(baud: Baud) -> io::Result<(Port, Port)> {
         let (a, b) = SerialStream::pair().map_err(serial_err)?;
-        let wrap = |stream, name: &str| Port {
-            stream: Link::Serial(stream),
-            name: name.to_string(),
-            baud,
-            rts: RtsMechanism::None,
-            pty: true,
-            rts_raised: false,
-            drain: None,
+        let wrap = |stream, name: &str| -> io::Result<Port> {
+            Ok(Port {
+                stream: Link::Serial(readable(stream)?),
+                name: name.to_string(),
+                baud,
+                rts: RtsMechanism::None,
+                pty: true,
+                rts_raised: false,
+                drain: None,
+                write_wait: None,
+            })
         };
-        Ok((wrap(a, "pty master"), wrap(b, "pty slave")))
+        Ok((wrap(a, "pty master")?, wrap(b, "pty slave")?))
     }
 
     /// The path the port was opened from.
@@ -357,6 +384,7 @@ impl Port {
             baud,
             detail,
         };
+        let stream = stream.get_mut();
         stream
             .set_baud_rate(baud.bps())
             .map_err(|e| refused(e.to_string()))?;
@@ -380,7 +408,7 @@ impl Port {
     /// refused at open).
     fn write_rts(&mut self, level: bool) -> io::Result<()> {
         match &mut self.stream {
-            Link::Serial(s) => s.write_request_to_send(level).map_err(serial_err),
+            Link::Serial(s) => s.get_mut().write_request_to_send(level).map_err(serial_err),
             Link::Tcp(_) => Ok(()),
         }
     }
@@ -425,15 +453,79 @@ fn is_pty_fd(fd: BorrowedFd<'_>) -> bool {
     }
 }
 
+impl Port {
+    /// Write what fits now; when nothing does, wait for room on a
+    /// duplicate descriptor registered for writability (see the I/O notes
+    /// on [`Port`]).
+    fn poll_write_fd(&mut self, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+        loop {
+            match nix::unistd::write(self.fd(), buf) {
+                Ok(n) => {
+                    self.write_wait = None;
+                    return Poll::Ready(Ok(n));
+                }
+                Err(nix::errno::Errno::EINTR) => continue,
+                Err(nix::errno::Errno::EAGAIN) => {}
+                Err(e) => return Poll::Ready(Err(e.into())),
+            }
+            if self.write_wait.is_none() {
+                let dup = self.fd().try_clone_to_owned()?;
+                // SAFETY: an `OwnedFd` keeps its fd open until dropped.
+                let reg = unsafe { AsyncFd::register_with_interest(dup, Interest::WRITABLE) }?;
+                self.write_wait = Some(reg);
+            }
+            let wait = self.write_wait.as_ref().expect("set above");
+            ready!(wait.poll_write_ready(cx))?.clear_ready();
+        }
+    }
+}
+
+/// Read from `io` when the runtime has seen it readable. A read shorter
+/// than the buffer emptied the kernel's queue: the readiness is cleared,
+/// so the next read waits for the next edge instead of trying first (the
+/// data that arrives later raises a new edge, seen at the runtime's next
+/// wait).
+fn poll_read_fd<T: AsRawFd>(
+    io: &AsyncFd<T>,
+    cx: &mut Context<'_>,
+    buf: &mut ReadBuf<'_>,
+) -> Poll<io::Result<()>> {
+    loop {
+        let mut guard = ready!(io.poll_read_ready(cx))?;
+        let unfilled = buf.initialize_unfilled();
+        let len = unfilled.len();
+        let fd = io.as_raw_fd();
+        let res = guard.try_io(|_| loop {
+            // SAFETY: `fd` is open for the lifetime of `io`, borrowed here.
+            let fd = unsafe { BorrowedFd::borrow_raw(fd) };
+            match nix::unistd::read(fd, unfilled) {
+                Err(nix::errno::Errno::EINTR) => continue,
+                r => return r.map_err(io::Error::from),
+            }
+        });
+        match res {
+            Ok(Ok(n)) => {
+                if n > 0 && n < len {
+                    guard.clear_ready();
+                }
+                buf.advance(n);
+                return Poll::Ready(Ok(()));
+            }
+            Ok(Err(e)) => return Poll::Ready(Err(e)),
+            Err(_would_block) => continue,
+        }
+    }
+}
+
 impl AsyncRead for Port {
     fn poll_read(
-        mut self: Pin<&mut Self>,
+        self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        match &mut self.stream {
-            Link::Serial(s) => Pin::new(s).poll_read(cx, buf),
-            Link::Tcp(t) => Pin::new(t).poll_read(cx, buf),
+        match &self.stream {
+            Link::Serial(s) => poll_read_fd(s, cx, buf),
+            Link::Tcp(t) => poll_read_fd(t, cx, buf),
         }
     }
 }
@@ -448,22 +540,16 @@ impl AsyncWrite for Port {
             self.write_rts(true)?;
             self.rts_raised = true;
         }
-        match &mut self.stream {
-            Link::Serial(s) => Pin::new(s).poll_write(cx, buf),
-            Link::Tcp(t) => Pin::new(t).poll_write(cx, buf),
-        }
+        self.poll_write_fd(cx, buf)
     }
 
     /// Without manual RTS control a flush does nothing: writes go straight
-    /// to the kernel, and the stream's own flush is `tcdrain`, which
-    /// blocks the thread until the bytes have left (on a pty: until the
-    /// peer has read them), adding latency to every telegram.
+    /// to the kernel. With it, `tcdrain` (which blocks until the last bit
+    /// has left; on a pty until the peer has read it) runs on a blocking
+    /// thread, then RTS is released.
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         if self.rts != RtsMechanism::Manual || !self.rts_raised {
             return Poll::Ready(Ok(()));
-        }
-        if let Link::Serial(s) = &mut self.stream {
-            ready!(Pin::new(s).poll_flush(cx))?;
         }
         if self.drain.is_none() {
             // tcdrain blocks until the last bit has left the UART; run it
@@ -485,10 +571,10 @@ impl AsyncWrite for Port {
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         ready!(self.as_mut().poll_flush(cx))?;
-        match &mut self.stream {
-            Link::Serial(s) => Pin::new(s).poll_shutdown(cx),
-            Link::Tcp(t) => Pin::new(t).poll_shutdown(cx),
+        if let Link::Tcp(t) = &self.stream {
+            t.get_ref().shutdown(std::net::Shutdown::Write)?;
         }
+        Poll::Ready(Ok(()))
     }
 }
 
@@ -514,6 +600,33 @@ mod tests {
         b.write_all(&data).await.unwrap();
         a.read_exact(&mut got).await.unwrap();
         assert_eq!(got, data);
+    }
+
+    /// The far end reads only once the writer has filled the pty's buffer:
+    /// the write that would block waits for room (on the duplicate
+    /// registered for writability) and everything arrives in order.
+    #[tokio::test]
+    async fn a_write_that_would_block_waits_for_room() {
+        let (mut a, mut b) = Port::pty_pair(Baud::B12000000).unwrap();
+        let data: Vec<u8> = (0..300_000u32).map(|i| (i % 251) as u8).collect();
+        let want = data.clone();
+        let writer = tokio::spawn(async move {
+            a.write_all(&data).await.unwrap();
+            assert!(a.write_wait.is_none(), "dropped after the last write");
+            a
+        });
+        let mut got = vec![0u8; want.len()];
+        b.read_exact(&mut got).await.unwrap();
+        assert!(got == want, "bytes lost or reordered");
+        let mut a = writer.await.unwrap();
+        // Short reads leave the port waiting for the next edge: bytes
+        // written afterwards still wake the reader.
+        for i in 0..50u8 {
+            a.write_all(&[i, i]).await.unwrap();
+            let mut two = [0u8; 2];
+            b.read_exact(&mut two).await.unwrap();
+            assert_eq!(two, [i, i]);
+        }
     }
 
     #[tokio::test]

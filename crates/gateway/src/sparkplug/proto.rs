@@ -4,6 +4,41 @@
 //! [`prost::Message`] on them needs no protoc and no build script; the
 //! tests check the wire format against the `.proto` with `protoc`.
 
+/// A `oneof` of the schema's values: the six scalar kinds every value
+/// `oneof` has (integer, long, float, double, boolean, string) at the
+/// given tags, then the variants of its own.
+macro_rules! value_oneof {
+    (
+        $(#[$doc:meta])*
+        $name:ident { $int:tt, $long:tt, $float:tt, $double:tt, $bool:tt, $string:tt }
+        $($own:tt)*
+    ) => {
+        $(#[$doc])*
+        #[derive(Clone, PartialEq, prost::Oneof)]
+        pub enum $name {
+            /// Int8..Int32 (two's complement), UInt8..UInt32.
+            #[prost(uint32, tag = $int)]
+            IntValue(u32),
+            /// Int64 (two's complement), UInt64, DateTime.
+            #[prost(uint64, tag = $long)]
+            LongValue(u64),
+            /// Float.
+            #[prost(float, tag = $float)]
+            FloatValue(f32),
+            /// Double.
+            #[prost(double, tag = $double)]
+            DoubleValue(f64),
+            /// Boolean.
+            #[prost(bool, tag = $bool)]
+            BooleanValue(bool),
+            /// String, Text, UUID.
+            #[prost(string, tag = $string)]
+            StringValue(String),
+            $($own)*
+        }
+    };
+}
+
 /// One Sparkplug message: NBIRTH, DDATA, DCMD, ….
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct Payload {
@@ -59,27 +94,9 @@ pub struct Metric {
     pub value: Option<MetricValue>,
 }
 
-/// The value of a [`Metric`].
-#[derive(Clone, PartialEq, prost::Oneof)]
-pub enum MetricValue {
-    /// Int8..Int32 (two's complement), UInt8..UInt32.
-    #[prost(uint32, tag = "10")]
-    IntValue(u32),
-    /// Int64 (two's complement), UInt64, DateTime.
-    #[prost(uint64, tag = "11")]
-    LongValue(u64),
-    /// Float.
-    #[prost(float, tag = "12")]
-    FloatValue(f32),
-    /// Double.
-    #[prost(double, tag = "13")]
-    DoubleValue(f64),
-    /// Boolean.
-    #[prost(bool, tag = "14")]
-    BooleanValue(bool),
-    /// String, Text, UUID.
-    #[prost(string, tag = "15")]
-    StringValue(String),
+value_oneof! {
+    /// The value of a [`Metric`].
+    MetricValue { "10", "11", "12", "13", "14", "15" }
     /// Bytes, File, arrays.
     #[prost(bytes = "vec", tag = "16")]
     BytesValue(Vec<u8>),
@@ -160,27 +177,9 @@ pub struct PropertyValue {
     pub value: Option<PropertyValueValue>,
 }
 
-/// The value of a [`PropertyValue`].
-#[derive(Clone, PartialEq, prost::Oneof)]
-pub enum PropertyValueValue {
-    /// Int8..Int32, UInt8..UInt32.
-    #[prost(uint32, tag = "3")]
-    IntValue(u32),
-    /// Int64, UInt64, DateTime.
-    #[prost(uint64, tag = "4")]
-    LongValue(u64),
-    /// Float.
-    #[prost(float, tag = "5")]
-    FloatValue(f32),
-    /// Double.
-    #[prost(double, tag = "6")]
-    DoubleValue(f64),
-    /// Boolean.
-    #[prost(bool, tag = "7")]
-    BooleanValue(bool),
-    /// String, Text.
-    #[prost(string, tag = "8")]
-    StringValue(String),
+value_oneof! {
+    /// The value of a [`PropertyValue`].
+    PropertyValueValue { "3", "4", "5", "6", "7", "8" }
     /// PropertySet.
     #[prost(message, tag = "9")]
     PropertysetValue(PropertySet),
@@ -225,27 +224,9 @@ pub struct DataSetValue {
     pub value: Option<DataSetValueValue>,
 }
 
-/// The value of a [`DataSetValue`].
-#[derive(Clone, PartialEq, prost::Oneof)]
-pub enum DataSetValueValue {
-    /// Int8..Int32, UInt8..UInt32.
-    #[prost(uint32, tag = "1")]
-    IntValue(u32),
-    /// Int64, UInt64, DateTime.
-    #[prost(uint64, tag = "2")]
-    LongValue(u64),
-    /// Float.
-    #[prost(float, tag = "3")]
-    FloatValue(f32),
-    /// Double.
-    #[prost(double, tag = "4")]
-    DoubleValue(f64),
-    /// Boolean.
-    #[prost(bool, tag = "5")]
-    BooleanValue(bool),
-    /// String, Text.
-    #[prost(string, tag = "6")]
-    StringValue(String),
+value_oneof! {
+    /// The value of a [`DataSetValue`].
+    DataSetValueValue { "1", "2", "3", "4", "5", "6" }
     /// Extension.
     #[prost(message, tag = "7")]
     ExtensionValue(Extension),
@@ -285,27 +266,9 @@ pub struct Parameter {
     pub value: Option<ParameterValue>,
 }
 
-/// The value of a [`Parameter`].
-#[derive(Clone, PartialEq, prost::Oneof)]
-pub enum ParameterValue {
-    /// Int8..Int32, UInt8..UInt32.
-    #[prost(uint32, tag = "3")]
-    IntValue(u32),
-    /// Int64, UInt64, DateTime.
-    #[prost(uint64, tag = "4")]
-    LongValue(u64),
-    /// Float.
-    #[prost(float, tag = "5")]
-    FloatValue(f32),
-    /// Double.
-    #[prost(double, tag = "6")]
-    DoubleValue(f64),
-    /// Boolean.
-    #[prost(bool, tag = "7")]
-    BooleanValue(bool),
-    /// String, Text.
-    #[prost(string, tag = "8")]
-    StringValue(String),
+value_oneof! {
+    /// The value of a [`Parameter`].
+    ParameterValue { "3", "4", "5", "6", "7", "8" }
     /// Extension.
     #[prost(message, tag = "9")]
     ExtensionValue(Extension),

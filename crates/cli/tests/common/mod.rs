@@ -1,7 +1,8 @@
-//! Helpers for end-to-end tests: the `dpctl` binary (built on first use),
-//! socat pty pairs, `dpctl bus` in a temp dir, the Python venv with
-//! pyprofibus, child processes that are stopped and cleaned up even when a
-//! test fails.
+//! Helpers for the process tests of the `dpctl` package (one copy, used
+//! by every file in `crates/cli/tests/` and `crates/cli/benches/`): the
+//! `dpctl` binary cargo built for them, the repository root, socat pty
+//! pairs, `dpctl bus` in a temp dir, the Python venv with pyprofibus,
+//! child processes that are stopped and cleaned up even when a test fails.
 //!
 //! Missing peers (socat, the venv) make a test FAIL with a message that
 //! says how to install them (`scripts/setup-test-env`); they never skip.
@@ -13,61 +14,20 @@ pub mod mqtt;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-/// The repository root.
+/// The repository root (this package lives in `crates/cli`).
 pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .expect("crates/cli inside the repository")
+        .to_path_buf()
 }
 
-/// Path of the `dpctl` binary, built on first use.
-///
-/// The binary lives next to the test executable's `deps/` directory
-/// (`target/<profile>/dpctl`). It is (re)built with `cargo build -p dpctl`
-/// for that profile, so a test never runs a stale binary; when cargo is
-/// not available (tests run by hand) an existing binary is used.
+/// Path of the `dpctl` binary cargo built for these tests.
 pub fn dpctl() -> PathBuf {
-    static PATH: OnceLock<PathBuf> = OnceLock::new();
-    PATH.get_or_init(|| {
-        let exe = std::env::current_exe().expect("test executable path");
-        // target/<profile>/deps/<test> → target/<profile>
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .expect("test executable in target/<profile>/deps")
-            .to_path_buf();
-        let bin = profile_dir.join(format!("dpctl{}", std::env::consts::EXE_SUFFIX));
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let mut cmd = Command::new(cargo);
-        cmd.args(["build", "--quiet", "-p", "dpctl", "--bin", "dpctl"]);
-        match profile_dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") => {}
-            Some("release") => {
-                cmd.arg("--release");
-            }
-            Some(other) => {
-                cmd.args(["--profile", other]);
-            }
-            None => {}
-        }
-        // Build into the same target directory as the tests.
-        if let Some(target) = profile_dir.parent() {
-            cmd.env("CARGO_TARGET_DIR", target);
-        }
-        cmd.current_dir(env!("CARGO_MANIFEST_DIR"));
-        match cmd.status() {
-            Ok(s) if s.success() => {}
-            Ok(s) => panic!("building dpctl failed ({s})"),
-            Err(e) if bin.exists() => {
-                eprintln!("cannot run cargo ({e}); using {}", bin.display())
-            }
-            Err(e) => panic!("cannot run cargo to build dpctl: {e}"),
-        }
-        assert!(bin.exists(), "{} missing after the build", bin.display());
-        bin
-    })
-    .clone()
+    PathBuf::from(env!("CARGO_BIN_EXE_dpctl"))
 }
 
 /// Fail with how to set up the test environment.
@@ -355,11 +315,12 @@ impl Lines {
     }
 }
 
-/// Run `dpctl` with `args` to completion (at most 30 s).
+/// Run `dpctl` with `args` to completion (killed after 2 min: a hang
+/// guard, generous for a busy machine).
 pub fn run_dpctl(args: &[&str]) -> Output {
     let mut cmd = Command::new(dpctl());
     cmd.args(args);
-    Proc::spawn_captured(cmd).finish(Duration::from_secs(30))
+    Proc::spawn_captured(cmd).finish(Duration::from_secs(120))
 }
 
 /// Wait until `cond` holds, polling every 5 ms; panic after `timeout`.

@@ -1,8 +1,8 @@
 //! Benchmark: telegram round trip and throughput through `dpctl bus`
 //! (unpaced) compared with a socat pty pair and a bare pty pair.
 //!
-//! Run with `cargo bench -p profibus --bench bus_latency` (builds dpctl in
-//! release mode; needs socat). A round trip is: this process writes a
+//! Run with `cargo bench -p dpctl --bench bus_latency` (cargo builds dpctl
+//! in the bench profile first; needs socat). A round trip is: this process writes a
 //! 6-byte SD1 telegram to end A, an echo thread reads it completely from
 //! end B and writes it back, this process reads it completely from A.
 //! Through the hub and socat the telegram crosses the relay twice. The
@@ -148,8 +148,6 @@ fn main() {
     let rounds = env_usize("ROUNDS", 20_000);
     let mbytes = env_usize("MBYTES", 8);
     common::require("socat");
-    // Build dpctl first so the build does not disturb the measurements.
-    common::dpctl();
     println!("round trip of a 6-byte telegram, {rounds} rounds; throughput {mbytes} MiB one way");
     println!();
     println!("| path | p50 µs | p99 µs | p99.9 µs | mean µs | MB/s |");

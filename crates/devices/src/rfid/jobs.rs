@@ -1,0 +1,321 @@
+//! Reader commands run by a DP master: [`CommandRun`] runs a list of
+//! commands on one reader (`dpctl rfid`, a [`SlaveTask`]), [`MasterJobs`]
+//! queues commands that arrive while a master runs (`dpctl master`'s
+//! stdin); each ended command is an [`RfidDone`] (`Display` for people,
+//! `Serialize` for JSON lines).
+
+use super::client::{RfidClient, RfidError, StartError};
+use super::{CFG, IDENT};
+use profibus_dp::busfile::BusSlave;
+use profibus_dp::master::{DpMaster, SlaveState, SlaveTask, StartupTimeout};
+use profibus_fdl::wire::Hex;
+use profibus_fdl::Instant;
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::fmt;
+use std::time::Duration;
+
+/// An RFID command that ended: the `rfid` event of `dpctl master` and
+/// `dpctl demo`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "event", rename = "rfid")]
+pub struct RfidDone {
+    /// The reader's station address.
+    pub slave: u8,
+    /// The command as given.
+    pub command: String,
+    /// It was answered.
+    pub ok: bool,
+    /// The answer as text (CRs kept).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub answer: Option<String>,
+    /// The answer's bytes, hex.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub answer_hex: Option<String>,
+    /// Why there is no answer.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl RfidDone {
+    /// `command` on the reader at `slave` ended with `r`.
+    pub fn new<E: fmt::Display>(slave: u8, command: String, r: Result<&[u8], E>) -> RfidDone {
+        let (answer, answer_hex, error) = match r {
+            Ok(a) => (
+                Some(String::from_utf8_lossy(a).into_owned()),
+                Some(Hex(a).to_string()),
+                None,
+            ),
+            Err(e) => (None, None, Some(e.to_string())),
+        };
+        RfidDone {
+            slave,
+            command,
+            ok: error.is_none(),
+            answer,
+            answer_hex,
+            error,
+        }
+    }
+}
+
+impl fmt::Display for RfidDone {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (slave, cmd) = (self.slave, &self.command);
+        match (&self.answer, &self.error) {
+            (Some(a), _) => write!(
+                f,
+                "rfid slave {slave}: {cmd} → {}",
+                a.trim_end_matches('\r').replace('\r', " | ")
+            ),
+            (None, e) => write!(
+                f,
+                "rfid slave {slave}: {cmd} failed: {}",
+                e.as_deref().unwrap_or("")
+            ),
+        }
+    }
+}
+
+/// One command of a [`CommandRun`] that ended: `Display` is the answer's
+/// lines (nothing for a failed command); `Serialize` the `dpctl rfid
+/// --json` object.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CommandResult {
+    /// The command and its answer.
+    #[serde(flatten)]
+    pub done: RfidDone,
+    /// Bytes of the answer.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<usize>,
+    /// Milliseconds from start to the whole answer.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms: Option<f64>,
+    /// Bytes of an earlier answer fetched and dropped first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drained: Option<usize>,
+    /// Start-ups of the reader while the command ran (it was sent again).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub restarts: Option<u64>,
+}
+
+impl fmt::Display for CommandResult {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for line in self
+            .done
+            .answer
+            .iter()
+            .flat_map(|a| a.split_terminator('\r'))
+        {
+            writeln!(f, "{line}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a [`CommandRun`] stopped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RunError {
+    /// The slave is not configured as the reader.
+    #[error(
+        "slave {0} is configured {1:02X?}; the reader has 16 bytes in and out (0x3F, gsd/AEGI0DC4.GSD)"
+    )]
+    NotAReader(u8, Vec<u8>),
+    /// The reader did not reach Data_Exchange.
+    #[error(transparent)]
+    Startup(#[from] StartupTimeout),
+    /// A command cannot be sent.
+    #[error("`{0}`: {1}")]
+    Start(String, StartError),
+    /// A command got no (complete) answer.
+    #[error("slave {0} `{1}`: {2}")]
+    Failed(u8, String, RfidError),
+}
+
+/// Commands run in turn on one reader, each answer fetched whole; stops
+/// at the first failure. See the module docs.
+#[derive(Debug)]
+pub struct CommandRun {
+    address: u8,
+    client: RfidClient,
+    todo: VecDeque<String>,
+    /// The command running, when it started, the reader's start-ups then.
+    running: Option<(String, Instant, u64)>,
+    results: Vec<CommandResult>,
+    /// Why the last command failed.
+    failed: Option<RfidError>,
+}
+
+impl CommandRun {
+    /// `commands` (CR appended) for the reader `slave` of a bus file,
+    /// each given `timeout` for its whole answer.
+    pub fn new(slave: &BusSlave, commands: &[String], timeout: Duration) -> Result<Self, RunError> {
+        let (address, p) = (slave.params.address, &slave.params);
+        if p.cfg != CFG {
+            return Err(RunError::NotAReader(address, p.cfg.clone()));
+        }
+        if p.ident_number != IDENT {
+            tracing::warn!(
+                ident = p.ident_number,
+                "slave {address} is not ident 0x{IDENT:04X}; trying the reader's handshake anyway"
+            );
+        }
+        Ok(CommandRun {
+            address,
+            client: RfidClient::new(timeout.max(Duration::from_millis(1))),
+            todo: commands.iter().cloned().collect(),
+            running: None,
+            results: vec![],
+            failed: None,
+        })
+    }
+
+    /// The commands that ended, in order.
+    pub fn results(&self) -> &[CommandResult] {
+        &self.results
+    }
+
+    /// Why the last command failed, if it did.
+    pub fn failure(&self) -> Option<RunError> {
+        let d = &self.results.last()?.done;
+        let e = self.failed?;
+        Some(RunError::Failed(d.slave, d.command.clone(), e))
+    }
+}
+
+impl SlaveTask for CommandRun {
+    type Error = RunError;
+
+    fn busy(&self) -> bool {
+        !self.client.is_idle()
+    }
+
+    fn step(&mut self, m: &mut DpMaster, now: Instant, in_dx: bool) -> Result<bool, RunError> {
+        let addr = self.address;
+        let Some(h) = m.handle(addr) else {
+            return Ok(true);
+        };
+        let restarts = |m: &DpMaster| m.slave_stats(addr).map_or(0, |s| s.restarts);
+        if let Some(r) = self.client.poll_master(now, m, h) {
+            let (command, t, r0) = self.running.take().unwrap_or((String::new(), now, 0));
+            let ok = r.as_ref().ok().map(|a| a.len());
+            let ms = now.saturating_duration_since(t).as_secs_f64() * 1000.0;
+            self.failed = r.as_ref().err().copied();
+            self.results.push(CommandResult {
+                done: RfidDone::new(addr, command, r),
+                bytes: ok,
+                ms: ok.map(|_| (ms * 1000.0).round() / 1000.0),
+                drained: ok.map(|_| self.client.drained()),
+                restarts: ok.map(|_| restarts(m) - r0),
+            });
+            if self.failed.is_some() {
+                return Ok(true);
+            }
+        }
+        if self.client.is_idle() && in_dx {
+            let Some(cmd) = self.todo.pop_front() else {
+                return Ok(true);
+            };
+            if let Err(e) = self.client.start(now, cmd.as_bytes()) {
+                return Err(RunError::Start(cmd, e));
+            }
+            self.running = Some((cmd, now, restarts(m)));
+        }
+        Ok(false)
+    }
+}
+
+/// Why a reader command given to a running master was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum QueueError {
+    /// `rfid` is not a station address.
+    #[error("`rfid` takes a station address")]
+    Address,
+    /// No `command`.
+    #[error("`command` missing (e.g. \"VER\")")]
+    Command,
+    /// The master has no such slave.
+    #[error("slave {0} is not in the bus file")]
+    NoSlave(u8),
+    /// Too many commands wait for this reader.
+    #[error("slave {0}: {MAX_QUEUED} RFID commands are waiting already")]
+    Full(u8),
+}
+
+/// RFID commands given to a running `dpctl master` as JSON lines
+/// (`{"rfid": 12, "command": "VER"}`): one client per reader, commands
+/// queued and run in turn, each answer reported as an [`RfidDone`].
+#[derive(Debug, Default)]
+pub struct MasterJobs {
+    readers: Vec<MasterReader>,
+}
+
+#[derive(Debug)]
+struct MasterReader {
+    address: u8,
+    client: RfidClient,
+    queue: VecDeque<String>,
+    running: Option<String>,
+}
+
+/// Most commands waiting per reader.
+pub const MAX_QUEUED: usize = 64;
+
+impl MasterJobs {
+    /// Take `line` if it is an RFID command (`{"rfid": ADDR, "command":
+    /// "…", "timeout_ms": MS}`): `None` when it is not one, else the reply
+    /// for the log or why it was refused.
+    pub fn command(&mut self, m: &DpMaster, line: &str) -> Option<Result<String, QueueError>> {
+        let v: serde_json::Value = serde_json::from_str(line).ok()?;
+        let addr = v.get("rfid")?;
+        Some((|| {
+            let addr = (addr.as_u64().filter(|&a| a <= 126)).ok_or(QueueError::Address)? as u8;
+            let cmd = (v.get("command").and_then(|c| c.as_str())).ok_or(QueueError::Command)?;
+            if m.handle(addr).is_none() {
+                return Err(QueueError::NoSlave(addr));
+            }
+            let timeout = v.get("timeout_ms").and_then(|t| t.as_u64()).unwrap_or(5000);
+            let i = match self.readers.iter().position(|r| r.address == addr) {
+                Some(i) => i,
+                None => {
+                    self.readers.push(MasterReader {
+                        address: addr,
+                        client: RfidClient::new(Duration::from_millis(timeout.max(1))),
+                        queue: VecDeque::new(),
+                        running: None,
+                    });
+                    self.readers.len() - 1
+                }
+            };
+            let r = &mut self.readers[i];
+            if r.queue.len() >= MAX_QUEUED {
+                return Err(QueueError::Full(addr));
+            }
+            r.queue.push_back(cmd.to_string());
+            Ok(format!("rfid slave {addr}: `{cmd}` queued"))
+        })())
+    }
+
+    /// Drive the clients; returns the finished commands.
+    pub fn step(&mut self, m: &mut DpMaster, now: Instant) -> Vec<RfidDone> {
+        let mut out = vec![];
+        for r in &mut self.readers {
+            let Some(h) = m.handle(r.address) else {
+                continue;
+            };
+            if let Some(res) = r.client.poll_master(now, m, h) {
+                let cmd = r.running.take().unwrap_or_default();
+                out.push(RfidDone::new(r.address, cmd, res));
+            }
+            if r.client.is_idle() && m.slave(h).state == SlaveState::DataExchange {
+                if let Some(cmd) = r.queue.pop_front() {
+                    match r.client.start(now, cmd.as_bytes()) {
+                        Ok(()) => r.running = Some(cmd),
+                        Err(e) => out.push(RfidDone::new(r.address, cmd, Err(e))),
+                    }
+                }
+            }
+        }
+        out
+    }
+}
