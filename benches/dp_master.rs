@@ -2,8 +2,9 @@
 //!
 //! (a)  Data_Exchange transactions per second with one slave over a socat
 //!      pty pair and through an unpaced `dpctl bus`: `dpctl master`
-//!      (default, `--busy-poll 300`, `--gather`, and with several poll
-//!      cycles per token visit, `alone_hold_bits = 3000`) and pyprofibus's master
+//!      (default, `--busy-poll 300`, `--gather`, with several poll
+//!      cycles per token visit, `alone_hold_bits = 3000`, and
+//!      `--anticipate 100`) and pyprofibus's master
 //!      against the same `dpctl slave`, next to the raw round trip of the
 //!      same path (a bare echo of a 13-byte telegram) as the physical
 //!      limit, with CPU seconds per 10 000 exchanges of each master.
@@ -477,7 +478,7 @@ fn main() {
             Line::Socat => "a socat pty pair",
             Line::Hub => "dpctl bus (unpaced)",
         };
-        let mut rows: Vec<[Rate; 6]> = vec![];
+        let mut rows: Vec<[Rate; 7]> = vec![];
         for _ in 0..rounds {
             let raw = Rate {
                 per_s: raw_echo_rate(&dpctl, &dir, &kind, n),
@@ -487,14 +488,15 @@ fn main() {
             let busy = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--busy-poll", "300"], "");
             let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"], "");
             let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 3000");
+            let ant = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--anticipate", "100"], "");
             let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
             println!(
-                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
+                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), --anticipate 100 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
                 raw.per_s, ours.per_s, ours.cpu_per_10k, busy.per_s, busy.cpu_per_10k,
-                gather.per_s, gather.cpu_per_10k, each.per_s, each.cpu_per_10k, py.per_s,
-                py.cpu_per_10k
+                gather.per_s, gather.cpu_per_10k, each.per_s, each.cpu_per_10k, ant.per_s,
+                ant.cpu_per_10k, py.per_s, py.cpu_per_10k
             );
-            rows.push([raw, ours, busy, gather, py, each]);
+            rows.push([raw, ours, busy, gather, py, each, ant]);
         }
         let median = |i: usize, cpu: bool| {
             let mut v: Vec<f64> = rows
@@ -508,9 +510,15 @@ fn main() {
         // The fastest a master can poll while keeping the line timing: the
         // raw round trip plus the slave's min TSDR before its answer and
         // the master's TID1 (TSYN + safety margin) before its next request.
+        // With a token to itself after every poll cycle (the default) the
+        // token (3 characters) and a second TID1 come on top.
         let p = BusParams::defaults(Baud::B1500000);
         let gaps = p.bits((p.min_tsdr + p.tid1()) as u64).as_secs_f64();
         let floor = 1.0 / (1.0 / raw + gaps);
+        let token_gaps = gaps
+            + p.bits(p.tid1() as u64).as_secs_f64()
+            + Baud::B1500000.chars_to_duration(3).as_secs_f64();
+        let token_floor = 1.0 / (1.0 / raw + token_gaps);
         println!("(a) Data_Exchange over {name}, 1 slave, medians of {rounds} rounds");
         println!("| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 |");
         println!("|---|---|---|---|---|");
@@ -521,11 +529,18 @@ fn main() {
             100.0 * floor / raw,
             floor / py
         );
+        println!(
+            "| line-timing floor, token to itself every cycle (raw + {:.1} µs) | {token_floor:.0} | {:.0} % | {:.2}× | |",
+            token_gaps * 1e6,
+            100.0 * token_floor / raw,
+            token_floor / py
+        );
         for (i, label) in [
             (1, "dpctl master"),
             (2, "dpctl master --busy-poll 300"),
             (3, "dpctl master --gather (benchmark option)"),
             (5, "dpctl master, alone_hold_bits = 3000"),
+            (6, "dpctl master --anticipate 100"),
             (4, "pyprofibus 1.13 master"),
         ] {
             let r = median(i, false);

@@ -159,6 +159,12 @@ impl<P: AsyncRead + Unpin> AsyncRead for Timed<P> {
     }
 }
 
+impl<P: driver::Waitable> driver::Waitable for Timed<P> {
+    fn wait_fd(&self) -> Option<std::os::fd::BorrowedFd<'_>> {
+        self.inner.wait_fd()
+    }
+}
+
 impl<P: AsyncWrite + Unpin> AsyncWrite for Timed<P> {
     fn poll_write(
         mut self: Pin<&mut Self>,

@@ -197,6 +197,7 @@ pub fn driver_options(
     Ok(profibus_fdl::driver::Options {
         gather,
         busy_poll: Duration::from_micros(busy_poll_us),
+        ..Default::default()
     })
 }
 

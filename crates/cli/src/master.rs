@@ -76,6 +76,11 @@ pub struct Args {
     /// of sleeping: faster answers on ptys and USB adapters, a busy CPU.
     #[arg(long, default_value_t = 0, value_name = "US")]
     busy_poll: u64,
+    /// After each request wake up shortly before its answer is expected
+    /// and poll the port for it, at most US µs past that (100 suits a pty
+    /// on a machine with a CPU to spare). 0: off.
+    #[arg(long, default_value_t = 0, value_name = "US")]
+    anticipate: u64,
     /// Benchmark option for ptys: gather the token to itself and the next
     /// request into one write. Faster on a pty, but the idle time (TSYN)
     /// before the request disappears: slaves that frame by idle time
@@ -120,7 +125,10 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     }
     let (mut station, mut port) =
         common::master_station(&args.port, bus, dp, args.latency, args.rts)?;
-    let options = common::driver_options(&port, args.busy_poll, args.gather)?;
+    let options = driver::Options {
+        anticipate: Duration::from_micros(args.anticipate),
+        ..common::driver_options(&port, args.busy_poll, args.gather)?
+    };
 
     // Commands come from a plain thread: a blocking read of stdin must not
     // keep the runtime from shutting down on Ctrl-C / SIGTERM.

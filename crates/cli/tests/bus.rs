@@ -76,8 +76,8 @@ fn sd2(da: u8, sa: u8, data: &[u8]) -> Vec<u8> {
 async fn hub_sends_every_byte_to_every_other_station_in_order() {
     let bus = Bus::start(4, &[]);
     let mut ports: Vec<Port> = (0..4).map(|i| open(&bus, i)).collect();
-    // Let the hub notice the new openers (it checks every 5 ms).
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    // The hub notices new openers within a few ms: wait until it has.
+    bus.wait_connected(4);
     for from in 0..4 {
         // 100 writes of 40 numbered bytes each.
         let mut sent = vec![];
@@ -208,16 +208,20 @@ async fn a_station_may_close_and_reopen_its_pty() {
     let bus = Bus::start(3, &[]);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(2);
     a.write_all(b"first").await.unwrap();
     assert_eq!(read_n(&mut b, 5, Duration::from_secs(5)).await, b"first");
     // Station 1 goes away; what is sent meanwhile must not reach it later.
     drop(b);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(1);
     a.write_all(b"while away").await.unwrap();
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    // The hub has carried those 10 characters (to nobody) before station 1
+    // comes back.
+    bus.wait_status("the characters sent while away", |s| {
+        common::counter(s, "chars ") == Some(15)
+    });
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(2);
     a.write_all(b"again").await.unwrap();
     assert_eq!(read_n(&mut b, 5, Duration::from_secs(5)).await, b"again");
     // And it can talk again.
@@ -234,13 +238,19 @@ async fn faulty_run(seed: &str) -> (Vec<u8>, String) {
     let bus = Bus::start(2, &["--drop", "0.01", "--flip", "0.001", "--seed", seed]);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(2);
     let data: Vec<u8> = (0..20_000u32).map(|i| (i * 13) as u8).collect();
     for c in data.chunks(100) {
         a.write_all(c).await.unwrap();
     }
-    // ~1 % is dropped; wait until the rest has arrived and the line is quiet.
-    let got = read_some(&mut b, Duration::from_millis(500)).await;
+    // ~1 % is dropped: once the hub has carried all 20 000 characters,
+    // the rest arrives (and nothing more).
+    let s = bus.wait_status("all characters carried", |s| {
+        common::counter(s, "chars ") == Some(20_000)
+    });
+    let kept = 20_000 - common::counter(&s, "dropped ").expect("drop counter") as usize;
+    let mut got = read_n(&mut b, kept, Duration::from_secs(10)).await;
+    got.extend(read_some(&mut b, Duration::from_millis(50)).await);
     drop((a, b));
     let out = bus.stop();
     assert!(out.status.success(), "{out:?}");
@@ -294,7 +304,7 @@ async fn pacing_makes_the_bus_as_slow_as_the_wire() {
     let bus = Bus::start(2, &["--baud", "19200"]);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(2);
     let start = std::time::Instant::now();
     a.write_all(&[0x55; 1920]).await.unwrap();
     // The transmission arrives in one piece when its last character has
@@ -323,7 +333,7 @@ async fn pcap_files_are_read_by_tshark() {
     let sniff = Proc::spawn_captured(cmd);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    bus.wait_connected(3);
     // 30 exchanges: request, response (SD2), token; plus garbage that must
     // not become packets.
     let mut expect = 0;
@@ -338,7 +348,8 @@ async fn pcap_files_are_read_by_tshark() {
         expect += 4;
         tokio::time::sleep(Duration::from_millis(1)).await;
     }
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // The sniffer has printed every telegram and garbage run.
+    sniff.wait_stdout("telegrams and errors", expect + 30, |_| true);
     let sniffed = sniff.stop();
     drop((a, b));
     let out = bus.stop();
@@ -387,13 +398,13 @@ async fn sniff_marks_errors_for_humans() {
     cmd.args(["sniff", "--port", &bus.link_str(1)]);
     let sniff = Proc::spawn_captured(cmd);
     let mut a = open(&bus, 0);
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    bus.wait_connected(2);
     let mut bad = fdl_status(3, 1);
     bad[4] ^= 0x10;
     a.write_all(&fdl_status(3, 1)).await.unwrap();
     a.write_all(&bad).await.unwrap();
     a.write_all(&[0xDC, 3, 1]).await.unwrap();
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    sniff.wait_stdout("lines", 3, |_| true);
     let out = sniff.stop();
     drop(a);
     bus.stop();
@@ -530,12 +541,19 @@ async fn zero_faults_carry_100000_telegrams_unchanged() {
     let bus = Bus::start(2, &["--drop", "0", "--flip", "0", "--seed", "1"]);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    bus.wait_connected(2);
     let mut r = profibus::fdl::rng::Rng::new(77);
     let sent: Vec<Vec<u8>> = (0..100_000).map(|_| random_telegram(&mut r)).collect();
     let stream: Vec<u8> = sent.concat();
+    // Writer and reader share this test's one thread, and the hub drops
+    // bytes for a station that does not read (overruns): the writer keeps
+    // at most 256 KiB ahead of what the reader has received.
+    let (read_tx, mut read_rx) = tokio::sync::watch::channel(0usize);
     let writer = tokio::spawn(async move {
-        for c in stream.chunks(1000) {
+        for (k, c) in stream.chunks(1000).enumerate() {
+            while k * 1000 > *read_rx.borrow() + (256 << 10) {
+                read_rx.changed().await.unwrap();
+            }
             a.write_all(c).await.unwrap();
         }
         a
@@ -549,6 +567,7 @@ async fn zero_faults_carry_100000_telegrams_unchanged() {
             .expect("telegrams stopped arriving")
             .unwrap();
         tap.push(profibus::fdl::Instant::ZERO, &buf[..n]);
+        read_tx.send_modify(|r| *r += n);
         while let Some(ev) = tap.poll() {
             match ev {
                 TapEvent::Telegram { bytes, .. } => got.push(bytes),
@@ -579,7 +598,7 @@ async fn flipped_bits_show_up_as_codec_errors_in_sniff() {
     cmd.args(["sniff", "--json", "--port", &bus.link_str(2)]);
     let sniff = Proc::spawn_captured(cmd);
     let mut a = open(&bus, 0);
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    bus.wait_connected(2);
     for k in 0..2000u32 {
         a.write_all(&sd2(3, 1, &[k as u8; 16])).await.unwrap();
         if k % 100 == 99 {
@@ -592,8 +611,8 @@ async fn flipped_bits_show_up_as_codec_errors_in_sniff() {
     let hub = bus.stop();
     let flipped: u64 = hub
         .stderr
-        .split("bits flipped ")
-        .nth(1)
+        .rsplit("bits flipped ")
+        .next()
         .and_then(|s| s.split(',').next())
         .and_then(|s| s.parse().ok())
         .expect("flip counter");
@@ -619,9 +638,13 @@ async fn flipped_bits_show_up_as_codec_errors_in_sniff() {
 #[test]
 fn counters_on_sigusr1_and_with_stats() {
     let bus = Bus::start(2, &["--stats", "0.1"]);
-    std::thread::sleep(Duration::from_millis(450));
-    bus.proc.signal(10);
-    std::thread::sleep(Duration::from_millis(100));
+    let mut periodic = 0;
+    while periodic < 3 {
+        let l = bus.proc.stderr_line(Duration::from_secs(30));
+        let l = l.expect("periodic status lines");
+        periodic += l.starts_with("dpctl bus: transmissions") as usize;
+    }
+    bus.status();
     let out = bus.stop();
     let lines = out
         .stderr

@@ -15,21 +15,46 @@
 //! library's DP slave (the application layer is not under test here), and
 //! its answer is written at its deadline.
 //!
-//! The master's JSON status counts retries per slave: in the steady state
-//! every request must be accepted at the first attempt.
+//! What is proved, and why this way. A receiver in user space (this
+//! slave, and the hub too) that is descheduled under load reads two
+//! telegrams in one piece and cannot tell that there was a gap between
+//! them; the hub's own record (`--pcap`) then shows them merged as well
+//! (measured: 27–64 % of token→request pairs at load 8, with a master
+//! that wrote them 0.7–1.5 ms apart). So the test does not count on the
+//! line being perfect; it proves instead:
+//! 1. Every retry is accounted for by this slave: a request it refused
+//!    because it read it merged with other telegrams or after less than
+//!    TSYN of idle, a frame garbled by a collision on the paced line (the
+//!    hub starts a transmission when it reads it: read late, the next one
+//!    can overlap it), or a repeat of a request it had answered (the
+//!    answer came or was read after the slot time). No retry for any
+//!    other cause.
+//! 2. The gap is there when nobody is late: requests right after the
+//!    master's token to itself, as telegrams of their own after ≥ TSYN
+//!    idle, are accepted at the first attempt (at least one such exchange;
+//!    a write the master gathers can never arrive in two pieces).
+//! 3. No telegram is split: every frame the slave saw is one or more
+//!    whole, valid telegrams, except frames garbled by collisions the hub
+//!    counted.
+//!
+//! `dpctl master --gather` (token and request in one write) fails 2
+//! (`gathering_master_fails_the_proof`); a hub that split telegrams fails
+//! 3 (and never reaches Data_Exchange).
 
 mod common;
 
-use common::{dpctl, repo, Lines, Proc, TempDir};
+use common::{dpctl, repo, Bus, Lines, Proc};
 use profibus::devices::generic::GenericDevice;
 use profibus::dp::gsd::{Gsd, ParseOptions};
 use profibus::dp::slave::DpSlave;
+use profibus::fdl::pcap::PcapReader;
 use profibus::fdl::station::passive::PassiveStation;
 use profibus::fdl::station::Station;
+use profibus::fdl::wire::FunctionCode;
 use profibus::fdl::{Baud, BusParams, Instant as FdlInstant, Telegram};
 use serde_json::Value;
 use std::os::fd::AsFd;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -43,16 +68,42 @@ const WAIT: Duration = Duration::from_secs(60);
 struct Counters {
     /// Frames that were one valid telegram.
     frames: AtomicU64,
-    /// Frames that were not exactly one valid telegram (two telegrams
-    /// without idle between them, or a telegram split by idle).
+    /// Frames of several whole telegrams without idle between them.
+    merged_frames: AtomicU64,
+    /// Frames that were not whole telegrams (a telegram split by idle,
+    /// garbage): never excused.
     bad_frames: AtomicU64,
+    /// The first few of those, for the failure message.
+    bad: std::sync::Mutex<Vec<String>>,
+    /// Requests to this slave inside merged frames (refused).
+    merged_requests: AtomicU64,
     /// Requests to this slave refused for less than TSYN idle before them.
     short_sync: AtomicU64,
     /// Requests to this slave answered.
     answered: AtomicU64,
+    /// Of those, the same request (FCV set, same FCB and data) as the one
+    /// answered before: the master did not take that answer in time.
+    repeats: AtomicU64,
     /// Of those, requests that came right after a token frame (a
     /// master's first attempt after its token to itself, not a retry).
     after_token: AtomicU64,
+}
+
+/// `frame` as whole, valid telegrams back to back; `None` when it is not.
+fn telegrams(frame: &[u8]) -> Option<Vec<Telegram<'_>>> {
+    let mut v = vec![];
+    let mut rest = frame;
+    while !rest.is_empty() {
+        let (t, n) = Telegram::parse(rest).ok()?;
+        v.push(t);
+        rest = &rest[n..];
+    }
+    Some(v)
+}
+
+/// A request to this slave.
+fn to_slave(t: &Telegram) -> bool {
+    matches!(t, Telegram::Data(d) if d.da == SLAVE && d.fc.is_request())
 }
 
 /// The receiver of an idle-framing slave; see the module docs.
@@ -127,6 +178,7 @@ fn idle_framing_slave(link: PathBuf, baud: Baud, stop: Arc<AtomicBool>, c: Arc<C
     let mut rx = IdleFramer::new(baud);
     let mut frames = vec![];
     let mut prev_token = false;
+    let mut last_answered = vec![];
     let mut buf = [0u8; 512];
     while !stop.load(Ordering::Relaxed) {
         let timeout = match rx.frame_end() {
@@ -145,27 +197,40 @@ fn idle_framing_slave(link: PathBuf, baud: Baud, stop: Arc<AtomicBool>, c: Arc<C
             rx.idle(&mut frames);
         }
         for (idle_before, frame) in frames.drain(..) {
-            let one = matches!(Telegram::parse(&frame), Ok((_, n)) if n == frame.len());
             let follows_token = std::mem::replace(&mut prev_token, false);
-            if !one {
+            let Some(ts) = telegrams(&frame) else {
                 c.bad_frames.fetch_add(1, Ordering::Relaxed);
+                let mut bad = c.bad.lock().unwrap();
+                if bad.len() < 4 {
+                    bad.push(format!("{frame:02X?} after {idle_before:?} idle"));
+                }
+                continue;
+            };
+            if ts.len() > 1 {
+                let n = ts.iter().filter(|t| to_slave(t)).count() as u64;
+                c.merged_frames.fetch_add(1, Ordering::Relaxed);
+                c.merged_requests.fetch_add(n, Ordering::Relaxed);
                 continue;
             }
             c.frames.fetch_add(1, Ordering::Relaxed);
-            let d = match Telegram::parse(&frame) {
-                Ok((Telegram::Data(d), _)) => d,
-                Ok((Telegram::Token { .. }, _)) => {
+            let d = match &ts[0] {
+                Telegram::Data(d) => d,
+                Telegram::Token { .. } => {
                     prev_token = true;
                     continue;
                 }
                 _ => continue,
             };
-            if d.da != SLAVE || !d.fc.is_request() {
+            if !to_slave(&ts[0]) {
                 continue;
             }
             if idle_before < rx.tsyn {
                 c.short_sync.fetch_add(1, Ordering::Relaxed);
                 continue;
+            }
+            let fcv = matches!(d.fc, FunctionCode::Request { fcv: true, .. });
+            if fcv && last_answered == frame {
+                c.repeats.fetch_add(1, Ordering::Relaxed);
             }
             // The request ended when its last character arrived.
             let end = rx.last_arrival.unwrap();
@@ -181,6 +246,7 @@ fn idle_framing_slave(link: PathBuf, baud: Baud, stop: Arc<AtomicBool>, c: Arc<C
                 if let Some(reply) = station.poll_transmit(fdl_now(Instant::now())) {
                     nix::unistd::write(&port, reply).expect("write");
                     c.answered.fetch_add(1, Ordering::Relaxed);
+                    last_answered.clone_from(&frame);
                     if follows_token {
                         c.after_token.fetch_add(1, Ordering::Relaxed);
                     }
@@ -189,26 +255,6 @@ fn idle_framing_slave(link: PathBuf, baud: Baud, stop: Arc<AtomicBool>, c: Arc<C
             }
         }
     }
-}
-
-fn bus(dir: &TempDir, baud: Option<&str>) -> (Proc, PathBuf) {
-    let prefix = dir.path("l");
-    let mut cmd = Command::new(dpctl());
-    cmd.args(["bus", "--stations", "2", "--link"]).arg(&prefix);
-    if let Some(b) = baud {
-        cmd.args(["--baud", b]);
-    }
-    let p = Proc::spawn("dpctl bus", cmd.stdout(Stdio::null()).stderr(Stdio::null()));
-    let end = Instant::now() + Duration::from_secs(20);
-    while !(0..2).all(|i| link(&prefix, i).exists()) {
-        assert!(Instant::now() < end, "dpctl bus made no links");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    (p, prefix)
-}
-
-fn link(prefix: &Path, i: usize) -> PathBuf {
-    PathBuf::from(format!("{}{i}", prefix.display()))
 }
 
 /// The slave's (data exchanges, retries) from a status line.
@@ -220,25 +266,68 @@ fn counts(v: &Value) -> Option<(u64, u64)> {
     Some((s["data_exchanges"].as_u64()?, s["retries"].as_u64()?))
 }
 
+/// What one run gave.
+struct Run {
+    /// Data exchanges and retries in the steady state (after 20 exchanges).
+    steady: (u64, u64),
+    /// Retries since the start, as the last status line said.
+    retries: u64,
+    /// Collisions the hub counted on the line.
+    collisions: u64,
+    /// Token→request pairs to the slave that the hub recorded merged
+    /// (same delivery), of all such pairs.
+    line_merged: (u64, u64),
+}
+
+/// Token→request pairs to the slave in a pcap file of the hub: (merged
+/// into one delivery, all).
+fn line_pairs(path: &std::path::Path) -> (u64, u64) {
+    let r = PcapReader::new(std::fs::File::open(path).expect("the hub's pcap")).unwrap();
+    let (mut merged, mut pairs) = (0, 0);
+    let mut prev: Option<(Duration, bool)> = None;
+    for p in r {
+        let p = p.unwrap();
+        let Ok((t, _)) = Telegram::parse(&p.data) else {
+            prev = None;
+            continue;
+        };
+        let token = matches!(t, Telegram::Token { .. });
+        if let (Some((ts, true)), true) = (prev, to_slave(&t)) {
+            pairs += 1;
+            merged += (ts == p.ts) as u64;
+        }
+        prev = Some((p.ts, token));
+    }
+    (merged, pairs)
+}
+
 /// Poll the idle-framing slave through `dpctl bus` at `baud` (paced when
-/// `paced`) and return (exchanges, retries) over `cycles` steady-state
-/// exchanges, plus the slave's counters.
+/// `paced`) for `cycles` steady-state exchanges; the master's numbers and
+/// the slave's counters.
 fn poll_idle_framing_slave(
     baud: Baud,
     paced: bool,
     hold: bool,
     cycles: u64,
-) -> ((u64, u64), Arc<Counters>) {
-    let dir = TempDir::new("idle");
+    extra: &[&str],
+) -> (Run, Arc<Counters>) {
     let baud_arg = baud.bps().to_string();
-    let (_bus, prefix) = bus(&dir, paced.then_some(baud_arg.as_str()));
+    let pcap_dir = common::TempDir::new("idle-pcap");
+    let pcap = pcap_dir.path("line.pcapng");
+    let mut args = vec!["--pcap", pcap.to_str().unwrap()];
+    if paced {
+        args.extend(["--baud", &baud_arg]);
+    }
+    let bus = Bus::start(2, &args);
     let stop = Arc::new(AtomicBool::new(false));
     let counters = Arc::new(Counters::default());
     let slave = {
-        let (l, s, c) = (link(&prefix, 1), stop.clone(), counters.clone());
+        let (l, s, c) = (bus.link(1), stop.clone(), counters.clone());
         std::thread::spawn(move || idle_framing_slave(l, baud, s, c))
     };
-    let cfg = dir.path("bus.toml");
+    // The slave listens before the master's first telegram.
+    bus.wait_connected(1);
+    let cfg = bus.dir().path("bus.toml");
     std::fs::write(
         &cfg,
         format!(
@@ -255,9 +344,10 @@ fn poll_idle_framing_slave(
         "dpctl master",
         Command::new(dpctl())
             .args(["master", "--json", "--interval", "100", "--port"])
-            .arg(link(&prefix, 0))
+            .arg(bus.link(0))
             .arg("--config")
             .arg(&cfg)
+            .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::null()),
     );
@@ -265,76 +355,100 @@ fn poll_idle_framing_slave(
     // Steady state: from the first status line after 20 exchanges.
     let mut start = None;
     let mut result = None;
+    let mut retries = 0;
     let end = Instant::now() + WAIT;
     while result.is_none() {
         let l = lines.next_line(end.saturating_duration_since(Instant::now()));
         let Some(l) = l else {
             let c = &counters;
+            let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
             panic!(
                 "no steady Data_Exchange at {baud} (paced {paced}) within {WAIT:?}: start {start:?}; \
-                 slave saw {} frames, {} bad frames, {} requests with short TSYN, answered {}",
-                c.frames.load(Ordering::Relaxed),
-                c.bad_frames.load(Ordering::Relaxed),
-                c.short_sync.load(Ordering::Relaxed),
-                c.answered.load(Ordering::Relaxed)
+                 slave saw {} frames, {} merged, {} bad, {} requests with short TSYN, answered {}",
+                n(&c.frames),
+                n(&c.merged_frames),
+                n(&c.bad_frames),
+                n(&c.short_sync),
+                n(&c.answered)
             );
         };
-        let Some((dx, retries)) = serde_json::from_str::<Value>(&l)
+        let Some((dx, r)) = serde_json::from_str::<Value>(&l)
             .ok()
             .and_then(|v| counts(&v))
         else {
             continue;
         };
+        retries = r;
         match start {
-            None if dx >= 20 => start = Some((dx, retries)),
-            Some((dx0, r0)) if dx >= dx0 + cycles => result = Some((dx - dx0, retries - r0)),
+            None if dx >= 20 => start = Some((dx, r)),
+            Some((dx0, r0)) if dx >= dx0 + cycles => result = Some((dx - dx0, r - r0)),
             _ => {}
         }
     }
-    stop.store(true, Ordering::Relaxed);
     drop(master);
+    stop.store(true, Ordering::Relaxed);
     slave.join().unwrap();
-    (result.unwrap(), counters)
+    let out = bus.stop();
+    assert!(out.status.success(), "{out:?}");
+    let last = out.stderr.lines().last().unwrap_or_default();
+    let run = Run {
+        steady: result.unwrap(),
+        retries,
+        collisions: common::counter(last, "collisions ").expect("the hub's counters"),
+        line_merged: line_pairs(&pcap),
+    };
+    (run, counters)
 }
 
-/// What must hold. On a quiet machine no request needs a retry. Under
-/// heavy load (the suite must pass with CPU hogs on every core) the slave
-/// thread or the hub can be scheduled late and read a token together with
-/// the request after it (one frame without idle), and that request needs a
-/// retry: on the shared 2-core VM at load 8–12, 1 of 102 exchanges at
-/// 19.2 kbit/s, 190 of 300 at 93.75 kbit/s and 766 of 1013 unpaced at
-/// 1.5 Mbit/s needed one (47 µs separate token and request there). So the
-/// test asserts what no load can fake: requests that follow the token to
-/// itself as a telegram of their own are accepted at the first attempt
-/// (in at least 1 exchange of 50), and paced lines need fewer retries than
-/// exchanges. With `hold` the master runs with `alone_hold_bits = 3000`
-/// (alone in the ring it polls on for that share of its token hold time,
-/// so a request follows the slave's own answer, not a token to itself);
-/// without (the default), it
-/// passes the token to itself after every poll cycle, the harder case for
-/// the idle time between two of its own telegrams. The defects this guards against never reached Data_Exchange
-/// (the hub split each telegram) or merged every token and request into
-/// one write (no request ever accepted at the first attempt).
+/// Run one case and check what the module docs say.
 fn check(baud: Baud, paced: bool, hold: bool, cycles: u64) {
-    // One bus at a time: the three cases would load each other.
+    check_with(baud, paced, hold, cycles, &[]);
+}
+
+fn check_with(baud: Baud, paced: bool, hold: bool, cycles: u64, extra: &[&str]) {
+    // One bus at a time: the cases would load each other.
     static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = ONE.lock().unwrap_or_else(|e| e.into_inner());
-    let ((dx, retries), c) = poll_idle_framing_slave(baud, paced, hold, cycles);
-    let after_token = c.after_token.load(Ordering::Relaxed);
+    let (run, c) = poll_idle_framing_slave(baud, paced, hold, cycles, extra);
+    let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
+    let (dx, steady_retries) = run.steady;
+    let bad = n(&c.bad_frames);
+    let explained = n(&c.merged_requests) + n(&c.short_sync) + bad + n(&c.repeats);
     let summary = format!(
-        "{baud} paced {paced} hold {hold}: {dx} exchanges, {retries} retries; slave: {} frames, {} bad, {} short TSYN, {} answered, {after_token} of them right after the token",
-        c.frames.load(Ordering::Relaxed),
-        c.bad_frames.load(Ordering::Relaxed),
-        c.short_sync.load(Ordering::Relaxed),
-        c.answered.load(Ordering::Relaxed)
+        "{baud} paced {paced} hold {hold}: steady state {dx} exchanges, {steady_retries} retries; \
+         {} retries in all, explained by the slave: {} requests in merged frames, {} after short idle, \
+         {bad} garbled frames, {} repeats of answered requests; slave: {} frames, {} merged, {} answered, \
+         {} of them right after the token; hub: {} collisions, {} of {} token→request pairs merged \
+         in its record; garbled frames: {:?}",
+        run.retries,
+        n(&c.merged_requests),
+        n(&c.short_sync),
+        n(&c.repeats),
+        n(&c.frames),
+        n(&c.merged_frames),
+        n(&c.answered),
+        n(&c.after_token),
+        run.collisions,
+        run.line_merged.0,
+        run.line_merged.1,
+        c.bad.lock().unwrap(),
     );
     eprintln!("{summary}");
+    // 1. Every retry accounted for.
+    assert!(run.retries <= explained, "unexplained retries: {summary}");
+    // 2. With the gap on the line, the first attempt is accepted.
     if !hold {
-        assert!(after_token > 0 && after_token * 50 >= dx, "{summary}");
+        assert!(
+            n(&c.after_token) > 0,
+            "no request right after the token accepted at the first attempt: {summary}"
+        );
     }
-    if paced {
-        assert!(retries < dx, "{summary}");
-    }
+    // 3. Nothing split; garbled only by collisions (each garbles the
+    // overlapping parts of two transmissions).
+    assert!(
+        bad <= 2 * run.collisions,
+        "split or garbled telegrams: {summary}"
+    );
 }
 
 #[test]
@@ -360,4 +474,12 @@ fn idle_framing_slave_paced_at_93750_master_holding_the_token() {
 #[test]
 fn idle_framing_slave_unpaced_at_1500000_master_holding_the_token() {
     check(Baud::B1500000, false, true, 1000);
+}
+
+/// The proof fails when the master gathers the token to itself and the
+/// next request into one write (`--gather`, a benchmark option).
+#[test]
+#[should_panic(expected = "no request right after the token accepted")]
+fn gathering_master_fails_the_proof() {
+    check_with(Baud::B1500000, false, false, 200, &["--gather"]);
 }

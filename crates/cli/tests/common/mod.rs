@@ -14,6 +14,7 @@ pub mod mqtt;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::{Receiver, Sender};
 use std::time::{Duration, Instant};
 
 /// The repository root (this package lives in `crates/cli`).
@@ -108,15 +109,26 @@ pub struct Proc {
     /// [`Proc::spawn_captured`]: threads collecting stdout and stderr
     /// while the process runs (so it never blocks on a full pipe).
     captured: Option<(Drain, Drain)>,
+    /// [`Proc::spawn_captured`]: the lines of stdout and stderr as they
+    /// come (they are in [`Output`] too).
+    lines: Option<(Receiver<String>, Receiver<String>)>,
 }
 
 type Drain = std::thread::JoinHandle<String>;
 
-fn drain(mut r: impl Read + Send + 'static) -> Drain {
+/// Collect all `r` yields; each line also goes to `tx` as it arrives.
+fn drain(r: impl Read + Send + 'static, tx: Option<Sender<String>>) -> Drain {
     std::thread::spawn(move || {
-        let mut v = Vec::new();
-        let _ = r.read_to_end(&mut v);
-        String::from_utf8_lossy(&v).into_owned()
+        let mut r = BufReader::new(r);
+        let (mut all, mut line) = (Vec::new(), Vec::new());
+        while r.read_until(b'\n', &mut line).is_ok_and(|n| n > 0) {
+            if let Some(tx) = &tx {
+                let l = String::from_utf8_lossy(&line);
+                let _ = tx.send(l.trim_end().to_string());
+            }
+            all.append(&mut line);
+        }
+        String::from_utf8_lossy(&all).into_owned()
     })
 }
 
@@ -129,6 +141,7 @@ impl Proc {
             child: Some(child),
             name: name.to_string(),
             captured: None,
+            lines: None,
         }
     }
 
@@ -144,10 +157,39 @@ impl Proc {
             .stderr(Stdio::piped());
         let mut p = Proc::spawn(&name, &mut cmd);
         let c = p.child.as_mut().expect("just spawned");
-        let out = drain(c.stdout.take().expect("piped"));
-        let err = drain(c.stderr.take().expect("piped"));
+        let (out_tx, out_rx) = std::sync::mpsc::channel();
+        let (err_tx, err_rx) = std::sync::mpsc::channel();
+        let out = drain(c.stdout.take().expect("piped"), Some(out_tx));
+        let err = drain(c.stderr.take().expect("piped"), Some(err_tx));
         p.captured = Some((out, err));
+        p.lines = Some((out_rx, err_rx));
         p
+    }
+
+    /// The next line on stdout of a [`Proc::spawn_captured`] process,
+    /// waiting at most `timeout`.
+    pub fn stdout_line(&self, timeout: Duration) -> Option<String> {
+        let (rx, _) = self.lines.as_ref().expect("spawn_captured");
+        rx.recv_timeout(timeout).ok()
+    }
+
+    /// The next line on stderr, as [`Proc::stdout_line`].
+    pub fn stderr_line(&self, timeout: Duration) -> Option<String> {
+        let (_, rx) = self.lines.as_ref().expect("spawn_captured");
+        rx.recv_timeout(timeout).ok()
+    }
+
+    /// Wait until `n` lines on stdout satisfied `ok` (counted from the
+    /// last call); fails after 30 s.
+    pub fn wait_stdout(&self, what: &str, n: usize, ok: impl Fn(&str) -> bool) {
+        let end = Instant::now() + Duration::from_secs(30);
+        let mut seen = 0;
+        while seen < n {
+            let left = end.saturating_duration_since(Instant::now());
+            let l = self.stdout_line(left);
+            let l = l.unwrap_or_else(|| panic!("{}: {seen} of {n} {what}", self.name));
+            seen += ok(&l) as usize;
+        }
     }
 
     /// Send signal number `sig` (e.g. 2 SIGINT, 15 SIGTERM).
@@ -332,6 +374,14 @@ pub fn wait_for(what: &str, timeout: Duration, mut cond: impl FnMut() -> bool) {
     }
 }
 
+/// The number after `key` in a status line of `dpctl bus`
+/// (`counter(s, "chars ")`).
+pub fn counter(status: &str, key: &str) -> Option<u64> {
+    let rest = status.split(key).nth(1)?;
+    let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+    digits.parse().ok()
+}
+
 /// A running `dpctl bus` whose links live in a temp dir.
 pub struct Bus {
     /// The hub process.
@@ -379,6 +429,51 @@ impl Bus {
     /// Link of station `i` as a string.
     pub fn link_str(&self, i: usize) -> String {
         self.link(i).to_string_lossy().into_owned()
+    }
+
+    /// The hub's counters now: asks with SIGUSR1 and returns the line it
+    /// prints (`transmissions …, chars N, …, k/N stations connected …`;
+    /// read numbers with [`counter`]).
+    pub fn status(&self) -> String {
+        self.proc.signal(10);
+        let end = Instant::now() + Duration::from_secs(30);
+        loop {
+            let left = end.saturating_duration_since(Instant::now());
+            let l = self
+                .proc
+                .stderr_line(left)
+                .expect("a status line from dpctl bus");
+            if l.starts_with("dpctl bus: transmissions") {
+                return l;
+            }
+        }
+    }
+
+    /// Wait until the hub's counters satisfy `ok` (see [`Bus::status`]):
+    /// the event a test needs (the hub saw a station open its pty, carried
+    /// N characters), never a guessed time.
+    pub fn wait_status(&self, what: &str, ok: impl Fn(&str) -> bool) -> String {
+        let end = Instant::now() + Duration::from_secs(30);
+        loop {
+            let s = self.status();
+            if ok(&s) {
+                return s;
+            }
+            assert!(Instant::now() < end, "timed out waiting for {what}: {s}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Wait until exactly `n` stations have their pty open as the hub
+    /// sees it (it checks for openers every few ms).
+    pub fn wait_connected(&self, n: u64) {
+        let connected = |s: &str| {
+            let head = s.split(" stations connected").next()?;
+            head.rsplit(' ').next()?.split('/').next()?.parse().ok()
+        };
+        self.wait_status(&format!("{n} stations connected"), |s| {
+            connected(s) == Some(n)
+        });
     }
 
     /// The temp dir holding the links (for other files of the test).

@@ -602,6 +602,13 @@ impl<A: MasterApp> Station for ActiveStation<A> {
         };
         earliest(c.tx_at, state)
     }
+
+    fn awaits_answer(&self) -> bool {
+        matches!(
+            self.core.state,
+            State::AwaitResponse { .. } | State::AwaitStatus { .. } | State::CheckTokenPass { .. }
+        )
+    }
 }
 
 /// The address after `a`, wrapping after HSA to 0.

@@ -49,6 +49,13 @@ pub trait Station {
 
     /// When the station next needs [`Station::handle_timeout`].
     fn poll_timeout(&self) -> Option<Instant>;
+
+    /// Whether the station awaits an answer to what it sent last (a
+    /// reply to its request, the first frame of its successor after a
+    /// token pass): a driver may watch the line closely until it comes.
+    fn awaits_answer(&self) -> bool {
+        false
+    }
 }
 
 impl<S: Station + ?Sized> Station for Box<S> {
@@ -63,6 +70,9 @@ impl<S: Station + ?Sized> Station for Box<S> {
     }
     fn poll_timeout(&self) -> Option<Instant> {
         (**self).poll_timeout()
+    }
+    fn awaits_answer(&self) -> bool {
+        (**self).awaits_answer()
     }
 }
 

@@ -293,7 +293,7 @@ impl Hub {
             // Wake-ups on time matter when pacing; the default slack of
             // this thread is 50 µs.
             self.slack_set = true;
-            set_timer_slack();
+            crate::driver::set_timer_slack();
         }
         let now = self.now();
         // Ptys without a process: has one opened them (HUP gone)?
@@ -472,19 +472,6 @@ fn remove_links(stations: &[Station]) {
 fn pty_err(e: Errno) -> HubError {
     HubError::Pty(e.into())
 }
-
-#[cfg(target_os = "linux")]
-fn set_timer_slack() {
-    // SAFETY: PR_SET_TIMERSLACK takes an unsigned long by value and
-    // touches no memory.
-    let r = unsafe { nix::libc::prctl(nix::libc::PR_SET_TIMERSLACK, 1 as nix::libc::c_ulong) };
-    if r != 0 {
-        tracing::debug!("cannot reduce the timer slack");
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-fn set_timer_slack() {}
 
 fn set_nonblocking(fd: &OwnedFd) -> Result<(), Errno> {
     use nix::fcntl::{fcntl, FcntlArg, OFlag};

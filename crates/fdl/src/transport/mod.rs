@@ -176,9 +176,7 @@ pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 /// gone through. A port registered for both (as `tokio-serial` and
 /// `tokio::net` register theirs) wakes its task's thread each time the far
 /// end has read what was written: two needless wake-ups per exchange on a
-/// pty, in the middle of the round trip. A read shorter than the buffer
-/// has emptied the kernel's queue, so the next read waits for the runtime
-/// without trying the descriptor first.
+/// pty, in the middle of the round trip.
 #[derive(Debug)]
 pub struct Port {
     stream: Link,
@@ -413,7 +411,7 @@ impl Port {
         }
     }
 
-    fn fd(&self) -> BorrowedFd<'_> {
+    pub(crate) fn fd(&self) -> BorrowedFd<'_> {
         // SAFETY: the fd belongs to `self.stream`, which outlives the
         // returned borrow (tied to `&self`).
         unsafe { BorrowedFd::borrow_raw(self.stream.as_raw_fd()) }
@@ -480,11 +478,11 @@ impl Port {
     }
 }
 
-/// Read from `io` when the runtime has seen it readable. A read shorter
-/// than the buffer emptied the kernel's queue: the readiness is cleared,
-/// so the next read waits for the next edge instead of trying first (the
-/// data that arrives later raises a new edge, seen at the runtime's next
-/// wait).
+/// Read from `io` when the runtime has seen it readable, until a read
+/// would block. (A short read does not prove the queue empty on a tty:
+/// a pty hands over at most its line discipline's buffer per read, and
+/// with edge-triggered readiness a reader that stopped early would wait
+/// for an edge that never comes once the writer is blocked.)
 fn poll_read_fd<T: AsRawFd>(
     io: &AsyncFd<T>,
     cx: &mut Context<'_>,
@@ -493,7 +491,6 @@ fn poll_read_fd<T: AsRawFd>(
     loop {
         let mut guard = ready!(io.poll_read_ready(cx))?;
         let unfilled = buf.initialize_unfilled();
-        let len = unfilled.len();
         let fd = io.as_raw_fd();
         let res = guard.try_io(|_| loop {
             // SAFETY: `fd` is open for the lifetime of `io`, borrowed here.
@@ -505,9 +502,6 @@ fn poll_read_fd<T: AsRawFd>(
         });
         match res {
             Ok(Ok(n)) => {
-                if n > 0 && n < len {
-                    guard.clear_ready();
-                }
                 buf.advance(n);
                 return Poll::Ready(Ok(()));
             }
@@ -619,8 +613,7 @@ mod tests {
         b.read_exact(&mut got).await.unwrap();
         assert!(got == want, "bytes lost or reordered");
         let mut a = writer.await.unwrap();
-        // Short reads leave the port waiting for the next edge: bytes
-        // written afterwards still wake the reader.
+        // Bytes written afterwards still wake the reader.
         for i in 0..50u8 {
             a.write_all(&[i, i]).await.unwrap();
             let mut two = [0u8; 2];
