@@ -164,3 +164,39 @@ fn rts_on_send_on_a_pty_is_a_clear_one_line_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("off") && err.contains("on-send"), "{err}");
 }
+
+#[test]
+fn rts_on_send_through_a_serial_device_server_is_refused_clearly() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = format!("tcp://{}", listener.local_addr().unwrap());
+    let out = Command::new(dpctl())
+        .args(["doctor", "--json", "--rts", "on-send", "--port", &port])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["kind"]["type"], "tcp");
+    let rts = v["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["what"] == "RTS control")
+        .unwrap()
+        .clone();
+    assert_eq!(rts["verdict"], "fail");
+    assert!(
+        rts["detail"]
+            .as_str()
+            .unwrap()
+            .contains("drives its transceiver itself"),
+        "{rts}"
+    );
+    let out = Command::new(dpctl())
+        .args(["scan", "--rts", "on-send", "--port", &port])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("--rts on-send needs an RTS line"), "{err}");
+}

@@ -209,7 +209,7 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
         "Name",
         "State",
         "Cycle",
-        "Retries",
+        "Retry/Err",
         "Inputs",
         "Outputs",
         "Diagnosis",

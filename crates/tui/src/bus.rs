@@ -667,9 +667,9 @@ impl BusView {
             .max()
             .unwrap_or(0)
             .clamp(4, 30) as u16;
-        // Addr, Name, State, Cycle, Retries; 7 gaps between 8 columns and
-        // the two borders.
-        let fixed = 4 + name_w + 13 + 9 + 7 + 7 + 2;
+        // Addr, Name, State, Cycle, Retry/Err; 7 gaps between 8 columns
+        // and the two borders.
+        let fixed = 4 + name_w + 13 + 9 + 9 + 7 + 2;
         let rest = area.width.saturating_sub(fixed).max(24);
         let io_w = rest * 3 / 8;
         let diag_w = rest - 2 * io_w;
@@ -678,7 +678,7 @@ impl BusView {
             "Name",
             "State",
             "Cycle",
-            "Retries",
+            "Retry/Err",
             "Inputs",
             "Outputs",
             "Diagnosis",
@@ -718,7 +718,10 @@ impl BusView {
                 Cell::from(fit(&spec.name, name_w as usize)),
                 Cell::from(Span::styled(state_name(r.state), state_style)),
                 Cell::from(cycle_text(r.cycle)),
-                Cell::from(format!("{:>7}", r.stats.retries)),
+                Cell::from(format!(
+                    "{:>9}",
+                    format!("{}/{}", r.stats.retries, r.stats.errors)
+                )),
                 Cell::from(Text::from(i)),
                 Cell::from(Text::from(o)),
                 Cell::from(Text::from(diag.join("\n"))),
@@ -732,7 +735,7 @@ impl BusView {
                 Constraint::Length(name_w),
                 Constraint::Length(13),
                 Constraint::Length(9),
-                Constraint::Length(7),
+                Constraint::Length(9),
                 Constraint::Length(io_w),
                 Constraint::Length(io_w),
                 Constraint::Length(diag_w),
@@ -956,7 +959,13 @@ mod tests {
         let s = screen(&v);
         assert!(s.contains("dpctl master  master 2 at 1.5Mbit/s"), "{s}");
         for h in [
-            "Addr", "Name", "State", "Cycle", "Retries", "Inputs", "Outputs",
+            "Addr",
+            "Name",
+            "State",
+            "Cycle",
+            "Retry/Err",
+            "Inputs",
+            "Outputs",
         ] {
             assert!(s.contains(h), "{h} missing:\n{s}");
         }
@@ -1086,7 +1095,11 @@ mod tests {
             master: Some(2),
             inputs: vec![0x00, 0x7B],
             outputs: vec![0x01, 0x02],
-            counters: Counters::default(),
+            counters: Counters {
+                retries: 3,
+                errors: 2,
+                ..Counters::default()
+            },
             diag: Diagnosis::Words(diag.iter().map(|w| w.to_string()).collect()),
         };
         let snap = BusSnapshot {
@@ -1121,7 +1134,10 @@ mod tests {
         );
         assert!(s.contains("line: telegrams 99"), "{s}");
         let drive = s.lines().find(|l| l.contains("drive")).expect(&s);
-        assert!(drive.contains("data_exchange"), "{drive}");
+        assert!(
+            drive.contains("data_exchange") && drive.contains(" 3/2 "),
+            "{drive}"
+        );
         assert!(s.contains("speed=258") && s.contains("actual=123"), "{s}");
         // Slave 8 of the bus file is not heard; 40 is heard, not in it.
         assert!(
