@@ -86,6 +86,11 @@ fn setup() -> Setup {
     let info = |address: u8| SlaveInfo {
         address,
         name: format!("s{address}"),
+        ident_number: master
+            .slaves
+            .iter()
+            .find(|s| s.address == address)
+            .map_or(0, |s| s.ident_number),
         channels: if address == 8 {
             omega_map.clone()
         } else {
