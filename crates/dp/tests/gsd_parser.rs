@@ -2,8 +2,8 @@
 //! mode, limits on input size.
 
 use profibus_dp::gsd::{
-    Allowed, DiagKind, Gsd, GsdError, ParseOptions, Parsed, PrmDataType, Quirk, MAX_FILE_LEN,
-    MAX_LINE_LEN,
+    decode_latin1, encode_latin1, Allowed, DiagKind, Gsd, GsdError, ParseOptions, Parsed,
+    PrmDataType, Quirk, MAX_FILE_LEN, MAX_LINE_LEN,
 };
 
 const HEAD: &str =
@@ -623,5 +623,119 @@ fn a_compact_station_with_many_alternatives_names_a_few() {
         "this is a compact station (no Modular_Station=1): it is configured with exactly \
          one of its modules (`PPO 0`, `PPO 1`, `PPO 2`, `PPO 3`, `PPO 4`, `PPO 5`, … 9 in all), \
          or all of them in file order"
+    );
+}
+
+#[test]
+fn decode_latin1_maps_every_byte_to_its_character() {
+    let all: Vec<u8> = (0..=255).collect();
+    let text = decode_latin1(&all);
+    assert!(text.chars().map(u32::from).eq(0..=255));
+    assert_eq!(encode_latin1(&text), all);
+    assert_eq!(
+        decode_latin1(b"Model_Name=\"x\"\r\n"),
+        "Model_Name=\"x\"\r\n"
+    );
+    assert_eq!(decode_latin1(b""), "");
+    assert_eq!(decode_latin1(b"a\xB5b\xFF\x80"), "a\u{B5}b\u{FF}\u{80}");
+}
+
+#[test]
+fn numbers_at_the_limits_of_64_bits() {
+    // Values beyond the keyword's range are reported with the number;
+    // beyond 64 bits as too large.
+    for (value, message) in [
+        ("9223372036854775807", "outside"),
+        ("0x7FFFFFFFFFFFFFFF", "outside"),
+        ("-9223372036854775807", "outside"),
+        ("9223372036854775808", "too large"),
+        ("0x8000000000000000", "too large"),
+        ("-9223372036854775808", "too large"),
+        ("0x10000000000000000", "too large"),
+    ] {
+        let e = strict_err(&format!("{HEAD}Max_Module={value}\n"));
+        assert!(e.first().message.contains(message), "{value}: {e}");
+    }
+    assert_eq!(
+        lenient(&format!("{HEAD}Max_Module=0x0000000000000000000FF\n"))
+            .gsd
+            .max_module,
+        Some(255)
+    );
+    assert_eq!(
+        lenient(&format!("{HEAD}Max_Module=+007\n")).gsd.max_module,
+        Some(7)
+    );
+}
+
+#[test]
+fn references_and_duplicate_definitions_are_checked_in_file_order() {
+    let def = |r: u16, default: u8, text: Option<u16>| {
+        let text = text.map_or(String::new(), |t| format!("Prm_Text_Ref={t}\n"));
+        format!("ExtUserPrmData={r} \"p{r}\"\nUnsigned8 {default} 0-3\n{text}EndExtUserPrmData\n")
+    };
+    let text = format!(
+        "{HEAD}PrmText=5\nText(0)=\"off\"\nEndPrmText\n{}{}{}{}{}\
+         Ext_User_Prm_Data_Ref(0)=1\nExt_User_Prm_Data_Ref(1)=9\n\
+         Ext_User_Prm_Data_Ref(2)=2\nExt_User_Prm_Data_Ref(3)=9\n",
+        def(1, 1, None),
+        def(2, 2, Some(5)),
+        def(1, 3, Some(6)),
+        def(2, 3, None),
+        def(1, 3, None),
+    );
+    let p = lenient(&text);
+    let twice: Vec<&str> = p
+        .warnings
+        .iter()
+        .filter(|w| w.message.contains("defined twice"))
+        .map(|w| w.message.as_str())
+        .collect();
+    assert_eq!(
+        twice,
+        [
+            "`ExtUserPrmData` 1 is defined twice; the first definition counts",
+            "`ExtUserPrmData` 2 is defined twice; the first definition counts",
+            "`ExtUserPrmData` 1 is defined twice; the first definition counts",
+        ]
+    );
+    let dangling: Vec<(u32, &str)> = p
+        .warnings
+        .iter()
+        .filter(|w| w.kind == DiagKind::Quirk(Quirk::DanglingReference))
+        .map(|w| (w.pos.line, w.message.as_str()))
+        .collect();
+    assert_eq!(
+        dangling,
+        [
+            (
+                18,
+                "`Prm_Text_Ref` names `PrmText` 6, which the file does not define"
+            ),
+            (
+                27,
+                "`Ext_User_Prm_Data_Ref` names `ExtUserPrmData` 9, which the file does not define"
+            ),
+            (
+                29,
+                "`Ext_User_Prm_Data_Ref` names `ExtUserPrmData` 9, which the file does not define"
+            ),
+        ]
+    );
+    // The first definition of each number counts; references to none are
+    // left out of the parameters.
+    let g = &p.gsd;
+    assert_eq!(g.user_prm_data(&[], &[]).unwrap(), [1, 0, 2]);
+    let params = g.parameters(&[]).unwrap();
+    let names: Vec<&str> = params.iter().map(|p| p.definition.name.as_str()).collect();
+    assert_eq!(names, ["p1", "p2"]);
+    assert_eq!(params[1].definition.prm_text_ref, Some(5));
+    let e = strict_err(&text);
+    assert_eq!(
+        e.errors
+            .iter()
+            .filter(|d| d.kind == DiagKind::Quirk(Quirk::DanglingReference))
+            .count(),
+        3
     );
 }

@@ -9,6 +9,7 @@
 
 use super::{Pos, MAX_LINE_LEN};
 use std::borrow::Cow;
+use std::fmt::Display;
 
 /// The physical lines of a text, with their 1-based numbers; a line
 /// longer than [`MAX_LINE_LEN`] yields `Err(line number)` after scanning at
@@ -147,6 +148,14 @@ impl<'a> LogicalLine<'a> {
     /// piece was empty) and stray trailing `\\` (a statement cannot end in
     /// a backslash), keeping positions right.
     pub(crate) fn trim(&mut self) {
+        // Most lines have nothing to trim (the first piece is trimmed when
+        // the line starts, and the last piece's trailing blanks are gone).
+        let (first, last) = (self.text.chars().next(), self.text.chars().next_back());
+        if !first.is_some_and(char::is_whitespace)
+            && !last.is_some_and(|c| c.is_whitespace() || c == '\\')
+        {
+            return;
+        }
         let end = self
             .text
             .trim_end_matches(|c: char| c.is_whitespace() || c == '\\')
@@ -279,7 +288,7 @@ impl<'t> Cursor<'t> {
     }
 
     /// Consume `c` or fail saying what was expected.
-    pub(crate) fn expect(&mut self, c: char, what: &str) -> Scan<()> {
+    pub(crate) fn expect(&mut self, c: char, what: impl Display) -> Scan<()> {
         if self.eat(c) {
             Ok(())
         } else {
@@ -288,7 +297,7 @@ impl<'t> Cursor<'t> {
     }
 
     /// Fail unless only blanks remain.
-    pub(crate) fn end(&mut self, after: &str) -> Scan<()> {
+    pub(crate) fn end(&mut self, after: impl Display) -> Scan<()> {
         if self.at_end() {
             Ok(())
         } else {
@@ -346,7 +355,7 @@ impl<'t> Cursor<'t> {
 
     /// An integer: optional sign, then decimal digits or `0x` and hex
     /// digits.
-    pub(crate) fn int(&mut self, what: &str) -> Scan<i64> {
+    pub(crate) fn int(&mut self, what: impl Display) -> Scan<i64> {
         self.ws();
         let start = self.i;
         let b = self.s.as_bytes();
@@ -368,8 +377,13 @@ impl<'t> Cursor<'t> {
             } else {
                 (10, i)
             };
+        // The value as the digits go by; `None` once it overflows.
+        let mut value = Some(0i64);
         let mut j = digits_at;
-        while j < b.len() && (b[j] as char).is_digit(radix) {
+        while let Some(d) = b.get(j).and_then(|&d| (d as char).to_digit(radix)) {
+            value = value
+                .and_then(|v| v.checked_mul(i64::from(radix)))
+                .and_then(|v| v.checked_add(i64::from(d)));
             j += 1;
         }
         if j == digits_at {
@@ -381,7 +395,7 @@ impl<'t> Cursor<'t> {
             c.i = start;
             return Err(c.error(format!("expected {what}, found {}", c.found())));
         }
-        let v = i64::from_str_radix(&self.s[digits_at..j], radix).map_err(|_| ScanError {
+        let v = value.ok_or_else(|| ScanError {
             at: start,
             msg: format!("number `{}` is too large", &self.s[start..j]),
         })?;
@@ -390,10 +404,10 @@ impl<'t> Cursor<'t> {
     }
 
     /// An integer in `lo..=hi`.
-    pub(crate) fn int_in(&mut self, what: &str, lo: i64, hi: i64) -> Scan<i64> {
+    pub(crate) fn int_in(&mut self, what: impl Display, lo: i64, hi: i64) -> Scan<i64> {
         self.ws();
         let at = self.i;
-        let v = self.int(what)?;
+        let v = self.int(&what)?;
         if v < lo || v > hi {
             return Err(ScanError {
                 at,
@@ -405,7 +419,7 @@ impl<'t> Cursor<'t> {
 
     /// A string in double quotes, or (when `single` is allowed) in single
     /// quotes.
-    pub(crate) fn string(&mut self, what: &str, single: bool) -> Scan<Quoted<'t>> {
+    pub(crate) fn string(&mut self, what: impl Display, single: bool) -> Scan<Quoted<'t>> {
         self.ws();
         let at = self.i;
         let q = match self.s[self.i..].chars().next() {
@@ -436,10 +450,10 @@ impl<'t> Cursor<'t> {
     }
 
     /// A comma-separated list of bytes (0..=255), at least one.
-    pub(crate) fn bytes(&mut self, what: &str) -> Scan<Vec<u8>> {
+    pub(crate) fn bytes(&mut self, what: impl Display) -> Scan<Vec<u8>> {
         let mut v = Vec::new();
         loop {
-            v.push(self.int_in(what, 0, 255)? as u8);
+            v.push(self.int_in(&what, 0, 255)? as u8);
             if !self.eat(',') {
                 return Ok(v);
             }

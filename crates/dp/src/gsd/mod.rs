@@ -333,7 +333,23 @@ impl std::error::Error for GsdError {}
 /// Decode Latin-1 bytes (the encoding of GSD files) into a string: every
 /// byte is the character of the same number.
 pub fn decode_latin1(bytes: &[u8]) -> String {
-    bytes.iter().map(|&b| b as char).collect()
+    // Most GSD files are plain ASCII, which is the same text in UTF-8:
+    // copy it in one go instead of character by character.
+    if bytes.is_ascii() {
+        if let Ok(s) = std::str::from_utf8(bytes) {
+            return s.to_owned();
+        }
+    }
+    // U+0080..=U+00FF take two bytes in UTF-8: 110000xx 10xxxxxx.
+    let mut utf8 = Vec::with_capacity(bytes.len() * 2);
+    for &b in bytes {
+        if b < 0x80 {
+            utf8.push(b);
+        } else {
+            utf8.extend_from_slice(&[0xC0 | (b >> 6), 0x80 | (b & 0x3F)]);
+        }
+    }
+    String::from_utf8(utf8).expect("Latin-1 encoded as UTF-8 is valid UTF-8")
 }
 
 /// Encode a string as Latin-1; characters beyond U+00FF become `?`.

@@ -122,7 +122,7 @@ struct Parser {
     state: State,
     ident_seen: bool,
     /// Simple keywords seen, with their first line.
-    seen: HashMap<String, u32>,
+    seen: HashMap<String, u32, KeyHasher>,
     /// Positions of `Ext_User_Prm_Data_Ref` lines.
     prm_refs: Vec<(Pos, u16)>,
     /// Positions of `Prm_Text_Ref` lines.
@@ -150,7 +150,9 @@ impl Parser {
             warnings: Vec::new(),
             state: State::Global,
             ident_seen: false,
-            seen: HashMap::new(),
+            // Room for the simple keywords of a large file: no rehashing
+            // while parsing.
+            seen: HashMap::with_capacity_and_hasher(32, KeyHasher),
             prm_refs: Vec::new(),
             text_refs: Vec::new(),
             module_pos: Vec::new(),
@@ -287,6 +289,11 @@ impl Parser {
                     return None;
                 }
             };
+            // The header line, commented out or not, has a `#`; most
+            // lines have none and need no closer look.
+            if !raw.as_bytes().contains(&b'#') {
+                continue;
+            }
             let t = raw.trim();
             if strip_comment(t).trim().eq_ignore_ascii_case("#Profibus_DP") {
                 return Some(n + 1);
@@ -566,7 +573,15 @@ impl Parser {
     /// Note a simple keyword; warn when it was given before.
     fn seen(&mut self, ll: &LogicalLine<'_>, key: &str, word: &str) {
         let line = ll.line();
-        if let Some(first) = self.seen.insert(key.to_string(), line) {
+        // The key is allocated only the first time it is seen.
+        let earlier = match self.seen.get_mut(key) {
+            Some(first) => Some(std::mem::replace(first, line)),
+            None => {
+                self.seen.insert(key.to_string(), line);
+                None
+            }
+        };
+        if let Some(first) = earlier {
             self.warn(
                 ll.pos(0),
                 DiagKind::Semantic,
@@ -584,8 +599,8 @@ impl Parser {
         lo: i64,
         hi: i64,
     ) -> Result<i64, ScanError> {
-        let v = c.int_in(&format!("a number for `{word}`"), lo, hi)?;
-        c.end(&format!("the value of `{word}`"))?;
+        let v = c.int_in(format_args!("a number for `{word}`"), lo, hi)?;
+        c.end(format_args!("the value of `{word}`"))?;
         self.seen(ll, key, word);
         Ok(v)
     }
@@ -599,8 +614,8 @@ impl Parser {
     ) -> Result<bool, ScanError> {
         c.ws();
         let at = c.at();
-        let v = c.int(&format!("0 or 1 for `{word}`"))?;
-        c.end(&format!("the value of `{word}`"))?;
+        let v = c.int(format_args!("0 or 1 for `{word}`"))?;
+        c.end(format_args!("the value of `{word}`"))?;
         self.seen(ll, key, word);
         if v != 0 && v != 1 {
             self.quirk(
@@ -617,13 +632,13 @@ impl Parser {
         &mut self,
         ll: &LogicalLine<'_>,
         c: &mut Cursor<'_>,
-        what: &str,
+        what: impl std::fmt::Display,
         to_end: bool,
     ) -> Result<String, ScanError> {
         match c.peek() {
-            Some('"') => Ok(c.string(what, false)?.text.to_string()),
+            Some('"') => Ok(c.string(&what, false)?.text.to_string()),
             Some('\'') => {
-                let q = c.string(what, true)?;
+                let q = c.string(&what, true)?;
                 self.quirk(
                     ll.pos(q.at),
                     Quirk::SingleQuotes,
@@ -655,8 +670,8 @@ impl Parser {
         word: &str,
         key: &str,
     ) -> Result<String, ScanError> {
-        let s = self.string_value(ll, c, &format!("the text of `{word}`"), true)?;
-        c.end(&format!("the text of `{word}`"))?;
+        let s = self.string_value(ll, c, format_args!("the text of `{word}`"), true)?;
+        c.end(format_args!("the text of `{word}`"))?;
         self.seen(ll, key, word);
         Ok(s)
     }
@@ -1331,7 +1346,7 @@ impl Parser {
         let mut c = Cursor::new(&ll.text);
         let (word, idx, eq) = self.head(ll, &mut c)?;
         if word.eq_ignore_ascii_case(block.end) {
-            if let Err(e) = c.end(&format!("`{}`", block.end)) {
+            if let Err(e) = c.end(format_args!("`{}`", block.end)) {
                 self.syntax(ll, e);
             }
             self.state = State::Global;
@@ -1464,8 +1479,22 @@ impl Parser {
                 );
             }
         }
+        // Sets of the defined reference numbers: a hostile file with
+        // tens of thousands of references and definitions must not cost
+        // their product.
+        let mut prm_defined = RefSet::new();
+        let mut duplicates = Vec::new();
+        for p in &g.ext_user_prm_data {
+            if !prm_defined.insert(p.reference) {
+                duplicates.push(p.reference);
+            }
+        }
+        let mut text_defined = RefSet::new();
+        for t in &g.prm_texts {
+            text_defined.insert(t.reference);
+        }
         for (pos, r) in &self.prm_refs {
-            if !g.ext_user_prm_data.iter().any(|p| p.reference == *r) {
+            if !prm_defined.contains(*r) {
                 note(
                     *pos,
                     DiagKind::Quirk(Quirk::DanglingReference),
@@ -1475,7 +1504,7 @@ impl Parser {
             }
         }
         for (pos, r) in &self.text_refs {
-            if !g.prm_texts.iter().any(|t| t.reference == *r) {
+            if !text_defined.contains(*r) {
                 note(
                     *pos,
                     DiagKind::Quirk(Quirk::DanglingReference),
@@ -1484,21 +1513,15 @@ impl Parser {
                 );
             }
         }
-        for (i, p) in g.ext_user_prm_data.iter().enumerate() {
-            if g.ext_user_prm_data[..i]
-                .iter()
-                .any(|q| q.reference == p.reference)
-            {
-                note(
-                    Pos::default(),
-                    DiagKind::Semantic,
-                    format!(
-                        "`ExtUserPrmData` {} is defined twice; the first definition counts",
-                        p.reference
-                    ),
-                    false,
-                );
-            }
+        for reference in duplicates {
+            note(
+                Pos::default(),
+                DiagKind::Semantic,
+                format!(
+                    "`ExtUserPrmData` {reference} is defined twice; the first definition counts"
+                ),
+                false,
+            );
         }
         for (m, pos) in g.modules.iter().zip(&self.module_pos) {
             if let Some(Err(e)) = cfg::identifiers(&m.cfg).find(|r| r.is_err()) {
@@ -1637,6 +1660,61 @@ pub(crate) const MAX_MODULES: usize = 4096;
 /// million unclosed modules) must not cost a diagnostic per line. The
 /// last one kept says that more were left out.
 pub(crate) const MAX_DIAGNOSTICS: usize = 1000;
+
+/// FNV-1a for the keyword table: the keys are the parser's own keywords
+/// (a fixed set of a few dozen), so a hash resisting chosen collisions is
+/// not needed, and SipHash costs more than the rest of a short line.
+#[derive(Clone, Copy, Default)]
+struct KeyHasher;
+
+struct Fnv(u64);
+
+impl std::hash::BuildHasher for KeyHasher {
+    type Hasher = Fnv;
+
+    fn build_hasher(&self) -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl std::hash::Hasher for Fnv {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+}
+
+/// A set of 16-bit reference numbers, one bit each; it allocates its
+/// 8 KiB only when the first number goes in.
+struct RefSet(Vec<u64>);
+
+impl RefSet {
+    fn new() -> RefSet {
+        RefSet(Vec::new())
+    }
+
+    /// Add `r`; whether it was not in the set yet.
+    fn insert(&mut self, r: u16) -> bool {
+        if self.0.is_empty() {
+            self.0 = vec![0; 1 << 10];
+        }
+        let (word, bit) = (usize::from(r >> 6), 1u64 << (r & 63));
+        let new = self.0[word] & bit == 0;
+        self.0[word] |= bit;
+        new
+    }
+
+    fn contains(&self, r: u16) -> bool {
+        self.0
+            .get(usize::from(r >> 6))
+            .is_some_and(|w| w & (1u64 << (r & 63)) != 0)
+    }
+}
 
 fn push_capped(list: &mut Vec<Diagnostic>, d: Diagnostic) {
     match list.len() {

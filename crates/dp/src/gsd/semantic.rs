@@ -611,6 +611,20 @@ impl Gsd {
         selection: &[usize],
     ) -> Result<(Vec<u8>, Vec<ParamInstance<'_>>), SelectionError> {
         let modules = self.selected(selection)?;
+        // The definitions by reference number (the first of each), looked
+        // up once per reference instead of a search through all of them.
+        let mut defs: Vec<(u16, &ExtUserPrmData)> = self
+            .ext_user_prm_data
+            .iter()
+            .map(|p| (p.reference, p))
+            .collect();
+        defs.sort_by_key(|&(r, _)| r);
+        defs.dedup_by_key(|&mut (r, _)| r);
+        let definition = |reference: u16| {
+            defs.binary_search_by_key(&reference, |&(r, _)| r)
+                .ok()
+                .map(|i| defs[i].1)
+        };
         let mut data = Vec::new();
         let mut params = Vec::new();
         let mut add_refs = |data: &mut Vec<u8>,
@@ -620,7 +634,7 @@ impl Gsd {
                             position: Option<usize>|
          -> Result<(), SelectionError> {
             for r in refs {
-                let Some(def) = self.prm_definition(r.reference) else {
+                let Some(def) = definition(r.reference) else {
                     continue;
                 };
                 let size = def.data_type.size();
