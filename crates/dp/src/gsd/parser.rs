@@ -231,23 +231,10 @@ impl Parser {
                 }
             } else {
                 if content.trim_start().starts_with('#') {
-                    let header = content.trim();
-                    if header.eq_ignore_ascii_case("#Profibus_DP") {
-                        self.warn(
-                            Pos { line: n, col: 1 },
-                            DiagKind::Semantic,
-                            "a second `#Profibus_DP` line; ignored".into(),
-                        );
-                        continue;
+                    if self.section_header(content.trim(), n) {
+                        break;
                     }
-                    self.warn(
-                        Pos { line: n, col: 1 },
-                        DiagKind::Semantic,
-                        format!(
-                            "`{header}` starts another section; the rest of the file is not read"
-                        ),
-                    );
-                    break;
+                    continue;
                 }
                 current = Some(LogicalLine::new(n, content));
             }
@@ -255,18 +242,48 @@ impl Parser {
             if !cont {
                 let mut ll = current.take().expect("a line was started");
                 ll.trim();
-                if !ll.text.is_empty() {
+                // A `#` line reached through a continuation (`\` on an
+                // otherwise empty line) is a section header too: kept as a
+                // statement, it would be written back as a line of its own
+                // and read as a header then.
+                if ll.text.starts_with('#') {
+                    if self.section_header(&ll.text, ll.pos(0).line) {
+                        break;
+                    }
+                } else if !ll.text.is_empty() {
                     self.statement(&ll);
                 }
             }
         }
         if let Some(mut ll) = current.take() {
             ll.trim();
-            if !ll.text.is_empty() {
+            if ll.text.starts_with('#') {
+                self.section_header(&ll.text, ll.pos(0).line);
+            } else if !ll.text.is_empty() {
                 self.statement(&ll);
             }
         }
         self.close_at_eof();
+    }
+
+    /// A `#` line (`header`, trimmed) on line `n` inside the section: a
+    /// second `#Profibus_DP` is ignored, any other header ends the
+    /// section. Whether it ends it.
+    fn section_header(&mut self, header: &str, n: u32) -> bool {
+        if header.eq_ignore_ascii_case("#Profibus_DP") {
+            self.warn(
+                Pos { line: n, col: 1 },
+                DiagKind::Semantic,
+                "a second `#Profibus_DP` line; ignored".into(),
+            );
+            return false;
+        }
+        self.warn(
+            Pos { line: n, col: 1 },
+            DiagKind::Semantic,
+            format!("`{header}` starts another section; the rest of the file is not read"),
+        );
+        true
     }
 
     fn line_too_long(&mut self, n: u32) {
@@ -1724,5 +1741,37 @@ fn push_capped(list: &mut Vec<Diagnostic>, d: Diagnostic) {
             ..d
         }),
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lenient(text: &str) -> Parsed {
+        parse(text, ParseOptions::LENIENT).unwrap_or_else(|e| panic!("{e:?}"))
+    }
+
+    #[test]
+    fn a_header_reached_through_a_continuation_ends_the_section() {
+        // Found by gsd_parse (third session), minimised: a `#` line after
+        // a lone `\` was copied into the open `UnitDiagType` block, written
+        // back as a line of its own and read as a section header then, so
+        // the round trip lost the rest of the block.
+        let p = lenient("Ident_Number=0\nUnitDiagType\n\\\n#");
+        assert_eq!(p.gsd.other, ["UnitDiagType", "endunitdiagtype"]);
+        assert!(p
+            .warnings
+            .iter()
+            .any(|w| w.pos.line == 4 && w.message.contains("`#` starts another section")));
+        assert_eq!(lenient(&p.gsd.write()).gsd, p.gsd);
+        // The same for a second `#Profibus_DP`, which is ignored, and at
+        // the station level.
+        let text = "#Profibus_DP\nIdent_Number=1\nUnitDiagType\n \\\n #profibus_dp\nx\n\
+                    EndUnitDiagType\n\\\n#Other\nIdent_Number=2\n";
+        let p = lenient(text);
+        assert_eq!(p.gsd.ident_number, 1);
+        assert_eq!(p.gsd.other, ["UnitDiagType", "x", "EndUnitDiagType"]);
+        assert_eq!(lenient(&p.gsd.write()).gsd, p.gsd);
     }
 }
