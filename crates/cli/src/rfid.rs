@@ -10,9 +10,7 @@
 
 use crate::common;
 use anyhow::Result;
-pub use profibus_devices::rfid::demo;
 use profibus_devices::rfid::jobs::CommandRun;
-pub use profibus_devices::rfid::jobs::MasterJobs;
 use profibus_dp::master::TaskRun;
 use std::time::Duration;
 

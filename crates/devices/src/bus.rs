@@ -5,8 +5,9 @@
 
 use crate::channels::{ChannelError, ChannelMap, Value};
 use crate::profile::{Configured, DeviceOptions, ProfileError};
+use crate::rfid::jobs::{MasterJobs, QueueError};
 use profibus_dp::busfile::{BusFile, BusFileError, DeviceEntry, DeviceResolver, ResolvedDevice};
-use profibus_dp::master::DpMaster;
+use profibus_dp::master::{CommandError, DpMaster};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -140,6 +141,43 @@ impl SetChannels {
         let h = m.handle(self.slave).ok_or(SetChannelsError::UnknownSlave)?;
         let values = self.set.iter().map(|(k, v)| (k.as_str(), *v));
         Ok(map.write_outputs(values, m.outputs_mut(h))?)
+    }
+}
+
+/// Why a command line of `dpctl master --input` was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    /// A channel write ([`SetChannels`]).
+    #[error(transparent)]
+    Channels(#[from] SetChannelsError),
+    /// An RFID reader command ([`MasterJobs::command`]).
+    #[error(transparent)]
+    Rfid(#[from] QueueError),
+    /// A command of the master itself ([`MasterCommand`]).
+    ///
+    /// [`MasterCommand`]: profibus_dp::master::MasterCommand
+    #[error(transparent)]
+    Master(#[from] CommandError),
+}
+
+/// Run one command line of `dpctl master --input` on `m`: a channel
+/// write by name (the slave's channels from `channels`), a command for
+/// the RFID readers of `rfid`, else a command of the master itself. The
+/// reply to show, if any.
+pub fn execute_input<'a>(
+    m: &mut DpMaster,
+    channels: impl Fn(u8) -> Option<&'a ChannelMap>,
+    rfid: &mut MasterJobs,
+    line: &str,
+) -> Result<Option<String>, InputError> {
+    if let Some(c) = SetChannels::from_json(line) {
+        let c = c?;
+        c.apply(m, channels(c.slave))?;
+        return Ok(None);
+    }
+    match rfid.command(m, line) {
+        Some(r) => Ok(Some(r?)),
+        None => Ok(m.execute_json(line)?),
     }
 }
 
