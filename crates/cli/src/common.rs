@@ -93,6 +93,37 @@ pub struct SlaveArgs {
     pub rts: RtsArg,
 }
 
+/// `--json` of the one-shot commands that print one outcome (`dpctl
+/// pkw`, `dpv1`).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct OutcomeArgs {
+    /// Print one JSON object.
+    #[arg(long, global = true)]
+    pub json: bool,
+}
+
+impl OutcomeArgs {
+    /// Print a success (text or JSON); a failure is printed as JSON
+    /// with `--json` and is the error.
+    pub fn print<T, E>(self, outcome: std::result::Result<T, E>) -> Result<()>
+    where
+        T: serde::Serialize + std::fmt::Display,
+        E: serde::Serialize + std::fmt::Display,
+    {
+        match outcome {
+            Ok(a) if self.json => println!("{}", json_line(&a)),
+            Ok(a) => println!("{a}"),
+            Err(r) => {
+                if self.json {
+                    println!("{}", json_line(&r));
+                }
+                anyhow::bail!("{r}")
+            }
+        }
+        Ok(())
+    }
+}
+
 impl SlaveArgs {
     /// The slave in the bus file.
     pub fn slave_of<'a>(
