@@ -157,9 +157,7 @@ impl Rig {
 }
 
 fn parse(text: &str) -> Vec<Value> {
-    text.lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
+    json_lines(text.lines())
 }
 
 const TAGS: &str = r#"
