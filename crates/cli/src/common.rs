@@ -91,21 +91,15 @@ pub struct SlaveArgs {
     pub latency: Option<f64>,
     #[command(flatten)]
     pub rts: RtsArg,
-}
-
-/// `--json` of the one-shot commands that print one outcome (`dpctl
-/// pkw`, `dpv1`).
-#[derive(clap::Args, Debug, Clone, Copy)]
-pub struct OutcomeArgs {
-    /// Print one JSON object.
+    /// Print JSON: one object (for `rfid`, one per command).
     #[arg(long, global = true)]
     pub json: bool,
 }
 
-impl OutcomeArgs {
+impl SlaveArgs {
     /// Print a success (text or JSON); a failure is printed as JSON
     /// with `--json` and is the error.
-    pub fn print<T, E>(self, outcome: std::result::Result<T, E>) -> Result<()>
+    pub fn print<T, E>(&self, outcome: std::result::Result<T, E>) -> Result<()>
     where
         T: serde::Serialize + std::fmt::Display,
         E: serde::Serialize + std::fmt::Display,
@@ -122,9 +116,7 @@ impl OutcomeArgs {
         }
         Ok(())
     }
-}
 
-impl SlaveArgs {
     /// The slave in the bus file.
     pub fn slave_of<'a>(
         &self,

@@ -4,7 +4,7 @@
 //! slaves, shown live.
 
 use crate::common;
-use crate::view::{drain_events, Line, SlaveInfo, View};
+use crate::view::{bus_view, drain_events, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::demo::{DemoSlave, Plant, BAUD};
 use profibus_fdl::pcap::PcapWriter;
@@ -78,7 +78,7 @@ async fn demo(args: Args) -> Result<()> {
 
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     if !args.json && !args.plain && std::io::stdout().is_terminal() {
-        view.open_terminal("dpctl demo", BAUD, &info)?;
+        view.open_terminal(bus_view("dpctl demo", BAUD, &info))?;
     }
     let start = tokio::time::Instant::now();
     let shutdown = common::shutdown();

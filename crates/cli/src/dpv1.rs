@@ -24,8 +24,6 @@ pub struct Args {
     /// Index of the record (0..=254).
     #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
     index: u8,
-    #[command(flatten)]
-    out: common::OutcomeArgs,
     #[command(subcommand)]
     op: Op,
 }
@@ -65,5 +63,5 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
     let task = run.finish()?;
     let out = task.outcome().context("no result")?;
-    args.out.print(if out.ok { Ok(out) } else { Err(out) })
+    args.link.print(if out.ok { Ok(out) } else { Err(out) })
 }

@@ -1,7 +1,7 @@
 //! `dpctl master`: run a DP master from a bus file.
 
 use crate::common;
-use crate::view::{drain_events, SlaveInfo, View};
+use crate::view::{bus_view, drain_events, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::{execute_input, ProfiledBus};
 use profibus_devices::control_io::lines_on_a_thread;
@@ -124,7 +124,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     // Commands typed on stdin (`--input -`) keep the terminal for lines.
     let stdin_commands = args.input.as_deref() == Some("-");
     if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
-        view.open_terminal("dpctl master", baud, &info)?;
+        view.open_terminal(bus_view("dpctl master", baud, &info))?;
     }
     let deadline = match args.timeout {
         Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),

@@ -27,8 +27,6 @@ pub struct Args {
     /// Milliseconds to wait for the PKW response.
     #[arg(long, global = true, value_name = "MS", default_value_t = 2000)]
     timeout: u64,
-    #[command(flatten)]
-    out: common::OutcomeArgs,
     #[command(subcommand)]
     op: Op,
 }
@@ -85,6 +83,6 @@ pub fn run(args: Args) -> Result<()> {
     }?;
     let mut run = TaskRun::new(task, args.link.wait());
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
-    args.out
+    args.link
         .print(run.finish()?.outcome().context("no result")?)
 }

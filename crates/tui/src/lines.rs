@@ -2,7 +2,7 @@
 //! statuses that are text (`Display`) and JSON (`Serialize`) at once, in
 //! the shape `dpctl master --json` prints.
 
-use crate::bus::{Decoding, SlaveSpec};
+use crate::bus::{BusView, Decoding, SlaveSpec};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::{ChannelMap, ImageValues};
 use profibus_devices::demo::DemoSlave;
@@ -92,6 +92,16 @@ impl From<&DemoSlave> for SlaveInfo {
             modules: s.modules.clone(),
         }
     }
+}
+
+/// The table view of the slaves `info` on a bus at `baud`, titled
+/// `title`.
+pub fn bus_view(title: &str, baud: Baud, info: &[SlaveInfo]) -> BusView {
+    BusView::new(
+        title,
+        Some(baud),
+        info.iter().map(SlaveInfo::spec).collect(),
+    )
 }
 
 /// The slaves of `bus` for a passive monitor
