@@ -115,10 +115,22 @@ device = "omega"
 setpoints = 1
 actual_values = 1
 
+[[slave]]
+address = 6
+name = "plc"
+device = "bm4"
+example = true
+
+[[slave]]
+address = 15
+name = "coupler"
+device = "bk3000"
+terminals = ["KL1104", "KL2134", "KL3102", "KL4002", "KL9010"]
+
 [mqtt]
 prefix = "profibus"
 bus = "line"
-writable = [3, { address = 25, channels = ["setpoint1"] }]
+writable = [3, { address = 25, channels = ["setpoint1"] }, { address = 15, channels = ["4.KL4002.1"] }]
 outputs_timeout_ms = 300
 safe_state = "zero"
 "#;
@@ -154,7 +166,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     // Every slave reaches Data_Exchange; a late subscriber gets the
     // retained status and states.
     let (sub0, mut early) = subscribe(port);
-    for a in [3, 4, 25] {
+    for a in [3, 4, 6, 15, 25] {
         expect(
             &mut early,
             &format!("profibus/line/{a}/state"),
@@ -164,12 +176,19 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     drop(sub0);
     let (_sub, mut lines) = subscribe(port);
     let status = expect(&mut lines, "profibus/line/status", &["online"]);
-    assert_eq!(status["writable"], serde_json::json!([3, 25]));
+    assert_eq!(status["writable"], serde_json::json!([3, 25, 15]));
     let st = expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
     assert_eq!(st["name"], "echo");
     // The Omega drive's inputs decoded into its named channels.
     let omega = expect(&mut lines, "profibus/line/25/inputs", &["values"]);
     assert!(omega["values"].get("status1").is_some(), "{omega}");
+    // The BM4 module's variables and the BK3000's terminal channels by
+    // name, the analog ones with their unit.
+    let plc = expect(&mut lines, "profibus/line/6/inputs", &["values"]);
+    assert!(plc["values"].get("ud_MyReadVar1").is_some(), "{plc}");
+    let strip = expect(&mut lines, "profibus/line/15/inputs", &["values"]);
+    assert!(strip["values"].get("1.KL1104.2").is_some(), "{strip}");
+    assert_eq!(strip["units"]["3.KL3102.1"], "V", "{strip}");
 
     // A write of the whole image: the echo slave's inputs follow it.
     publish(
@@ -200,6 +219,21 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
         &["\"setpoint1\":4321"],
     );
     assert!(o["hex"].as_str().unwrap().contains("10e1"), "{o}");
+
+    // An analog output of the BK3000 strip by name, in volts.
+    publish(
+        port,
+        "profibus/line/15/outputs/set",
+        r#"{"channels": {"4.KL4002.1": 5.0}, "id": "kl"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/15/outputs/response", &["\"kl\""]);
+    assert_eq!(r["ok"], true, "{r}");
+    let o = expect(
+        &mut lines,
+        "profibus/line/15/outputs",
+        &["\"4.KL4002.1\":5"],
+    );
+    assert_eq!(o["units"]["4.KL4002.1"], "V", "{o}");
 
     // A PKW job on the drive, answered on the topic the request names.
     publish(
