@@ -13,7 +13,6 @@ mod doctor;
 mod dpv1;
 mod gateway;
 mod gsd;
-mod jx2;
 mod master;
 mod monitor;
 mod pkw;

@@ -21,7 +21,6 @@ mod common;
 use common::*;
 use profibus::dp::gsd::{Gsd, ParseOptions};
 use profirust::{dp, fdl, phy};
-use serde_json::Value;
 use std::io::{Read, Write};
 use std::os::unix::fs::OpenOptionsExt;
 use std::process::{Command, Stdio};
@@ -216,11 +215,7 @@ fn profirust_master_reaches_data_exchange_with_dpctl_slave() {
 
     let st = slave.terminate(Duration::from_secs(10));
     assert!(st.success(), "dpctl slave exited with {st}");
-    let events: Vec<Value> = slave_out
-        .rest()
-        .iter()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
+    let events = json_lines(slave_out.rest());
     let prm = events
         .iter()
         .find(|v| v["event"] == "prm_ok")

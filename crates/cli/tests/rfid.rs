@@ -11,6 +11,7 @@
 mod common;
 
 use common::*;
+use profibus_devices::rfid::{MANUAL_REQUESTS, MANUAL_RESPONSES};
 use serde_json::Value;
 use std::io::Write;
 use std::path::PathBuf;
@@ -19,16 +20,6 @@ use std::time::Duration;
 
 const ADDR: u8 = 9;
 
-/// The manual's worked example (chapter 2.4), requests and responses in
-/// order, hex; bytes not shown are 0.
-const MANUAL_REQUESTS: [&str; 5] = ["00 01 04 56 45 52 0D", "01 01", "02 01", "03 01", "04 01"];
-const MANUAL_RESPONSES: [&str; 5] = [
-    "08 00 00",
-    "08 01 0D 41 45 47 20 49 44 20 2D 20 50 46 42 20",
-    "08 02 06 56 31 2E 32 36 0D",
-    "08 03 0D 41 45 47 20 49 44 20 2D 20 41 39 20 2F",
-    "00 04 0A 50 46 42 20 56 31 2E 32 38 0D",
-];
 const VERSION: &str = "AEG ID - PFB V1.26\rAEG ID - A9 /PFB V1.28\r";
 
 /// 16 bytes of hex, the rest 0, as the sniffer prints them.
@@ -157,9 +148,7 @@ impl Rig {
 }
 
 fn parse(text: &str) -> Vec<Value> {
-    text.lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
+    json_lines(text.lines())
 }
 
 const TAGS: &str = r#"

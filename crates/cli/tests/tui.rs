@@ -170,6 +170,45 @@ fn bus_file(dir: &Path) -> PathBuf {
     p
 }
 
+/// A bus file with only the GSD slave at 8 ("2 words in/out"), in `dir`.
+fn echo_bus_file(dir: &TempDir) -> PathBuf {
+    let config = dir.path("bus.toml");
+    let text = format!(
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\nwatchdog_ms = 5000\n",
+        gen_gsd().display()
+    );
+    std::fs::write(&config, text).unwrap();
+    config
+}
+
+/// `dpctl master --json` on `port` (its output dropped).
+fn json_master(port: &Path, config: &Path) -> Proc {
+    Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--json", "--latency", "100", "--port"])
+            .arg(port)
+            .arg("--config")
+            .arg(config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    )
+}
+
+/// The GSD slave at 8 ("2 words in/out") on `port`.
+fn echo_slave(port: &Path) -> Proc {
+    let gsd = gen_gsd();
+    let args = [
+        "--addr",
+        "8",
+        "--gsd",
+        &gsd.to_string_lossy(),
+        "--module",
+        "2 words in/out",
+    ];
+    slave(port, &args)
+}
+
 fn slave(port: &Path, args: &[&str]) -> Proc {
     Proc::spawn(
         "dpctl slave",
@@ -185,18 +224,7 @@ fn slave(port: &Path, args: &[&str]) -> Proc {
 #[test]
 fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let bus = Bus::start(3, &[]);
-    let gsd = gen_gsd();
-    let _echo = slave(
-        &bus.link(1),
-        &[
-            "--addr",
-            "8",
-            "--gsd",
-            &gsd.to_string_lossy(),
-            "--module",
-            "2 words in/out",
-        ],
-    );
+    let _echo = echo_slave(&bus.link(1));
     let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
     let config = bus_file(&bus.dir().0);
     let port = bus.link_str(0);
@@ -213,16 +241,7 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let s = t.wait("both slaves in data exchange", |s| {
         rows_in_data_exchange(s) >= 2
     });
-    for h in [
-        "Addr",
-        "Name",
-        "State",
-        "Cycle",
-        "Retry/Err",
-        "Inputs",
-        "Outputs",
-        "Diagnosis",
-    ] {
+    for h in profibus_tui::bus::COLUMNS {
         assert!(s.contains(h), "heading {h} missing:\n{s}");
     }
     assert!(s.contains("dpctl master  master 2 at 1.5Mbit/s"), "{s}");
@@ -280,28 +299,9 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
 #[test]
 fn master_plain_prints_lines_on_a_terminal() {
     let bus = Bus::start(2, &[]);
-    let gsd = gen_gsd();
-    let _echo = slave(
-        &bus.link(1),
-        &[
-            "--addr",
-            "8",
-            "--gsd",
-            &gsd.to_string_lossy(),
-            "--module",
-            "2 words in/out",
-        ],
-    );
+    let _echo = echo_slave(&bus.link(1));
     let dir = TempDir::new("plain");
-    let config = dir.path("bus.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\nwatchdog_ms = 5000\n",
-            gsd.display()
-        ),
-    )
-    .unwrap();
+    let config = echo_bus_file(&dir);
     let port = bus.link_str(0);
     let t = Tmux::start(&[
         "master",
@@ -388,38 +388,10 @@ fn omega_follows(s: &str) -> bool {
 #[test]
 fn sniff_lists_telegrams_with_filters_and_station_statistics() {
     let bus = Bus::start(3, &[]);
-    let gsd = gen_gsd();
-    let _echo = slave(
-        &bus.link(1),
-        &[
-            "--addr",
-            "8",
-            "--gsd",
-            &gsd.to_string_lossy(),
-            "--module",
-            "2 words in/out",
-        ],
-    );
+    let _echo = echo_slave(&bus.link(1));
     let dir = TempDir::new("sniff");
-    let config = dir.path("bus.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\nwatchdog_ms = 5000\n",
-            gsd.display()
-        ),
-    )
-    .unwrap();
-    let _master = Proc::spawn(
-        "dpctl master",
-        Command::new(dpctl())
-            .args(["master", "--json", "--latency", "100", "--port"])
-            .arg(bus.link(0))
-            .arg("--config")
-            .arg(&config)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
+    let config = echo_bus_file(&dir);
+    let _master = json_master(&bus.link(0), &config);
     let port = bus.link_str(2);
     let t = Tmux::start(&["sniff", "--port", &port]);
     let s = t.wait_for(&["dpctl sniff", "stations", "Data_Exchange", "token 2→2"]);
@@ -458,30 +430,10 @@ fn sniff_lists_telegrams_with_filters_and_station_statistics() {
 #[test]
 fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
     let bus = Bus::start(4, &[]);
-    let gsd = gen_gsd();
-    let _echo = slave(
-        &bus.link(1),
-        &[
-            "--addr",
-            "8",
-            "--gsd",
-            &gsd.to_string_lossy(),
-            "--module",
-            "2 words in/out",
-        ],
-    );
+    let _echo = echo_slave(&bus.link(1));
     let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
     let config = bus_file(&bus.dir().0);
-    let _master = Proc::spawn(
-        "dpctl master",
-        Command::new(dpctl())
-            .args(["master", "--json", "--latency", "100", "--port"])
-            .arg(bus.link(0))
-            .arg("--config")
-            .arg(&config)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
+    let _master = json_master(&bus.link(0), &config);
     let port = bus.link_str(3);
     let t = Tmux::start(&[
         "monitor",

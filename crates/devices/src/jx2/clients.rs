@@ -1,33 +1,55 @@
-//! `dpctl slave --device jx2`: the JX2-PROFI1's register interface while
-//! the slave runs.
+//! The JX2-PROFI1's register interface while the slave runs (`dpctl slave
+//! --device jx2`; feature `tokio`).
 //!
 //! One [`SharedJx2`] is the slave's device and the PLC the register
 //! clients play: stdin (always), each connection to the Unix socket of
-//! `--control SOCKET`, and the program of `--script FILE`. Each client has
-//! its own [`Interpreter`]; replies are JSON lines (on stdout for stdin
-//! and the script, with `"src"`; on the connection for socket clients).
-//! A client waiting on a bit wakes at each bus event and each register
-//! write of another client.
+//! `--control SOCKET`, and the program of the profile option `script`. Each client has its own [`Interpreter`];
+//! replies are JSON lines (on stdout for stdin and the script, with
+//! `"src"`; on the connection for socket clients). A client waiting on a
+//! bit wakes at each bus event and each register write of another client.
 
-use anyhow::{Context, Result};
-use profibus_devices::jx2::script::{Interpreter, Progress, Reply};
-use profibus_devices::jx2::{Plc, SharedJx2};
-use profibus_devices::BoxedDevice;
+use super::profile::Options;
+use super::script::{Interpreter, ParseError, Progress, Reply};
+use super::{BadModuleNumber, Plc, SharedJx2};
 use profibus_fdl::driver::Clock;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::sync::Notify;
 
-/// What `dpctl slave` passes on for the jx2 profile.
-#[derive(Debug, Clone)]
-pub struct Options {
-    /// Module number (registers `1x…` with x = it).
-    pub module_number: u32,
-    /// Unix socket for register clients.
-    pub control: Option<PathBuf>,
-    /// PLC program run at start.
-    pub script: Option<PathBuf>,
+/// Why the register clients cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// The module number is out of range.
+    #[error(transparent)]
+    Module(#[from] BadModuleNumber),
+    /// The script file cannot be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        /// The script file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The script has a line that is not a command.
+    #[error("{}: {source}", path.display())]
+    Script {
+        /// The script file.
+        path: PathBuf,
+        /// The bad line.
+        source: ParseError,
+    },
+    /// The control path exists and is not a socket (not ours to remove).
+    #[error("{} exists and is not a socket", .0.display())]
+    NotASocket(PathBuf),
+    /// The control socket cannot be created.
+    #[error("cannot listen on {}: {source}", path.display())]
+    Listen {
+        /// The socket.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
 }
 
 #[derive(Clone)]
@@ -37,10 +59,16 @@ struct Ctx {
     clock: Clock,
 }
 
-/// Build the module, start the register clients; the device for the
-/// slave, and the PLC (e.g. to set the baud rate register).
-pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
-    let plc = Plc::new(opts.module_number)?;
+/// Build the module of the profile's `options` and start its register
+/// clients (stdin, the script, the Unix socket `control`) as tokio tasks
+/// (call inside a runtime). The result is at once the slave's device and
+/// the PLC (e.g. to set the baud rate register).
+pub fn start(
+    options: &Options,
+    control: Option<&Path>,
+    clock: Clock,
+) -> Result<SharedJx2, ClientError> {
+    let plc = Plc::new(options.module_number)?;
     let notify = Arc::new(Notify::new());
     let shared = SharedJx2::new(plc).with_on_change({
         let n = notify.clone();
@@ -51,10 +79,15 @@ pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
         notify,
         clock,
     };
-    if let Some(path) = &opts.script {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let it = Interpreter::script(&text).with_context(|| format!("{}", path.display()))?;
+    if let Some(path) = &options.script {
+        let text = std::fs::read_to_string(path).map_err(|source| ClientError::Read {
+            path: path.clone(),
+            source,
+        })?;
+        let it = Interpreter::script(&text).map_err(|source| ClientError::Script {
+            path: path.clone(),
+            source,
+        })?;
         let c = ctx.clone();
         tokio::spawn(async move {
             let mut out = tokio::io::stdout();
@@ -76,14 +109,13 @@ pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
             serve(c, Interpreter::new(), input, &mut out, Some("stdin")).await;
         });
     }
-    if let Some(path) = &opts.control {
+    if let Some(path) = control {
         let listener = bind(path)?;
-        let guard = SocketFile(path.clone());
-        let c = ctx;
+        let guard = SocketFile(path.to_path_buf());
         tokio::spawn(async move {
             let _guard = guard;
             while let Ok((stream, _)) = listener.accept().await {
-                let c = c.clone();
+                let c = ctx.clone();
                 tokio::spawn(async move {
                     let (r, mut w) = stream.into_split();
                     serve(c, Interpreter::new(), BufReader::new(r), &mut w, None).await;
@@ -91,24 +123,25 @@ pub fn start(opts: &Options, clock: Clock) -> Result<(BoxedDevice, SharedJx2)> {
             }
         });
     }
-    Ok((Box::new(shared.clone()), shared))
+    Ok(shared)
 }
 
-fn bind(path: &Path) -> Result<tokio::net::UnixListener> {
+/// Listen on `path`, replacing a socket left behind by a killed run
+/// (anything else there is not ours to remove).
+fn bind(path: &Path) -> Result<tokio::net::UnixListener, ClientError> {
+    let listen = |source| ClientError::Listen {
+        path: path.to_path_buf(),
+        source,
+    };
     if path.exists() {
-        // A socket left behind by a killed run: replace it; anything
-        // else is not ours to remove.
         use std::os::unix::fs::FileTypeExt;
-        let meta = std::fs::symlink_metadata(path)?;
-        anyhow::ensure!(
-            meta.file_type().is_socket(),
-            "{} exists and is not a socket",
-            path.display()
-        );
-        std::fs::remove_file(path)?;
+        let meta = std::fs::symlink_metadata(path).map_err(listen)?;
+        if !meta.file_type().is_socket() {
+            return Err(ClientError::NotASocket(path.to_path_buf()));
+        }
+        std::fs::remove_file(path).map_err(listen)?;
     }
-    tokio::net::UnixListener::bind(path)
-        .with_context(|| format!("cannot listen on {}", path.display()))
+    tokio::net::UnixListener::bind(path).map_err(listen)
 }
 
 /// Removes the control socket when the listener goes away.
