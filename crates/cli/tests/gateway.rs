@@ -94,10 +94,26 @@ fn expect(lines: &mut Lines, topic: &str, needles: &[&str]) -> serde_json::Value
     );
 }
 
+/// Slaves of profiles with named channels, after [`GATEWAY_SLAVES`]: a
+/// BM4 module (the manual's example variables) and a BK3000 strip.
+const PROFILED: &str = r#"
+[[slave]]
+address = 6
+name = "plc"
+device = "bm4"
+example = true
+
+[[slave]]
+address = 15
+name = "coupler"
+device = "bk3000"
+terminals = ["KL1104", "KL2134", "KL3102", "KL4002", "KL9010"]
+"#;
+
 /// The `[mqtt]` table of the bus file of [`GATEWAY_SLAVES`].
 const MQTT: &str = r#"prefix = "profibus"
 bus = "line"
-writable = [3, { address = 25, channels = ["setpoint1"] }]
+writable = [3, { address = 25, channels = ["setpoint1"] }, { address = 15, channels = ["4.KL4002.1"] }]
 outputs_timeout_ms = 300
 safe_state = "zero"
 "#;
@@ -105,7 +121,7 @@ safe_state = "zero"
 #[test]
 fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     let dir = TempDir::new("gateway");
-    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}\n[mqtt]\n{MQTT}"));
+    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}{PROFILED}\n[mqtt]\n{MQTT}"));
     let port = free_port();
     let mut mosq = broker(&dir, port);
     // The gateway's log (stderr) read as it comes: `exec` keeps the pid
@@ -127,7 +143,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     // Every slave reaches Data_Exchange; a late subscriber gets the
     // retained status and states.
     let (sub0, mut early) = subscribe(port);
-    for a in [3, 4, 25] {
+    for a in [3, 4, 6, 15, 25] {
         expect(
             &mut early,
             &format!("profibus/line/{a}/state"),
@@ -137,12 +153,19 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     drop(sub0);
     let (_sub, mut lines) = subscribe(port);
     let status = expect(&mut lines, "profibus/line/status", &["online"]);
-    assert_eq!(status["writable"], serde_json::json!([3, 25]));
+    assert_eq!(status["writable"], serde_json::json!([3, 25, 15]));
     let st = expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
     assert_eq!(st["name"], "echo");
     // The Omega drive's inputs decoded into its named channels.
     let omega = expect(&mut lines, "profibus/line/25/inputs", &["values"]);
     assert!(omega["values"].get("status1").is_some(), "{omega}");
+    // The BM4 module's variables and the BK3000's terminal channels by
+    // name, the analog ones with their unit.
+    let plc = expect(&mut lines, "profibus/line/6/inputs", &["values"]);
+    assert!(plc["values"].get("ud_MyReadVar1").is_some(), "{plc}");
+    let strip = expect(&mut lines, "profibus/line/15/inputs", &["values"]);
+    assert!(strip["values"].get("1.KL1104.2").is_some(), "{strip}");
+    assert_eq!(strip["units"]["3.KL3102.1"], "V", "{strip}");
 
     // A write of the whole image: the echo slave's inputs follow it.
     publish(
@@ -173,6 +196,21 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
         &["\"setpoint1\":4321"],
     );
     assert!(o["hex"].as_str().unwrap().contains("10e1"), "{o}");
+
+    // An analog output of the BK3000 strip by name, in volts.
+    publish(
+        port,
+        "profibus/line/15/outputs/set",
+        r#"{"channels": {"4.KL4002.1": 5.0}, "id": "kl"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/15/outputs/response", &["\"kl\""]);
+    assert_eq!(r["ok"], true, "{r}");
+    let o = expect(
+        &mut lines,
+        "profibus/line/15/outputs",
+        &["\"4.KL4002.1\":5"],
+    );
+    assert_eq!(o["units"]["4.KL4002.1"], "V", "{o}");
 
     // A PKW job on the drive, answered on the topic the request names.
     publish(
