@@ -21,6 +21,7 @@ use crate::common;
 use anyhow::bail;
 use profibus_devices::control_io::ControlSource;
 use profibus_devices::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
+use profibus_devices::jx2::clients::{self, Console};
 use profibus_devices::{ControlInbox, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
 use profibus_fdl::driver::Clock;
@@ -133,7 +134,11 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         // The register interface runs beside the slave (stdin, a socket).
         let opts = args.profile.options()?.decode()?;
         let control = args.profile.control.as_deref().map(Path::new);
-        let plc = profibus_devices::jx2::clients::start(&opts, control, clock.clone())?;
+        let console = Console {
+            input: tokio::io::stdin,
+            output: tokio::io::stdout,
+        };
+        let plc = clients::start(&opts, control, console, clock.clone())?;
         jx2 = Some(plc.clone());
         Box::new(plc)
     } else {

@@ -2,11 +2,13 @@
 //! --device jx2`; feature `tokio`).
 //!
 //! One [`SharedJx2`] is the slave's device and the PLC the register
-//! clients play: stdin (always), each connection to the Unix socket of
-//! `--control SOCKET`, and the program of the profile option `script`. Each client has its own [`Interpreter`];
-//! replies are JSON lines (on stdout for stdin and the script, with
-//! `"src"`; on the connection for socket clients). A client waiting on a
-//! bit wakes at each bus event and each register write of another client.
+//! clients play: the [`Console`] (for `dpctl slave`: stdin and stdout),
+//! each connection to the Unix socket of `--control SOCKET`, and the
+//! program of the profile option `script`. Each client has its own
+//! [`Interpreter`]; replies are JSON lines (on the console for it and the
+//! script, with `"src"`; on the connection for socket clients). A client
+//! waiting on a bit wakes at each bus event and each register write of
+//! another client.
 
 use super::profile::Options;
 use super::script::{Interpreter, ParseError, Progress, Reply};
@@ -14,7 +16,7 @@ use super::{BadModuleNumber, Plc, SharedJx2};
 use profibus_fdl::driver::Clock;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::sync::Notify;
 
 /// Why the register clients cannot start.
@@ -59,15 +61,31 @@ struct Ctx {
     clock: Clock,
 }
 
+/// The console of the register clients: where the console client reads
+/// its lines, and where it and the script write their replies (`dpctl
+/// slave`: stdin and stdout). Each opens a new handle.
+#[derive(Debug, Clone, Copy)]
+pub struct Console<I, O> {
+    /// The console client's input.
+    pub input: fn() -> I,
+    /// The replies of the console client and the script.
+    pub output: fn() -> O,
+}
+
 /// Build the module of the profile's `options` and start its register
-/// clients (stdin, the script, the Unix socket `control`) as tokio tasks
-/// (call inside a runtime). The result is at once the slave's device and
-/// the PLC (e.g. to set the baud rate register).
-pub fn start(
+/// clients (the console, the script, the Unix socket `control`) as tokio
+/// tasks (call inside a runtime). The result is at once the slave's
+/// device and the PLC (e.g. to set the baud rate register).
+pub fn start<I, O>(
     options: &Options,
     control: Option<&Path>,
+    console: Console<I, O>,
     clock: Clock,
-) -> Result<SharedJx2, ClientError> {
+) -> Result<SharedJx2, ClientError>
+where
+    I: AsyncRead + Unpin + Send + 'static,
+    O: AsyncWrite + Unpin + Send + 'static,
+{
     let plc = Plc::new(options.module_number)?;
     let notify = Arc::new(Notify::new());
     let shared = SharedJx2::new(plc).with_on_change({
@@ -90,7 +108,7 @@ pub fn start(
         })?;
         let c = ctx.clone();
         tokio::spawn(async move {
-            let mut out = tokio::io::stdout();
+            let mut out = (console.output)();
             let none = BufReader::new(tokio::io::empty());
             serve(c, it, none, &mut out, Some("script")).await;
             let end = Reply {
@@ -104,8 +122,8 @@ pub fn start(
     {
         let c = ctx.clone();
         tokio::spawn(async move {
-            let mut out = tokio::io::stdout();
-            let input = BufReader::new(tokio::io::stdin());
+            let mut out = (console.output)();
+            let input = BufReader::new((console.input)());
             serve(c, Interpreter::new(), input, &mut out, Some("stdin")).await;
         });
     }
