@@ -44,12 +44,7 @@ fn rig(tag: &str) -> Rig {
         .stdin(Stdio::piped());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
     let stdin = slave.child.as_mut().unwrap().stdin.take().unwrap();
-    let mut out = Lines::from(&mut slave);
-    assert!(
-        out.wait_for("\"event\":\"start\"", WAIT),
-        "dpctl slave did not start: {:?}",
-        out.1
-    );
+    let out = started(&mut slave, WAIT);
     let start: Value = serde_json::from_str(
         out.1
             .iter()
@@ -336,11 +331,7 @@ fn pyprofibus_exchanges_data_with_the_coupler_through_its_gsd() {
     ] {
         cmd.args(["--module", m]);
     }
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines = json_lines(out.rest());
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = json_lines(run_pyprofibus(&mut cmd));
     let last = lines.iter().rev().find(|v| v["event"] == "dx").unwrap();
     let inputs = last["inputs"].as_str().unwrap();
     // Byte 4: the digital inputs, KL1104 input 1 pinned on.

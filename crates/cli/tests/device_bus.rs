@@ -43,8 +43,7 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
             .stdout(Stdio::piped())
             .stdin(Stdio::null()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    let _slave_out = started(&mut slave, Duration::from_secs(10));
     let (bus, cmds) = (dir.path("bus.toml"), dir.path("cmds.jsonl"));
     std::fs::write(&bus, BUS).unwrap();
     std::fs::write(&cmds, COMMANDS).unwrap();
@@ -161,8 +160,7 @@ fn a_bm4_slave_of_a_bus_file_answers_pkw_by_variable_name() {
             .stdout(Stdio::piped())
             .stdin(Stdio::null()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    let _slave_out = started(&mut slave, Duration::from_secs(10));
     // The master side from the same profile: the example table, PKW
     // module first, two of its variables.
     let bus = dir.path("bus.toml");

@@ -43,12 +43,7 @@ fn rig(tag: &str, args: &[impl AsRef<std::ffi::OsStr>], stdin: bool) -> Rig {
         .stderr(Stdio::inherit())
         .stdin(if stdin { Stdio::piped() } else { Stdio::null() });
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut out = Lines::from(&mut slave);
-    assert!(
-        out.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "dpctl slave did not start: {:?}",
-        out.1
-    );
+    let out = started(&mut slave, Duration::from_secs(10));
     Rig {
         dir,
         master_port: a,
@@ -464,11 +459,7 @@ fn pyprofibus_pkw(
     for m in modules {
         cmd.args(["--module", m]);
     }
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines = out.rest().to_vec();
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = run_pyprofibus(&mut cmd);
     let summary: Value = serde_json::from_str(lines.last().unwrap()).unwrap();
     assert_eq!(summary["phase"], "done");
     assert_eq!(summary["response"], expect);

@@ -323,22 +323,17 @@ fn sparkplug_births_data_commands_rebirth_and_last_will() {
 
     // DCMD by channel name, a negative value on a signed channel (two's
     // complement in int_value) and a positive one.
-    command(
-        port,
-        &dev("DCMD", 25),
-        r#"timestamp: 2 metrics { name: "Outputs/setpoint1" int_value: 4294967294 }"#,
-    );
-    sub.expect(&dev("DDATA", 25), |d| {
-        d.get("Outputs/setpoint1", "int_value") == Some("4294967294")
-    });
-    command(
-        port,
-        &dev("DCMD", 25),
-        r#"timestamp: 3 metrics { name: "Outputs/setpoint1" int_value: 4321 }"#,
-    );
-    sub.expect(&dev("DDATA", 25), |d| {
-        d.get("Outputs/setpoint1", "int_value") == Some("4321")
-    });
+    for (timestamp, value) in [(2, "4294967294"), (3, "4321")] {
+        let metric = format!(r#"metrics {{ name: "Outputs/setpoint1" int_value: {value} }}"#);
+        command(
+            port,
+            &dev("DCMD", 25),
+            &format!("timestamp: {timestamp} {metric}"),
+        );
+        sub.expect(&dev("DDATA", 25), |d| {
+            d.get("Outputs/setpoint1", "int_value") == Some(value)
+        });
+    }
 
     // Refused, nothing written: a slave not in `writable`, and a command
     // with one unknown metric next to a good one. A later good write

@@ -132,11 +132,7 @@ fn profirust_master_reaches_data_exchange_with_dpctl_slave() {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(
-        slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "dpctl slave did not start"
-    );
+    let mut slave_out = started(&mut slave, Duration::from_secs(10));
 
     // profirust's master, as its examples set it up for a USB-RS485
     // adapter: a long slot time and retries for a non-real-time OS.

@@ -82,12 +82,7 @@ fn rig_with(tags: &str, profile: bool) -> Rig {
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
     let stdin = slave.child.as_mut().unwrap().stdin.take();
-    let mut events = Lines::from(&mut slave);
-    assert!(
-        events.wait_for("\"event\":\"start\"", Duration::from_secs(20)),
-        "the reader did not start: {:?}",
-        events.1
-    );
+    let events = started(&mut slave, Duration::from_secs(20));
     Rig {
         bus,
         slave,
@@ -151,22 +146,8 @@ fn parse(text: &str) -> Vec<Value> {
     json_lines(text.lines())
 }
 
-const TAGS: &str = r#"
-[reader]
-tor = 10
-uid_ms = 10
-block_ms = 50
-
-[[tag]]
-uid = "E004015012345678"
-in_field = true
-blocks = 16
-data = ["00112233", "44556677"]
-
-[[tag]]
-uid = "E0040150AABBCCDD"
-data = ["CAFEF00D"]
-"#;
+/// Two tags, the first in the field.
+const TAGS: &str = include_str!("data/rfid_tags.toml");
 
 /// One `VER` with `dpctl sniff --json` listening: the Data_Exchange
 /// (request, response) pairs of the reader, consecutive repeats left out;
@@ -353,8 +334,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut events = Lines::from(&mut slave);
-    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    let mut events = started(&mut slave, Duration::from_secs(20));
     let mut cmd = Command::new(py);
     cmd.arg(repo().join("tests/interop/pyprofibus_rfid.py"))
         .arg("--port")
@@ -364,11 +344,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .args(["--addr", "9", "--command", "VER"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines = out.rest().to_vec();
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = run_pyprofibus(&mut cmd);
     let summary: Value = serde_json::from_str(lines.last().unwrap()).unwrap();
     let answer: String = summary["answer"].as_str().unwrap().to_string();
     let expect: String = VERSION.bytes().map(|b| format!("{b:02X}")).collect();
@@ -455,8 +431,7 @@ fn control_commands_over_a_socket() {
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut events = Lines::from(&mut slave);
-    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    let mut events = started(&mut slave, Duration::from_secs(20));
     wait_for("the control socket", Duration::from_secs(10), || {
         sock.exists()
     });

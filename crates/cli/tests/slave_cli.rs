@@ -18,20 +18,9 @@ use std::time::{Duration, Instant};
 const GEN_IDENT: [u8; 2] = [0x0D, 0xCE];
 
 fn request(da: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
-    let mut b = vec![0u8; 300];
-    let n = Telegram::Data(DataTelegram {
-        da,
-        sa: 2,
-        fc: FunctionCode::from_byte(fc),
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data,
-        format: None,
-    })
-    .emit(&mut b)
-    .unwrap();
-    b.truncate(n);
-    b
+    let (dsap, ssap) = saps.unzip();
+    let t = DataTelegram::new(da, 2, FunctionCode::from_byte(fc), data).with_saps(dsap, ssap);
+    Telegram::Data(t).to_vec().unwrap()
 }
 
 /// The master's end of the pty pair (blocking reads with a deadline).
@@ -110,12 +99,7 @@ fn start_slave(port: &Path, extra: &[&str]) -> (Proc, Lines) {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit()),
     );
-    let mut lines = Lines::from(&mut p);
-    assert!(
-        lines.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "no start line: {:?}",
-        lines.1
-    );
+    let lines = started(&mut p, Duration::from_secs(10));
     (p, lines)
 }
 

@@ -181,6 +181,22 @@ fn echo_bus_file(dir: &TempDir) -> PathBuf {
     config
 }
 
+/// `dpctl master` on the first link of `bus` in tmux, with `extra`
+/// options.
+fn tmux_master(bus: &Bus, config: &Path, extra: &[&str]) -> Tmux {
+    let (port, config) = (bus.link_str(0), config.to_string_lossy());
+    let args = [
+        "master",
+        "--port",
+        &port,
+        "--config",
+        &config,
+        "--latency",
+        "100",
+    ];
+    Tmux::start(&[&args[..], extra].concat())
+}
+
 /// `dpctl master --json` on `port` (its output dropped).
 fn json_master(port: &Path, config: &Path) -> Proc {
     Proc::spawn(
@@ -227,16 +243,7 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let _echo = echo_slave(&bus.link(1));
     let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
     let config = bus_file(&bus.dir().0);
-    let port = bus.link_str(0);
-    let t = Tmux::start(&[
-        "master",
-        "--port",
-        &port,
-        "--config",
-        &config.to_string_lossy(),
-        "--latency",
-        "100",
-    ]);
+    let t = tmux_master(&bus, &config, &[]);
     // Both slaves in Data_Exchange, in a table with its headings.
     let s = t.wait("both slaves in data exchange", |s| {
         rows_in_data_exchange(s) >= 2
@@ -302,19 +309,7 @@ fn master_plain_prints_lines_on_a_terminal() {
     let _echo = echo_slave(&bus.link(1));
     let dir = TempDir::new("plain");
     let config = echo_bus_file(&dir);
-    let port = bus.link_str(0);
-    let t = Tmux::start(&[
-        "master",
-        "--plain",
-        "--port",
-        &port,
-        "--config",
-        &config.to_string_lossy(),
-        "--latency",
-        "100",
-        "--exchanges",
-        "20",
-    ]);
+    let t = tmux_master(&bus, &config, &["--plain", "--exchanges", "20"]);
     let s = t.wait_for(&["[exit 0]"]);
     assert!(s.contains("master 2 at 1.5Mbit/s"), "{s}");
     assert!(s.contains("data_exchange"), "{s}");

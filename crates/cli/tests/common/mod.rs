@@ -60,6 +60,26 @@ pub fn run_ok(cmd: &mut Command) -> std::process::Output {
     out
 }
 
+/// Run a pyprofibus peer script (`cmd`, stdout piped) to its end, at
+/// most 90 s: it must succeed. Its output lines.
+pub fn run_pyprofibus(cmd: &mut Command) -> Vec<String> {
+    let mut p = Proc::spawn("pyprofibus", cmd);
+    let mut out = Lines::from(&mut p);
+    let st = p.wait(Duration::from_secs(90));
+    let lines = out.rest().to_vec();
+    assert!(st.success(), "pyprofibus: {lines:?}");
+    lines
+}
+
+/// The output lines of `slave`, a `dpctl slave --json` just spawned
+/// (stdout piped), once it printed its start event (within `timeout`).
+pub fn started(slave: &mut Proc, timeout: Duration) -> Lines {
+    let mut out = Lines::from(slave);
+    let start = out.wait_for("\"event\":\"start\"", timeout);
+    assert!(start, "dpctl slave did not start: {:?}", out.1);
+    out
+}
+
 /// The repository root (this package lives in `crates/cli`).
 pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
