@@ -178,6 +178,10 @@ fn sniffed_ver(rig: &Rig) -> Option<Vec<(String, String)>> {
     let answers = rig.rfid(&["VER"]);
     assert_eq!(answers[0]["answer"], VERSION);
     assert_eq!(answers[0]["bytes"], 42);
+    // The sniffer may lag behind the bus on a busy machine: stop it only
+    // once it has shown the manual's last response.
+    let last = telegram(MANUAL_RESPONSES[MANUAL_RESPONSES.len() - 1]);
+    sniffed.wait_for(&last, Duration::from_secs(30));
     sniff.signal(15);
     let lines = parse(&sniffed.rest().join("\n"));
     if answers[0]["restarts"] != 0 {
