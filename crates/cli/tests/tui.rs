@@ -440,8 +440,14 @@ fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
     // Both slaves in Data_Exchange in the table (not just in the event
     // log), decoded, and master 2 in the ring.
     let s = t.wait(
-        "both slaves in data exchange and master 2 in the ring",
-        |s| rows_in_data_exchange(s) >= 2 && s.contains("token ring: masters 2 ("),
+        "both slaves in data exchange, their data decoded, master 2 in the ring",
+        |s| {
+            rows_in_data_exchange(s) >= 2
+                && s.contains("token ring: masters 2 (")
+                && s.contains("2 words in/out: ")
+                && s.contains("setpoint1=")
+                && s.contains("actual1=")
+        },
     );
     assert!(s.contains("dpctl monitor  listening at 1.5Mbit/s"), "{s}");
     assert!(!s.contains("master 2 at"), "the monitor is no master:\n{s}");
