@@ -492,18 +492,15 @@ impl Pacer {
 
     /// Wait until `t` right after a write whose bytes a kernel worker
     /// hands on ([`Waitable::writes_need_cpu`]): sleep in the kernel for
-    /// at least [`RELEASE`] (longer when the learned wake-up latency
-    /// leaves room), so the worker gets this CPU, then spin to `t`. The
-    /// wait may end a little after `t`: the idle time on the line only
-    /// grows.
+    /// the whole wait (at least [`RELEASE`]), so that this CPU is free for
+    /// the worker, and for the other stations' workers, all the time (a
+    /// thread spinning at real-time priority keeps every ordinary thread
+    /// off its CPU). The wait ends up to a wake-up latency after `t`: the
+    /// idle time on the line only grows.
     fn release_then_wait(&mut self, clock: &Clock, t: Instant) {
         let now = clock.now();
-        let nap = t
-            .saturating_duration_since(now)
-            .saturating_sub(self.wake())
-            .max(RELEASE);
+        let nap = t.saturating_duration_since(now).max(RELEASE);
         ppoll(None, nap);
-        self.learn_wake(clock.now().saturating_duration_since(now + nap));
         spin_until(clock, t);
     }
 
