@@ -270,8 +270,11 @@ where
                     if wrote && release {
                         // Right after a write on a pty: give the CPU to
                         // the kernel's worker that delivers it (see
-                        // `Waitable::writes_need_cpu`), then wait.
-                        pacer.release_then_wait(&clock, d);
+                        // `Waitable::writes_need_cpu`), then wait; bytes
+                        // that arrive meanwhile are read first.
+                        if pacer.release_then_wait(&clock, port.wait_fd(), d) {
+                            break;
+                        }
                     } else {
                         // Spun: a kernel sleep this short wakes too late
                         // too often (the request would leave late).
@@ -492,16 +495,22 @@ impl Pacer {
 
     /// Wait until `t` right after a write whose bytes a kernel worker
     /// hands on ([`Waitable::writes_need_cpu`]): sleep in the kernel for
-    /// the whole wait (at least [`RELEASE`]), so that this CPU is free for
+    /// the whole wait (at least [`RELEASE`]; waking when `fd` becomes
+    /// readable), so that this CPU is free for
     /// the worker, and for the other stations' workers, all the time (a
     /// thread spinning at real-time priority keeps every ordinary thread
     /// off its CPU). The wait ends up to a wake-up latency after `t`: the
     /// idle time on the line only grows.
-    fn release_then_wait(&mut self, clock: &Clock, t: Instant) {
+    /// Returns whether `fd` became readable first (then it returns at
+    /// once, before `t`).
+    fn release_then_wait(&mut self, clock: &Clock, fd: Option<BorrowedFd<'_>>, t: Instant) -> bool {
         let now = clock.now();
         let nap = t.saturating_duration_since(now).max(RELEASE);
-        ppoll(None, nap);
+        if ppoll(fd, nap) {
+            return true;
+        }
         spin_until(clock, t);
+        false
     }
 
     fn learn_wake(&mut self, late: Duration) {
