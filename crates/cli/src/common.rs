@@ -91,9 +91,32 @@ pub struct SlaveArgs {
     pub latency: Option<f64>,
     #[command(flatten)]
     pub rts: RtsArg,
+    /// Print JSON: one object (for `rfid`, one per command).
+    #[arg(long, global = true)]
+    pub json: bool,
 }
 
 impl SlaveArgs {
+    /// Print a success (text or JSON); a failure is printed as JSON
+    /// with `--json` and is the error.
+    pub fn print<T, E>(&self, outcome: std::result::Result<T, E>) -> Result<()>
+    where
+        T: serde::Serialize + std::fmt::Display,
+        E: serde::Serialize + std::fmt::Display,
+    {
+        match outcome {
+            Ok(a) if self.json => println!("{}", json_line(&a)),
+            Ok(a) => println!("{a}"),
+            Err(r) => {
+                if self.json {
+                    println!("{}", json_line(&r));
+                }
+                anyhow::bail!("{r}")
+            }
+        }
+        Ok(())
+    }
+
     /// The slave in the bus file.
     pub fn slave_of<'a>(
         &self,

@@ -4,7 +4,7 @@
 //! slaves, shown live.
 
 use crate::common;
-use crate::view::{drain_events, Line, SlaveInfo, View};
+use crate::view::{bus_view, drain_events, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::demo::{DemoSlave, Plant, BAUD};
 use profibus_fdl::pcap::PcapWriter;
@@ -52,7 +52,7 @@ pub fn run(args: Args) -> Result<()> {
 async fn demo(args: Args) -> Result<()> {
     // The RFID reader with a tag that comes and goes, and the PLC's
     // commands to it.
-    let (mut reader, parts) = crate::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
+    let (mut reader, parts) = profibus_devices::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
     let rfid = DemoSlave {
         address: RFID_ADDRESS,
         name: "RFID reader ARE I2 (rfid)".into(),
@@ -61,15 +61,7 @@ async fn demo(args: Args) -> Result<()> {
         channels: Some(parts.channels),
     };
     let mut plant = Plant::new(vec![(rfid, parts.device)])?;
-    let info: Vec<SlaveInfo> = (plant.slaves().iter())
-        .map(|s| SlaveInfo {
-            address: s.address,
-            name: s.name.clone(),
-            gsd: Some(s.gsd.clone()),
-            channels: s.channels.clone(),
-            modules: s.modules.clone(),
-        })
-        .collect();
+    let info: Vec<SlaveInfo> = plant.slaves().iter().map(SlaveInfo::from).collect();
     let pcap = (args.pcap.as_deref())
         .map(|p| {
             PcapWriter::create(p, Duration::ZERO)
@@ -86,7 +78,7 @@ async fn demo(args: Args) -> Result<()> {
 
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     if !args.json && !args.plain && std::io::stdout().is_terminal() {
-        view.open_terminal("dpctl demo", BAUD, &info)?;
+        view.open_terminal(bus_view("dpctl demo", BAUD, &info))?;
     }
     let start = tokio::time::Instant::now();
     let shutdown = common::shutdown();

@@ -24,9 +24,6 @@ pub struct Args {
     /// Index of the record (0..=254).
     #[arg(long, global = true, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=254))]
     index: u8,
-    /// Print one JSON object.
-    #[arg(long, global = true)]
-    json: bool,
     #[command(subcommand)]
     op: Op,
 }
@@ -66,13 +63,5 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
     let task = run.finish()?;
     let out = task.outcome().context("no result")?;
-    if args.json {
-        println!("{}", common::json_line(&out));
-    } else if out.ok {
-        println!("{out}");
-    }
-    if !out.ok {
-        bail!("{out}");
-    }
-    Ok(())
+    args.link.print(if out.ok { Ok(out) } else { Err(out) })
 }

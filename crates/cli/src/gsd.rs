@@ -2,7 +2,7 @@
 //! describes, and what is wrong with it.
 
 use anyhow::bail;
-use profibus_dp::gsd::{Diagnostic, FileDiagnostic, Gsd, GsdSummary, ParseOptions};
+use profibus_dp::gsd::{FileDiagnostic, Gsd, GsdCheck, GsdSummary, ParseOptions};
 use std::path::PathBuf;
 
 /// Show or check a GSD file.
@@ -89,48 +89,18 @@ fn show(a: ShowArgs) -> anyhow::Result<()> {
 }
 
 fn check(a: CheckArgs) -> anyhow::Result<()> {
-    let emit = |severity: &'static str, d: &Diagnostic| {
-        let fd = FileDiagnostic::new(&a.file, severity, d);
-        if a.json {
-            println!("{}", crate::common::json_line(&fd));
-        } else {
-            println!("{fd}");
-        }
-    };
-    match Gsd::from_file(&a.file, opts(a.strict)) {
-        Ok(parsed) => {
-            let mut warnings = parsed.warnings.clone();
-            warnings.extend(parsed.gsd.module_problems());
-            for w in &warnings {
-                emit("warning", w);
-            }
-            if !a.json {
-                println!(
-                    "{}: ok, {} module(s), {} warning(s)",
-                    a.file.display(),
-                    parsed.gsd.modules.len(),
-                    warnings.len()
-                );
-            }
-            Ok(())
-        }
-        Err(e) => {
-            let mut all: Vec<(&'static str, &Diagnostic)> = e
-                .errors
-                .iter()
-                .map(|d| ("error", d))
-                .chain(e.warnings.iter().map(|d| ("warning", d)))
-                .collect();
-            all.sort_by_key(|(_, d)| d.pos);
-            for (s, d) in all {
-                emit(s, d);
-            }
-            bail!(
-                "{}: {} error(s), {} warning(s)",
-                a.file.display(),
-                e.errors.len(),
-                e.warnings.len()
-            )
+    let check = GsdCheck::of_file(&a.file, opts(a.strict));
+    for fd in check.lines() {
+        match a.json {
+            true => println!("{}", crate::common::json_line(&fd)),
+            false => println!("{fd}"),
         }
     }
+    if !check.ok() {
+        bail!("{check}");
+    }
+    if !a.json {
+        println!("{check}");
+    }
+    Ok(())
 }

@@ -13,7 +13,6 @@ mod doctor;
 mod dpv1;
 mod gateway;
 mod gsd;
-mod jx2;
 mod master;
 mod monitor;
 mod pkw;
@@ -36,6 +35,12 @@ use std::process::ExitCode;
     long_about = None
 )]
 pub(crate) struct Cli {
+    /// Run under SCHED_FIFO at this real-time priority (1-99, below 50
+    /// keeps the serial interrupts first): the station keeps its deadlines
+    /// and the line's idle times on a busy machine. Needs root,
+    /// CAP_SYS_NICE or `ulimit -r`.
+    #[arg(long, global = true, value_name = "PRIO")]
+    rt_priority: Option<u8>,
     #[command(subcommand)]
     command: Command,
 }
@@ -93,6 +98,13 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
+    // Before any runtime starts a thread: its threads inherit the policy.
+    if let Some(p) = cli.rt_priority {
+        if let Err(e) = profibus_fdl::transport::realtime::set_fifo_priority(p) {
+            eprintln!("dpctl: --rt-priority: {e}");
+            return ExitCode::from(1);
+        }
+    }
     let result = match cli.command {
         Command::Decode(a) => decode::run(a),
         Command::Scan(a) => scan::run(a),

@@ -1,13 +1,14 @@
 //! `dpctl master`: run a DP master from a bus file.
 
 use crate::common;
-use crate::view::{drain_events, Line, SlaveInfo, View};
+use crate::view::{bus_view, drain_events, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
-use profibus_devices::bus::{ProfiledBus, SetChannels};
+use profibus_devices::bus::{execute_input, ProfiledBus};
 use profibus_devices::control_io::lines_on_a_thread;
 use profibus_dp::master::{DpMaster, OperatingState, StopReason, StopWhen};
 use profibus_fdl::driver::{self, Clock};
 use profibus_fdl::Instant;
+use profibus_tui::lines::CommandLine;
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -94,26 +95,6 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(master(args, bus))
 }
 
-/// Apply a channel command; `None` when `line` is none.
-fn set_channels(m: &mut DpMaster, info: &[SlaveInfo], line: &str) -> Option<Result<()>> {
-    let c = SetChannels::from_json(line)?;
-    let map = |a| info.iter().find(|s| s.address == a)?.channels.as_ref();
-    Some(c.and_then(|c| c.apply(m, map(c.slave))).map_err(Into::into))
-}
-
-/// The reply to a command.
-#[derive(serde::Serialize)]
-struct CommandReply<'a> {
-    result: &'a str,
-}
-
-/// A refused command line.
-#[derive(serde::Serialize)]
-struct BadCommand<'a> {
-    line: &'a str,
-    error: String,
-}
-
 async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     let bus = &profiled.file;
     for w in &bus.warnings {
@@ -138,25 +119,12 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     };
 
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
-    let mut info: Vec<SlaveInfo> = vec![];
-    for s in &bus.slaves {
-        let a = s.params.address;
-        info.push(SlaveInfo {
-            address: a,
-            name: s.params.name.clone(),
-            gsd: Some(s.gsd.clone()),
-            channels: profiled
-                .channels(a)
-                .transpose()
-                .with_context(|| format!("slave {a}"))?,
-            modules: s.modules.clone(),
-        });
-    }
+    let info = SlaveInfo::of_bus(&profiled)?;
     let baud = bus.master.params.baud;
     // Commands typed on stdin (`--input -`) keep the terminal for lines.
     let stdin_commands = args.input.as_deref() == Some("-");
     if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
-        view.open_terminal("dpctl master", baud, &info)?;
+        view.open_terminal(bus_view("dpctl master", baud, &info))?;
     }
     let deadline = match args.timeout {
         Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
@@ -170,7 +138,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     };
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
-    let mut rfid = crate::rfid::MasterJobs::default();
+    let mut rfid = profibus_devices::rfid::jobs::MasterJobs::default();
     let result = driver::run_with(
         &mut station,
         &mut port,
@@ -181,23 +149,10 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             last_now = now;
             let m = st.app_mut();
             while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
-                let result = match (set_channels(m, &info, &line), rfid.command(m, &line)) {
-                    (Some(r), _) => r.map(|_| None),
-                    (None, Some(r)) => r.map(Some).map_err(Into::into),
-                    (None, None) => m.execute_json(&line).map_err(Into::into),
-                };
-                match result {
-                    Ok(Some(reply)) => view.event(&Line::new(
-                        "command",
-                        CommandReply { result: &reply },
-                        reply.as_str(),
-                    )),
-                    Ok(None) => {}
-                    Err(e) => {
-                        let error = format!("{e:#}");
-                        let text = format!("bad command `{line}`: {error}");
-                        view.event(&Line::new("error", BadCommand { line: &line, error }, text))
-                    }
+                let channels = |a| info.iter().find(|s| s.address == a)?.channels.as_ref();
+                let result = execute_input(m, channels, &mut rfid, &line);
+                if let Some(shown) = CommandLine::of(&line, result) {
+                    view.event(&shown);
                 }
             }
             for e in rfid.step(m, now) {

@@ -6,7 +6,7 @@
 //! lines or JSON lines every `--interval`.
 
 use crate::common;
-use crate::view::{Line, SlaveInfo, View};
+use crate::view::{bus_view, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::monitor::{Monitor, MonitorOptions};
@@ -63,7 +63,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut listen_opts = ListenOptions::for_port(&port);
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     if !args.json && !args.plain && std::io::stdout().is_terminal() {
-        view.open_listening("dpctl monitor", baud, &info)?;
+        view.open_terminal(bus_view("dpctl monitor", baud, &info).listen_only())?;
         listen_opts.tick = LiveBus::KEYS;
     }
     let on_heard = |heard| {

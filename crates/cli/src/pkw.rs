@@ -8,7 +8,7 @@
 //! timeout, or a slave that does not reach Data_Exchange.
 
 use crate::common;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use profibus_devices::pkw_task::PkwTask;
 use profibus_dp::master::TaskRun;
 use std::time::Duration;
@@ -27,9 +27,6 @@ pub struct Args {
     /// Milliseconds to wait for the PKW response.
     #[arg(long, global = true, value_name = "MS", default_value_t = 2000)]
     timeout: u64,
-    /// Print one JSON object.
-    #[arg(long, global = true)]
-    json: bool,
     #[command(subcommand)]
     op: Op,
 }
@@ -86,15 +83,6 @@ pub fn run(args: Args) -> Result<()> {
     }?;
     let mut run = TaskRun::new(task, args.link.wait());
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
-    match run.finish()?.outcome().context("no result")? {
-        Ok(a) if args.json => println!("{}", common::json_line(&a)),
-        Ok(a) => println!("{a}"),
-        Err(r) => {
-            if args.json {
-                println!("{}", common::json_line(&r));
-            }
-            bail!("{r}");
-        }
-    }
-    Ok(())
+    args.link
+        .print(run.finish()?.outcome().context("no result")?)
 }

@@ -10,9 +10,7 @@
 
 use crate::common;
 use anyhow::Result;
-pub use profibus_devices::rfid::demo;
 use profibus_devices::rfid::jobs::CommandRun;
-pub use profibus_devices::rfid::jobs::MasterJobs;
 use profibus_dp::master::TaskRun;
 use std::time::Duration;
 
@@ -26,9 +24,6 @@ pub struct Args {
     /// Milliseconds to wait for the whole answer of each command.
     #[arg(long, value_name = "MS", default_value_t = 5000)]
     timeout: u64,
-    /// Print one JSON object per command.
-    #[arg(long)]
-    json: bool,
     /// The commands, in order (CR is appended), e.g. "VER" "RD 0 3".
     #[arg(value_name = "COMMAND", required = true)]
     commands: Vec<String>,
@@ -42,7 +37,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut run = TaskRun::new(task, args.link.wait());
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
     for r in run.task().results() {
-        match args.json {
+        match args.link.json {
             true => println!("{}", common::json_line(r)),
             false => print!("{r}"),
         }

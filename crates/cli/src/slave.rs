@@ -21,13 +21,14 @@ use crate::common;
 use anyhow::bail;
 use profibus_devices::control_io::ControlSource;
 use profibus_devices::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
-use profibus_devices::{ControlInbox, DeviceOptions, PROFILES};
+use profibus_devices::jx2::clients::{self, Console};
+use profibus_devices::{ControlInbox, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
 use profibus_fdl::driver::Clock;
 use profibus_fdl::runner::{PassiveRunner, RunnerEvent};
 use profibus_fdl::Instant;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::Path;
 
 /// Emulate a PROFIBUS-DP slave.
 #[derive(clap::Args, Debug)]
@@ -99,16 +100,6 @@ fn emit(json: bool, now: Instant, e: &Emitted<'_>) {
     let _ = out.flush();
 }
 
-/// What the jx2 register clients need.
-fn jx2_options(args: &Args, opts: &DeviceOptions) -> anyhow::Result<crate::jx2::Options> {
-    let o: profibus_devices::jx2::profile::Options = opts.decode()?;
-    Ok(crate::jx2::Options {
-        module_number: o.module_number,
-        control: args.profile.control.as_ref().map(PathBuf::from),
-        script: o.script,
-    })
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.profile.list_devices {
         PROFILES.iter().for_each(|p| println!("{p}"));
@@ -141,10 +132,15 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let mut jx2 = None;
     let device = if emulated.entry.name == profibus_devices::jx2::profile::NAME {
         // The register interface runs beside the slave (stdin, a socket).
-        let opts = args.profile.options()?;
-        let (dev, plc) = crate::jx2::start(&jx2_options(&args, &opts)?, clock.clone())?;
-        jx2 = Some(plc);
-        dev
+        let opts = args.profile.options()?.decode()?;
+        let control = args.profile.control.as_deref().map(Path::new);
+        let console = Console {
+            input: tokio::io::stdin,
+            output: tokio::io::stdout,
+        };
+        let plc = clients::start(&opts, control, console, clock.clone())?;
+        jx2 = Some(plc.clone());
+        Box::new(plc)
     } else {
         let control = args.profile.control.as_deref().map(|src| {
             let inbox = ControlInbox::new();

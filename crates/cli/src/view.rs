@@ -8,7 +8,7 @@ use profibus_dp::master::{DpMaster, MasterReport};
 use profibus_fdl::{Baud, Instant};
 use profibus_tui::bus::BusView;
 use profibus_tui::lines::StatusLine;
-pub use profibus_tui::lines::{EventLine as Line, SlaveInfo};
+pub use profibus_tui::lines::{bus_view, EventLine as Line, SlaveInfo};
 use profibus_tui::source::BusSource;
 use profibus_tui::term::LiveBus;
 use serde::Serialize;
@@ -36,29 +36,9 @@ impl View {
         }
     }
 
-    /// Show the slaves `info` as a table on the terminal instead of
-    /// lines, titled `title`, until [`View::close`].
-    pub fn open_terminal(
-        &mut self,
-        title: &str,
-        baud: Baud,
-        info: &[SlaveInfo],
-    ) -> std::io::Result<()> {
-        let specs = info.iter().map(SlaveInfo::spec).collect();
-        self.live = Some(LiveBus::open(BusView::new(title, Some(baud), specs))?);
-        Ok(())
-    }
-
-    /// [`View::open_terminal`] for a source that never sends (`dpctl
-    /// monitor`): no writes.
-    pub fn open_listening(
-        &mut self,
-        title: &str,
-        baud: Baud,
-        info: &[SlaveInfo],
-    ) -> std::io::Result<()> {
-        let specs = info.iter().map(SlaveInfo::spec).collect();
-        let view = BusView::new(title, Some(baud), specs).listen_only();
+    /// Show `view` (a table of the slaves, [`bus_view`]) on the terminal
+    /// instead of lines, until [`View::close`].
+    pub fn open_terminal(&mut self, view: BusView) -> std::io::Result<()> {
         self.live = Some(LiveBus::open(view)?);
         Ok(())
     }

@@ -44,12 +44,7 @@ fn rig(tag: &str) -> Rig {
         .stdin(Stdio::piped());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
     let stdin = slave.child.as_mut().unwrap().stdin.take().unwrap();
-    let mut out = Lines::from(&mut slave);
-    assert!(
-        out.wait_for("\"event\":\"start\"", WAIT),
-        "dpctl slave did not start: {:?}",
-        out.1
-    );
+    let out = started(&mut slave, WAIT);
     let start: Value = serde_json::from_str(
         out.1
             .iter()
@@ -122,11 +117,7 @@ impl Rig {
                 .any(|v| done(&v));
         }
         m.terminate(Duration::from_secs(10));
-        let lines: Vec<Value> = out
-            .rest()
-            .iter()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect();
+        let lines = json_lines(out.rest());
         assert!(
             hit,
             "dpctl master never showed what the test waits for: {lines:?}"
@@ -136,22 +127,14 @@ impl Rig {
 
     /// The slave's events so far, as JSON.
     fn events(&self) -> Vec<Value> {
-        self.out
-            .1
-            .iter()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect()
+        json_lines(&self.out.1)
     }
 
     fn stop(mut self) -> Vec<Value> {
         drop(self.stdin);
         let st = self.slave.terminate(Duration::from_secs(10));
         assert!(st.success(), "dpctl slave exited with {st}");
-        self.out
-            .rest()
-            .iter()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect()
+        json_lines(self.out.rest())
     }
 }
 
@@ -162,13 +145,6 @@ fn bus_file(terminals: &str) -> String {
          terminals = [{}]\nwatchdog_ms = 1000\n",
         list.join(", ")
     )
-}
-
-fn json_lines(out: &[u8]) -> Vec<Value> {
-    String::from_utf8_lossy(out)
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
 }
 
 #[test]
@@ -355,15 +331,7 @@ fn pyprofibus_exchanges_data_with_the_coupler_through_its_gsd() {
     ] {
         cmd.args(["--module", m]);
     }
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines: Vec<Value> = out
-        .rest()
-        .iter()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = json_lines(run_pyprofibus(&mut cmd));
     let last = lines.iter().rev().find(|v| v["event"] == "dx").unwrap();
     let inputs = last["inputs"].as_str().unwrap();
     // Byte 4: the digital inputs, KL1104 input 1 pinned on.
@@ -382,6 +350,12 @@ fn pyprofibus_exchanges_data_with_the_coupler_through_its_gsd() {
     );
 }
 
+/// `dpctl slave` of a BK3000 with the terminals `strip` on no line.
+fn start_strip(strip: &str) -> Output {
+    let args = ["--port", "/dev/null", "--device", "bk3000", "--addr", "5"];
+    run_dpctl(&[&["slave", "--terminals", strip], &args[..]].concat())
+}
+
 #[test]
 fn strips_the_coupler_cannot_run_are_refused_at_start() {
     for (strip, words) in [
@@ -389,32 +363,12 @@ fn strips_the_coupler_cannot_run_are_refused_at_start() {
         ("KL1104,KL9010,KL2134", "follows the end terminal"),
         ("KL1104,KL7777,KL9010", "`KL7777` is not in the catalogue"),
     ] {
-        let o = run_dpctl(&[
-            "slave",
-            "--port",
-            "/dev/null",
-            "--device",
-            "bk3000",
-            "--terminals",
-            strip,
-            "--addr",
-            "5",
-        ]);
+        let o = start_strip(strip);
         assert_eq!(o.status.code(), Some(1), "{strip}: {o:?}");
         assert!(o.stderr.contains(words), "{strip}: {}", o.stderr);
     }
     let many = vec!["KL1002"; 64].join(",") + ",KL9010";
-    let o = run_dpctl(&[
-        "slave",
-        "--port",
-        "/dev/null",
-        "--device",
-        "bk3000",
-        "--terminals",
-        &many,
-        "--addr",
-        "5",
-    ]);
+    let o = start_strip(&many);
     assert!(o.stderr.contains("at most 64"), "{}", o.stderr);
 }
 
@@ -422,7 +376,7 @@ fn strips_the_coupler_cannot_run_are_refused_at_start() {
 fn the_demo_runs_a_bk3000_with_named_channels() {
     let o = run_dpctl(&["demo", "--fast", "--cycles", "400", "--json"]);
     assert!(o.status.success(), "{}", o.stderr);
-    let lines = json_lines(o.stdout.as_bytes());
+    let lines = json_lines(o.stdout.lines());
     let st = lines.iter().rev().find(|v| v["event"] == "status").unwrap();
     let bk = st["slaves"]
         .as_array()

@@ -142,6 +142,7 @@ fn bad_arguments_exit_2_with_one_line() {
     std::fs::write(&file, b"precious").unwrap();
     let prefix = dir.path("st");
     let prefix = prefix.to_str().unwrap();
+    let two = ["bus", "--stations", "2", "--link", "/tmp/x"];
     for (args, expect) in [
         (
             vec!["bus", "--stations", "1", "--link", prefix],
@@ -152,29 +153,10 @@ fn bad_arguments_exit_2_with_one_line() {
             "not a symlink",
         ),
         (
-            vec![
-                "bus",
-                "--stations",
-                "2",
-                "--link",
-                "/tmp/x",
-                "--baud",
-                "115200",
-            ],
+            [&two[..], &["--baud", "115200"]].concat(),
             "unknown baud rate",
         ),
-        (
-            vec![
-                "bus",
-                "--stations",
-                "2",
-                "--link",
-                "/tmp/x",
-                "--drop",
-                "1.5",
-            ],
-            "probability",
-        ),
+        ([&two[..], &["--drop", "1.5"]].concat(), "probability"),
     ] {
         let out = run_dpctl(&args);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {out:?}");

@@ -77,19 +77,23 @@ fn demo_brings_every_slave_to_data_exchange_and_data_moves() {
     assert!(summary["telegrams"].as_u64().unwrap() > 1000);
 }
 
+/// `dpctl decode --json TELEGRAMS…`: it succeeds, every line is JSON.
+fn decode_json(telegrams: &[&str]) -> Vec<Value> {
+    let o = dpctl(&[&["decode", "--json"], telegrams].concat());
+    assert!(o.status.success());
+    o.stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 #[test]
 fn decode_reports_malformed_telegrams_with_exit_1() {
     let o = dpctl(&["decode", "10", "02", "08", "00", "0B", "16"]);
     assert_eq!(o.status.code(), Some(1));
     let err = o.stderr;
     assert!(err.contains("FCS mismatch"), "{err}");
-    let o = dpctl(&["decode", "--json", "10 02 08 00 0A 16", "E5"]);
-    assert!(o.status.success());
-    let out = o.stdout;
-    let v: Vec<Value> = out
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let v = decode_json(&["10 02 08 00 0A 16", "E5"]);
     assert_eq!(v[0]["status"], "OK");
     assert_eq!(v[0]["sa"], 8);
     assert_eq!(v[1]["type"], "short_ack");
@@ -101,18 +105,10 @@ fn decode_reports_malformed_telegrams_with_exit_1() {
 fn decode_shows_the_start_delimiter_received() {
     // The same 6-byte Slave_Diag answer as SD2 (as real devices send it)
     // and as SD3: each is labelled as received.
-    let o = dpctl(&[
-        "decode",
-        "--json",
+    let v = decode_json(&[
         "680b0b68828b083e3c020900ff002bc416",
         "a2828b083e3c020900ff002bc416",
     ]);
-    assert!(o.status.success());
-    let out = o.stdout;
-    let v: Vec<Value> = out
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
     assert_eq!(v[0]["format"], "SD2");
     assert_eq!(v[1]["format"], "SD3");
     assert_eq!(v[0]["data"], v[1]["data"]);

@@ -43,32 +43,23 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
             .stdout(Stdio::piped())
             .stdin(Stdio::null()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    let _slave_out = started(&mut slave, Duration::from_secs(10));
     let (bus, cmds) = (dir.path("bus.toml"), dir.path("cmds.jsonl"));
     std::fs::write(&bus, BUS).unwrap();
     std::fs::write(&cmds, COMMANDS).unwrap();
-    let out = Command::new(dpctl())
-        // Until 60 Data_Exchange cycles, however long the start-up takes on
-        // a busy machine; late replies within 100 ms are not lost ones.
-        .args(["master", "--exchanges", "60", "--timeout", "120"])
-        .args(["--latency", "100", "--json", "--port"])
-        .arg(&master_end)
-        .arg("--config")
-        .arg(&bus)
-        .arg("--input")
-        .arg(&cmds)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        Command::new(dpctl())
+            // Until 60 Data_Exchange cycles, however long the start-up takes
+            // on a busy machine; late replies within 100 ms are not lost ones.
+            .args(["master", "--exchanges", "60", "--timeout", "120"])
+            .args(["--latency", "100", "--json", "--port"])
+            .arg(&master_end)
+            .arg("--config")
+            .arg(&bus)
+            .arg("--input")
+            .arg(&cmds),
     );
-    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
+    let lines = json_lines(String::from_utf8_lossy(&out.stdout).lines());
     assert!(
         lines
             .iter()
@@ -91,14 +82,14 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
         "{lines:?}"
     );
     // In words: a line of `name=value` under the slave.
-    let out = Command::new(dpctl())
-        .args(["master", "--exchanges", "60", "--timeout", "120"])
-        .args(["--latency", "100", "--port"])
-        .arg(&master_end)
-        .arg("--config")
-        .arg(&bus)
-        .output()
-        .unwrap();
+    let out = run_ok(
+        Command::new(dpctl())
+            .args(["master", "--exchanges", "60", "--timeout", "120"])
+            .args(["--latency", "100", "--port"])
+            .arg(&master_end)
+            .arg("--config")
+            .arg(&bus),
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.lines().any(|l| l.trim_start().starts_with("in: pke=")
@@ -169,8 +160,7 @@ fn a_bm4_slave_of_a_bus_file_answers_pkw_by_variable_name() {
             .stdout(Stdio::piped())
             .stdin(Stdio::null()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)));
+    let _slave_out = started(&mut slave, Duration::from_secs(10));
     // The master side from the same profile: the example table, PKW
     // module first, two of its variables.
     let bus = dir.path("bus.toml");

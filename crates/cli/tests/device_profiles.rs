@@ -29,7 +29,7 @@ struct Rig {
 /// reply must not count as a lost one.
 const LATENCY: &str = "100";
 
-fn rig(tag: &str, args: &[&str], stdin: bool) -> Rig {
+fn rig(tag: &str, args: &[impl AsRef<std::ffi::OsStr>], stdin: bool) -> Rig {
     let dir = TempDir::new(tag);
     let (a, b) = (dir.path("master"), dir.path("slave"));
     let socat = pty_pair(&a, &b);
@@ -43,12 +43,7 @@ fn rig(tag: &str, args: &[&str], stdin: bool) -> Rig {
         .stderr(Stdio::inherit())
         .stdin(if stdin { Stdio::piped() } else { Stdio::null() });
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut out = Lines::from(&mut slave);
-    assert!(
-        out.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "dpctl slave did not start: {:?}",
-        out.1
-    );
+    let out = started(&mut slave, Duration::from_secs(10));
     Rig {
         dir,
         master_port: a,
@@ -104,28 +99,25 @@ impl Rig {
             "dpctl master: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect()
+        json_lines(String::from_utf8_lossy(&out.stdout).lines())
     }
 
     fn stop(mut self) -> Vec<Value> {
         let st = self.slave.terminate(Duration::from_secs(10));
         assert!(st.success(), "dpctl slave exited with {st}");
-        self.out
-            .rest()
-            .iter()
-            .filter_map(|l| serde_json::from_str(l).ok())
-            .collect()
+        json_lines(self.out.rest())
     }
 }
 
-fn example_vars() -> String {
-    repo()
-        .join("crates/devices/data/bm4_example_vars.toml")
-        .display()
-        .to_string()
+/// `dpctl slave` arguments of a BM4 with the manual's example variables,
+/// then `extra`.
+fn bm4(extra: &[&str]) -> Vec<String> {
+    let vars = repo().join("crates/devices/data/bm4_example_vars.toml");
+    let vars = vars.display().to_string();
+    let args = ["--device", "bm4", "--vars", &vars]
+        .into_iter()
+        .chain(extra.iter().copied());
+    args.map(String::from).collect()
 }
 
 const BM4_BUS: &str = r#"
@@ -141,19 +133,9 @@ watchdog_ms = 1000
 
 #[test]
 fn bm4_pkw_examples_of_the_manual() {
-    let vars = example_vars();
     let r = rig(
         "bm4-pkw",
-        &[
-            "--device",
-            "bm4",
-            "--addr",
-            "6",
-            "--vars",
-            &vars,
-            "--write-gsd",
-            "my.gsd",
-        ],
+        &bm4(&["--addr", "6", "--write-gsd", "my.gsd"]),
         false,
     );
     // The generated GSD has the modules of the manual's MyGSDFile.gsd.
@@ -211,23 +193,8 @@ fn bm4_pkw_examples_of_the_manual() {
 
 #[test]
 fn bm4_user_diagnosis_example_reaches_the_master() {
-    let vars = example_vars();
-    let mut r = rig(
-        "bm4-diag",
-        &[
-            "--device",
-            "bm4",
-            "--addr",
-            "6",
-            "--vars",
-            &vars,
-            "--write-gsd",
-            "my.gsd",
-            "--control",
-            "-",
-        ],
-        true,
-    );
+    let args = bm4(&["--addr", "6", "--write-gsd", "my.gsd", "--control", "-"]);
+    let mut r = rig("bm4-diag", &args, true);
     let bus = r.bus("bus.toml", BM4_BUS);
     {
         use std::io::Write;
@@ -266,18 +233,14 @@ fn bm4_user_diagnosis_example_reaches_the_master() {
 fn bm4_set_once_address_survives_a_restart() {
     let state = TempDir::new("bm4-state");
     let sd = state.0.display().to_string();
-    let args = [
-        "--device",
-        "bm4",
+    let args = bm4(&[
         "--us-device",
         "126",
         "--state-dir",
         &sd,
-        "--vars",
-        &example_vars(),
         "--write-gsd",
         "my.gsd",
-    ];
+    ]);
     let r = rig("bm4-addr", &args, false);
     assert!(r.out.1.iter().any(|l| l.contains("\"address\":126")));
     let bus = r.bus("bus.toml", &BM4_BUS.replace("address = 6", "address = 7"));
@@ -496,11 +459,7 @@ fn pyprofibus_pkw(
     for m in modules {
         cmd.args(["--module", m]);
     }
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines = out.rest().to_vec();
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = run_pyprofibus(&mut cmd);
     let summary: Value = serde_json::from_str(lines.last().unwrap()).unwrap();
     assert_eq!(summary["phase"], "done");
     assert_eq!(summary["response"], expect);
@@ -510,12 +469,7 @@ fn pyprofibus_pkw(
 fn pyprofibus_runs_both_profiles_into_data_exchange_with_pkw() {
     let py = python();
     // BM4 with the manual's MyGSDFile.gsd from gsd/.
-    let vars = example_vars();
-    let r = rig(
-        "py-bm4",
-        &["--device", "bm4", "--addr", "6", "--vars", &vars],
-        false,
-    );
+    let r = rig("py-bm4", &bm4(&["--addr", "6"]), false);
     pyprofibus_pkw(
         &r,
         &py,

@@ -6,6 +6,21 @@ mod common;
 use common::*;
 use std::process::Command;
 
+/// The check `what` of a JSON report.
+fn check<'a>(report: &'a serde_json::Value, what: &str) -> &'a serde_json::Value {
+    let checks = report["checks"].as_array().unwrap();
+    (checks.iter().find(|c| c["what"] == what))
+        .unwrap_or_else(|| panic!("{what} missing: {report}"))
+}
+
+/// The RTS control check of a JSON report failed, saying `why`.
+fn rts_check_fails(report: &serde_json::Value, why: &str) {
+    let rts = check(report, "RTS control");
+    assert_eq!(rts["verdict"], "fail");
+    let detail = rts["detail"].as_str().unwrap();
+    assert!(detail.contains(why), "{rts}");
+}
+
 #[test]
 fn doctor_on_a_pty_names_what_it_could_not_check() {
     let dir = TempDir::new("doctor");
@@ -91,14 +106,7 @@ fn doctor_json_is_one_object_with_every_check() {
     assert_eq!(v["rts"], "off");
     assert_eq!(v["failed"], false);
     assert_eq!(v["unchecked"], 4);
-    let checks = v["checks"].as_array().unwrap();
-    let verdict = |what: &str| {
-        checks
-            .iter()
-            .find(|c| c["what"] == what)
-            .unwrap_or_else(|| panic!("{what} missing: {v}"))["verdict"]
-            .clone()
-    };
+    let verdict = |what: &str| check(&v, what)["verdict"].clone();
     assert_eq!(verdict("open"), "ok");
     assert_eq!(verdict("8E1"), "unchecked");
     assert_eq!(verdict("RTS control"), "ok");
@@ -112,21 +120,7 @@ fn doctor_json_is_one_object_with_every_check() {
         (v["rts"].as_str(), v["failed"].as_bool()),
         (Some("on-send"), Some(true))
     );
-    let rts = v["checks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["what"] == "RTS control")
-        .unwrap()
-        .clone();
-    assert_eq!(rts["verdict"], "fail");
-    assert!(
-        rts["detail"]
-            .as_str()
-            .unwrap()
-            .contains("a pty has no RTS line"),
-        "{rts}"
-    );
+    rts_check_fails(&v, "a pty has no RTS line");
 }
 
 #[test]
@@ -176,21 +170,7 @@ fn rts_on_send_through_a_serial_device_server_is_refused_clearly() {
     assert_eq!(out.status.code(), Some(1));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["kind"]["type"], "tcp");
-    let rts = v["checks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["what"] == "RTS control")
-        .unwrap()
-        .clone();
-    assert_eq!(rts["verdict"], "fail");
-    assert!(
-        rts["detail"]
-            .as_str()
-            .unwrap()
-            .contains("drives its transceiver itself"),
-        "{rts}"
-    );
+    rts_check_fails(&v, "drives its transceiver itself");
     let out = Command::new(dpctl())
         .args(["scan", "--rts", "on-send", "--port", &port])
         .output()

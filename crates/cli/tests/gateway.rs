@@ -5,9 +5,10 @@
 
 mod common;
 
-use common::mqtt::{broker, free_port, mosquitto};
-use common::{dpctl, wait_for, Lines, Proc, TempDir};
-use std::net::TcpStream;
+use common::mqtt::{
+    broker, broker_with, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES,
+};
+use common::{dpctl, Lines, Proc, TempDir};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -93,32 +94,26 @@ fn expect(lines: &mut Lines, topic: &str, needles: &[&str]) -> serde_json::Value
     );
 }
 
-const BUS: &str = r#"[master]
-address = 1
-baud = "1.5M"
+/// Slaves of profiles with named channels, after [`GATEWAY_SLAVES`]: a
+/// BM4 module (the manual's example variables) and a BK3000 strip.
+const PROFILED: &str = r#"
+[[slave]]
+address = 6
+name = "plc"
+device = "bm4"
+example = true
 
 [[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
+address = 15
+name = "coupler"
+device = "bk3000"
+terminals = ["KL1104", "KL2134", "KL3102", "KL4002", "KL9010"]
+"#;
 
-[[slave]]
-address = 4
-name = "locked"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 25
-device = "omega"
-setpoints = 1
-actual_values = 1
-
-[mqtt]
-prefix = "profibus"
+/// The `[mqtt]` table of the bus file of [`GATEWAY_SLAVES`].
+const MQTT: &str = r#"prefix = "profibus"
 bus = "line"
-writable = [3, { address = 25, channels = ["setpoint1"] }]
+writable = [3, { address = 25, channels = ["setpoint1"] }, { address = 15, channels = ["4.KL4002.1"] }]
 outputs_timeout_ms = 300
 safe_state = "zero"
 "#;
@@ -126,13 +121,7 @@ safe_state = "zero"
 #[test]
 fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     let dir = TempDir::new("gateway");
-    std::fs::copy(
-        common::repo().join("gsd/DPCTL_GEN.GSD"),
-        dir.path("DPCTL_GEN.GSD"),
-    )
-    .unwrap();
-    let bus = dir.path("bus.toml");
-    std::fs::write(&bus, BUS).unwrap();
+    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}{PROFILED}\n[mqtt]\n{MQTT}"));
     let port = free_port();
     let mut mosq = broker(&dir, port);
     // The gateway's log (stderr) read as it comes: `exec` keeps the pid
@@ -154,7 +143,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     // Every slave reaches Data_Exchange; a late subscriber gets the
     // retained status and states.
     let (sub0, mut early) = subscribe(port);
-    for a in [3, 4, 25] {
+    for a in [3, 4, 6, 15, 25] {
         expect(
             &mut early,
             &format!("profibus/line/{a}/state"),
@@ -164,12 +153,19 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     drop(sub0);
     let (_sub, mut lines) = subscribe(port);
     let status = expect(&mut lines, "profibus/line/status", &["online"]);
-    assert_eq!(status["writable"], serde_json::json!([3, 25]));
+    assert_eq!(status["writable"], serde_json::json!([3, 25, 15]));
     let st = expect(&mut lines, "profibus/line/3/state", &["data_exchange"]);
     assert_eq!(st["name"], "echo");
     // The Omega drive's inputs decoded into its named channels.
     let omega = expect(&mut lines, "profibus/line/25/inputs", &["values"]);
     assert!(omega["values"].get("status1").is_some(), "{omega}");
+    // The BM4 module's variables and the BK3000's terminal channels by
+    // name, the analog ones with their unit.
+    let plc = expect(&mut lines, "profibus/line/6/inputs", &["values"]);
+    assert!(plc["values"].get("ud_MyReadVar1").is_some(), "{plc}");
+    let strip = expect(&mut lines, "profibus/line/15/inputs", &["values"]);
+    assert!(strip["values"].get("1.KL1104.2").is_some(), "{strip}");
+    assert_eq!(strip["units"]["3.KL3102.1"], "V", "{strip}");
 
     // A write of the whole image: the echo slave's inputs follow it.
     publish(
@@ -200,6 +196,21 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
         &["\"setpoint1\":4321"],
     );
     assert!(o["hex"].as_str().unwrap().contains("10e1"), "{o}");
+
+    // An analog output of the BK3000 strip by name, in volts.
+    publish(
+        port,
+        "profibus/line/15/outputs/set",
+        r#"{"channels": {"4.KL4002.1": 5.0}, "id": "kl"}"#,
+    );
+    let r = expect(&mut lines, "profibus/line/15/outputs/response", &["\"kl\""]);
+    assert_eq!(r["ok"], true, "{r}");
+    let o = expect(
+        &mut lines,
+        "profibus/line/15/outputs",
+        &["\"4.KL4002.1\":5"],
+    );
+    assert_eq!(o["units"]["4.KL4002.1"], "V", "{o}");
 
     // A PKW job on the drive, answered on the topic the request names.
     publish(
@@ -246,32 +257,26 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     );
     let r = expect(&mut lines, "profibus/line/25/outputs/response", &["\"ch\""]);
     assert_eq!(r["ok"], false);
-    publish(
-        port,
-        "profibus/line/25/outputs/set",
-        r#"{"channels": {"control1": 1}, "id": "cw"}"#,
-    );
-    let r = expect(&mut lines, "profibus/line/25/outputs/response", &["\"cw\""]);
-    assert!(
-        r["error"]
-            .as_str()
-            .unwrap()
-            .contains("only the output channels"),
-        "{r}"
-    );
-    publish(
-        port,
-        "profibus/line/25/pkw/request",
-        r#"{"op": "write", "pnu": 1000, "value": 1, "id": "pw"}"#,
-    );
-    let r = expect(&mut lines, "profibus/line/25/pkw/response", &["\"pw\""]);
-    assert!(
-        r["error"]
-            .as_str()
-            .unwrap()
-            .contains("only the output channels"),
-        "{r}"
-    );
+    // Not writable: the drive's input channels, and its PKW channel.
+    for (topic, request, id) in [
+        (
+            "outputs/set",
+            r#"{"channels": {"control1": 1}, "id": "cw"}"#,
+            "cw",
+        ),
+        (
+            "pkw/request",
+            r#"{"op": "write", "pnu": 1000, "value": 1, "id": "pw"}"#,
+            "pw",
+        ),
+    ] {
+        publish(port, &format!("profibus/line/25/{topic}"), request);
+        let service = topic.split('/').next().unwrap();
+        let response = format!("profibus/line/25/{service}/response");
+        let r = expect(&mut lines, &response, &[&format!("\"{id}\"")]);
+        let error = r["error"].as_str().unwrap();
+        assert!(error.contains("only the output channels"), "{r}");
+    }
     // A later good write goes through; by then nothing of the refused
     // ones reached an image.
     publish(port, "profibus/line/3/outputs/set", "cafe0001");
@@ -328,28 +333,8 @@ fn gateway_on_a_line_with_a_slave_process() {
     let port = free_port();
     let _mosq = broker(&dir, port);
     let line = common::Bus::start(2, &[]);
-    let _slave = Proc::spawn(
-        "dpctl slave",
-        Command::new(dpctl())
-            .args(["slave", "--port"])
-            .arg(line.link(1))
-            .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
-            .arg(common::repo().join("gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "2 words in/out"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
-    std::fs::copy(
-        common::repo().join("gsd/DPCTL_GEN.GSD"),
-        dir.path("DPCTL_GEN.GSD"),
-    )
-    .unwrap();
-    let bus = dir.path("bus.toml");
-    std::fs::write(
-        &bus,
-        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nbus = \"line\"\nwritable = [3]\n",
-    )
-    .unwrap();
+    let _slave = echo_slave(&line.link(1));
+    let bus = write_bus(&dir, &echo_bus_text("bus = \"line\"\nwritable = [3]\n"));
     let (_sub, mut lines) = subscribe(port);
     let gw = Proc::spawn_captured({
         let mut c = Command::new(dpctl());
@@ -415,45 +400,27 @@ fn run_in(dir: &TempDir, program: &str, args: &[&str]) {
 #[test]
 fn gateway_over_tls_with_a_password() {
     let dir = TempDir::new("gateway-tls");
-    run_in(
-        &dir,
-        "openssl",
-        &[
-            "req",
-            "-x509",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:prime256v1",
-            "-nodes",
-            "-keyout",
-            "ca.key",
-            "-out",
-            "ca.crt",
-            "-days",
-            "2",
-            "-subj",
-            "/CN=dpctl test CA",
-        ],
-    );
-    run_in(
-        &dir,
-        "openssl",
-        &[
-            "req",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:prime256v1",
-            "-nodes",
-            "-keyout",
-            "server.key",
-            "-out",
-            "server.csr",
-            "-subj",
-            "/CN=127.0.0.1",
-        ],
-    );
+    // A new P-256 key and a request for it (with -x509: a certificate).
+    let new_key = [
+        "req",
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:prime256v1",
+        "-nodes",
+    ];
+    let ca = ["-x509", "-keyout", "ca.key", "-out", "ca.crt", "-days", "2"];
+    let ca = [&new_key[..], &ca, &["-subj", "/CN=dpctl test CA"]].concat();
+    run_in(&dir, "openssl", &ca);
+    let server = [
+        "-keyout",
+        "server.key",
+        "-out",
+        "server.csr",
+        "-subj",
+        "/CN=127.0.0.1",
+    ];
+    run_in(&dir, "openssl", &[&new_key[..], &server].concat());
     std::fs::write(
         dir.path("ext.cnf"),
         "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n",
@@ -499,29 +466,10 @@ fn gateway_over_tls_with_a_password() {
         ),
     )
     .unwrap();
-    let _mosq = Proc::spawn(
-        "mosquitto",
-        Command::new(mosquitto())
-            .arg("-c")
-            .arg(&conf)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
-    );
-    wait_for("mosquitto to listen", T, || {
-        TcpStream::connect(("127.0.0.1", port)).is_ok()
-    });
-    std::fs::copy(
-        common::repo().join("gsd/DPCTL_GEN.GSD"),
-        dir.path("DPCTL_GEN.GSD"),
-    )
-    .unwrap();
+    let _mosq = broker_with(&conf, port);
     std::fs::write(dir.path("pw.txt"), "s3cret\n").unwrap();
-    let bus = dir.path("bus.toml");
-    std::fs::write(
-        &bus,
-        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nbus = \"line\"\nwritable = [3]\nusername = \"gw\"\npassword_file = \"pw.txt\"\nca_file = \"ca.crt\"\n",
-    )
-    .unwrap();
+    let mqtt = "bus = \"line\"\nwritable = [3]\nusername = \"gw\"\npassword_file = \"pw.txt\"\nca_file = \"ca.crt\"\n";
+    let bus = write_bus(&dir, &echo_bus_text(mqtt));
     let ca = dir.path("ca.crt");
     let ca = ca.to_str().unwrap();
     let tls = ["--cafile", ca, "-u", "gw", "-P", "s3cret"];

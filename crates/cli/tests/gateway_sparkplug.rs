@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::mqtt::{broker, free_port};
+use common::mqtt::{broker, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES};
 use common::{dpctl, require, Lines, Proc, TempDir};
 use std::collections::HashMap;
 use std::io::Write;
@@ -129,11 +129,15 @@ impl Sub {
                 .status()
                 .expect("mosquitto_pub")
                 .success();
-            assert!(ok, "mosquitto_pub failed");
+            // A refused publish (the broker not listening yet on a busy
+            // machine) is tried again; the wait is the pause between tries.
             if lines.wait_for(PROBE, Duration::from_millis(500)) {
                 break;
             }
-            assert!(Instant::now() < end, "mosquitto_sub never subscribed");
+            assert!(
+                Instant::now() < end,
+                "mosquitto_sub never subscribed (last mosquitto_pub succeeded: {ok})"
+            );
         }
         Sub {
             _p: p,
@@ -217,34 +221,6 @@ fn command(port: u16, topic: &str, text: &str) {
     );
 }
 
-const BUS: &str = r#"[master]
-address = 1
-baud = "1.5M"
-
-[[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 4
-name = "locked"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 25
-device = "omega"
-setpoints = 1
-actual_values = 1
-pkw = false
-
-[mqtt]
-bus = "line"
-writable = [3, 25]
-"#;
-
 fn gateway(bus: &std::path::Path, port: u16, extra: &[&str]) -> Proc {
     let mut c = Command::new(dpctl());
     c.arg("gateway")
@@ -316,13 +292,8 @@ fn check_seq(sub: &Sub) {
 #[test]
 fn sparkplug_births_data_commands_rebirth_and_last_will() {
     let dir = TempDir::new("sparkplug");
-    std::fs::copy(
-        common::repo().join("gsd/DPCTL_GEN.GSD"),
-        dir.path("DPCTL_GEN.GSD"),
-    )
-    .unwrap();
-    let bus = dir.path("bus.toml");
-    std::fs::write(&bus, BUS).unwrap();
+    let mqtt = "[mqtt]\nbus = \"line\"\nwritable = [3, 25]\n";
+    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}pkw = false\n\n{mqtt}"));
     let port = free_port();
     let mut mosq = broker(&dir, port);
     let mut sub = Sub::start(port);
@@ -356,22 +327,17 @@ fn sparkplug_births_data_commands_rebirth_and_last_will() {
 
     // DCMD by channel name, a negative value on a signed channel (two's
     // complement in int_value) and a positive one.
-    command(
-        port,
-        &dev("DCMD", 25),
-        r#"timestamp: 2 metrics { name: "Outputs/setpoint1" int_value: 4294967294 }"#,
-    );
-    sub.expect(&dev("DDATA", 25), |d| {
-        d.get("Outputs/setpoint1", "int_value") == Some("4294967294")
-    });
-    command(
-        port,
-        &dev("DCMD", 25),
-        r#"timestamp: 3 metrics { name: "Outputs/setpoint1" int_value: 4321 }"#,
-    );
-    sub.expect(&dev("DDATA", 25), |d| {
-        d.get("Outputs/setpoint1", "int_value") == Some("4321")
-    });
+    for (timestamp, value) in [(2, "4294967294"), (3, "4321")] {
+        let metric = format!(r#"metrics {{ name: "Outputs/setpoint1" int_value: {value} }}"#);
+        command(
+            port,
+            &dev("DCMD", 25),
+            &format!("timestamp: {timestamp} {metric}"),
+        );
+        sub.expect(&dev("DDATA", 25), |d| {
+            d.get("Outputs/setpoint1", "int_value") == Some(value)
+        });
+    }
 
     // Refused, nothing written: a slave not in `writable`, and a command
     // with one unknown metric next to a good one. A later good write
@@ -455,31 +421,11 @@ fn sparkplug_on_a_line_ddeath_dbirth_and_clean_ndeath() {
     let port = free_port();
     let _mosq = broker(&dir, port);
     let line = common::Bus::start(2, &[]);
-    let slave = |line: &common::Bus| {
-        Proc::spawn(
-            "dpctl slave",
-            Command::new(dpctl())
-                .args(["slave", "--port"])
-                .arg(line.link(1))
-                .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
-                .arg(common::repo().join("gsd/DPCTL_GEN.GSD"))
-                .args(["--module", "2 words in/out"])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null()),
-        )
-    };
-    let mut s = slave(&line);
-    std::fs::copy(
-        common::repo().join("gsd/DPCTL_GEN.GSD"),
-        dir.path("DPCTL_GEN.GSD"),
-    )
-    .unwrap();
-    let bus = dir.path("bus.toml");
-    std::fs::write(
-        &bus,
-        "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n[mqtt]\nsparkplug = \"G/E\"\nwritable = [3]\n",
-    )
-    .unwrap();
+    let mut s = echo_slave(&line.link(1));
+    let bus = write_bus(
+        &dir,
+        &echo_bus_text("sparkplug = \"G/E\"\nwritable = [3]\n"),
+    );
     let mut sub = Sub::start(port);
     let gw = gateway(&bus, port, &["--port", &line.link_str(0)]);
     let nb = sub.expect(NBIRTH, |_| true);
@@ -500,7 +446,7 @@ fn sparkplug_on_a_line_ddeath_dbirth_and_clean_ndeath() {
     let dd = sub.expect(&dev("DDEATH", 3), |_| true);
     assert!(dd.metrics.is_empty() && dd.fields.contains_key("timestamp"));
     // It comes back: DBIRTH again.
-    let _s = slave(&line);
+    let _s = echo_slave(&line.link(1));
     sub.expect(&dev("DBIRTH", 3), |_| true);
 
     // SIGTERM: the gateway publishes NDEATH itself before disconnecting.

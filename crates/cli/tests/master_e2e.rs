@@ -7,9 +7,8 @@
 
 mod common;
 
-use common::{dpctl, repo, Bus, Lines, Proc, TempDir};
+use common::{all_dx, dpctl, repo, run_ok, send, slave_of, Bus, Lines, Proc, TempDir};
 use serde_json::Value;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -80,12 +79,6 @@ fn master(prefix: &Path, i: usize, config: &Path) -> (Proc, Watch) {
     (p, Watch { lines, pos: 0 })
 }
 
-fn send(p: &mut Proc, line: &str) {
-    let stdin = p.child.as_mut().unwrap().stdin.as_mut().unwrap();
-    writeln!(stdin, "{line}").unwrap();
-    stdin.flush().unwrap();
-}
-
 /// The output of a `dpctl master --json` with a read position: status
 /// lines are looked for after the last one returned.
 struct Watch {
@@ -126,23 +119,6 @@ impl Watch {
     fn all(&self) -> &[String] {
         &self.lines.1
     }
-}
-
-fn slave_of(status: &Value, addr: u8) -> &Value {
-    status["slaves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|s| s["address"] == addr)
-        .unwrap()
-}
-
-fn all_dx(v: &Value) -> bool {
-    v["slaves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .all(|s| s["state"] == "data_exchange")
 }
 
 #[test]
@@ -327,25 +303,20 @@ fn two_masters_and_a_scanner_share_one_bus() {
     // scanner's slot time (+100 ms latency) under load is missing from
     // that pass, so scan again (at most 5 times) until both are listed.
     let scan = || -> Vec<Value> {
-        let out = Command::new(dpctl())
-            .args([
-                "scan",
-                "--json",
-                "--addr",
-                "9",
-                "--baud",
-                "1.5M",
-                "--timeout",
-                "60",
-            ])
-            .args(["--latency", "100", "--port"])
-            .arg(link(&prefix, 0))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = run_ok(
+            Command::new(dpctl())
+                .args([
+                    "scan",
+                    "--json",
+                    "--addr",
+                    "9",
+                    "--baud",
+                    "1.5M",
+                    "--timeout",
+                    "60",
+                ])
+                .args(["--latency", "100", "--port"])
+                .arg(link(&prefix, 0)),
         );
         String::from_utf8(out.stdout)
             .unwrap()

@@ -13,23 +13,8 @@ use std::io::Write;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-const BUS: &str = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["1 byte in", "2 words in/out"]
-
-[[slave]]
-address = 25
-device = "omega"
-setpoints = 2
-actual_values = 2
-watchdog_ms = 1000
-"#;
+/// Master 2 with the echo slave at 3 and an Omega drive at 25.
+const BUS: &str = include_str!("data/monitor_bus.toml");
 
 const COMMANDS: &str = r#"{"slave": 3, "outputs": "12 34 56 78"}
 {"slave": 25, "set": {"setpoint1": 1234, "setpoint2": -5}}
@@ -171,19 +156,9 @@ fn monitor_follows_a_master_and_its_slaves_to_data_exchange() {
 
 /// Bytes of a data telegram.
 fn tg(da: u8, sa: u8, fc: FunctionCode, saps: Option<(u8, u8)>, du: &[u8]) -> Vec<u8> {
-    let mut buf = [0u8; 256];
-    let n = Telegram::Data(DataTelegram {
-        da,
-        sa,
-        fc,
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data: du,
-        format: None,
-    })
-    .emit(&mut buf)
-    .unwrap();
-    buf[..n].to_vec()
+    let (dsap, ssap) = saps.unzip();
+    let t = DataTelegram::new(da, sa, fc, du).with_saps(dsap, ssap);
+    Telegram::Data(t).to_vec().unwrap()
 }
 
 /// A master (2) and a slave (3) as canned telegrams: a start-up and one

@@ -21,7 +21,6 @@ mod common;
 use common::*;
 use profibus::dp::gsd::{Gsd, ParseOptions};
 use profirust::{dp, fdl, phy};
-use serde_json::Value;
 use std::io::{Read, Write};
 use std::os::unix::fs::OpenOptionsExt;
 use std::process::{Command, Stdio};
@@ -133,11 +132,7 @@ fn profirust_master_reaches_data_exchange_with_dpctl_slave() {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit()),
     );
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(
-        slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "dpctl slave did not start"
-    );
+    let mut slave_out = started(&mut slave, Duration::from_secs(10));
 
     // profirust's master, as its examples set it up for a USB-RS485
     // adapter: a long slot time and retries for a non-real-time OS.
@@ -216,11 +211,7 @@ fn profirust_master_reaches_data_exchange_with_dpctl_slave() {
 
     let st = slave.terminate(Duration::from_secs(10));
     assert!(st.success(), "dpctl slave exited with {st}");
-    let events: Vec<Value> = slave_out
-        .rest()
-        .iter()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
+    let events = json_lines(slave_out.rest());
     let prm = events
         .iter()
         .find(|v| v["event"] == "prm_ok")

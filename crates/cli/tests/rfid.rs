@@ -11,6 +11,7 @@
 mod common;
 
 use common::*;
+use profibus_devices::rfid::{MANUAL_REQUESTS, MANUAL_RESPONSES};
 use serde_json::Value;
 use std::io::Write;
 use std::path::PathBuf;
@@ -19,16 +20,6 @@ use std::time::Duration;
 
 const ADDR: u8 = 9;
 
-/// The manual's worked example (chapter 2.4), requests and responses in
-/// order, hex; bytes not shown are 0.
-const MANUAL_REQUESTS: [&str; 5] = ["00 01 04 56 45 52 0D", "01 01", "02 01", "03 01", "04 01"];
-const MANUAL_RESPONSES: [&str; 5] = [
-    "08 00 00",
-    "08 01 0D 41 45 47 20 49 44 20 2D 20 50 46 42 20",
-    "08 02 06 56 31 2E 32 36 0D",
-    "08 03 0D 41 45 47 20 49 44 20 2D 20 41 39 20 2F",
-    "00 04 0A 50 46 42 20 56 31 2E 32 38 0D",
-];
 const VERSION: &str = "AEG ID - PFB V1.26\rAEG ID - A9 /PFB V1.28\r";
 
 /// 16 bytes of hex, the rest 0, as the sniffer prints them.
@@ -91,12 +82,7 @@ fn rig_with(tags: &str, profile: bool) -> Rig {
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
     let stdin = slave.child.as_mut().unwrap().stdin.take();
-    let mut events = Lines::from(&mut slave);
-    assert!(
-        events.wait_for("\"event\":\"start\"", Duration::from_secs(20)),
-        "the reader did not start: {:?}",
-        events.1
-    );
+    let events = started(&mut slave, Duration::from_secs(20));
     Rig {
         bus,
         slave,
@@ -157,27 +143,11 @@ impl Rig {
 }
 
 fn parse(text: &str) -> Vec<Value> {
-    text.lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
+    json_lines(text.lines())
 }
 
-const TAGS: &str = r#"
-[reader]
-tor = 10
-uid_ms = 10
-block_ms = 50
-
-[[tag]]
-uid = "E004015012345678"
-in_field = true
-blocks = 16
-data = ["00112233", "44556677"]
-
-[[tag]]
-uid = "E0040150AABBCCDD"
-data = ["CAFEF00D"]
-"#;
+/// Two tags, the first in the field.
+const TAGS: &str = include_str!("data/rfid_tags.toml");
 
 /// One `VER` with `dpctl sniff --json` listening: the Data_Exchange
 /// (request, response) pairs of the reader, consecutive repeats left out;
@@ -208,6 +178,10 @@ fn sniffed_ver(rig: &Rig) -> Option<Vec<(String, String)>> {
     let answers = rig.rfid(&["VER"]);
     assert_eq!(answers[0]["answer"], VERSION);
     assert_eq!(answers[0]["bytes"], 42);
+    // The sniffer may lag behind the bus on a busy machine: stop it only
+    // once it has shown the manual's last response.
+    let last = telegram(MANUAL_RESPONSES[MANUAL_RESPONSES.len() - 1]);
+    sniffed.wait_for(&last, Duration::from_secs(30));
     sniff.signal(15);
     let lines = parse(&sniffed.rest().join("\n"));
     if answers[0]["restarts"] != 0 {
@@ -364,8 +338,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut events = Lines::from(&mut slave);
-    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    let mut events = started(&mut slave, Duration::from_secs(20));
     let mut cmd = Command::new(py);
     cmd.arg(repo().join("tests/interop/pyprofibus_rfid.py"))
         .arg("--port")
@@ -375,11 +348,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .args(["--addr", "9", "--command", "VER"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
-    let mut p = Proc::spawn("pyprofibus", &mut cmd);
-    let mut out = Lines::from(&mut p);
-    let st = p.wait(Duration::from_secs(90));
-    let lines = out.rest().to_vec();
-    assert!(st.success(), "pyprofibus: {lines:?}");
+    let lines = run_pyprofibus(&mut cmd);
     let summary: Value = serde_json::from_str(lines.last().unwrap()).unwrap();
     let answer: String = summary["answer"].as_str().unwrap().to_string();
     let expect: String = VERSION.bytes().map(|b| format!("{b:02X}")).collect();
@@ -466,8 +435,7 @@ fn control_commands_over_a_socket() {
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     let mut slave = Proc::spawn("dpctl slave", &mut cmd);
-    let mut events = Lines::from(&mut slave);
-    assert!(events.wait_for("\"event\":\"start\"", Duration::from_secs(20)));
+    let mut events = started(&mut slave, Duration::from_secs(20));
     wait_for("the control socket", Duration::from_secs(10), || {
         sock.exists()
     });

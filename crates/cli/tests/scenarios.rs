@@ -7,13 +7,13 @@
 
 mod common;
 
-use common::{dpctl, repo, Bus, Proc, TempDir};
+use common::{all_dx, dpctl, repo, send, slave_of, Bus, Proc, TempDir};
 use profibus::fdl::pcap::PcapReader;
 use profibus::fdl::station::active::ActiveConfig;
 use profibus::fdl::wire::{FunctionCode, Telegram};
 use profibus::fdl::{Baud, BusParams};
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
@@ -158,28 +158,8 @@ fn master(port: &str, config: &Path) -> (Proc, Timed) {
     (p, lines)
 }
 
-fn send(p: &mut Proc, line: &str) {
-    let stdin = p.child.as_mut().unwrap().stdin.as_mut().unwrap();
-    writeln!(stdin, "{line}").unwrap();
-    stdin.flush().unwrap();
-}
-
-fn slave_of(status: &Value, addr: u8) -> &Value {
-    status["slaves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|s| s["address"] == addr)
-        .unwrap()
-}
-
 fn status_all_dx(v: &Value) -> bool {
-    v["event"] == "status"
-        && v["slaves"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .all(|s| s["state"] == "data_exchange")
+    v["event"] == "status" && all_dx(v)
 }
 
 /// A telegram from the bus's pcap: time (s since the Unix epoch),

@@ -18,20 +18,9 @@ use std::time::{Duration, Instant};
 const GEN_IDENT: [u8; 2] = [0x0D, 0xCE];
 
 fn request(da: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
-    let mut b = vec![0u8; 300];
-    let n = Telegram::Data(DataTelegram {
-        da,
-        sa: 2,
-        fc: FunctionCode::from_byte(fc),
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data,
-        format: None,
-    })
-    .emit(&mut b)
-    .unwrap();
-    b.truncate(n);
-    b
+    let (dsap, ssap) = saps.unzip();
+    let t = DataTelegram::new(da, 2, FunctionCode::from_byte(fc), data).with_saps(dsap, ssap);
+    Telegram::Data(t).to_vec().unwrap()
 }
 
 /// The master's end of the pty pair (blocking reads with a deadline).
@@ -84,6 +73,19 @@ fn diag(line: &mut Line, addr: u8) -> Vec<u8> {
     }
 }
 
+/// Set_Slave_Add of station 21 to `new` (FCB 0, after a 6D frame) is
+/// refused with RS: No_Add_Chg holds.
+fn change_refused(line: &mut Line, new: u8) {
+    let set = request(
+        21,
+        0x5D,
+        Some((55, 62)),
+        &[new, GEN_IDENT[0], GEN_IDENT[1], 0],
+    );
+    let r = line.ask(&set, Duration::from_secs(2));
+    assert_eq!(r, vec![0x10, 0x02, 21, 0x03, 0x1A, 0x16], "RS");
+}
+
 fn start_slave(port: &Path, extra: &[&str]) -> (Proc, Lines) {
     let mut p = Proc::spawn(
         "dpctl slave",
@@ -97,20 +99,12 @@ fn start_slave(port: &Path, extra: &[&str]) -> (Proc, Lines) {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit()),
     );
-    let mut lines = Lines::from(&mut p);
-    assert!(
-        lines.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "no start line: {:?}",
-        lines.1
-    );
+    let lines = started(&mut p, Duration::from_secs(10));
     (p, lines)
 }
 
 fn events(lines: &[String]) -> Vec<Value> {
-    lines
-        .iter()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
+    json_lines(lines)
 }
 
 #[test]
@@ -213,16 +207,7 @@ fn set_slave_add_persists_in_the_address_file() {
         "the old address is gone"
     );
     // No_Add_Chg: a further change is refused (RS).
-    let r = line.ask(
-        &request(
-            21,
-            0x5D,
-            Some((55, 62)),
-            &[22, GEN_IDENT[0], GEN_IDENT[1], 0],
-        ),
-        Duration::from_secs(2),
-    );
-    assert_eq!(r, vec![0x10, 0x02, 21, 0x03, 0x1A, 0x16], "RS");
+    change_refused(&mut line, 22);
     assert!(slave.terminate(Duration::from_secs(10)).success());
     let stored = std::fs::read_to_string(&file).unwrap();
     assert_eq!(stored, "address = 21\nno_add_chg = true\n");
@@ -232,16 +217,7 @@ fn set_slave_add_persists_in_the_address_file() {
     diag(&mut line, 21);
     // (FCB toggled after the first frame 6D: 5D, not 7D, which would be
     // a repeat and get the stored answer.)
-    let r = line.ask(
-        &request(
-            21,
-            0x5D,
-            Some((55, 62)),
-            &[23, GEN_IDENT[0], GEN_IDENT[1], 0],
-        ),
-        Duration::from_secs(2),
-    );
-    assert_eq!(r, vec![0x10, 0x02, 21, 0x03, 0x1A, 0x16], "RS");
+    change_refused(&mut line, 23);
     assert!(slave.terminate(Duration::from_secs(10)).success());
 }
 
@@ -266,45 +242,15 @@ fn usage_and_input_errors() {
     // Input errors: exit 1 with one line on stderr.
     let gsd = repo().join("gsd/DPCTL_GEN.GSD");
     let gsd = gsd.to_str().unwrap();
-    for args in [
-        vec![
-            "--port",
-            "/nonexistent/x",
-            "--addr",
-            "3",
-            "--gsd",
-            gsd,
-            "--module",
-            "2 words in/out",
-        ],
-        vec![
-            "--port",
-            "/nonexistent/x",
-            "--addr",
-            "3",
-            "--gsd",
-            gsd,
-            "--module",
-            "no such module",
-        ],
-        vec![
-            "--port",
-            "/nonexistent/x",
-            "--addr",
-            "3",
-            "--gsd",
-            "/nonexistent.gsd",
-        ],
-        vec![
-            "--port",
-            "/nonexistent/x",
-            "--addr",
-            "3",
-            "--device",
-            "nope",
-        ],
-        vec!["--port", "/nonexistent/x", "--addr", "3"],
+    let no_port = ["--port", "/nonexistent/x", "--addr", "3"];
+    for extra in [
+        &["--gsd", gsd, "--module", "2 words in/out"][..],
+        &["--gsd", gsd, "--module", "no such module"],
+        &["--gsd", "/nonexistent.gsd"],
+        &["--device", "nope"],
+        &[],
     ] {
+        let args = [&no_port[..], extra].concat();
         let o = run(&args);
         assert_eq!(o.status.code(), Some(1), "{args:?}");
         let err = String::from_utf8_lossy(&o.stderr);

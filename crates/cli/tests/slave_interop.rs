@@ -72,12 +72,7 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
         slave_cmd.args(["--module", m]);
     }
     let mut slave = Proc::spawn("dpctl slave", &mut slave_cmd);
-    let mut slave_out = Lines::from(&mut slave);
-    assert!(
-        slave_out.wait_for("\"event\":\"start\"", Duration::from_secs(10)),
-        "dpctl slave did not start: {:?}",
-        slave_out.1
-    );
+    let mut slave_out = started(&mut slave, Duration::from_secs(10));
 
     let mut master_cmd = Command::new(py);
     master_cmd

@@ -8,9 +8,8 @@
 
 mod common;
 
-use common::{dpctl, repo, require, Bus, Lines, Proc, TempDir};
+use common::{dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
 use profibus::fdl::pcap::PcapWriter;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -45,12 +44,6 @@ fn tshark_fields(capture: &Path, fields: &[&str]) -> Vec<Vec<String>> {
     text.lines()
         .map(|l| l.split('|').map(|v| v.replace(':', "")).collect())
         .collect()
-}
-
-fn send(p: &mut Proc, line: &str) {
-    let stdin = p.child.as_mut().unwrap().stdin.as_mut().unwrap();
-    writeln!(stdin, "{line}").unwrap();
-    stdin.flush().unwrap();
 }
 
 /// Records a start-up with DP-V1 jobs; returns the capture's path.

@@ -5,8 +5,9 @@
 
 use crate::channels::{ChannelError, ChannelMap, Value};
 use crate::profile::{Configured, DeviceOptions, ProfileError};
+use crate::rfid::jobs::{MasterJobs, QueueError};
 use profibus_dp::busfile::{BusFile, BusFileError, DeviceEntry, DeviceResolver, ResolvedDevice};
-use profibus_dp::master::DpMaster;
+use profibus_dp::master::{CommandError, DpMaster};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -143,16 +144,62 @@ impl SetChannels {
     }
 }
 
+/// Why a command line of `dpctl master --input` was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    /// A channel write ([`SetChannels`]).
+    #[error(transparent)]
+    Channels(#[from] SetChannelsError),
+    /// An RFID reader command ([`MasterJobs::command`]).
+    #[error(transparent)]
+    Rfid(#[from] QueueError),
+    /// A command of the master itself ([`MasterCommand`]).
+    ///
+    /// [`MasterCommand`]: profibus_dp::master::MasterCommand
+    #[error(transparent)]
+    Master(#[from] CommandError),
+}
+
+/// Run one command line of `dpctl master --input` on `m`: a channel
+/// write by name (the slave's channels from `channels`), a command for
+/// the RFID readers of `rfid`, else a command of the master itself. The
+/// reply to show, if any.
+pub fn execute_input<'a>(
+    m: &mut DpMaster,
+    channels: impl Fn(u8) -> Option<&'a ChannelMap>,
+    rfid: &mut MasterJobs,
+    line: &str,
+) -> Result<Option<String>, InputError> {
+    if let Some(c) = SetChannels::from_json(line) {
+        let c = c?;
+        c.apply(m, channels(c.slave))?;
+        return Ok(None);
+    }
+    match rfid.command(m, line) {
+        Some(r) => Ok(Some(r?)),
+        None => Ok(m.execute_json(line)?),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::channels::{Direction, Value};
 
+    /// A bus file of master 2 at 1.5 Mbit/s with the `[[slave]]` tables
+    /// `$slaves`.
+    macro_rules! bus_text {
+        ($slaves:literal) => {
+            concat!("[master]\naddress = 2\nbaud = \"1.5M\"\n\n", $slaves)
+        };
+    }
+
     #[test]
     fn set_channels_commands_write_named_outputs_all_or_none() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
-        let text = "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 25\n\
-                    device = \"omega\"\nsetpoints = 1\nactual_values = 1\npkw = false\n";
+        let text = bus_text!(
+            "[[slave]]\naddress = 25\ndevice = \"omega\"\nsetpoints = 1\nactual_values = 1\npkw = false\n"
+        );
         let bus = ProfiledBus::parse(&dir, text).unwrap();
         let map = bus.channels(25).unwrap().unwrap();
         let mut m = DpMaster::new(&bus.file.master).unwrap();
@@ -190,16 +237,14 @@ mod tests {
     #[test]
     fn bm4_and_omega_from_a_bus_file() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
+        let text = bus_text!(
+            r#"[[slave]]
 address = 6
 device = "bm4"
 vars = "../crates/devices/data/bm4_example_vars.toml"
 modules = ["ud_MyReadVar1", "ud_MyWriteVar1"]
-"#;
+"#
+        );
         // `modules` is a slave key: a profile chooses its own.
         assert!(ProfiledBus::parse(&dir, text).is_err());
         let text = text.replace("modules", "varz");
@@ -210,11 +255,8 @@ modules = ["ud_MyReadVar1", "ud_MyWriteVar1"]
             bus.file.slaves[0].modules[1..],
             ["ud_MyReadVar1", "ud_MyWriteVar1"]
         );
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
+        let text = bus_text!(
+            r#"[[slave]]
 address = 6
 device = "bm4"
 vars = "BM4_VARS"
@@ -226,6 +268,7 @@ setpoints = 1
 actual_values = 1
 pkw = false
 "#
+        )
         .replace(
             "BM4_VARS",
             concat!(env!("CARGO_MANIFEST_DIR"), "/data/bm4_example_vars.toml"),
@@ -281,15 +324,13 @@ pkw = false
         let dir = std::env::temp_dir().join(format!("bus-paths-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("strip.txt"), "KL1104,KL2134,KL9010").unwrap();
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
+        let text = bus_text!(
+            r#"[[slave]]
 address = 11
 device = "bk3000"
 terminals_file = "strip.txt"
-"#;
+"#
+        );
         // Read from elsewhere: the file is found next to the bus file.
         let bus = ProfiledBus::parse(&dir.join("bus.toml"), text);
         std::fs::remove_dir_all(&dir).unwrap();
@@ -302,11 +343,8 @@ terminals_file = "strip.txt"
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
         // Omega's `params` (a parameter file) and generic's `gsd` and
         // `modules`: under the profile's name, relative to the bus file.
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
+        let text = bus_text!(
+            r#"[[slave]]
 address = 25
 device = "omega"
 pkw = false
@@ -318,7 +356,8 @@ device = "generic"
 generic.gsd = "BNF_00D0.GSD"
 generic.modules = ["Status / control module", "1 actual value, 1 setpoint"]
 lenient = true
-"#;
+"#
+        );
         let bus = ProfiledBus::parse(&dir, text).unwrap();
         let omega = &bus.file.slaves[0];
         let params = omega.device.as_ref().unwrap().options.get("params");

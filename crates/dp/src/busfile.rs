@@ -795,6 +795,16 @@ mod tests {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml")
     }
 
+    /// A bus file whose slave 25 is the device profile `omega2`; its
+    /// further keys follow.
+    const OMEGA2_BUS: &str =
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 25\ndevice = \"omega2\"\n";
+
+    /// `text` parsed as gsd/bus.toml with the device profile `omega2`.
+    fn with_omega2(text: &str) -> Result<BusFile, BusFileError> {
+        BusFile::parse_with(&gsd_dir(), text, &OneProfile)
+    }
+
     fn load(text: &str) -> Result<BusFile, BusFileError> {
         BusFile::parse(&gsd_dir(), text)
     }
@@ -910,17 +920,8 @@ modules = ["no such module"]
 
     #[test]
     fn a_slave_may_name_a_device_profile() {
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
-address = 25
-device = "omega2"
-pkw = false
-watchdog_ms = 300
-"#;
-        let b = BusFile::parse_with(&gsd_dir(), text, &OneProfile).unwrap();
+        let text = &format!("{OMEGA2_BUS}pkw = false\nwatchdog_ms = 300\n");
+        let b = with_omega2(text).unwrap();
         let s = &b.slaves[0];
         assert_eq!(s.params.cfg, [0x71, 0x53, 0x63]);
         assert_eq!(s.params.user_prm_data.len(), 5);
@@ -933,41 +934,22 @@ watchdog_ms = 300
         // Without a registry, or with an unknown name: an error at `device`.
         let e = BusFile::parse(&gsd_dir(), text).unwrap_err();
         assert_eq!(e.line, 7, "{e}");
-        let e = BusFile::parse_with(&gsd_dir(), &text.replace("omega2", "nope"), &OneProfile)
-            .unwrap_err();
+        let e = with_omega2(&text.replace("omega2", "nope")).unwrap_err();
         assert!(e.message.contains("device `nope`"), "{e}");
         // Profile options without a profile: the key's line.
-        let e = BusFile::parse_with(
-            &gsd_dir(),
-            &text.replace("device = \"omega2\"", "gsd = \"BNF_00D0.GSD\""),
-            &OneProfile,
-        )
-        .unwrap_err();
+        let e = with_omega2(&text.replace("device = \"omega2\"", "gsd = \"BNF_00D0.GSD\""))
+            .unwrap_err();
         assert_eq!(e.line, 8, "{e}");
         assert!(e.message.contains("unknown key `pkw`"), "{e}");
         // Both, or neither.
-        let e = BusFile::parse_with(
-            &gsd_dir(),
-            &text.replace("pkw = false", "gsd = \"BNF_00D0.GSD\""),
-            &OneProfile,
-        )
-        .unwrap_err();
+        let e = with_omega2(&text.replace("pkw = false", "gsd = \"BNF_00D0.GSD\"")).unwrap_err();
         assert!(e.message.contains("either"), "{e}");
     }
 
     #[test]
     fn profile_options_named_like_slave_keys_go_under_the_profile_name() {
-        let text = r#"[master]
-address = 2
-baud = "1.5M"
-
-[[slave]]
-address = 25
-device = "omega2"
-watchdog_ms = 300
-omega2.pkw = false
-"#;
-        let b = BusFile::parse_with(&gsd_dir(), text, &OneProfile).unwrap();
+        let text = &format!("{OMEGA2_BUS}watchdog_ms = 300\nomega2.pkw = false\n");
+        let b = with_omega2(text).unwrap();
         let d = b.slaves[0].device.as_ref().unwrap();
         assert_eq!(d.options.get("pkw"), Some(&toml::Value::Boolean(false)));
         assert!(!d.options.contains_key("omega2"));
@@ -976,14 +958,7 @@ omega2.pkw = false
             [0x71, 0x53, 0x63],
             "the option took"
         );
-        let with = |line: &str| {
-            BusFile::parse_with(
-                &gsd_dir(),
-                &text.replace("watchdog_ms = 300", line),
-                &OneProfile,
-            )
-            .unwrap_err()
-        };
+        let with = |line: &str| with_omega2(&text.replace("watchdog_ms = 300", line)).unwrap_err();
         // A slave key the device slave cannot take: the key's line and
         // where the profile's option of that name goes.
         for (line, says) in [
@@ -1007,12 +982,7 @@ omega2.pkw = false
         // The same option twice; the namespace not a table.
         let e = with("pkw = true");
         assert!(e.message.contains("option `pkw` given twice"), "{e}");
-        let e = BusFile::parse_with(
-            &gsd_dir(),
-            &text.replace("omega2.pkw = false", "omega2 = 1"),
-            &OneProfile,
-        )
-        .unwrap_err();
+        let e = with_omega2(&text.replace("omega2.pkw = false", "omega2 = 1")).unwrap_err();
         assert_eq!(e.line, 9, "{e}");
         assert!(e.message.contains("must be a table"), "{e}");
         // `params` as a table stays the slave's User_Prm_Data.

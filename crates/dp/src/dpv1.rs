@@ -147,6 +147,17 @@ fn with_data(du: &[u8]) -> Result<(u8, u8, &[u8]), Dpv1ParseError> {
     Ok((du[1], du[2], data))
 }
 
+/// `function slot alarm_type specifier`: an Alarm_Ack, the same PDU in
+/// the request and in the response.
+fn alarm_ack(du: &[u8]) -> Result<Pdu<'_>, Dpv1ParseError> {
+    need(du, 4)?;
+    Ok(Pdu::AlarmAck {
+        slot: du[1],
+        alarm_type: du[2],
+        specifier: du[3],
+    })
+}
+
 impl<'a> Pdu<'a> {
     /// Decode a PDU sent by a master.
     pub fn parse_request(du: &'a [u8]) -> Result<Pdu<'a>, Dpv1ParseError> {
@@ -164,14 +175,7 @@ impl<'a> Pdu<'a> {
                 let (slot, index, data) = with_data(du)?;
                 Ok(Pdu::WriteReq { slot, index, data })
             }
-            FN_ALARM_ACK => {
-                need(du, 4)?;
-                Ok(Pdu::AlarmAck {
-                    slot: du[1],
-                    alarm_type: du[2],
-                    specifier: du[3],
-                })
-            }
+            FN_ALARM_ACK => alarm_ack(du),
             other => Err(Dpv1ParseError::UnknownFunction(other)),
         }
     }
@@ -201,14 +205,7 @@ impl<'a> Pdu<'a> {
                     length: du[3],
                 })
             }
-            FN_ALARM_ACK => {
-                need(du, 4)?;
-                Ok(Pdu::AlarmAck {
-                    slot: du[1],
-                    alarm_type: du[2],
-                    specifier: du[3],
-                })
-            }
+            FN_ALARM_ACK => alarm_ack(du),
             other => Err(Dpv1ParseError::UnknownFunction(other)),
         }
     }

@@ -88,17 +88,9 @@ impl Device for Echo {
 }
 
 fn emit(buf: &mut [u8], da: u8, fc: FunctionCode, saps: Option<(u8, u8)>, data: &[u8]) -> usize {
-    Telegram::Data(DataTelegram {
-        da,
-        sa: 2,
-        fc,
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data,
-        format: None,
-    })
-    .emit(buf)
-    .unwrap()
+    let (dsap, ssap) = saps.unzip();
+    let t = DataTelegram::new(da, 2, fc, data).with_saps(dsap, ssap);
+    Telegram::Data(t).emit(buf).unwrap()
 }
 
 fn exchange(st: &mut PassiveStation<DpSlave<Echo>>, now: &mut Instant, req: &[u8]) -> usize {

@@ -21,7 +21,11 @@
 //! two without spinning through the whole wait. A deadline less than
 //! [`SPIN_INLINE`] away (the idle time before a request, the slave's min
 //! TSDR) is handled in the same pass, and what it sends is written at
-//! once (no round through the runtime and the port's read). Longer
+//! once (no round through the runtime and the port's read); it is spun
+//! for, except right after a write on a pty, where the driver sleeps
+//! instead so that the kernel's worker can deliver what it wrote (see
+//! [`Waitable::writes_need_cpu`]: spinning there merged the token to
+//! itself and the next request on the far end in most cycles). Longer
 //! deadlines sleep in the runtime. [`Options::anticipate`] (off by
 //! default) also wakes up shortly before an expected answer and polls the
 //! port for it. Without a descriptor (an in-memory duplex stream) short
@@ -153,11 +157,27 @@ pub trait Waitable {
     fn wait_fd(&self) -> Option<BorrowedFd<'_>> {
         None
     }
+
+    /// Whether the kernel hands written bytes on in a worker thread that
+    /// needs a CPU after `write` returns (a pty: its flip buffer is
+    /// pushed by a workqueue thread, usually on the writer's CPU). The
+    /// driver then gives the CPU up while it waits right after a write,
+    /// instead of spinning: a spinning writer (above all one under
+    /// `SCHED_FIFO`) holds the telegram it just wrote back until its next
+    /// write, and the far end reads both as one, without the idle time
+    /// between them.
+    fn writes_need_cpu(&self) -> bool {
+        false
+    }
 }
 
 impl Waitable for crate::transport::Port {
     fn wait_fd(&self) -> Option<BorrowedFd<'_>> {
         Some(self.fd())
+    }
+
+    fn writes_need_cpu(&self) -> bool {
+        self.is_pty()
     }
 }
 
@@ -166,6 +186,10 @@ impl Waitable for tokio::io::DuplexStream {}
 impl<T: Waitable + ?Sized> Waitable for &mut T {
     fn wait_fd(&self) -> Option<BorrowedFd<'_>> {
         (**self).wait_fd()
+    }
+
+    fn writes_need_cpu(&self) -> bool {
+        (**self).writes_need_cpu()
     }
 }
 
@@ -213,6 +237,7 @@ where
     // (bounded, so that the runtime's other tasks and the shutdown signal
     // get their turn).
     let mut precise_in_row = 0u32;
+    let release = port.writes_need_cpu();
     tokio::pin!(shutdown);
     loop {
         if options.gather {
@@ -227,10 +252,12 @@ where
             // bound keeps a station that never stops asking from starving
             // the runtime.
             for _ in 0..16 {
+                let mut wrote = false;
                 while let Some(bytes) = station.poll_transmit(clock.now()) {
                     stage::mark(b'w', bytes.len());
                     port.write_all(bytes).await?;
                     pacer.sent(clock.now(), station.awaits_answer());
+                    wrote = true;
                 }
                 let Some(d) = station.poll_timeout() else {
                     break;
@@ -240,9 +267,19 @@ where
                     if d.saturating_duration_since(now) >= SPIN_INLINE {
                         break;
                     }
-                    // Spun: a kernel sleep this short wakes too late too
-                    // often (the request would leave late).
-                    spin_until(&clock, d);
+                    if wrote && release {
+                        // Right after a write on a pty: give the CPU to
+                        // the kernel's worker that delivers it (see
+                        // `Waitable::writes_need_cpu`), then wait; bytes
+                        // that arrive meanwhile are read first.
+                        if pacer.release_then_wait(&clock, port.wait_fd(), d) {
+                            break;
+                        }
+                    } else {
+                        // Spun: a kernel sleep this short wakes too late
+                        // too often (the request would leave late).
+                        spin_until(&clock, d);
+                    }
                 }
                 station.handle_timeout(clock.now());
             }
@@ -309,6 +346,11 @@ where
 /// Sleeps shorter than this are not worth a trip through the kernel:
 /// the driver spins instead.
 const MIN_SLEEP: Duration = Duration::from_micros(8);
+
+/// The shortest kernel sleep right after a write on a pty (see
+/// [`Waitable::writes_need_cpu`]): long enough for the kernel's worker to
+/// push the written bytes to the reader (a few µs).
+const RELEASE: Duration = Duration::from_micros(10);
 
 /// Bounds of the learned wake-up latency (see [`Pacer`]).
 const WAKE_MIN: Duration = Duration::from_micros(2);
@@ -449,6 +491,26 @@ impl Pacer {
             }
             std::hint::spin_loop();
         }
+    }
+
+    /// Wait until `t` right after a write whose bytes a kernel worker
+    /// hands on ([`Waitable::writes_need_cpu`]): sleep in the kernel for
+    /// the whole wait (at least [`RELEASE`]; waking when `fd` becomes
+    /// readable), so that this CPU is free for
+    /// the worker, and for the other stations' workers, all the time (a
+    /// thread spinning at real-time priority keeps every ordinary thread
+    /// off its CPU). The wait ends up to a wake-up latency after `t`: the
+    /// idle time on the line only grows.
+    /// Returns whether `fd` became readable first (then it returns at
+    /// once, before `t`).
+    fn release_then_wait(&mut self, clock: &Clock, fd: Option<BorrowedFd<'_>>, t: Instant) -> bool {
+        let now = clock.now();
+        let nap = t.saturating_duration_since(now).max(RELEASE);
+        if ppoll(fd, nap) {
+            return true;
+        }
+        spin_until(clock, t);
+        false
     }
 
     fn learn_wake(&mut self, late: Duration) {

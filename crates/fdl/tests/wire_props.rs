@@ -8,14 +8,10 @@ use tokio_util::codec::Decoder;
 
 #[derive(Debug, Clone)]
 enum Owned {
+    /// A data telegram: its header fields (`head.data` empty) and its data.
     Data {
-        da: u8,
-        sa: u8,
-        fc: u8,
-        dsap: Option<u8>,
-        ssap: Option<u8>,
+        head: DataTelegram<'static>,
         data: Vec<u8>,
-        format: Option<Format>,
     },
     Token(u8, u8),
     Ack,
@@ -24,23 +20,7 @@ enum Owned {
 impl Owned {
     fn view(&self) -> Telegram<'_> {
         match self {
-            Owned::Data {
-                da,
-                sa,
-                fc,
-                dsap,
-                ssap,
-                data,
-                format,
-            } => Telegram::Data(DataTelegram {
-                da: *da,
-                sa: *sa,
-                fc: FunctionCode::from_byte(*fc),
-                dsap: *dsap,
-                ssap: *ssap,
-                data,
-                format: *format,
-            }),
+            Owned::Data { head, data } => Telegram::Data(DataTelegram { data, ..*head }),
             Owned::Token(da, sa) => Telegram::Token { da: *da, sa: *sa },
             Owned::Ack => Telegram::ShortAck,
         }
@@ -83,15 +63,17 @@ fn telegram() -> impl Strategy<Value = Owned> {
                     (_, 8) => Some(Format::Sd3),
                     _ => Some(Format::Sd2),
                 };
-                Owned::Data {
+                let fc = FunctionCode::from_byte(fc);
+                let head = DataTelegram {
                     da,
                     sa,
                     fc,
                     dsap,
                     ssap,
-                    data,
+                    data: &[],
                     format,
-                }
+                };
+                Owned::Data { head, data }
             })
         });
     prop_oneof![

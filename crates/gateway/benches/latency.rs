@@ -26,19 +26,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use support::{pct, run_gateway, Broker};
 
-const BUS: &str = r#"[master]
-address = 1
-baud = "1.5M"
-
-[[slave]]
-address = 3
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[mqtt]
-bus = "bench"
-writable = [3]
-"#;
+/// Master 1 with the echo slave at 3, writable over MQTT.
+const BUS: &str = include_str!("data/latency_bus.toml");
 
 /// The times of one sample, by the inputs' hex.
 #[derive(Default, Clone, Copy)]

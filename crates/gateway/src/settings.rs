@@ -275,11 +275,15 @@ impl MqttSettings {
                 ("both", PublishMode::Both),
             ],
         )?;
-        let interval = match t.get("interval_ms") {
-            None => Duration::from_secs(1),
-            Some(toml::Value::Integer(ms @ 1..=86_400_000)) => Duration::from_millis(*ms as u64),
-            Some(_) => return Err(bad("interval_ms", "must be 1..=86400000")),
+        // A time in ms (1 ms to a day), when given.
+        let ms = |key: &'static str| match t.get(key) {
+            None => Ok(None),
+            Some(toml::Value::Integer(ms @ 1..=86_400_000)) => {
+                Ok(Some(Duration::from_millis(*ms as u64)))
+            }
+            Some(_) => Err(bad(key, "must be 1..=86400000")),
         };
+        let interval = ms("interval_ms")?.unwrap_or(Duration::from_secs(1));
         let writable: Vec<WriteAccess> = match t.get("writable") {
             None => vec![],
             Some(toml::Value::Array(a)) => a.iter().map(access).collect::<Result<_, _>>()?,
@@ -295,13 +299,6 @@ impl MqttSettings {
                 format!("lists slave {} twice", w.1.address),
             ));
         }
-        let ms = |key: &'static str| match t.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Integer(ms @ 1..=86_400_000)) => {
-                Ok(Some(Duration::from_millis(*ms as u64)))
-            }
-            Some(_) => Err(bad(key, "must be 1..=86400000")),
-        };
         let outputs_timeout = ms("outputs_timeout_ms")?;
         let job_timeout = ms("job_timeout_ms")?.unwrap_or(Duration::from_secs(2));
         let safe_state = choice(

@@ -225,6 +225,18 @@ enum Mode {
     Prompt(String),
 }
 
+/// The headings of the table's columns, left to right.
+pub const COLUMNS: [&str; 8] = [
+    "Addr",
+    "Name",
+    "State",
+    "Cycle",
+    "Retry/Err",
+    "Inputs",
+    "Outputs",
+    "Diagnosis",
+];
+
 /// The bus view: state of the table, the log and the prompts.
 pub struct BusView {
     title: String,
@@ -673,17 +685,8 @@ impl BusView {
         let rest = area.width.saturating_sub(fixed).max(24);
         let io_w = rest * 3 / 8;
         let diag_w = rest - 2 * io_w;
-        let header = Row::new([
-            "Addr",
-            "Name",
-            "State",
-            "Cycle",
-            "Retry/Err",
-            "Inputs",
-            "Outputs",
-            "Diagnosis",
-        ])
-        .style(Style::default().add_modifier(Modifier::BOLD | Modifier::UNDERLINED));
+        let header = Row::new(COLUMNS)
+            .style(Style::default().add_modifier(Modifier::BOLD | Modifier::UNDERLINED));
         let rows = self.specs.iter().zip(&self.rows).map(|(spec, r)| {
             // Hex, then the decoded values, wrapped into the column.
             let io = |dir, image: &[u8]| {
@@ -958,15 +961,8 @@ mod tests {
         v.log("slave 8: offline → diag");
         let s = screen(&v);
         assert!(s.contains("dpctl master  master 2 at 1.5Mbit/s"), "{s}");
-        for h in [
-            "Addr",
-            "Name",
-            "State",
-            "Cycle",
-            "Retry/Err",
-            "Inputs",
-            "Outputs",
-        ] {
+        // The headings up to Outputs.
+        for h in &COLUMNS[..7] {
             assert!(s.contains(h), "{h} missing:\n{s}");
         }
         let row = s.lines().find(|l| l.contains("drive")).expect(&s);

@@ -2,11 +2,12 @@
 //! statuses that are text (`Display`) and JSON (`Serialize`) at once, in
 //! the shape `dpctl master --json` prints.
 
-use crate::bus::{Decoding, SlaveSpec};
+use crate::bus::{BusView, Decoding, SlaveSpec};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::{ChannelMap, ImageValues};
+use profibus_devices::demo::DemoSlave;
 use profibus_devices::profile::ProfileError;
-use profibus_dp::busfile::BusFile;
+use profibus_dp::busfile::{BusFile, BusSlave};
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{DpMaster, MasterStatus, SlaveStatus};
 use profibus_dp::monitor;
@@ -46,23 +47,22 @@ impl SlaveInfo {
     /// The slaves of a bus file, with the named channels of those given
     /// as device profiles; the error names the slave whose profile failed.
     pub fn of_bus(bus: &ProfiledBus) -> Result<Vec<SlaveInfo>, SlaveProfileError> {
-        bus.file
-            .slaves
-            .iter()
-            .map(|s| {
-                let a = s.params.address;
-                Ok(SlaveInfo {
-                    address: a,
-                    name: s.params.name.clone(),
-                    gsd: Some(s.gsd.clone()),
-                    channels: bus
-                        .channels(a)
-                        .transpose()
-                        .map_err(|source| SlaveProfileError { address: a, source })?,
-                    modules: s.modules.clone(),
-                })
-            })
+        (bus.file.slaves.iter())
+            .map(|s| SlaveInfo::of_slave(bus, s))
             .collect()
+    }
+
+    /// The slave `s` of `bus`.
+    fn of_slave(bus: &ProfiledBus, s: &BusSlave) -> Result<SlaveInfo, SlaveProfileError> {
+        let address = s.params.address;
+        let channels = bus.channels(address).transpose();
+        Ok(SlaveInfo {
+            address,
+            name: s.params.name.clone(),
+            gsd: Some(s.gsd.clone()),
+            channels: channels.map_err(|source| SlaveProfileError { address, source })?,
+            modules: s.modules.clone(),
+        })
     }
 
     /// The slave for a [`BusView`](crate::bus::BusView): decoded by its
@@ -79,6 +79,29 @@ impl SlaveInfo {
             },
         }
     }
+}
+
+impl From<&DemoSlave> for SlaveInfo {
+    /// A slave of the demo plant.
+    fn from(s: &DemoSlave) -> SlaveInfo {
+        SlaveInfo {
+            address: s.address,
+            name: s.name.clone(),
+            gsd: Some(s.gsd.clone()),
+            channels: s.channels.clone(),
+            modules: s.modules.clone(),
+        }
+    }
+}
+
+/// The table view of the slaves `info` on a bus at `baud`, titled
+/// `title`.
+pub fn bus_view(title: &str, baud: Baud, info: &[SlaveInfo]) -> BusView {
+    BusView::new(
+        title,
+        Some(baud),
+        info.iter().map(SlaveInfo::spec).collect(),
+    )
 }
 
 /// The slaves of `bus` for a passive monitor
@@ -123,6 +146,57 @@ impl<T: Serialize> EventLine<T> {
 impl<T: Serialize> fmt::Display for EventLine<T> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.text)
+    }
+}
+
+/// The outcome of a command line of `dpctl master --input`
+/// ([`profibus_devices::bus::execute_input`]) when there is one to show:
+/// `{"event": "command", "result": …}` with its reply as text, or
+/// `{"event": "error", "line": …, "error": …}` with ``bad command `LINE`:
+/// ERROR`` as text (the error with its sources).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(tag = "event", rename_all = "lowercase")]
+pub enum CommandLine {
+    /// The command's reply.
+    Command {
+        /// The reply.
+        result: String,
+    },
+    /// The command was refused.
+    Error {
+        /// The command line.
+        line: String,
+        /// Why.
+        error: String,
+    },
+}
+
+impl CommandLine {
+    /// What to show after running `line` with `result`; `None` for a
+    /// command that went through without a reply.
+    pub fn of<E: std::error::Error>(line: &str, result: Result<Option<String>, E>) -> Option<Self> {
+        match result {
+            Ok(reply) => reply.map(|result| CommandLine::Command { result }),
+            Err(e) => {
+                let mut error = e.to_string();
+                let mut source = e.source();
+                while let Some(s) = source {
+                    error = format!("{error}: {s}");
+                    source = s.source();
+                }
+                let line = line.to_string();
+                Some(CommandLine::Error { line, error })
+            }
+        }
+    }
+}
+
+impl fmt::Display for CommandLine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CommandLine::Command { result } => f.write_str(result),
+            CommandLine::Error { line, error } => write!(f, "bad command `{line}`: {error}"),
+        }
     }
 }
 

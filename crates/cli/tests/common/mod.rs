@@ -17,6 +17,69 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc::{Receiver, Sender};
 use std::time::{Duration, Instant};
 
+/// The lines of `lines` that are JSON values (a command's `--json`
+/// output), parsed; other lines are passed over.
+pub fn json_lines<S: AsRef<str>>(lines: impl IntoIterator<Item = S>) -> Vec<serde_json::Value> {
+    let parsed = lines
+        .into_iter()
+        .map(|l| serde_json::from_str(l.as_ref()).ok());
+    parsed.flatten().collect()
+}
+
+/// Write `line` to the stdin of `p` (started with a piped stdin).
+pub fn send(p: &mut Proc, line: &str) {
+    use std::io::Write;
+    let stdin = p.child.as_mut().unwrap().stdin.as_mut().unwrap();
+    writeln!(stdin, "{line}").unwrap();
+    stdin.flush().unwrap();
+}
+
+/// The slave at `addr` in a status line of `dpctl master --json`.
+pub fn slave_of(status: &serde_json::Value, addr: u8) -> &serde_json::Value {
+    let slaves = status["slaves"].as_array().unwrap();
+    slaves.iter().find(|s| s["address"] == addr).unwrap()
+}
+
+/// Whether every slave of a status line of `dpctl master --json` is in
+/// Data_Exchange.
+pub fn all_dx(status: &serde_json::Value) -> bool {
+    let slaves = status["slaves"].as_array().unwrap();
+    slaves.iter().all(|s| s["state"] == "data_exchange")
+}
+
+/// Run `cmd` to its end: it must succeed (its stderr is the message when
+/// it does not).
+pub fn run_ok(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{:?} failed: {stderr}",
+        cmd.get_program()
+    );
+    out
+}
+
+/// Run a pyprofibus peer script (`cmd`, stdout piped) to its end, at
+/// most 90 s: it must succeed. Its output lines.
+pub fn run_pyprofibus(cmd: &mut Command) -> Vec<String> {
+    let mut p = Proc::spawn("pyprofibus", cmd);
+    let mut out = Lines::from(&mut p);
+    let st = p.wait(Duration::from_secs(90));
+    let lines = out.rest().to_vec();
+    assert!(st.success(), "pyprofibus: {lines:?}");
+    lines
+}
+
+/// The output lines of `slave`, a `dpctl slave --json` just spawned
+/// (stdout piped), once it printed its start event (within `timeout`).
+pub fn started(slave: &mut Proc, timeout: Duration) -> Lines {
+    let mut out = Lines::from(slave);
+    let start = out.wait_for("\"event\":\"start\"", timeout);
+    assert!(start, "dpctl slave did not start: {:?}", out.1);
+    out
+}
+
 /// The repository root (this package lives in `crates/cli`).
 pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

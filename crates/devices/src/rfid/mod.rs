@@ -90,6 +90,21 @@ pub const DATA_FLAG: u8 = 0x08;
 /// The command-line terminator (L97).
 pub const CR: u8 = 0x0D;
 
+/// The manual's worked example (chapter 2.4, L97-170): the master's
+/// requests for the command `VER`, in order, hex (bytes not shown are 0).
+/// Known-answer data for tests of the emulation and of its peers.
+pub const MANUAL_REQUESTS: [&str; 5] = ["00 01 04 56 45 52 0D", "01 01", "02 01", "03 01", "04 01"];
+
+/// The reader's responses to [`MANUAL_REQUESTS`], hex (bytes not shown
+/// are 0).
+pub const MANUAL_RESPONSES: [&str; 5] = [
+    "08 00 00",
+    "08 01 0D 41 45 47 20 49 44 20 2D 20 50 46 42 20",
+    "08 02 06 56 31 2E 32 36 0D",
+    "08 03 0D 41 45 47 20 49 44 20 2D 20 41 39 20 2F",
+    "00 04 0A 50 46 42 20 56 31 2E 32 38 0D",
+];
+
 /// The emulated reader: a [`Device`] for the DP slave core.
 #[derive(Debug)]
 pub struct Rfid {

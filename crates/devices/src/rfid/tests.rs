@@ -25,16 +25,6 @@ fn dx(d: &mut Rfid, now: Instant, req: &[u8; 16]) -> [u8; 16] {
     out
 }
 
-/// The manual's worked example (chapter 2.4, L97-170), hex.
-const MANUAL_REQUESTS: [&str; 5] = ["00 01 04 56 45 52 0D", "01 01", "02 01", "03 01", "04 01"];
-const MANUAL_RESPONSES: [&str; 5] = [
-    "08 00 00",
-    "08 01 0D 41 45 47 20 49 44 20 2D 20 50 46 42 20",
-    "08 02 06 56 31 2E 32 36 0D",
-    "08 03 0D 41 45 47 20 49 44 20 2D 20 41 39 20 2F",
-    "00 04 0A 50 46 42 20 56 31 2E 32 38 0D",
-];
-
 fn reader_with_tag() -> Rfid {
     let mut f = TagField::parse(
         "[reader]\ntor = 5\nuid_ms = 10\nblock_ms = 20\n\n[[tag]]\nuid = \"E004015012345678\"\nin_field = true\ndata = [\"00112233\", \"44556677\"]",

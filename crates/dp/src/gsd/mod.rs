@@ -43,7 +43,7 @@ pub use semantic::{
     LookupError, ModuleIo, ParamInstance, PrmInput, PrmValue, PrmValueParseError, Problem,
     SelectionError,
 };
-pub use summary::GsdSummary;
+pub use summary::{GsdCheck, GsdSummary};
 
 use std::fmt;
 use std::io::Read;

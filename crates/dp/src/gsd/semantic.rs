@@ -858,25 +858,22 @@ impl Gsd {
                 })),
             }
         }
-        let limit = |v: Option<u8>, key: &'static str| match v {
-            Some(v) if usize::from(v) < MAX_IO_LEN => (usize::from(v), key),
-            _ => (MAX_IO_LEN, "the protocol's limit"),
+        // The limit of one direction (the GSD key's, else the protocol's)
+        // and where it comes from, when `bytes` exceed it.
+        let exceeded = |bytes: usize, v: Option<u8>, key: &'static str| {
+            let (max, limit) = match v {
+                Some(v) if usize::from(v) < MAX_IO_LEN => (usize::from(v), key),
+                _ => (MAX_IO_LEN, "the protocol's limit"),
+            };
+            (bytes > max).then_some((max, limit))
         };
-        let (max, lim) = limit(self.max_input_len, "Max_Input_Len");
-        if input > max {
-            problems.push(Problem::InputTooLong {
-                bytes: input,
-                max,
-                limit: lim,
-            });
+        if let Some((max, limit)) = exceeded(input, self.max_input_len, "Max_Input_Len") {
+            let bytes = input;
+            problems.push(Problem::InputTooLong { bytes, max, limit });
         }
-        let (max, lim) = limit(self.max_output_len, "Max_Output_Len");
-        if output > max {
-            problems.push(Problem::OutputTooLong {
-                bytes: output,
-                max,
-                limit: lim,
-            });
+        if let Some((max, limit)) = exceeded(output, self.max_output_len, "Max_Output_Len") {
+            let bytes = output;
+            problems.push(Problem::OutputTooLong { bytes, max, limit });
         }
         if let Some(max) = self.max_data_len.map(usize::from) {
             if input + output > max {

@@ -1,8 +1,11 @@
 //! [`GsdSummary`]: what a GSD file describes, for people (`Display`) and
 //! for scripts (`Serialize`, feature `serde`) — the output of
-//! `dpctl gsd show`.
+//! `dpctl gsd show`; [`GsdCheck`]: what is wrong with it, the output of
+//! `dpctl gsd check`.
 
-use super::{Allowed, Gsd, Module, ParamInstance, Parsed};
+use super::{
+    Allowed, Diagnostic, FileDiagnostic, Gsd, Module, ParamInstance, ParseOptions, Parsed,
+};
 use profibus_fdl::wire::Hex;
 use profibus_fdl::Baud;
 use std::fmt;
@@ -443,6 +446,81 @@ mod ser {
                 warnings: self.parsed.warnings.iter().map(located).collect(),
             }
             .serialize(s)
+        }
+    }
+}
+
+/// What `dpctl gsd check` reports about a GSD file: every error and
+/// warning with its severity (the problems of single modules among the
+/// warnings of a file that parses). `Display` is the verdict line,
+/// `FILE: ok, N module(s), W warning(s)` or `FILE: E error(s), W
+/// warning(s)`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GsdCheck {
+    /// The file checked.
+    pub file: std::path::PathBuf,
+    /// The modules of a file that parses; `None` when it has errors.
+    pub modules: Option<usize>,
+    /// Errors and warnings with their severity (`error`, `warning`): in
+    /// file order when the file has errors; else the parser's warnings in
+    /// file order, then those of the modules.
+    pub diagnostics: Vec<(&'static str, Diagnostic)>,
+}
+
+impl GsdCheck {
+    /// Parse and check `file`.
+    pub fn of_file(file: &Path, opts: ParseOptions) -> GsdCheck {
+        let (modules, diagnostics) = match Gsd::from_file(file, opts) {
+            Ok(parsed) => {
+                let warnings = parsed.warnings.into_iter();
+                let all = warnings.chain(parsed.gsd.module_problems());
+                let modules = parsed.gsd.modules.len();
+                (Some(modules), all.map(|d| ("warning", d)).collect())
+            }
+            Err(e) => {
+                let errors = e.errors.into_iter().map(|d| ("error", d));
+                let mut all: Vec<_> = errors
+                    .chain(e.warnings.into_iter().map(|d| ("warning", d)))
+                    .collect();
+                all.sort_by_key(|(_, d)| d.pos);
+                (None, all)
+            }
+        };
+        GsdCheck {
+            file: file.to_path_buf(),
+            modules,
+            diagnostics,
+        }
+    }
+
+    /// Each diagnostic with the file, as printed.
+    pub fn lines(&self) -> impl Iterator<Item = FileDiagnostic<'_>> {
+        (self.diagnostics.iter()).map(|(severity, d)| FileDiagnostic::new(&self.file, severity, d))
+    }
+
+    /// How many diagnostics are of `severity`.
+    pub fn count(&self, severity: &str) -> usize {
+        self.diagnostics
+            .iter()
+            .filter(|(s, _)| *s == severity)
+            .count()
+    }
+
+    /// Whether the file has no errors.
+    pub fn ok(&self) -> bool {
+        self.modules.is_some()
+    }
+}
+
+impl fmt::Display for GsdCheck {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (file, warnings) = (self.file.display(), self.count("warning"));
+        match self.modules {
+            Some(n) => write!(f, "{file}: ok, {n} module(s), {warnings} warning(s)"),
+            None => {
+                let errors = self.count("error");
+                write!(f, "{file}: {errors} error(s), {warnings} warning(s)")
+            }
         }
     }
 }

@@ -7,18 +7,9 @@ const S: u8 = 8;
 
 /// Bytes of a data telegram.
 fn data(da: u8, sa: u8, fc: FunctionCode, saps: Option<(u8, u8)>, du: &[u8]) -> Vec<u8> {
-    let t = Telegram::Data(DataTelegram {
-        da,
-        sa,
-        fc,
-        dsap: saps.map(|s| s.0),
-        ssap: saps.map(|s| s.1),
-        data: du,
-        format: None,
-    });
-    let mut buf = [0u8; 256];
-    let n = t.emit(&mut buf).unwrap();
-    buf[..n].to_vec()
+    let (dsap, ssap) = saps.unzip();
+    let t = DataTelegram::new(da, sa, fc, du).with_saps(dsap, ssap);
+    Telegram::Data(t).to_vec().unwrap()
 }
 
 fn req(da: u8, sap: Option<u8>, fcb: bool, fcv: bool, du: &[u8]) -> Vec<u8> {

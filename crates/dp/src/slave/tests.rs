@@ -190,19 +190,13 @@ impl Bench {
         saps: Option<(u8, u8)>,
         data: &[u8],
     ) -> Ans {
-        let req = DataTelegram {
-            da: ADDR,
-            sa: from,
-            fc: FunctionCode::Request {
-                kind,
-                fcb: false,
-                fcv: false,
-            },
-            dsap: saps.map(|s| s.0),
-            ssap: saps.map(|s| s.1),
-            data,
-            format: None,
+        let fc = FunctionCode::Request {
+            kind,
+            fcb: false,
+            fcv: false,
         };
+        let (dsap, ssap) = saps.unzip();
+        let req = DataTelegram::new(ADDR, from, fc, data).with_saps(dsap, ssap);
         let mut out = [0u8; 246];
         match self.slave.on_request(now, &req, &mut out) {
             Reply::Silence => Ans::Silence,

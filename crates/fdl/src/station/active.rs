@@ -386,6 +386,18 @@ struct Pending {
     ssap: Option<u8>,
 }
 
+impl Pending {
+    /// The result of a request that got no answer.
+    fn no_response(&self) -> CycleResult<'static> {
+        CycleResult {
+            da: self.da,
+            service: self.service,
+            outcome: Outcome::NoResponse,
+            retries: self.attempts,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 struct Listen {
     first_sa: Option<u8>,
@@ -921,15 +933,7 @@ impl Core {
         if let Some(p) = self.pending.take() {
             self.stats.cycles += 1;
             self.stats.no_response += 1;
-            app.on_result(
-                now,
-                &CycleResult {
-                    da: p.da,
-                    service: p.service,
-                    outcome: Outcome::NoResponse,
-                    retries: p.attempts,
-                },
-            );
+            app.on_result(now, &p.no_response());
         }
         self.tx_at = None;
     }
@@ -1364,15 +1368,7 @@ impl Core {
         self.cycles_this_visit += 1;
         self.line_free_at = now;
         self.state = State::UseToken { wake: now };
-        app.on_result(
-            now,
-            &CycleResult {
-                da: p.da,
-                service: p.service,
-                outcome: Outcome::NoResponse,
-                retries: p.attempts,
-            },
-        );
+        app.on_result(now, &p.no_response());
     }
 
     fn pass_token(&mut self, now: Instant, attempts: u8) {

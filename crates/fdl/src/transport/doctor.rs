@@ -256,34 +256,6 @@ fn tty_driver(sysfs: &Path, tty: &str) -> Option<String> {
     Some(link.file_name()?.to_string_lossy().into_owned())
 }
 
-/// `struct serial_rs485` of `<linux/serial.h>`, as read by TIOCGRS485.
-#[repr(C)]
-#[derive(Debug, Default, Clone, Copy)]
-struct SerialRs485 {
-    flags: u32,
-    delay_rts_before_send: u32,
-    delay_rts_after_send: u32,
-    padding: [u32; 5],
-}
-
-#[cfg(target_os = "linux")]
-nix::ioctl_read_bad!(tiocgrs485, nix::libc::TIOCGRS485, SerialRs485);
-
-/// The RS-485 flags of the UART behind `fd` (`Err`: no RS-485 support).
-#[cfg(target_os = "linux")]
-fn rs485_flags(fd: BorrowedFd<'_>) -> io::Result<u32> {
-    let mut conf = SerialRs485::default();
-    // SAFETY: `fd` is open for the call; `conf` is a valid, writable
-    // `struct serial_rs485` the kernel fills in.
-    unsafe { tiocgrs485(fd.as_raw_fd(), &mut conf) }.map_err(io::Error::from)?;
-    Ok(conf.flags)
-}
-
-#[cfg(not(target_os = "linux"))]
-fn rs485_flags(_fd: BorrowedFd<'_>) -> io::Result<u32> {
-    Err(io::Error::new(io::ErrorKind::Unsupported, "Linux only"))
-}
-
 /// Check the port at `path`; see the module docs. Never sends a byte.
 pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
     let mut r = Report {
@@ -411,7 +383,7 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
     if pty {
         r.add("RS-485 mode", Verdict::Unchecked, pty_note);
     } else {
-        match rs485_flags(fd) {
+        match super::rs485::flags(fd) {
             Ok(f) if f & 1 != 0 => r.add(
                 "RS-485 mode",
                 Verdict::Ok,
@@ -539,7 +511,7 @@ fn rts_check(r: &mut Report, rts: RtsControl, port: &mut dyn SerialPort, fd: Bor
             Verdict::Fail,
             "on-send cannot work: a pty has no RTS line (leave --rts off)",
         ),
-        RtsControl::OnSend => match rs485_flags(fd) {
+        RtsControl::OnSend => match super::rs485::flags(fd) {
             Ok(_) => r.add(
                 "RTS control",
                 Verdict::Ok,

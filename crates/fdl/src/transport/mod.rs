@@ -37,9 +37,13 @@
 //! [`hub`] is the virtual RS-485 bus of ptys behind `dpctl bus`. The
 //! in-process simulated bus is not a `Port`: it is the sans-IO
 //! [`crate::medium::Medium`] driven on virtual time.
+//!
+//! [`realtime`] puts a station process under `SCHED_FIFO`, so that it
+//! runs at its deadlines on a busy machine (`dpctl --rt-priority`).
 
 pub mod doctor;
 pub mod hub;
+pub mod realtime;
 mod rs485;
 
 use crate::timing::Baud;
@@ -200,6 +204,20 @@ impl Port {
         Self::open_with(path, PortOptions::new(baud))
     }
 
+    /// A port on `stream` named `name`, at `baud`: no pty, no RTS control.
+    fn new(stream: Link, name: &str, baud: Baud) -> Port {
+        Port {
+            stream,
+            name: name.to_string(),
+            baud,
+            rts: RtsMechanism::None,
+            pty: false,
+            rts_raised: false,
+            drain: None,
+            write_wait: None,
+        }
+    }
+
     /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
         let open_err = |error| TransportError::Open {
@@ -217,16 +235,8 @@ impl Port {
             .stop_bits(StopBits::One)
             .flow_control(FlowControl::None);
         let stream = SerialStream::open(&builder).map_err(|e| open_err(serial_err(e)))?;
-        let mut port = Port {
-            stream: Link::Serial(readable(stream).map_err(open_err)?),
-            name: path.to_string(),
-            baud: opts.baud,
-            rts: RtsMechanism::None,
-            pty: false,
-            rts_raised: false,
-            drain: None,
-            write_wait: None,
-        };
+        let link = Link::Serial(readable(stream).map_err(open_err)?);
+        let mut port = Port::new(link, path, opts.baud);
         port.pty = is_pty_fd(port.fd());
         port.check_parity_on_input().map_err(open_err)?;
         port.set_baud(opts.baud)?;
@@ -273,16 +283,8 @@ impl Port {
                 Ok(s) => {
                     s.set_nodelay(true).map_err(open_err)?;
                     s.set_nonblocking(true).map_err(open_err)?;
-                    return Ok(Port {
-                        stream: Link::Tcp(readable(s).map_err(open_err)?),
-                        name: path.to_string(),
-                        baud: opts.baud,
-                        rts: RtsMechanism::None,
-                        pty: false,
-                        rts_raised: false,
-                        drain: None,
-                        write_wait: None,
-                    });
+                    let link = Link::Tcp(readable(s).map_err(open_err)?);
+                    return Ok(Port::new(link, path, opts.baud));
                 }
                 Err(e) => last = e,
             }
@@ -295,15 +297,10 @@ impl Port {
     pub fn pty_pair(baud: Baud) -> io::Result<(Port, Port)> {
         let (a, b) = SerialStream::pair().map_err(serial_err)?;
         let wrap = |stream, name: &str| -> io::Result<Port> {
+            let link = Link::Serial(readable(stream)?);
             Ok(Port {
-                stream: Link::Serial(readable(stream)?),
-                name: name.to_string(),
-                baud,
-                rts: RtsMechanism::None,
                 pty: true,
-                rts_raised: false,
-                drain: None,
-                write_wait: None,
+                ..Port::new(link, name, baud)
             })
         };
         Ok((wrap(a, "pty master")?, wrap(b, "pty slave")?))

@@ -4,7 +4,8 @@
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd};
 
-/// `struct serial_rs485` of `<linux/serial.h>` (32 bytes).
+/// `struct serial_rs485` of `<linux/serial.h>` (32 bytes), written by
+/// TIOCSRS485 and read by TIOCGRS485.
 #[repr(C)]
 #[derive(Debug, Default, Clone, Copy)]
 struct SerialRs485 {
@@ -21,6 +22,8 @@ const SER_RS485_RTS_ON_SEND: u32 = 1 << 1;
 
 #[cfg(target_os = "linux")]
 nix::ioctl_write_ptr_bad!(tiocsrs485, nix::libc::TIOCSRS485, SerialRs485);
+#[cfg(target_os = "linux")]
+nix::ioctl_read_bad!(tiocgrs485, nix::libc::TIOCGRS485, SerialRs485);
 
 /// Switch the UART behind `fd` to RS-485 mode with RTS on send. Fails
 /// (ENOTTY, EINVAL, …) when the driver has no RS-485 support, as for ptys
@@ -45,6 +48,23 @@ pub(super) fn enable(_fd: BorrowedFd<'_>) -> io::Result<()> {
         io::ErrorKind::Unsupported,
         "kernel RS-485 mode is Linux only",
     ))
+}
+
+/// The RS-485 flags of the UART behind `fd` (`Err`: no RS-485 support;
+/// `dpctl doctor`).
+#[cfg(target_os = "linux")]
+pub(super) fn flags(fd: BorrowedFd<'_>) -> io::Result<u32> {
+    let mut conf = SerialRs485::default();
+    // SAFETY: `fd` is open for the call; `conf` is a valid, writable
+    // `struct serial_rs485` the kernel fills in.
+    unsafe { tiocgrs485(fd.as_raw_fd(), &mut conf) }.map_err(io::Error::from)?;
+    Ok(conf.flags)
+}
+
+/// No kernel RS-485 mode outside Linux.
+#[cfg(not(target_os = "linux"))]
+pub(super) fn flags(_fd: BorrowedFd<'_>) -> io::Result<u32> {
+    Err(io::Error::new(io::ErrorKind::Unsupported, "Linux only"))
 }
 
 #[cfg(test)]

@@ -596,24 +596,8 @@ mod tests {
     use super::*;
     use crate::sim::SimPlant;
 
-    const BUS: &str = r#"[master]
-address = 1
-baud = "1.5M"
-
-[[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 4
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[mqtt]
-writable = [3]
-"#;
+    /// Master 1 with two GSD slaves, 3 (named) and 4; 3 writable.
+    const BUS: &str = include_str!("../../tests/data/sparkplug_bus.toml");
 
     struct Rig {
         plant: SimPlant,
