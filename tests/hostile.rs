@@ -155,6 +155,37 @@ fn gsd_files_huge_endless_binary_nested() {
             "(and 999 more errors)",
         ],
     );
+
+    // References: 32 768 parameter definitions and, up to the file
+    // limit, 73 291 references to numbers none of them has (checked
+    // each against every definition, that was over 10^9 comparisons).
+    let mut text = String::from("#Profibus_DP\nGSD_Revision=1\nIdent_Number=0x1234\n");
+    for r in 0..1 << 15 {
+        text.push_str(&format!(
+            "ExtUserPrmData={r} \"p\"\nUnsigned8 0 0-1\nEndExtUserPrmData\n"
+        ));
+    }
+    let mut r = 1u32 << 15;
+    while text.len() < MAX_FILE_LEN - 40 {
+        text.push_str(&format!("Ext_User_Prm_Data_Ref(0)={r}\n"));
+        r = (r + 1).min(0xFFFF);
+    }
+    let f = d.join("references.gsd");
+    std::fs::write(&f, &text).unwrap();
+    let p = bounded_by(MEM_PARSE, "GSD references", || {
+        let p = Gsd::from_file(&f, ParseOptions::LENIENT).unwrap();
+        assert_eq!(p.gsd.parameters(&[]).map(|v| v.len()), Ok(0));
+        p
+    });
+    assert_eq!(p.gsd.ext_user_prm_data.len(), 1 << 15);
+    assert!(p.gsd.ext_user_prm_data_ref.len() > 50_000);
+    assert!(
+        p.warnings
+            .iter()
+            .any(|w| w.message.contains("names `ExtUserPrmData` 32768")),
+        "{:?}",
+        p.warnings.iter().take(3).collect::<Vec<_>>()
+    );
     std::fs::remove_dir_all(&d).unwrap();
 }
 
