@@ -272,7 +272,7 @@ where
                         // the kernel's worker that delivers it (see
                         // `Waitable::writes_need_cpu`), then wait; bytes
                         // that arrive meanwhile are read first.
-                        if pacer.release_then_wait(&clock, port.wait_fd(), d) {
+                        if sleep_after_write(&clock, port.wait_fd(), d) {
                             break;
                         }
                     } else {
@@ -493,26 +493,6 @@ impl Pacer {
         }
     }
 
-    /// Wait until `t` right after a write whose bytes a kernel worker
-    /// hands on ([`Waitable::writes_need_cpu`]): sleep in the kernel for
-    /// the whole wait (at least [`RELEASE`]; waking when `fd` becomes
-    /// readable), so that this CPU is free for
-    /// the worker, and for the other stations' workers, all the time (a
-    /// thread spinning at real-time priority keeps every ordinary thread
-    /// off its CPU). The wait ends up to a wake-up latency after `t`: the
-    /// idle time on the line only grows.
-    /// Returns whether `fd` became readable first (then it returns at
-    /// once, before `t`).
-    fn release_then_wait(&mut self, clock: &Clock, fd: Option<BorrowedFd<'_>>, t: Instant) -> bool {
-        let now = clock.now();
-        let nap = t.saturating_duration_since(now).max(RELEASE);
-        if ppoll(fd, nap) {
-            return true;
-        }
-        spin_until(clock, t);
-        false
-    }
-
     fn learn_wake(&mut self, late: Duration) {
         let late = late.clamp(WAKE_MIN, WAKE_MAX).as_nanos() as u64;
         self.wake_ns = self.wake_ns - self.wake_ns / 8 + late / 8;
@@ -536,6 +516,22 @@ fn ppoll(fd: Option<BorrowedFd<'_>>, d: Duration) -> bool {
             false
         }
     }
+}
+
+/// Wait until `t` right after a write whose bytes a kernel worker hands
+/// on ([`Waitable::writes_need_cpu`]): sleep in the kernel for the whole
+/// wait (at least [`RELEASE`]), so that this CPU stays free for that
+/// worker and for the other stations' workers (a thread spinning at
+/// real-time priority keeps every ordinary thread off its CPU). The wait
+/// may end a wake-up latency after `t`: the idle time on the line only
+/// grows. Returns at once, `true`, when `fd` becomes readable first.
+fn sleep_after_write(clock: &Clock, fd: Option<BorrowedFd<'_>>, t: Instant) -> bool {
+    let nap = t.saturating_duration_since(clock.now()).max(RELEASE);
+    if ppoll(fd, nap) {
+        return true;
+    }
+    spin_until(clock, t);
+    false
 }
 
 /// Let this thread's timers (the precise waits) fire within 1 µs of
