@@ -152,7 +152,8 @@ const TAGS: &str = include_str!("data/rfid_tags.toml");
 /// One `VER` with `dpctl sniff --json` listening: the Data_Exchange
 /// (request, response) pairs of the reader, consecutive repeats left out;
 /// `None` when the master started the reader up again meanwhile (the
-/// command was sent again, so the wire shows more than one exchange).
+/// command was sent again, so the wire shows more than one exchange) or
+/// when the sniffer missed the command among bytes it had to skip.
 fn sniffed_ver(rig: &Rig) -> Option<Vec<(String, String)>> {
     let mut cmd = Command::new(dpctl());
     cmd.args(["sniff", "--json", "--port", &rig.bus.link_str(2)])
@@ -207,6 +208,17 @@ fn sniffed_ver(rig: &Rig) -> Option<Vec<(String, String)>> {
             }
         }
     }
+    // The command's first request missing from a capture in which the
+    // sniffer had to skip bytes (a telegram it saw broken: on a loaded
+    // machine a pty may hand it over in parts with a pause between):
+    // the capture is incomplete, not the wire wrong; the run is repeated.
+    // Without skipped bytes, a missing request fails the test below.
+    let skipped = lines.iter().filter(|v| v.get("error").is_some()).count();
+    let first = telegram(MANUAL_REQUESTS[0]);
+    if skipped > 0 && !pairs.iter().any(|(q, _)| *q == first) {
+        eprintln!("the sniffer skipped {skipped} broken telegrams and missed the command; again");
+        return None;
+    }
     Some(pairs)
 }
 
@@ -218,13 +230,13 @@ fn the_manuals_ver_exchange_byte_for_byte_on_the_wire() {
     // repeated.
     let pairs = (0..5)
         .find_map(|_| sniffed_ver(&rig))
-        .expect("five runs disturbed by a start-up of the reader");
+        .expect("five runs disturbed by a start-up of the reader or a broken capture");
     let events = rig.stop();
     // Before the command: all zero (or the previous run's last exchange).
     let first = pairs
         .iter()
         .position(|(q, _)| *q == telegram(MANUAL_REQUESTS[0]))
-        .expect("the command on the wire");
+        .unwrap_or_else(|| panic!("the command is not on the wire; the exchanges: {pairs:?}"));
     // Then every request and response of the manual, in order; between
     // them only the Data_Exchange right after each change of R, whose
     // response is still the previous one (L86).
