@@ -6,7 +6,7 @@
 mod common;
 
 use common::mqtt::{
-    broker, broker_with, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES,
+    self, broker, broker_with, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES,
 };
 use common::{dpctl, Lines, Proc, TempDir};
 use std::process::{Command, Stdio};
@@ -15,34 +15,16 @@ use std::time::Duration;
 const T: Duration = Duration::from_secs(30);
 
 /// `mosquitto_sub -v` on the gateway's topics and `client/#` (answers
-/// sent to a request's `reply_to`), its lines collected.
+/// sent to a request's `reply_to`), subscribed when this returns, its
+/// lines collected.
 fn subscribe(port: u16) -> (Proc, Lines) {
     subscribe_with(port, &[])
 }
 
 /// [`subscribe`] with extra `mosquitto_sub` arguments (TLS, user).
-fn subscribe_with(port: u16, extra: &[&str]) -> (Proc, Lines) {
-    common::require("mosquitto_sub");
-    let mut p = Proc::spawn(
-        "mosquitto_sub",
-        Command::new("mosquitto_sub")
-            .args([
-                "-h",
-                "127.0.0.1",
-                "-p",
-                &port.to_string(),
-                "-v",
-                "-t",
-                "profibus/line/#",
-                "-t",
-                "client/#",
-            ])
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null()),
-    );
-    let lines = Lines::from(&mut p);
-    (p, lines)
+fn subscribe_with(port: u16, auth: &[&str]) -> (Proc, Lines) {
+    let topics = ["-v", "-t", "profibus/line/#", "-t", "client/#"];
+    mqtt::subscribe(port, &topics, auth, "client/probe")
 }
 
 fn publish(port: u16, topic: &str, payload: &str) {

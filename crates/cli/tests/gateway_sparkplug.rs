@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::mqtt::{broker, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES};
+use common::mqtt::{self, broker, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES};
 use common::{dpctl, require, Lines, Proc, TempDir};
 use std::collections::HashMap;
 use std::io::Write;
@@ -111,34 +111,8 @@ impl Sub {
     /// Subscribe; returns once the subscription is in place (a probe
     /// message published after it came back).
     fn start(port: u16) -> Sub {
-        require("mosquitto_sub");
-        let mut p = Proc::spawn(
-            "mosquitto_sub",
-            Command::new("mosquitto_sub")
-                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
-                .args(["-t", "spBv1.0/#", "-F", "%t %x"])
-                .stdout(Stdio::piped())
-                .stderr(Stdio::null()),
-        );
-        let mut lines = Lines::from(&mut p);
-        let end = Instant::now() + T;
-        loop {
-            let ok = Command::new("mosquitto_pub")
-                .args(["-h", "127.0.0.1", "-p", &port.to_string()])
-                .args(["-t", PROBE, "-n"])
-                .status()
-                .expect("mosquitto_pub")
-                .success();
-            // A refused publish (the broker not listening yet on a busy
-            // machine) is tried again; the wait is the pause between tries.
-            if lines.wait_for(PROBE, Duration::from_millis(500)) {
-                break;
-            }
-            assert!(
-                Instant::now() < end,
-                "mosquitto_sub never subscribed (last mosquitto_pub succeeded: {ok})"
-            );
-        }
+        let args = ["-t", "spBv1.0/#", "-F", "%t %x"];
+        let (p, lines) = mqtt::subscribe(port, &args, &[], PROBE);
         Sub {
             _p: p,
             lines,

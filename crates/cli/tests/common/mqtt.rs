@@ -1,11 +1,13 @@
 //! A real MQTT broker for the gateway tests: Debian's mosquitto on a free
 //! localhost port. Fails (never skips) when it is missing.
 
-use super::{need, wait_for, Proc, TempDir};
+use super::{need, require, wait_for, Lines, Proc, TempDir};
+use std::collections::HashSet;
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Duration;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 /// The mosquitto broker binary (Debian puts it in /usr/sbin).
 pub fn mosquitto() -> PathBuf {
@@ -23,13 +25,24 @@ pub fn mosquitto() -> PathBuf {
     }
 }
 
-/// A localhost TCP port nobody listens on now.
+/// A localhost TCP port nobody listens on now, and never handed out
+/// before in this test process (the tests of a binary run in parallel:
+/// two brokers on one port would leave one test talking to the other's
+/// broker).
 pub fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    static GIVEN: Mutex<Option<HashSet<u16>>> = Mutex::new(None);
+    let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
+    let given = given.get_or_insert_with(HashSet::new);
+    loop {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        if given.insert(port) {
+            return port;
+        }
+    }
 }
 
 /// A broker on `port` (its config in `dir`), accepting connections when
@@ -45,20 +58,74 @@ pub fn broker(dir: &TempDir, port: u16) -> Proc {
 }
 
 /// A broker with the configuration `conf`, listening on `port` when this
-/// returns.
+/// returns; its log (stderr) is `mosquitto-<port>.log` beside `conf`.
+/// Fails, with the log, when the broker exits before or just after the
+/// port accepts (a port somebody else took, a bad certificate).
 pub fn broker_with(conf: &Path, port: u16) -> Proc {
-    let p = Proc::spawn(
+    let log = conf.with_file_name(format!("mosquitto-{port}.log"));
+    let mut p = Proc::spawn(
         "mosquitto",
         Command::new(mosquitto())
             .arg("-c")
             .arg(conf)
             .stdout(Stdio::null())
-            .stderr(Stdio::null()),
+            .stderr(std::fs::File::create(&log).unwrap()),
     );
+    let dead = |p: &mut Proc| {
+        if p.exited() {
+            let log = std::fs::read_to_string(&log).unwrap_or_default();
+            panic!("mosquitto on port {port} exited:\n{log}");
+        }
+    };
     wait_for("mosquitto to listen", Duration::from_secs(30), || {
+        dead(&mut p);
         TcpStream::connect(("127.0.0.1", port)).is_ok()
     });
+    dead(&mut p);
     p
+}
+
+/// `mosquitto_sub` on `port` with `args` (its topics and output format)
+/// and `auth` (TLS and user options, given to the probe's
+/// `mosquitto_pub` too); its stdout and stderr as [`Lines`] (an error
+/// of the client shows in a failing test's output). Returns once the
+/// subscription is in place: an empty message published to `probe`, a
+/// topic that `args` subscribe to, came back (it is in the lines).
+pub fn subscribe(port: u16, args: &[&str], auth: &[&str], probe: &str) -> (Proc, Lines) {
+    require("mosquitto_sub");
+    require("mosquitto_pub");
+    let port = port.to_string();
+    let mut p = Proc::spawn(
+        "mosquitto_sub",
+        Command::new("sh")
+            .args(["-c", "exec mosquitto_sub \"$@\" 2>&1", "mosquitto_sub"])
+            .args(["-h", "127.0.0.1", "-p", &port])
+            .args(args)
+            .args(auth)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped()),
+    );
+    let mut lines = Lines::from(&mut p);
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        let published = Command::new("mosquitto_pub")
+            .args(["-h", "127.0.0.1", "-p", &port])
+            .args(auth)
+            .args(["-t", probe, "-n"])
+            .stderr(Stdio::null())
+            .status()
+            .expect("mosquitto_pub")
+            .success();
+        // The wait is the pause between tries.
+        if lines.wait_for(probe, Duration::from_millis(500)) {
+            return (p, lines);
+        }
+        assert!(
+            !p.exited() && Instant::now() < end,
+            "mosquitto_sub never subscribed (last probe published: {published}); it printed:\n{}",
+            lines.1.join("\n")
+        );
+    }
 }
 
 /// The slaves of the gateway tests' bus file (master 1 at 1.5 Mbit/s):
