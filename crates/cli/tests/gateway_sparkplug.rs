@@ -128,7 +128,9 @@ impl Sub {
             let l = self.lines.1[self.decoded].clone();
             self.decoded += 1;
             let (t, hex) = l.split_once(' ').unwrap_or((&l, ""));
-            if t == PROBE {
+            // The probe, and what mosquitto_sub printed on stderr (an
+            // error; [`Sub::expect`] prints it when it fails).
+            if t == PROBE || !t.starts_with("spBv1.0/") {
                 continue;
             }
             let bytes: Vec<u8> = (0..hex.len() / 2)
@@ -156,12 +158,14 @@ impl Sub {
                 .next_line(end.saturating_duration_since(Instant::now()))
                 .is_none()
             {
+                let other = self.lines.1.iter().filter(|l| !l.starts_with("spBv1.0/"));
                 panic!(
-                    "no matching message on {topic}; got:\n{:#?}",
+                    "no matching message on {topic}; got:\n{:#?}\nmosquitto_sub printed also:\n{}",
                     self.seen
                         .iter()
                         .map(|(t, d)| (t, &d.fields))
-                        .collect::<Vec<_>>()
+                        .collect::<Vec<_>>(),
+                    other.cloned().collect::<Vec<_>>().join("\n")
                 );
             }
         }
