@@ -2,7 +2,7 @@
 //! localhost port. Fails (never skips) when it is missing.
 
 use super::{need, require, wait_for, Lines, Proc, TempDir};
-use std::collections::HashSet;
+use std::collections::BTreeSet;
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -30,9 +30,8 @@ pub fn mosquitto() -> PathBuf {
 /// two brokers on one port would leave one test talking to the other's
 /// broker).
 pub fn free_port() -> u16 {
-    static GIVEN: Mutex<Option<HashSet<u16>>> = Mutex::new(None);
+    static GIVEN: Mutex<BTreeSet<u16>> = Mutex::new(BTreeSet::new());
     let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
-    let given = given.get_or_insert_with(HashSet::new);
     loop {
         let port = TcpListener::bind("127.0.0.1:0")
             .unwrap()
