@@ -400,7 +400,10 @@ fn need<T>(v: Option<T>, key: &str) -> Result<T, RequestError> {
 fn op(o: &Obj, ops: &[&str]) -> Result<String, RequestError> {
     match o.get("op") {
         Some(serde_json::Value::String(s)) if ops.contains(&s.as_str()) => Ok(s.clone()),
-        _ => Err(malformed(format!("`op` must be one of {ops:?}"))),
+        _ => {
+            let ops: Vec<String> = ops.iter().map(|o| format!("\"{o}\"")).collect();
+            Err(malformed(format!("`op` must be one of {}", ops.join(", "))))
+        }
     }
 }
 
