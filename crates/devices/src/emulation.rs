@@ -166,12 +166,13 @@ pub enum EmulationError {
     #[error("{0}; or use --gsd FILE")]
     UnknownProfile(ProfileError),
     /// The profile refused its options.
-    #[error("device `{name}`: {source}")]
+    #[error("device `{name}`: {error}")]
     Profile {
         /// The profile.
         name: &'static str,
-        /// Why.
-        source: ProfileError,
+        /// Why (in the message, not also the error's source, so that a
+        /// printed chain says it once).
+        error: ProfileError,
     },
     /// The generic device or the options are refused.
     #[error(transparent)]
@@ -247,7 +248,7 @@ impl ProfileArgs {
         match &self.device {
             Some(_) => EmulationError::Profile {
                 name: self.entry().map_or("", |e| e.name),
-                source: e,
+                error: e,
             },
             None => EmulationError::Plain(e),
         }
