@@ -71,9 +71,9 @@ async fn scan(args: Args) -> Result<()> {
     rows[1..].sort_by_key(|r| r.station.address);
     for row in rows {
         if args.json {
-            println!("{}", common::json_line(&row));
+            crate::out::outln!("{}", common::json_line(&row))?;
         } else {
-            println!("{row}");
+            crate::out::outln!("{row}")?;
         }
     }
     Ok(())

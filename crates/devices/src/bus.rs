@@ -330,8 +330,8 @@ pkw = false
             let p = crate::profile(name).unwrap();
             assert!(p.path_options.contains(&key), "{name}: {key}");
         }
-        let dir = std::env::temp_dir().join(format!("bus-paths-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         std::fs::write(dir.join("strip.txt"), "KL1104,KL2134,KL9010").unwrap();
         let text = bus_text!(
             r#"[[slave]]
@@ -342,7 +342,6 @@ terminals_file = "strip.txt"
         );
         // Read from elsewhere: the file is found next to the bus file.
         let bus = ProfiledBus::parse(&dir.join("bus.toml"), text);
-        std::fs::remove_dir_all(&dir).unwrap();
         let bus = bus.unwrap();
         assert_eq!(bus.file.slaves[0].params.address, 11);
     }

@@ -158,8 +158,8 @@ mod tests {
 
     #[tokio::test]
     async fn lines_from_a_socket_and_a_file_reach_the_inbox() {
-        let dir = std::env::temp_dir().join(format!("control-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let sock = dir.join("ctl.sock");
         let source = ControlSource::of(sock.to_str().unwrap());
         assert_eq!(source, ControlSource::Socket(sock.clone()));
@@ -187,6 +187,5 @@ mod tests {
         let missing = ControlSource::File(dir.join("missing"));
         let err = missing.spawn(inbox).unwrap_err().to_string();
         assert!(err.starts_with("cannot open "), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

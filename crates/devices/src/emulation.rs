@@ -707,8 +707,8 @@ mod tests {
 
     #[test]
     fn the_shell_keeps_addresses_and_state_in_files() {
-        let dir = std::env::temp_dir().join(format!("emulation-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let shell = SlaveShell {
             runner: PassiveRunner::new(false, Default::default(), Default::default()),
             address_file: Some(dir.join("address")),
@@ -735,6 +735,5 @@ mod tests {
             std::fs::read_to_string(dir.join("state.toml")).unwrap(),
             "x = 1\n"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -804,8 +804,8 @@ fn sync_and_freeze_accepted_dpv1_refused_like_a_dp_v0_slave() {
 #[test]
 fn terminals_file_option() {
     use crate::{profile as registry, DeviceOptions};
-    let dir = std::env::temp_dir().join(format!("bk3000-strip-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
     let f = dir.join("strip.txt");
     std::fs::write(
         &f,
@@ -823,5 +823,4 @@ fn terminals_file_option() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
