@@ -598,9 +598,13 @@ impl BusFile {
         let cx = Ctx { path, text };
         // Every key with its position first: a misspelt key is named
         // where it is, with the closest valid keys.
-        let doc = toml_edit::ImDocument::parse(text)
-            .map_err(|e| cx.err(e.span(), e.message().trim_end()))?;
-        cx.check_keys(doc.as_table())?;
+        // (The parsed document is dropped before the file is read again
+        // below: a large file costs one parse at a time.)
+        {
+            let doc = toml_edit::ImDocument::parse(text)
+                .map_err(|e| cx.err(e.span(), e.message().trim_end()))?;
+            cx.check_keys(doc.as_table())?;
+        }
         // The slaves' tables once more as plain tables: the keys that are
         // not slave keys are a profile's options. Checked first, so that a
         // profile option given where a slave key of the same name goes
@@ -686,7 +690,11 @@ impl BusFile {
                     };
                     let r = resolver.resolve(&entry, addr).map_err(|e| {
                         let at = match &e.option {
-                            Some(key) => option_at(doc.as_table(), n, &entry.name, key),
+                            // Parsed again for the key's position: only
+                            // on this error.
+                            Some(key) => toml_edit::ImDocument::parse(text)
+                                .ok()
+                                .and_then(|doc| option_at(doc.as_table(), n, &entry.name, key)),
                             None => None,
                         };
                         let at = at.or(Some(d.span()));
