@@ -192,3 +192,51 @@ fn no_color_turns_colours_off_on_a_terminal() {
         "colours with NO_COLOR=1"
     );
 }
+
+#[test]
+fn an_error_names_its_cause_once_and_in_words() {
+    // The profile's refusal is in the message once, not again as its
+    // chained source.
+    let out = common::run_dpctl(&[
+        "slave",
+        "--port",
+        "/nonexistent/link",
+        "--addr",
+        "5",
+        "--device",
+        "bm4",
+        "--device-opt",
+        "foo=1",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", out.stderr);
+    assert_eq!(
+        out.stderr.matches("unknown field `foo`").count(),
+        1,
+        "{}",
+        out.stderr
+    );
+    // A device profile's built-in GSD is named in words, not as a
+    // made-up path.
+    let dir = common::TempDir::new("words");
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 1\nbaud = \"45.45k\"\n[[slave]]\naddress = 5\ndevice = \"omega\"\n",
+    )
+    .unwrap();
+    let out = common::run_dpctl(&[
+        "master",
+        "--port",
+        "/nonexistent/link",
+        "--config",
+        bus.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", out.stderr);
+    assert!(
+        out.stderr
+            .contains("the GSD of device `omega` does not support 45.45kbit/s"),
+        "{}",
+        out.stderr
+    );
+    assert!(!out.stderr.contains("<omega>"), "{}", out.stderr);
+}

@@ -3,7 +3,7 @@
 //! as the bus file's [`DeviceResolver`], and the named channels of those
 //! slaves for the master.
 
-use crate::channels::{ChannelError, ChannelMap, Value};
+use crate::channels::{ChannelError, ChannelMap, OutputWrite, OutputWriteError, Value};
 use crate::profile::{Configured, DeviceOptions, ProfileError};
 use crate::rfid::jobs::{MasterJobs, QueueError};
 use profibus_dp::busfile::{BusFile, BusFileError, DeviceEntry, DeviceResolver, ResolvedDevice};
@@ -139,8 +139,16 @@ impl SetChannels {
     ) -> Result<(), SetChannelsError> {
         let map = map.ok_or(SetChannelsError::NoChannels(self.slave))?;
         let h = m.handle(self.slave).ok_or(SetChannelsError::UnknownSlave)?;
-        let values = self.set.iter().map(|(k, v)| (k.as_str(), *v));
-        Ok(map.write_outputs(values, m.outputs_mut(h))?)
+        // The rule every output write follows (`OutputWrite`).
+        let values = self.set.iter().map(|(k, v)| (k.clone(), *v)).collect();
+        let image = OutputWrite::Channels(values)
+            .apply(self.slave, m.outputs_mut(h), Some(map), None)
+            .map_err(|e| match e {
+                OutputWriteError::Channel { error, .. } => SetChannelsError::Channel(error),
+                _ => SetChannelsError::NoChannels(self.slave),
+            })?;
+        m.outputs_mut(h).copy_from_slice(&image);
+        Ok(())
     }
 }
 

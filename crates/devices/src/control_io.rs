@@ -23,20 +23,20 @@ pub enum ControlSource {
 #[derive(Debug, thiserror::Error)]
 pub enum ControlSourceError {
     /// The file cannot be opened.
-    #[error("cannot open {}: {source}", path.display())]
+    #[error("cannot open {}: {error}", path.display())]
     Open {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: io::Error,
+        error: io::Error,
     },
     /// The socket cannot be created.
-    #[error("cannot listen on {}: {source}", path.display())]
+    #[error("cannot listen on {}: {error}", path.display())]
     Listen {
         /// The socket.
         path: PathBuf,
         /// Why.
-        source: io::Error,
+        error: io::Error,
     },
 }
 
@@ -65,17 +65,17 @@ impl ControlSource {
         match self {
             ControlSource::Stdin => feed(tokio::io::stdin(), inbox),
             ControlSource::File(path) => {
-                let f = std::fs::File::open(path).map_err(|source| ControlSourceError::Open {
+                let f = std::fs::File::open(path).map_err(|error| ControlSourceError::Open {
                     path: path.clone(),
-                    source,
+                    error,
                 })?;
                 feed(tokio::fs::File::from_std(f), inbox);
             }
             ControlSource::Socket(path) => {
                 let _ = std::fs::remove_file(path);
-                let listen = |source| ControlSourceError::Listen {
+                let listen = |error| ControlSourceError::Listen {
                     path: path.clone(),
-                    source,
+                    error,
                 };
                 let listener = tokio::net::UnixListener::bind(path).map_err(listen)?;
                 tokio::spawn(async move {
@@ -109,9 +109,9 @@ pub fn lines_on_a_thread(
     let reader: Box<dyn io::Read + Send> = if src == "-" {
         Box::new(io::stdin())
     } else {
-        let f = std::fs::File::open(src).map_err(|source| ControlSourceError::Open {
+        let f = std::fs::File::open(src).map_err(|error| ControlSourceError::Open {
             path: src.into(),
-            source,
+            error,
         })?;
         Box::new(f)
     };

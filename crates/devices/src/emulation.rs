@@ -166,12 +166,12 @@ pub enum EmulationError {
     #[error("{0}; or use --gsd FILE")]
     UnknownProfile(ProfileError),
     /// The profile refused its options.
-    #[error("device `{name}`: {source}")]
+    #[error("device `{name}`: {error}")]
     Profile {
         /// The profile.
         name: &'static str,
         /// Why.
-        source: ProfileError,
+        error: ProfileError,
     },
     /// The generic device or the options are refused.
     #[error(transparent)]
@@ -247,7 +247,7 @@ impl ProfileArgs {
         match &self.device {
             Some(_) => EmulationError::Profile {
                 name: self.entry().map_or("", |e| e.name),
-                source: e,
+                error: e,
             },
             None => EmulationError::Plain(e),
         }

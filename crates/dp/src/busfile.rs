@@ -232,7 +232,8 @@ impl DeviceResolver for NoProfiles {
 pub struct BusSlave {
     /// What the master sends it.
     pub params: SlaveParams,
-    /// The GSD file it was built from (`<NAME>` for a device profile).
+    /// The GSD file it was built from (for a device profile, the words
+    /// ``the GSD of device `NAME` ``: its GSD is built in).
     pub gsd_path: PathBuf,
     /// The device profile it was given as, if any.
     pub device: Option<DeviceEntry>,
@@ -547,7 +548,7 @@ impl BusFile {
                     })?;
                     let names = r.modules.into_iter().map(|m| (m, None)).collect();
                     (
-                        PathBuf::from(format!("<{}>", entry.name)),
+                        PathBuf::from(format!("the GSD of device `{}`", entry.name)),
                         r.gsd,
                         Some(entry),
                         d.span(),
