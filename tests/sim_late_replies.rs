@@ -288,15 +288,22 @@ impl<S: Station> Station for OneLate<S> {
 
 /// Issue 26, item 1: at 19.2 kbit/s on a transport that hands over whole
 /// telegrams (a paced `dpctl bus`), the master waits for a Data_Exchange
-/// answer with 2 bytes of inputs for the slot time (100 bit, 5.2 ms) plus
+/// answer with 4 bytes of inputs for the slot time (100 bit, 5.2 ms) plus
 /// the transport's latency (5 ms on a pty) plus that answer's wire time
-/// (11 characters, 6.3 ms): about 17 ms, not the 151 ms that allowed for
+/// (13 characters, 7.4 ms): about 18 ms, not the 151 ms that allowed for
 /// the longest telegram. An answer complete 44 ms after the request is
 /// late: the master retries, takes the answer to the retry, and counts the
 /// late one (in the station's and the slave's counters) and drops it
-/// instead of taking it as the answer.
+/// instead of taking it as the answer, with one slave on the bus and
+/// with two. The inputs (a counter that steps with each Data_Exchange)
+/// step by one with each exchange: no answer is taken for another's.
 #[test]
 fn a_data_exchange_answer_44_ms_late_at_19200_is_counted_late_and_dropped() {
+    late_answer_dropped(&[10]);
+    late_answer_dropped(&[10, 11]);
+}
+
+fn late_answer_dropped(addrs: &[u8]) {
     let baud = Baud::B19200;
     let params = BusParams::defaults(baud);
     // A paced `dpctl bus` with the late sender waiting for the line (so
@@ -304,8 +311,7 @@ fn a_data_exchange_answer_44_ms_late_at_19200_is_counted_late_and_dropped() {
     let mut medium = MediumConfig::paced(baud);
     medium.collisions = Collisions::Serialize;
     let mut bus = SimBus::new(medium).with_whole_transmissions();
-    let addrs = [10u8, 11];
-    let cfg = [0x11u8, 0x21]; // 2 bytes in, 2 bytes out
+    let cfg = [0x13u8, 0x21]; // 4 bytes in, 2 bytes out
     let slaves = addrs
         .iter()
         .map(|&a| {
@@ -358,15 +364,34 @@ fn a_data_exchange_answer_44_ms_late_at_19200_is_counted_late_and_dropped() {
     let m = bus.station::<Master>(master);
     let (late_before, retries_before) = (m.stats().late_replies, m.stats().retries);
     let s10_before = m.app().slave_stats(10).unwrap();
+    let counter = |b: &SimBus| {
+        let m = b.station::<Master>(master).app();
+        let i = m.inputs(10).unwrap();
+        (
+            m.slave_stats(10).unwrap().data_exchanges,
+            u32::from_be_bytes([i[0], i[1], i[2], i[3]]),
+        )
+    };
+    let mut last = counter(&bus);
 
     // Slave 10's next Data_Exchange answer leaves 44 ms after it was due,
     // less its own wire time: it is complete at the master about 44 ms
     // after the request.
-    let delay = Duration::from_millis(44) - baud.chars_to_duration(11);
+    let delay = Duration::from_millis(44) - baud.chars_to_duration(13);
     bus.station_mut::<OneLate<Slave>>(ids[0]).armed = Some(delay);
     let end = bus.now() + Duration::from_millis(500);
     while bus.now() < end {
         assert!(bus.step(), "the simulation stopped");
+        let now = counter(&bus);
+        if now.0 != last.0 {
+            assert_eq!(
+                (now.0, now.1),
+                (last.0 + 1, last.1 + 1),
+                "slave 10's inputs step with each exchange ({addrs:?}, at {:?})",
+                bus.now()
+            );
+            last = now;
+        }
         let m = bus.station_mut::<Master>(master).app_mut();
         while let Some(e) = m.poll_event() {
             assert!(
@@ -386,23 +411,25 @@ fn a_data_exchange_answer_44_ms_late_at_19200_is_counted_late_and_dropped() {
     let m = bus.station::<Master>(master);
     let s10 = m.app().slave_stats(10).unwrap();
     eprintln!(
-        "master: {:?}\nslave 10 before {s10_before:?}\nslave 10 after {s10:?}",
+        "{addrs:?}: master {:?}\nslave 10 before {s10_before:?}\nslave 10 after {s10:?}",
         m.stats()
     );
     assert_eq!(
         m.stats().late_replies - late_before,
         1,
-        "the late answer was counted as late"
+        "the late answer was counted as late ({addrs:?})"
     );
     assert_eq!(s10.late_replies - s10_before.late_replies, 1, "{s10:?}");
     assert_eq!(
         m.stats().retries - retries_before,
         1,
-        "the request was repeated after its wait"
+        "the request was repeated after its wait ({addrs:?})"
     );
     assert_eq!(s10.retries - s10_before.retries, 1, "{s10:?}");
     assert_eq!(s10.errors, s10_before.errors, "the retry was answered");
     assert!(s10.data_exchanges > s10_before.data_exchanges + 5);
-    assert_eq!(m.app().slave_stats(11).unwrap().late_replies, 0);
+    for &a in &addrs[1..] {
+        assert_eq!(m.app().slave_stats(a).unwrap().late_replies, 0);
+    }
     assert_eq!(m.stats().duplicate_tokens, 0);
 }
