@@ -200,8 +200,22 @@ pub fn master_station(
     use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
     let port_ = rts.open(port, bus.master.params.baud)?;
     let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
-    cfg.latency_allowance = latency(latency_ms, &port_)?;
+    allow_for_port(&mut cfg, latency_ms, &port_)?;
     Ok((ActiveStation::new(cfg, dp), port_))
+}
+
+/// Fit an active station's timeouts to its port: the latency from
+/// `--latency MS` (see [`latency`]) and whether the port hands over whole
+/// telegrams ([`Port::whole_telegrams`]; then each request's wait allows
+/// for the wire time of its longest answer).
+pub fn allow_for_port(
+    cfg: &mut profibus_fdl::station::active::ActiveConfig,
+    latency_ms: Option<f64>,
+    port: &Port,
+) -> Result<()> {
+    cfg.latency_allowance = latency(latency_ms, port)?;
+    cfg.whole_telegrams = port.whole_telegrams();
+    Ok(())
 }
 
 /// Driver options: busy polling for `busy_poll_us` µs after each event;

@@ -33,7 +33,7 @@ pub fn run(args: Args) -> Result<()> {
 async fn scan(args: Args) -> Result<()> {
     let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(args.line.baud));
     let mut port = args.line.open()?;
-    cfg.latency_allowance = common::latency(args.line.latency, &port)?;
+    common::allow_for_port(&mut cfg, args.line.latency, &port)?;
     let mut station = ActiveStation::new(cfg, LiveListScan::new(args.addr));
     let limit = Duration::from_secs_f64(args.timeout.max(0.0));
     let deadline = tokio::time::sleep(limit);

@@ -759,6 +759,9 @@ impl BusView {
         if let Some(n) = s.diag_reads {
             l.push_str(&format!("  diagnosis reads {n}"));
         }
+        if let Some(n) = s.late_replies {
+            l.push_str(&format!("  late replies {n}"));
+        }
         out.push(l);
         if let Decoding::Modules(spans) = &spec.decoding {
             out.push(format!(

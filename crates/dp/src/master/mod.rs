@@ -424,6 +424,10 @@ pub struct SlaveStats {
     /// bit 2 of Station_Status_2 clear); the diagnosis is read again and
     /// nothing is derived from them.
     pub invalid_diags: u64,
+    /// Answers that came after their request's wait ran out (the retry
+    /// had gone out, or the request had failed) and were dropped
+    /// ([`profibus_fdl::station::active::ActiveStats::late_replies`]).
+    pub late_replies: u64,
 }
 
 /// Poll-cycle statistics.
@@ -898,6 +902,7 @@ impl DpMaster {
             dsap: Some(sap::SLAVE_DIAG),
             ssap: Some(sap::MASTER),
             data: &[],
+            max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
         };
         let (step, req) = match s.state {
             SlaveState::Offline | SlaveState::Diag | SlaveState::CheckDiag | SlaveState::Locked => {
@@ -914,6 +919,8 @@ impl DpMaster {
                     dsap: Some(sap::SET_PRM),
                     ssap: Some(sap::MASTER),
                     data: &s.prm,
+                    // A short acknowledge, or a negative one.
+                    max_reply_len: Some(0),
                 },
             ),
             SlaveState::ChkCfg => (
@@ -924,6 +931,7 @@ impl DpMaster {
                     dsap: Some(sap::CHK_CFG),
                     ssap: Some(sap::MASTER),
                     data: &s.p.cfg,
+                    max_reply_len: Some(0),
                 },
             ),
             SlaveState::DataExchange => {
@@ -940,6 +948,8 @@ impl DpMaster {
                         dsap: None,
                         ssap: None,
                         data,
+                        // The inputs (at most 244 bytes, checked in `new`).
+                        max_reply_len: Some(s.input_len as u8),
                     },
                 )
             }
@@ -1167,6 +1177,13 @@ impl DpMaster {
         }
         let j = self.active_job.as_mut()?;
         let da = j.job.address();
+        let max_reply_len = match j.job {
+            Job::SetSlaveAdd { .. } => Some(0),
+            Job::ReadDiag { .. } => Some(crate::diag::MAX_DIAG_LEN as u8),
+            // Get_Cfg, Rd_Inp, Rd_Outp of any slave and DP-V1 answers
+            // carry up to 244 bytes: as long as the longest telegram.
+            _ => None,
+        };
         let (dsap, ssap, len) = match (&j.job, j.polling_since) {
             (Job::ReadDiag { .. }, _) => (sap::SLAVE_DIAG, sap::MASTER, 0),
             (Job::GetCfg { .. }, _) => (sap::GET_CFG, sap::MASTER, 0),
@@ -1235,6 +1252,7 @@ impl DpMaster {
             dsap: Some(dsap),
             ssap: Some(ssap),
             data: &self.req[..len],
+            max_reply_len,
         })
     }
 
@@ -1380,6 +1398,8 @@ impl DpMaster {
             dsap: Some(sap::GLOBAL_CONTROL),
             ssap: Some(sap::MASTER),
             data: &self.gc_bytes,
+            // SDN: never answered.
+            max_reply_len: None,
         }
     }
 }
@@ -1446,6 +1466,13 @@ impl MasterApp for DpMaster {
             }
         }
         self.emit(MasterEvent::Ring(event));
+    }
+
+    fn on_late_reply(&mut self, _now: Instant, from: Option<u8>) {
+        let i = from.and_then(|a| self.index.get(a as usize).copied());
+        if let Some(s) = i.and_then(|i| self.slaves.get_mut(i as usize)) {
+            s.stats.late_replies += 1;
+        }
     }
 }
 

@@ -21,7 +21,9 @@
 //! by at most one telegram's duration. Receivers that frame by idle time,
 //! as slave ASICs do, see the telegrams as they would on RS-485. A master
 //! sees the first character of a reply only when the whole reply has
-//! arrived; [`super::Port::default_latency`] allows for that on ptys.
+//! arrived; on ptys ([`super::Port::whole_telegrams`]) a master's wait for
+//! each answer allows for the wire time of the longest answer that
+//! request can get.
 //! Unpaced, bytes pass as fast as they come, in the chunks they were read
 //! in: the gaps are the ones the writers left, plus scheduling jitter.
 //!

@@ -28,8 +28,8 @@
 //! driver must flush after each telegram.
 //!
 //! Facts about the line a port leads to, for the shells that run stations
-//! on it: [`Port::is_pty`], [`Port::default_latency`] and
-//! [`Port::may_gather`].
+//! on it: [`Port::is_pty`], [`Port::default_latency`],
+//! [`Port::whole_telegrams`] and [`Port::may_gather`].
 //!
 //! [`doctor`] checks what can be checked about a port (8E1, baud rates,
 //! an FTDI latency timer, RS-485 mode, slot time against latency).
@@ -334,24 +334,38 @@ impl Port {
         self.pty
     }
 
-    /// The latency allowance to add to slot times and token timeouts when
-    /// the user gives none. USB serial adapters buffer for up to 16 ms
-    /// (the FTDI latency timer): 20 ms. A pty answers within a millisecond
-    /// even on a loaded machine, but a paced `dpctl bus` hands a reply over
-    /// only when its last character has crossed the wire: 5 ms plus the
-    /// wire time of the longest telegram (255 characters) at the port's
-    /// rate (2 ms at 1.5 Mbit/s, 146 ms at 19.2 kbit/s). A serial device
-    /// server collects the characters of its line into packets and adds
-    /// the network's delay both ways: 20 ms, as for a USB adapter.
+    /// The transport's latency, the allowance to add to slot times and
+    /// token timeouts when the user gives none
+    /// ([`crate::station::active::ActiveConfig::latency_allowance`]). USB
+    /// serial adapters buffer for up to 16 ms (the FTDI latency timer):
+    /// 20 ms. A pty answers within a millisecond even on a loaded machine:
+    /// 5 ms. A serial device server collects the characters of its line
+    /// into packets and adds the network's delay both ways: 20 ms, as for
+    /// a USB adapter.
+    ///
+    /// The wire time of a reply that a paced `dpctl bus` (or a device
+    /// server) hands over only once complete is not part of it: see
+    /// [`Port::whole_telegrams`]; each request allows for its own longest
+    /// answer. So `dpctl scan` of all 126 addresses of a `dpctl bus` at
+    /// 19.2 kbit/s takes 5.2 s (2026-11-28; 41 s when this allowance held
+    /// the wire time of the longest telegram, 146 ms at that rate).
     pub fn default_latency(&self) -> Duration {
         if self.pty {
             Duration::from_millis(5)
-                + self
-                    .baud
-                    .chars_to_duration(crate::wire::consts::MAX_TELEGRAM_LEN as u64)
         } else {
             Duration::from_millis(20)
         }
+    }
+
+    /// Whether the port may hand over each telegram only once its last
+    /// character has crossed the wire, so that an answer's first character
+    /// comes its whole wire time late
+    /// ([`crate::station::active::ActiveConfig::whole_telegrams`]): true on
+    /// a pty (a paced `dpctl bus` does so) and on a TCP serial device
+    /// server (which packs a telegram into one packet); false on a serial
+    /// port, whose characters come as they arrive.
+    pub fn whole_telegrams(&self) -> bool {
+        self.pty || self.is_tcp()
     }
 
     /// Whether telegrams may be gathered into one write
@@ -574,10 +588,6 @@ mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-    fn consts_max() -> usize {
-        crate::wire::consts::MAX_TELEGRAM_LEN
-    }
-
     #[tokio::test]
     async fn pty_pair_carries_bytes_raw() {
         let (mut a, mut b) = Port::pty_pair(Baud::B12000000).unwrap();
@@ -626,9 +636,8 @@ mod tests {
         drop(pty.slave);
         let path = path.to_str().unwrap();
         let mut port = Port::open(path, Baud::B9600).unwrap();
-        assert!(port.is_pty() && port.may_gather());
-        let longest = Baud::B9600.chars_to_duration(consts_max() as u64);
-        assert_eq!(port.default_latency(), Duration::from_millis(5) + longest);
+        assert!(port.is_pty() && port.may_gather() && port.whole_telegrams());
+        assert_eq!(port.default_latency(), Duration::from_millis(5));
         for b in Baud::ALL {
             port.set_baud(b).unwrap();
             assert_eq!(port.baud(), b);
@@ -656,6 +665,7 @@ mod tests {
         let mut port = Port::open(&path, Baud::B1500000).unwrap();
         let (mut server, _) = listener.accept().await.unwrap();
         assert!(port.is_tcp() && !port.is_pty() && !port.may_gather());
+        assert!(port.whole_telegrams());
         assert_eq!(port.name(), path);
         assert_eq!(port.default_latency(), Duration::from_millis(20));
         port.set_baud(Baud::B19200).unwrap();
