@@ -10,8 +10,9 @@ use std::time::Duration;
 /// Line options of every command that runs a station.
 #[derive(clap::Args, Debug, Clone)]
 pub struct LineArgs {
-    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link),
-    /// or tcp://HOST:PORT (RS-485 serial device server in raw TCP mode).
+    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link:
+    /// waited for up to 10 s if not made yet), or tcp://HOST:PORT (RS-485
+    /// serial device server in raw TCP mode).
     #[arg(long, value_name = "PATH")]
     pub port: String,
     /// Baud rate: 9600 … 12000000, or 1.5M, 187.5k, … (on a pty the rate

@@ -170,7 +170,8 @@ pub enum EmulationError {
     Profile {
         /// The profile.
         name: &'static str,
-        /// Why.
+        /// Why (in the message, not also the error's source, so that a
+        /// printed chain says it once).
         error: ProfileError,
     },
     /// The generic device or the options are refused.

@@ -152,7 +152,7 @@ mod tests {
         o.set_pair("speed=3").unwrap();
         assert!(matches!(
             entry.configure(&o, None),
-            Err(ProfileError::Options(_))
+            Err(ProfileError::UnknownOption { .. })
         ));
     }
 }

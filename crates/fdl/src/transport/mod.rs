@@ -16,6 +16,10 @@
 //! the bus timing, and RTS control is the server's business (asking for
 //! it is a [`TransportError::Rts`]). See [`Port::is_tcp`].
 //!
+//! A path that does not exist yet but may be a pty link on its way (see
+//! [`PATH_WAIT`]) is waited for: a station started right after `dpctl
+//! bus` or `socat`, as in a script, finds its link once they have made it.
+//!
 //! Framing never depends on inter-character timing: wrap the port in
 //! `tokio_util::codec::Framed` with [`crate::FdlCodec`].
 //!
@@ -51,6 +55,7 @@ use mio_serial::SerialStream;
 use std::future::Future;
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
+use std::path::Path;
 use std::pin::Pin;
 use std::task::{ready, Context, Poll};
 use std::time::Duration;
@@ -171,6 +176,50 @@ pub const TCP_SCHEME: &str = "tcp://";
 /// connection.
 pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long [`Port::open`] waits for a path that does not exist yet when
+/// it may be a pty link still being made (`dpctl bus --link`, `socat
+/// pty,link=…`, started a moment before): the path is not under `/dev`
+/// (device nodes there come from the kernel, and a missing adapter does
+/// not appear by waiting) and its directory exists. The wait is logged as
+/// one warning line; a path that does not appear in time fails with
+/// [`TransportError::Open`] saying so.
+pub const PATH_WAIT: Duration = Duration::from_secs(10);
+
+/// How often a path waited for is looked for.
+const PATH_POLL: Duration = Duration::from_millis(10);
+
+/// Wait up to `limit` for `path` when it does not exist yet and may be a
+/// link on its way (see [`PATH_WAIT`]); blocks the calling thread.
+/// Returns at once when the path exists or cannot appear this way (the
+/// open that follows then says why it fails).
+fn wait_for_path(path: &Path, limit: Duration) -> io::Result<()> {
+    // `metadata` follows links: a link made before its pty is not there yet.
+    let missing = |p: &Path| matches!(p.metadata(), Err(e) if e.kind() == io::ErrorKind::NotFound);
+    let may_appear = !path.starts_with("/dev")
+        && path
+            .parent()
+            .is_some_and(|d| d.as_os_str().is_empty() || d.is_dir());
+    if !missing(path) || !may_appear {
+        return Ok(());
+    }
+    tracing::warn!(
+        "{} does not exist yet: waiting up to {} s for it",
+        path.display(),
+        limit.as_secs()
+    );
+    let end = std::time::Instant::now() + limit;
+    while missing(path) {
+        if std::time::Instant::now() >= end {
+            return Err(io::Error::new(
+                io::ErrorKind::NotFound,
+                format!("no such file, also after waiting {} s", limit.as_secs()),
+            ));
+        }
+        std::thread::sleep(PATH_POLL);
+    }
+    Ok(())
+}
+
 /// An async byte stream to an FDL medium; see the module docs.
 ///
 /// I/O: the descriptor is registered with the runtime for readability
@@ -199,7 +248,8 @@ pub struct Port {
 }
 
 impl Port {
-    /// Open `path` at `baud`, 8E1, raw, without RTS control.
+    /// Open `path` at `baud`, 8E1, raw, without RTS control (a path that
+    /// is not there yet is waited for: [`PATH_WAIT`]).
     pub fn open(path: &str, baud: Baud) -> Result<Port, TransportError> {
         Self::open_with(path, PortOptions::new(baud))
     }
@@ -218,7 +268,9 @@ impl Port {
         }
     }
 
-    /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
+    /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`). A tty
+    /// path that does not exist yet is waited for up to [`PATH_WAIT`]
+    /// when it may be a pty link being made (blocking the thread).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
         let open_err = |error| TransportError::Open {
             path: path.to_string(),
@@ -227,6 +279,7 @@ impl Port {
         if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
             return Self::open_tcp(path, addr, opts);
         }
+        wait_for_path(Path::new(path), PATH_WAIT).map_err(open_err)?;
         // Open at a standard rate first so that a refused PROFIBUS rate is
         // reported as such, not as a failure to open.
         let builder = tokio_serial::new(path, 9600)
@@ -707,5 +760,90 @@ mod tests {
     async fn open_errors_name_the_path() {
         let e = Port::open("/nonexistent/tty", Baud::B19200).unwrap_err();
         assert!(e.to_string().contains("/nonexistent/tty"), "{e}");
+    }
+
+    /// The lines a `tracing` subscriber writes, one message per write.
+    struct LogLines(std::sync::mpsc::Sender<String>);
+
+    impl io::Write for LogLines {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            let _ = self.0.send(String::from_utf8_lossy(buf).into_owned());
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// `Port::open(path)` on a thread of its own (with a runtime), its
+    /// log lines sent to the returned receiver as they are written.
+    fn open_on_a_thread(
+        path: &Path,
+    ) -> (
+        std::sync::mpsc::Receiver<String>,
+        std::thread::JoinHandle<Result<String, TransportError>>,
+    ) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let path = path.to_str().unwrap().to_string();
+        let opener = std::thread::spawn(move || {
+            let logs = tracing_subscriber::fmt()
+                .with_writer(move || LogLines(tx.clone()))
+                .with_ansi(false)
+                .finish();
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_io()
+                .build()
+                .unwrap();
+            let _rt = rt.enter();
+            tracing::subscriber::with_default(logs, || {
+                Port::open(&path, Baud::B19200).map(|p| p.name().to_string())
+            })
+        });
+        (rx, opener)
+    }
+
+    /// A station started before `dpctl bus` or socat has made its link
+    /// (a script, the README's tour) waits for the link, says so in one
+    /// line, and opens it once it is there.
+    #[test]
+    fn a_link_that_does_not_exist_yet_is_waited_for() {
+        let dir = tempfile::tempdir().unwrap();
+        let link = dir.path().join("pb1");
+        let (log, opener) = open_on_a_thread(&link);
+        // The event: the opener says that it waits (or it has failed).
+        let said = log.recv_timeout(Duration::from_secs(60));
+        let Ok(said) = said else {
+            panic!("open did not wait: {:?}", opener.join().unwrap().err());
+        };
+        assert!(
+            said.contains(&format!("{} does not exist yet", link.display()))
+                && said.contains("waiting up to 10 s"),
+            "{said}"
+        );
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let tty = nix::unistd::ttyname(&pty.slave).unwrap();
+        std::os::unix::fs::symlink(&tty, &link).unwrap();
+        let opened = opener.join().unwrap().unwrap();
+        assert_eq!(opened, link.to_str().unwrap());
+        let more: Vec<String> = log.try_iter().collect();
+        assert!(more.is_empty(), "one line only: {more:?}");
+    }
+
+    /// Nothing is waited for where no link can be on its way: a device
+    /// node under /dev, a path in a directory that does not exist. A path
+    /// that stays missing fails naming the wait.
+    #[test]
+    fn only_a_path_that_may_appear_is_waited_for() {
+        for path in ["/dev/ttyNOPE9", "/nonexistent/dir/tty"] {
+            let (log, opener) = open_on_a_thread(Path::new(path));
+            let e = opener.join().unwrap().unwrap_err();
+            assert!(e.to_string().starts_with(&format!("cannot open {path}: ")));
+            let lines: Vec<String> = log.try_iter().collect();
+            assert!(lines.is_empty(), "{path}: {lines:?}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let e = wait_for_path(&dir.path().join("never"), Duration::ZERO).unwrap_err();
+        assert_eq!(e.to_string(), "no such file, also after waiting 0 s");
+        wait_for_path(dir.path(), Duration::ZERO).unwrap();
     }
 }
