@@ -17,7 +17,8 @@ use std::fmt;
 /// A [`MasterEvent`] together with what it refers to: the diagnosis in
 /// words, a job's result. Built with [`MasterReport::new`] right after
 /// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
-/// `diag`, `fault`, `job`, `ring`) and the slave's address as `slave`.
+/// `diag`, `fault`, `job`, `ring`, `duplicate_address`) and the slave's
+/// address as `slave`.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -69,6 +70,12 @@ pub enum MasterReport {
         /// result was taken already).
         result: String,
     },
+    /// Answers from one address keep arriving garbled or twice: possibly
+    /// two stations at that address ([`FdlEvent::DuplicateAddress`]).
+    DuplicateAddress {
+        /// Station address.
+        slave: u8,
+    },
     /// The token ring changed.
     Ring {
         /// What happened (serialised in words).
@@ -116,6 +123,9 @@ impl MasterReport {
                     result,
                 }
             }
+            MasterEvent::Ring(FdlEvent::DuplicateAddress(slave)) => {
+                MasterReport::DuplicateAddress { slave }
+            }
             MasterEvent::Ring(what) => MasterReport::Ring { what },
         }
     }
@@ -131,6 +141,10 @@ impl fmt::Display for MasterReport {
                 write!(f, "slave {slave} diagnosis: {}", words.join("; "))
             }
             MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
+            MasterReport::DuplicateAddress { slave } => write!(
+                f,
+                "possible duplicate address {slave}: its answers arrive garbled or twice"
+            ),
             MasterReport::Job { id, data, result } => {
                 write!(f, "job {id}: {result}")?;
                 if let Some(d) = data {
