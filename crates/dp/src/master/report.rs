@@ -220,8 +220,14 @@ impl fmt::Display for MasterStatus {
         let c = &self.cycle_us;
         write!(
             f,
-            "master {} at {}  {:?}  cycles {}  cycle min/avg/max {}/{}/{} µs",
-            self.address, self.baud, self.operating, self.cycles, c.min, c.avg, c.max
+            "master {} at {}  {}  cycles {}  cycle min/avg/max {}/{}/{} µs",
+            self.address,
+            self.baud,
+            self.operating.as_str(),
+            self.cycles,
+            c.min,
+            c.avg,
+            c.max
         )
     }
 }
