@@ -463,8 +463,8 @@ fn main() {
         return;
     }
     let dpctl = dpctl();
-    let dir = std::env::temp_dir().join(format!("dpctl-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
 
     // Three rounds, each path in turn, so that all see the same load;
     // medians reported. `DP_MASTER_ROUNDS=N` changes the number of rounds.

@@ -351,12 +351,10 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(if quick { 2000 } else { 50_000 });
-    let dir: PathBuf =
-        std::env::temp_dir().join(format!("dpctl-turnaround-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir: PathBuf = tmp.path().to_path_buf();
     println!("slave turnaround, {cycles} Data_Exchange cycles, {IO} bytes each way");
     in_process(cycles * 4);
     over_socat(cycles, &dir);
     raw_pty_echo(cycles, &dir);
-    let _ = std::fs::remove_dir_all(&dir);
 }

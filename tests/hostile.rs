@@ -17,7 +17,7 @@ use profibus::dp::busfile::BusFile;
 use profibus::dp::gsd::{Gsd, ParseOptions, MAX_FILE_LEN};
 use profibus_gateway::core::{Gateway, SlaveInfo};
 use profibus_gateway::settings::MqttSettings;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -66,12 +66,12 @@ fn bounded_by<T>(mem: u64, what: &str, f: impl FnOnce() -> T) -> T {
     r
 }
 
-/// A fresh directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("hostile-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory for one test, removed on drop.
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("hostile-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// A 50 MB file that takes no disk space (sparse, all zero bytes).
@@ -105,7 +105,8 @@ const BUS_HEAD: &str = "[master]\naddress = 2\nbaud = \"1.5M\"\n\n";
 #[test]
 fn gsd_files_huge_endless_binary_nested() {
     let _g = serial();
-    let d = scratch("gsd");
+    let tmp = scratch("gsd");
+    let d = tmp.path();
     let big = d.join("big.gsd");
     sparse(&big);
     let e = bounded("50 MB GSD", || Gsd::from_file(&big, ParseOptions::LENIENT)).unwrap_err();
@@ -186,13 +187,13 @@ fn gsd_files_huge_endless_binary_nested() {
         "{:?}",
         p.warnings.iter().take(3).collect::<Vec<_>>()
     );
-    std::fs::remove_dir_all(&d).unwrap();
 }
 
 #[test]
 fn bus_files_huge_endless_binary_not_utf8_nested() {
     let _g = serial();
-    let d = scratch("bus");
+    let tmp = scratch("bus");
+    let d = tmp.path();
     let big = d.join("big.toml");
     sparse(&big);
     let e = bounded("50 MB bus file", || BusFile::load(&big)).unwrap_err();
@@ -258,7 +259,6 @@ fn bus_files_huge_endless_binary_not_utf8_nested() {
     std::fs::write(&f, text).unwrap();
     let e = bounded_by(MEM_PARSE, "1 MB of slaves", || ProfiledBus::load(&f)).unwrap_err();
     contains(e, &["many.toml:", "a second slave with address 8"]);
-    std::fs::remove_dir_all(&d).unwrap();
 }
 
 /// Configure profile `device` with its option `key` naming `file`.
@@ -275,7 +275,8 @@ fn configure(device: &str, key: &str, file: &Path) -> Result<(), String> {
 #[test]
 fn terminal_and_tag_files_huge_endless_binary_nested() {
     let _g = serial();
-    let d = scratch("tables");
+    let tmp = scratch("tables");
+    let d = tmp.path();
     let big = d.join("big.txt");
     sparse(&big);
     let bin = d.join("binary.txt");
@@ -336,7 +337,6 @@ fn terminal_and_tag_files_huge_endless_binary_nested() {
     std::fs::write(&f, text).unwrap();
     let e = bounded_by(MEM_PARSE, "1 MB of tags", || configure("rfid", "tags", &f)).unwrap_err();
     contains(e, &["many-tags.toml", "a tags file may list at most 1024"]);
-    std::fs::remove_dir_all(&d).unwrap();
 }
 
 /// A gateway with slave 8 (4 output bytes) writable, and its answers.

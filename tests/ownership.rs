@@ -117,6 +117,7 @@ impl MasterApp for Rogue {
             dsap: *dsap,
             ssap: dsap.map(|_| 62),
             data,
+            max_reply_len: None,
         })
     }
 

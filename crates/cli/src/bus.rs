@@ -75,7 +75,8 @@ pub fn run(args: Args) -> Result<()> {
         hub.record(Box::new(BufWriter::new(f)), epoch)?;
     }
     {
-        let mut out = std::io::stdout().lock();
+        // A closed output ends the bus quietly (`crate::out`).
+        let mut out = crate::out::stdout();
         for (link, tty) in hub.links() {
             writeln!(out, "{} -> {}", link.display(), tty.display())?;
         }

@@ -1,6 +1,7 @@
 //! What several subcommands share: the runtime, shutdown signals, opening
 //! a port with the line options every station command takes.
 
+use crate::out::outln;
 use anyhow::{Context, Result};
 use profibus_fdl::transport::{Port, PortOptions, RtsControl, TransportError};
 use profibus_fdl::Baud;
@@ -9,8 +10,9 @@ use std::time::Duration;
 /// Line options of every command that runs a station.
 #[derive(clap::Args, Debug, Clone)]
 pub struct LineArgs {
-    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link),
-    /// or tcp://HOST:PORT (RS-485 serial device server in raw TCP mode).
+    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link:
+    /// waited for up to 10 s if not made yet), or tcp://HOST:PORT (RS-485
+    /// serial device server in raw TCP mode).
     #[arg(long, value_name = "PATH")]
     pub port: String,
     /// Baud rate: 9600 … 12000000, or 1.5M, 187.5k, … (on a pty the rate
@@ -105,11 +107,11 @@ impl SlaveArgs {
         E: serde::Serialize + std::fmt::Display,
     {
         match outcome {
-            Ok(a) if self.json => println!("{}", json_line(&a)),
-            Ok(a) => println!("{a}"),
+            Ok(a) if self.json => outln!("{}", json_line(&a))?,
+            Ok(a) => outln!("{a}")?,
             Err(r) => {
                 if self.json {
-                    println!("{}", json_line(&r));
+                    outln!("{}", json_line(&r))?;
                 }
                 anyhow::bail!("{r}")
             }
@@ -199,8 +201,22 @@ pub fn master_station(
     use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
     let port_ = rts.open(port, bus.master.params.baud)?;
     let mut cfg = ActiveConfig::new(bus.master.address, bus.master.params);
-    cfg.latency_allowance = latency(latency_ms, &port_)?;
+    allow_for_port(&mut cfg, latency_ms, &port_)?;
     Ok((ActiveStation::new(cfg, dp), port_))
+}
+
+/// Fit an active station's timeouts to its port: the latency from
+/// `--latency MS` (see [`latency`]) and whether the port hands over whole
+/// telegrams ([`Port::whole_telegrams`]; then each request's wait allows
+/// for the wire time of its longest answer).
+pub fn allow_for_port(
+    cfg: &mut profibus_fdl::station::active::ActiveConfig,
+    latency_ms: Option<f64>,
+    port: &Port,
+) -> Result<()> {
+    cfg.latency_allowance = latency(latency_ms, port)?;
+    cfg.whole_telegrams = port.whole_telegrams();
+    Ok(())
 }
 
 /// Driver options: busy polling for `busy_poll_us` µs after each event;
@@ -234,8 +250,8 @@ pub fn runtime() -> Result<tokio::runtime::Runtime> {
     Ok(rt)
 }
 
-/// Set once SIGINT or SIGTERM arrived.
-static STOP: std::sync::OnceLock<tokio::sync::watch::Receiver<bool>> = std::sync::OnceLock::new();
+/// Set once SIGINT or SIGTERM arrived, or [`request_stop`] was called.
+static STOP: std::sync::OnceLock<tokio::sync::watch::Sender<bool>> = std::sync::OnceLock::new();
 
 /// Catch SIGINT and SIGTERM from now on, before the command prints
 /// anything: a signal that arrives at any later moment stops the command
@@ -245,30 +261,39 @@ fn install_shutdown(rt: &tokio::runtime::Runtime) -> std::io::Result<()> {
     let _guard = rt.enter();
     let mut int = signal(SignalKind::interrupt())?;
     let mut term = signal(SignalKind::terminate())?;
-    let (tx, rx) = tokio::sync::watch::channel(false);
+    let _ = STOP.set(tokio::sync::watch::Sender::new(false));
     rt.spawn(async move {
         tokio::select! {
             _ = int.recv() => {}
             _ = term.recv() => {}
         }
-        let _ = tx.send(true);
+        request_stop();
     });
-    let _ = STOP.set(rx);
     Ok(())
 }
 
-/// Whether SIGINT or SIGTERM has arrived, without waiting.
-pub fn stop_requested() -> bool {
-    STOP.get().is_some_and(|rx| *rx.borrow())
+/// Stop the command as SIGTERM would (its [`shutdown`] completes): for
+/// a standard output nobody reads any more ([`crate::out::Closed`]).
+pub fn request_stop() {
+    if let Some(tx) = STOP.get() {
+        tx.send_replace(true);
+    }
 }
 
-/// Completes once SIGINT (Ctrl-C) or SIGTERM has arrived (also when it
-/// arrived before this was called).
+/// Whether SIGINT or SIGTERM has arrived (or [`request_stop`] was
+/// called), without waiting.
+pub fn stop_requested() -> bool {
+    STOP.get().is_some_and(|tx| *tx.borrow())
+}
+
+/// Completes once SIGINT (Ctrl-C) or SIGTERM has arrived, or
+/// [`request_stop`] was called (also when that happened before this was
+/// called).
 pub async fn shutdown() {
-    let Some(rx) = STOP.get() else {
+    let Some(tx) = STOP.get() else {
         return std::future::pending().await;
     };
-    let mut rx = rx.clone();
+    let mut rx = tx.subscribe();
     if rx.wait_for(|&stop| stop).await.is_err() {
         std::future::pending::<()>().await;
     }

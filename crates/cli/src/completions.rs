@@ -28,8 +28,12 @@ pub struct ManArgs {
 /// Print the completion script for `args.shell` on stdout.
 pub fn run(args: Args) -> Result<()> {
     let mut cmd = crate::Cli::command();
-    let mut out = std::io::stdout().lock();
-    clap_complete::generate(args.shell, &mut cmd, "dpctl", &mut out);
+    // clap_complete panics on a failed write: it writes into memory, and
+    // standard output gets the whole script (a closed one is `Closed`).
+    let mut script = Vec::new();
+    clap_complete::generate(args.shell, &mut cmd, "dpctl", &mut script);
+    let mut out = crate::out::stdout();
+    out.write_all(&script)?;
     out.flush()?;
     Ok(())
 }
@@ -45,7 +49,7 @@ pub fn man(args: ManArgs) -> Result<()> {
                 .with_context(|| format!("writing man pages into {}", dir.display()))?;
         }
         None => {
-            let mut out = std::io::stdout().lock();
+            let mut out = crate::out::stdout();
             clap_mangen::Man::new(cmd).render(&mut out)?;
             out.flush()?;
         }

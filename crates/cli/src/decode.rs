@@ -1,6 +1,7 @@
 //! `dpctl decode HEX...`: decode telegram bytes.
 
 use crate::common;
+use crate::out::outln;
 use profibus_dp::describe::summaries;
 
 /// Decode one or more telegrams given as hex bytes.
@@ -25,9 +26,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for summary in summaries(&bytes) {
         let summary = summary?;
         if args.json {
-            println!("{}", common::json_line(&summary));
+            outln!("{}", common::json_line(&summary))?;
         } else {
-            println!("{summary}");
+            outln!("{summary}")?;
         }
     }
     Ok(())

@@ -128,9 +128,9 @@ async fn demo(args: Args) -> Result<()> {
     view.status(m, &info, BAUD, now, true);
     let summary = plant.summary();
     if args.json {
-        println!("{}", common::json_line(&Line::new("summary", &summary, "")));
+        crate::out::outln!("{}", common::json_line(&Line::new("summary", &summary, "")))?;
     } else {
-        println!("{summary}");
+        crate::out::outln!("{summary}")?;
     }
     if let Some(mut w) = pcap.borrow_mut().take() {
         w.flush()?;

@@ -42,9 +42,9 @@ pub fn run(args: Args) -> Result<()> {
     };
     let report = diagnose(&args.port, &options);
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        crate::out::outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        println!("{report}");
+        crate::out::outln!("{report}")?;
     }
     if report.failed() {
         bail!("{} is not fit for PROFIBUS (see above)", args.port);

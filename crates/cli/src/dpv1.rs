@@ -9,7 +9,7 @@
 
 use crate::common;
 use anyhow::{bail, Context, Result};
-use profibus_dp::busfile::BusFile;
+use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::{RecordTask, TaskRun};
 
 /// Read or write a DP-V1 data record (slot, index) of a slave.
@@ -46,7 +46,9 @@ enum Op {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let bus = BusFile::load(&args.link.config)?;
+    // Like every command taking --config: `device = …` slaves resolved
+    // by the profile registry.
+    let bus = ProfiledBus::load(&args.link.config)?.file;
     let addr = args.link.slave;
     if !args.link.slave_of(&bus)?.params.dpv1 {
         bail!("slave {addr} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)");

@@ -1,6 +1,7 @@
 //! `dpctl gsd show FILE` and `dpctl gsd check FILE`: what a GSD file
 //! describes, and what is wrong with it.
 
+use crate::out::{out, outln};
 use anyhow::bail;
 use profibus_dp::gsd::{FileDiagnostic, Gsd, GsdCheck, GsdSummary, ParseOptions};
 use std::path::PathBuf;
@@ -81,9 +82,9 @@ fn show(a: ShowArgs) -> anyhow::Result<()> {
         parsed: &parsed,
     };
     if a.json {
-        println!("{}", crate::common::json_line(&summary));
+        outln!("{}", crate::common::json_line(&summary))?;
     } else {
-        print!("{summary}");
+        out!("{summary}")?;
     }
     Ok(())
 }
@@ -92,15 +93,15 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     let check = GsdCheck::of_file(&a.file, opts(a.strict));
     for fd in check.lines() {
         match a.json {
-            true => println!("{}", crate::common::json_line(&fd)),
-            false => println!("{fd}"),
+            true => outln!("{}", crate::common::json_line(&fd))?,
+            false => outln!("{fd}")?,
         }
     }
     if !check.ok() {
         bail!("{check}");
     }
     if !a.json {
-        println!("{check}");
+        outln!("{check}")?;
     }
     Ok(())
 }

@@ -2,7 +2,9 @@
 //! arguments, builds library objects, runs them and prints.
 //!
 //! Exit status: 0 success, 2 usage error, 1 any other failure with a
-//! one-line reason on stderr.
+//! one-line reason on stderr. A standard output whose reader went away
+//! (`dpctl … | head -1`) ends the command quietly with status 0
+//! ([`out`]).
 
 mod bus;
 mod common;
@@ -15,6 +17,7 @@ mod gateway;
 mod gsd;
 mod master;
 mod monitor;
+mod out;
 mod pkw;
 mod rfid;
 mod scan;
@@ -91,13 +94,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("DPCTL_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    logging();
     // Before any runtime starts a thread: its threads inherit the policy.
     if let Some(p) = cli.rt_priority {
         if let Err(e) = profibus_fdl::transport::realtime::set_fifo_priority(p) {
@@ -126,9 +123,53 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // Nobody reads the output any more: not a failure.
+        Err(e) if out::is_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("dpctl: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+/// Logs to stderr, filtered by `DPCTL_LOG` (default: warnings, and the
+/// MQTT gateway's connection lines). Colours only on a terminal, and
+/// never with `NO_COLOR` set to anything but the empty string
+/// (<https://no-color.org>).
+fn logging() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_env("DPCTL_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(colour(
+            std::io::stderr().is_terminal(),
+            std::env::var_os("NO_COLOR").as_deref(),
+        ))
+        .with_writer(std::io::stderr)
+        .init();
+}
+
+/// The log filter without `DPCTL_LOG`: warnings, and the gateway link's
+/// start-up, connected and reconnected lines.
+const DEFAULT_LOG: &str = "warn,profibus_gateway::link=info";
+
+/// Whether logs get ANSI colours: on a terminal, unless `NO_COLOR` is set
+/// and not empty.
+fn colour(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::colour;
+    use std::ffi::OsStr;
+
+    #[test]
+    fn colours_only_on_a_terminal_without_no_color() {
+        assert!(colour(true, None));
+        assert!(colour(true, Some(OsStr::new(""))));
+        assert!(!colour(true, Some(OsStr::new("1"))));
+        assert!(!colour(false, None));
     }
 }

@@ -38,8 +38,8 @@ pub fn run(args: Args) -> Result<()> {
     common::runtime()?.block_on(args.link.run_master(&bus, |m, now| run.tick(m, now)))?;
     for r in run.task().results() {
         match args.link.json {
-            true => println!("{}", common::json_line(r)),
-            false => print!("{r}"),
+            true => crate::out::outln!("{}", common::json_line(r))?,
+            false => crate::out::out!("{r}")?,
         }
     }
     match run.finish()?.failure() {

@@ -33,7 +33,7 @@ pub fn run(args: Args) -> Result<()> {
 async fn scan(args: Args) -> Result<()> {
     let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(args.line.baud));
     let mut port = args.line.open()?;
-    cfg.latency_allowance = common::latency(args.line.latency, &port)?;
+    common::allow_for_port(&mut cfg, args.line.latency, &port)?;
     let mut station = ActiveStation::new(cfg, LiveListScan::new(args.addr));
     let limit = Duration::from_secs_f64(args.timeout.max(0.0));
     let deadline = tokio::time::sleep(limit);
@@ -71,9 +71,9 @@ async fn scan(args: Args) -> Result<()> {
     rows[1..].sort_by_key(|r| r.station.address);
     for row in rows {
         if args.json {
-            println!("{}", common::json_line(&row));
+            crate::out::outln!("{}", common::json_line(&row))?;
         } else {
-            println!("{row}");
+            crate::out::outln!("{row}")?;
         }
     }
     Ok(())

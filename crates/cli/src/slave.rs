@@ -87,8 +87,8 @@ fn emit(json: bool, now: Instant, e: &Emitted<'_>) {
         t: f64,
     }
     let t = now.as_nanos() as f64 / 1e9;
-    let mut out = std::io::stdout().lock();
-    let _ = if json {
+    let mut out = crate::out::stdout();
+    let printed = if json {
         let line = Timed {
             event: e,
             t: (t * 1e6).round() / 1e6,
@@ -97,12 +97,20 @@ fn emit(json: bool, now: Instant, e: &Emitted<'_>) {
     } else {
         writeln!(out, "[{t:>11.6}] {e}")
     };
-    let _ = out.flush();
+    // Nobody reads the output any more: stop as on SIGTERM.
+    if printed
+        .and_then(|()| out.flush())
+        .is_err_and(|e| crate::out::closed(&e))
+    {
+        crate::common::request_stop();
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.profile.list_devices {
-        PROFILES.iter().for_each(|p| println!("{p}"));
+        for p in PROFILES {
+            crate::out::outln!("{p}")?;
+        }
         return Ok(());
     }
     let rt = common::runtime()?;

@@ -68,7 +68,7 @@ struct Printer {
     json: bool,
     /// The live list on a terminal.
     live: Option<LiveSniff>,
-    out: BufWriter<std::io::Stdout>,
+    out: BufWriter<crate::out::Stdout>,
     pcap: Option<PcapWriter<BufWriter<File>>>,
 }
 
@@ -162,7 +162,7 @@ async fn sniff(args: Args) -> Result<()> {
     let mut printer = Printer {
         json: args.json,
         live,
-        out: BufWriter::new(std::io::stdout()),
+        out: BufWriter::new(crate::out::stdout()),
         pcap,
     };
     let mut port = port;
@@ -188,17 +188,20 @@ async fn sniff(args: Args) -> Result<()> {
     })
     .await;
     printer.live = None;
-    if let Some(e) = failure {
-        return Err(e);
-    }
     let stats = match &heard {
         Ok(s) => *s,
         Err(e) => e.stats,
     };
-    printer.summary(&stats)?;
+    // The pcap file is finished also when printing failed (a closed
+    // output, `crate::out::Closed`, ends the sniffer quietly).
+    let summary = match failure {
+        Some(e) => Err(e),
+        None => printer.summary(&stats),
+    };
     if let Some(p) = printer.pcap.take() {
         p.into_inner().context("writing the pcap file")?;
     }
+    summary?;
     heard
         .map(drop)
         .with_context(|| format!("reading {}", args.port))

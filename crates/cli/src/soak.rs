@@ -76,9 +76,9 @@ pub fn run(args: Args) -> Result<()> {
         )
     })?;
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        crate::out::outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!("{report}");
+        crate::out::out!("{report}")?;
     }
     if let Some(v) = report.violations.first() {
         bail!("soak failed: invariant broken: {v}");

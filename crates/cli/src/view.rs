@@ -4,6 +4,7 @@
 //! libraries' types (`Display` for text, `Serialize` for JSON):
 //! `MasterReport`, `profibus_tui::lines::StatusLine`, `MonitorStatus`.
 
+use crate::out::outln;
 use profibus_dp::master::{DpMaster, MasterReport};
 use profibus_fdl::{Baud, Instant};
 use profibus_tui::bus::BusView;
@@ -23,6 +24,8 @@ pub struct View {
     live: Option<LiveBus>,
     last_print: Option<Instant>,
     interval: Duration,
+    /// Standard output's reader went away.
+    closed: bool,
 }
 
 impl View {
@@ -33,6 +36,7 @@ impl View {
             live: None,
             last_print: None,
             interval,
+            closed: false,
         }
     }
 
@@ -73,13 +77,27 @@ impl View {
 
     /// Show an event: its JSON with `--json`, else its `Display` text
     /// (in the table's log on the terminal).
+    /// A closed standard output stops the command as SIGTERM would
+    /// ([`crate::common::request_stop`]); nothing more is printed.
     pub fn event<E: Serialize + Display + ?Sized>(&mut self, e: &E) {
-        if self.json {
-            println!("{}", crate::common::json_line(e));
+        if self.closed {
+            return;
+        }
+        let printed = if self.json {
+            outln!("{}", crate::common::json_line(e))
         } else if let Some(live) = &mut self.live {
             live.view_mut().log(e.to_string());
+            Ok(())
         } else {
-            println!("{e}");
+            outln!("{e}")
+        };
+        match printed {
+            Ok(()) => {}
+            Err(e) if crate::out::closed(&e) => {
+                self.closed = true;
+                crate::common::request_stop();
+            }
+            Err(e) => tracing::warn!("standard output: {e}"),
         }
     }
 

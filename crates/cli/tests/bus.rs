@@ -142,7 +142,8 @@ fn bad_arguments_exit_2_with_one_line() {
     std::fs::write(&file, b"precious").unwrap();
     let prefix = dir.path("st");
     let prefix = prefix.to_str().unwrap();
-    let two = ["bus", "--stations", "2", "--link", "/tmp/x"];
+    let other = dir.path("x");
+    let two = ["bus", "--stations", "2", "--link", other.to_str().unwrap()];
     for (args, expect) in [
         (
             vec!["bus", "--stations", "1", "--link", prefix],

@@ -319,8 +319,8 @@ fn omega_pkw_examples_of_the_manual() {
             &[
                 "Service data module",
                 "Status / control module",
-                "1 cycl. actual value",
-                "1 cycl. setpoint",
+                "1 cycl. actual value ( 2 AI)",
+                "1 cycl. setpoint ( 2 AO)",
             ],
         ),
     );
@@ -371,8 +371,8 @@ fn omega_configurations_a_b_c_give_the_same_layout() {
         &[
             "Service data module",
             "Status / control module",
-            "2 cycl. actual values",
-            "2 cycl. setpoints",
+            "2 cycl. actual values ( 4 AI)",
+            "2 cycl. setpoints ( 4 AO)",
         ],
         &["Data block 2 actual values / setpoints"],
     ];
@@ -411,7 +411,10 @@ fn omega_configurations_a_b_c_give_the_same_layout() {
     let gsd = omega_gsd(&r.dir);
     let bus = r.bus(
         "bad.toml",
-        &omega_bus(&gsd, &["Status / control module", "2 cycl. actual values"]),
+        &omega_bus(
+            &gsd,
+            &["Status / control module", "2 cycl. actual values ( 4 AI)"],
+        ),
     );
     // Start-up takes 4 poll cycles; retries on a busy machine add some,
     // and a slave that answered late is probed again only every 100 ms
@@ -495,8 +498,8 @@ fn pyprofibus_runs_both_profiles_into_data_exchange_with_pkw() {
         &[
             "Service data module",
             "Status / control module",
-            "1 cycl. actual value",
-            "1 cycl. setpoint",
+            "1 cycl. actual value ( 2 AI)",
+            "1 cycl. setpoint ( 2 AO)",
         ],
         (16, 16),
         "207F000000000004",

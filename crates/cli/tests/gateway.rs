@@ -538,3 +538,65 @@ fn gateway_over_tls_with_a_password() {
     let out = gw.finish(T);
     assert!(out.status.success(), "gateway failed: {}", out.stderr);
 }
+
+/// The gateway's own log at the default level: one line at the start,
+/// one on connecting and one on reconnecting after the broker came back
+/// (each with the broker's URL), one for the loss; SIGTERM ends it
+/// within a bound and logs no loss of the connection it closes.
+#[test]
+fn gateway_logs_its_connections_and_stops_promptly_on_sigterm() {
+    let dir = TempDir::new("gateway-log");
+    let bus = write_bus(&dir, &echo_bus_text(""));
+    let port = free_port();
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let mut mosq = broker(&dir, port);
+    let mut gw = Proc::spawn(
+        "dpctl gateway",
+        Command::new("sh")
+            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
+            .arg(dpctl())
+            .arg("gateway")
+            .arg("--config")
+            .arg(&bus)
+            .arg("--sim")
+            .args(["--mqtt", &url])
+            .env_remove("DPCTL_LOG")
+            .env_remove("NO_COLOR")
+            .stdout(Stdio::piped()),
+    );
+    let mut log = Lines::from(&mut gw);
+    let seen = |log: &mut Lines, what: &str| {
+        assert!(
+            log.wait_for(what, T),
+            "no `{what}` in the log:\n{}",
+            log.1.join("\n")
+        );
+    };
+    seen(&mut log, &format!("MQTT gateway starting: broker {url}"));
+    seen(&mut log, &format!("connected to the MQTT broker {url}"));
+    // The broker goes away and comes back.
+    mosq.signal(9);
+    mosq.wait(T);
+    seen(&mut log, &format!("MQTT connection to {url} lost"));
+    let _mosq = broker(&dir, port);
+    seen(&mut log, &format!("reconnected to the MQTT broker {url}"));
+
+    gw.signal(15);
+    let status = gw.wait(Duration::from_secs(10));
+    let lines = log.rest().to_vec();
+    assert!(status.success(), "{status}:\n{}", lines.join("\n"));
+    let count = |needle: &str| lines.iter().filter(|l| l.contains(needle)).count();
+    for (needle, n) in [
+        ("MQTT gateway starting", 1),
+        ("connected to the MQTT broker", 2),
+        ("reconnected to the MQTT broker", 1),
+        ("lost", 1),
+    ] {
+        assert_eq!(count(needle), n, "`{needle}`:\n{}", lines.join("\n"));
+    }
+    assert!(
+        !lines.iter().any(|l| l.contains('\x1b')),
+        "colour codes in a pipe:\n{}",
+        lines.join("\n")
+    );
+}

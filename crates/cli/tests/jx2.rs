@@ -247,6 +247,33 @@ write 12101 14
 goto ds
 ";
 
+/// `dpctl dpv1 --config` takes a bus file whose slave is a device
+/// profile (`device = "jx2"`, its default 4/4 words), as `master`, `pkw`
+/// and `rfid` do; it used to refuse it ("need a loader with the device
+/// registry").
+#[test]
+fn dpv1_takes_a_bus_file_with_a_device_profile() {
+    let mut j = start("jx2-device-bus", EXAMPLE_2);
+    j.expect(
+        "the address write",
+        |v| v["src"] == "script" && v["reg"] == 12107 && v["ok"] == true,
+        20,
+    );
+    let bus = j.dir.path("device.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 1\nbaud = \"1.5M\"\n[[slave]]\naddress = 3\ndevice = \"jx2\"\n\
+         watchdog_ms = 2000\n",
+    )
+    .unwrap();
+    let (ok, v, err) = j.dpv1(
+        &bus,
+        &["--slot", "1", "--index", "2", "read", "--length", "5"],
+    );
+    assert!(ok, "{err} {v}");
+    assert_eq!(v["data"], "11 22 33 44 55");
+}
+
 #[test]
 fn example_2_data_records_and_diagnosis_kinds() {
     let mut j = start("jx2-ex2", EXAMPLE_2);

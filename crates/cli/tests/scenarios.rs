@@ -552,6 +552,8 @@ fn the_token_holder_of_a_three_master_ring_is_killed() {
         let claimer = seen[claim].sa;
         let mut cfg = ActiveConfig::new(claimer, BusParams::defaults(Baud::B1500000));
         cfg.latency_allowance = Duration::from_secs_f64(LATENCY_MS / 1e3);
+        // As `dpctl master` on a pty (`Port::whole_telegrams`).
+        cfg.whole_telegrams = true;
         let tto_ms = cfg.token_lost_timeout().as_secs_f64() * 1e3;
         let silence_ms = (seen[claim].t - last) * 1e3;
         let back_ms = (passed.t - last) * 1e3;

@@ -287,6 +287,16 @@ fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     t.type_text("setpoint1=1234");
     t.keys(&["Enter"]);
     t.wait_for(&["setpoint1=1234"]);
+    // A short image is refused with the reason, as the gateway refuses
+    // it: written by position it would overwrite the drive's PKW header.
+    t.keys(&["w"]);
+    t.type_text("01 02");
+    t.keys(&["Enter"]);
+    let s = t.wait_for(&["not written: slave 25 has ", "the write has 2"]);
+    assert!(
+        s.contains("setpoint1=1234"),
+        "the drive's outputs changed:\n{s}"
+    );
 
     // Pause: the header says so and the cycle counter stands still.
     t.keys(&["p"]);

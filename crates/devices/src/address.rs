@@ -102,10 +102,9 @@ mod tests {
 
     #[test]
     fn round_trip_and_old_format() {
-        let dir = std::env::temp_dir().join(format!("dpctl-stored-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let path = dir.join("addr.toml");
-        let _ = std::fs::remove_file(&path);
         assert!(StoredAddress::load(&path).unwrap().is_none());
         let s = StoredAddress {
             address: 21,
@@ -129,6 +128,5 @@ mod tests {
         assert!(StoredAddress::load(&path).is_err());
         std::fs::write(&path, "address=126\n").unwrap();
         assert!(StoredAddress::load(&path).is_err());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -70,6 +70,23 @@ impl ChannelType {
     }
 }
 
+/// The type in words (`bit 3`, `signed 16-bit integer`, …), for
+/// messages.
+impl fmt::Display for ChannelType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ChannelType::Bool { bit } => write!(f, "bit {bit}"),
+            ChannelType::U8 => f.write_str("unsigned 8-bit integer"),
+            ChannelType::I8 => f.write_str("signed 8-bit integer"),
+            ChannelType::U16 => f.write_str("unsigned 16-bit integer"),
+            ChannelType::I16 => f.write_str("signed 16-bit integer"),
+            ChannelType::U32 => f.write_str("unsigned 32-bit integer"),
+            ChannelType::I32 => f.write_str("signed 32-bit integer"),
+            ChannelType::F32 => f.write_str("32-bit float"),
+        }
+    }
+}
+
 /// Byte order of a multi-byte channel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -155,7 +172,7 @@ pub enum ChannelError {
     #[error("no output channel `{0}`")]
     Unknown(String),
     /// The value does not fit the channel's type.
-    #[error("{value} does not fit channel `{name}` ({ty:?})")]
+    #[error("{value} does not fit channel `{name}` ({ty})")]
     OutOfRange {
         /// Channel.
         name: String,
@@ -398,6 +415,143 @@ impl ChannelMap {
     }
 }
 
+/// A write of a slave's outputs as a person or a client asks for it (the
+/// terminal view's `w`, MQTT `outputs/set`, `dpctl master`'s `"set"`
+/// lines): the whole output image, or named output channels. Every
+/// interface checks it with the same rule, [`OutputWrite::check`] and
+/// [`OutputWrite::apply`]: a part of the image is never written by
+/// position, so a short write cannot leave bytes the writer did not mean
+/// (a drive's PKW header in front of its process data) to chance.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OutputWrite {
+    /// The whole output image: exactly as many bytes as the slave has
+    /// outputs.
+    Image(Vec<u8>),
+    /// Named output channels; the rest of the image keeps its values.
+    Channels(Vec<(String, Value)>),
+}
+
+/// Why an [`OutputWrite`] was refused; nothing of it was written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OutputWriteError {
+    /// A whole image of another length than the slave's outputs.
+    #[error(
+        "slave {address} has {expected} output bytes, the write has {given}: \
+         give the whole image or named channels"
+    )]
+    Length {
+        /// Station address.
+        address: u8,
+        /// The slave's output bytes.
+        expected: usize,
+        /// Bytes given.
+        given: usize,
+    },
+    /// Channel names for a slave without named channels.
+    #[error("slave {0} has no named channels: give the whole image in hex")]
+    NoChannels(u8),
+    /// The writer may write only some named channels (a permission such
+    /// as `[mqtt] writable`), and asked for more or for the whole image.
+    #[error(
+        "slave {address}: only the output channels {} are writable",
+        names(allowed)
+    )]
+    ChannelsOnly {
+        /// Station address.
+        address: u8,
+        /// The channels that may be written.
+        allowed: Vec<String>,
+    },
+    /// A name that is no output channel, or a value that does not fit.
+    #[error("slave {address}: {error}")]
+    Channel {
+        /// Station address.
+        address: u8,
+        /// What is wrong (in the message; not also `source()`, so that
+        /// a printed error chain names it once).
+        error: ChannelError,
+    },
+}
+
+/// `a`, `b`, `c` as words: `` `a`, `b` and `c` ``.
+fn names(list: &[String]) -> String {
+    let quoted: Vec<String> = list.iter().map(|n| format!("`{n}`")).collect();
+    match quoted.split_last() {
+        None => "(none)".into(),
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+    }
+}
+
+impl OutputWrite {
+    /// Check the write to the slave at `address` as far as it can be
+    /// checked without its image: channel names need the slave's channels
+    /// (`map`) and must name output channels; with `allowed` (the only
+    /// channels this writer may write, `None`: all) the write must be
+    /// named channels among those.
+    pub fn check(
+        &self,
+        address: u8,
+        map: Option<&ChannelMap>,
+        allowed: Option<&[String]>,
+    ) -> Result<(), OutputWriteError> {
+        if let Some(allowed) = allowed {
+            let ok = match self {
+                OutputWrite::Image(_) => false,
+                OutputWrite::Channels(values) => values.iter().all(|(n, _)| allowed.contains(n)),
+            };
+            if !ok {
+                return Err(OutputWriteError::ChannelsOnly {
+                    address,
+                    allowed: allowed.to_vec(),
+                });
+            }
+        }
+        if let OutputWrite::Channels(values) = self {
+            let map = map.ok_or(OutputWriteError::NoChannels(address))?;
+            if let Some((n, _)) = values
+                .iter()
+                .find(|(n, _)| map.find(Direction::Output, n).is_none())
+            {
+                return Err(OutputWriteError::Channel {
+                    address,
+                    error: ChannelError::Unknown(n.clone()),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The slave's new output image: the write [checked](Self::check),
+    /// then applied to `current` (its output image now). A whole image
+    /// must have exactly `current.len()` bytes; every channel value must
+    /// fit its channel. All of it or nothing.
+    pub fn apply(
+        &self,
+        address: u8,
+        current: &[u8],
+        map: Option<&ChannelMap>,
+        allowed: Option<&[String]>,
+    ) -> Result<Vec<u8>, OutputWriteError> {
+        self.check(address, map, allowed)?;
+        match self {
+            OutputWrite::Image(b) if b.len() != current.len() => Err(OutputWriteError::Length {
+                address,
+                expected: current.len(),
+                given: b.len(),
+            }),
+            OutputWrite::Image(b) => Ok(b.clone()),
+            OutputWrite::Channels(values) => {
+                let map = map.ok_or(OutputWriteError::NoChannels(address))?;
+                let mut image = current.to_vec();
+                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), &mut image)
+                    .map_err(|error| OutputWriteError::Channel { address, error })?;
+                Ok(image)
+            }
+        }
+    }
+}
+
 /// The bus monitor decodes a profile's images with its channels.
 impl profibus_dp::monitor::ImageDecoder for ChannelMap {
     fn decode(
@@ -475,6 +629,91 @@ mod tests {
             .unwrap();
         assert_eq!(&img[..3], &[0, 0, 1]);
         assert_eq!(m.decode(Direction::Input, &img).count(), 0);
+    }
+
+    /// A drive's outputs: a 4-byte PKW header in front of one setpoint.
+    fn drive() -> ChannelMap {
+        let mut m = ChannelMap::new();
+        m.push("setpoint1", Direction::Output, 4, ChannelType::I16);
+        m.push("enable", Direction::Output, 6, ChannelType::Bool { bit: 0 });
+        m.push("actual1", Direction::Input, 4, ChannelType::I16);
+        m
+    }
+
+    #[test]
+    fn an_output_write_is_the_whole_image_or_named_channels() {
+        let (m, current) = (drive(), [0xAA, 0xBB, 0xCC, 0xDD, 0, 0, 0]);
+        let image = |b: &[u8]| OutputWrite::Image(b.to_vec());
+        let set = |n: &str, v| OutputWrite::Channels(vec![(n.to_string(), v)]);
+        // The whole image, exactly.
+        let whole = [1, 2, 3, 4, 5, 6, 7];
+        assert_eq!(
+            image(&whole).apply(25, &current, Some(&m), None),
+            Ok(whole.to_vec())
+        );
+        // A short image would overwrite the PKW header by position: refused.
+        let e = image(&[1, 2])
+            .apply(25, &current, Some(&m), None)
+            .unwrap_err();
+        assert_eq!(
+            e,
+            OutputWriteError::Length {
+                address: 25,
+                expected: 7,
+                given: 2
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "slave 25 has 7 output bytes, the write has 2: give the whole image or named channels"
+        );
+        assert!(image(&[0; 8]).apply(25, &current, Some(&m), None).is_err());
+        // A channel: the header stays.
+        assert_eq!(
+            set("setpoint1", Value::Int(-2)).apply(25, &current, Some(&m), None),
+            Ok(vec![0xAA, 0xBB, 0xCC, 0xDD, 0xFF, 0xFE, 0])
+        );
+        // Names need channels, output channels, values that fit.
+        let e = set("setpoint1", Value::Int(1)).apply(8, &[0; 7], None, None);
+        assert_eq!(e, Err(OutputWriteError::NoChannels(8)));
+        let e = set("actual1", Value::Int(1))
+            .check(25, Some(&m), None)
+            .unwrap_err();
+        assert_eq!(e.to_string(), "slave 25: no output channel `actual1`");
+        let e = set("setpoint1", Value::Int(40000))
+            .apply(25, &current, Some(&m), None)
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "slave 25: 40000 does not fit channel `setpoint1` (signed 16-bit integer)"
+        );
+        let e = set("enable", Value::Int(2)).apply(25, &current, Some(&m), None);
+        assert!(e.unwrap_err().to_string().ends_with("(bit 0)"));
+    }
+
+    #[test]
+    fn a_writer_limited_to_some_channels_writes_only_those() {
+        let (m, current) = (drive(), [0u8; 7]);
+        let allowed = ["setpoint1".to_string()];
+        let only = Some(&allowed[..]);
+        let set = |n: &str| OutputWrite::Channels(vec![(n.to_string(), Value::Int(1))]);
+        assert!(set("setpoint1").apply(25, &current, Some(&m), only).is_ok());
+        let refused = OutputWriteError::ChannelsOnly {
+            address: 25,
+            allowed: allowed.to_vec(),
+        };
+        assert_eq!(
+            set("enable").check(25, Some(&m), only),
+            Err(refused.clone())
+        );
+        let whole = OutputWrite::Image(vec![0; 7]);
+        assert_eq!(whole.check(25, Some(&m), only), Err(refused.clone()));
+        assert_eq!(
+            refused.to_string(),
+            "slave 25: only the output channels `setpoint1` are writable"
+        );
+        let two = ["a".to_string(), "b".into(), "c".into()];
+        assert_eq!(names(&two), "`a`, `b` and `c`");
     }
 }
 

@@ -23,20 +23,20 @@ pub enum ControlSource {
 #[derive(Debug, thiserror::Error)]
 pub enum ControlSourceError {
     /// The file cannot be opened.
-    #[error("cannot open {}: {source}", path.display())]
+    #[error("cannot open {}: {error}", path.display())]
     Open {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: io::Error,
+        error: io::Error,
     },
     /// The socket cannot be created.
-    #[error("cannot listen on {}: {source}", path.display())]
+    #[error("cannot listen on {}: {error}", path.display())]
     Listen {
         /// The socket.
         path: PathBuf,
         /// Why.
-        source: io::Error,
+        error: io::Error,
     },
 }
 
@@ -65,17 +65,17 @@ impl ControlSource {
         match self {
             ControlSource::Stdin => feed(tokio::io::stdin(), inbox),
             ControlSource::File(path) => {
-                let f = std::fs::File::open(path).map_err(|source| ControlSourceError::Open {
+                let f = std::fs::File::open(path).map_err(|error| ControlSourceError::Open {
                     path: path.clone(),
-                    source,
+                    error,
                 })?;
                 feed(tokio::fs::File::from_std(f), inbox);
             }
             ControlSource::Socket(path) => {
                 let _ = std::fs::remove_file(path);
-                let listen = |source| ControlSourceError::Listen {
+                let listen = |error| ControlSourceError::Listen {
                     path: path.clone(),
-                    source,
+                    error,
                 };
                 let listener = tokio::net::UnixListener::bind(path).map_err(listen)?;
                 tokio::spawn(async move {
@@ -109,9 +109,9 @@ pub fn lines_on_a_thread(
     let reader: Box<dyn io::Read + Send> = if src == "-" {
         Box::new(io::stdin())
     } else {
-        let f = std::fs::File::open(src).map_err(|source| ControlSourceError::Open {
+        let f = std::fs::File::open(src).map_err(|error| ControlSourceError::Open {
             path: src.into(),
-            source,
+            error,
         })?;
         Box::new(f)
     };
@@ -158,8 +158,8 @@ mod tests {
 
     #[tokio::test]
     async fn lines_from_a_socket_and_a_file_reach_the_inbox() {
-        let dir = std::env::temp_dir().join(format!("control-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let sock = dir.join("ctl.sock");
         let source = ControlSource::of(sock.to_str().unwrap());
         assert_eq!(source, ControlSource::Socket(sock.clone()));
@@ -187,6 +187,5 @@ mod tests {
         let missing = ControlSource::File(dir.join("missing"));
         let err = missing.spawn(inbox).unwrap_err().to_string();
         assert!(err.starts_with("cannot open "), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

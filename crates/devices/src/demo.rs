@@ -85,12 +85,12 @@ pub enum DemoError {
     #[error(transparent)]
     Profile(#[from] ProfileError),
     /// A generic device cannot be built from its GSD.
-    #[error("building {name}: {source}")]
+    #[error("building {name}: {error}")]
     Generic {
         /// The slave's name.
         name: String,
         /// Why.
-        source: GenericError,
+        error: GenericError,
     },
     /// A shipped GSD file does not parse.
     #[error(transparent)]
@@ -382,9 +382,9 @@ fn generic(
     inputs: InputPattern,
 ) -> Result<(DemoSlave, BoxedDevice), DemoError> {
     let dev = GenericDevice::from_gsd(gsd, modules)
-        .map_err(|source| DemoError::Generic {
+        .map_err(|error| DemoError::Generic {
             name: name.into(),
-            source,
+            error,
         })?
         .with_inputs(inputs);
     let slave = DemoSlave {

@@ -166,12 +166,13 @@ pub enum EmulationError {
     #[error("{0}; or use --gsd FILE")]
     UnknownProfile(ProfileError),
     /// The profile refused its options.
-    #[error("device `{name}`: {source}")]
+    #[error("device `{name}`: {error}")]
     Profile {
         /// The profile.
         name: &'static str,
-        /// Why.
-        source: ProfileError,
+        /// Why (in the message, not also the error's source, so that a
+        /// printed chain says it once).
+        error: ProfileError,
     },
     /// The generic device or the options are refused.
     #[error(transparent)]
@@ -247,7 +248,7 @@ impl ProfileArgs {
         match &self.device {
             Some(_) => EmulationError::Profile {
                 name: self.entry().map_or("", |e| e.name),
-                source: e,
+                error: e,
             },
             None => EmulationError::Plain(e),
         }
@@ -706,8 +707,8 @@ mod tests {
 
     #[test]
     fn the_shell_keeps_addresses_and_state_in_files() {
-        let dir = std::env::temp_dir().join(format!("emulation-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let shell = SlaveShell {
             runner: PassiveRunner::new(false, Default::default(), Default::default()),
             address_file: Some(dir.join("address")),
@@ -734,6 +735,5 @@ mod tests {
             std::fs::read_to_string(dir.join("state.toml")).unwrap(),
             "x = 1\n"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -173,9 +173,8 @@ impl GenericDevice {
         }
     }
 
-    /// The device a GSD file describes with the modules `modules` (names,
-    /// matched approximately; empty for a compact station's fixed
-    /// configuration): its ident number and features, the modules'
+    /// The device a GSD file describes with the modules `modules` (exact
+    /// names; empty for the file's default selection): its ident number and features, the modules'
     /// configuration, and the User_Prm_Data length and parameter ranges
     /// of that selection.
     pub fn from_gsd<S: AsRef<str>>(gsd: &Gsd, modules: &[S]) -> Result<Self, GenericError> {
@@ -430,8 +429,10 @@ impl Device for GenericDevice {
 pub struct GenericOptions {
     /// The GSD file (required).
     pub gsd: Option<PathBuf>,
-    /// Module names in slot order (matched approximately); none: the
-    /// file's fixed configuration.
+    /// Module names in slot order (exact names of the GSD's modules);
+    /// none: the file's default selection (a compact station's module,
+    /// a modular station's `Preset` modules), which a modular station
+    /// without `Preset` modules does not have.
     pub modules: Vec<String>,
     /// Accept known vendor quirks in the GSD file (as warnings).
     pub lenient: bool,
@@ -702,9 +703,9 @@ EndModule
         Gsd::parse(GSD, Default::default()).unwrap().gsd
     }
 
-    /// The device of [`GSD`] with the modules "2 words" and "1 byte in".
+    /// The device of [`GSD`] with the modules "2 words in/out" and "1 byte in".
     fn two_words_and_a_byte() -> GenericDevice {
-        GenericDevice::from_gsd(&gsd(), &["2 words", "1 byte in"]).unwrap()
+        GenericDevice::from_gsd(&gsd(), &["2 words in/out", "1 byte in"]).unwrap()
     }
 
     #[test]

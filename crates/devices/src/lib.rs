@@ -141,6 +141,7 @@ pub fn profile(name: &str) -> Result<&'static ProfileEntry, ProfileError> {
         .find(|p| p.name.eq_ignore_ascii_case(name))
         .ok_or_else(|| ProfileError::Unknown {
             name: name.to_string(),
+            suggestions: profibus_dp::names::DidYouMean::new(name, PROFILES.iter().map(|p| p.name)),
             available: PROFILES
                 .iter()
                 .map(|p| p.name)
@@ -208,6 +209,11 @@ mod tests {
             assert_eq!(PROFILES.iter().filter(|q| q.name == p.name).count(), 1);
         }
         assert!(matches!(profile("nope"), Err(ProfileError::Unknown { .. })));
+        let e = profile("omgea").unwrap_err().to_string();
+        assert!(
+            e.starts_with("no device profile `omgea`; did you mean `omega`? (available: "),
+            "{e}"
+        );
     }
 
     #[test]

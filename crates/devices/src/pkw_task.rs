@@ -484,7 +484,7 @@ mod tests {
     fn slave(ident: u16, cfg: Vec<u8>) -> BusSlave {
         BusSlave {
             params: SlaveParams::new(5, ident, cfg),
-            gsd_path: "<omega>".into(),
+            gsd_path: "the GSD of device `omega`".into(),
             device: None,
             gsd: Default::default(),
             modules: vec![],
@@ -509,7 +509,7 @@ mod tests {
         assert_eq!(e("P5[x]"), "bad array index in `P5[x]`");
         assert_eq!(
             e("speed"),
-            "`speed` is neither a parameter number nor a variable module of <omega>"
+            "`speed` is neither a parameter number nor a variable module of the GSD of device `omega`"
         );
     }
 

@@ -16,6 +16,7 @@ use crate::channels::ChannelMap;
 use crate::pkw::Dialect;
 use crate::BoxedDevice;
 use profibus_dp::gsd::Gsd;
+use profibus_dp::names::{field_names, DidYouMean};
 use serde::de::DeserializeOwned;
 use serde::Deserializer;
 use std::collections::VecDeque;
@@ -26,12 +27,30 @@ use std::sync::{Arc, Mutex};
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
     /// No profile has that name.
-    #[error("no device profile `{name}` (available: {available})")]
+    #[error("no device profile `{name}`{suggestions} (available: {available})")]
     Unknown {
         /// The name asked for.
         name: String,
+        /// The closest profile names.
+        suggestions: DidYouMean,
         /// The registered names.
         available: String,
+    },
+    /// The profile has no option of that name.
+    #[error("unknown option `{key}`{}", hint(key, valid))]
+    UnknownOption {
+        /// The key given.
+        key: String,
+        /// The profile's options.
+        valid: &'static [&'static str],
+    },
+    /// The value of an option is refused.
+    #[error("option `{key}`: {message}")]
+    BadOption {
+        /// The option.
+        key: &'static str,
+        /// What is wrong.
+        message: String,
     },
     /// The options do not fit the profile's options struct.
     #[error("options: {0}")]
@@ -76,6 +95,27 @@ pub enum ProfileError {
     /// The options contradict each other or the product.
     #[error("{0}")]
     Invalid(String),
+}
+
+/// `; did you mean …?` for `key` among `valid`, else the valid keys.
+fn hint(key: &str, valid: &[&str]) -> String {
+    let near = DidYouMean::new(key, valid.iter().copied());
+    if near.is_empty() {
+        format!(" (options: {})", valid.join(", "))
+    } else {
+        near.to_string()
+    }
+}
+
+impl ProfileError {
+    /// The option the error is about, if it is about one.
+    pub fn option(&self) -> Option<&str> {
+        match self {
+            ProfileError::UnknownOption { key, .. } => Some(key),
+            ProfileError::BadOption { key, .. } => Some(key),
+            _ => None,
+        }
+    }
 }
 
 /// Why a control command (a line of text for a running device, see
@@ -201,8 +241,18 @@ impl DeviceOptions {
         &self.0
     }
 
-    /// Decode into a profile's options struct.
+    /// Decode into a profile's options struct: a key that is none of
+    /// its fields is [`ProfileError::UnknownOption`] with the closest.
     pub fn decode<T: DeserializeOwned>(&self) -> Result<T, ProfileError> {
+        let valid = field_names::<T>();
+        if let Some(key) = self.0.keys().find(|k| !valid.contains(&k.as_str())) {
+            if !valid.is_empty() {
+                return Err(ProfileError::UnknownOption {
+                    key: key.clone(),
+                    valid,
+                });
+            }
+        }
         toml::Value::Table(self.0.clone())
             .try_into()
             .map_err(|e: toml::de::Error| ProfileError::Options(e.message().to_string()))

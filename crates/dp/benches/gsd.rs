@@ -75,8 +75,8 @@ fn main() {
         )
     });
 
-    let dir = std::env::temp_dir().join(format!("gsd-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
     let big = dir.join("big.gsd");
     std::fs::File::create(&big)
         .unwrap()
@@ -93,5 +93,4 @@ fn main() {
     measure("refuse a 10 MB line (parse)", || {
         Gsd::parse(&line10m, ParseOptions::LENIENT).unwrap_err()
     });
-    std::fs::remove_dir_all(&dir).unwrap();
 }

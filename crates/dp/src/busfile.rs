@@ -69,6 +69,7 @@
 
 use crate::gsd::{Gsd, ParseOptions, PrmValue};
 use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+use crate::names::{field_names, DidYouMean};
 use profibus_fdl::timing::{Baud, BusParams};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -76,6 +77,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use toml::Spanned;
+use toml_edit::{Item, TableLike};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -199,31 +201,58 @@ pub struct ResolvedDevice {
     pub modules: Vec<String>,
 }
 
+/// Why a [`DeviceResolver`] cannot resolve a [`DeviceEntry`]: its
+/// message (which names the profile or option at fault) and, when one
+/// option is at fault, that option's key, where the error is shown.
+#[derive(Debug, thiserror::Error)]
+#[error("{error}")]
+pub struct DeviceError {
+    /// The option at fault, if the error is about one.
+    pub option: Option<String>,
+    /// What is wrong (shown as the error's message, not as a source, so
+    /// that a printed chain says it once).
+    pub error: Box<dyn std::error::Error + Send + Sync>,
+}
+
+impl DeviceError {
+    /// An error about the entry as a whole (shown at `device = …`).
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> DeviceError {
+        DeviceError {
+            option: None,
+            error: error.into(),
+        }
+    }
+
+    /// An error about the option `key` (shown at its key).
+    pub fn at_option(
+        key: impl Into<String>,
+        error: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+    ) -> DeviceError {
+        DeviceError {
+            option: Some(key.into()),
+            error: error.into(),
+        }
+    }
+}
+
 /// Turns `device = "NAME"` plus options into a GSD and modules (the
 /// layer above implements it with its profile registry).
 pub trait DeviceResolver {
-    /// Resolve the profile entry of the slave at `address`.
-    fn resolve(
-        &self,
-        entry: &DeviceEntry,
-        address: u8,
-    ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>>;
+    /// Resolve the profile entry of the slave at `address`. The error's
+    /// message is shown after `slave N: `: it names the profile.
+    fn resolve(&self, entry: &DeviceEntry, address: u8) -> Result<ResolvedDevice, DeviceError>;
 }
 
 /// No device profiles: a `device =` entry is an error.
 struct NoProfiles;
 
 impl DeviceResolver for NoProfiles {
-    fn resolve(
-        &self,
-        entry: &DeviceEntry,
-        _address: u8,
-    ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
-        Err(format!(
-            "device profiles (`{}`) need a loader with the device registry (profibus-devices)",
+    fn resolve(&self, entry: &DeviceEntry, _address: u8) -> Result<ResolvedDevice, DeviceError> {
+        Err(DeviceError::new(format!(
+            "device `{}`: device profiles need a loader with the device registry \
+             (`profibus_devices::bus::ProfiledBus`)",
             entry.name
-        )
-        .into())
+        )))
     }
 }
 
@@ -232,7 +261,8 @@ impl DeviceResolver for NoProfiles {
 pub struct BusSlave {
     /// What the master sends it.
     pub params: SlaveParams,
-    /// The GSD file it was built from (`<NAME>` for a device profile).
+    /// The GSD file it was built from (for a device profile, the words
+    /// ``the GSD of device `NAME` ``: its GSD is built in).
     pub gsd_path: PathBuf,
     /// The device profile it was given as, if any.
     pub device: Option<DeviceEntry>,
@@ -400,6 +430,123 @@ impl Ctx<'_> {
     }
 }
 
+/// The position of `key` in `table`, where the parser knows it.
+fn key_at(table: &dyn TableLike, key: &str) -> Option<std::ops::Range<usize>> {
+    table.key(key).and_then(|k| k.span())
+}
+
+/// The `[[slave]]` tables of a parsed bus file (array of tables or an
+/// array of inline tables).
+fn slave_tables(root: &toml_edit::Table) -> Vec<&dyn TableLike> {
+    match root.get("slave") {
+        Some(Item::ArrayOfTables(a)) => a.iter().map(|t| t as &dyn TableLike).collect(),
+        Some(Item::Value(toml_edit::Value::Array(a))) => a
+            .iter()
+            .filter_map(|v| v.as_inline_table().map(|t| t as &dyn TableLike))
+            .collect(),
+        _ => vec![],
+    }
+}
+
+/// Where the option `key` of the device `name` of slave table `n` is:
+/// `key = …` in the table, else `name.key = …`.
+fn option_at(
+    root: &toml_edit::Table,
+    n: usize,
+    name: &str,
+    key: &str,
+) -> Option<std::ops::Range<usize>> {
+    let t = *slave_tables(root).get(n)?;
+    key_at(t, key).or_else(|| {
+        let ns = t.get(name)?.as_table_like()?;
+        key_at(ns, key).or_else(|| key_at(t, name))
+    })
+}
+
+/// `; did you mean …?` for `key` among `known`, else the valid keys.
+fn key_hint(key: &str, known: &[&str]) -> String {
+    let near = DidYouMean::new(key, known.iter().copied());
+    if near.is_empty() {
+        format!(" (valid: {})", known.join(", "))
+    } else {
+        near.to_string()
+    }
+}
+
+impl Ctx<'_> {
+    /// Every key of the file is one the bus file knows: the tables'
+    /// keys, and a `[[slave]]` table's keys other than profile options
+    /// (a key of a `device` slave that is none of [`SLAVE_KEYS`] is an
+    /// option, checked by the profile, unless it is a misspelt slave key
+    /// whose right spelling is missing).
+    fn check_keys(&self, root: &toml_edit::Table) -> Result<(), BusFileError> {
+        for (k, item) in root.iter() {
+            let (table, known) = match k {
+                "master" => ("[master]", field_names::<RawMaster>()),
+                "bus" => ("[bus]", field_names::<RawBus>()),
+                "options" => ("[options]", field_names::<RawOptions>()),
+                "slave" => {
+                    for t in slave_tables(root) {
+                        self.check_slave_keys(t)?;
+                    }
+                    continue;
+                }
+                "mqtt" => continue,
+                other => {
+                    return Err(self.err(
+                        key_at(root, other),
+                        format!(
+                            "unknown table `{other}`{}",
+                            key_hint(other, field_names::<RawFile>())
+                        ),
+                    ))
+                }
+            };
+            let Some(t) = item.as_table_like() else {
+                continue;
+            };
+            for (key, _) in t.iter() {
+                if !known.contains(&key) {
+                    return Err(self.err(
+                        key_at(t, key),
+                        format!("unknown key `{key}` in {table}{}", key_hint(key, known)),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn check_slave_keys(&self, t: &dyn TableLike) -> Result<(), BusFileError> {
+        let slave = match t.get("address").and_then(|a| a.as_integer()) {
+            Some(a) => format!("slave {a}: "),
+            None => String::new(),
+        };
+        let device = t.contains_key("device");
+        for (k, _) in t.iter() {
+            if SLAVE_KEYS.contains(&k) {
+                continue;
+            }
+            let near = DidYouMean::new(k, SLAVE_KEYS.iter().copied());
+            let misspelt = near.0.iter().any(|n| !t.contains_key(n));
+            let message = if !device {
+                let hint = if near.is_empty() {
+                    " (profile options need `device = \"NAME\"`)".to_string()
+                } else {
+                    near.to_string()
+                };
+                format!("{slave}unknown key `{k}` in [[slave]]{hint}")
+            } else if misspelt {
+                format!("{slave}unknown key `{k}` in [[slave]]{near}")
+            } else {
+                continue;
+            };
+            return Err(self.err(key_at(t, k), message));
+        }
+        Ok(())
+    }
+}
+
 /// The largest bus file read, in bytes (1 MiB; a bus file of 125 slaves
 /// is some 20 KB). Parsing costs up to some 50 times the file's size.
 pub const MAX_BUS_FILE: u64 = 1 << 20;
@@ -450,6 +597,15 @@ impl BusFile {
         resolver: &dyn DeviceResolver,
     ) -> Result<BusFile, BusFileError> {
         let cx = Ctx { path, text };
+        // Every key with its position first: a misspelt key is named
+        // where it is, with the closest valid keys.
+        // (The parsed document is dropped before the file is read again
+        // below: a large file costs one parse at a time.)
+        {
+            let doc = toml_edit::ImDocument::parse(text)
+                .map_err(|e| cx.err(e.span(), e.message().trim_end()))?;
+            cx.check_keys(doc.as_table())?;
+        }
         // The slaves' tables once more as plain tables: the keys that are
         // not slave keys are a profile's options. Checked first, so that a
         // profile option given where a slave key of the same name goes
@@ -508,12 +664,6 @@ impl BusFile {
             // Where the GSD came from, for error positions.
             let (gsd_path, gsd, device, source_span, module_names) = match (&s.gsd, &s.device) {
                 (Some(g), None) => {
-                    if let Some(k) = options.keys().next() {
-                        return Err(cx.err(
-                            key_span(text, rs.span(), k),
-                            format!("slave {addr}: unknown key `{k}` (profile options need `device = \"NAME\"`)"),
-                        ));
-                    }
                     let gsd_path = dir.join(g.get_ref());
                     let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
                         .map_err(|e| cx.err(Some(g.span()), format!("GSD file: {e}")))?;
@@ -540,14 +690,20 @@ impl BusFile {
                         options,
                     };
                     let r = resolver.resolve(&entry, addr).map_err(|e| {
-                        cx.err(
-                            Some(d.span()),
-                            format!("slave {addr}: device `{}`: {e}", entry.name),
-                        )
+                        let at = match &e.option {
+                            // Parsed again for the key's position: only
+                            // on this error.
+                            Some(key) => toml_edit::ImDocument::parse(text)
+                                .ok()
+                                .and_then(|doc| option_at(doc.as_table(), n, &entry.name, key)),
+                            None => None,
+                        };
+                        let at = at.or(Some(d.span()));
+                        cx.err(at, format!("slave {addr}: {e}"))
                     })?;
                     let names = r.modules.into_iter().map(|m| (m, None)).collect();
                     (
-                        PathBuf::from(format!("<{}>", entry.name)),
+                        PathBuf::from(format!("the GSD of device `{}`", entry.name)),
                         r.gsd,
                         Some(entry),
                         d.span(),
@@ -561,10 +717,15 @@ impl BusFile {
                     ))
                 }
             };
+            // The GSD for people: the file, or the device profile's.
+            let source = match &device {
+                Some(d) => format!("device `{}`", d.name),
+                None => gsd_path.display().to_string(),
+            };
             if !gsd.supports_baud(baud) {
                 return Err(cx.err(
                     Some(source_span.clone()),
-                    format!("{} does not support {baud}", gsd_path.display()),
+                    format!("slave {addr}: {source} does not support {baud}"),
                 ));
             }
             if let Some(t) = gsd.max_tsdr(baud) {
@@ -576,7 +737,7 @@ impl BusFile {
                 let i = gsd.find_module_index(m).map_err(|e| {
                     cx.err(
                         span.clone().or(Some(source_span.clone())),
-                        format!("{e} in {}", gsd_path.display()),
+                        format!("slave {addr}: {source}: {e}"),
                     )
                 })?;
                 selection.push(i);
@@ -894,19 +1055,29 @@ modules = ["no such module"]
             &self,
             entry: &DeviceEntry,
             _address: u8,
-        ) -> Result<ResolvedDevice, Box<dyn std::error::Error + Send + Sync>> {
+        ) -> Result<ResolvedDevice, DeviceError> {
             if entry.name != "omega2" {
-                return Err("unknown".into());
+                return Err(DeviceError::new(format!(
+                    "no device profile `{}`",
+                    entry.name
+                )));
+            }
+            if let Some(k) = entry.options.keys().find(|k| *k != "pkw") {
+                return Err(DeviceError::at_option(
+                    k.clone(),
+                    format!("device `omega2`: unknown option `{k}`"),
+                ));
             }
             let gsd = Gsd::from_file(
                 gsd_dir().with_file_name("BNF_00D0.GSD"),
                 ParseOptions { lenient: true },
-            )?
+            )
+            .map_err(DeviceError::new)?
             .gsd;
             let mut modules = vec![
                 "Status / control module",
-                "2 cycl. actual values",
-                "2 cycl. setpoints",
+                "2 cycl. actual values ( 4 AI)",
+                "2 cycl. setpoints ( 4 AO)",
             ];
             if entry.options.get("pkw") != Some(&toml::Value::Boolean(false)) {
                 modules.insert(0, "Service data module");
@@ -916,6 +1087,100 @@ modules = ["no such module"]
                 modules: modules.into_iter().map(String::from).collect(),
             })
         }
+    }
+
+    /// The error of `text` as gsd/bus.toml with the profile `omega2`:
+    /// `line:col: message`.
+    fn error_of(text: &str) -> String {
+        let e = with_omega2(text).unwrap_err();
+        format!("{}:{}: {}", e.line, e.column, e.message)
+    }
+
+    /// A bus file of master 2 with one slave at 5 of DPCTL_GEN.GSD whose
+    /// `modules` line is `modules`.
+    fn gen_bus(modules: &str) -> String {
+        format!(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 5\ngsd = \"DPCTL_GEN.GSD\"\n{modules}\n"
+        )
+    }
+
+    #[test]
+    fn module_names_match_exactly_or_not_at_all() {
+        let b = load(&gen_bus("modules = [\"2 words in/out\"]")).unwrap();
+        assert_eq!(b.slaves[0].modules, ["2 words in/out"]);
+        // Not in the GSD: an error at the name, with the closest names,
+        // never the nearest module instead.
+        assert_eq!(
+            error_of(&gen_bus("modules = [\"1 byte in\", \"3 words in/out\"]")),
+            format!(
+                "8:25: slave 5: {}: no module named `3 words in/out`; \
+                 did you mean `2 words in/out`?",
+                gsd_dir().with_file_name("DPCTL_GEN.GSD").display()
+            )
+        );
+        for near in ["2 Words in/out", "2 words"] {
+            let e = error_of(&gen_bus(&format!("modules = [\"{near}\"]")));
+            assert!(e.starts_with("8:12: slave 5: "), "{e}");
+            assert!(e.contains(": no module named"), "{e}");
+            assert!(e.contains("did you mean `2 words in/out`"), "{e}");
+        }
+    }
+
+    #[test]
+    fn unknown_keys_are_named_where_they_are_with_the_closest() {
+        let master = "[master]\naddress = 2\nbaud = \"1.5M\"\n";
+        for (text, want) in [
+            (
+                "[master]\nadress = 2\nbaud = \"1.5M\"\n".to_string(),
+                "2:1: unknown key `adress` in [master]; did you mean `address`?",
+            ),
+            (
+                format!("{master}[bus]\nslot_tim = 300\n"),
+                "5:1: unknown key `slot_tim` in [bus]; did you mean `slot_time`?",
+            ),
+            (
+                format!("{master}[options]\nlost_afterr = 3\n"),
+                "5:1: unknown key `lost_afterr` in [options]; did you mean `lost_after`?",
+            ),
+            (
+                format!("{master}[optoins]\nlost_after = 3\n"),
+                "4:2: unknown table `optoins`; did you mean `options`?",
+            ),
+            (
+                format!("{master}[[slave]]\nadress = 5\ngsd = \"DPCTL_GEN.GSD\"\n"),
+                "5:1: unknown key `adress` in [[slave]]; did you mean `address`?",
+            ),
+            (
+                format!("{master}[[slave]]\naddress = 5\ngsd = \"DPCTL_GEN.GSD\"\nmodule = [\"1 byte in\"]\n"),
+                "7:1: slave 5: unknown key `module` in [[slave]]; did you mean `modules`?",
+            ),
+            (
+                format!("{master}[[slave]]\naddress = 5\ngsd = \"DPCTL_GEN.GSD\"\nfoo = 1\n"),
+                "7:1: slave 5: unknown key `foo` in [[slave]] (profile options need `device = \"NAME\"`)",
+            ),
+            // A device slave: a misspelt slave key, then the profile's
+            // own options, at their keys.
+            (
+                format!("{master}[[slave]]\nadress = 25\ndevice = \"omega2\"\n"),
+                "5:1: unknown key `adress` in [[slave]]; did you mean `address`?",
+            ),
+            (
+                format!("{OMEGA2_BUS}pkw = false\nsetpoint = 2\n"),
+                "9:1: slave 25: device `omega2`: unknown option `setpoint`",
+            ),
+            (
+                format!("{OMEGA2_BUS}omega2.setpoint = 2\n"),
+                "8:8: slave 25: device `omega2`: unknown option `setpoint`",
+            ),
+        ] {
+            assert_eq!(error_of(&text), want, "{text}");
+        }
+        // Without a suggestion: the valid keys.
+        let e = error_of("[master]\naddress = 2\nbaud = \"1.5M\"\nspeed = 1\n");
+        assert_eq!(
+            e,
+            "4:1: unknown key `speed` in [master] (valid: address, baud)"
+        );
     }
 
     #[test]
@@ -935,7 +1200,7 @@ modules = ["no such module"]
         let e = BusFile::parse(&gsd_dir(), text).unwrap_err();
         assert_eq!(e.line, 7, "{e}");
         let e = with_omega2(&text.replace("omega2", "nope")).unwrap_err();
-        assert!(e.message.contains("device `nope`"), "{e}");
+        assert_eq!(e.message, "slave 25: no device profile `nope`", "{e}");
         // Profile options without a profile: the key's line.
         let e = with_omega2(&text.replace("device = \"omega2\"", "gsd = \"BNF_00D0.GSD\""))
             .unwrap_err();

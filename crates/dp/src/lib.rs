@@ -19,6 +19,8 @@
 //!   slave's state, data, diagnosis, cycle times, retries and errors, and
 //!   the masters in the token ring (`dpctl monitor`).
 //! - [`scan`]: the live-list scanner behind `dpctl scan`.
+//! - [`names`]: the closest valid names to a misspelt one ("did you
+//!   mean …?") and the keys of a serde struct.
 //! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
 //!   module selection → Chk_Cfg / User_Prm_Data, writer.
 //! - [`slave`]: the DP slave core (state machine, every slave service)
@@ -34,6 +36,7 @@ pub mod file;
 pub mod gsd;
 pub mod master;
 pub mod monitor;
+pub mod names;
 pub mod prm;
 pub mod sap;
 pub mod scan;

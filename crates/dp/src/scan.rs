@@ -165,6 +165,8 @@ impl MasterApp for LiveListScan {
                 dsap: None,
                 ssap: None,
                 data: &[],
+                // FDL Status: answered with 6 characters.
+                max_reply_len: None,
             });
         }
         while self.next_diag < self.found.len() {
@@ -178,6 +180,7 @@ impl MasterApp for LiveListScan {
                     dsap: Some(sap::SLAVE_DIAG),
                     ssap: Some(sap::MASTER),
                     data: &[],
+                    max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
                 });
             }
         }

@@ -195,7 +195,7 @@ fn bm4_default_file() {
     assert_eq!(g.check_selection(&all), vec![]);
     assert_eq!(g.user_prm_data(&all, &[]).unwrap(), [0, 0, 0]);
     // The 4th identifier byte of the variable modules is the PKW number.
-    let m = g.find_module("8 dword d_actvalues8..15").unwrap();
+    let m = g.find_module("8 DWord d_ActValues8..15").unwrap();
     let id = m.identifiers().next().unwrap().unwrap();
     assert_eq!(id.manufacturer, [0x02, 0x07]);
     // The commented-out header is a quirk: a warning when lenient.
@@ -310,12 +310,13 @@ fn jetter_jx2_profi1() {
     assert_eq!(g.user_prm_data(&s, &[]).unwrap(), [0x80, 0x00, 0x00]);
     let big = g.find_module("INPUT (consistent) : 64 words").unwrap();
     assert_eq!(big.io().unwrap().input_bytes, 128);
-    // The approximate lookup tells the consistent and plain modules apart.
+    // Names match exactly: the consistent and plain modules apart.
     assert_eq!(
-        g.find_module("input (consistent) : 2 words").unwrap().cfg,
+        g.find_module("INPUT (consistent) : 2 words").unwrap().cfg,
         [0xD1]
     );
-    assert_eq!(g.find_module("INPUT: 2 words").unwrap().cfg, [0x51]);
+    assert_eq!(g.find_module("INPUT : 2 words").unwrap().cfg, [0x51]);
+    assert!(g.find_module("INPUT: 2 words").is_err());
 }
 
 #[test]
@@ -377,7 +378,7 @@ fn dpctl_generic_slave() {
         SelectionError::UnknownParameter {
             name: "Moed".into(),
             position: None,
-            suggestion: Some("Mode".into())
+            suggestions: profibus_dp::names::DidYouMean(vec!["Mode".into()])
         }
     );
     let e = g.user_prm_data(&s, &v(&["0:Filter=1"])).unwrap_err();

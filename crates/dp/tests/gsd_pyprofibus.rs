@@ -339,8 +339,8 @@ fn pyprofibus_reads_what_we_write() {
     // Our writer emits the standard's syntax: pyprofibus reads every file
     // we write, with the same differences as in the originals.
     let files = gsd_files();
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("gsd_written");
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let mut written = Vec::new();
     let mut models = Vec::new();
     for path in &files {

@@ -417,9 +417,10 @@ impl Medium {
     /// characters of one telegram in pieces with pauses between them,
     /// which a receiver framing by idle time takes for the end of the
     /// telegram. The price: the first character of a reply arrives only
-    /// when the whole reply has crossed the wire, so a master's slot-time
-    /// allowance must cover the longest reply (see
-    /// `transport::Port::default_latency`). On virtual time (the
+    /// when the whole reply has crossed the wire, so a master's wait for
+    /// an answer must cover that answer's wire time (see
+    /// `station::active::ActiveConfig::whole_telegrams`; the simulator
+    /// does this with `sim::SimBus::with_whole_transmissions`). On virtual time (the
     /// simulator) every receiver is on time and character-wise delivery
     /// is exact.
     pub fn with_whole_transmissions(mut self) -> Medium {

@@ -470,13 +470,13 @@ mod tests {
 
     #[test]
     fn create_writes_a_pcapng_file() {
-        let path = std::env::temp_dir().join(format!("pcap-create-{}.pcapng", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("create.pcapng");
         let mut w = PcapWriter::create(&path, Duration::ZERO).unwrap();
         w.write_telegram(Instant::from_nanos(1_000), &[0xE5])
             .unwrap();
         w.into_inner().unwrap();
         let bytes = std::fs::read(&path).unwrap();
-        std::fs::remove_file(&path).unwrap();
         let packets: Vec<_> = PcapReader::new(&bytes[..]).unwrap().collect();
         assert_eq!(packets.len(), 1);
         assert_eq!(packets[0].as_ref().unwrap().data, [0xE5]);

@@ -69,6 +69,7 @@ pub struct SimBus {
     slots: Vec<Slot>,
     now: Instant,
     tap: Option<Tap>,
+    whole: bool,
 }
 
 /// Steps at one instant after which the simulator concludes a station
@@ -84,7 +85,17 @@ impl SimBus {
             slots: Vec::new(),
             now: Instant::ZERO,
             tap: None,
+            whole: false,
         }
+    }
+
+    /// Deliver each transmission in one piece when its last character has
+    /// arrived, as a paced `dpctl bus` does
+    /// ([`Medium::with_whole_transmissions`]), instead of character by
+    /// character.
+    pub fn with_whole_transmissions(mut self) -> SimBus {
+        self.whole = true;
+        self
     }
 
     /// Attach a station (before the first step).
@@ -151,8 +162,15 @@ impl SimBus {
 
     fn medium(&mut self) -> &mut Medium {
         let n = self.slots.len();
-        let cfg = self.cfg;
-        self.medium.get_or_insert_with(|| Medium::new(n, cfg))
+        let (cfg, whole) = (self.cfg, self.whole);
+        self.medium.get_or_insert_with(|| {
+            let m = Medium::new(n, cfg);
+            if whole {
+                m.with_whole_transmissions()
+            } else {
+                m
+            }
+        })
     }
 
     fn next_event(&mut self) -> Option<Instant> {

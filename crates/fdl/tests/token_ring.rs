@@ -44,6 +44,7 @@ impl MasterApp for Poller {
             dsap: None,
             ssap: None,
             data: &self.data,
+            max_reply_len: None,
         })
     }
 

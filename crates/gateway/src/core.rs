@@ -9,7 +9,7 @@ use crate::payload::{
     Status,
 };
 use crate::settings::{MqttSettings, PublishMode};
-use profibus_devices::channels::{ChannelMap, Direction, Value};
+use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value};
 use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, Dialect, PKW_LEN};
 use profibus_devices::rfid::client::RfidClient;
@@ -184,20 +184,16 @@ pub fn parse_hex(text: &str) -> Option<Vec<u8>> {
         .filter(|b| !b.is_empty())
 }
 
-/// What a write of outputs asks for.
-#[derive(Debug, Clone, PartialEq)]
-pub enum WriteRequest {
-    /// The whole output image.
-    Image(Vec<u8>),
-    /// Named output channels; the rest of the image stays as it is.
-    Channels(Vec<(String, Value)>),
-}
+/// What a write of outputs asks for: the whole image or named channels,
+/// checked by the rule the terminal view shares
+/// ([`OutputWrite::check`], [`OutputWrite::apply`]).
+pub use profibus_devices::channels::OutputWrite;
 
 /// A request from a message, checked for form (not yet for permission).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Request {
     /// Set outputs.
-    Outputs(WriteRequest),
+    Outputs(OutputWrite),
     /// DP-V1 read of a data record.
     Dpv1Read {
         /// Slot.
@@ -271,27 +267,11 @@ pub enum RequestError {
     /// The bus file's `[mqtt] writable` does not list the slave.
     #[error("slave {0} is not writable over MQTT (see [mqtt] writable)")]
     Unauthorised(u8),
-    /// `[mqtt] writable` allows only some named channels of the slave.
-    #[error("slave {address}: only the output channels {allowed:?} are writable over MQTT")]
-    ChannelsOnly {
-        /// Station address.
-        address: u8,
-        /// The writable channels.
-        allowed: Vec<String>,
-    },
-    /// A whole image of the wrong length.
-    #[error("slave {address} has {expected} output bytes, the write has {got}")]
-    Length {
-        /// Station address.
-        address: u8,
-        /// Output image length.
-        expected: usize,
-        /// Bytes written.
-        got: usize,
-    },
-    /// A named channel the slave lacks, or a value out of its range.
-    #[error("{0}")]
-    Channel(String),
+    /// An output write that breaks the rule of output writes (a short
+    /// image, an unknown channel, a value that does not fit), or a write
+    /// beyond the channels `[mqtt] writable` allows.
+    #[error(transparent)]
+    Write(#[from] OutputWriteError),
     /// The slave does not offer the service (no PKW channel, not a
     /// reader, not DP-V1).
     #[error("slave {address} has no {what}")]
@@ -360,7 +340,7 @@ pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Reque
     };
     let image = |s: &str| {
         parse_hex(s)
-            .map(|b| Request::Outputs(WriteRequest::Image(b)))
+            .map(|b| Request::Outputs(OutputWrite::Image(b)))
             .ok_or_else(|| malformed("neither a JSON object nor hex"))
     };
     let o = match serde_json::from_str::<serde_json::Value>(text) {
@@ -420,7 +400,10 @@ fn need<T>(v: Option<T>, key: &str) -> Result<T, RequestError> {
 fn op(o: &Obj, ops: &[&str]) -> Result<String, RequestError> {
     match o.get("op") {
         Some(serde_json::Value::String(s)) if ops.contains(&s.as_str()) => Ok(s.clone()),
-        _ => Err(malformed(format!("`op` must be one of {ops:?}"))),
+        _ => {
+            let ops: Vec<String> = ops.iter().map(|o| format!("\"{o}\"")).collect();
+            Err(malformed(format!("`op` must be one of {}", ops.join(", "))))
+        }
     }
 }
 
@@ -503,9 +486,9 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
 fn outputs_body(o: &Obj) -> Result<Request, RequestError> {
     let req = match (o.get("hex"), o.get("channels")) {
         (Some(serde_json::Value::String(h)), None) => {
-            WriteRequest::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
+            OutputWrite::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
         }
-        (None, Some(serde_json::Value::Object(c))) if !c.is_empty() => WriteRequest::Channels(
+        (None, Some(serde_json::Value::Object(c))) if !c.is_empty() => OutputWrite::Channels(
             c.iter()
                 .map(|(k, v)| {
                     let val = match v {
@@ -729,34 +712,18 @@ impl Gateway {
             .settings
             .access(address)
             .ok_or(RequestError::Unauthorised(address))?;
-        if let Some(allowed) = &access.channels {
-            let ok = match request {
-                Request::Outputs(WriteRequest::Channels(values)) => {
-                    values.iter().all(|(n, _)| allowed.contains(n))
-                }
-                _ => false,
-            };
-            if !ok {
-                return Err(RequestError::ChannelsOnly {
+        let allowed = access.channels.as_deref();
+        match (request, allowed) {
+            (Request::Outputs(w), _) => w.check(address, entry.info.channels.as_ref(), allowed)?,
+            // Channel access only: no other writes.
+            (_, Some(allowed)) => {
+                return Err(OutputWriteError::ChannelsOnly {
                     address,
-                    allowed: allowed.clone(),
-                });
+                    allowed: allowed.to_vec(),
+                }
+                .into())
             }
-        }
-        if let Request::Outputs(WriteRequest::Channels(values)) = request {
-            let Some(map) = &entry.info.channels else {
-                return Err(RequestError::Channel(format!(
-                    "slave {address} has no named channels: write `hex`"
-                )));
-            };
-            if let Some((n, _)) = values
-                .iter()
-                .find(|(n, _)| map.find(Direction::Output, n).is_none())
-            {
-                return Err(RequestError::Channel(format!(
-                    "slave {address} has no output channel `{n}`"
-                )));
-            }
+            (_, None) => {}
         }
         Ok(())
     }
@@ -920,34 +887,20 @@ impl Gateway {
         }
     }
 
-    fn apply(&self, m: &mut DpMaster, address: u8, w: &WriteRequest) -> Result<(), RequestError> {
+    fn apply(&self, m: &mut DpMaster, address: u8, w: &OutputWrite) -> Result<(), RequestError> {
         let current = m
             .outputs(address)
             .ok_or_else(|| RequestError::UnknownSlave(address.to_string()))?;
-        let image = match w {
-            WriteRequest::Image(b) => {
-                if b.len() != current.len() {
-                    return Err(RequestError::Length {
-                        address,
-                        expected: current.len(),
-                        got: b.len(),
-                    });
-                }
-                b.clone()
-            }
-            WriteRequest::Channels(values) => {
-                let map = self
-                    .slaves
-                    .iter()
-                    .find(|e| e.info.address == address)
-                    .and_then(|e| e.info.channels.as_ref())
-                    .ok_or_else(|| RequestError::Channel("no named channels".into()))?;
-                let mut img = current.to_vec();
-                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), &mut img)
-                    .map_err(|e| RequestError::Channel(e.to_string()))?;
-                img
-            }
-        };
+        let map = self
+            .slaves
+            .iter()
+            .find(|e| e.info.address == address)
+            .and_then(|e| e.info.channels.as_ref());
+        let allowed = self
+            .settings
+            .access(address)
+            .and_then(|a| a.channels.as_deref());
+        let image = w.apply(address, current, map, allowed)?;
         m.set_outputs(address, &image);
         Ok(())
     }
@@ -1255,11 +1208,11 @@ mod tests {
         let out = |p: &[u8]| parse_request(Service::Outputs, p);
         assert_eq!(
             out(b"0102").1.unwrap(),
-            Request::Outputs(WriteRequest::Image(vec![1, 2]))
+            Request::Outputs(OutputWrite::Image(vec![1, 2]))
         );
         assert_eq!(
             out(b"\"0102\"").1.unwrap(),
-            Request::Outputs(WriteRequest::Image(vec![1, 2]))
+            Request::Outputs(OutputWrite::Image(vec![1, 2]))
         );
         let (to, r) =
             out(br#"{"channels": {"a": 1, "b": true, "c": 1.5}, "id": "x", "reply_to": "me/r"}"#);
@@ -1272,7 +1225,7 @@ mod tests {
         );
         assert_eq!(
             r.unwrap(),
-            Request::Outputs(WriteRequest::Channels(vec![
+            Request::Outputs(OutputWrite::Channels(vec![
                 ("a".into(), Value::Int(1)),
                 ("b".into(), Value::Bool(true)),
                 ("c".into(), Value::Float(1.5)),
@@ -1450,7 +1403,7 @@ mod tests {
             (
                 "profibus/l1/5/outputs/set",
                 b"{\"channels\": {\"speed\": 1, \"torque\": 1}}",
-                "only the output channels [\"speed\"]",
+                "only the output channels `speed` are writable",
             ),
             ("profibus/l1/5/outputs/set", b"00010001", "only the output"),
             (

@@ -81,7 +81,9 @@
 //!
 //! The bus keeps running while the broker is away. The link reconnects
 //! with a growing pause (100 ms doubling to 5 s); on every connection the
-//! status and every retained topic are published again. After
+//! status and every retained topic are published again. The link logs
+//! one line each for its start, the connection, a loss and the
+//! reconnection, with the broker's URL ([`link`]). After
 //! `[mqtt] outputs_timeout_ms` without a broker the outputs go to
 //! `[mqtt] safe_state` once (default `keep`: the last values stay), which
 //! is logged and, once the broker is back, reported in the status.

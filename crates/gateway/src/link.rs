@@ -4,7 +4,11 @@
 //! reconnects after a loss with a growing pause (100 ms doubling to 5 s),
 //! subscribes to the write topics on every connection, and hands
 //! connections, losses and messages to the gateway's loop as
-//! [`LinkEvent`]s. Publishing never blocks the bus: a message that finds
+//! [`LinkEvent`]s. It logs (target `profibus_gateway::link`, which
+//! `dpctl` shows by default) one line each at the start, on connecting,
+//! on reconnecting and when a connection is lost, with the broker's URL;
+//! retries stay quiet, and a clean close ([`MqttLink::close`]) logs no
+//! loss. Publishing never blocks the bus: a message that finds
 //! the client's queue full (the broker is away) is dropped, and the
 //! gateway republishes every retained topic when the broker is back.
 
@@ -13,7 +17,7 @@ use crate::settings::{parse_broker, Broker, MqttSettings, PasswordSource, Settin
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
 use rumqttc::{
-    AsyncClient, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport,
+    AsyncClient, Event, LastWill, MqttOptions, Outgoing, Packet, QoS, TlsConfiguration, Transport,
 };
 use std::path::PathBuf;
 use std::time::Duration;
@@ -236,6 +240,9 @@ pub struct MqttLink {
     will_qos: QoS,
     events: mpsc::UnboundedReceiver<LinkEvent>,
     task: tokio::task::JoinHandle<()>,
+    /// Set by [`MqttLink::close`]: the client's task ends instead of
+    /// reconnecting.
+    closing: tokio::sync::watch::Sender<bool>,
 }
 
 fn qos(q: u8) -> QoS {
@@ -270,13 +277,26 @@ impl MqttLink {
         let (tx, events) = mpsc::unbounded_channel();
         let filters = setup.filters;
         let sub = client.clone();
+        let (closing, mut closed) = tokio::sync::watch::channel(false);
+        let url = conn.broker.to_string();
+        tracing::info!(
+            "MQTT gateway starting: broker {url}, client id `{}`",
+            s.client_id
+        );
         let task = tokio::spawn(async move {
             let mut pause = Duration::from_millis(100);
+            // Whether the broker ever accepted us, and whether the loss
+            // of the connection (or the failed first attempt) was logged.
+            let (mut ever, mut lost) = (false, false);
             loop {
                 match eventloop.poll().await {
                     Ok(Event::Incoming(Packet::ConnAck(_))) => {
                         pause = Duration::from_millis(100);
-                        tracing::info!("connected to the MQTT broker");
+                        match ever {
+                            false => tracing::info!("connected to the MQTT broker {url}"),
+                            true => tracing::info!("reconnected to the MQTT broker {url}"),
+                        }
+                        (ever, lost) = (true, false);
                         for f in &filters {
                             if let Err(e) = sub.try_subscribe(f.clone(), q) {
                                 tracing::warn!(error = %e, "cannot subscribe to {f}");
@@ -295,16 +315,36 @@ impl MqttLink {
                             return;
                         }
                     }
+                    // Our clean disconnect went out (`MqttLink::close`).
+                    Ok(Event::Outgoing(Outgoing::Disconnect)) => return,
                     Ok(_) => {}
+                    // The broker closing the connection we are closing.
+                    Err(_) if *closed.borrow() => return,
                     Err(e) => {
-                        tracing::warn!(error = %e, "MQTT connection lost; retrying in {pause:?}");
+                        // One line per outage; the retries are quiet.
+                        match (lost, ever) {
+                            (true, _) => {
+                                tracing::debug!(error = %e, "MQTT broker {url}: still away")
+                            }
+                            (false, true) => {
+                                tracing::warn!("MQTT connection to {url} lost ({e}); reconnecting")
+                            }
+                            (false, false) => tracing::warn!(
+                                "cannot connect to the MQTT broker {url} ({e}); retrying"
+                            ),
+                        }
+                        lost = true;
                         if tx.send(LinkEvent::Disconnected(e.to_string())).is_err() {
                             return;
                         }
                         // The next poll connects again, with the next will.
                         eventloop.mqtt_options.set_last_will(will());
-                        // Reconnection backoff, not a wait for an event.
-                        tokio::time::sleep(pause).await;
+                        // Reconnection backoff, not a wait for an event;
+                        // a close ends it.
+                        tokio::select! {
+                            _ = tokio::time::sleep(pause) => {}
+                            _ = closed.wait_for(|&c| c) => return,
+                        }
                         pause = (pause * 2).min(Duration::from_secs(5));
                     }
                 }
@@ -316,6 +356,7 @@ impl MqttLink {
             will_qos,
             events,
             task,
+            closing,
         }
     }
 
@@ -337,17 +378,22 @@ impl MqttLink {
     }
 
     /// Publish `p` and disconnect cleanly (the broker then does not send
-    /// the last will: publish the offline status with this).
+    /// the last will: publish the offline status with this). Never waits
+    /// long: with the broker away nothing is sent, and the client's task
+    /// is given at most [`CLOSE_WAIT`] to send both.
     pub async fn close(self, last: Publish) {
+        self.closing.send_replace(true);
         let _ = self
             .client
-            .publish(last.topic, self.will_qos, last.retain, last.payload)
-            .await;
-        let _ = self.client.disconnect().await;
-        // Let the event loop send both, then stop it.
-        let _ = tokio::time::timeout(Duration::from_secs(1), self.task).await;
+            .try_publish(last.topic, self.will_qos, last.retain, last.payload);
+        let _ = self.client.try_disconnect();
+        let _ = tokio::time::timeout(CLOSE_WAIT, self.task).await;
     }
 }
+
+/// The longest [`MqttLink::close`] waits for the last message and the
+/// disconnect to go out.
+pub const CLOSE_WAIT: Duration = Duration::from_secs(2);
 
 /// Hand every link event to `gateway`; `ts_ms` is the wall-clock time in
 /// ms since the Unix epoch.

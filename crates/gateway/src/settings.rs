@@ -156,6 +156,14 @@ pub struct Broker {
     pub tls: bool,
 }
 
+/// The broker as a URL: `mqtt://HOST:PORT` or `mqtts://HOST:PORT`.
+impl std::fmt::Display for Broker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let scheme = if self.tls { "mqtts" } else { "mqtt" };
+        write!(f, "{scheme}://{}:{}", self.host, self.port)
+    }
+}
+
 impl MqttSettings {
     /// The write access to slave `address`, if any.
     pub fn access(&self, address: u8) -> Option<&WriteAccess> {

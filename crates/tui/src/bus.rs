@@ -13,11 +13,11 @@
 //! | `p` | pause / resume the view (the bus keeps running) |
 //! | ↑ / ↓ | select a slave |
 //! | Enter | details of the selected slave (Esc or Enter closes them) |
-//! | `w` | write the selected slave's outputs: hex bytes (`01 FF`), or `NAME=VALUE ...` for named channels ([`Action::Write`]; not in a listen-only view) |
+//! | `w` | write the selected slave's outputs: the whole image in hex (`01 FF …`), or `NAME=VALUE ...` for named channels, checked as the MQTT gateway checks them ([`OutputWrite`]) ([`Action::Write`]; not in a listen-only view) |
 
 use crate::source::{BusSnapshot, BusSource, Counters, Diagnosis};
 use crate::{fit, hex, Key};
-use profibus_devices::channels::{ChannelError, ChannelMap, Direction, Value};
+use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value};
 use profibus_dp::diag;
 use profibus_dp::gsd::Gsd;
 use profibus_dp::master::{OperatingState, SlaveState};
@@ -118,14 +118,10 @@ pub struct SlaveSpec {
     pub decoding: Decoding,
 }
 
-/// A write the person asked for with `w`.
-#[derive(Debug, Clone, PartialEq)]
-pub enum OutputWrite {
-    /// Bytes from the start of the output image.
-    Bytes(Vec<u8>),
-    /// Named output channels.
-    Channels(Vec<(String, Value)>),
-}
+/// A write the person asked for with `w`: the whole image or named
+/// channels, checked by the rule every interface shares (the MQTT
+/// gateway's too, [`OutputWrite::apply`]).
+pub use profibus_devices::channels::OutputWrite;
 
 /// What the application should do after a key.
 #[derive(Debug, Clone, PartialEq)]
@@ -148,24 +144,12 @@ pub enum Action {
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
     /// Not hex bytes nor `NAME=VALUE` words.
-    #[error("give hex bytes (01 FF) or NAME=VALUE words: {0}")]
+    #[error("give the whole image in hex (01 FF …) or NAME=VALUE words: {0}")]
     Syntax(String),
-    /// More bytes than the slave has outputs.
-    #[error("slave {address} has {len} output bytes, {given} given")]
-    TooLong {
-        /// Station address.
-        address: u8,
-        /// Its output length.
-        len: usize,
-        /// Bytes given.
-        given: usize,
-    },
-    /// Names given for a slave without named channels.
-    #[error("slave {0} has no named channels: give hex bytes")]
-    NoChannels(u8),
-    /// A channel name or value is wrong.
+    /// The write breaks the rule of output writes (a short image, an
+    /// unknown channel, a value that does not fit).
     #[error(transparent)]
-    Channel(#[from] ChannelError),
+    Refused(#[from] OutputWriteError),
     /// Not a slave of the master, or a view that only listens.
     #[error("slave {0}: no outputs to write here")]
     UnknownSlave(u8),
@@ -488,7 +472,7 @@ impl BusView {
             OutputWrite::Channels(values)
         } else {
             match profibus_fdl::wire::parse_hex(text) {
-                Ok(b) => OutputWrite::Bytes(b),
+                Ok(b) => OutputWrite::Image(b),
                 Err(e) => {
                     self.message = Some(WriteError::Syntax(e.to_string()).to_string());
                     return Action::None;
@@ -532,25 +516,17 @@ impl BusView {
         let out = source
             .outputs_mut(address)
             .ok_or(WriteError::UnknownSlave(address))?;
-        match write {
-            OutputWrite::Bytes(b) if b.len() > out.len() => Err(WriteError::TooLong {
-                address,
-                len: out.len(),
-                given: b.len(),
-            }),
-            OutputWrite::Bytes(b) => {
-                out[..b.len()].copy_from_slice(b);
-                Ok(())
-            }
-            OutputWrite::Channels(values) => {
-                let spec = self.specs.iter().find(|s| s.address == address);
-                let Some(Decoding::Channels(map)) = spec.map(|s| &s.decoding) else {
-                    return Err(WriteError::NoChannels(address));
-                };
-                map.write_outputs(values.iter().map(|(n, v)| (n.as_str(), *v)), out)?;
-                Ok(())
-            }
-        }
+        let map = match self.specs.iter().find(|s| s.address == address) {
+            Some(SlaveSpec {
+                decoding: Decoding::Channels(map),
+                ..
+            }) => Some(map),
+            _ => None,
+        };
+        // The person at the master's terminal may write every channel.
+        let image = write.apply(address, out, map, None)?;
+        out.copy_from_slice(&image);
+        Ok(())
     }
 
     /// Draw the view into `area` of a frame.
@@ -655,7 +631,7 @@ impl BusView {
                     .unwrap_or((0, ""));
                 Line::from(vec![
                     Span::styled(
-                        format!("write outputs of slave {a} {n} (hex bytes or NAME=VALUE, Esc cancels): "),
+                        format!("write outputs of slave {a} {n} (the whole image in hex, or NAME=VALUE; Esc cancels): "),
                         Style::default().add_modifier(Modifier::BOLD),
                     ),
                     Span::raw(format!("{text}_")),
@@ -782,6 +758,9 @@ impl BusView {
         );
         if let Some(n) = s.diag_reads {
             l.push_str(&format!("  diagnosis reads {n}"));
+        }
+        if let Some(n) = s.late_replies {
+            l.push_str(&format!("  late replies {n}"));
         }
         out.push(l);
         if let Decoding::Modules(spans) = &spec.decoding {
@@ -1021,7 +1000,7 @@ mod tests {
             a,
             Action::Write {
                 address: 8,
-                write: OutputWrite::Bytes(vec![0x7F])
+                write: OutputWrite::Image(vec![0x7F])
             }
         );
         let Action::Write { address, write } = a else {
@@ -1035,17 +1014,28 @@ mod tests {
 
         // Too long: refused, nothing written.
         let e = v
-            .write(&mut m, 8, &OutputWrite::Bytes(vec![1, 2]))
+            .write(&mut m, 8, &OutputWrite::Image(vec![1, 2]))
             .unwrap_err();
         assert!(matches!(
             e,
-            WriteError::TooLong {
-                len: 1,
+            WriteError::Refused(OutputWriteError::Length {
+                expected: 1,
                 given: 2,
                 ..
-            }
+            })
         ));
         assert_eq!(m.outputs(8), Some(&[0x7F][..]));
+        // Too short for the drive's 2 bytes: the rest would be left to
+        // chance, so it is refused too.
+        let e = v
+            .write(&mut m, 25, &OutputWrite::Image(vec![9]))
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "slave 25 has 2 output bytes, the write has 1: give the whole image or named channels"
+        );
+        assert!(screen(&v).contains("not written: slave 25 has 2 output bytes"));
+        assert_eq!(m.outputs(25), Some(&[0, 0][..]));
 
         // Named channels on the drive.
         v.key(Key::Down);
@@ -1075,7 +1065,7 @@ mod tests {
             v.key(Key::Char(c));
         }
         assert_eq!(v.key(Key::Enter), Action::None);
-        assert!(screen(&v).contains("give hex bytes"));
+        assert!(screen(&v).contains("give the whole image in hex"));
     }
 
     #[test]
@@ -1151,7 +1141,7 @@ mod tests {
         v.key(Key::Char('w'));
         assert!(!screen(&v).contains("write outputs of"));
         let mut m = master();
-        assert!(v.write(&mut m, 25, &OutputWrite::Bytes(vec![1])).is_err());
+        assert!(v.write(&mut m, 25, &OutputWrite::Image(vec![1])).is_err());
         assert_eq!(m.outputs(25), Some(&[0, 0][..]));
         // Details name the master that polls the slave.
         v.key(Key::Down);

@@ -34,13 +34,12 @@ pub struct SlaveInfo {
 
 /// A slave's device profile could not give its channels.
 #[derive(Debug, thiserror::Error)]
-#[error("slave {address}: {source}")]
+#[error("slave {address}: {error}")]
 pub struct SlaveProfileError {
     /// Station address.
     pub address: u8,
     /// Why.
-    #[source]
-    pub source: ProfileError,
+    pub error: ProfileError,
 }
 
 impl SlaveInfo {
@@ -60,7 +59,7 @@ impl SlaveInfo {
             address,
             name: s.params.name.clone(),
             gsd: Some(s.gsd.clone()),
-            channels: channels.map_err(|source| SlaveProfileError { address, source })?,
+            channels: channels.map_err(|error| SlaveProfileError { address, error })?,
             modules: s.modules.clone(),
         })
     }

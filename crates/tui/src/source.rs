@@ -22,6 +22,9 @@ pub struct Counters {
     pub restarts: u64,
     /// Slave_Diag reads (`None`: the source does not count them).
     pub diag_reads: Option<u64>,
+    /// Answers that came after their request's wait and were dropped
+    /// (`None`: the source sends no requests).
+    pub late_replies: Option<u64>,
 }
 
 /// A slave's last diagnosis.
@@ -101,6 +104,7 @@ impl BusSnapshot {
                         errors: s.stats.errors,
                         restarts: s.stats.restarts,
                         diag_reads: Some(s.stats.diag_reads),
+                        late_replies: Some(s.stats.late_replies),
                     },
                     diag: Diagnosis::Raw {
                         bytes: s.diag.to_vec(),
@@ -146,6 +150,7 @@ impl BusSnapshot {
                         errors: x.counters.errors,
                         restarts: x.counters.restarts,
                         diag_reads: None,
+                        late_replies: None,
                     },
                     diag: Diagnosis::Words(x.diag.clone()),
                 })

@@ -127,30 +127,25 @@ pub fn python() -> PathBuf {
     py
 }
 
-/// A temporary directory removed on drop.
-pub struct TempDir(pub PathBuf);
+/// A temporary directory of its own, removed on drop: made by the
+/// `tempfile` crate, which picks a random name and creates it only if no
+/// such entry exists, so tests on parallel threads (or processes) never
+/// share one. `.0` is its path.
+pub struct TempDir(pub PathBuf, tempfile::TempDir);
 
 impl TempDir {
+    /// A new directory `dpctl-TAG-XXXXXX` in the system's temp dir.
     pub fn new(tag: &str) -> TempDir {
-        let p = std::env::temp_dir().join(format!(
-            "dpctl-{tag}-{}-{}",
-            std::process::id(),
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_nanos()
-        ));
-        std::fs::create_dir_all(&p).unwrap();
-        TempDir(p)
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("dpctl-{tag}-"))
+            .tempdir()
+            .unwrap_or_else(|e| panic!("cannot create a temp dir for {tag}: {e}"));
+        TempDir(dir.path().to_path_buf(), dir)
     }
+
+    /// The path of `name` in the directory.
     pub fn path(&self, name: &str) -> PathBuf {
         self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 
@@ -563,5 +558,34 @@ impl Bus {
         }
         drop(dir);
         out
+    }
+}
+
+#[cfg(test)]
+mod tempdir_tests {
+    /// Tests run on parallel threads and ask for temp dirs at the same
+    /// moment (two tests of `rfid.rs` once got the same one, and then the
+    /// same pty link): every `TempDir` is a directory of its own.
+    #[test]
+    fn temp_dirs_made_at_once_on_many_threads_are_distinct() {
+        use super::TempDir;
+        use std::collections::BTreeSet;
+        const THREADS: usize = 8;
+        const EACH: usize = 200;
+        let start = std::sync::Barrier::new(THREADS);
+        let dirs: Vec<TempDir> = std::thread::scope(|s| {
+            let made: Vec<_> = (0..THREADS)
+                .map(|_| {
+                    s.spawn(|| {
+                        start.wait();
+                        (0..EACH).map(|_| TempDir::new("same")).collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            made.into_iter().flat_map(|t| t.join().unwrap()).collect()
+        });
+        let paths: BTreeSet<_> = dirs.iter().map(|d| d.0.clone()).collect();
+        assert_eq!(paths.len(), THREADS * EACH, "two TempDirs share a path");
+        assert!(dirs.iter().all(|d| d.0.is_dir()));
     }
 }

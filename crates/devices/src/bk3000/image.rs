@@ -30,12 +30,14 @@ pub const CFG_CYCLE_COUNTER: u8 = 0x10;
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum StripError {
     /// A name that is not in the catalogue.
-    #[error("terminal {position}: `{name}` is not in the catalogue (known: {known})")]
+    #[error("terminal {position}: `{name}` is not in the catalogue{}", if suggestions.is_empty() { format!(" (known: {known})") } else { suggestions.to_string() })]
     Unknown {
         /// 1-based position.
         position: usize,
         /// The name given.
         name: String,
+        /// The closest names of the catalogue.
+        suggestions: profibus_dp::names::DidYouMean,
         /// The catalogue's names.
         known: String,
     },
@@ -122,6 +124,10 @@ impl Strip {
                 return Err(StripError::Unknown {
                     position: i + 1,
                     name: name.to_string(),
+                    suggestions: profibus_dp::names::DidYouMean::new(
+                        name,
+                        catalogue::CATALOGUE.iter().map(|t| t.name),
+                    ),
                     known: catalogue::CATALOGUE
                         .iter()
                         .map(|t| t.name)

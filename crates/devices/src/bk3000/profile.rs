@@ -28,7 +28,8 @@ pub enum TerminalList {
 #[serde(default, deny_unknown_fields)]
 pub struct Options {
     /// The strip in plug order, end terminal last; a name may carry
-    /// `:compact`, `:complete`, `:standard` or `:status`.
+    /// `:compact`, `:complete`, `:standard` or `:status`. Default:
+    /// [`DEFAULT_STRIP`], the manual's appendix example.
     pub terminals: Option<TerminalList>,
     /// The strip from a file (one name per line or comma-separated, `#`
     /// comments).
@@ -63,25 +64,33 @@ fn invalid(e: impl ToString) -> ProfileError {
     ProfileError::Invalid(e.to_string())
 }
 
-/// The strip the options name.
+/// The strip without `terminals`: the manual's appendix example
+/// ("Beispiel: Prozeßabbild im Buskoppler", p. 38-40, manual line 76-78),
+/// digital and analog terminals in and out, a power feed and the end
+/// terminal.
+pub const DEFAULT_STRIP: &str = "KL1002,KL1002,KL1002,KL1002,KL1002,KL2012,KL2012,KL2012,KL3002,\
+KL4002,KL4002,KL3002,KL9100,KL1002,KL1002,KL1002,KL2012,KL2012,KL4002,KL9010";
+
+/// The strip the options name; [`DEFAULT_STRIP`] without `terminals`.
 pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
     let list = match (&o.terminals, &o.terminals_file) {
-        (Some(_), Some(_)) => return Err(invalid("give --terminals or a terminals file, not both")),
+        (Some(_), Some(_)) => {
+            return Err(invalid("give --terminals or a terminals file, not both"))
+        }
         (Some(TerminalList::List(v)), None) => v.join(","),
         (Some(TerminalList::Text(t)), None) => t.clone(),
         (None, Some(path)) => crate::profile::read_option_file(path)?,
-        (None, None) => {
-            return Err(invalid(
-                "give the terminal strip: --terminals KL1104,KL2134,...,KL9010 (plug order, end terminal KL9010 last)",
-            ))
-        }
+        (None, None) => DEFAULT_STRIP.to_string(),
     };
     let s = Strip::parse(&list).map_err(|e| match &o.terminals_file {
         Some(path) => ProfileError::Table {
             path: path.clone(),
             message: e.to_string(),
         },
-        None => invalid(e),
+        None => ProfileError::BadOption {
+            key: "terminals",
+            message: e.to_string(),
+        },
     })?;
     Ok(s)
 }
@@ -126,7 +135,7 @@ impl Profile for Bk3000Profile {
     const SUMMARY: &'static str =
         "Beckhoff BK3000 PROFIBUS-DP bus coupler (ident 0xBECF) with a K-bus terminal strip";
     const OPTIONS_HELP: &'static str = "--terminals KL1104,KL2134,KL3102:complete,...,KL9010 (plug order, end terminal last; \
-bus file: terminals = [...]) or --device-opt terminals-file=FILE, \
+bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the manual's appendix example strip), \
 --switch-ones N --switch-tens N (rotary switches, instead of --addr), \
 --device-opt programmed-cfg=HEX (table 70), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";

@@ -650,8 +650,17 @@ fn profile_options_modules_and_channels() {
         .find(crate::channels::Direction::Input, "2.KL3102.1.status")
         .is_some());
     // Refusals a user understands.
-    let e = entry.configure(&DeviceOptions::new(), None).unwrap_err();
-    assert!(e.to_string().contains("--terminals"), "{e}");
+    // Without a strip: the manual's appendix example.
+    let p = entry.configure(&DeviceOptions::new(), None).unwrap();
+    assert_eq!(p.modules(), profile::gsd_modules(p.gsd(), &strip(APPENDIX)));
+    // A terminal name matches exactly or not at all, with the closest.
+    let mut o = DeviceOptions::new();
+    o.set_text("terminals", "KL1104,KL2135,KL9010");
+    let e = entry.configure(&o, None).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "option `terminals`: terminal 2: `KL2135` is not in the catalogue; did you mean `KL2134`?"
+    );
     let mut o = DeviceOptions::new();
     o.set_text("terminals", "KL1104,KL2134");
     let e = entry.configure(&o, None).unwrap_err();
@@ -795,8 +804,8 @@ fn sync_and_freeze_accepted_dpv1_refused_like_a_dp_v0_slave() {
 #[test]
 fn terminals_file_option() {
     use crate::{profile as registry, DeviceOptions};
-    let dir = std::env::temp_dir().join(format!("bk3000-strip-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
     let f = dir.join("strip.txt");
     std::fs::write(
         &f,
@@ -814,5 +823,4 @@ fn terminals_file_option() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -37,7 +37,9 @@ pub struct Options {
     /// order; default: all of them. (Not `modules`: in a bus file that
     /// key is the slave's GSD modules, which a profile chooses itself.)
     pub variables: Option<Vec<String>>,
-    /// Master side: configure the PKW module first (default: true).
+    /// Master side: configure the PKW module first (default: where it
+    /// fits the GSD's lengths next to the variables, so not with the
+    /// default table, which fills them).
     pub pkw: Option<bool>,
 }
 
@@ -59,7 +61,8 @@ impl Profile for Bm4Profile {
 --us-device N (1..125 fixed, 126 set once by the master and kept in --state-dir, 127 set after every start, \
 128 rotary switch; default: --addr), --switch N (rotary switch for us_DEVICE 128), --state-dir DIR, \
 --write-gsd FILE (write the generated GSD), --control FILE|- (commands: sdiag HEX..., sdiag-clear, set NAME VALUE, get NAME, status); \
-example = true (the manual's example table instead of --vars); master side: variables = [names] (default all), pkw = true|false";
+example = true (the manual's example table instead of --vars); master side: variables = [names] (default all), \
+pkw = true|false (default: true where the PKW module fits next to the variables, not with the default table)";
     const IDENT: Option<u16> = Some(IDENT);
     const PATH_OPTIONS: &'static [&'static str] = &["vars", "state_dir", "write_gsd"];
     const PKW: Option<&'static Dialect> = Some(&PKW);
@@ -120,17 +123,32 @@ example = true (the manual's example table instead of --vars); master side: vari
                 .find(|m| m.cfg == cfg)
                 .map(|m| m.name.clone())
         };
-        let mut out = vec![];
-        if self.options.pkw.unwrap_or(true) {
-            out.extend(name_of(&[PKW_MODULE]));
+        let vars: Vec<String> = match &self.options.variables {
+            Some(names) => names.clone(),
+            None => (0..self.table.vars.len())
+                .filter_map(|i| name_of(&self.table.identifier(i)))
+                .collect(),
+        };
+        let pkw: Vec<String> = name_of(&[PKW_MODULE]).into_iter().collect();
+        let with_pkw = [pkw.clone(), vars.clone()].concat();
+        // Default: the PKW module first where it fits next to the
+        // variables. The manual's default variables (5.03058.03, L2101-
+        // 2109) are 112 bytes each way, all that its default GSD allows
+        // (BM4OPRO1.GSD, L2255-2257: Max_Input_Len=112,
+        // Max_Output_Len=112, Max_Data_Len=224; its "all modules" module,
+        // L2260, is that configuration): with the 8 PKW bytes it would be
+        // refused, so the default table goes without the PKW module.
+        let fits = |names: &[String]| {
+            self.gsd
+                .select(names)
+                .is_ok_and(|sel| self.gsd.check_selection(&sel).is_empty())
+        };
+        match self.options.pkw {
+            Some(true) => with_pkw,
+            Some(false) => vars,
+            None if fits(&with_pkw) || !fits(&vars) => with_pkw,
+            None => vars,
         }
-        match &self.options.variables {
-            Some(names) => out.extend(names.iter().cloned()),
-            None => out.extend(
-                (0..self.table.vars.len()).filter_map(|i| name_of(&self.table.identifier(i))),
-            ),
-        }
-        out
     }
 
     fn address(&self) -> Option<u8> {

@@ -232,9 +232,8 @@ fn sdiag_example_and_status_codes() {
 
 #[test]
 fn addressing_modes() {
-    let dir = std::env::temp_dir().join(format!("bm4-addr-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
     let a = |us, sw| Addressing::from_us_device(us, sw, Some(&dir));
     assert_eq!(a(6, None).unwrap().address, 6);
     assert!(!a(6, None).unwrap().accepts_set_slave_add());
@@ -273,7 +272,6 @@ fn addressing_modes() {
             .features()
             .set_slave_add
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -26,31 +26,31 @@ pub enum ClientError {
     #[error(transparent)]
     Module(#[from] BadModuleNumber),
     /// The script file cannot be read.
-    #[error("cannot read {}: {source}", path.display())]
+    #[error("cannot read {}: {error}", path.display())]
     Read {
         /// The script file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The script has a line that is not a command.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Script {
         /// The script file.
         path: PathBuf,
         /// The bad line.
-        source: ParseError,
+        error: ParseError,
     },
     /// The control path exists and is not a socket (not ours to remove).
     #[error("{} exists and is not a socket", .0.display())]
     NotASocket(PathBuf),
     /// The control socket cannot be created.
-    #[error("cannot listen on {}: {source}", path.display())]
+    #[error("cannot listen on {}: {error}", path.display())]
     Listen {
         /// The socket.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -98,13 +98,13 @@ where
         clock,
     };
     if let Some(path) = &options.script {
-        let text = std::fs::read_to_string(path).map_err(|source| ClientError::Read {
+        let text = std::fs::read_to_string(path).map_err(|error| ClientError::Read {
             path: path.clone(),
-            source,
+            error,
         })?;
-        let it = Interpreter::script(&text).map_err(|source| ClientError::Script {
+        let it = Interpreter::script(&text).map_err(|error| ClientError::Script {
             path: path.clone(),
-            source,
+            error,
         })?;
         let c = ctx.clone();
         tokio::spawn(async move {
@@ -147,9 +147,9 @@ where
 /// Listen on `path`, replacing a socket left behind by a killed run
 /// (anything else there is not ours to remove).
 fn bind(path: &Path) -> Result<tokio::net::UnixListener, ClientError> {
-    let listen = |source| ClientError::Listen {
+    let listen = |error| ClientError::Listen {
         path: path.to_path_buf(),
-        source,
+        error,
     };
     if path.exists() {
         use std::os::unix::fs::FileTypeExt;

@@ -118,7 +118,7 @@ impl fmt::Display for CommandResult {
 pub enum RunError {
     /// The slave is not configured as the reader.
     #[error(
-        "slave {0} is configured {1:02X?}; the reader has 16 bytes in and out (0x3F, gsd/AEGI0DC4.GSD)"
+        "slave {0} is configured {h}; the reader has 16 bytes in and out (3F, gsd/AEGI0DC4.GSD)", h = Hex(.1)
     )]
     NotAReader(u8, Vec<u8>),
     /// The reader did not reach Data_Exchange.
@@ -385,7 +385,8 @@ mod tests {
         };
         let e = CommandRun::new(&wrong, &[], Duration::from_secs(1)).unwrap_err();
         assert!(
-            e.to_string().starts_with("slave 12 is configured [11]"),
+            e.to_string()
+                .starts_with("slave 12 is configured 11; the reader has 16 bytes"),
             "{e}"
         );
     }

@@ -96,7 +96,8 @@ the reader's timing; rewritten when a tag's memory changes or a tag enters or le
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
         if cfg != CFG {
             return Err(ProfileError::Config(format!(
-                "the reader has the one module 0x3F, not {cfg:02X?}"
+                "the reader has the one module 3F, not {}",
+                profibus_fdl::wire::Hex(cfg)
             )));
         }
         let mut m = ChannelMap::new();
@@ -151,7 +152,7 @@ mod tests {
         o.set_pair("speed=3").unwrap();
         assert!(matches!(
             entry.configure(&o, None),
-            Err(ProfileError::Options(_))
+            Err(ProfileError::UnknownOption { .. })
         ));
     }
 }

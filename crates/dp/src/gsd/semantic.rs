@@ -23,6 +23,7 @@
 
 use super::model::*;
 use crate::cfg::{self, CfgError, CfgTotals};
+use crate::names::DidYouMean;
 use profibus_fdl::timing::Baud;
 use std::str::FromStr;
 
@@ -35,24 +36,16 @@ pub const MAX_USER_PRM_LEN: usize = 237;
 /// The most input or output bytes of one DP slave.
 pub const MAX_IO_LEN: usize = 244;
 
-/// A module name that matches no module, or several.
+/// A module name that is not the name of a module of the GSD.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum LookupError {
-    /// No module has a name like this.
-    #[error("no module named `{name}`{}", suggestion.as_ref().map(|s| format!("; did you mean `{s}`?")).unwrap_or_default())]
+    /// No module has this name (names match exactly).
+    #[error("no module named `{name}`{suggestions}")]
     NotFound {
         /// The name looked for.
         name: String,
-        /// The closest module name, if any is close.
-        suggestion: Option<String>,
-    },
-    /// Several modules match equally well.
-    #[error("`{name}` matches several modules: {}", candidates.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", "))]
-    Ambiguous {
-        /// The name looked for.
-        name: String,
-        /// The modules it matches.
-        candidates: Vec<String>,
+        /// The closest module names, if any is close.
+        suggestions: DidYouMean,
     },
 }
 
@@ -77,14 +70,14 @@ pub enum SelectionError {
         error: CfgError,
     },
     /// A named parameter that the selection does not have.
-    #[error("no parameter `{name}`{} in this configuration{}", position.map(|p| format!(" at module position {p}")).unwrap_or_default(), suggestion.as_ref().map(|s| format!("; did you mean `{s}`?")).unwrap_or_default())]
+    #[error("no parameter `{name}`{} in this configuration{suggestions}", position.map(|p| format!(" at module position {p}")).unwrap_or_default())]
     UnknownParameter {
         /// The name given.
         name: String,
         /// The module position given, if any.
         position: Option<usize>,
-        /// The closest parameter name, if any is close.
-        suggestion: Option<String>,
+        /// The closest parameter names, if any is close.
+        suggestions: DidYouMean,
     },
     /// A value the parameter does not allow.
     #[error("parameter `{name}`: {value} is not allowed; allowed: {allowed}")]
@@ -302,94 +295,6 @@ fn normalize(s: &str) -> String {
         .to_lowercase()
 }
 
-/// Edit distance between two strings in characters, counting a swap of
-/// two neighbours as one edit (optimal string alignment).
-fn levenshtein(a: &str, b: &str) -> usize {
-    let a: Vec<char> = a.chars().collect();
-    let b: Vec<char> = b.chars().collect();
-    let w = b.len() + 1;
-    let mut d = vec![0usize; (a.len() + 1) * w];
-    for i in 0..=a.len() {
-        d[i * w] = i;
-    }
-    for (j, v) in d.iter_mut().enumerate().take(w) {
-        *v = j;
-    }
-    for i in 1..=a.len() {
-        for j in 1..=b.len() {
-            let cost = usize::from(a[i - 1] != b[j - 1]);
-            let mut v = (d[(i - 1) * w + j] + 1)
-                .min(d[i * w + j - 1] + 1)
-                .min(d[(i - 1) * w + j - 1] + cost);
-            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
-                v = v.min(d[(i - 2) * w + j - 2] + 1);
-            }
-            d[i * w + j] = v;
-        }
-    }
-    d[a.len() * w + b.len()]
-}
-
-/// Find `name` among `names`: exact, then equal after normalizing, then
-/// a unique prefix, then a unique substring, then the unique closest by
-/// edit distance if close enough.
-fn lookup<'a>(
-    name: &str,
-    names: impl Iterator<Item = &'a str> + Clone,
-) -> Result<usize, LookupError> {
-    if let Some(i) = names.clone().position(|n| n == name) {
-        return Ok(i);
-    }
-    let want = normalize(name);
-    let normalized: Vec<String> = names.clone().map(normalize).collect();
-    let steps: [&dyn Fn(&str) -> bool; 3] = [
-        &|n: &str| n == want,
-        &|n: &str| n.starts_with(&want),
-        &|n: &str| n.contains(&want),
-    ];
-    for pred in steps {
-        let hits: Vec<usize> = (0..normalized.len())
-            .filter(|&i| pred(&normalized[i]))
-            .collect();
-        match hits.as_slice() {
-            [] => continue,
-            [i] => return Ok(*i),
-            [first, rest @ ..] => {
-                if rest.iter().all(|&i| normalized[i] == normalized[*first]) {
-                    return Ok(*first);
-                }
-                let all: Vec<&str> = names.clone().collect();
-                return Err(LookupError::Ambiguous {
-                    name: name.to_string(),
-                    candidates: hits.iter().map(|&i| all[i].to_string()).collect(),
-                });
-            }
-        }
-    }
-    let dists: Vec<usize> = normalized.iter().map(|n| levenshtein(&want, n)).collect();
-    let best = dists.iter().copied().min();
-    let all: Vec<&str> = names.collect();
-    match best {
-        Some(d) => {
-            let hits: Vec<usize> = (0..dists.len()).filter(|&i| dists[i] == d).collect();
-            let close = d <= (want.chars().count() / 4).max(2);
-            if close && hits.len() == 1 {
-                Ok(hits[0])
-            } else {
-                Err(LookupError::NotFound {
-                    name: name.to_string(),
-                    suggestion: (d <= (want.chars().count() / 2).max(3))
-                        .then(|| all[hits[0]].to_string()),
-                })
-            }
-        }
-        None => Err(LookupError::NotFound {
-            name: name.to_string(),
-            suggestion: None,
-        }),
-    }
-}
-
 /// Write `v` as type `t` at `at` (big-endian for 16/32 bits; Bit and
 /// BitArea change only their bits).
 fn put(data: &mut [u8], at: usize, t: PrmDataType, v: i64) {
@@ -498,21 +403,24 @@ impl Gsd {
         self.modules.iter().position(|m| m.name == name)
     }
 
-    /// The index of the module best matching `name`: the exact name,
-    /// else the same name ignoring case and blanks, else a unique prefix,
-    /// else a unique substring, else a unique name within a few typing
-    /// errors.
+    /// The index of the module named `name`: names match exactly (a
+    /// module that is not in the file is never replaced by a similar
+    /// one); the error names the closest module names.
     pub fn find_module_index(&self, name: &str) -> Result<usize, LookupError> {
-        lookup(name, self.modules.iter().map(|m| m.name.as_str()))
+        self.module_index(name)
+            .ok_or_else(|| LookupError::NotFound {
+                name: name.to_string(),
+                suggestions: DidYouMean::new(name, self.modules.iter().map(|m| m.name.as_str())),
+            })
     }
 
-    /// The module best matching `name` (see
+    /// The module named `name` (see
     /// [`find_module_index`](Self::find_module_index)).
     pub fn find_module(&self, name: &str) -> Result<&Module, LookupError> {
         self.find_module_index(name).map(|i| &self.modules[i])
     }
 
-    /// A selection from module names (approximate matching).
+    /// A selection from module names (exact names).
     pub fn select<S: AsRef<str>>(&self, names: &[S]) -> Result<Vec<usize>, LookupError> {
         names
             .iter()
@@ -780,15 +688,11 @@ impl Gsd {
             }
             if !hit {
                 let names: Vec<&str> = params.iter().map(|p| p.definition.name.as_str()).collect();
-                let suggestion = match lookup(&v.name, names.iter().copied()) {
-                    Ok(i) => Some(names[i].to_string()),
-                    Err(LookupError::NotFound { suggestion, .. }) => suggestion,
-                    Err(LookupError::Ambiguous { candidates, .. }) => candidates.into_iter().next(),
-                };
+                let suggestions = DidYouMean::new(&v.name, names.iter().copied());
                 return Err(SelectionError::UnknownParameter {
                     name: v.name.clone(),
                     position: v.position,
-                    suggestion,
+                    suggestions,
                 });
             }
         }
@@ -913,29 +817,38 @@ mod tests {
     use super::*;
 
     #[test]
-    fn edit_distance() {
-        assert_eq!(levenshtein("kitten", "sitting"), 3);
-        assert_eq!(levenshtein("", "abc"), 3);
-        assert_eq!(levenshtein("abc", "abc"), 0);
-        assert_eq!(levenshtein("bytse", "bytes"), 1);
-    }
-
-    #[test]
-    fn lookup_steps() {
-        let names = ["1 byte in", "1 byte out", "2 words in/out", "16 bytes out"];
-        let f = |n: &str| lookup(n, names.iter().copied());
-        assert_eq!(f("1 byte in"), Ok(0));
-        assert_eq!(f("1  BYTE   OUT"), Ok(1));
-        assert_eq!(f("2 words"), Ok(2));
-        assert_eq!(f("16 bytes"), Ok(3));
-        assert_eq!(f("16 bytse out"), Ok(3));
-        assert!(
-            matches!(f("1 byte"), Err(LookupError::Ambiguous { candidates, .. }) if candidates.len() == 2)
+    fn module_names_match_exactly() {
+        let mut g = Gsd::default();
+        for (name, id) in [
+            ("1 word in/out", 0x70),
+            ("2 words in/out", 0x71),
+            ("4 words in/out", 0x73),
+        ] {
+            g.modules.push(Module {
+                name: name.into(),
+                cfg: vec![id],
+                ..Module::default()
+            });
+        }
+        assert_eq!(g.find_module_index("2 words in/out"), Ok(1));
+        // Never a similar module instead: the closest names in the error.
+        for near in ["3 words in/out", "2 Words in/out", "2 words"] {
+            let e = g.find_module_index(near).unwrap_err();
+            assert!(
+                e.to_string().contains("did you mean `2 words in/out`"),
+                "{e}"
+            );
+        }
+        let e = g
+            .find_module_index("3 words in/out")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "no module named `3 words in/out`; did you mean `2 words in/out` or `4 words in/out`?"
         );
-        assert!(matches!(
-            f("completely else"),
-            Err(LookupError::NotFound { .. })
-        ));
+        let e = g.find_module_index("temperature").unwrap_err().to_string();
+        assert_eq!(e, "no module named `temperature`");
     }
 
     #[test]

@@ -478,6 +478,10 @@ pub struct SlaveStats {
     /// Set_Prm or Chk_Cfg, Station_Not_Ready for too long) and were
     /// retried after a back-off.
     pub failed_startups: u64,
+    /// Answers that came after their request's wait ran out (the retry
+    /// had gone out, or the request had failed) and were dropped
+    /// ([`profibus_fdl::station::active::ActiveStats::late_replies`]).
+    pub late_replies: u64,
 }
 
 /// Poll-cycle statistics.
@@ -1057,6 +1061,7 @@ impl DpMaster {
             dsap: Some(sap::SLAVE_DIAG),
             ssap: Some(sap::MASTER),
             data: &[],
+            max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
         };
         let (step, req) = match s.state {
             SlaveState::Diag if s.read_cfg => (
@@ -1067,6 +1072,8 @@ impl DpMaster {
                     dsap: Some(sap::GET_CFG),
                     ssap: Some(sap::MASTER),
                     data: &[],
+                    // Up to 244 bytes: as long as the longest telegram.
+                    max_reply_len: None,
                 },
             ),
             SlaveState::Offline | SlaveState::Diag | SlaveState::CheckDiag | SlaveState::Locked => {
@@ -1083,6 +1090,8 @@ impl DpMaster {
                     dsap: Some(sap::SET_PRM),
                     ssap: Some(sap::MASTER),
                     data: &s.prm,
+                    // A short acknowledge, or a negative one.
+                    max_reply_len: Some(0),
                 },
             ),
             SlaveState::ChkCfg => (
@@ -1093,6 +1102,7 @@ impl DpMaster {
                     dsap: Some(sap::CHK_CFG),
                     ssap: Some(sap::MASTER),
                     data: &s.p.cfg,
+                    max_reply_len: Some(0),
                 },
             ),
             SlaveState::DataExchange => {
@@ -1109,6 +1119,8 @@ impl DpMaster {
                         dsap: None,
                         ssap: None,
                         data,
+                        // The inputs (at most 244 bytes, checked in `new`).
+                        max_reply_len: Some(s.input_len as u8),
                     },
                 )
             }
@@ -1407,6 +1419,13 @@ impl DpMaster {
         }
         let j = self.active_job.as_mut()?;
         let da = j.job.address();
+        let max_reply_len = match j.job {
+            Job::SetSlaveAdd { .. } => Some(0),
+            Job::ReadDiag { .. } => Some(crate::diag::MAX_DIAG_LEN as u8),
+            // Get_Cfg, Rd_Inp, Rd_Outp of any slave and DP-V1 answers
+            // carry up to 244 bytes: as long as the longest telegram.
+            _ => None,
+        };
         let (dsap, ssap, len) = match (&j.job, j.polling_since) {
             (Job::ReadDiag { .. }, _) => (sap::SLAVE_DIAG, sap::MASTER, 0),
             (Job::GetCfg { .. }, _) => (sap::GET_CFG, sap::MASTER, 0),
@@ -1475,6 +1494,7 @@ impl DpMaster {
             dsap: Some(dsap),
             ssap: Some(ssap),
             data: &self.req[..len],
+            max_reply_len,
         })
     }
 
@@ -1620,6 +1640,8 @@ impl DpMaster {
             dsap: Some(sap::GLOBAL_CONTROL),
             ssap: Some(sap::MASTER),
             data: &self.gc_bytes,
+            // SDN: never answered.
+            max_reply_len: None,
         }
     }
 }
@@ -1686,6 +1708,13 @@ impl MasterApp for DpMaster {
             }
         }
         self.emit(MasterEvent::Ring(event));
+    }
+
+    fn on_late_reply(&mut self, _now: Instant, from: Option<u8>) {
+        let i = from.and_then(|a| self.index.get(a as usize).copied());
+        if let Some(s) = i.and_then(|i| self.slaves.get_mut(i as usize)) {
+            s.stats.late_replies += 1;
+        }
     }
 }
 

@@ -405,14 +405,15 @@ impl fmt::Display for SlaveStatus {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "{} {:<20} {:<13} in: {}  out: {}  (errors {}, retries {})",
+            "{} {:<20} {:<13} in: {}  out: {}  (errors {}, retries {}, late {})",
             self.address,
             self.name,
             self.state.map(SlaveState::name).unwrap_or(""),
             Hex(&self.inputs),
             Hex(&self.outputs),
             self.stats.errors,
-            self.stats.retries
+            self.stats.retries,
+            self.stats.late_replies
         )?;
         if self.stats.failed_startups > 0 {
             write!(f, "  failed start-ups {}", self.stats.failed_startups)?;

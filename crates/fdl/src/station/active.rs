@@ -58,6 +58,20 @@
 //! latency (ptys, USB adapters): one allowance on the slot time and the
 //! token-pass check, 3 + n on the token-lost timeout of address n (see
 //! [`ActiveConfig::token_lost_timeout`]). On the simulator it is zero.
+//! A transport that hands a telegram over only once its last character
+//! has crossed the wire ([`ActiveConfig::whole_telegrams`]: a paced `dpctl
+//! bus`, a serial device server) delays the first character of every
+//! answer by the answer's own wire time, which the standard's slot time
+//! (measured to the first character) does not contain. The wait for an
+//! answer then also allows for the wire time of the longest answer *that
+//! request* can get ([`Request::longest_answer`]: 6 characters for FDL
+//! Status, the caller's [`Request::max_reply_len`] for an SRD), never for
+//! the longest telegram: a station silent at 19.2 kbit/s costs 14 ms per
+//! attempt, not 160 ms. A reply that comes after its request's wait (after
+//! the retry, or after giving up) is counted
+//! ([`ActiveStats::late_replies`], [`MasterApp::on_late_reply`]) and
+//! dropped; it never answers a later request of another station or with
+//! other SAPs (see `reply_matches`).
 
 use super::{earliest, RxPath, Station};
 use crate::time::Instant;
@@ -75,8 +89,17 @@ pub struct ActiveConfig {
     /// Bus parameters.
     pub params: BusParams,
     /// Added to the slot time, token-pass check and token-lost timeout to
-    /// cover the latency of the transport; zero on the simulator.
+    /// cover the latency of the transport (a pty: a few ms; a USB adapter
+    /// or a serial device server: 20 ms); zero on the simulator.
     pub latency_allowance: Duration,
+    /// The transport hands each telegram over only once its last
+    /// character has crossed the wire (a paced `dpctl bus`, a serial
+    /// device server), so an answer's first character comes its whole
+    /// wire time later than on a line: every wait for a telegram also
+    /// allows for the wire time of the longest telegram that can come (per
+    /// request: [`Request::longest_answer`]). False on a serial line and on
+    /// the simulator, which deliver character by character.
+    pub whole_telegrams: bool,
     /// Repetitions of a token pass the successor does not take before it
     /// is removed from the LAS.
     pub token_retry: u8,
@@ -98,11 +121,27 @@ impl ActiveConfig {
     /// allowance later, and without the extra step the next address
     /// claims as well (issue 18: in a 3-master ring on `dpctl bus`, master
     /// 4 claimed next to master 3 in about a third of the runs).
+    ///
+    /// With [`ActiveConfig::whole_telegrams`] each allowance also holds
+    /// the wire time of the longest telegram: while any telegram crosses
+    /// such a transport, the other stations see silence.
     pub fn token_lost_timeout(&self) -> Duration {
         let n = self.address.min(125) as u32;
         self.params
             .bits(self.params.token_lost_timeout(n as u8) as u64)
-            + (3 + n) * self.latency_allowance
+            + (3 + n) * self.telegram_allowance(consts::MAX_TELEGRAM_LEN)
+    }
+
+    /// The allowance on a wait for a telegram of up to `chars` characters:
+    /// the transport's latency, plus the telegram's wire time when the
+    /// transport hands over whole telegrams.
+    pub fn telegram_allowance(&self, chars: usize) -> Duration {
+        let wire = if self.whole_telegrams {
+            self.params.baud.chars_to_duration(chars as u64)
+        } else {
+            Duration::ZERO
+        };
+        self.latency_allowance + wire
     }
 
     /// Configuration with default token retry (1) and no latency allowance.
@@ -111,6 +150,7 @@ impl ActiveConfig {
             address,
             params,
             latency_allowance: Duration::ZERO,
+            whole_telegrams: false,
             token_retry: 1,
         }
     }
@@ -167,6 +207,41 @@ pub struct Request<'a> {
     pub ssap: Option<u8>,
     /// Data unit.
     pub data: &'a [u8],
+    /// The longest data unit (bytes after the SAPs) an answer to this SRD
+    /// can carry, when the requester knows it (DP: the configured input
+    /// length for Data_Exchange, 244 for Slave_Diag); `None` allows for
+    /// the longest telegram. Ignored for other services, whose answers
+    /// have a fixed length. Sets the wait for the answer on a transport
+    /// with [`ActiveConfig::whole_telegrams`]; an answer that is longer
+    /// is still taken when it comes in time.
+    pub max_reply_len: Option<u8>,
+}
+
+impl Request<'_> {
+    /// Characters of the longest telegram that can answer this request:
+    /// 0 for SDN (no answer), 6 for FDL Status and SDA (an SD1 reply; a
+    /// short acknowledge is 1), for SRD an SD2 telegram with the request's
+    /// SAPs swapped and [`Request::max_reply_len`] bytes of data (at least
+    /// the 6 of an SD1 "no data" reply; the longest telegram, 255, when
+    /// unknown).
+    pub fn longest_answer(&self) -> usize {
+        const SD1_LEN: usize = 6;
+        match self.service {
+            Service::SdnHigh | Service::SdnLow => 0,
+            Service::FdlStatus | Service::SdaHigh | Service::SdaLow => SD1_LEN,
+            Service::SrdHigh | Service::SrdLow => match self.max_reply_len {
+                None => consts::MAX_TELEGRAM_LEN,
+                Some(n) => {
+                    let saps = self.dsap.is_some() as usize + self.ssap.is_some() as usize;
+                    match saps + n as usize {
+                        0 => SD1_LEN,
+                        // SD2: SD LE LEr SD DA SA FC, the field, FCS ED.
+                        field => (9 + field).min(consts::MAX_TELEGRAM_LEN),
+                    }
+                }
+            },
+        }
+    }
 }
 
 /// How a message cycle ended.
@@ -294,6 +369,13 @@ pub trait MasterApp {
 
     /// Something happened to the ring.
     fn on_event(&mut self, _now: Instant, _event: FdlEvent) {}
+
+    /// A reply addressed to this station came when no request awaited it
+    /// (after its request's wait ran out: the retry went out, or the
+    /// request got no response) or did not fit the pending request; it
+    /// was dropped and counted in [`ActiveStats::late_replies`]. `from`
+    /// is the sender (`None` for a short acknowledge, which names none).
+    fn on_late_reply(&mut self, _now: Instant, _from: Option<u8>) {}
 }
 
 /// Externally visible state of the station.
@@ -334,7 +416,8 @@ pub struct ActiveStats {
     pub collisions: u64,
     /// Duplicate tokens detected.
     pub duplicate_tokens: u64,
-    /// Replies that came after the slot time and were ignored.
+    /// Replies addressed to this station that came after their request's
+    /// wait ran out (or did not fit the pending request) and were dropped.
     pub late_replies: u64,
     /// Shortest real rotation time (ns).
     pub rotation_min_ns: u64,
@@ -381,6 +464,8 @@ struct Pending {
     attempts: u8,
     max_retries: u8,
     len: usize,
+    /// How long after the end of the request its answer is awaited.
+    wait: Duration,
     /// SAPs of the request; a reply carries them swapped.
     dsap: Option<u8>,
     ssap: Option<u8>,
@@ -456,7 +541,7 @@ pub struct ActiveStation<A> {
 impl<A: MasterApp> ActiveStation<A> {
     /// A station that starts listening for the token at time zero.
     pub fn new(cfg: ActiveConfig, app: A) -> Self {
-        let slack = cfg.params.slot_duration() + cfg.latency_allowance;
+        let slack = cfg.params.slot_duration() + cfg.telegram_allowance(consts::MAX_TELEGRAM_LEN);
         let ts = cfg.address.min(125);
         ActiveStation {
             rx: RxPath::new(cfg.params.baud, slack),
@@ -662,6 +747,16 @@ fn reply_matches(p: &Pending, d: &DataTelegram<'_>) -> bool {
         && (status.is_negative() || status == ResponseStatus::Nr)
 }
 
+/// Whether `t` is a reply addressed to station `ts` (a response telegram
+/// to it, or a short acknowledge, which names no one).
+fn is_reply_to(t: &Telegram<'_>, ts: u8) -> bool {
+    match t {
+        Telegram::ShortAck => true,
+        Telegram::Data(d) => !d.fc.is_request() && d.da == ts,
+        Telegram::Token { .. } => false,
+    }
+}
+
 fn next_addr(a: u8, hsa: u8) -> u8 {
     if a >= hsa {
         0
@@ -683,17 +778,32 @@ impl Core {
         self.cfg.params.bits(n as u64)
     }
 
-    fn slot(&self) -> Duration {
-        self.bits(self.p().slot_time) + self.cfg.latency_allowance
+    /// The wait for the first telegram of the successor after a token
+    /// pass: the slot time plus the allowance for the longest telegram
+    /// (the successor may start with any request).
+    fn token_pass_slot(&self) -> Duration {
+        self.bits(self.p().slot_time) + self.cfg.telegram_allowance(consts::MAX_TELEGRAM_LEN)
+    }
+
+    /// The wait for the answer to a request whose longest answer is
+    /// `chars` characters: the slot time plus the allowance for it.
+    fn answer_slot(&self, chars: usize) -> Duration {
+        self.bits(self.p().slot_time) + self.cfg.telegram_allowance(chars)
     }
 
     /// The wait for the answer to a GAP poll: the slot time plus at most
-    /// 1 ms of the latency allowance. Most GAP addresses are empty, so this
-    /// wait is paid on almost every poll; an answer that comes later only
-    /// delays finding a new master to the next sweep (it is ignored as a
-    /// late reply meanwhile).
+    /// 1 ms of the latency allowance (plus the 6 characters of the FDL
+    /// Status answer on a transport of whole telegrams). Most GAP
+    /// addresses are empty, so this wait is paid on almost every poll; an
+    /// answer that comes later only delays finding a new master to the
+    /// next sweep (it is ignored as a late reply meanwhile).
     fn gap_slot(&self) -> Duration {
-        self.bits(self.p().slot_time) + self.cfg.latency_allowance.min(Duration::from_millis(1))
+        let latency = self.cfg.latency_allowance.min(Duration::from_millis(1));
+        let cfg = ActiveConfig {
+            latency_allowance: latency,
+            ..self.cfg
+        };
+        self.bits(self.p().slot_time) + cfg.telegram_allowance(6)
     }
 
     fn token_lost_timeout(&self) -> Duration {
@@ -836,6 +946,11 @@ impl Core {
                 self.state = State::ActiveIdle;
                 self.active_idle(now, t, app);
             }
+            State::CheckTokenPass { .. } if is_reply_to(t, ts) => {
+                // A late reply to one of our requests, not the successor
+                // (which starts with a request or a token).
+                self.late_reply(now, t, app);
+            }
             State::CheckTokenPass { .. } => {
                 // The successor (or someone) started transmitting.
                 self.state = State::ActiveIdle;
@@ -911,14 +1026,8 @@ impl Core {
     /// another station, or a reply to another master, means a second
     /// token exists.
     fn duplicate_token<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
-        let late_reply = match t {
-            Telegram::ShortAck => true,
-            Telegram::Data(d) => !d.fc.is_request() && d.da == self.ts(),
-            Telegram::Token { .. } => false,
-        };
-        if late_reply {
-            self.stats.late_replies += 1;
-            tracing::debug!(address = self.ts(), "late reply ignored");
+        if is_reply_to(t, self.ts()) {
+            self.late_reply(now, t, app);
             return;
         }
         tracing::warn!(address = self.ts(), "duplicate token: dropping ours");
@@ -927,6 +1036,18 @@ impl Core {
         self.drop_pending(now, app);
         self.state = State::ActiveIdle;
         self.active_idle(now, t, app);
+    }
+
+    /// Count and drop a reply addressed to this station that no request
+    /// awaits (see [`is_reply_to`]).
+    fn late_reply<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
+        let from = match t {
+            Telegram::Data(d) => Some(d.sa),
+            _ => None,
+        };
+        self.stats.late_replies += 1;
+        tracing::debug!(address = self.ts(), from, "late reply dropped");
+        app.on_late_reply(now, from);
     }
 
     fn drop_pending<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
@@ -1035,7 +1156,12 @@ impl Core {
         }
     }
 
-    fn active_idle<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, _app: &mut A) {
+    fn active_idle<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
+        if is_reply_to(t, self.ts()) {
+            // An answer to one of our requests after the token went on.
+            self.late_reply(now, t, app);
+            return;
+        }
         match *t {
             Telegram::Token { da, sa } => {
                 if da == self.ts() {
@@ -1287,6 +1413,7 @@ impl Core {
             }
         };
         let (service, da, dsap, ssap) = (req.service, req.da, req.dsap, req.ssap);
+        let wait = self.answer_slot(req.longest_answer());
         let end = self.send_req_buffer(now, len);
         if reply {
             self.pending = Some(Pending {
@@ -1295,11 +1422,12 @@ impl Core {
                 attempts: 0,
                 max_retries: if r.operational { self.p().max_retry } else { 0 },
                 len,
+                wait,
                 dsap,
                 ssap,
             });
             self.state = State::AwaitResponse {
-                deadline: end + self.slot(),
+                deadline: end + wait,
             };
             None
         } else {
@@ -1354,7 +1482,7 @@ impl Core {
             self.pending = Some(p);
             let end = self.send_req_buffer(now, p.len);
             self.state = State::AwaitResponse {
-                deadline: end + self.slot(),
+                deadline: end + p.wait,
             };
             return;
         }
@@ -1381,7 +1509,7 @@ impl Core {
         } else {
             self.state = State::CheckTokenPass {
                 attempts,
-                deadline: end + self.slot(),
+                deadline: end + self.token_pass_slot(),
             };
         }
     }
@@ -1400,6 +1528,10 @@ mod tests {
         queue: Vec<(u8, Service)>,
         /// (DSAP, SSAP) of every request, if any.
         saps: Option<(u8, u8)>,
+        /// [`Request::max_reply_len`] of every request.
+        max_reply: Option<u8>,
+        /// Senders of late replies ([`MasterApp::on_late_reply`]).
+        late: Vec<Option<u8>>,
     }
 
     impl MasterApp for Recorder {
@@ -1412,6 +1544,7 @@ mod tests {
                 dsap: self.saps.map(|s| s.0),
                 ssap: self.saps.map(|s| s.1),
                 data: &[],
+                max_reply_len: self.max_reply,
             })
         }
         fn on_result(&mut self, _now: Instant, r: &CycleResult<'_>) {
@@ -1425,6 +1558,9 @@ mod tests {
         }
         fn on_event(&mut self, _now: Instant, e: FdlEvent) {
             self.events.push(e);
+        }
+        fn on_late_reply(&mut self, _now: Instant, from: Option<u8>) {
+            self.late.push(from);
         }
     }
 
@@ -1594,6 +1730,132 @@ mod tests {
         );
         assert_eq!(st.app().results, vec![(8, "response", 0)]);
         assert_eq!(st.stats().late_replies, 1);
+    }
+
+    #[test]
+    fn longest_answer_of_each_service() {
+        let req = |service, saps: Option<(u8, u8)>, max| Request {
+            da: 8,
+            service,
+            dsap: saps.map(|s| s.0),
+            ssap: saps.map(|s| s.1),
+            data: &[1, 2, 3],
+            max_reply_len: max,
+        };
+        let diag = Some((60, 62));
+        for (r, chars) in [
+            (req(Service::FdlStatus, None, None), 6),
+            (req(Service::SdaLow, diag, Some(200)), 6),
+            (req(Service::SdnHigh, None, None), 0),
+            (req(Service::SrdHigh, None, None), 255),
+            // Data_Exchange with 2 bytes of inputs: SD2 of 9 + 2.
+            (req(Service::SrdHigh, None, Some(2)), 11),
+            // No data, no SAPs: the 6 characters of an SD1 "no data".
+            (req(Service::SrdHigh, None, Some(0)), 6),
+            // Set_Prm: a short acknowledge, or a reply with the SAPs.
+            (req(Service::SrdHigh, diag, Some(0)), 11),
+            (req(Service::SrdLow, diag, Some(244)), 255),
+            (req(Service::SrdLow, None, Some(255)), 255),
+        ] {
+            assert_eq!(r.longest_answer(), chars, "{r:?}");
+        }
+    }
+
+    /// Issue 26: on a transport of whole telegrams each request waits for
+    /// the slot time, the latency and the wire time of *its* longest
+    /// answer; a silent station costs 14 ms per FDL Status at 19.2 kbit/s,
+    /// not the 160 ms of an allowance for the longest telegram.
+    #[test]
+    fn the_wait_for_an_answer_allows_for_that_requests_longest_answer() {
+        let params = BusParams::defaults(Baud::B19200);
+        let mut cfg = ActiveConfig::new(3, params);
+        cfg.latency_allowance = Duration::from_millis(5);
+        cfg.whole_telegrams = true;
+        let wire = |n: usize| params.baud.chars_to_duration(n as u64);
+        let tsl = params.bits(params.slot_time as u64);
+        for (service, saps, max, answer) in [
+            (Service::FdlStatus, None, None, 6),
+            (Service::SrdHigh, None, Some(2), 11),
+            (Service::SrdHigh, Some((60, 62)), Some(244), 255),
+            (Service::SrdHigh, None, None, 255),
+        ] {
+            let mut st = ActiveStation::new(cfg, Recorder::default());
+            st.app_mut().saps = saps;
+            st.app_mut().max_reply = max;
+            st.app_mut().queue.push((8, service));
+            step(&mut st);
+            step(&mut st);
+            let (t, tx) = step(&mut st);
+            let sent = tx.unwrap().len();
+            // No answer: the retry goes out when the wait ran out.
+            let (t1, retry) = step(&mut st);
+            assert_eq!(retry.unwrap().len(), sent);
+            assert_eq!(
+                t1 - t,
+                wire(sent) + tsl + Duration::from_millis(5) + wire(answer),
+                "{service:?} {max:?}"
+            );
+        }
+        // On a line that delivers character by character the first
+        // character is awaited: the slot time and the latency only.
+        cfg.whole_telegrams = false;
+        let mut st = ActiveStation::new(cfg, Recorder::default());
+        st.app_mut().queue.push((8, Service::SrdHigh));
+        step(&mut st);
+        step(&mut st);
+        let (t, tx) = step(&mut st);
+        let (t1, _) = step(&mut st);
+        let sent = tx.unwrap().len();
+        assert_eq!(t1 - t, wire(sent) + tsl + Duration::from_millis(5));
+        // The token-lost timeout still allows for the longest telegram per
+        // allowance: any telegram is silence to the others while it
+        // crosses a transport of whole telegrams.
+        cfg.whole_telegrams = true;
+        assert_eq!(
+            cfg.token_lost_timeout(),
+            params.bits(params.token_lost_timeout(3) as u64)
+                + 6 * (Duration::from_millis(5) + wire(255))
+        );
+    }
+
+    /// The answer to a request whose wait ran out comes after the retry
+    /// was answered, and after that while the token is checked at the
+    /// successor: counted and dropped, and the token pass still waits for
+    /// the successor.
+    #[test]
+    fn a_reply_after_its_wait_is_counted_and_dropped() {
+        let params = BusParams::defaults(Baud::B19200);
+        let (mut st, t, _) = srd_to_8(None);
+        let answer = reply(3, 8, ResponseStatus::Dl, None, &[1, 2]);
+        // No answer in time: the retry; its answer comes.
+        let (t1, retry) = step(&mut st);
+        assert!(retry.is_some());
+        st.handle_rx(t1 + params.bits(200), &answer);
+        assert_eq!(st.app().results, vec![(8, "response", 1)]);
+        // The answer to the first attempt, late: not taken for anything.
+        st.handle_rx(t1 + params.bits(300), &answer);
+        assert_eq!(st.stats().late_replies, 1);
+        assert_eq!(st.app().late, vec![Some(8)]);
+        assert_eq!(st.app().results.len(), 1);
+        assert!(t1 > t);
+        // Another master in the ring: the token goes to it, and a late
+        // reply during the check is not the successor taking it.
+        st.core.las[5] = true;
+        st.core.ns = 5;
+        let (t2, token) = loop {
+            let (t2, tx) = step(&mut st);
+            if let Some(tx) = tx.filter(|b| b[0] == consts::SD4) {
+                break (t2, tx);
+            }
+        };
+        assert_eq!(token, vec![0xDC, 5, 3]);
+        assert_eq!(st.ring_state(), RingState::CheckTokenPass);
+        st.handle_rx(t2 + params.bits(50), &[0xE5]);
+        assert_eq!(st.ring_state(), RingState::CheckTokenPass);
+        assert_eq!(st.stats().late_replies, 2);
+        // The successor's first telegram ends the check.
+        st.handle_rx(t2 + params.bits(60), &[0xDC, 7, 5]);
+        assert_eq!(st.ring_state(), RingState::ActiveIdle);
     }
 
     #[test]

@@ -571,15 +571,15 @@ mod tests {
 
     #[test]
     fn latency_timer_from_a_sysfs_tree() {
-        let dir = std::env::temp_dir().join(format!("doctor-sysfs-{}", std::process::id()));
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let d = dir.join("bus/usb-serial/devices/ttyUSB7");
         std::fs::create_dir_all(&d).unwrap();
         std::fs::write(d.join("latency_timer"), "16\n").unwrap();
-        assert_eq!(latency_timer(&dir, "ttyUSB7").unwrap().unwrap(), 16);
-        assert!(latency_timer(&dir, "ttyUSB8").is_none());
+        assert_eq!(latency_timer(dir, "ttyUSB7").unwrap().unwrap(), 16);
+        assert!(latency_timer(dir, "ttyUSB8").is_none());
         std::fs::write(d.join("latency_timer"), "x\n").unwrap();
-        assert!(latency_timer(&dir, "ttyUSB7").unwrap().is_err());
-        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(latency_timer(dir, "ttyUSB7").unwrap().is_err());
     }
 
     #[test]

@@ -21,7 +21,9 @@
 //! by at most one telegram's duration. Receivers that frame by idle time,
 //! as slave ASICs do, see the telegrams as they would on RS-485. A master
 //! sees the first character of a reply only when the whole reply has
-//! arrived; [`super::Port::default_latency`] allows for that on ptys.
+//! arrived; on ptys ([`super::Port::whole_telegrams`]) a master's wait for
+//! each answer allows for the wire time of the longest answer that
+//! request can get.
 //! Unpaced, bytes pass as fast as they come, in the chunks they were read
 //! in: the gaps are the ones the writers left, plus scheduling jitter.
 //!
@@ -567,11 +569,9 @@ mod tests {
     }
 
     impl Running {
-        fn start(tag: &str, medium: MediumConfig) -> Running {
-            let dir = std::env::temp_dir();
-            let links: Vec<PathBuf> = (0..2)
-                .map(|i| dir.join(format!("hub-{tag}-{}-{i}", std::process::id())))
-                .collect();
+        /// A hub of two stations with their links in `dir`.
+        fn start(dir: &Path, medium: MediumConfig) -> Running {
+            let links: Vec<PathBuf> = (0..2).map(|i| dir.join(format!("hub-{i}"))).collect();
             let mut hub = Hub::open(&links, medium).unwrap();
             let stop = Arc::new(AtomicBool::new(false));
             let s = stop.clone();
@@ -629,7 +629,8 @@ mod tests {
 
     #[test]
     fn paced_hub_delivers_a_telegram_in_one_piece_in_process() {
-        let hub = Running::start("paced", MediumConfig::paced(Baud::B19200));
+        let dir = tempfile::tempdir().unwrap();
+        let hub = Running::start(dir.path(), MediumConfig::paced(Baud::B19200));
         let (mut a, mut b) = (hub.open(0), hub.open(1));
         // An 11-byte telegram at 19.2 kbit/s: 6.3 ms on the wire. However
         // late this thread reads, it gets all 11 bytes in one read.
@@ -648,15 +649,14 @@ mod tests {
 
     #[test]
     fn links_are_refused_over_other_files_and_removed_at_the_end() {
-        let dir = std::env::temp_dir();
-        let file = dir.join(format!("hub-file-{}", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("hub-file");
         std::fs::write(&file, b"precious").unwrap();
         let e = Hub::open(std::slice::from_ref(&file), MediumConfig::default()).unwrap_err();
         assert!(matches!(e, HubError::NotASymlink(_)), "{e}");
         assert_eq!(std::fs::read(&file).unwrap(), b"precious");
-        std::fs::remove_file(&file).unwrap();
 
-        let hub = Running::start("links", MediumConfig::default());
+        let hub = Running::start(dir.path(), MediumConfig::default());
         let links = hub.links.clone();
         assert!(links.iter().all(|l| std::fs::read_link(l).is_ok()));
         hub.stop();

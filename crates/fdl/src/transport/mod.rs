@@ -16,6 +16,10 @@
 //! the bus timing, and RTS control is the server's business (asking for
 //! it is a [`TransportError::Rts`]). See [`Port::is_tcp`].
 //!
+//! A path that does not exist yet but may be a pty link on its way (see
+//! [`PATH_WAIT`]) is waited for: a station started right after `dpctl
+//! bus` or `socat`, as in a script, finds its link once they have made it.
+//!
 //! Framing never depends on inter-character timing: wrap the port in
 //! `tokio_util::codec::Framed` with [`crate::FdlCodec`].
 //!
@@ -28,8 +32,8 @@
 //! driver must flush after each telegram.
 //!
 //! Facts about the line a port leads to, for the shells that run stations
-//! on it: [`Port::is_pty`], [`Port::default_latency`] and
-//! [`Port::may_gather`].
+//! on it: [`Port::is_pty`], [`Port::default_latency`],
+//! [`Port::whole_telegrams`] and [`Port::may_gather`].
 //!
 //! [`doctor`] checks what can be checked about a port (8E1, baud rates,
 //! an FTDI latency timer, RS-485 mode, slot time against latency).
@@ -51,6 +55,7 @@ use mio_serial::SerialStream;
 use std::future::Future;
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
+use std::path::Path;
 use std::pin::Pin;
 use std::task::{ready, Context, Poll};
 use std::time::Duration;
@@ -171,6 +176,50 @@ pub const TCP_SCHEME: &str = "tcp://";
 /// connection.
 pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long [`Port::open`] waits for a path that does not exist yet when
+/// it may be a pty link still being made (`dpctl bus --link`, `socat
+/// pty,link=…`, started a moment before): the path is not under `/dev`
+/// (device nodes there come from the kernel, and a missing adapter does
+/// not appear by waiting) and its directory exists. The wait is logged as
+/// one warning line; a path that does not appear in time fails with
+/// [`TransportError::Open`] saying so.
+pub const PATH_WAIT: Duration = Duration::from_secs(10);
+
+/// How often a path waited for is looked for.
+const PATH_POLL: Duration = Duration::from_millis(10);
+
+/// Wait up to `limit` for `path` when it does not exist yet and may be a
+/// link on its way (see [`PATH_WAIT`]); blocks the calling thread.
+/// Returns at once when the path exists or cannot appear this way (the
+/// open that follows then says why it fails).
+fn wait_for_path(path: &Path, limit: Duration) -> io::Result<()> {
+    // `metadata` follows links: a link made before its pty is not there yet.
+    let missing = |p: &Path| matches!(p.metadata(), Err(e) if e.kind() == io::ErrorKind::NotFound);
+    let may_appear = !path.starts_with("/dev")
+        && path
+            .parent()
+            .is_some_and(|d| d.as_os_str().is_empty() || d.is_dir());
+    if !missing(path) || !may_appear {
+        return Ok(());
+    }
+    tracing::warn!(
+        "{} does not exist yet: waiting up to {} s for it",
+        path.display(),
+        limit.as_secs()
+    );
+    let end = std::time::Instant::now() + limit;
+    while missing(path) {
+        if std::time::Instant::now() >= end {
+            return Err(io::Error::new(
+                io::ErrorKind::NotFound,
+                format!("no such file, also after waiting {} s", limit.as_secs()),
+            ));
+        }
+        std::thread::sleep(PATH_POLL);
+    }
+    Ok(())
+}
+
 /// An async byte stream to an FDL medium; see the module docs.
 ///
 /// I/O: the descriptor is registered with the runtime for readability
@@ -199,7 +248,8 @@ pub struct Port {
 }
 
 impl Port {
-    /// Open `path` at `baud`, 8E1, raw, without RTS control.
+    /// Open `path` at `baud`, 8E1, raw, without RTS control (a path that
+    /// is not there yet is waited for: [`PATH_WAIT`]).
     pub fn open(path: &str, baud: Baud) -> Result<Port, TransportError> {
         Self::open_with(path, PortOptions::new(baud))
     }
@@ -218,7 +268,9 @@ impl Port {
         }
     }
 
-    /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`).
+    /// Open `path` with `opts` (a tty path, or `tcp://HOST:PORT`). A tty
+    /// path that does not exist yet is waited for up to [`PATH_WAIT`]
+    /// when it may be a pty link being made (blocking the thread).
     pub fn open_with(path: &str, opts: PortOptions) -> Result<Port, TransportError> {
         let open_err = |error| TransportError::Open {
             path: path.to_string(),
@@ -227,6 +279,7 @@ impl Port {
         if let Some(addr) = path.strip_prefix(TCP_SCHEME) {
             return Self::open_tcp(path, addr, opts);
         }
+        wait_for_path(Path::new(path), PATH_WAIT).map_err(open_err)?;
         // Open at a standard rate first so that a refused PROFIBUS rate is
         // reported as such, not as a failure to open.
         let builder = tokio_serial::new(path, 9600)
@@ -334,24 +387,38 @@ impl Port {
         self.pty
     }
 
-    /// The latency allowance to add to slot times and token timeouts when
-    /// the user gives none. USB serial adapters buffer for up to 16 ms
-    /// (the FTDI latency timer): 20 ms. A pty answers within a millisecond
-    /// even on a loaded machine, but a paced `dpctl bus` hands a reply over
-    /// only when its last character has crossed the wire: 5 ms plus the
-    /// wire time of the longest telegram (255 characters) at the port's
-    /// rate (2 ms at 1.5 Mbit/s, 146 ms at 19.2 kbit/s). A serial device
-    /// server collects the characters of its line into packets and adds
-    /// the network's delay both ways: 20 ms, as for a USB adapter.
+    /// The transport's latency, the allowance to add to slot times and
+    /// token timeouts when the user gives none
+    /// ([`crate::station::active::ActiveConfig::latency_allowance`]). USB
+    /// serial adapters buffer for up to 16 ms (the FTDI latency timer):
+    /// 20 ms. A pty answers within a millisecond even on a loaded machine:
+    /// 5 ms. A serial device server collects the characters of its line
+    /// into packets and adds the network's delay both ways: 20 ms, as for
+    /// a USB adapter.
+    ///
+    /// The wire time of a reply that a paced `dpctl bus` (or a device
+    /// server) hands over only once complete is not part of it: see
+    /// [`Port::whole_telegrams`]; each request allows for its own longest
+    /// answer. So `dpctl scan` of all 126 addresses of a `dpctl bus` at
+    /// 19.2 kbit/s takes 5.2 s (2026-11-28; 41 s when this allowance held
+    /// the wire time of the longest telegram, 146 ms at that rate).
     pub fn default_latency(&self) -> Duration {
         if self.pty {
             Duration::from_millis(5)
-                + self
-                    .baud
-                    .chars_to_duration(crate::wire::consts::MAX_TELEGRAM_LEN as u64)
         } else {
             Duration::from_millis(20)
         }
+    }
+
+    /// Whether the port may hand over each telegram only once its last
+    /// character has crossed the wire, so that an answer's first character
+    /// comes its whole wire time late
+    /// ([`crate::station::active::ActiveConfig::whole_telegrams`]): true on
+    /// a pty (a paced `dpctl bus` does so) and on a TCP serial device
+    /// server (which packs a telegram into one packet); false on a serial
+    /// port, whose characters come as they arrive.
+    pub fn whole_telegrams(&self) -> bool {
+        self.pty || self.is_tcp()
     }
 
     /// Whether telegrams may be gathered into one write
@@ -574,10 +641,6 @@ mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-    fn consts_max() -> usize {
-        crate::wire::consts::MAX_TELEGRAM_LEN
-    }
-
     #[tokio::test]
     async fn pty_pair_carries_bytes_raw() {
         let (mut a, mut b) = Port::pty_pair(Baud::B12000000).unwrap();
@@ -626,9 +689,8 @@ mod tests {
         drop(pty.slave);
         let path = path.to_str().unwrap();
         let mut port = Port::open(path, Baud::B9600).unwrap();
-        assert!(port.is_pty() && port.may_gather());
-        let longest = Baud::B9600.chars_to_duration(consts_max() as u64);
-        assert_eq!(port.default_latency(), Duration::from_millis(5) + longest);
+        assert!(port.is_pty() && port.may_gather() && port.whole_telegrams());
+        assert_eq!(port.default_latency(), Duration::from_millis(5));
         for b in Baud::ALL {
             port.set_baud(b).unwrap();
             assert_eq!(port.baud(), b);
@@ -656,6 +718,7 @@ mod tests {
         let mut port = Port::open(&path, Baud::B1500000).unwrap();
         let (mut server, _) = listener.accept().await.unwrap();
         assert!(port.is_tcp() && !port.is_pty() && !port.may_gather());
+        assert!(port.whole_telegrams());
         assert_eq!(port.name(), path);
         assert_eq!(port.default_latency(), Duration::from_millis(20));
         port.set_baud(Baud::B19200).unwrap();
@@ -697,5 +760,90 @@ mod tests {
     async fn open_errors_name_the_path() {
         let e = Port::open("/nonexistent/tty", Baud::B19200).unwrap_err();
         assert!(e.to_string().contains("/nonexistent/tty"), "{e}");
+    }
+
+    /// The lines a `tracing` subscriber writes, one message per write.
+    struct LogLines(std::sync::mpsc::Sender<String>);
+
+    impl io::Write for LogLines {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            let _ = self.0.send(String::from_utf8_lossy(buf).into_owned());
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// `Port::open(path)` on a thread of its own (with a runtime), its
+    /// log lines sent to the returned receiver as they are written.
+    fn open_on_a_thread(
+        path: &Path,
+    ) -> (
+        std::sync::mpsc::Receiver<String>,
+        std::thread::JoinHandle<Result<String, TransportError>>,
+    ) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let path = path.to_str().unwrap().to_string();
+        let opener = std::thread::spawn(move || {
+            let logs = tracing_subscriber::fmt()
+                .with_writer(move || LogLines(tx.clone()))
+                .with_ansi(false)
+                .finish();
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_io()
+                .build()
+                .unwrap();
+            let _rt = rt.enter();
+            tracing::subscriber::with_default(logs, || {
+                Port::open(&path, Baud::B19200).map(|p| p.name().to_string())
+            })
+        });
+        (rx, opener)
+    }
+
+    /// A station started before `dpctl bus` or socat has made its link
+    /// (a script, the README's tour) waits for the link, says so in one
+    /// line, and opens it once it is there.
+    #[test]
+    fn a_link_that_does_not_exist_yet_is_waited_for() {
+        let dir = tempfile::tempdir().unwrap();
+        let link = dir.path().join("pb1");
+        let (log, opener) = open_on_a_thread(&link);
+        // The event: the opener says that it waits (or it has failed).
+        let said = log.recv_timeout(Duration::from_secs(60));
+        let Ok(said) = said else {
+            panic!("open did not wait: {:?}", opener.join().unwrap().err());
+        };
+        assert!(
+            said.contains(&format!("{} does not exist yet", link.display()))
+                && said.contains("waiting up to 10 s"),
+            "{said}"
+        );
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let tty = nix::unistd::ttyname(&pty.slave).unwrap();
+        std::os::unix::fs::symlink(&tty, &link).unwrap();
+        let opened = opener.join().unwrap().unwrap();
+        assert_eq!(opened, link.to_str().unwrap());
+        let more: Vec<String> = log.try_iter().collect();
+        assert!(more.is_empty(), "one line only: {more:?}");
+    }
+
+    /// Nothing is waited for where no link can be on its way: a device
+    /// node under /dev, a path in a directory that does not exist. A path
+    /// that stays missing fails naming the wait.
+    #[test]
+    fn only_a_path_that_may_appear_is_waited_for() {
+        for path in ["/dev/ttyNOPE9", "/nonexistent/dir/tty"] {
+            let (log, opener) = open_on_a_thread(Path::new(path));
+            let e = opener.join().unwrap().unwrap_err();
+            assert!(e.to_string().starts_with(&format!("cannot open {path}: ")));
+            let lines: Vec<String> = log.try_iter().collect();
+            assert!(lines.is_empty(), "{path}: {lines:?}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let e = wait_for_path(&dir.path().join("never"), Duration::ZERO).unwrap_err();
+        assert_eq!(e.to_string(), "no such file, also after waiting 0 s");
+        wait_for_path(dir.path(), Duration::ZERO).unwrap();
     }
 }

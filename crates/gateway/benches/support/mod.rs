@@ -8,7 +8,6 @@
 use profibus_devices::bus::ProfiledBus;
 use profibus_gateway::sim::{slave_infos, Pacer, SimPlant};
 use profibus_gateway::{Broker as BrokerUrl, Connection, Gateway, MqttLink, MqttSettings, Session};
-use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
@@ -17,7 +16,8 @@ pub struct Broker {
     /// Its localhost port.
     pub port: u16,
     child: Child,
-    dir: PathBuf,
+    /// Holds the broker's configuration; removed on drop.
+    _dir: tempfile::TempDir,
 }
 
 fn mosquitto() -> String {
@@ -44,9 +44,11 @@ impl Broker {
             .local_addr()
             .unwrap()
             .port();
-        let dir = std::env::temp_dir().join(format!("gw-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let conf = dir.join("mosquitto.conf");
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("gw-{name}-"))
+            .tempdir()
+            .unwrap();
+        let conf = dir.path().join("mosquitto.conf");
         let text = format!("listener {port} 127.0.0.1\nallow_anonymous true\n{extra}");
         std::fs::write(&conf, text).unwrap();
         let child = Command::new(mosquitto())
@@ -59,7 +61,11 @@ impl Broker {
         while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
             std::thread::sleep(Duration::from_millis(5));
         }
-        Broker { port, child, dir }
+        Broker {
+            port,
+            child,
+            _dir: dir,
+        }
     }
 
     /// The broker's process id.
@@ -72,7 +78,6 @@ impl Drop for Broker {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
-        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
 
