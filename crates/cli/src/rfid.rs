@@ -3,10 +3,12 @@
 //!
 //! Runs the DP master of the bus file like `dpctl master`; once the reader
 //! is in Data_Exchange, `profibus_devices::rfid::jobs::CommandRun`
-//! sends each command and fetches the whole answer. Prints each answer
-//! (its lines; or one JSON object per command with `--json`). Exit 0 when
-//! every command was answered, 1 on a timeout or a reader that does not
-//! reach Data_Exchange.
+//! sends each command and fetches the whole answer. Prints each command
+//! (`> VER`) and then its answer's lines, an error answer `NAK #nn` in
+//! words (or one JSON object per command with `--json`, `"nak"` the
+//! error's number). Exit 0 when every command was answered; 1 on an
+//! error answer (the commands after it are not sent), a timeout or a
+//! reader that does not reach Data_Exchange.
 
 use crate::common;
 use anyhow::Result;

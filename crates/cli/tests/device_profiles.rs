@@ -191,6 +191,44 @@ fn bm4_pkw_examples_of_the_manual() {
     );
 }
 
+/// The README's PKW example as written: its `BUS.toml` block (taken from
+/// README.md) and its `dpctl slave --device bm4` line, then `dpctl pkw
+/// … --slave 6 read di_MyReadVar3` gives the manual's 3000.
+#[test]
+fn readme_pkw_example_works_as_written() {
+    let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
+    let after = readme
+        .split("`BUS.toml` for these two slaves")
+        .nth(1)
+        .expect("README shows BUS.toml for the PKW examples");
+    let block = after.split("```toml\n").nth(1).unwrap();
+    let bus_text = block.split("```").next().unwrap();
+    let line = readme
+        .lines()
+        .find(|l| l.starts_with("dpctl slave --port PTY --device bm4 --addr 6 "))
+        .expect("README's bm4 slave line");
+    // The README's arguments after the port, without `--write-gsd`, its
+    // paths relative to the repository (where the README runs them).
+    let mut args: Vec<String> = line
+        .split_whitespace()
+        .skip(4)
+        .map(|a| match a.starts_with("crates/") {
+            true => repo().join(a).display().to_string(),
+            false => a.to_string(),
+        })
+        .collect();
+    if let Some(i) = args.iter().position(|a| a == "--write-gsd") {
+        args.drain(i..i + 2);
+    }
+    let r = rig("bm4-readme", &args, false);
+    std::os::unix::fs::symlink(repo().join("crates"), r.dir.path("crates")).unwrap();
+    let bus = r.bus("BUS.toml", bus_text);
+    let (ok, v, err) = r.pkw(&bus, 6, &["read", "di_MyReadVar3"]);
+    assert!(ok, "{err} {v}\n{bus_text}");
+    assert_eq!(v["value"], 3000, "{v}");
+    r.stop();
+}
+
 #[test]
 fn bm4_user_diagnosis_example_reaches_the_master() {
     let args = bm4(&["--addr", "6", "--write-gsd", "my.gsd", "--control", "-"]);

@@ -103,6 +103,16 @@ impl Rig {
         cmd
     }
 
+    /// `dpctl rfid` printing text.
+    fn rfid_text(&self, commands: &[&str]) -> Command {
+        let mut cmd = Command::new(dpctl());
+        cmd.args(["rfid", "--port", &self.bus.link_str(0), "--config"])
+            .arg(&self.busfile)
+            .args(["--slave", &ADDR.to_string(), "--latency", "20"])
+            .args(commands);
+        cmd
+    }
+
     /// Run `dpctl rfid` to its end: its JSON answers.
     fn rfid(&self, commands: &[&str]) -> Vec<Value> {
         let out = Proc::spawn_captured(self.rfid_cmd(commands)).finish(Duration::from_secs(60));
@@ -258,19 +268,13 @@ fn long_commands_long_answers_and_a_slow_command() {
     let mut rig = rig(TAGS);
     // 38 bytes with CR: three send jobs; a 129-byte answer: ten fragments,
     // after 16 blocks × 50 ms of air time.
-    let a = rig.rfid(&[
-        "WD 2 00112233445566778899AABBCCDDEEFF",
-        "RD 0 F",
-        "GT",
-        "HELLO",
-    ]);
+    let a = rig.rfid(&["WD 2 00112233445566778899AABBCCDDEEFF", "RD 0 F", "GT"]);
     assert_eq!(a[0]["answer"], "00112233445566778899AABBCCDDEEFF\r");
     let rd = a[1]["answer"].as_str().unwrap();
     assert_eq!(rd.len(), 129);
     assert!(rd.starts_with("001122334455667700112233445566778899AABBCCDDEEFF00000000"));
     assert!(a[1]["ms"].as_f64().unwrap() >= 800.0, "{}", a[1]);
     assert_eq!(a[2]["answer"], "E004015012345678\r");
-    assert_eq!(a[3]["answer"], "NAK #00\r");
     rig.wait_event("state saved to");
     // The write is in the tags file.
     let saved = std::fs::read_to_string(&rig.tags).unwrap();
@@ -300,6 +304,41 @@ fn long_commands_long_answers_and_a_slow_command() {
             "rfid: send job: 12 bytes, 1 command line(s) complete"
         ]
     );
+}
+
+#[test]
+fn each_command_before_its_answer_and_a_nak_in_words_fails() {
+    let rig = rig(TAGS);
+    let out = Proc::spawn_captured(rig.rfid_text(&["VER", "GT", "RD 0 99", "GT"]))
+        .finish(Duration::from_secs(60));
+    // Each command, then its answer's lines; the NAK in words; the
+    // command after it not sent.
+    assert_eq!(
+        out.stdout,
+        "> VER\nAEG ID - PFB V1.26\nAEG ID - A9 /PFB V1.28\n\
+         > GT\nE004015012345678\n\
+         > RD 0 99\nNAK #02: wrong or missing parameter (or a block beyond the tag's memory)\n",
+        "{out:?}"
+    );
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    assert_eq!(
+        out.stderr,
+        "dpctl: slave 9 `RD 0 99`: the reader refused it: NAK #02: wrong or missing parameter \
+         (or a block beyond the tag's memory)\n"
+    );
+    // With --json: the answer, its number and its meaning, `ok` false.
+    let out = Proc::spawn_captured(rig.rfid_cmd(&["HELLO"])).finish(Duration::from_secs(60));
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let a = parse(&out.stdout);
+    assert_eq!(a.len(), 1, "{out:?}");
+    assert_eq!(a[0]["answer"], "NAK #00\r");
+    assert_eq!(a[0]["nak"], 0);
+    assert_eq!(a[0]["ok"], false);
+    assert_eq!(
+        a[0]["error"],
+        "the reader refused it: NAK #00: unknown command"
+    );
+    rig.stop();
 }
 
 #[test]

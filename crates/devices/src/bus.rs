@@ -458,7 +458,7 @@ mod defaults {
             assert_eq!(address, 7, "{}", p.name);
             let device = match p.name {
                 // The JX2-PROFI1 joins the bus once its PLC writes the
-                // station address (manual L…, docs/devices/jx2.md): here
+                // station address to 1x107 (docs/devices/jx2.md): here
                 // the PLC program that does, as on a real installation.
                 "jx2" => {
                     let mut plc = crate::jx2::Plc::new(2).unwrap();

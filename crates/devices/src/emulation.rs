@@ -41,7 +41,7 @@ pub struct ProfileArgs {
     )]
     pub gsd: Option<PathBuf>,
     /// A module of the GSD file, in slot order (repeat for each module;
-    /// names match approximately). None: the file's fixed configuration.
+    /// the GSD's exact module names). None: the file's fixed configuration.
     #[cfg_attr(
         feature = "clap",
         arg(long = "module", value_name = "NAME", requires = "gsd")

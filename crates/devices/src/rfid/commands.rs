@@ -66,6 +66,61 @@ impl Nak {
     pub fn answer(self) -> Vec<u8> {
         format!("NAK #{:02}\r", self.code()).into_bytes()
     }
+
+    /// The error of number `code`, if the reader has one of that number.
+    pub fn from_code(code: u8) -> Option<Nak> {
+        [
+            Nak::UnknownCommand,
+            Nak::WrongParameter,
+            Nak::BufferOverflow,
+        ]
+        .into_iter()
+        .find(|n| n.code() == code)
+    }
+
+    /// What the error means, in words. The PROFIBUS manual leaves the
+    /// reader's commands and their answers to the reader's own
+    /// documentation (L25); the numbers and meanings are the ones of this
+    /// module's table (see the module docs).
+    pub fn meaning(self) -> &'static str {
+        match self {
+            Nak::UnknownCommand => "unknown command",
+            Nak::WrongParameter => {
+                "wrong or missing parameter (or a block beyond the tag's memory)"
+            }
+            Nak::BufferOverflow => "command line too long (more than 255 bytes)",
+        }
+    }
+}
+
+/// The error number of an answer `NAK #nn` (with or without its CR),
+/// `None` for any other answer.
+pub fn nak_code(answer: &[u8]) -> Option<u8> {
+    let text = std::str::from_utf8(answer).ok()?;
+    let digits = text.trim_end_matches('\r').strip_prefix("NAK #")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+/// A `NAK #nn` answer in words, e.g. `NAK #02: wrong or missing
+/// parameter (…)`; a number the reader is not known to give is said to
+/// be so.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NakText(pub u8);
+
+impl std::fmt::Display for NakText {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0;
+        match Nak::from_code(n) {
+            Some(nak) => write!(f, "NAK #{n:02}: {}", nak.meaning()),
+            None => write!(
+                f,
+                "NAK #{n:02}: error {n}, not one this reader is known to give"
+            ),
+        }
+    }
 }
 
 /// A parsed command line.
@@ -432,6 +487,26 @@ mod tests {
         assert_eq!(parse(b"XYZ"), Err(Nak::UnknownCommand));
         assert_eq!(parse(&[0xFF, 0xFE]), Err(Nak::UnknownCommand));
         assert_eq!(Nak::UnknownCommand.answer(), b"NAK #00\r");
+        // Every error answer is known again, and told in words.
+        for nak in [
+            Nak::UnknownCommand,
+            Nak::WrongParameter,
+            Nak::BufferOverflow,
+        ] {
+            assert_eq!(nak_code(&nak.answer()), Some(nak.code()));
+            assert_eq!(Nak::from_code(nak.code()), Some(nak));
+        }
+        assert_eq!(nak_code(b"NAK #02"), Some(2));
+        assert_eq!(nak_code(b"NAK #\r"), None);
+        assert_eq!(nak_code(b"E004015012345678\r"), None);
+        assert_eq!(
+            NakText(2).to_string(),
+            "NAK #02: wrong or missing parameter (or a block beyond the tag's memory)"
+        );
+        assert_eq!(
+            NakText(7).to_string(),
+            "NAK #07: error 7, not one this reader is known to give"
+        );
     }
 
     #[test]

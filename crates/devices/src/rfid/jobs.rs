@@ -5,6 +5,7 @@
 //! `Serialize` for JSON lines).
 
 use super::client::{RfidClient, RfidError, StartError};
+use super::commands::{nak_code, NakText};
 use super::{CFG, IDENT};
 use profibus_dp::busfile::BusSlave;
 use profibus_dp::master::{DpMaster, SlaveState, SlaveTask, StartupTimeout};
@@ -32,21 +33,30 @@ pub struct RfidDone {
     /// The answer's bytes, hex.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub answer_hex: Option<String>,
-    /// Why there is no answer.
+    /// Why there is no answer, or why the answer is an error (a NAK).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The error number of an answer `NAK #nn` (then `ok` is false and
+    /// `error` says what the number means).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nak: Option<u8>,
 }
 
 impl RfidDone {
-    /// `command` on the reader at `slave` ended with `r`.
+    /// `command` on the reader at `slave` ended with `r`. An answer
+    /// `NAK #nn` is a failure, explained in words ([`NakText`]).
     pub fn new<E: fmt::Display>(slave: u8, command: String, r: Result<&[u8], E>) -> RfidDone {
-        let (answer, answer_hex, error) = match r {
-            Ok(a) => (
-                Some(String::from_utf8_lossy(a).into_owned()),
-                Some(Hex(a).to_string()),
-                None,
-            ),
-            Err(e) => (None, None, Some(e.to_string())),
+        let (answer, answer_hex, error, nak) = match r {
+            Ok(a) => {
+                let nak = nak_code(a);
+                (
+                    Some(String::from_utf8_lossy(a).into_owned()),
+                    Some(Hex(a).to_string()),
+                    nak.map(|n| format!("the reader refused it: {}", NakText(n))),
+                    nak,
+                )
+            }
+            Err(e) => (None, None, Some(e.to_string()), None),
         };
         RfidDone {
             slave,
@@ -55,6 +65,7 @@ impl RfidDone {
             answer,
             answer_hex,
             error,
+            nak,
         }
     }
 }
@@ -63,22 +74,20 @@ impl fmt::Display for RfidDone {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let (slave, cmd) = (self.slave, &self.command);
         match (&self.answer, &self.error) {
-            (Some(a), _) => write!(
+            (_, Some(e)) => write!(f, "rfid slave {slave}: {cmd} failed: {e}"),
+            (Some(a), None) => write!(
                 f,
                 "rfid slave {slave}: {cmd} → {}",
                 a.trim_end_matches('\r').replace('\r', " | ")
             ),
-            (None, e) => write!(
-                f,
-                "rfid slave {slave}: {cmd} failed: {}",
-                e.as_deref().unwrap_or("")
-            ),
+            (None, None) => write!(f, "rfid slave {slave}: {cmd} failed"),
         }
     }
 }
 
-/// One command of a [`CommandRun`] that ended: `Display` is the answer's
-/// lines (nothing for a failed command); `Serialize` the `dpctl rfid
+/// One command of a [`CommandRun`] that ended: `Display` is the command
+/// (`> VER`) and then the answer's lines, a `NAK #nn` in words (nothing
+/// more for a command without an answer); `Serialize` the `dpctl rfid
 /// --json` object.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CommandResult {
@@ -101,6 +110,10 @@ pub struct CommandResult {
 
 impl fmt::Display for CommandResult {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "> {}", self.done.command)?;
+        if let Some(n) = self.done.nak {
+            return writeln!(f, "{}", NakText(n));
+        }
         for line in self
             .done
             .answer
@@ -130,10 +143,14 @@ pub enum RunError {
     /// A command got no (complete) answer.
     #[error("slave {0} `{1}`: {2}")]
     Failed(u8, String, RfidError),
+    /// The reader answered a command with an error (`NAK #nn`).
+    #[error("slave {0} `{1}`: the reader refused it: {2}")]
+    Refused(u8, String, NakText),
 }
 
 /// Commands run in turn on one reader, each answer fetched whole; stops
-/// at the first failure. See the module docs.
+/// at the first failure (no answer, or an answer `NAK #nn`). See the
+/// module docs.
 #[derive(Debug)]
 pub struct CommandRun {
     address: u8,
@@ -143,7 +160,7 @@ pub struct CommandRun {
     running: Option<(String, Instant, u64)>,
     results: Vec<CommandResult>,
     /// Why the last command failed.
-    failed: Option<RfidError>,
+    failed: Option<RunError>,
 }
 
 impl CommandRun {
@@ -177,9 +194,7 @@ impl CommandRun {
 
     /// Why the last command failed, if it did.
     pub fn failure(&self) -> Option<RunError> {
-        let d = &self.results.last()?.done;
-        let e = self.failed?;
-        Some(RunError::Failed(d.slave, d.command.clone(), e))
+        self.failed.clone()
     }
 }
 
@@ -200,9 +215,14 @@ impl SlaveTask for CommandRun {
             let (command, t, r0) = self.running.take().unwrap_or((String::new(), now, 0));
             let ok = r.as_ref().ok().map(|a| a.len());
             let ms = now.saturating_duration_since(t).as_secs_f64() * 1000.0;
-            self.failed = r.as_ref().err().copied();
+            let done = RfidDone::new(addr, command.clone(), r.as_ref().map(|a| &a[..]));
+            self.failed = match (r.as_ref().err(), done.nak) {
+                (Some(e), _) => Some(RunError::Failed(addr, command, *e)),
+                (None, Some(n)) => Some(RunError::Refused(addr, command, NakText(n))),
+                (None, None) => None,
+            };
             self.results.push(CommandResult {
-                done: RfidDone::new(addr, command, r),
+                done,
                 bytes: ok,
                 ms: ok.map(|_| (ms * 1000.0).round() / 1000.0),
                 drained: ok.map(|_| self.client.drained()),
@@ -338,7 +358,26 @@ mod tests {
             drained: Some(0),
             restarts: Some(0),
         };
-        assert_eq!(r.to_string(), "V1.0\nOK\n");
+        assert_eq!(r.to_string(), "> VER\nV1.0\nOK\n");
+        // A NAK is a failure, in words.
+        let nak = RfidDone::new::<RfidError>(12, "RD 0 99".into(), Ok(b"NAK #02\r"));
+        assert!(!nak.ok);
+        assert_eq!(nak.nak, Some(2));
+        assert_eq!(
+            nak.to_string(),
+            "rfid slave 12: RD 0 99 failed: the reader refused it: NAK #02: wrong or missing \
+             parameter (or a block beyond the tag's memory)"
+        );
+        let r = CommandResult {
+            done: nak,
+            bytes: Some(8),
+            ms: Some(1.0),
+            drained: Some(0),
+            restarts: Some(0),
+        };
+        assert!(r
+            .to_string()
+            .starts_with("> RD 0 99\nNAK #02: wrong or missing"));
         let failed = RfidDone::new(12, "GT".into(), Err::<&[u8], _>("gone"));
         assert_eq!(failed.to_string(), "rfid slave 12: GT failed: gone");
         let v = serde_json::to_value(&failed).unwrap();
