@@ -10,7 +10,11 @@
 -- short acknowledge), LE/LEr, destination and source address with their
 -- extension bits, FC (request: FCB/FCV and function; response: station
 -- type and answer), DSAP/SSAP with the DP service names, FCS (checked)
--- and ED.
+-- and ED. `pbdl.fcs.good` is false (the filter `pbdl.fcs.good == 0`) for
+-- every corrupted packet: a wrong FCS, a telegram cut off or malformed,
+-- or bytes the recorder flagged as no valid telegram (pcapng epb_flags
+-- CRC error, `frame.packet_flags_crc_error`: `dpctl bus --pcap` and
+-- `dpctl sniff --pcap` keep corrupted telegrams that way).
 -- DP (protocol "pbdp"): Set_Prm, Chk_Cfg / Get_Cfg identifiers,
 -- Slave_Diag station status bits, Global_Control, Set_Slave_Add,
 -- DP-V1 MSAC_C1 read / write / errors, Data_Exchange outputs and inputs.
@@ -82,13 +86,34 @@ f.ssap = ProtoField.uint8("pbdl.ssap", "SSAP", base.DEC, SAP_NAMES, 0x3F)
 f.data = ProtoField.bytes("pbdl.data", "Data unit")
 f.fcs = ProtoField.uint8("pbdl.fcs", "FCS", base.HEX)
 f.fcs_status = ProtoField.string("pbdl.fcs.status", "FCS status")
-f.fcs_good = ProtoField.bool("pbdl.fcs.good", "FCS good")
+f.fcs_good = ProtoField.bool("pbdl.fcs.good", "FCS good (false: corrupted telegram)")
 f.ed = ProtoField.uint8("pbdl.ed", "End delimiter", base.HEX)
 f.token = ProtoField.bool("pbdl.token", "Token")
 
 local e_fcs = ProtoExpert.new("pbdl.fcs.bad", "FCS wrong", expert.group.CHECKSUM, expert.severity.ERROR)
 local e_len = ProtoExpert.new("pbdl.malformed", "Malformed telegram", expert.group.MALFORMED, expert.severity.ERROR)
-pbdl.experts = { e_fcs, e_len }
+local e_flag = ProtoExpert.new("pbdl.corrupt", "Recorded as corrupt", expert.group.CHECKSUM, expert.severity.ERROR)
+pbdl.experts = { e_fcs, e_len, e_flag }
+
+-- The recorder's CRC-error flag (Wireshark 1.12 and later know the field).
+local ok_flag, crc_flag = pcall(Field.new, "frame.packet_flags_crc_error")
+if not ok_flag then crc_flag = nil end
+
+-- Whether the packet being dissected was already marked corrupt, and
+-- whether the recorder flagged it.
+local marked_bad = false
+local flagged = false
+
+-- Marks the packet corrupt: FCS status Bad, `pbdl.fcs.good` false, and an
+-- expert info saying why.
+local function mark_bad(tree, e, why)
+  if not marked_bad then
+    tree:add(f.fcs_status, "Bad"):set_generated()
+    tree:add(f.fcs_good, false):set_generated()
+    marked_bad = true
+  end
+  tree:add_proto_expert_info(e, why)
+end
 
 ---------------------------------------------------------------------------
 -- DP fields
@@ -450,7 +475,10 @@ local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
   local fcs = tvb(stop, 1):uint()
   local want = fcs_of(tvb, pos, stop)
   local fct = tree:add(f.fcs, tvb(stop, 1))
-  if fcs == want then
+  if fcs == want and flagged then
+    fct:append_text(" [correct]")
+    mark_bad(tree, e_flag, "FCS right, but recorded as no valid telegram (CRC-error flag)")
+  elseif fcs == want then
     fct:append_text(" [correct]")
     tree:add(f.fcs_status, "Good"):set_generated()
     tree:add(f.fcs_good, true):set_generated()
@@ -458,6 +486,7 @@ local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
     fct:append_text(string.format(" [incorrect, should be 0x%02X]", want))
     tree:add(f.fcs_status, "Bad"):set_generated()
     tree:add(f.fcs_good, false):set_generated()
+    marked_bad = true
     fct:add_proto_expert_info(e_fcs, string.format("FCS 0x%02X, computed 0x%02X", fcs, want))
   end
   tree:add(f.ed, tvb(stop + 1, 1))
@@ -476,16 +505,14 @@ local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
   pinfo.cols.info = info
 end
 
-function pbdl.dissector(tvb, pinfo, root)
+local function dissect_telegram(tvb, pinfo, tree, root)
   local len = tvb:len()
-  if len < 1 then return 0 end
   pinfo.cols.protocol = "PROFIBUS DL"
   local sd = tvb(0, 1):uint()
   local sdname = SD_NAMES[sd]
-  local tree = root:add(pbdl, tvb(), "PROFIBUS DL")
   tree:add(f.sd, tvb(0, 1))
   if sdname == nil then
-    tree:add_proto_expert_info(e_len, string.format("unknown start delimiter 0x%02X", sd))
+    mark_bad(tree, e_len, string.format("unknown start delimiter 0x%02X", sd))
     pinfo.cols.info = string.format("unknown start delimiter 0x%02X", sd)
     return len
   end
@@ -497,7 +524,7 @@ function pbdl.dissector(tvb, pinfo, root)
     return 1
   elseif sd == 0xDC then
     if len < 3 then
-      tree:add_proto_expert_info(e_len, "token shorter than 3 bytes"); return len
+      mark_bad(tree, e_len, "token shorter than 3 bytes"); return len
     end
     local dt = tree:add(f.da, tvb(1, 1)); dt:add(f.da_addr, tvb(1, 1))
     local st = tree:add(f.sa, tvb(2, 1)); st:add(f.sa_addr, tvb(2, 1))
@@ -507,31 +534,45 @@ function pbdl.dissector(tvb, pinfo, root)
     return 3
   elseif sd == 0x10 then
     if len < 6 then
-      tree:add_proto_expert_info(e_len, "SD1 telegram shorter than 6 bytes"); return len
+      mark_bad(tree, e_len, "SD1 telegram shorter than 6 bytes"); return len
     end
     dissect_body(tvb, pinfo, tree, root, 1, 3, sdname)
     return 6
   elseif sd == 0xA2 then
     if len < 14 then
-      tree:add_proto_expert_info(e_len, "SD3 telegram shorter than 14 bytes"); return len
+      mark_bad(tree, e_len, "SD3 telegram shorter than 14 bytes"); return len
     end
     dissect_body(tvb, pinfo, tree, root, 1, 11, sdname)
     return 14
   else -- SD2
     if len < 4 then
-      tree:add_proto_expert_info(e_len, "SD2 header cut off"); return len
+      mark_bad(tree, e_len, "SD2 header cut off"); return len
     end
     local le, ler = tvb(1, 1):uint(), tvb(2, 1):uint()
     tree:add(f.le, tvb(1, 1))
     tree:add(f.ler, tvb(2, 1))
     if le ~= ler or tvb(3, 1):uint() ~= 0x68 or le < 3 or len < le + 6 then
-      tree:add_proto_expert_info(e_len, string.format("SD2 with LE %d, LEr %d in %d bytes", le, ler, len))
+      mark_bad(tree, e_len, string.format("SD2 with LE %d, LEr %d in %d bytes", le, ler, len))
       pinfo.cols.info = "SD2 malformed"
       return len
     end
     dissect_body(tvb, pinfo, tree, root, 4, le, sdname)
     return le + 6
   end
+end
+
+function pbdl.dissector(tvb, pinfo, root)
+  if tvb:len() < 1 then return 0 end
+  local tree = root:add(pbdl, tvb(), "PROFIBUS DL")
+  marked_bad = false
+  local flag = crc_flag and crc_flag()
+  flagged = flag ~= nil and flag.value == true
+  local n = dissect_telegram(tvb, pinfo, tree, root)
+  if flagged and not marked_bad then
+    mark_bad(tree, e_flag, "recorded as no valid telegram (CRC-error flag)")
+    pinfo.cols.info:append(" [corrupt]")
+  end
+  return n
 end
 
 -- Link type 257 has no Wireshark encapsulation of its own: pcapng files

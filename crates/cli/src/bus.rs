@@ -33,7 +33,8 @@ pub struct Args {
     #[arg(long, value_name = "SECS", value_parser = parse_rate)]
     pub stats: Option<f64>,
     /// Record every telegram on the line to FILE (pcapng, link type 257
-    /// PROFIBUS DL; tshark and Wireshark read it).
+    /// PROFIBUS DL; tshark and Wireshark read it). Corrupted telegrams are
+    /// kept, flagged (CRC-error flag; the dissector's `pbdl.fcs.good == 0`).
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
 }

@@ -5,14 +5,18 @@
 //! telegram as `dpctl decode` describes it. Bytes the framer had to skip
 //! (garbage, a bad FCS, a broken length) are printed on lines starting
 //! with `!! `, with their hex and the errors they raised. `--json` prints
-//! the same as JSON lines (`"error"` marks the skipped bytes); `--pcap`
-//! records the telegrams. On Ctrl-C / SIGTERM it prints a summary line
+//! the same as JSON lines (`"error"` marks the skipped bytes), with the
+//! DP layer of each DP telegram in a `"dp"` object
+//! (`profibus_dp::decode`: service and decoded data unit; a response is
+//! read by the request it answers); `--pcap` records the telegrams, and
+//! the skipped bytes flagged as corrupt. On Ctrl-C / SIGTERM it prints a summary line
 //! with the codec counters and stops. On a terminal (without `--json` or
 //! `--plain`) it shows the telegrams as a live list with filters and
 //! per-station statistics instead (`profibus_tui::sniff`).
 
 use crate::common;
 use anyhow::{Context, Result};
+use profibus_dp::decode::{DpTelegram, Exchanges};
 use profibus_dp::describe::TelegramSummary;
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::listen::{listen, Heard, ListenOptions};
@@ -39,7 +43,8 @@ pub struct Args {
     /// Baud rate of the line (9600 … 12M); irrelevant on a pty.
     #[arg(long, value_name = "B", default_value = "19200")]
     pub baud: Baud,
-    /// Print one JSON object per line.
+    /// Print one JSON object per line; DP telegrams carry their decoded
+    /// DP layer in `"dp"` (`service`, and the data unit's fields).
     #[arg(long)]
     pub json: bool,
     /// Print lines even on a terminal. Without it a terminal shows a live
@@ -62,6 +67,9 @@ struct Seen<T: serde::Serialize> {
     t_us: u64,
     #[serde(flatten)]
     what: T,
+    /// The DP layer (`profibus_dp::decode`), for DP telegrams.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dp: Option<DpTelegram>,
 }
 
 struct Printer {
@@ -70,6 +78,8 @@ struct Printer {
     live: Option<LiveSniff>,
     out: BufWriter<crate::out::Stdout>,
     pcap: Option<PcapWriter<BufWriter<File>>>,
+    /// Pairs responses with their requests for the `"dp"` object.
+    exchanges: Exchanges,
 }
 
 impl Printer {
@@ -85,7 +95,9 @@ impl Printer {
                 if let Some(live) = &mut self.live {
                     live.view_mut().telegram(at, &bytes, what.to_string());
                 } else if self.json {
-                    writeln!(self.out, "{}", common::json_line(&Seen { t_us, what }))?;
+                    let dp = self.exchanges.decode(&t);
+                    let seen = Seen { t_us, what, dp };
+                    writeln!(self.out, "{}", common::json_line(&seen))?;
                 } else {
                     writeln!(self.out, "{t_us:>12} {what}")?;
                 }
@@ -96,12 +108,21 @@ impl Printer {
             }
             TapEvent::Skipped { at, bytes, errors } => {
                 let t_us = at.as_nanos() / 1000;
+                if let Some(p) = self.pcap.as_mut() {
+                    p.write_corrupt(at, &bytes)
+                        .context("writing the pcap file")?;
+                }
                 let what = Skipped::new(&bytes, errors);
                 if let Some(live) = &mut self.live {
                     live.view_mut()
                         .skipped(at, skipped_text(&what.error, &bytes));
                 } else if self.json {
-                    writeln!(self.out, "{}", common::json_line(&Seen { t_us, what }))?;
+                    let seen = Seen {
+                        t_us,
+                        what,
+                        dp: None,
+                    };
+                    writeln!(self.out, "{}", common::json_line(&seen))?;
                 } else {
                     writeln!(self.out, "!! {t_us:>9} {what}")?;
                 }
@@ -164,6 +185,7 @@ async fn sniff(args: Args) -> Result<()> {
         live,
         out: BufWriter::new(crate::out::stdout()),
         pcap,
+        exchanges: Exchanges::default(),
     };
     let mut port = port;
     let mut failure = None;

@@ -247,3 +247,72 @@ fn monitor_never_sends_a_byte() {
         out.stderr
     );
 }
+
+/// When the master stops, the slave it had in Data_Exchange leaves it
+/// after `--master-timeout`: the monitor prints the state change.
+#[test]
+fn monitor_takes_slaves_out_of_data_exchange_when_their_master_stops() {
+    let line = Bus::start(3, &[]);
+    let dir = TempDir::new("monitor-stop");
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\nname = \"echo\"\n\
+         gsd = \"DPCTL_GEN.GSD\"\nmodules = [\"1 byte in\"]\n",
+    )
+    .unwrap();
+    std::fs::copy(repo().join("gsd/DPCTL_GEN.GSD"), dir.path("DPCTL_GEN.GSD")).unwrap();
+    let mut monitor = Proc::spawn(
+        "dpctl monitor",
+        Command::new(dpctl())
+            .args(["monitor", "--json", "--interval", "100"])
+            .args(["--master-timeout", "300", "--port"])
+            .arg(line.link(2))
+            .arg("--config")
+            .arg(&bus)
+            .stdout(Stdio::piped())
+            .stdin(Stdio::null()),
+    );
+    let mut seen = Lines::from(&mut monitor);
+    assert!(seen.wait_for("\"event\":\"status\"", Duration::from_secs(20)));
+    let _slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
+            .arg(line.link(1))
+            .arg("--gsd")
+            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .args(["--module", "1 byte in"])
+            .stdout(Stdio::null())
+            .stdin(Stdio::null()),
+    );
+    let mut master = Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--latency", "100", "--port"])
+            .arg(line.link(0))
+            .arg("--config")
+            .arg(&bus)
+            .stdout(Stdio::null())
+            .stdin(Stdio::null()),
+    );
+    // The state event, within a bound (status lines keep coming).
+    let state = |seen: &mut Lines, from: &str, to: &str| {
+        let end = std::time::Instant::now() + Duration::from_secs(60);
+        loop {
+            let left = end.saturating_duration_since(std::time::Instant::now());
+            let l = seen.next_line(left)?;
+            let Some(v) = json(&l) else { continue };
+            if v["event"] == "state" && v["slave"] == 3 && v["from"] == from && v["to"] == to {
+                return Some(v);
+            }
+        }
+    };
+    state(&mut seen, "check_diag", "data_exchange")
+        .unwrap_or_else(|| panic!("slave 3 not in data_exchange: {:?}", seen.1));
+    master.terminate(Duration::from_secs(10));
+    let v = state(&mut seen, "data_exchange", "offline")
+        .unwrap_or_else(|| panic!("slave 3 stayed in data_exchange: {:?}", seen.1));
+    assert_eq!(v["master"], 2, "{v}");
+    assert!(monitor.terminate(Duration::from_secs(10)).success());
+}

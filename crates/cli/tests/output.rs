@@ -236,3 +236,15 @@ fn an_error_names_its_cause_once_and_in_words() {
     );
     assert!(!out.stderr.contains("<omega>"), "{}", out.stderr);
 }
+
+#[test]
+fn the_master_status_line_names_the_operating_state_in_words() {
+    let out = common::run_dpctl(&["demo", "--fast", "--cycles", "20", "--plain"]);
+    assert!(out.status.success(), "{}", out.stderr);
+    let status = out
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("master 1 at "))
+        .unwrap_or_else(|| panic!("no status line:\n{}", out.stdout));
+    assert!(status.contains("  operate  cycles "), "{status}");
+}

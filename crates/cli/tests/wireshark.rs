@@ -8,8 +8,10 @@
 
 mod common;
 
-use common::{dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
-use profibus::fdl::pcap::PcapWriter;
+use common::{counter, dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
+use profibus::fdl::pcap::{PcapReader, PcapWriter};
+use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -24,6 +26,12 @@ fn script() -> PathBuf {
 /// packet, the fields separated by `|` (repeated values by `,`), byte
 /// fields as plain hex.
 fn tshark_fields(capture: &Path, fields: &[&str]) -> Vec<Vec<String>> {
+    tshark_filtered(capture, None, fields)
+}
+
+/// [`tshark_fields`] of the packets that match the display filter
+/// `filter` (`-Y`).
+fn tshark_filtered(capture: &Path, filter: Option<&str>, fields: &[&str]) -> Vec<Vec<String>> {
     require("tshark");
     let mut cmd = Command::new("tshark");
     cmd.arg("-X")
@@ -31,6 +39,9 @@ fn tshark_fields(capture: &Path, fields: &[&str]) -> Vec<Vec<String>> {
         .arg("-r")
         .arg(capture)
         .args(["-T", "fields", "-E", "separator=|", "-E", "occurrence=a"]);
+    if let Some(f) = filter {
+        cmd.args(["-Y", f]);
+    }
     for f in fields {
         cmd.args(["-e", f]);
     }
@@ -430,4 +441,77 @@ fn dissector_decodes_sd3_and_set_slave_add() {
     );
     assert_eq!(&s[11..14], &["7", "0x0dce", "1"], "{s:?}");
     assert_eq!(rows[2][0], "SC");
+}
+
+/// `dpctl bus --pcap` on a line that flips bits (seeded) keeps the
+/// corrupted telegrams in the recording, flagged: the dissector's filter
+/// `pbdl.fcs.good == 0` finds exactly the flagged packets.
+#[test]
+fn bus_pcap_keeps_corrupted_telegrams_for_the_fcs_filter() {
+    require("tshark");
+    let dir = TempDir::new("wireshark-corrupt");
+    let pcap = dir.path("flipped.pcapng");
+    let bus = Bus::start(
+        2,
+        &[
+            "--flip",
+            "0.002",
+            "--seed",
+            "9",
+            "--pcap",
+            pcap.to_str().unwrap(),
+        ],
+    );
+    let mut port = std::fs::OpenOptions::new()
+        .write(true)
+        .open(bus.link(0))
+        .unwrap();
+    let fc = FunctionCode::Request {
+        kind: RequestKind::SrdHigh,
+        fcb: true,
+        fcv: true,
+    };
+    let mut written = 0u64;
+    for k in 0..400u32 {
+        let du = [k as u8; 16];
+        let t = Telegram::Data(DataTelegram::new(3, 1, fc, &du))
+            .to_vec()
+            .unwrap();
+        port.write_all(&t).unwrap();
+        port.flush().unwrap();
+        written += t.len() as u64;
+    }
+    // The hub carried every character the test wrote.
+    bus.wait_status(&format!("{written} chars"), |s| {
+        counter(s, "chars ").is_some_and(|n| n >= written)
+    });
+    drop(port);
+    let out = bus.stop();
+    assert!(out.status.success(), "dpctl bus: {}", out.stderr);
+    let packets: Vec<_> = PcapReader::new(std::fs::File::open(&pcap).unwrap())
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let flagged: Vec<String> = (packets.iter().enumerate())
+        .filter(|(_, p)| p.is_corrupt())
+        .map(|(i, _)| (i + 1).to_string())
+        .collect();
+    // 400 × 25 bytes × 8 bits × 0.002 ≈ 160 flips.
+    assert!(
+        flagged.len() > 20,
+        "{} of {} packets flagged",
+        flagged.len(),
+        packets.len()
+    );
+    assert!(packets.len() > 300, "{} packets", packets.len());
+    let found: Vec<String> = tshark_filtered(&pcap, Some("pbdl.fcs.good == 0"), &["frame.number"])
+        .into_iter()
+        .map(|r| r[0].clone())
+        .collect();
+    assert_eq!(found, flagged);
+    assert!(
+        out.stderr.contains(&format!(" {} corrupt", flagged.len())),
+        "{}",
+        out.stderr
+    );
 }

@@ -6,6 +6,8 @@
 //! - [`cfg`]: configuration identifiers (Chk_Cfg / Get_Cfg / GSD modules)
 //!   decoded into I/O lengths.
 //! - [`prm`]: the Set_Prm data unit.
+//! - [`decode`]: the DP layer of a telegram decoded (service and data
+//!   unit; responses read by the request they answer): `dpctl sniff --json`.
 //! - [`describe`]: telegrams described for people and scripts
 //!   ([`describe::TelegramSummary`]: `dpctl decode`, `dpctl sniff`).
 //! - [`diag`]: Slave_Diag, the station status bytes and extended
@@ -29,6 +31,7 @@
 pub mod busfile;
 pub mod cfg;
 pub mod control;
+pub mod decode;
 pub mod describe;
 pub mod diag;
 pub mod dpv1;

@@ -42,6 +42,12 @@ const PCAPNG_IDB: u32 = 1;
 const PCAPNG_SPB: u32 = 3;
 const PCAPNG_EPB: u32 = 6;
 const PCAPNG_BYTE_ORDER: u32 = 0x1A2B_3C4D;
+/// Option code of `epb_flags` in an enhanced packet block.
+const EPB_FLAGS: u16 = 2;
+/// `epb_flags` bit 24, a link-layer error: "CRC error" (pcapng
+/// specification, enhanced packet block flags word). For PROFIBUS: the
+/// bytes are no valid telegram (bad FCS, length or delimiter, garbage).
+pub const EPB_FLAG_CRC_ERROR: u32 = 1 << 24;
 /// Snapshot length written in the headers (a telegram is at most 255
 /// bytes; this leaves room for anything a reader might add).
 pub const SNAPLEN: u32 = 65_535;
@@ -141,9 +147,31 @@ impl<W: Write> PcapWriter<W> {
         self.write_packet(ts, telegram)
     }
 
+    /// Record bytes seen at `at` (driver time) that are no valid
+    /// telegram (a bad FCS, a broken length, garbage): kept so that a
+    /// capture shows the line as it was. In pcapng the packet is flagged
+    /// with the CRC-error bit of `epb_flags` ([`EPB_FLAG_CRC_ERROR`];
+    /// Wireshark: `frame.packet_flags_crc_error`); the dissector of
+    /// `tools/wireshark` also finds it with `pbdl.fcs.good == 0`.
+    pub fn write_corrupt(&mut self, at: Instant, bytes: &[u8]) -> io::Result<()> {
+        let ts = self.epoch + Duration::from_nanos(at.as_nanos());
+        self.write_packet_flagged(ts, bytes, EPB_FLAG_CRC_ERROR)
+    }
+
     /// Record one packet with an absolute time stamp (since the Unix
     /// epoch).
     pub fn write_packet(&mut self, ts: Duration, data: &[u8]) -> io::Result<()> {
+        self.write_packet_flagged(ts, data, 0)
+    }
+
+    /// Record one packet with `epb_flags` (pcapng; 0: none written; the
+    /// classic format has no place for flags).
+    pub fn write_packet_flagged(
+        &mut self,
+        ts: Duration,
+        data: &[u8],
+        flags: u32,
+    ) -> io::Result<()> {
         let len = u32::try_from(data.len())
             .ok()
             .filter(|&l| l <= SNAPLEN)
@@ -166,7 +194,9 @@ impl<W: Write> PcapWriter<W> {
                     io::Error::new(io::ErrorKind::InvalidInput, "time stamp beyond 2554")
                 })?;
                 let pad = pad4(data.len());
-                let total = (32 + data.len() + pad) as u32;
+                // Options: epb_flags (code 2, 4 bytes), then opt_endofopt.
+                let opts = if flags != 0 { 12 } else { 0 };
+                let total = (32 + data.len() + pad + opts) as u32;
                 let mut h = [0u8; 28];
                 h[0..4].copy_from_slice(&PCAPNG_EPB.to_le_bytes());
                 h[4..8].copy_from_slice(&total.to_le_bytes());
@@ -178,6 +208,13 @@ impl<W: Write> PcapWriter<W> {
                 self.sink.write_all(&h)?;
                 self.sink.write_all(data)?;
                 self.sink.write_all(&[0u8; 3][..pad])?;
+                if flags != 0 {
+                    let mut o = [0u8; 12];
+                    o[0..2].copy_from_slice(&EPB_FLAGS.to_le_bytes());
+                    o[2..4].copy_from_slice(&4u16.to_le_bytes());
+                    o[4..8].copy_from_slice(&flags.to_le_bytes());
+                    self.sink.write_all(&o)?;
+                }
                 self.sink.write_all(&total.to_le_bytes())?;
             }
         }
@@ -211,6 +248,15 @@ pub struct PcapPacket {
     pub orig_len: u32,
     /// The captured bytes.
     pub data: Vec<u8>,
+    /// pcapng `epb_flags` (0 when absent, and in classic files).
+    pub flags: u32,
+}
+
+impl PcapPacket {
+    /// Flagged as corrupt (the CRC-error bit of `epb_flags`).
+    pub fn is_corrupt(&self) -> bool {
+        self.flags & EPB_FLAG_CRC_ERROR != 0
+    }
 }
 
 /// Reads classic pcap (both byte orders, micro- and nanosecond stamps)
@@ -373,6 +419,23 @@ impl<R: Read> PcapReader<R> {
         Duration::from_secs(secs) + Duration::from_nanos(nanos)
     }
 
+    /// The `epb_flags` option among the options `opts` of an enhanced
+    /// packet block (0 when absent).
+    fn epb_flags(&self, mut opts: &[u8]) -> u32 {
+        while opts.len() >= 4 {
+            let code = self.u16_at(opts, 0);
+            let len = self.u16_at(opts, 2) as usize;
+            if code == 0 {
+                break;
+            }
+            if code == EPB_FLAGS && len == 4 && opts.len() >= 8 {
+                return self.u32_at(opts, 4);
+            }
+            opts = opts.get(4 + len + pad4(len)..).unwrap_or(&[]);
+        }
+        0
+    }
+
     /// The next packet, or `None` at the end of the file.
     pub fn next_packet(&mut self) -> io::Result<Option<PcapPacket>> {
         if self.format == PcapFormat::Pcapng {
@@ -390,10 +453,12 @@ impl<R: Read> PcapReader<R> {
                             .get(20..20 + incl)
                             .ok_or_else(|| invalid(format!("packet of {incl} bytes")))?
                             .to_vec();
+                        let opts = body.get(20 + incl + pad4(incl)..).unwrap_or(&[]);
                         return Ok(Some(PcapPacket {
                             ts: self.stamp(units),
                             orig_len,
                             data,
+                            flags: self.epb_flags(opts),
                         }));
                     }
                     PCAPNG_SPB if body.len() >= 4 => {
@@ -403,6 +468,7 @@ impl<R: Read> PcapReader<R> {
                             ts: Duration::ZERO,
                             orig_len,
                             data: body[4..4 + n].to_vec(),
+                            flags: 0,
                         }));
                     }
                     PCAPNG_SHB => return Err(invalid("second pcapng section".into())),
@@ -427,6 +493,7 @@ impl<R: Read> PcapReader<R> {
             ts: Duration::from_secs(secs) + self.stamp(frac),
             orig_len,
             data,
+            flags: 0,
         }))
     }
 }
@@ -517,6 +584,40 @@ mod tests {
         let mut cut = PcapReader::new(&file[..100]).unwrap();
         assert!(cut.next_packet().is_ok());
         assert!(cut.next_packet().is_err());
+    }
+
+    #[test]
+    fn corrupt_telegrams_are_kept_and_flagged() {
+        // A Slave_Diag request with a wrong FCS (0x00 instead of 0xF1),
+        // then a token.
+        let bad = [0x68, 5, 5, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x00, 0x16];
+        let mut w = PcapWriter::new(Vec::new(), Duration::from_secs(5)).unwrap();
+        w.write_corrupt(Instant::from_nanos(1_000), &bad).unwrap();
+        w.write_telegram(Instant::from_nanos(2_000), &[0xDC, 2, 2])
+            .unwrap();
+        assert_eq!(w.packets(), 2);
+        let file = w.into_inner().unwrap();
+        // EPB 32 + 11 bytes + 1 pad + epb_flags option 8 + end of options 4.
+        assert_eq!(file.len(), 28 + 32 + 56 + 36);
+        let packets: Vec<PcapPacket> = PcapReader::new(&file[..])
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        assert_eq!(packets[0].data, bad);
+        assert_eq!(packets[0].flags, 0x0100_0000);
+        assert!(packets[0].is_corrupt());
+        assert_eq!(packets[1].data, [0xDC, 2, 2]);
+        assert!(!packets[1].is_corrupt());
+        // The classic format keeps the bytes, without a flag.
+        let mut w = PcapWriter::with_format(Vec::new(), PcapFormat::Pcap, Duration::ZERO).unwrap();
+        w.write_corrupt(Instant::ZERO, &bad).unwrap();
+        let file = w.into_inner().unwrap();
+        let p = PcapReader::new(&file[..])
+            .unwrap()
+            .next_packet()
+            .unwrap()
+            .unwrap();
+        assert_eq!((p.data.as_slice(), p.flags), (&bad[..], 0));
     }
 
     #[test]

@@ -17,8 +17,8 @@ use std::fmt;
 /// A [`MasterEvent`] together with what it refers to: the diagnosis in
 /// words, a job's result. Built with [`MasterReport::new`] right after
 /// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
-/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `job`, `ring`) and the
-/// slave's address as `slave`.
+/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `job`, `ring`,
+/// `duplicate_address`) and the slave's address as `slave`.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -94,6 +94,12 @@ pub enum MasterReport {
         /// result was taken already).
         result: String,
     },
+    /// Answers from one address keep arriving garbled or twice: possibly
+    /// two stations at that address ([`FdlEvent::DuplicateAddress`]).
+    DuplicateAddress {
+        /// Station address.
+        slave: u8,
+    },
     /// The token ring changed.
     Ring {
         /// What happened (serialised in words).
@@ -158,6 +164,9 @@ impl MasterReport {
                     result,
                 }
             }
+            MasterEvent::Ring(FdlEvent::DuplicateAddress(slave)) => {
+                MasterReport::DuplicateAddress { slave }
+            }
             MasterEvent::Ring(what) => MasterReport::Ring { what },
         }
     }
@@ -202,6 +211,10 @@ impl fmt::Display for MasterReport {
                     list(actual)
                 )
             }
+            MasterReport::DuplicateAddress { slave } => write!(
+                f,
+                "possible duplicate address {slave}: its answers arrive garbled or twice"
+            ),
             MasterReport::Job { id, data, result } => {
                 write!(f, "job {id}: {result}")?;
                 if let Some(d) = data {
@@ -356,8 +369,14 @@ impl fmt::Display for MasterStatus {
         let c = &self.cycle_us;
         write!(
             f,
-            "master {} at {}  {:?}  cycles {}  cycle min/avg/max {}/{}/{} µs",
-            self.address, self.baud, self.operating, self.cycles, c.min, c.avg, c.max
+            "master {} at {}  {}  cycles {}  cycle min/avg/max {}/{}/{} µs",
+            self.address,
+            self.baud,
+            self.operating.as_str(),
+            self.cycles,
+            c.min,
+            c.avg,
+            c.max
         )
     }
 }

@@ -502,7 +502,9 @@ pub struct MonitorStatus {
 #[derive(Debug, Clone, Copy)]
 pub struct MonitorOptions {
     /// A master that has not passed the token for this long, and for five
-    /// of its longest rotations, has left the ring.
+    /// of its longest rotations, has left the ring; a slave in
+    /// Data_Exchange not polled for this long, and for five of its longest
+    /// cycles, is `offline`.
     pub master_timeout: Duration,
     /// Consecutive failed requests after which a slave is `offline`.
     pub offline_after: u32,
@@ -540,6 +542,8 @@ struct SlaveTrack {
     diag_raw: Vec<u8>,
     diag_words: Vec<String>,
     last: Option<LastRequest>,
+    /// When its master last addressed it.
+    last_polled: Option<Instant>,
     failures: u32,
 }
 
@@ -557,6 +561,7 @@ impl SlaveTrack {
             diag_raw: vec![],
             diag_words: vec![],
             last: None,
+            last_polled: None,
             failures: 0,
         }
     }
@@ -671,7 +676,9 @@ impl Monitor {
     }
 
     /// Time passes without telegrams: masters that stopped passing the
-    /// token leave the live list.
+    /// token leave the live list, and slaves in Data_Exchange that their
+    /// master has not addressed for [`MonitorOptions::master_timeout`]
+    /// (and five of their longest cycles) go `offline`.
     pub fn tick(&mut self, now: Instant) {
         self.now = self.now.max(now);
         let base = self.options.master_timeout;
@@ -685,6 +692,27 @@ impl Monitor {
         }
         for master in left {
             self.push(MonitorEvent::MasterLeft { master });
+        }
+        // A slave in Data_Exchange is polled every cycle. When its master
+        // stops polling it (the master stopped, or dropped it), it is no
+        // longer exchanging data: its watchdog (IEC 61158-6-3, Set_Prm
+        // WD_Fact) ends Data_Exchange on the slave side too. The monitor
+        // cannot see the slave's own state, so it is `offline` for the
+        // master.
+        let mut silent = vec![];
+        for (a, s) in self.slaves.iter() {
+            let (Some(SlaveState::DataExchange), Some(master), Some(t)) =
+                (s.state, s.master, s.last_polled)
+            else {
+                continue;
+            };
+            let limit = base.max(Duration::from_micros(s.cycle.max.saturating_mul(5)));
+            if self.now - t > limit {
+                silent.push((*a, master));
+            }
+        }
+        for (address, master) in silent {
+            self.set_state(address, master, SlaveState::Offline);
         }
     }
 
@@ -838,6 +866,7 @@ impl Monitor {
         let expects_reply = kind.expects_reply();
         let s = self.slave(d.da);
         s.counters.requests += 1;
+        s.last_polled = Some(at);
         let retry = kind.uses_fcb()
             && s.last.is_some_and(|l| {
                 l.master == d.sa

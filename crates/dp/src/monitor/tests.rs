@@ -493,3 +493,34 @@ fn format_is_irrelevant() {
     );
     assert_eq!(m.slave_state(S), Some(SlaveState::SetPrm));
 }
+
+#[test]
+fn slaves_leave_data_exchange_when_their_master_stops() {
+    let mut m = Monitor::new(info(), MonitorOptions::default());
+    let t = feed(&mut m, 0, &startup());
+    events(&mut m);
+    // Half the master timeout of silence: still exchanging data.
+    m.tick(Instant::from_nanos((t + 500) * 1_000_000));
+    assert_eq!(m.slave_state(S), Some(SlaveState::DataExchange));
+    assert!(events(&mut m).is_empty());
+    // The master stopped: after the master timeout the slave is no
+    // longer in Data_Exchange, once.
+    m.tick(Instant::from_nanos((t + 1_100) * 1_000_000));
+    assert_eq!(m.slave_state(S), Some(SlaveState::Offline));
+    assert_eq!(
+        events(&mut m),
+        [MonitorEvent::SlaveState {
+            address: S,
+            master: M,
+            from: Some(SlaveState::DataExchange),
+            to: SlaveState::Offline,
+        }]
+    );
+    m.tick(Instant::from_nanos((t + 3_000) * 1_000_000));
+    assert!(events(&mut m).is_empty());
+    // A new start-up of the master brings it back.
+    let t = feed(&mut m, t + 4_000, &startup());
+    assert_eq!(m.slave_state(S), Some(SlaveState::DataExchange));
+    m.tick(Instant::from_nanos((t + 10) * 1_000_000));
+    assert_eq!(m.slave_state(S), Some(SlaveState::DataExchange));
+}

@@ -306,6 +306,11 @@ pub enum FdlEvent {
     AddressCollision,
     /// A second token was detected; this station dropped its own.
     DuplicateToken,
+    /// Answers from this address keep arriving garbled (codec errors while
+    /// its reply was due, [`DUPLICATE_GARBLED`] attempts in a row) or twice
+    /// to one request ([`DUPLICATE_TWICE`] times): most likely two
+    /// stations answer at this address. Reported once per address.
+    DuplicateAddress(u8),
     /// Answer to a GAP poll (`None`: nobody answered).
     GapStatus {
         /// Address polled.
@@ -335,6 +340,10 @@ impl std::fmt::Display for FdlEvent {
             FdlEvent::AddressInUse => f.write_str("another station uses this address: offline"),
             FdlEvent::AddressCollision => f.write_str("address collision"),
             FdlEvent::DuplicateToken => f.write_str("duplicate token dropped"),
+            FdlEvent::DuplicateAddress(a) => write!(
+                f,
+                "possible duplicate address {a}: its answers arrive garbled or twice"
+            ),
         }
     }
 }
@@ -395,6 +404,16 @@ pub enum RingState {
     CheckTokenPass,
 }
 
+/// Garbled replies in a row from one address after which it is reported
+/// as a possible duplicate ([`FdlEvent::DuplicateAddress`]). Two stations
+/// answering at once garble every reply; line noise rarely garbles this
+/// many in a row.
+pub const DUPLICATE_GARBLED: u8 = 6;
+/// Second replies to one request from one address after which it is
+/// reported as a possible duplicate. Replies to retried requests do not
+/// count (the first answer may just have been late).
+pub const DUPLICATE_TWICE: u8 = 3;
+
 /// Counters of an active station.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ActiveStats {
@@ -419,6 +438,9 @@ pub struct ActiveStats {
     /// Replies addressed to this station that came after their request's
     /// wait ran out (or did not fit the pending request) and were dropped.
     pub late_replies: u64,
+    /// Signs of two stations at one address: attempts whose reply was
+    /// garbled, and second replies to one request.
+    pub duplicate_address_signs: u64,
     /// Shortest real rotation time (ns).
     pub rotation_min_ns: u64,
     /// Longest real rotation time (ns).
@@ -528,6 +550,20 @@ struct Core {
     collisions_in_row: u8,
     was_in_ring: bool,
     stats: ActiveStats,
+    /// Per address: garbled replies in a row, second replies seen, and
+    /// whether it was reported as a possible duplicate.
+    duplicate: [DuplicateSigns; 128],
+    /// The station whose reply completed the last cycle at the first
+    /// attempt: a second reply from it means two stations answered.
+    last_answered: Option<u8>,
+}
+
+/// Signs of two stations at one address.
+#[derive(Debug, Clone, Copy, Default)]
+struct DuplicateSigns {
+    garbled_in_row: u8,
+    twice: u8,
+    reported: bool,
 }
 
 /// An active FDL station driving a [`MasterApp`]; see the module docs.
@@ -570,6 +606,8 @@ impl<A: MasterApp> ActiveStation<A> {
                 collisions_in_row: 0,
                 was_in_ring: false,
                 stats: ActiveStats::default(),
+                duplicate: [DuplicateSigns::default(); 128],
+                last_answered: None,
             },
             app,
         }
@@ -642,8 +680,23 @@ impl<A: MasterApp> ActiveStation<A> {
     }
 
     fn process(&mut self, now: Instant) {
-        while let Some(t) = self.rx.next_telegram() {
-            self.core.on_telegram(now, &t, &mut self.app);
+        loop {
+            // Codec errors while a reply is due: that reply was garbled.
+            let awaiting = self.core.awaiting();
+            let errors = self.rx.stats().errors();
+            let got = match self.rx.next_telegram() {
+                Some(t) => {
+                    self.core.on_telegram(now, &t, &mut self.app);
+                    true
+                }
+                None => false,
+            };
+            if let Some(da) = awaiting.filter(|_| self.rx.stats().errors() > errors) {
+                self.core.garbled_reply(now, da, &mut self.app);
+            }
+            if !got {
+                return;
+            }
         }
     }
 }
@@ -659,7 +712,12 @@ impl<A: MasterApp> Station for ActiveStation<A> {
     }
 
     fn handle_timeout(&mut self, now: Instant) {
+        let awaiting = self.core.awaiting();
+        let errors = self.rx.stats().errors();
         self.rx.handle_idle(now);
+        if let Some(da) = awaiting.filter(|_| self.rx.stats().errors() > errors) {
+            self.core.garbled_reply(now, da, &mut self.app);
+        }
         self.process(now);
         let receiving = self.rx.receiving();
         self.core.on_timeout(now, receiving, &mut self.app);
@@ -1045,9 +1103,51 @@ impl Core {
             Telegram::Data(d) => Some(d.sa),
             _ => None,
         };
+        if let Some(sa) = from.filter(|&sa| self.last_answered == Some(sa)) {
+            self.last_answered = None;
+            self.second_reply(now, sa, app);
+        }
         self.stats.late_replies += 1;
         tracing::debug!(address = self.ts(), from, "late reply dropped");
         app.on_late_reply(now, from);
+    }
+
+    /// The station asked for a reply is `da`, if one is due now.
+    fn awaiting(&self) -> Option<u8> {
+        match self.state {
+            State::AwaitResponse { .. } => self.pending.map(|p| p.da),
+            _ => None,
+        }
+    }
+
+    /// The reply due from `da` arrived garbled (bad FCS, length or
+    /// delimiter).
+    fn garbled_reply<A: MasterApp>(&mut self, now: Instant, da: u8, app: &mut A) {
+        self.stats.duplicate_address_signs += 1;
+        let d = &mut self.duplicate[da as usize & 0x7F];
+        d.garbled_in_row = d.garbled_in_row.saturating_add(1);
+        if d.garbled_in_row >= DUPLICATE_GARBLED {
+            self.report_duplicate(now, da, app);
+        }
+    }
+
+    /// A second reply from `da` to a request it already answered.
+    fn second_reply<A: MasterApp>(&mut self, now: Instant, da: u8, app: &mut A) {
+        self.stats.duplicate_address_signs += 1;
+        let d = &mut self.duplicate[da as usize & 0x7F];
+        d.twice = d.twice.saturating_add(1);
+        if d.twice >= DUPLICATE_TWICE {
+            self.report_duplicate(now, da, app);
+        }
+    }
+
+    fn report_duplicate<A: MasterApp>(&mut self, now: Instant, da: u8, app: &mut A) {
+        let d = &mut self.duplicate[da as usize & 0x7F];
+        if !d.reported {
+            d.reported = true;
+            tracing::warn!(address = da, "possible duplicate address");
+            app.on_event(now, FdlEvent::DuplicateAddress(da));
+        }
     }
 
     fn drop_pending<A: MasterApp>(&mut self, now: Instant, app: &mut A) {
@@ -1448,6 +1548,11 @@ impl Core {
 
     fn complete<A: MasterApp>(&mut self, now: Instant, outcome: Outcome<'_>, app: &mut A) {
         let p = self.pending.take().expect("pending");
+        let data_reply = matches!(outcome, Outcome::Response { .. });
+        if data_reply {
+            self.duplicate[p.da as usize & 0x7F].garbled_in_row = 0;
+        }
+        self.last_answered = (data_reply && p.attempts == 0).then_some(p.da);
         let r = &mut self.remote[p.da as usize & 0x7F];
         if p.service.kind().uses_fcb() {
             r.fcb = !r.fcb;

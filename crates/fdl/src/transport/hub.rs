@@ -118,8 +118,10 @@ pub struct HubStatus {
     pub connected: usize,
     /// Stations on the bus.
     pub stations: usize,
-    /// With a pcap recording: telegrams written and the framer's counters.
-    pub pcap: Option<(u64, CodecStats)>,
+    /// With a pcap recording: packets written (telegrams and flagged
+    /// corrupt stretches), the corrupt ones among them, and the framer's
+    /// counters.
+    pub pcap: Option<(u64, u64, CodecStats)>,
 }
 
 impl fmt::Display for HubStatus {
@@ -134,10 +136,10 @@ impl fmt::Display for HubStatus {
             self.stations,
             self.hub.connects
         )?;
-        if let Some((packets, c)) = self.pcap {
+        if let Some((packets, corrupt, c)) = self.pcap {
             write!(
                 f,
-                "; pcap {packets} telegrams (codec: {} garbage bytes, {} bad FCS, {} other errors)",
+                "; pcap {packets} packets, {corrupt} corrupt (codec: {} garbage bytes, {} bad FCS, {} other errors)",
                 c.garbage_bytes,
                 c.bad_fcs,
                 c.errors() - c.bad_fcs
@@ -168,6 +170,8 @@ pub struct Hub {
     stats: HubStats,
     tap: Tap,
     pcap: Option<Recorder>,
+    /// Corrupt stretches written to the recording.
+    corrupt_packets: u64,
     next_reconnect: Instant,
     last_delivery: Instant,
     buf: Box<[u8; 4096]>,
@@ -239,6 +243,7 @@ impl Hub {
             stats: HubStats::default(),
             tap: Tap::new(),
             pcap: None,
+            corrupt_packets: 0,
             next_reconnect: Instant::ZERO,
             last_delivery: Instant::ZERO,
             buf: Box::new([0; 4096]),
@@ -248,6 +253,9 @@ impl Hub {
 
     /// Record every telegram on the line to `sink` (pcapng, link type 257,
     /// time stamps from the hub's start at `epoch` since the Unix epoch).
+    /// Bytes that form no valid telegram (corrupted by `--flip`/`--noise`
+    /// or by two stations at once) are recorded too, flagged
+    /// ([`PcapWriter::write_corrupt`]).
     pub fn record(&mut self, sink: Box<dyn Write + Send>, epoch: Duration) -> Result<(), HubError> {
         self.pcap = Some(PcapWriter::new(sink, epoch).map_err(HubError::Pcap)?);
         Ok(())
@@ -272,7 +280,10 @@ impl Hub {
             hub: self.stats,
             connected: self.stations.iter().filter(|s| s.connected).count(),
             stations: self.stations.len(),
-            pcap: self.pcap.as_ref().map(|p| (p.packets(), self.tap.stats())),
+            pcap: self
+                .pcap
+                .as_ref()
+                .map(|p| (p.packets(), self.corrupt_packets, self.tap.stats())),
         }
     }
 
@@ -432,9 +443,19 @@ impl Hub {
 
     fn drain_tap(&mut self) -> Result<(), HubError> {
         while let Some(ev) = self.tap.poll() {
-            if let (TapEvent::Telegram { at, bytes }, Some(p)) = (ev, self.pcap.as_mut()) {
-                p.write_telegram(at, &bytes).map_err(HubError::Pcap)?;
+            let Some(p) = self.pcap.as_mut() else {
+                continue;
+            };
+            match ev {
+                TapEvent::Telegram { at, bytes } => p.write_telegram(at, &bytes),
+                // Corrupted telegrams (a flipped bit, noise, two stations
+                // at once) stay in the recording, flagged.
+                TapEvent::Skipped { at, bytes, .. } => {
+                    self.corrupt_packets += 1;
+                    p.write_corrupt(at, &bytes)
+                }
             }
+            .map_err(HubError::Pcap)?;
         }
         Ok(())
     }

@@ -182,7 +182,9 @@ pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 /// (device nodes there come from the kernel, and a missing adapter does
 /// not appear by waiting) and its directory exists. The wait is logged as
 /// one warning line; a path that does not appear in time fails with
-/// [`TransportError::Open`] saying so.
+/// [`TransportError::Open`] saying so. The wait blocks the calling
+/// thread: on a current-thread runtime, a signal the runtime handles
+/// (Ctrl-C in `dpctl`) takes effect once the wait has ended.
 pub const PATH_WAIT: Duration = Duration::from_secs(10);
 
 /// How often a path waited for is looked for.
