@@ -806,13 +806,15 @@ fn reply_matches(p: &Pending, d: &DataTelegram<'_>) -> bool {
 }
 
 /// Whether `t` is a reply addressed to station `ts` (a response telegram
-/// to it, or a short acknowledge, which names no one).
+/// to it, or a short acknowledge, which names no one: only while `ts`
+/// holds the token is it surely `ts`'s).
 fn is_reply_to(t: &Telegram<'_>, ts: u8) -> bool {
-    match t {
-        Telegram::ShortAck => true,
-        Telegram::Data(d) => !d.fc.is_request() && d.da == ts,
-        Telegram::Token { .. } => false,
-    }
+    matches!(t, Telegram::ShortAck) || is_response_to(t, ts)
+}
+
+/// Whether `t` is a response telegram addressed to station `ts`.
+fn is_response_to(t: &Telegram<'_>, ts: u8) -> bool {
+    matches!(t, Telegram::Data(d) if !d.fc.is_request() && d.da == ts)
 }
 
 fn next_addr(a: u8, hsa: u8) -> u8 {
@@ -1004,9 +1006,11 @@ impl Core {
                 self.state = State::ActiveIdle;
                 self.active_idle(now, t, app);
             }
-            State::CheckTokenPass { .. } if is_reply_to(t, ts) => {
+            State::CheckTokenPass { .. } if is_response_to(t, ts) => {
                 // A late reply to one of our requests, not the successor
-                // (which starts with a request or a token).
+                // (which starts with a request or a token). A short
+                // acknowledge names no one: it may answer the successor's
+                // first request, so it ends the check as before.
                 self.late_reply(now, t, app);
             }
             State::CheckTokenPass { .. } => {
@@ -1257,8 +1261,9 @@ impl Core {
     }
 
     fn active_idle<A: MasterApp>(&mut self, now: Instant, t: &Telegram<'_>, app: &mut A) {
-        if is_reply_to(t, self.ts()) {
-            // An answer to one of our requests after the token went on.
+        if is_response_to(t, self.ts()) {
+            // An answer to one of our requests after the token went on
+            // (a short acknowledge here is another master's).
             self.late_reply(now, t, app);
             return;
         }
@@ -1955,11 +1960,19 @@ mod tests {
         };
         assert_eq!(token, vec![0xDC, 5, 3]);
         assert_eq!(st.ring_state(), RingState::CheckTokenPass);
-        st.handle_rx(t2 + params.bits(50), &[0xE5]);
+        st.handle_rx(t2 + params.bits(50), &answer);
         assert_eq!(st.ring_state(), RingState::CheckTokenPass);
         assert_eq!(st.stats().late_replies, 2);
+        assert_eq!(st.app().late, vec![Some(8), Some(8)]);
         // The successor's first telegram ends the check.
         st.handle_rx(t2 + params.bits(60), &[0xDC, 7, 5]);
+        assert_eq!(st.ring_state(), RingState::ActiveIdle);
+        // Waiting for the token: a short acknowledge is another master's
+        // business; a response addressed to this station is late.
+        st.handle_rx(t2 + params.bits(90), &[0xE5]);
+        assert_eq!(st.stats().late_replies, 2);
+        st.handle_rx(t2 + params.bits(120), &answer);
+        assert_eq!(st.stats().late_replies, 3);
         assert_eq!(st.ring_state(), RingState::ActiveIdle);
     }
 
