@@ -271,3 +271,19 @@ fn station_commands_end_quietly_when_nobody_reads_their_output() {
     }
     bus.stop();
 }
+
+#[test]
+fn a_closed_stderr_loses_the_message_but_keeps_the_exit_status() {
+    // `dpctl decode zz 2>&1 | true`: the failure's one line cannot be
+    // written; the status still says "failed" (1), not a panic (101).
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    let status = Command::new(dpctl())
+        .args(["decode", "zz"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(writer)
+        .status()
+        .expect("dpctl decode");
+    assert_eq!(status.code(), Some(1), "{status}");
+}
