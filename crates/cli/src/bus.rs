@@ -41,7 +41,7 @@ pub struct Args {
 
 /// A usage error found after parsing: one line, exit status 2.
 fn usage(msg: impl std::fmt::Display) -> ! {
-    eprintln!("dpctl bus: {msg}");
+    crate::out::errln!("dpctl bus: {msg}");
     std::process::exit(2)
 }
 
@@ -97,7 +97,7 @@ pub fn run(args: Args) -> Result<()> {
             let mut stop = false;
             while let Ok(Some(info)) = signals.read_signal() {
                 match Signal::try_from(info.ssi_signo as i32) {
-                    Ok(Signal::SIGUSR1) => eprintln!("dpctl bus: {}", hub.status()),
+                    Ok(Signal::SIGUSR1) => crate::out::errln!("dpctl bus: {}", hub.status()),
                     _ => stop = true,
                 }
             }
@@ -107,12 +107,12 @@ pub fn run(args: Args) -> Result<()> {
         }
         if let (Some(t), Some(d)) = (next_stats, stats_every) {
             if Instant::now() >= t {
-                eprintln!("dpctl bus: {}", hub.status());
+                crate::out::errln!("dpctl bus: {}", hub.status());
                 next_stats = Some(t.max(Instant::now()) + d);
             }
         }
     }
     let status = hub.finish()?;
-    eprintln!("dpctl bus: {status}");
+    crate::out::errln!("dpctl bus: {status}");
     Ok(())
 }

@@ -44,7 +44,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let profiled = ProfiledBus::load(&args.config)?;
     for w in &profiled.file.warnings {
-        eprintln!("dpctl gateway: warning: {w}");
+        crate::out::errln!("dpctl gateway: warning: {w}");
     }
     let settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
         .with_context(|| args.config.display().to_string())?;

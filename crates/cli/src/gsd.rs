@@ -67,7 +67,7 @@ fn show(a: ShowArgs) -> anyhow::Result<()> {
         Ok(p) => p,
         Err(e) => {
             for d in &e.errors {
-                eprintln!("{}", FileDiagnostic::new(&a.file, "error", d));
+                crate::out::errln!("{}", FileDiagnostic::new(&a.file, "error", d));
             }
             let n = e.errors.len();
             let s = if n == 1 { "" } else { "s" };
@@ -75,7 +75,7 @@ fn show(a: ShowArgs) -> anyhow::Result<()> {
         }
     };
     for w in &parsed.warnings {
-        eprintln!("{}", FileDiagnostic::new(&a.file, "warning", w));
+        crate::out::errln!("{}", FileDiagnostic::new(&a.file, "warning", w));
     }
     let summary = GsdSummary {
         file: &a.file,

@@ -98,7 +98,7 @@ fn main() -> ExitCode {
     // Before any runtime starts a thread: its threads inherit the policy.
     if let Some(p) = cli.rt_priority {
         if let Err(e) = profibus_fdl::transport::realtime::set_fifo_priority(p) {
-            eprintln!("dpctl: --rt-priority: {e}");
+            crate::out::errln!("dpctl: --rt-priority: {e}");
             return ExitCode::from(1);
         }
     }
@@ -126,7 +126,7 @@ fn main() -> ExitCode {
         // Nobody reads the output any more: not a failure.
         Err(e) if out::is_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("dpctl: {e:#}");
+            crate::out::errln!("dpctl: {e:#}");
             ExitCode::from(1)
         }
     }

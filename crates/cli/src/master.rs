@@ -98,7 +98,7 @@ pub fn run(args: Args) -> Result<()> {
 async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     let bus = &profiled.file;
     for w in &bus.warnings {
-        eprintln!("dpctl master: warning: {w}");
+        crate::out::errln!("dpctl master: warning: {w}");
     }
     let mut dp = DpMaster::new(&bus.master)?;
     if args.clear {

@@ -8,7 +8,8 @@
 //! command returns it as its error, a long-running one stops as on
 //! SIGTERM ([`crate::common::request_stop`]: links, sockets and files
 //! are cleaned up), and `dpctl` exits with status 0 without a message
-//! (see [`is_closed`] and `main`).
+//! (see [`is_closed`] and `main`). Messages on stderr go through
+//! [`errln!`], which never panics either.
 
 use std::fmt;
 use std::io::{self, Write};
@@ -84,7 +85,16 @@ macro_rules! out {
     }};
 }
 
-pub(crate) use {out, outln};
+/// `eprintln!` for messages and warnings on stderr, which never panics:
+/// a closed stderr (`dpctl … 2>&1 | head -1`) only loses the line.
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+pub(crate) use {errln, out, outln};
 
 #[cfg(test)]
 mod tests {

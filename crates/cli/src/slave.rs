@@ -153,7 +153,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         let control = args.profile.control.as_deref().map(|src| {
             let inbox = ControlInbox::new();
             if let Err(e) = ControlSource::of(src).spawn(inbox.clone()) {
-                eprintln!("dpctl slave: {e}");
+                crate::out::errln!("dpctl slave: {e}");
             }
             inbox
         });

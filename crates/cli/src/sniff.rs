@@ -164,7 +164,7 @@ async fn sniff(args: Args) -> Result<()> {
             options.idle = Duration::from_secs_f64(ms / 1000.0)
         }
         Some(ms) => {
-            eprintln!("dpctl sniff: --idle-ms {ms} must be a positive number");
+            crate::out::errln!("dpctl sniff: --idle-ms {ms} must be a positive number");
             std::process::exit(2)
         }
         None => {}

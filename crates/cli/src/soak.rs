@@ -70,9 +70,11 @@ pub fn run(args: Args) -> Result<()> {
         ..SoakConfig::default()
     };
     let report = soak::run(&cfg, |p| {
-        eprintln!(
+        crate::out::errln!(
             "soak: {} cycles, {:.1} s bus time, {} disturbances",
-            p.cycles, p.bus_time_s, p.disturbances
+            p.cycles,
+            p.bus_time_s,
+            p.disturbances
         )
     })?;
     if args.json {

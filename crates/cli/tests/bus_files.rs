@@ -188,6 +188,10 @@ fn a_wrong_name_is_one_line_with_its_place_and_the_closest_names() {
              did you mean `setpoints`?",
         ),
         (
+            "address = 5\ndevice = \"omega\"\nsetpoints = \"x\"\n",
+            "dpctl: bad.toml:8:1: slave 5: device `omega`: option `setpoints`: `x` is not a number",
+        ),
+        (
             "address = 5\ndevice = \"bk3000\"\nterminals = [\"KL1104\", \"KL2135\", \"KL9010\"]\n",
             "dpctl: bad.toml:8:1: slave 5: device `bk3000`: option `terminals`: terminal 2: \
              `KL2135` is not in the catalogue; did you mean `KL2134`?",

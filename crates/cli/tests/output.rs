@@ -248,3 +248,42 @@ fn the_master_status_line_names_the_operating_state_in_words() {
         .unwrap_or_else(|| panic!("no status line:\n{}", out.stdout));
     assert!(status.contains("  operate  cycles "), "{status}");
 }
+
+#[test]
+fn station_commands_end_quietly_when_nobody_reads_their_output() {
+    let bus = Bus::start(3, &[]);
+    let config = bus.dir().path("bus.toml");
+    std::fs::write(
+        &config,
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 25\ndevice = \"omega\"\n",
+    )
+    .unwrap();
+    let config = config.to_str().unwrap();
+    // Each would run until a signal; the closed output stops it.
+    let (l0, l1, l2) = (bus.link_str(0), bus.link_str(1), bus.link_str(2));
+    let slave = ClosedStdout::start(&[
+        "slave", "--port", &l1, "--baud", "1.5M", "--addr", "25", "--device", "omega",
+    ]);
+    let master = ClosedStdout::start(&["master", "--plain", "--port", &l0, "--config", config]);
+    let monitor = ClosedStdout::start(&["monitor", "--json", "--port", &l2, "--config", config]);
+    for p in [slave, master, monitor] {
+        p.assert_quiet();
+    }
+    bus.stop();
+}
+
+#[test]
+fn a_closed_stderr_loses_the_message_but_keeps_the_exit_status() {
+    // `dpctl decode zz 2>&1 | true`: the failure's one line cannot be
+    // written; the status still says "failed" (1), not a panic (101).
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    let status = Command::new(dpctl())
+        .args(["decode", "zz"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(writer)
+        .status()
+        .expect("dpctl decode");
+    assert_eq!(status.code(), Some(1), "{status}");
+}

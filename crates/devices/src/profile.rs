@@ -48,7 +48,7 @@ pub enum ProfileError {
     #[error("option `{key}`: {message}")]
     BadOption {
         /// The option.
-        key: &'static str,
+        key: String,
         /// What is wrong.
         message: String,
     },
@@ -253,9 +253,23 @@ impl DeviceOptions {
                 });
             }
         }
-        toml::Value::Table(self.0.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| ProfileError::Options(e.message().to_string()))
+        let decode = |t: toml::Table| toml::Value::Table(t).try_into::<T>();
+        decode(self.0.clone()).map_err(|e| {
+            let message = e.message().to_string();
+            // The option at fault: the one that alone does not decode
+            // (every other option has its default).
+            let key = self.0.iter().map(|(k, _)| k).find(|k| {
+                let one = self.0.iter().filter(|(o, _)| o == k);
+                decode(one.map(|(o, v)| (o.clone(), v.clone())).collect()).is_err()
+            });
+            match key {
+                Some(key) => ProfileError::BadOption {
+                    key: key.clone(),
+                    message,
+                },
+                None => ProfileError::Options(message),
+            }
+        })
     }
 }
 

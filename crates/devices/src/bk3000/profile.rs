@@ -88,7 +88,7 @@ pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
             message: e.to_string(),
         },
         None => ProfileError::BadOption {
-            key: "terminals",
+            key: "terminals".into(),
             message: e.to_string(),
         },
     })?;
