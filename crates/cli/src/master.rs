@@ -42,11 +42,13 @@ pub struct Args {
     #[arg(long, value_name = "N")]
     cycles: Option<u64>,
     /// Stop once every slave has completed N Data_Exchange cycles (however
-    /// long its start-up took): what scripts and tests wait for.
+    /// long its start-up took): what scripts and tests wait for. Gives up
+    /// after 60 s unless `--timeout` says otherwise.
     #[arg(long, value_name = "N")]
     exchanges: Option<u64>,
     /// Give up after this many seconds: exit status 1, naming the slaves
-    /// not in Data_Exchange when `--exchanges` was not reached.
+    /// not in Data_Exchange when `--exchanges` was not reached. Default
+    /// with `--exchanges`: 60; otherwise none.
     #[arg(long, value_name = "SECS")]
     timeout: Option<f64>,
     /// Print JSON lines instead of text.
@@ -126,16 +128,14 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if !args.json && !args.plain && !stdin_commands && std::io::stdout().is_terminal() {
         view.open_terminal(bus_view("dpctl master", baud, &info))?;
     }
-    let deadline = match args.timeout {
-        Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
-        Some(t) => bail!("--timeout takes a positive number of seconds, not {t}"),
-        None => None,
-    };
-    let stop_when = StopWhen {
-        cycles: args.cycles,
-        exchanges: args.exchanges,
-        deadline,
-    };
+    let stop_when = stop_when(&args)?;
+    if let (Some(n), Some(d)) = (args.exchanges, stop_when.deadline) {
+        tracing::info!(
+            exchanges = n,
+            timeout_s = d.as_secs_f64(),
+            "waiting for Data_Exchange at most this long"
+        );
+    }
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
     let mut rfid = profibus_devices::rfid::jobs::MasterJobs::default();
@@ -180,12 +180,62 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if args.cycles.is_some() && !stuck.is_empty() {
         tracing::info!(?stuck, "slaves not in data exchange at the end");
     }
-    if timed_out && args.exchanges.is_some() {
+    if let (true, Some(n)) = (timed_out, args.exchanges) {
+        let short: Vec<String> = m
+            .slave_addresses()
+            .filter_map(|a| {
+                let done = m.slave_stats(a)?.data_exchanges;
+                let state = m.slave_state(a)?.name();
+                (done < n).then(|| format!("slave {a} ({state}, {done} exchanges)"))
+            })
+            .collect();
         bail!(
-            "timeout after {:.1} s: {} Data_Exchange cycles not reached (not in Data_Exchange: {stuck:?})",
-            args.timeout.unwrap_or(0.0),
-            args.exchanges.unwrap_or(0)
+            "timeout after {:.1} s: not every slave reached {n} Data_Exchange cycles: {}",
+            stop_when.deadline.unwrap_or_default().as_secs_f64(),
+            short.join(", ")
         );
     }
     Ok(())
+}
+
+/// The stop conditions of the arguments: `--exchanges` without
+/// `--timeout` gives up after `profibus_dp::master::EXCHANGES_TIMEOUT`.
+fn stop_when(args: &Args) -> Result<StopWhen> {
+    let deadline = match args.timeout {
+        Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
+        Some(t) => bail!("--timeout takes a positive number of seconds, not {t}"),
+        None => None,
+    };
+    Ok(StopWhen::new(args.cycles, args.exchanges, deadline))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use profibus_dp::master::EXCHANGES_TIMEOUT;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn parse(extra: &[&str]) -> Args {
+        let mut argv = vec!["dpctl", "--port", "/dev/null", "--config", "bus.toml"];
+        argv.extend_from_slice(extra);
+        Cli::parse_from(argv).args
+    }
+
+    #[test]
+    fn exchanges_without_timeout_give_up_after_the_default() {
+        let w = stop_when(&parse(&["--exchanges", "5"])).unwrap();
+        assert_eq!(w.deadline, Some(EXCHANGES_TIMEOUT));
+        assert_eq!(EXCHANGES_TIMEOUT, Duration::from_secs(60));
+        let w = stop_when(&parse(&["--exchanges", "5", "--timeout", "3"])).unwrap();
+        assert_eq!(w.deadline, Some(Duration::from_secs(3)));
+        let w = stop_when(&parse(&[])).unwrap();
+        assert_eq!(w.deadline, None, "no deadline without --exchanges");
+        assert!(stop_when(&parse(&["--timeout", "0"])).is_err());
+    }
 }

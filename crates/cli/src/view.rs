@@ -131,7 +131,8 @@ impl View {
 pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View) {
     while let Some(e) = m.poll_event() {
         let gsd = match &e {
-            profibus_dp::master::MasterEvent::Diag { address } => slaves_info
+            profibus_dp::master::MasterEvent::Diag { address }
+            | profibus_dp::master::MasterEvent::CfgMismatch { address } => slaves_info
                 .iter()
                 .find(|s| s.address == *address)
                 .and_then(|s| s.gsd.as_ref()),

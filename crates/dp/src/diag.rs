@@ -120,10 +120,14 @@ impl<'a> SlaveDiag<'a> {
         })
     }
 
-    /// Whether this is a valid diagnosis: bit 2 of Station_Status_2 is
-    /// always 1 in a slave's answer (EN 50170 / IEC 61158-6-3). A master
-    /// must not act on a diagnosis without it: such an answer is a stray
-    /// telegram (e.g. a late Data_Exchange reply) or corrupt.
+    /// Whether bit 2 of Station_Status_2, which a slave always sets
+    /// (EN 50170 Vol. 2 / IEC 61158-6-3, Station_Status_2 bit 2 "always
+    /// 1"), is set. Some home-made and older slave cores leave it clear
+    /// (e.g. `02 08 00 02 00 2B`): their answer with the SAPs of a
+    /// Slave_Diag answer is still a diagnosis, and a master acts on it and
+    /// counts the missing bit as a warning. It is not proof against stray
+    /// telegrams: a late Data_Exchange reply has no SAPs and is rejected by
+    /// the FDL's reply matching.
     pub fn is_valid(&self) -> bool {
         self.status2.contains(StationStatus2::ALWAYS_ONE)
     }
@@ -202,7 +206,7 @@ impl<'a> SlaveDiag<'a> {
             }
         }
         if !self.status2.contains(StationStatus2::ALWAYS_ONE) {
-            add("(bit 2 of Station_Status_2 not set: invalid diagnosis)");
+            add("always-1 bit (Station_Status_2 bit 2) clear");
         }
         if self.status3.contains(StationStatus3::EXT_DIAG_OVERFLOW) {
             add("Ext_Diag_Overflow");

@@ -169,6 +169,19 @@ pub struct MasterOptions {
 /// watchdog time) and a negligible share of the bus at any baud rate.
 pub const DEFAULT_GLOBAL_CONTROL_INTERVAL: Duration = Duration::from_millis(100);
 
+/// The back-off after the first failed start-up of a slave (a Prm/Cfg
+/// fault, a negative answer to Set_Prm or Chk_Cfg, Station_Not_Ready for
+/// too long). The standard's masters retry a failed start-up for as long
+/// as the slave is configured (IEC 61158-6-3, the master's slave handler
+/// goes back to reading the diagnosis); this master doubles the wait with
+/// each failure in a row, from 10 ms up to [`STARTUP_RETRY_MAX`], so a
+/// persistent fault costs a few telegrams a second instead of the bus,
+/// and a fixed slave is in Data_Exchange within a second.
+pub const STARTUP_RETRY_FIRST: Duration = Duration::from_millis(10);
+
+/// The longest back-off between two start-ups of a faulty slave: 1 s.
+pub const STARTUP_RETRY_MAX: Duration = Duration::from_secs(1);
+
 /// The default of [`MasterOptions::alone_hold_bits`]: 0, the token after
 /// every poll cycle, as most masters do.
 pub const DEFAULT_ALONE_HOLD_BITS: u32 = 0;

@@ -15,7 +15,19 @@
 //! the right step: Prm_Req or an RS answer to
 //! Data_Exchange to Set_Prm; Prm_Fault/Cfg_Fault are reported in words and
 //! the slave is parameterised again; a slave locked by another master is
-//! left alone and watched. A slave that stops answering for
+//! left alone and watched.
+//!
+//! A start-up that fails (a Prm/Cfg fault, a negative answer to Set_Prm
+//! or Chk_Cfg, a slave that stays Station_Not_Ready) is retried, as the
+//! standard's masters do, but with a bounded exponential back-off: the
+//! n-th failure in a row waits [`STARTUP_RETRY_FIRST`] × 2^(n−1), at most
+//! [`STARTUP_RETRY_MAX`], before the next Slave_Diag. A persistent fault
+//! is reported once ([`MasterEvent::Fault`]) and, when it changes or the
+//! slave reaches Data_Exchange, with its repeat count
+//! ([`MasterEvent::FaultEnded`]); the state changes of the retries are
+//! not reported. On a Cfg_Fault the master reads the slave's real
+//! configuration (Get_Cfg) and reports it next to its own
+//! ([`MasterEvent::CfgMismatch`]). A slave that stops answering for
 //! [`MasterOptions::lost_after`] cycles is *lost*: it is probed with
 //! Slave_Diag every [`MasterOptions::reprobe_interval`] and parameterised
 //! again as soon as it answers. A "data high" (DH) answer to
@@ -91,10 +103,10 @@ mod wait;
 pub use command::{CommandError, CommandOutcome, MasterCommand};
 pub use config::{
     MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
-    DEFAULT_GLOBAL_CONTROL_INTERVAL,
+    DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST, STARTUP_RETRY_MAX,
 };
-pub use report::{CycleMicros, MasterReport, MasterStatus, SlaveStatus};
-pub use stop::{StopReason, StopWhen};
+pub use report::{CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
@@ -374,6 +386,20 @@ impl FaultReason {
             status3: d.status3,
         }
     }
+
+    /// Whether `other` is the same fault: the same ident numbers, or the
+    /// same fault bits of Station_Status_1 (Prm_Fault, Cfg_Fault,
+    /// Not_Supported; the other status bits may change between reads).
+    pub fn same_as(&self, other: &FaultReason) -> bool {
+        use crate::diag::StationStatus1 as S1;
+        let bits = S1::PRM_FAULT | S1::CFG_FAULT | S1::NOT_SUPPORTED;
+        match (self, other) {
+            (FaultReason::Station { status1: a, .. }, FaultReason::Station { status1: b, .. }) => {
+                *a & bits == *b & bits
+            }
+            _ => self == other,
+        }
+    }
 }
 
 /// What the master reports.
@@ -393,12 +419,31 @@ pub enum MasterEvent {
         /// Station address.
         address: u8,
     },
-    /// A slave reported a parameterisation or configuration fault.
+    /// A slave reported a parameterisation or configuration fault: once
+    /// per fault, not again for each retry of the start-up while the same
+    /// fault persists.
     Fault {
         /// Station address.
         address: u8,
         /// What is wrong (`Display`: in words).
         reason: FaultReason,
+    },
+    /// A reported fault is over: the slave reached Data_Exchange, or
+    /// reported another fault (a [`MasterEvent::Fault`] follows).
+    FaultEnded {
+        /// Station address.
+        address: u8,
+        /// The fault that ended.
+        reason: FaultReason,
+        /// How many start-ups ended in it in a row.
+        repeats: u64,
+    },
+    /// A slave reported Cfg_Fault and answered Get_Cfg: its real
+    /// configuration ([`DpMaster::actual_cfg`]) next to the configured
+    /// one ([`SlaveParams::cfg`]).
+    CfgMismatch {
+        /// Station address.
+        address: u8,
     },
     /// A job ended; take its result with [`DpMaster::take_result`].
     JobDone(JobId),
@@ -421,9 +466,18 @@ pub struct SlaveStats {
     /// Slave_Diag reads.
     pub diag_reads: u64,
     /// Slave_Diag answers rejected as invalid (shorter than 6 bytes, or
-    /// bit 2 of Station_Status_2 clear); the diagnosis is read again and
-    /// nothing is derived from them.
+    /// without the SAPs of a Slave_Diag answer); the diagnosis is read
+    /// again and nothing is derived from them.
     pub invalid_diags: u64,
+    /// Warnings: Slave_Diag answers with the always-1 bit (bit 2 of
+    /// Station_Status_2) clear. They are diagnoses all the same (the
+    /// SAPs and length of a Slave_Diag answer) and are acted on; older
+    /// and home-made slave cores send them.
+    pub always_one_clear: u64,
+    /// Start-ups that failed (a Prm/Cfg fault, a negative answer to
+    /// Set_Prm or Chk_Cfg, Station_Not_Ready for too long) and were
+    /// retried after a back-off.
+    pub failed_startups: u64,
     /// Answers that came after their request's wait ran out (the retry
     /// had gone out, or the request had failed) and were dropped
     /// ([`profibus_fdl::station::active::ActiveStats::late_replies`]).
@@ -470,6 +524,18 @@ struct Slave {
     stats: SlaveStats,
     /// Start-up steps still allowed back to back in this pass.
     chain: u8,
+    /// Failed start-ups in a row (0 once in Data_Exchange).
+    failed_in_row: u32,
+    /// No new start-up before this time (the back-off after a failure).
+    retry_at: Instant,
+    /// The fault reported last, and how many start-ups ended in it.
+    fault: Option<(FaultReason, u64)>,
+    /// The ident number reported last in an ident mismatch.
+    ident_reported: Option<u16>,
+    /// Get_Cfg is due (after a new Cfg_Fault).
+    read_cfg: bool,
+    /// The slave's answer to the last Get_Cfg.
+    actual_cfg: Vec<u8>,
 }
 
 /// The next request of a poll cycle ([`DpMaster::next_cyclic`]).
@@ -492,6 +558,7 @@ enum Step {
     SetPrm,
     ChkCfg,
     DataExchange,
+    GetCfg,
 }
 
 #[derive(Debug)]
@@ -580,6 +647,24 @@ pub struct DpMaster {
 
 const NO_SLAVE: u8 = 0xFF;
 
+/// The back-off after the `n`-th failed start-up in a row (n ≥ 1).
+fn startup_retry_delay(n: u32) -> Duration {
+    let doublings = n.saturating_sub(1).min(16);
+    STARTUP_RETRY_FIRST
+        .saturating_mul(1 << doublings)
+        .min(STARTUP_RETRY_MAX)
+}
+
+impl SlaveState {
+    /// A step of the start-up sequence (Diag, SetPrm, ChkCfg, CheckDiag).
+    fn starting(self) -> bool {
+        matches!(
+            self,
+            SlaveState::Diag | SlaveState::SetPrm | SlaveState::ChkCfg | SlaveState::CheckDiag
+        )
+    }
+}
+
 impl DpMaster {
     /// A master polling the slaves of `cfg`, starting in [`OperatingState::Operate`].
     pub fn new(cfg: &MasterConfig) -> Result<DpMaster, MasterConfigError> {
@@ -629,6 +714,12 @@ impl DpMaster {
                 last_diag: Instant::ZERO,
                 stats: SlaveStats::default(),
                 chain: STARTUP_CHAIN,
+                failed_in_row: 0,
+                retry_at: Instant::ZERO,
+                fault: None,
+                ident_reported: None,
+                read_cfg: false,
+                actual_cfg: Vec::new(),
             });
         }
         Ok(DpMaster {
@@ -749,6 +840,12 @@ impl DpMaster {
     /// The last diagnosis read from a slave (empty before the first).
     pub fn diag(&self, address: u8) -> Option<&[u8]> {
         self.by_address(address).map(|s| &s.diag[..])
+    }
+
+    /// The slave's answer to the Get_Cfg read after its last Cfg_Fault
+    /// (empty before; see [`MasterEvent::CfgMismatch`]).
+    pub fn actual_cfg(&self, address: u8) -> Option<&[u8]> {
+        self.by_address(address).map(|s| &s.actual_cfg[..])
     }
 
     /// A slave's counters.
@@ -872,7 +969,66 @@ impl DpMaster {
         }
         let address = s.p.address;
         tracing::debug!(address, from = from.name(), to = to.name(), "slave state");
-        self.emit(MasterEvent::StateChanged { address, from, to });
+        // The steps of a start-up retried after a failure are not
+        // reported again: the fault (and its end) tells what happens.
+        let retry = s.failed_in_row > 0 && from.starting() && to.starting();
+        if to == SlaveState::DataExchange {
+            s.failed_in_row = 0;
+            s.ident_reported = None;
+            if let Some((reason, repeats)) = s.fault.take() {
+                tracing::info!(address, %reason, repeats, "slave fault ended");
+                self.emit(MasterEvent::FaultEnded {
+                    address,
+                    reason,
+                    repeats,
+                });
+            }
+        }
+        if !retry {
+            self.emit(MasterEvent::StateChanged { address, from, to });
+        }
+    }
+
+    /// A start-up of slave `i` failed: back to Slave_Diag after the
+    /// back-off ([`STARTUP_RETRY_FIRST`] doubled per failure in a row, at
+    /// most [`STARTUP_RETRY_MAX`]).
+    fn startup_failed(&mut self, i: usize, now: Instant) {
+        self.set_state(i, SlaveState::Diag);
+        let s = &mut self.slaves[i];
+        s.stats.failed_startups += 1;
+        s.failed_in_row = s.failed_in_row.saturating_add(1);
+        s.retry_at = now + startup_retry_delay(s.failed_in_row);
+        if let Some((_, repeats)) = &mut s.fault {
+            *repeats += 1;
+        }
+    }
+
+    /// Report `reason` for slave `i` unless it is the fault reported last
+    /// (then it only counts, in [`Self::startup_failed`]). A new Cfg_Fault
+    /// asks for the slave's real configuration (Get_Cfg).
+    fn fault(&mut self, i: usize, reason: FaultReason) {
+        use crate::diag::StationStatus1 as S1;
+        let s = &mut self.slaves[i];
+        let address = s.p.address;
+        if s.fault.as_ref().is_some_and(|(f, _)| f.same_as(&reason)) {
+            return;
+        }
+        if let Some((old, repeats)) = s.fault.take() {
+            self.emit(MasterEvent::FaultEnded {
+                address,
+                reason: old,
+                repeats,
+            });
+        }
+        let s = &mut self.slaves[i];
+        s.fault = Some((reason, 0));
+        if let FaultReason::Station { status1, .. } = reason {
+            if status1.contains(S1::CFG_FAULT) {
+                s.read_cfg = true;
+            }
+        }
+        tracing::warn!(address, %reason, "slave fault");
+        self.emit(MasterEvent::Fault { address, reason });
     }
 
     /// Whether slave `i` is to be polled in this pass at `now`.
@@ -880,6 +1036,9 @@ impl DpMaster {
         let s = &self.slaves[i];
         if s.state == SlaveState::Offline || s.state == SlaveState::Locked {
             return now >= s.next_probe;
+        }
+        if s.state == SlaveState::Diag && !s.read_cfg && now < s.retry_at {
+            return false;
         }
         match s.last_poll {
             Some(t) => now >= t + s.p.min_slave_interval,
@@ -905,6 +1064,18 @@ impl DpMaster {
             max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
         };
         let (step, req) = match s.state {
+            SlaveState::Diag if s.read_cfg => (
+                Step::GetCfg,
+                Request {
+                    da,
+                    service: Service::SrdHigh,
+                    dsap: Some(sap::GET_CFG),
+                    ssap: Some(sap::MASTER),
+                    data: &[],
+                    // Up to 244 bytes: as long as the longest telegram.
+                    max_reply_len: None,
+                },
+            ),
             SlaveState::Offline | SlaveState::Diag | SlaveState::CheckDiag | SlaveState::Locked => {
                 (Step::Diag, diag(da))
             }
@@ -1003,11 +1174,50 @@ impl DpMaster {
                     ..
                 }
         );
+        if step == Step::GetCfg {
+            // Asked once per new Cfg_Fault, whatever the answer.
+            self.slaves[i].read_cfg = false;
+        }
         match (step, r.outcome) {
             (_, Outcome::NoResponse) => self.slave_failed(i, now),
-            (Step::Diag, Outcome::Response { data, status, .. }) if !status.is_negative() => {
+            (
+                Step::GetCfg,
+                Outcome::Response {
+                    status,
+                    data,
+                    dsap,
+                    ssap,
+                    ..
+                },
+            ) if !status.is_negative()
+                && (dsap, ssap) == (Some(sap::MASTER), Some(sap::GET_CFG)) =>
+            {
+                let s = &mut self.slaves[i];
+                s.fails = 0;
+                s.actual_cfg.clear();
+                s.actual_cfg.extend_from_slice(&data[..data.len().min(244)]);
+                let address = s.p.address;
+                self.emit(MasterEvent::CfgMismatch { address });
+            }
+            (Step::GetCfg, _) => {
+                // No configuration to show (refused, or no answer data).
                 self.slaves[i].fails = 0;
-                self.on_diag(i, data, now);
+                let address = self.slaves[i].p.address;
+                tracing::debug!(address, "no answer data to Get_Cfg");
+            }
+            (
+                Step::Diag,
+                Outcome::Response {
+                    data,
+                    status,
+                    dsap,
+                    ssap,
+                    ..
+                },
+            ) if !status.is_negative() => {
+                self.slaves[i].fails = 0;
+                let saps = (dsap, ssap) == (Some(sap::MASTER), Some(sap::SLAVE_DIAG));
+                self.on_diag(i, data, saps, now);
             }
             (Step::SetPrm, _) if acked => {
                 self.slaves[i].fails = 0;
@@ -1042,16 +1252,24 @@ impl DpMaster {
             }
             (_, Outcome::Response { status, .. }) => {
                 // A negative answer: the slave is not in the state we
-                // thought (e.g. RS to Data_Exchange after a restart).
-                let address = self.slaves[i].p.address;
-                self.slaves[i].fails = 0;
-                tracing::info!(
-                    address,
-                    status = status.mnemonic(),
-                    ?step,
-                    "negative answer"
-                );
-                self.set_state(i, SlaveState::Diag);
+                // thought (e.g. RS to Data_Exchange after a restart). To
+                // Set_Prm or Chk_Cfg, the start-up failed.
+                let s = &mut self.slaves[i];
+                let address = s.p.address;
+                s.fails = 0;
+                if s.failed_in_row == 0 {
+                    tracing::info!(
+                        address,
+                        status = status.mnemonic(),
+                        ?step,
+                        "negative answer"
+                    );
+                }
+                if matches!(step, Step::SetPrm | Step::ChkCfg) {
+                    self.startup_failed(i, now);
+                } else {
+                    self.set_state(i, SlaveState::Diag);
+                }
             }
             (_, Outcome::ShortAck | Outcome::Sent) => {
                 // SC to Slave_Diag: no diagnosis data; ask again.
@@ -1060,23 +1278,43 @@ impl DpMaster {
         }
     }
 
-    fn on_diag(&mut self, i: usize, data: &[u8], now: Instant) {
+    /// A Slave_Diag answer of slave `i`; `saps`: it carries the SAPs of
+    /// a Slave_Diag answer (DSAP 62, SSAP 60: the request's swapped).
+    fn on_diag(&mut self, i: usize, data: &[u8], saps: bool, now: Instant) {
         let me = self.address;
         let s = &mut self.slaves[i];
         s.stats.diag_reads += 1;
-        let Some(d) = SlaveDiag::parse(data).ok().filter(SlaveDiag::is_valid) else {
-            // Not a diagnosis (too short, or the always-1 bit clear): a
-            // stray or corrupt answer. Count it, keep the last valid
-            // diagnosis and state, and read it again.
-            s.stats.invalid_diags += 1;
-            s.need_diag = true;
-            tracing::debug!(
-                address = s.p.address,
-                len = data.len(),
-                "invalid Slave_Diag answer ignored"
-            );
-            return;
+        let d = match SlaveDiag::parse(data) {
+            Ok(d) if saps => d,
+            _ => {
+                // Not a diagnosis (shorter than 6 bytes, or without the
+                // SAPs of a Slave_Diag answer: a stray reply, e.g. a late
+                // Data_Exchange answer). Count it, keep the last
+                // diagnosis and state, and read it again.
+                s.stats.invalid_diags += 1;
+                s.need_diag = true;
+                tracing::debug!(
+                    address = s.p.address,
+                    len = data.len(),
+                    saps,
+                    "invalid Slave_Diag answer ignored"
+                );
+                return;
+            }
         };
+        if !d.is_valid() {
+            // The always-1 bit clear: a diagnosis all the same (the SAPs
+            // and the length say so), acted on; counted as a warning,
+            // logged once per slave.
+            s.stats.always_one_clear += 1;
+            if s.stats.always_one_clear == 1 {
+                tracing::warn!(
+                    address = s.p.address,
+                    "Slave_Diag with the always-1 bit (Station_Status_2 bit 2) clear: \
+                     taken as a diagnosis"
+                );
+            }
+        }
         s.last_diag = now;
         s.need_diag = false;
         let changed = s.diag != data;
@@ -1102,7 +1340,15 @@ impl DpMaster {
                     self.slaves[i].next_probe = now + reprobe;
                     self.set_state(i, SlaveState::Locked);
                 } else {
-                    if d.ident_number != ident {
+                    let s = &mut self.slaves[i];
+                    if d.ident_number != ident && s.ident_reported != Some(d.ident_number) {
+                        s.ident_reported = Some(d.ident_number);
+                        tracing::warn!(
+                            address,
+                            reported = d.ident_number,
+                            expected = ident,
+                            "slave reports another ident number"
+                        );
                         self.emit(MasterEvent::Fault {
                             address,
                             reason: FaultReason::IdentMismatch {
@@ -1124,31 +1370,27 @@ impl DpMaster {
                     .status1
                     .intersects(S1::PRM_FAULT | S1::CFG_FAULT | S1::NOT_SUPPORTED)
                 {
-                    self.emit(MasterEvent::Fault {
-                        address,
-                        reason: FaultReason::station(&d),
-                    });
-                    self.set_state(i, SlaveState::Diag);
+                    self.fault(i, FaultReason::station(&d));
+                    self.startup_failed(i, now);
                 } else if d.status2.contains(S2::PRM_REQ) || locked_by_other {
-                    self.set_state(i, SlaveState::Diag);
+                    self.startup_failed(i, now);
                 } else {
                     let limit = self.options.not_ready_limit;
                     let s = &mut self.slaves[i];
                     s.not_ready += 1;
                     if s.not_ready > limit {
-                        self.set_state(i, SlaveState::Diag);
+                        self.startup_failed(i, now);
                     }
                 }
             }
             SlaveState::DataExchange => {
                 if !d.ready_for(me) && !d.status2.contains(S2::STAT_DIAG) {
                     if d.status1.intersects(S1::PRM_FAULT | S1::CFG_FAULT) {
-                        self.emit(MasterEvent::Fault {
-                            address,
-                            reason: FaultReason::station(&d),
-                        });
+                        self.fault(i, FaultReason::station(&d));
+                        self.startup_failed(i, now);
+                    } else {
+                        self.set_state(i, SlaveState::Diag);
                     }
-                    self.set_state(i, SlaveState::Diag);
                 } else if d.status2.contains(S2::STAT_DIAG) {
                     // Static diagnosis: keep reading it, no data exchange.
                     self.slaves[i].need_diag = true;

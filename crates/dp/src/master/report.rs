@@ -17,8 +17,8 @@ use std::fmt;
 /// A [`MasterEvent`] together with what it refers to: the diagnosis in
 /// words, a job's result. Built with [`MasterReport::new`] right after
 /// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
-/// `diag`, `fault`, `job`, `ring`, `duplicate_address`) and the slave's
-/// address as `slave`.
+/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `job`, `ring`,
+/// `duplicate_address`) and the slave's address as `slave`.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -55,6 +55,30 @@ pub enum MasterReport {
             serde(serialize_with = "profibus_fdl::ser::display")
         )]
         reason: FaultReason,
+    },
+    /// A reported fault is over (the slave reached Data_Exchange or
+    /// reports another fault).
+    FaultEnded {
+        /// Station address.
+        slave: u8,
+        /// The fault (serialised in words).
+        #[cfg_attr(
+            feature = "serde",
+            serde(serialize_with = "profibus_fdl::ser::display")
+        )]
+        reason: FaultReason,
+        /// Start-ups that ended in it in a row.
+        repeats: u64,
+    },
+    /// Cfg_Fault: the configuration the master sent (Chk_Cfg) and the
+    /// slave's real one (Get_Cfg), each split into identifier groups.
+    CfgMismatch {
+        /// Station address.
+        slave: u8,
+        /// The master's configuration.
+        configured: Vec<CfgGroup>,
+        /// The slave's answer to Get_Cfg.
+        actual: Vec<CfgGroup>,
     },
     /// A job ended.
     Job {
@@ -111,6 +135,23 @@ impl MasterReport {
                 slave: address,
                 reason,
             },
+            MasterEvent::FaultEnded {
+                address,
+                reason,
+                repeats,
+            } => MasterReport::FaultEnded {
+                slave: address,
+                reason,
+                repeats,
+            },
+            MasterEvent::CfgMismatch { address } => MasterReport::CfgMismatch {
+                slave: address,
+                configured: CfgGroup::split(
+                    m.slave_params(address).map_or(&[][..], |p| &p.cfg[..]),
+                    gsd,
+                ),
+                actual: CfgGroup::split(m.actual_cfg(address).unwrap_or(&[]), gsd),
+            },
             MasterEvent::JobDone(id) => {
                 let (data, result) = match m.take_result(id) {
                     Some(JobResult::Data(d)) => (Some(d), "ok".to_string()),
@@ -141,6 +182,35 @@ impl fmt::Display for MasterReport {
                 write!(f, "slave {slave} diagnosis: {}", words.join("; "))
             }
             MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
+            MasterReport::FaultEnded {
+                slave,
+                reason,
+                repeats,
+            } => write!(
+                f,
+                "slave {slave} fault over after {repeats} failed start-ups: {reason}"
+            ),
+            MasterReport::CfgMismatch {
+                slave,
+                configured,
+                actual,
+            } => {
+                let list = |g: &[CfgGroup]| {
+                    if g.is_empty() {
+                        return "nothing".to_string();
+                    }
+                    g.iter()
+                        .map(|g| g.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                write!(
+                    f,
+                    "slave {slave} configuration mismatch: configured {}; the slave has {}",
+                    list(configured),
+                    list(actual)
+                )
+            }
             MasterReport::DuplicateAddress { slave } => write!(
                 f,
                 "possible duplicate address {slave}: its answers arrive garbled or twice"
@@ -154,6 +224,85 @@ impl fmt::Display for MasterReport {
             }
             MasterReport::Ring { what } => write!(f, "ring: {what}"),
         }
+    }
+}
+
+/// A run of configuration identifiers that belong together: one GSD
+/// module's identifiers, or a single identifier no module has.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct CfgGroup {
+    /// The identifier bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub bytes: Vec<u8>,
+    /// The identifiers in words ([`crate::cfg::Identifier`]'s `Display`,
+    /// joined by `, `), e.g. `2 words in+out`.
+    pub meaning: String,
+    /// The GSD module with exactly these bytes (several names joined by
+    /// ` or ` when modules share them); `None` without a GSD or match.
+    pub module: Option<String>,
+}
+
+impl CfgGroup {
+    /// Split a configuration (Chk_Cfg / Get_Cfg bytes) into groups: at
+    /// each position the longest GSD module whose identifier bytes come
+    /// next, else one identifier. Bytes that do not decode end the list
+    /// with a group whose meaning is the error.
+    pub fn split(bytes: &[u8], gsd: Option<&Gsd>) -> Vec<CfgGroup> {
+        let mut out = vec![];
+        let mut pos = 0;
+        while pos < bytes.len() {
+            let rest = &bytes[pos..];
+            let modules = gsd.map_or(&[][..], |g| &g.modules[..]);
+            let longest = modules
+                .iter()
+                .filter(|m| !m.cfg.is_empty() && rest.starts_with(&m.cfg))
+                .map(|m| m.cfg.len())
+                .max();
+            let len = match longest {
+                Some(n) => n,
+                None => match crate::cfg::identifiers(rest).next() {
+                    Some(Ok(id)) => id.raw.len(),
+                    Some(Err(e)) => {
+                        out.push(CfgGroup {
+                            bytes: rest.to_vec(),
+                            meaning: e.to_string(),
+                            module: None,
+                        });
+                        break;
+                    }
+                    None => break,
+                },
+            };
+            let group = &rest[..len];
+            let meaning = crate::cfg::identifiers(group)
+                .map(|id| id.map_or_else(|e| e.to_string(), |id| id.to_string()))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let names: Vec<&str> = modules
+                .iter()
+                .filter(|m| m.cfg == group)
+                .map(|m| m.name.as_str())
+                .collect();
+            out.push(CfgGroup {
+                bytes: group.to_vec(),
+                meaning,
+                module: (!names.is_empty()).then(|| names.join(" or ")),
+            });
+            pos += len;
+        }
+        out
+    }
+}
+
+impl fmt::Display for CfgGroup {
+    /// `[71] 2 words in+out ("2 words in/out")`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "[{}] {}", Hex(&self.bytes), self.meaning)?;
+        if let Some(m) = &self.module {
+            write!(f, " (\"{m}\")")?;
+        }
+        Ok(())
     }
 }
 
@@ -284,7 +433,18 @@ impl fmt::Display for SlaveStatus {
             self.stats.errors,
             self.stats.retries,
             self.stats.late_replies
-        )
+        )?;
+        if self.stats.failed_startups > 0 {
+            write!(f, "  failed start-ups {}", self.stats.failed_startups)?;
+        }
+        if self.stats.always_one_clear > 0 {
+            write!(
+                f,
+                "  warning: {} diagnoses with the always-1 bit clear",
+                self.stats.always_one_clear
+            )?;
+        }
+        Ok(())
     }
 }
 

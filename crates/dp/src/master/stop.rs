@@ -6,6 +6,13 @@ use super::DpMaster;
 use profibus_fdl::Instant;
 use std::time::Duration;
 
+/// The deadline of [`StopWhen::new`] when N Data_Exchange cycles are
+/// waited for and no deadline is given: 60 s (`dpctl master --exchanges N`
+/// without `--timeout`). Every slave of a working bus is in Data_Exchange
+/// within a few seconds even at 9.6 kbit/s; a slave that never answers
+/// must not keep a script waiting for ever.
+pub const EXCHANGES_TIMEOUT: Duration = Duration::from_secs(60);
+
 /// Stop conditions of a running master; each is optional.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StopWhen {
@@ -29,6 +36,21 @@ pub enum StopReason {
 }
 
 impl StopWhen {
+    /// The stop conditions of `dpctl master`: waiting for `exchanges`
+    /// without a `deadline` gets [`EXCHANGES_TIMEOUT`].
+    pub fn new(
+        cycles: Option<u64>,
+        exchanges: Option<u64>,
+        deadline: Option<Duration>,
+    ) -> StopWhen {
+        let deadline = deadline.or(exchanges.map(|_| EXCHANGES_TIMEOUT));
+        StopWhen {
+            cycles,
+            exchanges,
+            deadline,
+        }
+    }
+
     /// Whether `m` should stop at `now`, and why (the deadline first).
     pub fn check(&self, m: &DpMaster, now: Instant) -> Option<StopReason> {
         if self.deadline.is_some_and(|d| now - Instant::ZERO >= d) {
@@ -75,5 +97,17 @@ mod tests {
         };
         assert_eq!(zero.check(&m, at(10)), Some(StopReason::Exchanged));
         assert_eq!(StopWhen::default().check(&m, at(10)), None);
+    }
+
+    #[test]
+    fn waiting_for_exchanges_has_a_default_deadline() {
+        let s = Some(Duration::from_secs(3));
+        assert_eq!(
+            StopWhen::new(None, Some(5), None).deadline,
+            Some(EXCHANGES_TIMEOUT)
+        );
+        assert_eq!(StopWhen::new(None, Some(5), s).deadline, s);
+        assert_eq!(StopWhen::new(Some(5), None, None).deadline, None);
+        assert_eq!(StopWhen::new(None, None, s).deadline, s);
     }
 }

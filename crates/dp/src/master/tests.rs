@@ -270,17 +270,23 @@ fn an_invalid_diagnosis_is_counted_read_again_and_never_acted_on() {
     states(&mut m);
     next(&mut m, 5).unwrap();
     answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
-    // The observed failure: 20 bytes of process data taken as Slave_Diag
-    // (Master_Lock set, always-1 bit clear, ident 0). Then a 3-byte one.
+    // The observed failure: 20 bytes of process data, a late
+    // Data_Exchange reply without SAPs, taken as Slave_Diag (Master_Lock
+    // set, ident 0). Then a 3-byte answer with the Slave_Diag SAPs.
     let bogus = [
         0x80, 0x00, 0x00, 0x00, 0x00, 0x00, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14,
     ];
-    for (t, data) in [(6, &bogus[..]), (7, &[0x00, 0x0C, 0x00][..])] {
+    let short = [0x00, 0x0C, 0x00];
+    for (t, outcome) in [
+        (6, data_resp(ResponseStatus::Dl, &bogus)),
+        (7, diag_resp(&short)),
+    ] {
         assert_eq!(next(&mut m, t).unwrap().0, Some(sap::SLAVE_DIAG));
-        answer(&mut m, t, diag_resp(data));
+        answer(&mut m, t, outcome);
         assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
     }
     assert_eq!(m.slave_stats(8).unwrap().invalid_diags, 2);
+    assert_eq!(m.slave_stats(8).unwrap().always_one_clear, 0);
     assert_eq!(
         m.diag(8),
         Some(&READY[..]),
@@ -304,16 +310,47 @@ fn an_invalid_diagnosis_is_counted_read_again_and_never_acted_on() {
 #[test]
 fn an_invalid_diagnosis_at_start_up_is_not_taken_for_a_lock_or_an_ident() {
     let mut m = master();
-    // Master_Lock by master 5 and a foreign ident, but bit 2 of
-    // Station_Status_2 clear: not a diagnosis.
+    // Master_Lock by master 5 and a foreign ident, but no SAPs: a stray
+    // reply, not a diagnosis.
     assert_eq!(next(&mut m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
-    answer(&mut m, 1, diag_resp(&[0x80, 0x00, 0x00, 0x05, 0x00, 0x00]));
+    answer(
+        &mut m,
+        1,
+        data_resp(ResponseStatus::Dl, &[0x80, 0x0C, 0x00, 0x05, 0x00, 0x00]),
+    );
     assert_eq!(m.slave_state(8), Some(SlaveState::Diag));
     assert!(m.poll_event().is_none());
     assert_eq!(next(&mut m, 2).unwrap().0, Some(sap::SLAVE_DIAG));
     answer(&mut m, 2, diag_resp(&FRESH));
     assert_eq!(next(&mut m, 3).unwrap().0, Some(sap::SET_PRM));
     assert_eq!(m.slave_stats(8).unwrap().invalid_diags, 1);
+}
+
+#[test]
+fn a_diagnosis_with_the_always_one_bit_clear_is_acted_on_and_counted() {
+    // A slave core that never sets bit 2 of Station_Status_2 (as in
+    // `02 08 00 02 00 2B`): its answers carry the Slave_Diag SAPs and 6
+    // bytes, so they are diagnoses; the master parameterises the slave
+    // and exchanges data, and counts each as a warning.
+    let mut m = master();
+    assert_eq!(next(&mut m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 1, diag_resp(&[0x02, 0x01, 0x00, 0xFF, 0x12, 0x34]));
+    assert_eq!(next(&mut m, 2).unwrap().0, Some(sap::SET_PRM));
+    answer(&mut m, 2, Outcome::ShortAck);
+    assert_eq!(next(&mut m, 3).unwrap().0, Some(sap::CHK_CFG));
+    answer(&mut m, 3, Outcome::ShortAck);
+    assert_eq!(next(&mut m, 4).unwrap().0, Some(sap::SLAVE_DIAG));
+    let ready = [0x00, 0x08, 0x00, 0x02, 0x12, 0x34];
+    answer(&mut m, 4, diag_resp(&ready));
+    assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+    assert_eq!(m.diag(8), Some(&ready[..]));
+    let (dsap, _) = next(&mut m, 5).unwrap();
+    assert_eq!(dsap, None, "Data_Exchange");
+    answer(&mut m, 5, data_resp(ResponseStatus::Dl, &[1, 2]));
+    let stats = m.slave_stats(8).unwrap();
+    assert_eq!((stats.always_one_clear, stats.invalid_diags), (2, 0));
+    assert_eq!(stats.data_exchanges, 1);
+    assert_eq!(stats.restarts, 0, "no loop back to the start-up");
 }
 
 #[test]
@@ -423,4 +460,109 @@ fn a_slave_that_answers_again_is_started_up_within_one_pass() {
     answer(&mut m, 13, diag_resp(&not_ready));
     assert_eq!(visit(&mut m, 4), None);
     assert_eq!(m.slave_state(8), Some(SlaveState::CheckDiag));
+}
+
+/// A slave that acknowledges Set_Prm and Chk_Cfg and then reports
+/// Cfg_Fault (with Prm_Req, as it waits for parameters again) until it
+/// is `fixed`; its real configuration is 4 words out (0xE3).
+struct CfgFaultSlave {
+    checked: bool,
+    fixed: bool,
+}
+
+impl CfgFaultSlave {
+    fn answer(&mut self, dsap: Option<u8>) -> Outcome<'static> {
+        const FAULT: [u8; 6] = [0x06, 0x05, 0x00, 0xFF, 0x12, 0x34];
+        match dsap {
+            Some(sap::SLAVE_DIAG) if self.checked && self.fixed => diag_resp(&READY),
+            Some(sap::SLAVE_DIAG) if self.checked => diag_resp(&FAULT),
+            Some(sap::SLAVE_DIAG) => diag_resp(&FRESH),
+            Some(sap::CHK_CFG) => {
+                self.checked = true;
+                Outcome::ShortAck
+            }
+            Some(sap::GET_CFG) => Outcome::Response {
+                status: ResponseStatus::Dl,
+                station: StationType::Passive,
+                dsap: Some(sap::MASTER),
+                ssap: Some(sap::GET_CFG),
+                data: &[0xE3],
+            },
+            Some(_) => Outcome::ShortAck,
+            None => data_resp(ResponseStatus::Dl, &[0, 0]),
+        }
+    }
+}
+
+/// Run `m` against `slave` from `from` for `ms` milliseconds of virtual
+/// time, a token visit every millisecond with up to 5 requests (a pass
+/// with a start-up chain); returns the requests by DSAP.
+fn run_ms(m: &mut DpMaster, slave: &mut CfgFaultSlave, from: u64, ms: u64) -> Vec<Option<u8>> {
+    let mut sent = vec![];
+    for k in 0..ms {
+        let t = (from + k) * 1_000_000;
+        for _ in 0..5 {
+            let Some((dsap, _)) = next(m, t) else {
+                break;
+            };
+            sent.push(dsap);
+            let outcome = slave.answer(dsap);
+            answer(m, t, outcome);
+        }
+    }
+    sent
+}
+
+#[test]
+fn a_persistent_cfg_fault_backs_off_is_reported_once_and_shows_the_real_cfg() {
+    let mut m = master();
+    let mut slave = CfgFaultSlave {
+        checked: false,
+        fixed: false,
+    };
+    // 10 s of virtual time: the start-up is retried, but with a back-off
+    // (10 ms doubling to 1 s: 17 start-ups), not every poll (thousands).
+    let sent = run_ms(&mut m, &mut slave, 0, 10_000);
+    let startups = sent.iter().filter(|d| **d == Some(sap::SET_PRM)).count();
+    assert!((10..=20).contains(&startups), "{startups} start-ups");
+    assert_eq!(
+        sent.iter().filter(|d| **d == Some(sap::GET_CFG)).count(),
+        1,
+        "Get_Cfg once per new fault"
+    );
+    let stats = m.slave_stats(8).unwrap();
+    assert_eq!(stats.failed_startups, startups as u64);
+    // One line per change: the first start-up's states, the fault, the
+    // configurations; nothing for the retries.
+    let mut lines = vec![];
+    while let Some(e) = m.poll_event() {
+        lines.push(e);
+    }
+    let count = |f: fn(&MasterEvent) -> bool| lines.iter().filter(|e| f(e)).count();
+    assert_eq!(count(|e| matches!(e, MasterEvent::Fault { .. })), 1);
+    assert_eq!(count(|e| matches!(e, MasterEvent::CfgMismatch { .. })), 1);
+    assert!(
+        count(|e| matches!(e, MasterEvent::StateChanged { .. })) <= 4,
+        "{lines:?}"
+    );
+    assert_eq!(m.actual_cfg(8), Some(&[0xE3][..]));
+    let report = MasterReport::new(&mut m, MasterEvent::CfgMismatch { address: 8 }, None);
+    assert_eq!(
+        report.to_string(),
+        "slave 8 configuration mismatch: configured [11] 2 bytes in, [21] 2 bytes out; \
+         the slave has [E3] 4 words (consistent) out"
+    );
+
+    // Fixed: in Data_Exchange within the longest back-off, and the fault's
+    // end is reported with its count.
+    slave.fixed = true;
+    run_ms(&mut m, &mut slave, 10_000, 1_100);
+    assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+    let ended: Vec<_> = std::iter::from_fn(|| m.poll_event())
+        .filter_map(|e| match e {
+            MasterEvent::FaultEnded { repeats, .. } => Some(repeats),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(ended, vec![startups as u64]);
 }

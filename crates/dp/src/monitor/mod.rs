@@ -384,6 +384,9 @@ pub struct SlaveCounters {
     pub errors: u64,
     /// Times it left Data_Exchange for a new start-up.
     pub restarts: u64,
+    /// Warnings: Slave_Diag answers with the always-1 bit (bit 2 of
+    /// Station_Status_2) clear, taken as diagnoses all the same.
+    pub always_one_clear: u64,
 }
 
 /// A GSD module's part of the process images.
@@ -1027,6 +1030,9 @@ impl Monitor {
         let Ok(d) = SlaveDiag::parse(data) else {
             return;
         };
+        if !d.is_valid() {
+            self.slave(address).counters.always_one_clear += 1;
+        }
         let state = self.slave(address).state;
         let other = d.master_address != NO_MASTER && d.master_address != master;
         let to = if other && d.status1.contains(StationStatus1::MASTER_LOCK) {
