@@ -323,7 +323,10 @@ pub fn diagnose(path: &str, opts: &DoctorOptions) -> Report {
             (d, p, s) => r.add(
                 "8E1",
                 Verdict::Fail,
-                format!("the port reports {d:?}, {p:?}, {s:?} after asking for 8E1"),
+                format!(
+                    "the port reports {} after asking for 8E1",
+                    line_words(d.ok(), p.ok(), s.ok())
+                ),
             ),
         }
     }
@@ -565,9 +568,50 @@ fn diagnose_tcp(r: &mut Report, addr: &str) {
     }
 }
 
+/// Line settings in words, as the 8E1 check reports them: `7 data
+/// bits, no parity, 2 stop bits` (`unknown …` for what the port cannot
+/// tell).
+fn line_words(d: Option<DataBits>, p: Option<Parity>, s: Option<StopBits>) -> String {
+    let d = match d {
+        Some(DataBits::Five) => "5 data bits",
+        Some(DataBits::Six) => "6 data bits",
+        Some(DataBits::Seven) => "7 data bits",
+        Some(DataBits::Eight) => "8 data bits",
+        None => "unknown data bits",
+    };
+    let p = match p {
+        Some(Parity::None) => "no parity",
+        Some(Parity::Odd) => "odd parity",
+        Some(Parity::Even) => "even parity",
+        None => "unknown parity",
+    };
+    let s = match s {
+        Some(StopBits::One) => "1 stop bit",
+        Some(StopBits::Two) => "2 stop bits",
+        None => "unknown stop bits",
+    };
+    format!("{d}, {p}, {s}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn line_settings_in_words() {
+        assert_eq!(
+            line_words(
+                Some(DataBits::Seven),
+                Some(Parity::None),
+                Some(StopBits::Two)
+            ),
+            "7 data bits, no parity, 2 stop bits"
+        );
+        assert_eq!(
+            line_words(None, Some(Parity::Even), None),
+            "unknown data bits, even parity, unknown stop bits"
+        );
+    }
 
     #[test]
     fn latency_timer_from_a_sysfs_tree() {
