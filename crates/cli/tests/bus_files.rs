@@ -37,7 +37,9 @@ fn workdir() -> tempfile::TempDir {
 /// (`cat > FILE <<'END'` … `END`) and the ```toml blocks that are bus
 /// files or parts of one (a `[master]` or `[[slave]]` table; a block
 /// with slaves only is completed with a `[master]` table), with the
-/// line each starts at.
+/// line each starts at. In a here-document whose delimiter is not
+/// quoted the shell expands `$PWD`: it stays in the text, marked by
+/// [`EXPAND_PWD`] before it, for the caller to expand.
 fn bus_files(md: &str) -> Vec<(usize, String)> {
     let lines: Vec<&str> = md.lines().collect();
     let mut out = vec![];
@@ -59,7 +61,11 @@ fn bus_files(md: &str) -> Vec<(usize, String)> {
                 body.push(lines[i]);
                 i += 1;
             }
-            let text = body.join("\n") + "\n";
+            let mut text = body.join("\n") + "\n";
+            let unquoted = l.starts_with("cat >") && !l.contains(['\'', '"']);
+            if unquoted && text.contains("$PWD") {
+                text = format!("{EXPAND_PWD}{text}");
+            }
             let has = |t: &str| body.iter().any(|l| l.trim() == t);
             if has("[master]") {
                 out.push((start, text));
@@ -74,6 +80,10 @@ fn bus_files(md: &str) -> Vec<(usize, String)> {
     }
     out
 }
+
+/// First line of a bus file whose `$PWD` the shell expands (a
+/// here-document with an unquoted delimiter): a TOML comment.
+const EXPAND_PWD: &str = "# $PWD expanded\n";
 
 /// The first slave address of a bus file.
 fn first_slave(text: &str) -> String {
@@ -136,6 +146,11 @@ fn every_command_with_config_takes_every_bus_file_of_the_docs() {
         let md = std::fs::read_to_string(doc).unwrap();
         for (line, text) in bus_files(&md) {
             let name = format!("bus-{checked}.toml");
+            let text = match text.strip_prefix(EXPAND_PWD) {
+                // The commands run in `dir`, as from the repository's root.
+                Some(t) => t.replace("$PWD", &dir.path().display().to_string()),
+                None => text,
+            };
             std::fs::write(dir.path().join(&name), &text).unwrap();
             let slave = first_slave(&text);
             for args in commands(&name, &slave) {
