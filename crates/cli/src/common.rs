@@ -65,7 +65,8 @@ impl RtsArg {
                  leave --rts off, and see `dpctl doctor --port {path} --rts {0}`",
                 rts.as_str()
             ),
-            r => r.with_context(|| format!("opening {path}")),
+            // Every TransportError names the path itself.
+            r => Ok(r?),
         }
     }
 }

@@ -58,7 +58,7 @@ pub fn run(args: Args) -> Result<()> {
     let baud = bus.file.master.params.baud;
     let mut port = {
         let _guard = rt.enter();
-        Port::open(&args.port, baud).with_context(|| format!("opening {}", args.port))?
+        Port::open(&args.port, baud)?
     };
     let mut listen_opts = ListenOptions::for_port(&port);
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));

@@ -235,6 +235,18 @@ fn an_error_names_its_cause_once_and_in_words() {
         out.stderr
     );
     assert!(!out.stderr.contains("<omega>"), "{}", out.stderr);
+    // A port that cannot be opened is named once (the transport's error
+    // names it; the command adds no "opening PATH" before it).
+    for cmd in ["scan", "sniff"] {
+        let out = common::run_dpctl(&[cmd, "--port", "/nonexistent/link"]);
+        assert_eq!(out.status.code(), Some(1), "{}", out.stderr);
+        assert_eq!(
+            out.stderr.matches("/nonexistent/link").count(),
+            1,
+            "{}",
+            out.stderr
+        );
+    }
 }
 
 #[test]
