@@ -50,9 +50,9 @@
 //! - `control_io` (feature `tokio`): control lines for a
 //!   [`ControlInbox`] from a file, stdin or a Unix socket, and command
 //!   lines read on a thread.
-//! - [`demo`]: the demo plant of `dpctl demo` (a master and a slave of
-//!   every profile on the simulated bus, with the PLC program that moves
-//!   them), sans-IO.
+//!
+//! The demo plant of `dpctl demo` and the fault soak (a master and a
+//! slave of every profile on the simulated bus) are in `profibus-plant`.
 //!
 //! # How to add a profile
 //!
@@ -101,7 +101,6 @@ pub mod bus;
 pub mod channels;
 #[cfg(feature = "tokio")]
 pub mod control_io;
-pub mod demo;
 pub mod emulation;
 pub mod generic;
 pub mod gsd_files;
@@ -112,7 +111,6 @@ pub mod pkw;
 pub mod pkw_task;
 pub mod profile;
 pub mod rfid;
-pub mod soak;
 
 pub use profile::{
     Configured, ControlError, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError,

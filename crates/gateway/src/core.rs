@@ -1528,7 +1528,7 @@ mod tests {
 
     /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
     /// PKW (25) and an RFID reader (30), all writable but the reader.
-    fn plant() -> (Gateway, crate::sim::SimPlant) {
+    fn plant() -> (Gateway, profibus_plant::Plant) {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/plant.toml");
         let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
             [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
@@ -1540,12 +1540,12 @@ mod tests {
         let bus = profibus_devices::bus::ProfiledBus::parse(&dir, text).unwrap();
         let s = crate::MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
         let g = Gateway::new(s, crate::sim::slave_infos(&bus).unwrap());
-        (g, crate::sim::SimPlant::new(&bus).unwrap())
+        (g, profibus_plant::Plant::from_bus(&bus).unwrap())
     }
 
     /// Run the plant 1 ms at a time until a message on `topic` (at most
     /// 2 s of bus time).
-    fn run_until(g: &mut Gateway, p: &mut crate::sim::SimPlant, topic: &str) -> serde_json::Value {
+    fn run_until(g: &mut Gateway, p: &mut profibus_plant::Plant, topic: &str) -> serde_json::Value {
         for _ in 0..2000 {
             let t = p.now() + std::time::Duration::from_millis(1);
             p.run_until(t);

@@ -594,13 +594,13 @@ impl Session for EdgeNode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::SimPlant;
+    use profibus_plant::Plant;
 
     /// Master 1 with two GSD slaves, 3 (named) and 4; 3 writable.
     const BUS: &str = include_str!("../../tests/data/sparkplug_bus.toml");
 
     struct Rig {
-        plant: SimPlant,
+        plant: Plant,
         node: EdgeNode,
         t: u64,
     }
@@ -616,7 +616,7 @@ mod tests {
                 devices(&bus).unwrap(),
             );
             Rig {
-                plant: SimPlant::new(&bus).unwrap(),
+                plant: Plant::from_bus(&bus).unwrap(),
                 node,
                 t: 0,
             }
