@@ -28,6 +28,8 @@
 //! - [`slave`]: the DP slave core (state machine, every slave service)
 //!   and the [`slave::Device`] trait device profiles implement.
 
+#![forbid(unsafe_code)]
+
 pub mod busfile;
 pub mod cfg;
 pub mod control;
