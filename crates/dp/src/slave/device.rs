@@ -8,9 +8,9 @@
 //! and configurations it accepts, what its outputs do, what its inputs
 //! are, its extended diagnosis and its DP-V1 records.
 
-use crate::diag::ChannelIo;
-use crate::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
-use crate::prm::SetPrm;
+use crate::pdu::diag::ChannelIo;
+use crate::pdu::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
+use crate::pdu::prm::SetPrm;
 use crate::slave::SlaveState;
 use profibus_fdl::Instant;
 use std::borrow::Cow;
@@ -355,7 +355,7 @@ impl<'a> DiagWriter<'a> {
 /// is short:
 ///
 /// ```
-/// use profibus_dp::prm::SetPrm;
+/// use profibus_dp::pdu::prm::SetPrm;
 /// use profibus_dp::slave::{Device, IoLayout, Reason, expect_cfg};
 /// use profibus_fdl::Instant;
 ///
@@ -468,7 +468,7 @@ pub trait Device {
         _seq: u8,
     ) -> Result<(), Dpv1Error> {
         Err(Dpv1Error::dpv1(
-            crate::dpv1::FN_ALARM_ACK,
+            crate::pdu::dpv1::FN_ALARM_ACK,
             ERR_CLASS_APPLICATION,
             ERR_FEATURE_NOT_SUPPORTED,
         ))
@@ -648,7 +648,7 @@ pub fn expect_user_prm_len(prm: &SetPrm<'_>, len: usize) -> Result<(), Reason> {
 /// The cyclic layout of a configuration (sum of its identifiers), or why
 /// it cannot be decoded or exceeds 244 bytes in a direction.
 pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
-    let t = crate::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
+    let t = crate::pdu::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
     if t.input_bytes > super::MAX_IO_LEN || t.output_bytes > super::MAX_IO_LEN {
         return Err(format!(
             "configuration has {} input and {} output bytes, at most 244 each way",
@@ -673,7 +673,7 @@ pub(crate) fn hex(bytes: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diag::{ext_blocks, ExtDiagBlock, LINE_BREAK_3_2};
+    use crate::pdu::diag::{ext_blocks, ExtDiagBlock, LINE_BREAK_3_2};
 
     #[test]
     fn diag_writer_blocks_and_overflow() {
