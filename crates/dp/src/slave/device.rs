@@ -9,7 +9,7 @@
 //! are, its extended diagnosis and its DP-V1 records.
 
 use crate::pdu::diag::ChannelIo;
-use crate::pdu::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
+use crate::pdu::dpv1::{AccessError, ApplicationError, Dpv1Error, ErrorClass, FN_READ, FN_WRITE};
 use crate::pdu::prm::SetPrm;
 use crate::slave::SlaveState;
 use profibus_fdl::Instant;
@@ -169,23 +169,23 @@ impl Dpv1Outcome {
 }
 
 /// Error class "application" (Error_Code_1 high nibble 0xA).
-pub const ERR_CLASS_APPLICATION: u8 = 0xA;
+pub const ERR_CLASS_APPLICATION: u8 = ErrorClass::Application.code();
 /// Error class "access" (0xB).
-pub const ERR_CLASS_ACCESS: u8 = 0xB;
+pub const ERR_CLASS_ACCESS: u8 = ErrorClass::Access.code();
 /// Error class "resource" (0xC).
-pub const ERR_CLASS_RESOURCE: u8 = 0xC;
+pub const ERR_CLASS_RESOURCE: u8 = ErrorClass::Resource.code();
 /// Application error code "feature not supported".
-pub const ERR_FEATURE_NOT_SUPPORTED: u8 = 9;
+pub const ERR_FEATURE_NOT_SUPPORTED: u8 = ApplicationError::FeatureNotSupported.code();
 /// Access error code "invalid index".
-pub const ERR_INVALID_INDEX: u8 = 0;
+pub const ERR_INVALID_INDEX: u8 = AccessError::InvalidIndex.code();
 /// Access error code "write length error".
-pub const ERR_WRITE_LENGTH: u8 = 1;
+pub const ERR_WRITE_LENGTH: u8 = AccessError::WriteLength.code();
 /// Access error code "invalid slot".
-pub const ERR_INVALID_SLOT: u8 = 2;
+pub const ERR_INVALID_SLOT: u8 = AccessError::InvalidSlot.code();
 /// Access error code "state conflict".
-pub const ERR_STATE_CONFLICT: u8 = 5;
+pub const ERR_STATE_CONFLICT: u8 = AccessError::StateConflict.code();
 /// Access error code "invalid range".
-pub const ERR_INVALID_RANGE: u8 = 7;
+pub const ERR_INVALID_RANGE: u8 = AccessError::InvalidRange.code();
 
 /// Where the slave's station address comes from (see
 /// [`Device::own_address`]).
