@@ -4,12 +4,12 @@
 //! turns quirks into errors); and whatever parses survives write → parse
 //! unchanged.
 //!
-//! Run: `cargo +nightly fuzz run gsd_parse fuzz/corpus/gsd_parse gsd gsd/corpus -- -dict=fuzz/gsd.dict`
+//! Run: `cargo +nightly fuzz run gsd_parse fuzz/corpus/gsd_parse crates/devices/gsd crates/devices/gsd/corpus -- -dict=fuzz/gsd.dict`
 
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
+use profibus_dp::config::gsd::{decode_latin1, Gsd, ParseOptions};
 
 fuzz_target!(|data: &[u8]| {
     let text = decode_latin1(data);

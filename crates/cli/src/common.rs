@@ -3,8 +3,8 @@
 
 use crate::out::outln;
 use anyhow::{Context, Result};
-use profibus_fdl::transport::{Port, PortOptions, RtsControl, TransportError};
 use profibus_fdl::Baud;
+use profibus_io::transport::{Port, PortOptions, RtsControl, TransportError};
 use std::time::Duration;
 
 /// Line options of every command that runs a station.
@@ -123,8 +123,8 @@ impl SlaveArgs {
     /// The slave in the bus file.
     pub fn slave_of<'a>(
         &self,
-        bus: &'a profibus_dp::busfile::BusFile,
-    ) -> Result<&'a profibus_dp::busfile::BusSlave> {
+        bus: &'a profibus_dp::config::busfile::BusFile,
+    ) -> Result<&'a profibus_dp::config::busfile::BusSlave> {
         bus.slaves
             .iter()
             .find(|s| s.params.address == self.slave)
@@ -141,13 +141,13 @@ impl SlaveArgs {
     /// An interrupt (Ctrl-C, SIGTERM) is an error.
     pub async fn run_master(
         &self,
-        bus: &profibus_dp::busfile::BusFile,
+        bus: &profibus_dp::config::busfile::BusFile,
         mut tick: impl FnMut(
             &mut profibus_dp::master::DpMaster,
             profibus_fdl::Instant,
         ) -> std::ops::ControlFlow<()>,
     ) -> Result<()> {
-        use profibus_fdl::driver::{self, Clock, Stop};
+        use profibus_io::driver::{self, Clock, Stop};
         let dp = profibus_dp::master::DpMaster::new(&bus.master)?;
         let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency, self.rts)?;
         let stop = driver::run_with(
@@ -191,7 +191,7 @@ pub fn latency(ms: Option<f64>, port: &Port) -> Result<Duration> {
 /// (opened with `rts`).
 pub fn master_station(
     port: &str,
-    bus: &profibus_dp::busfile::BusFile,
+    bus: &profibus_dp::config::busfile::BusFile,
     dp: profibus_dp::master::DpMaster,
     latency_ms: Option<f64>,
     rts: RtsArg,
@@ -227,14 +227,14 @@ pub fn driver_options(
     port: &Port,
     busy_poll_us: u64,
     gather: bool,
-) -> Result<profibus_fdl::driver::Options> {
+) -> Result<profibus_io::driver::Options> {
     if gather && !port.may_gather() {
         anyhow::bail!(
             "--gather is for ptys only: {} is a serial line",
             port.name()
         );
     }
-    Ok(profibus_fdl::driver::Options {
+    Ok(profibus_io::driver::Options {
         gather,
         busy_poll: Duration::from_micros(busy_poll_us),
         ..Default::default()

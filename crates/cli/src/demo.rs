@@ -6,7 +6,7 @@
 use crate::common;
 use crate::view::{bus_view, drain_events, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
-use profibus_fdl::pcap::PcapWriter;
+use profibus_fdl::capture::pcap::PcapWriter;
 use profibus_fdl::Instant;
 use profibus_plant::demo::{DemoPlant, BAUD};
 use profibus_plant::PlantSlave;

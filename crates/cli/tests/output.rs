@@ -5,8 +5,8 @@
 mod common;
 
 use common::{dpctl, repo, require, Bus, Proc};
-use profibus::fdl::transport::Port;
 use profibus::fdl::Baud;
+use profibus_io::transport::Port;
 use std::io::Read;
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -75,7 +75,7 @@ impl ClosedStdout {
 
 #[test]
 fn one_shot_commands_end_quietly_when_nobody_reads_their_output() {
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let gsd = gsd.to_str().unwrap();
     for args in [
         &["gsd", "show", gsd][..],

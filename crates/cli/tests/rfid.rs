@@ -56,7 +56,7 @@ fn rig_with(tags: &str, profile: bool) -> Rig {
     } else {
         format!(
             "gsd = \"{}\"\nmodules = [\"16 Byte In/Out\"]",
-            repo().join("gsd/AEGI0DC4.GSD").display()
+            repo().join("crates/devices/gsd/AEGI0DC4.GSD").display()
         )
     };
     // HSA 8: the master's GAP polls (FDL_Status) stay below the reader's
@@ -395,7 +395,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .arg("--port")
         .arg(&a)
         .arg("--gsd")
-        .arg(repo().join("gsd/AEGI0DC4.GSD"))
+        .arg(repo().join("crates/devices/gsd/AEGI0DC4.GSD"))
         .args(["--addr", "9", "--command", "VER"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
@@ -518,7 +518,7 @@ fn the_client_on_the_simulated_bus() {
     use profibus::devices::rfid::{Rfid, CFG, IDENT};
     use profibus::dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
     use profibus::dp::slave::DpSlave;
-    use profibus::fdl::medium::MediumConfig;
+    use profibus::fdl::line::medium::MediumConfig;
     use profibus::fdl::sim::SimBus;
     use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
     use profibus::fdl::station::passive::PassiveStation;

@@ -8,7 +8,7 @@
 mod common;
 
 use common::{all_dx, dpctl, repo, send, slave_of, Bus, Proc, TempDir};
-use profibus::fdl::pcap::PcapReader;
+use profibus::fdl::capture::pcap::PcapReader;
 use profibus::fdl::station::active::ActiveConfig;
 use profibus::fdl::wire::{FunctionCode, Telegram};
 use profibus::fdl::{Baud, BusParams};
@@ -23,7 +23,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 const WAIT: Duration = Duration::from_secs(60);
 
 fn gen_gsd() -> PathBuf {
-    repo().join("gsd/DPCTL_GEN.GSD")
+    repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
 }
 
 fn wall() -> f64 {

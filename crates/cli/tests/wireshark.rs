@@ -9,7 +9,7 @@
 mod common;
 
 use common::{counter, dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
-use profibus::fdl::pcap::{PcapReader, PcapWriter};
+use profibus::fdl::capture::pcap::{PcapReader, PcapWriter};
 use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -61,7 +61,7 @@ fn tshark_filtered(capture: &Path, filter: Option<&str>, fields: &[&str]) -> Vec
 fn record_startup(dir: &TempDir) -> PathBuf {
     let pcap = dir.path("startup.pcapng");
     let bus = Bus::start(2, &["--pcap", pcap.to_str().unwrap()]);
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let mut slave = Proc::spawn(
         "dpctl slave",
         Command::new(dpctl())

@@ -41,16 +41,11 @@
 //!
 //! # Running devices
 //!
-//! - [`emulation`]: a device as a DP slave on a port, what `dpctl slave`
-//!   does: [`emulation::ProfileArgs`] (the device and its options; clap
-//!   flags with the `clap` feature), [`emulation::BaudChoice`] and
-//!   [`emulation::SlaveShell`] (the baud-rate search runner, keeping
-//!   Set_Slave_Add addresses and device state in files, events for text
-//!   and JSON).
-//! - `control_io` (feature `tokio`): control lines for a
-//!   [`ControlInbox`] from a file, stdin or a Unix socket, and command
-//!   lines read on a thread.
-//!
+//! This crate does no I/O. A device runs as a DP slave on a port through
+//! `profibus_io::emulation` (what `dpctl slave` does: the baud-rate search
+//! runner, keeping Set_Slave_Add addresses and device state in files);
+//! `profibus_io::control_io` feeds a [`ControlInbox`] from a file, stdin or
+//! a Unix socket, and `profibus_io::jx2` runs the JX2's register clients.
 //! The demo plant of `dpctl demo` and the fault soak (a master and a
 //! slave of every profile on the simulated bus) are in `profibus-plant`.
 //!
@@ -94,14 +89,13 @@
 //! the registry. Errors are [`ProfileError`] (no `String` errors); the
 //! device does no file I/O while it runs.
 
+#![forbid(unsafe_code)]
+
 pub mod address;
 pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
-#[cfg(feature = "tokio")]
-pub mod control_io;
-pub mod emulation;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;
@@ -139,7 +133,10 @@ pub fn profile(name: &str) -> Result<&'static ProfileEntry, ProfileError> {
         .find(|p| p.name.eq_ignore_ascii_case(name))
         .ok_or_else(|| ProfileError::Unknown {
             name: name.to_string(),
-            suggestions: profibus_dp::names::DidYouMean::new(name, PROFILES.iter().map(|p| p.name)),
+            suggestions: profibus_dp::config::names::DidYouMean::new(
+                name,
+                PROFILES.iter().map(|p| p.name),
+            ),
             available: PROFILES
                 .iter()
                 .map(|p| p.name)
@@ -189,7 +186,7 @@ pub fn pkw_dialect(ident: u16, cfg: &[u8]) -> Result<&'static pkw::Dialect, PkwL
 /// The PKW parameter number of the parameter named `name` of a slave with
 /// ident number `ident` and GSD `gsd`, from the profile with that ident
 /// number (e.g. a BM4-O-PRO-01 variable: its module's parameter number).
-pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::gsd::Gsd, name: &str) -> Option<u16> {
+pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::config::gsd::Gsd, name: &str) -> Option<u16> {
     PROFILES
         .iter()
         .filter(|p| p.ident == Some(ident))

@@ -6,7 +6,7 @@
 //! Run: `cargo bench -p profibus-dp --bench gsd`. Prints the median of
 //! several rounds per case.
 
-use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions, MAX_LINE_LEN};
+use profibus_dp::config::gsd::{decode_latin1, Gsd, ParseOptions, MAX_LINE_LEN};
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -39,7 +39,7 @@ fn measure<T>(name: &str, mut f: impl FnMut() -> T) {
 
 fn file(name: &str) -> (PathBuf, String) {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../gsd")
+        .join("../devices/gsd")
         .join(name);
     let text = decode_latin1(&std::fs::read(&p).unwrap());
     (p, text)

@@ -5,7 +5,7 @@
 //!   never makes the parser panic, in either mode, and whatever it parses
 //!   survives write → parse unchanged.
 
-use profibus_dp::gsd::*;
+use profibus_dp::config::gsd::*;
 use proptest::prelude::*;
 use proptest::sample::select;
 
@@ -425,12 +425,12 @@ fn token_soup() -> impl Strategy<Value = String> {
 
 /// The real files, with random edits.
 fn edited_file() -> impl Strategy<Value = String> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd");
     let mut texts = Vec::new();
     for d in [dir.clone(), dir.join("corpus")] {
         for e in std::fs::read_dir(d).unwrap() {
             let p = e.unwrap().path();
-            if profibus_dp::gsd::is_gsd_file_name(&p) {
+            if profibus_dp::config::gsd::is_gsd_file_name(&p) {
                 texts.push(decode_latin1(&std::fs::read(p).unwrap()));
             }
         }

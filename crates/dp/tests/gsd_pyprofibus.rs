@@ -1,6 +1,6 @@
 //! Cross-check with an independent GSD parser: pyprofibus 1.13 (from PyPI,
 //! installed in `.venv` by `scripts/setup-test-env`) reads every file in
-//! `gsd/` and `gsd/corpus/` and must see the same ident number, module
+//! `crates/devices/gsd/` and `crates/devices/gsd/corpus/` and must see the same ident number, module
 //! names and identifier bytes, baud rates and limits as we do; it also
 //! reads what our writer makes of each file.
 //!
@@ -23,7 +23,7 @@
 //!
 //! The test fails (it does not skip) when the venv is missing.
 
-use profibus_dp::gsd::{Gsd, ParseOptions};
+use profibus_dp::config::gsd::{Gsd, ParseOptions};
 use profibus_fdl::timing::Baud;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

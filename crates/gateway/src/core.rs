@@ -13,7 +13,7 @@ use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value}
 use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, Dialect, PKW_LEN};
 use profibus_devices::rfid::client::RfidClient;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use profibus_dp::master::{
     DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveHandle, SlaveState,
 };
@@ -428,7 +428,7 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
                 only(o, &["op", "slot", "index", "hex"])?;
                 let data = match o.get("hex") {
                     Some(serde_json::Value::String(h)) => parse_hex(h)
-                        .filter(|d| d.len() <= profibus_dp::dpv1::MAX_DATA_LEN)
+                        .filter(|d| d.len() <= profibus_dp::pdu::dpv1::MAX_DATA_LEN)
                         .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
                     _ => return Err(malformed("`hex` is missing")),
                 };
@@ -980,7 +980,7 @@ impl Gateway {
                 let text = if v.diag.is_empty() {
                     vec![]
                 } else {
-                    profibus_dp::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
+                    profibus_dp::pdu::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
                 };
                 let p = DiagPayload::new(addr, v.diag, text, ts_ms, cycle);
                 msgs.push((SlaveTopic::Diag, to_bytes(&p)));
@@ -1529,7 +1529,8 @@ mod tests {
     /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
     /// PKW (25) and an RFID reader (30), all writable but the reader.
     fn plant() -> (Gateway, profibus_plant::Plant) {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/plant.toml");
+        let dir =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/plant.toml");
         let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
             [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
             [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\

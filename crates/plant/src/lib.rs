@@ -30,18 +30,20 @@
 //! paces it on the wall clock does so from outside (the gateway's
 //! `Pacer`).
 
+#![forbid(unsafe_code)]
+
 pub mod demo;
 pub mod soak;
 
 use profibus_devices::channels::ChannelMap;
 use profibus_devices::generic::{GenericDevice, GenericError, InputPattern};
 use profibus_devices::{BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError};
-use profibus_dp::gsd::{Gsd, LookupError, SelectionError};
+use profibus_dp::config::gsd::{Gsd, LookupError, SelectionError};
 use profibus_dp::master::{
     DpMaster, MasterConfig, MasterConfigError, MasterOptions, SlaveParams, SlaveState,
 };
 use profibus_dp::slave::DpSlave;
-use profibus_fdl::medium::MediumConfig;
+use profibus_fdl::line::medium::MediumConfig;
 use profibus_fdl::sim::{SimBus, StationId};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::station::passive::PassiveStation;

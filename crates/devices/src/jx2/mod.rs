@@ -67,13 +67,11 @@
 //!
 //! Choices where the manual is silent or contradicts itself (see
 //! `docs/devices/jx2.md`): the ident number 0x0DC3 is ours
-//! (`gsd/JX2P0DC3.GSD`); 1x102/1x103 go to 122 (not 102); the diagnosis
+//! (`crates/devices/gsd/JX2P0DC3.GSD`); 1x102/1x103 go to 122 (not 102); the diagnosis
 //! length is 10..=32 (not 6..=32); the DS-write length is 1x119; status
 //! reads 0x2001 while BUSY after a reset, 0x0001 after; error 11 (memory
 //! test) can only be provoked on purpose ([`Jx2::fail_memory_test`]).
 
-#[cfg(feature = "tokio")]
-pub mod clients;
 mod device;
 pub mod profile;
 pub mod script;
@@ -90,7 +88,7 @@ use std::fmt;
 use std::time::Duration;
 
 /// `JX2P0DC3.GSD`, written for this project from the manual.
-pub const GSD: &[u8] = include_bytes!("../../../../gsd/JX2P0DC3.GSD");
+pub const GSD: &[u8] = include_bytes!("../../gsd/JX2P0DC3.GSD");
 
 /// Ident number of the emulation (ours: the manual gives none).
 pub const IDENT: u16 = 0x0DC3;
@@ -1076,7 +1074,7 @@ impl Jx2 {
         let mut outputs = 0usize;
         let mut cin: Vec<(usize, usize)> = Vec::new();
         let mut cout: Vec<(usize, usize)> = Vec::new();
-        for id in profibus_dp::cfg::identifiers(cfg) {
+        for id in profibus_dp::pdu::cfg::identifiers(cfg) {
             let id = id?;
             if let Some(len) = id.input {
                 let n = id.input_bytes();
@@ -1141,7 +1139,7 @@ impl Jx2 {
 pub enum CfgMismatch {
     /// An identifier does not decode.
     #[error(transparent)]
-    Identifier(#[from] profibus_dp::cfg::CfgError),
+    Identifier(#[from] profibus_dp::pdu::cfg::CfgError),
     /// The lengths differ from 1x102 / 1x103.
     #[error(
         "the configuration has {inputs} input and {outputs} output bytes, the module {} and {} (1x102 = {}, 1x103 = {})",

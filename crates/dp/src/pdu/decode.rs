@@ -1,0 +1,538 @@
+//! The DP layer of a telegram, decoded: which DP service it carries and
+//! what its data unit says (IEC 61158-6-3; the layouts are in the modules
+//! of each service: [`crate::pdu::diag`], [`crate::pdu::prm`], [`crate::pdu::cfg`],
+//! [`crate::pdu::control`], [`crate::pdu::dpv1`]).
+//!
+//! [`decode`] is sans-IO and stateless: a telegram, and for a response the
+//! request it answers ([`Request`]), give a [`DpTelegram`] (serde-
+//! serialisable with the feature `serde`). A response's DP meaning follows
+//! from its request: a short acknowledge carries no addresses at all, a
+//! Data_Exchange answer no SAPs, and some slaves answer other services
+//! without SAPs too. [`Exchanges`] pairs them on a stream of telegrams: it
+//! keeps the last request per master/slave pair (and the one a short
+//! acknowledge can answer: the last request that expects a reply).
+//!
+//! Used by `dpctl sniff --json` (the `"dp"` object of each telegram).
+//!
+//! ```
+//! use profibus_dp::pdu::decode::{Exchanges, Detail};
+//! use profibus_fdl::Telegram;
+//!
+//! let mut ex = Exchanges::default();
+//! // Master 2 asks slave 8 for its diagnosis (SD2, DSAP 60, SSAP 62) …
+//! let req = [0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0xF1, 0x16];
+//! let (t, _) = Telegram::parse(&req).unwrap();
+//! assert_eq!(ex.decode(&t).unwrap().service, "Slave_Diag");
+//! // … and slave 8 answers: Station_Not_Ready, Prm_Req, ident 0x0ED0.
+//! let res = [
+//!     0x68, 0x0B, 0x0B, 0x68, 0x82, 0x88, 0x08, 0x3E, 0x3C, //
+//!     0x02, 0x05, 0x00, 0xFF, 0x0E, 0xD0, 0x70, 0x16,
+//! ];
+//! let (t, _) = Telegram::parse(&res).unwrap();
+//! let dp = ex.decode(&t).unwrap();
+//! let Some(Detail::SlaveDiag { status, ident_number, .. }) = dp.detail else { panic!() };
+//! assert_eq!(status, ["Station_Not_Ready", "Prm_Req"]);
+//! assert_eq!(ident_number, 0x0ED0);
+//! ```
+
+use crate::pdu::cfg;
+use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
+use crate::pdu::diag::{self, SlaveDiag, NO_MASTER};
+use crate::pdu::dpv1::{self, Pdu};
+use crate::pdu::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
+use crate::pdu::sap;
+use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// What a decoder needs to know of a request to read its response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Request {
+    /// The requester (a master).
+    pub master: u8,
+    /// The responder (a slave).
+    pub slave: u8,
+    /// Destination SAP (without the segment bit); `None`: Data_Exchange.
+    pub dsap: Option<u8>,
+    /// Source SAP (without the segment bit).
+    pub ssap: Option<u8>,
+}
+
+impl Request {
+    /// The request `d`, if it is one (a response gives `None`).
+    pub fn of(d: &DataTelegram<'_>) -> Option<Request> {
+        d.fc.is_request().then_some(Request {
+            master: d.sa,
+            slave: d.da,
+            dsap: d.dsap.map(|s| s & 0x3F),
+            ssap: d.ssap.map(|s| s & 0x3F),
+        })
+    }
+}
+
+/// One identifier of a Chk_Cfg or Get_Cfg, decoded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct CfgIdentifier {
+    /// Its bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub raw: Vec<u8>,
+    /// In words (`2 words in+out`, `empty slot`, …).
+    pub text: String,
+    /// Input bytes.
+    pub input_bytes: usize,
+    /// Output bytes.
+    pub output_bytes: usize,
+}
+
+/// What the data unit of a DP telegram says, per service.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(untagged))]
+pub enum Detail {
+    /// A Slave_Diag response.
+    SlaveDiag {
+        /// The station status bits that are set, by their names in the
+        /// standard (`Station_Not_Ready`, `Prm_Req`, …); empty: all clear.
+        status: Vec<String>,
+        /// Diag.Master_Add: the master that parameterised the slave
+        /// (`None`: 255, none).
+        master_address: Option<u8>,
+        /// Ident_Number.
+        ident_number: u16,
+        /// The extended diagnosis blocks in words.
+        ext_diag: Vec<String>,
+        /// Bit 2 of Station_Status_2 (always 1 in a slave's diagnosis).
+        valid: bool,
+    },
+    /// A Set_Prm request.
+    SetPrm {
+        /// Station_Status bits set (`Lock_Req`, `WD_On`, …).
+        station_status: Vec<&'static str>,
+        /// The watchdog time (`None`: WD_On clear). Counted in 1 ms when
+        /// the first User_Prm_Data byte is a DPV1_Status_1 with
+        /// DPV1_Enable and WD_Base_1ms, else in 10 ms.
+        watchdog_ms: Option<u64>,
+        /// min TSDR in bit times (0: keep).
+        min_tsdr: u8,
+        /// Ident_Number.
+        ident_number: u16,
+        /// Groups of Group_Ident (1..=8).
+        groups: Vec<u8>,
+        /// User_Prm_Data (for DP-V1 slaves starting with DPV1_Status_1..3).
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        user_prm_data: Vec<u8>,
+    },
+    /// A Chk_Cfg request or a Get_Cfg response.
+    Cfg {
+        /// The identifiers, each decoded.
+        identifiers: Vec<CfgIdentifier>,
+        /// Input bytes in all.
+        input_bytes: usize,
+        /// Output bytes in all.
+        output_bytes: usize,
+        /// Why the rest could not be decoded.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        error: Option<String>,
+    },
+    /// Outputs: a Data_Exchange request, a Rd_Outp response.
+    Outputs {
+        /// The output bytes.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        outputs: Vec<u8>,
+    },
+    /// Inputs: a Data_Exchange or Rd_Inp response.
+    Inputs {
+        /// The input bytes.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        inputs: Vec<u8>,
+        /// The slave has new diagnosis (response status DH or RDH).
+        new_diag: bool,
+    },
+    /// A Global_Control broadcast.
+    GlobalControl {
+        /// Control_Command bits set (`Clear_Data`, `Sync`, …).
+        command: Vec<&'static str>,
+        /// Groups of Group_Select (empty: every slave).
+        groups: Vec<u8>,
+    },
+    /// A Set_Slave_Add request.
+    SetSlaveAdd {
+        /// The address the slave is to take.
+        new_address: u8,
+        /// Ident_Number.
+        ident_number: u16,
+        /// No further address change through the bus.
+        no_add_chg: bool,
+    },
+    /// A DP-V1 PDU (MSAC_C1, MSAC_C2).
+    Dpv1 {
+        /// `Read`, `Write`, `Alarm_Ack`, `Data_Transport`, `Initiate`,
+        /// `Abort`, `Idle`, `Error`, or `Poll` (an empty request that
+        /// polls for the answer).
+        pdu: &'static str,
+        /// Slot.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        slot: Option<u8>,
+        /// Index.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        index: Option<u8>,
+        /// Length byte.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        length: Option<u8>,
+        /// The data read or written.
+        #[cfg_attr(
+            feature = "serde",
+            serde(
+                skip_serializing_if = "Option::is_none",
+                serialize_with = "profibus_fdl::ser::opt_hex"
+            )
+        )]
+        data: Option<Vec<u8>>,
+        /// A negative response in words.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        error: Option<String>,
+    },
+    /// The data unit does not decode as its service's.
+    Malformed {
+        /// Why.
+        error: String,
+    },
+}
+
+/// A telegram's DP layer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct DpTelegram {
+    /// The DP service: `Data_Exchange`, `Slave_Diag`, `Set_Prm`,
+    /// `Chk_Cfg`, `Get_Cfg`, `Global_Control`, `Set_Slave_Add`, `Rd_Inp`,
+    /// `Rd_Outp`, `MSAC_C1`, `Alarm_Ack`, `MSAC_C2_Initiate`, `MSAC_C2`.
+    pub service: &'static str,
+    /// `request` or `response` (a short acknowledge is a response).
+    pub direction: &'static str,
+    /// The service's data, decoded (`None`: the data unit is empty, or a
+    /// negative response).
+    #[cfg_attr(feature = "serde", serde(flatten))]
+    pub detail: Option<Detail>,
+}
+
+/// The DP layer of `telegram`; `answers` is the request a response (or
+/// short acknowledge) answers, when known. `None`: no DP telegram (a
+/// token, FDL status and ident requests, other SAPs).
+pub fn decode(telegram: &Telegram<'_>, answers: Option<&Request>) -> Option<DpTelegram> {
+    let d = match telegram {
+        Telegram::Token { .. } => return None,
+        Telegram::ShortAck => {
+            let r = answers?;
+            return Some(DpTelegram {
+                service: service(r.dsap)?,
+                direction: "response",
+                detail: None,
+            });
+        }
+        Telegram::Data(d) => d,
+    };
+    match d.fc {
+        FunctionCode::Request { kind, .. } => request(d, kind),
+        FunctionCode::Response { status, .. } => response(d, status, answers),
+    }
+}
+
+/// The DP service of a slave SAP (`None`: Data_Exchange).
+fn service(sap: Option<u8>) -> Option<&'static str> {
+    match sap {
+        None => Some("Data_Exchange"),
+        Some(s) => sap::name(s),
+    }
+}
+
+fn request(d: &DataTelegram<'_>, kind: RequestKind) -> Option<DpTelegram> {
+    if matches!(
+        kind,
+        RequestKind::FdlStatus | RequestKind::Ident | RequestKind::LsapStatus
+    ) {
+        return None;
+    }
+    let dsap = d.dsap.map(|s| s & 0x3F);
+    if dsap.is_none() && d.ssap.is_some() {
+        return None;
+    }
+    let service = service(dsap)?;
+    let du = d.data;
+    let detail = match dsap {
+        None => Some(Detail::Outputs {
+            outputs: du.to_vec(),
+        }),
+        Some(sap::SET_PRM) => Some(set_prm(du)),
+        Some(sap::CHK_CFG) => Some(config(du)),
+        Some(sap::GLOBAL_CONTROL) => Some(match GlobalControl::parse(du) {
+            Ok(gc) => Detail::GlobalControl {
+                command: control_names(gc.command),
+                groups: groups(gc.group_select),
+            },
+            Err(e) => malformed(e),
+        }),
+        Some(sap::SET_SLAVE_ADD) => Some(match SetSlaveAdd::parse(du) {
+            Ok(s) => Detail::SetSlaveAdd {
+                new_address: s.new_address,
+                ident_number: s.ident_number,
+                no_add_chg: s.no_add_chg,
+            },
+            Err(e) => malformed(e),
+        }),
+        Some(s) if s <= sap::MSAC_C1 => Some(dpv1_pdu(du, true)),
+        _ if du.is_empty() => None,
+        _ => Some(Detail::Malformed {
+            error: format!("{service} request carries {} bytes, needs none", du.len()),
+        }),
+    };
+    Some(DpTelegram {
+        service,
+        direction: "request",
+        detail,
+    })
+}
+
+fn response(
+    d: &DataTelegram<'_>,
+    status: ResponseStatus,
+    answers: Option<&Request>,
+) -> Option<DpTelegram> {
+    let answers = answers.filter(|r| r.master == d.da && r.slave == d.sa);
+    // The slave's SAP is the response's SSAP; a response without SAPs
+    // answers the request's service (Data_Exchange when none is known).
+    let sap = match (d.ssap, answers) {
+        (Some(s), _) => Some(s & 0x3F),
+        (None, Some(r)) => r.dsap,
+        (None, None) => None,
+    };
+    let service = service(sap)?;
+    let du = d.data;
+    let detail = if status.is_negative() {
+        None
+    } else {
+        match sap {
+            None => Some(Detail::Inputs {
+                inputs: du.to_vec(),
+                new_diag: matches!(status, ResponseStatus::Dh | ResponseStatus::Rdh),
+            }),
+            Some(sap::SLAVE_DIAG) => Some(slave_diag(du)),
+            Some(sap::GET_CFG) => Some(config(du)),
+            Some(sap::RD_INP) => Some(Detail::Inputs {
+                inputs: du.to_vec(),
+                new_diag: false,
+            }),
+            Some(sap::RD_OUTP) => Some(Detail::Outputs {
+                outputs: du.to_vec(),
+            }),
+            Some(s) if s <= sap::MSAC_C1 && !du.is_empty() => Some(dpv1_pdu(du, false)),
+            _ => None,
+        }
+    };
+    Some(DpTelegram {
+        service,
+        direction: "response",
+        detail,
+    })
+}
+
+fn malformed(e: impl fmt::Display) -> Detail {
+    Detail::Malformed {
+        error: e.to_string(),
+    }
+}
+
+/// Group numbers (1..=8) of a Group_Ident / Group_Select byte.
+fn groups(bits: u8) -> Vec<u8> {
+    (0..8)
+        .filter(|b| bits & (1 << b) != 0)
+        .map(|b| b + 1)
+        .collect()
+}
+
+fn control_names(c: ControlCommand) -> Vec<&'static str> {
+    [
+        (ControlCommand::CLEAR_DATA, "Clear_Data"),
+        (ControlCommand::UNFREEZE, "Unfreeze"),
+        (ControlCommand::FREEZE, "Freeze"),
+        (ControlCommand::UNSYNC, "Unsync"),
+        (ControlCommand::SYNC, "Sync"),
+    ]
+    .into_iter()
+    .filter(|(f, _)| c.contains(*f))
+    .map(|(_, n)| n)
+    .collect()
+}
+
+fn set_prm(du: &[u8]) -> Detail {
+    let p = match SetPrm::parse(du) {
+        Ok(p) => p,
+        Err(e) => return malformed(e),
+    };
+    let dpv1 = p
+        .dpv1_status()
+        .is_some_and(|(s1, _, _)| s1.contains(Dpv1Status1::DPV1_ENABLE));
+    let station_status = [
+        (PrmStationStatus::LOCK_REQ, "Lock_Req"),
+        (PrmStationStatus::UNLOCK_REQ, "Unlock_Req"),
+        (PrmStationStatus::SYNC_REQ, "Sync_Req"),
+        (PrmStationStatus::FREEZE_REQ, "Freeze_Req"),
+        (PrmStationStatus::WD_ON, "WD_On"),
+    ]
+    .into_iter()
+    .filter(|(f, _)| p.station_status.contains(*f))
+    .map(|(_, n)| n)
+    .collect();
+    Detail::SetPrm {
+        station_status,
+        watchdog_ms: p.watchdog(dpv1).map(|w| w.as_millis() as u64),
+        min_tsdr: p.min_tsdr,
+        ident_number: p.ident_number,
+        groups: groups(p.group_ident),
+        user_prm_data: p.user_prm_data.to_vec(),
+    }
+}
+
+fn config(du: &[u8]) -> Detail {
+    let mut identifiers = vec![];
+    let mut error = None;
+    for id in cfg::identifiers(du) {
+        match id {
+            Ok(id) => identifiers.push(CfgIdentifier {
+                raw: id.raw.to_vec(),
+                text: id.to_string(),
+                input_bytes: id.input_bytes(),
+                output_bytes: id.output_bytes(),
+            }),
+            Err(e) => error = Some(e.to_string()),
+        }
+    }
+    Detail::Cfg {
+        input_bytes: identifiers.iter().map(|i| i.input_bytes).sum(),
+        output_bytes: identifiers.iter().map(|i| i.output_bytes).sum(),
+        identifiers,
+        error,
+    }
+}
+
+fn slave_diag(du: &[u8]) -> Detail {
+    let d = match SlaveDiag::parse(du) {
+        Ok(d) => d,
+        Err(e) => return malformed(e),
+    };
+    // `status_words` names each bit that is set, one word per bit.
+    let words = d.status_words();
+    let status = words
+        .split(", ")
+        .filter(|w| *w != "OK")
+        .map(String::from)
+        .collect();
+    Detail::SlaveDiag {
+        status,
+        master_address: (d.master_address != NO_MASTER).then_some(d.master_address),
+        ident_number: d.ident_number,
+        ext_diag: diag::ext_blocks(d.ext_diag)
+            .map(|b| b.describe(false))
+            .collect(),
+        valid: d.is_valid(),
+    }
+}
+
+/// A DP-V1 PDU (function numbers: IEC 61158-6-3; /work/shared/reference
+/// dpv1-c2-im-alarms.md §4.3). An empty request polls for the answer.
+fn dpv1_pdu(du: &[u8], request: bool) -> Detail {
+    let pdu = |pdu, slot, index, length, data: Option<&[u8]>, error| Detail::Dpv1 {
+        pdu,
+        slot,
+        index,
+        length,
+        data: data.map(<[u8]>::to_vec),
+        error,
+    };
+    let Some(&f) = du.first() else {
+        return pdu("Poll", None, None, None, None, None);
+    };
+    let parsed = if request {
+        Pdu::parse_request(du)
+    } else {
+        Pdu::parse_response(du)
+    };
+    let len = |x: &[u8]| Some(x.len().min(255) as u8);
+    match parsed {
+        Ok(Pdu::ReadReq {
+            slot,
+            index,
+            length,
+        }) => pdu("Read", Some(slot), Some(index), Some(length), None, None),
+        Ok(Pdu::ReadRes { slot, index, data }) => {
+            pdu("Read", Some(slot), Some(index), len(data), Some(data), None)
+        }
+        Ok(Pdu::WriteReq { slot, index, data }) => pdu(
+            "Write",
+            Some(slot),
+            Some(index),
+            len(data),
+            Some(data),
+            None,
+        ),
+        Ok(Pdu::WriteRes {
+            slot,
+            index,
+            length,
+        }) => pdu("Write", Some(slot), Some(index), Some(length), None, None),
+        Ok(Pdu::AlarmAck { slot, .. }) => pdu("Alarm_Ack", Some(slot), None, None, None, None),
+        Ok(Pdu::Error(e)) => pdu("Error", None, None, None, None, Some(e.describe())),
+        Err(e) => {
+            let name = match f & 0x7F {
+                dpv1::FN_IDLE => "Idle",
+                0x51 => "Data_Transport",
+                0x56 => "Resource_Manager",
+                0x57 => "Initiate",
+                0x58 => "Abort",
+                _ => return malformed(e),
+            };
+            let error = (f & 0x80 != 0).then(|| format!("negative response 0x{f:02X}"));
+            pdu(name, None, None, None, None, error)
+        }
+    }
+}
+
+/// Pairs responses with their requests on a stream of telegrams (see the
+/// module docs) and decodes each.
+#[derive(Debug, Default, Clone)]
+pub struct Exchanges {
+    /// The last request per (master, slave).
+    last: BTreeMap<(u8, u8), Request>,
+    /// The request a short acknowledge would answer now.
+    pending: Option<Request>,
+}
+
+impl Exchanges {
+    /// The DP layer of the next telegram of the stream.
+    pub fn decode(&mut self, telegram: &Telegram<'_>) -> Option<DpTelegram> {
+        match telegram {
+            Telegram::Token { .. } => {
+                self.pending = None;
+                None
+            }
+            Telegram::ShortAck => decode(telegram, self.pending.take().as_ref()),
+            Telegram::Data(d) => match (Request::of(d), d.fc) {
+                (Some(r), FunctionCode::Request { kind, .. }) => {
+                    self.pending = (kind.expects_reply() && !d.is_broadcast()).then_some(r);
+                    if self.pending.is_some() {
+                        self.last.insert((r.master, r.slave), r);
+                    }
+                    decode(telegram, None)
+                }
+                _ => {
+                    self.pending = None;
+                    let r = self.last.get(&(d.da, d.sa)).copied();
+                    decode(telegram, r.as_ref())
+                }
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,384 @@
+//! Telegrams written byte by byte from the standard's layouts
+//! (IEC 61158-4-3 frames; IEC 61158-6-3 data units; the examples of
+//! /work/shared/reference/profibus-dp.md), never by our encoder. Master 2,
+//! slave 8; FCS = sum of DA … DU modulo 256.
+
+use super::*;
+
+const DIAG_REQ: [u8; 11] = [
+    0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0xF1, 0x16,
+];
+/// Station_Not_Ready, Prm_Req, no master, ident 0x0ED0.
+const DIAG_RES: [u8; 17] = [
+    0x68, 0x0B, 0x0B, 0x68, 0x82, 0x88, 0x08, 0x3E, 0x3C, 0x02, 0x05, 0x00, 0xFF, 0x0E, 0xD0, 0x70,
+    0x16,
+];
+/// Ext_Diag, WD_On, master 2; an identifier-related block (modules 0
+/// and 2) and a channel-related block (module 1, channel 1, input, wire
+/// break).
+const DIAG_RES_EXT: [u8; 22] = [
+    0x68, 0x10, 0x10, 0x68, 0x82, 0x88, 0x08, 0x3E, 0x3C, 0x08, 0x0C, 0x00, 0x02, 0x0E, 0xD0, 0x42,
+    0x05, 0x81, 0x41, 0x06, 0x8F, 0x16,
+];
+/// The reference's Set_Prm example [TR19]: Lock+Sync+Freeze+WD_On,
+/// 30·1·10 ms, ident 0x0A35, group 1, DPV1 bytes 0, 4 user bytes.
+const PRM: [u8; 25] = [
+    0x68, 0x13, 0x13, 0x68, 0x88, 0x82, 0x5D, 0x3D, 0x3E, 0xB8, 0x1E, 0x01, 0x00, 0x0A, 0x35, 0x01,
+    0x00, 0x00, 0x00, 0x82, 0x00, 0x00, 0x00, 0x7B, 0x16,
+];
+/// WD_On, 10·10 with DPV1_Enable and WD_Base_1ms: 100 ms; min TSDR 11.
+const PRM_DPV1: [u8; 21] = [
+    0x68, 0x0F, 0x0F, 0x68, 0x88, 0x82, 0x7D, 0x3D, 0x3E, 0x08, 0x0A, 0x0A, 0x0B, 0x0E, 0xD0, 0x00,
+    0x84, 0x00, 0x00, 0x8B, 0x16,
+];
+/// Chk_Cfg: the BM4 example (42 C1 02 04, 82 C0 01 03), special format
+/// out+in (C0 51 51), F9 and a free place.
+const CHK_CFG: [u8; 24] = [
+    0x68, 0x12, 0x12, 0x68, 0x88, 0x82, 0x7D, 0x3E, 0x3E, 0x42, 0xC1, 0x02, 0x04, 0x82, 0xC0, 0x01,
+    0x03, 0xC0, 0x51, 0x51, 0xF9, 0x00, 0xAD, 0x16,
+];
+const GET_CFG_REQ: [u8; 11] = [
+    0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x5D, 0x3B, 0x3E, 0xE0, 0x16,
+];
+/// [TR26]: a free place, 1 byte in, 1 byte out.
+const GET_CFG_RES: [u8; 14] = [
+    0x68, 0x08, 0x08, 0x68, 0x82, 0x88, 0x08, 0x3E, 0x3B, 0x00, 0x10, 0x20, 0xBB, 0x16,
+];
+const DX_REQ: [u8; 11] = [
+    0x68, 0x05, 0x05, 0x68, 0x08, 0x02, 0x7D, 0xAA, 0xBB, 0xEC, 0x16,
+];
+/// DH: inputs 42 and new diagnosis.
+const DX_RES_DH: [u8; 10] = [0x68, 0x04, 0x04, 0x68, 0x02, 0x08, 0x0A, 0x42, 0x56, 0x16];
+/// SD1 Data_Exchange without outputs.
+const DX_REQ_EMPTY: [u8; 6] = [0x10, 0x08, 0x02, 0x5D, 0x67, 0x16];
+const SC: [u8; 1] = [0xE5];
+/// SDN high to 127: Clear_Data to groups 1 and 2.
+const GLOBAL_CONTROL: [u8; 13] = [
+    0x68, 0x07, 0x07, 0x68, 0xFF, 0x82, 0x46, 0x3A, 0x3E, 0x02, 0x03, 0x44, 0x16,
+];
+const SET_SLAVE_ADD: [u8; 15] = [
+    0x68, 0x09, 0x09, 0x68, 0x88, 0x82, 0x6D, 0x37, 0x3E, 0x05, 0x0E, 0xD0, 0x00, 0xCF, 0x16,
+];
+/// MSAC_C1 Read slot 1 index 2, 16 bytes.
+const READ_REQ: [u8; 15] = [
+    0x68, 0x09, 0x09, 0x68, 0x88, 0x82, 0x6D, 0x33, 0x33, 0x5E, 0x01, 0x02, 0x10, 0x4E, 0x16,
+];
+const POLL: [u8; 11] = [
+    0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x5D, 0x33, 0x33, 0xCD, 0x16,
+];
+const READ_RES: [u8; 17] = [
+    0x68, 0x0B, 0x0B, 0x68, 0x82, 0x88, 0x08, 0x33, 0x33, 0x5E, 0x01, 0x02, 0x02, 0xAB, 0xCD, 0x53,
+    0x16,
+];
+/// Read error: DP-V1, class B code 0 (invalid index).
+const READ_ERR: [u8; 15] = [
+    0x68, 0x09, 0x09, 0x68, 0x82, 0x88, 0x08, 0x33, 0x33, 0xDE, 0x80, 0xB0, 0x00, 0x86, 0x16,
+];
+/// A diagnosis answered without SAPs (home-made slaves do that).
+const DIAG_RES_NO_SAPS: [u8; 15] = [
+    0x68, 0x09, 0x09, 0x68, 0x02, 0x08, 0x08, 0x02, 0x05, 0x00, 0xFF, 0x0E, 0xD0, 0xF6, 0x16,
+];
+const FDL_STATUS: [u8; 6] = [0x10, 0x08, 0x02, 0x49, 0x53, 0x16];
+const TOKEN: [u8; 3] = [0xDC, 0x08, 0x02];
+
+fn tg(bytes: &[u8]) -> Telegram<'_> {
+    let (t, n) = Telegram::parse(bytes).expect("a valid telegram");
+    assert_eq!(n, bytes.len());
+    t
+}
+
+fn detail(ex: &mut Exchanges, bytes: &[u8]) -> (&'static str, &'static str, Option<Detail>) {
+    let dp = ex.decode(&tg(bytes)).expect("a DP telegram");
+    (dp.service, dp.direction, dp.detail)
+}
+
+#[test]
+fn slave_diag_request_and_response() {
+    let mut ex = Exchanges::default();
+    assert_eq!(detail(&mut ex, &DIAG_REQ), ("Slave_Diag", "request", None));
+    let (service, dir, d) = detail(&mut ex, &DIAG_RES);
+    assert_eq!((service, dir), ("Slave_Diag", "response"));
+    assert_eq!(
+        d,
+        Some(Detail::SlaveDiag {
+            status: vec!["Station_Not_Ready".into(), "Prm_Req".into()],
+            master_address: None,
+            ident_number: 0x0ED0,
+            ext_diag: vec![],
+            valid: true,
+        })
+    );
+    let Some(Detail::SlaveDiag {
+        status,
+        master_address,
+        ext_diag,
+        ..
+    }) = detail(&mut ex, &DIAG_RES_EXT).2
+    else {
+        panic!()
+    };
+    assert_eq!(status, ["Ext_Diag", "WD_On"]);
+    assert_eq!(master_address, Some(2));
+    assert_eq!(ext_diag.len(), 2, "{ext_diag:?}");
+    assert!(ext_diag[0].contains("module"), "{ext_diag:?}");
+    assert!(ext_diag[1].contains("channel 1"), "{ext_diag:?}");
+}
+
+#[test]
+fn set_prm_of_the_standard_example() {
+    let mut ex = Exchanges::default();
+    assert_eq!(
+        detail(&mut ex, &PRM),
+        (
+            "Set_Prm",
+            "request",
+            Some(Detail::SetPrm {
+                station_status: vec!["Lock_Req", "Sync_Req", "Freeze_Req", "WD_On"],
+                watchdog_ms: Some(300),
+                min_tsdr: 0,
+                ident_number: 0x0A35,
+                groups: vec![1],
+                user_prm_data: vec![0, 0, 0, 0x82, 0, 0, 0],
+            })
+        )
+    );
+    // Its short acknowledge is the Set_Prm's response.
+    assert_eq!(detail(&mut ex, &SC), ("Set_Prm", "response", None));
+    let Some(Detail::SetPrm {
+        watchdog_ms,
+        min_tsdr,
+        groups,
+        ..
+    }) = detail(&mut ex, &PRM_DPV1).2
+    else {
+        panic!()
+    };
+    assert_eq!((watchdog_ms, min_tsdr, groups), (Some(100), 11, vec![]));
+}
+
+#[test]
+fn chk_cfg_and_get_cfg_identifiers() {
+    let mut ex = Exchanges::default();
+    let Some(Detail::Cfg {
+        identifiers,
+        input_bytes,
+        output_bytes,
+        error,
+    }) = detail(&mut ex, &CHK_CFG).2
+    else {
+        panic!()
+    };
+    let got: Vec<(Vec<u8>, &str, usize, usize)> = identifiers
+        .iter()
+        .map(|i| {
+            (
+                i.raw.clone(),
+                i.text.as_str(),
+                i.input_bytes,
+                i.output_bytes,
+            )
+        })
+        .collect();
+    assert_eq!(
+        got,
+        [
+            (
+                vec![0x42, 0xC1, 0x02, 0x04],
+                "2 words (consistent) in; manufacturer bytes 02 04",
+                4,
+                0
+            ),
+            (
+                vec![0x82, 0xC0, 0x01, 0x03],
+                "1 word (consistent) out; manufacturer bytes 01 03",
+                0,
+                2
+            ),
+            (vec![0xC0, 0x51, 0x51], "18 words out + 18 words in", 36, 36),
+            (vec![0xF9], "10 words (consistent) in+out", 20, 20),
+            (vec![0x00], "empty slot", 0, 0),
+        ]
+    );
+    assert_eq!((input_bytes, output_bytes, error), (60, 58, None));
+    assert_eq!(detail(&mut ex, &SC), ("Chk_Cfg", "response", None));
+    assert_eq!(detail(&mut ex, &GET_CFG_REQ), ("Get_Cfg", "request", None));
+    let Some(Detail::Cfg { identifiers, .. }) = detail(&mut ex, &GET_CFG_RES).2 else {
+        panic!()
+    };
+    let texts: Vec<&str> = identifiers.iter().map(|i| i.text.as_str()).collect();
+    assert_eq!(texts, ["empty slot", "1 byte in", "1 byte out"]);
+}
+
+#[test]
+fn data_exchange_global_control_and_set_slave_add() {
+    let mut ex = Exchanges::default();
+    assert_eq!(
+        detail(&mut ex, &DX_REQ),
+        (
+            "Data_Exchange",
+            "request",
+            Some(Detail::Outputs {
+                outputs: vec![0xAA, 0xBB]
+            })
+        )
+    );
+    assert_eq!(
+        detail(&mut ex, &DX_RES_DH),
+        (
+            "Data_Exchange",
+            "response",
+            Some(Detail::Inputs {
+                inputs: vec![0x42],
+                new_diag: true
+            })
+        )
+    );
+    // A slave without inputs answers with a short acknowledge.
+    assert_eq!(detail(&mut ex, &DX_REQ_EMPTY).0, "Data_Exchange");
+    assert_eq!(detail(&mut ex, &SC), ("Data_Exchange", "response", None));
+    assert_eq!(
+        detail(&mut ex, &GLOBAL_CONTROL),
+        (
+            "Global_Control",
+            "request",
+            Some(Detail::GlobalControl {
+                command: vec!["Clear_Data"],
+                groups: vec![1, 2]
+            })
+        )
+    );
+    assert_eq!(
+        detail(&mut ex, &SET_SLAVE_ADD).2,
+        Some(Detail::SetSlaveAdd {
+            new_address: 5,
+            ident_number: 0x0ED0,
+            no_add_chg: false
+        })
+    );
+}
+
+#[test]
+fn dpv1_read_poll_and_error() {
+    let mut ex = Exchanges::default();
+    let dpv1 = |pdu, slot, index, length, data: Option<Vec<u8>>, error: Option<&str>| {
+        Some(Detail::Dpv1 {
+            pdu,
+            slot,
+            index,
+            length,
+            data,
+            error: error.map(String::from),
+        })
+    };
+    assert_eq!(
+        detail(&mut ex, &READ_REQ),
+        (
+            "MSAC_C1",
+            "request",
+            dpv1("Read", Some(1), Some(2), Some(16), None, None)
+        )
+    );
+    assert_eq!(detail(&mut ex, &SC), ("MSAC_C1", "response", None));
+    assert_eq!(
+        detail(&mut ex, &POLL).2,
+        dpv1("Poll", None, None, None, None, None)
+    );
+    assert_eq!(
+        detail(&mut ex, &READ_RES).2,
+        dpv1(
+            "Read",
+            Some(1),
+            Some(2),
+            Some(2),
+            Some(vec![0xAB, 0xCD]),
+            None
+        )
+    );
+    let Some(Detail::Dpv1 { pdu, error, .. }) = detail(&mut ex, &READ_ERR).2 else {
+        panic!()
+    };
+    assert_eq!(pdu, "Error");
+    assert!(error.unwrap().contains("invalid index"));
+}
+
+#[test]
+fn a_response_follows_the_request_it_answers() {
+    // Without SAPs, a diagnosis answer is read as the Slave_Diag it
+    // answers …
+    let mut ex = Exchanges::default();
+    detail(&mut ex, &DIAG_REQ);
+    let (service, _, d) = detail(&mut ex, &DIAG_RES_NO_SAPS);
+    assert_eq!(service, "Slave_Diag");
+    assert!(matches!(
+        d,
+        Some(Detail::SlaveDiag {
+            ident_number: 0x0ED0,
+            ..
+        })
+    ));
+    // … and without a request, as Data_Exchange inputs.
+    let d = decode(&tg(&DIAG_RES_NO_SAPS), None).unwrap();
+    assert_eq!(d.service, "Data_Exchange");
+    // A token ends the exchange: a short acknowledge after it answers
+    // nothing known.
+    detail(&mut ex, &PRM);
+    assert_eq!(ex.decode(&tg(&TOKEN)), None);
+    assert_eq!(ex.decode(&tg(&SC)), None);
+    // FDL status is no DP telegram.
+    assert_eq!(ex.decode(&tg(&FDL_STATUS)), None);
+}
+
+#[cfg(feature = "serde")]
+#[test]
+fn serialises_flat_under_its_service() {
+    let mut ex = Exchanges::default();
+    let j = |ex: &mut Exchanges, b: &[u8]| serde_json::to_value(ex.decode(&tg(b))).unwrap();
+    let v = j(&mut ex, &PRM);
+    assert_eq!(v["service"], "Set_Prm");
+    assert_eq!(v["ident_number"], 0x0A35);
+    assert_eq!(v["watchdog_ms"], 300);
+    assert_eq!(v["groups"], serde_json::json!([1]));
+    assert_eq!(v["user_prm_data"], "00 00 00 82 00 00 00");
+    let v = j(&mut ex, &SC);
+    assert_eq!(
+        v,
+        serde_json::json!({"service": "Set_Prm", "direction": "response"})
+    );
+    let v = j(&mut ex, &CHK_CFG);
+    assert_eq!(v["identifiers"][3]["text"], "10 words (consistent) in+out");
+    assert_eq!(v["identifiers"][3]["raw"], "F9");
+    j(&mut ex, &DIAG_REQ);
+    let v = j(&mut ex, &DIAG_RES);
+    assert_eq!(
+        v["status"],
+        serde_json::json!(["Station_Not_Ready", "Prm_Req"])
+    );
+    assert_eq!(v["master_address"], serde_json::Value::Null);
+    assert_eq!(v["ident_number"], 0x0ED0);
+}
+
+proptest::proptest! {
+    /// Any telegram, with any request before it, decodes without panic.
+    #[test]
+    fn any_telegram_decodes_without_panic(
+        req in proptest::collection::vec(proptest::num::u8::ANY, 0..40),
+        du in proptest::collection::vec(proptest::num::u8::ANY, 0..40),
+        dsap in proptest::option::of(0u8..64),
+        resp in proptest::bool::ANY,
+    ) {
+        let mut ex = Exchanges::default();
+        let fc = if resp {
+            FunctionCode::slave_response(ResponseStatus::Dl)
+        } else {
+            FunctionCode::Request { kind: RequestKind::SrdHigh, fcb: true, fcv: true }
+        };
+        let saps = dsap.map(|s| (s, crate::pdu::sap::MASTER));
+        let t = DataTelegram::new(8, 2, FunctionCode::Request {
+            kind: RequestKind::SrdHigh, fcb: false, fcv: true,
+        }, &req).with_saps(dsap, saps.map(|s| s.1));
+        ex.decode(&Telegram::Data(t));
+        let t = DataTelegram::new(2, 8, fc, &du).with_saps(saps.map(|s| s.1), dsap);
+        let _ = ex.decode(&Telegram::Data(t));
+        let _ = ex.decode(&Telegram::ShortAck);
+    }
+}

@@ -1,0 +1,686 @@
+//! A virtual RS-485 multidrop bus made of ptys (the library behind
+//! `dpctl bus`).
+//!
+//! Each station gets a pty; the links given to [`Hub::open`] become
+//! symlinks to the pty ends the station processes open (like any serial
+//! port). The hub keeps the other ends and runs them through a
+//! [`Medium`] driven by real time (nanoseconds since the hub started):
+//! every byte a station writes reaches every other station, in order, and
+//! not the writer; with a baud rate the line is paced at wire speed;
+//! faults are injected as configured.
+//!
+//! # Line timing as receivers see it
+//!
+//! A paced hub delivers each transmission (one station's bytes while it
+//! holds the line) in one write when its last character has crossed the
+//! wire ([`Medium::with_whole_transmissions`]): the characters of one
+//! telegram never arrive with an idle gap inside, even when the hub or a
+//! receiver is scheduled late, and the idle time between telegrams is the
+//! one on the modelled wire (a transmission starts on the wire when the
+//! hub reads it) plus the hub's wake-up latency: never shortened, delayed
+//! by at most one telegram's duration. Receivers that frame by idle time,
+//! as slave ASICs do, see the telegrams as they would on RS-485. A master
+//! sees the first character of a reply only when the whole reply has
+//! arrived; on ptys ([`super::Port::whole_telegrams`]) a master's wait for
+//! each answer allows for the wire time of the longest answer that
+//! request can get.
+//! Unpaced, bytes pass as fast as they come, in the chunks they were read
+//! in: the gaps are the ones the writers left, plus scheduling jitter.
+//!
+//! # Stations come and go
+//!
+//! A pty whose end is not open (or was closed by a restarting process)
+//! reads EIO and polls HUP. The hub then stops delivering to it, throws
+//! away what it had queued, checks every few milliseconds whether a
+//! process opened it again, and carries on. A station that does not read
+//! for so long that its pty fills up loses bytes (counted as overruns)
+//! instead of stalling the bus.
+//!
+//! # Driving it
+//!
+//! [`Hub::poll`] runs one round of a plain `ppoll` loop over the pty
+//! masters (no runtime, no per-byte allocation; writes go straight to the
+//! fds, and without pacing nothing sleeps between a read and the writes it
+//! causes). A caller passes its own file descriptor to wake on (a signalfd,
+//! an eventfd) and calls it in a loop; [`Hub::finish`] flushes the pcap
+//! recording and removes the links (dropping the hub removes them too).
+
+use nix::errno::Errno;
+use nix::poll::{PollFd, PollFlags};
+use nix::sys::termios::{self, SetArg};
+use nix::sys::time::TimeSpec;
+use profibus_fdl::capture::pcap::PcapWriter;
+use profibus_fdl::codec::CodecStats;
+use profibus_fdl::line::medium::{Medium, MediumConfig, MediumStats};
+use profibus_fdl::line::tap::{Tap, TapEvent};
+use profibus_fdl::time::Instant;
+use std::fmt;
+use std::io::{self, Write};
+use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// How long the line must be quiet before the pcap framer gives up an
+/// incomplete telegram.
+const IDLE_GAP: Duration = Duration::from_millis(5);
+/// How often ptys without a process are checked for a new one.
+const RECONNECT_CHECK: Duration = Duration::from_millis(5);
+/// Bytes queued for a station that does not read before it loses bytes.
+const MAX_QUEUED: usize = 1 << 20;
+
+/// Why a hub could not be set up or run.
+#[derive(Debug, thiserror::Error)]
+pub enum HubError {
+    /// A link path exists and is not a symlink (the hub never replaces
+    /// other files).
+    #[error("{} exists and is not a symlink; refusing to replace it", .0.display())]
+    NotASymlink(PathBuf),
+    /// A link could not be checked, created or replaced.
+    #[error("cannot create link {}: {error}", .path.display())]
+    Link {
+        /// The link.
+        path: PathBuf,
+        /// The cause (in the message; not also `source()`, so that a
+        /// printed error chain names it once).
+        error: io::Error,
+    },
+    /// A pty could not be made or configured.
+    #[error("cannot set up a pty: {0}")]
+    Pty(io::Error),
+    /// Waiting for the ptys failed.
+    #[error("ppoll: {0}")]
+    Poll(io::Error),
+    /// Writing the pcap recording failed.
+    #[error("writing the pcap recording: {0}")]
+    Pcap(io::Error),
+}
+
+/// Counters of the hub itself (the line's are [`MediumStats`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct HubStats {
+    /// Bytes handed to stations (counted once per receiving station).
+    pub delivered_bytes: u64,
+    /// Bytes lost because a station did not read.
+    pub overrun_bytes: u64,
+    /// Times a process opened a station's pty.
+    pub connects: u64,
+}
+
+/// A snapshot of a hub's counters; `Display` gives the one-line summary
+/// `dpctl bus` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HubStatus {
+    /// What the line carried and injected.
+    pub medium: MediumStats,
+    /// The hub's own counters.
+    pub hub: HubStats,
+    /// Stations whose pty a process has open.
+    pub connected: usize,
+    /// Stations on the bus.
+    pub stations: usize,
+    /// With a pcap recording: packets written (telegrams and flagged
+    /// corrupt stretches), the corrupt ones among them, and the framer's
+    /// counters.
+    pub pcap: Option<(u64, u64, CodecStats)>,
+}
+
+impl fmt::Display for HubStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}; delivered {} bytes, overruns {} bytes, {}/{} stations connected ({} connects)",
+            self.medium,
+            self.hub.delivered_bytes,
+            self.hub.overrun_bytes,
+            self.connected,
+            self.stations,
+            self.hub.connects
+        )?;
+        if let Some((packets, corrupt, c)) = self.pcap {
+            write!(
+                f,
+                "; pcap {packets} packets, {corrupt} corrupt (codec: {} garbage bytes, {} bad FCS, {} other errors)",
+                c.garbage_bytes,
+                c.bad_fcs,
+                c.errors() - c.bad_fcs
+            )?;
+        }
+        Ok(())
+    }
+}
+
+struct Station {
+    master: OwnedFd,
+    link: PathBuf,
+    /// Where the link points (the pty end for the station process).
+    tty: PathBuf,
+    /// A process has the pty open.
+    connected: bool,
+    /// Bytes the pty did not take yet.
+    queued: Vec<u8>,
+}
+
+type Recorder = PcapWriter<Box<dyn Write + Send>>;
+
+/// The virtual bus; see the module docs.
+pub struct Hub {
+    stations: Vec<Station>,
+    medium: Medium,
+    clock: std::time::Instant,
+    stats: HubStats,
+    tap: Tap,
+    pcap: Option<Recorder>,
+    /// Corrupt stretches written to the recording.
+    corrupt_packets: u64,
+    next_reconnect: Instant,
+    last_delivery: Instant,
+    buf: Box<[u8; 4096]>,
+    slack_set: bool,
+}
+
+impl fmt::Debug for Hub {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Hub")
+            .field("stations", &self.stations.len())
+            .field("medium", self.medium.config())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Hub {
+    /// Make one pty per link, raw, and point each link at its pty end.
+    /// An existing symlink is replaced; any other file is an error
+    /// ([`HubError::NotASymlink`], checked for every link before anything
+    /// is created). The line behaves as `medium` says.
+    pub fn open(links: &[PathBuf], medium: MediumConfig) -> Result<Hub, HubError> {
+        for l in links {
+            match std::fs::symlink_metadata(l) {
+                Ok(m) if m.file_type().is_symlink() => {}
+                Ok(_) => return Err(HubError::NotASymlink(l.clone())),
+                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                Err(error) => {
+                    return Err(HubError::Link {
+                        path: l.clone(),
+                        error,
+                    })
+                }
+            }
+        }
+        let mut stations: Vec<Station> = Vec::with_capacity(links.len());
+        for link in links {
+            let pty = nix::pty::openpty(None, None).map_err(pty_err)?;
+            // Raw mode on the station's end: no echo, no line editing, no
+            // CR/LF translation; it stays while the hub holds the master.
+            let mut t = termios::tcgetattr(&pty.slave).map_err(pty_err)?;
+            termios::cfmakeraw(&mut t);
+            termios::tcsetattr(&pty.slave, SetArg::TCSANOW, &t).map_err(pty_err)?;
+            let tty = nix::unistd::ttyname(&pty.slave).map_err(pty_err)?;
+            set_nonblocking(&pty.master).map_err(pty_err)?;
+            drop(pty.slave);
+            let st = Station {
+                master: pty.master,
+                link: link.clone(),
+                tty,
+                connected: false,
+                queued: Vec::new(),
+            };
+            // Pushed first, so that a failure removes the links made so far.
+            stations.push(st);
+            let st = stations.last().expect("pushed");
+            if let Err(error) = replace_symlink(&st.tty, link) {
+                stations.pop();
+                remove_links(&stations);
+                return Err(HubError::Link {
+                    path: link.clone(),
+                    error,
+                });
+            }
+        }
+        Ok(Hub {
+            medium: Medium::new(stations.len(), medium).with_whole_transmissions(),
+            stations,
+            clock: std::time::Instant::now(),
+            stats: HubStats::default(),
+            tap: Tap::new(),
+            pcap: None,
+            corrupt_packets: 0,
+            next_reconnect: Instant::ZERO,
+            last_delivery: Instant::ZERO,
+            buf: Box::new([0; 4096]),
+            slack_set: false,
+        })
+    }
+
+    /// Record every telegram on the line to `sink` (pcapng, link type 257,
+    /// time stamps from the hub's start at `epoch` since the Unix epoch).
+    /// Bytes that form no valid telegram (corrupted by `--flip`/`--noise`
+    /// or by two stations at once) are recorded too, flagged
+    /// ([`PcapWriter::write_corrupt`]).
+    pub fn record(&mut self, sink: Box<dyn Write + Send>, epoch: Duration) -> Result<(), HubError> {
+        self.pcap = Some(PcapWriter::new(sink, epoch).map_err(HubError::Pcap)?);
+        Ok(())
+    }
+
+    /// The stations' links and the pty ends they point to, by index.
+    pub fn links(&self) -> impl Iterator<Item = (&Path, &Path)> {
+        self.stations
+            .iter()
+            .map(|s| (s.link.as_path(), s.tty.as_path()))
+    }
+
+    /// The line's configuration.
+    pub fn medium_config(&self) -> &MediumConfig {
+        self.medium.config()
+    }
+
+    /// The counters now.
+    pub fn status(&self) -> HubStatus {
+        HubStatus {
+            medium: self.medium.stats(),
+            hub: self.stats,
+            connected: self.stations.iter().filter(|s| s.connected).count(),
+            stations: self.stations.len(),
+            pcap: self
+                .pcap
+                .as_ref()
+                .map(|p| (p.packets(), self.corrupt_packets, self.tap.stats())),
+        }
+    }
+
+    /// The hub's time now.
+    fn now(&self) -> Instant {
+        Instant::from_nanos(self.clock.elapsed().as_nanos() as u64)
+    }
+
+    /// One round: check for reconnected stations, deliver what is due,
+    /// then wait (at most `max_wait`, or until the next delivery) for
+    /// station writes or for `wake` to become readable, and carry the
+    /// bytes read. Returns whether `wake` is readable (the caller reads
+    /// it). Call it in a loop.
+    pub fn poll(
+        &mut self,
+        wake: Option<BorrowedFd<'_>>,
+        max_wait: Option<Duration>,
+    ) -> Result<bool, HubError> {
+        if !self.slack_set && self.medium.config().baud.is_some() {
+            // Wake-ups on time matter when pacing; the default slack of
+            // this thread is 50 µs.
+            self.slack_set = true;
+            crate::driver::set_timer_slack();
+        }
+        let now = self.now();
+        // Ptys without a process: has one opened them (HUP gone)?
+        if now >= self.next_reconnect {
+            for s in self.stations.iter_mut().filter(|s| !s.connected) {
+                if !hung_up(&s.master) {
+                    // Drop anything written to the pty while nobody had
+                    // it open, so the new process starts on a clean line.
+                    let _ = termios::tcflush(&s.master, termios::FlushArg::TCOFLUSH);
+                    s.connected = true;
+                    self.stats.connects += 1;
+                    tracing::debug!(link = %s.link.display(), "station connected");
+                }
+            }
+            self.next_reconnect = now + RECONNECT_CHECK;
+        }
+        self.deliver_due(now)?;
+        if self.tap.pending() > 0 && now >= self.idle_at() {
+            self.tap.line_idle();
+            self.drain_tap()?;
+            if let Some(p) = self.pcap.as_mut() {
+                p.flush().map_err(HubError::Pcap)?;
+            }
+        }
+
+        // Sleep until something happens or is due.
+        let mut deadline = self.medium.poll_timeout();
+        let mut consider = |t: Instant| deadline = Some(deadline.map_or(t, |d| d.min(t)));
+        if self.stations.iter().any(|s| !s.connected) {
+            consider(self.next_reconnect);
+        }
+        if let Some(w) = max_wait {
+            consider(now + w);
+        }
+        if self.tap.pending() > 0 {
+            consider(self.idle_at());
+        }
+        let timeout =
+            deadline.map(|d| TimeSpec::from_duration(d.saturating_duration_since(self.now())));
+
+        let mut fds = Vec::with_capacity(self.stations.len() + 1);
+        let mut index = Vec::with_capacity(self.stations.len());
+        if let Some(w) = wake {
+            fds.push(PollFd::new(w, PollFlags::POLLIN));
+        }
+        let first = fds.len();
+        for (i, s) in self
+            .stations
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.connected)
+        {
+            let mut ev = PollFlags::POLLIN;
+            if !s.queued.is_empty() {
+                ev |= PollFlags::POLLOUT;
+            }
+            fds.push(PollFd::new(s.master.as_fd(), ev));
+            index.push(i);
+        }
+        match nix::poll::ppoll(&mut fds, timeout, None) {
+            Ok(_) | Err(Errno::EINTR) => {}
+            Err(e) => return Err(HubError::Poll(e.into())),
+        }
+        let revents: Vec<PollFlags> = fds
+            .iter()
+            .map(|f| f.revents().unwrap_or(PollFlags::empty()))
+            .collect();
+        drop(fds);
+        let woken = wake.is_some() && revents[0].contains(PollFlags::POLLIN);
+
+        for (k, &i) in index.iter().enumerate() {
+            let ev = revents[first + k];
+            if ev.contains(PollFlags::POLLOUT) {
+                flush_queue(&mut self.stations[i]);
+            }
+            if ev.intersects(PollFlags::POLLIN | PollFlags::POLLHUP | PollFlags::POLLERR) {
+                self.read_station(i)?;
+            }
+        }
+        Ok(woken)
+    }
+
+    /// Read everything station `i` wrote; the medium gets each chunk as it
+    /// came.
+    fn read_station(&mut self, i: usize) -> Result<(), HubError> {
+        loop {
+            match nix::unistd::read(&self.stations[i].master, &mut self.buf[..]) {
+                Ok(0) => return Ok(()),
+                Ok(len) => {
+                    let now = self.now();
+                    self.medium.transmit(now, i, &self.buf[..len]);
+                    // Unpaced: hand it on at once.
+                    self.deliver_due(now)?;
+                    // A pty read returns all there is (up to the buffer
+                    // size): skip the read that would say EAGAIN.
+                    if len < self.buf.len() {
+                        return Ok(());
+                    }
+                }
+                Err(Errno::EAGAIN) | Err(Errno::EINTR) => return Ok(()),
+                Err(Errno::EIO) => {
+                    disconnect(&mut self.stations[i]);
+                    return Ok(());
+                }
+                Err(e) => {
+                    tracing::warn!(link = %self.stations[i].link.display(), error = %e, "read failed");
+                    disconnect(&mut self.stations[i]);
+                    return Ok(());
+                }
+            }
+        }
+    }
+
+    fn deliver_due(&mut self, now: Instant) -> Result<(), HubError> {
+        while let Some(d) = self.medium.poll_delivery(now) {
+            self.last_delivery = d.at;
+            for (j, s) in self.stations.iter_mut().enumerate() {
+                if d.reaches(j) && s.connected {
+                    deliver(s, &d.bytes, &mut self.stats);
+                }
+            }
+            if self.pcap.is_some() {
+                self.tap.push(d.at, &d.bytes);
+                self.drain_tap()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// When the pcap framer may take the line as idle.
+    fn idle_at(&self) -> Instant {
+        self.last_delivery.max(self.medium.busy_until()) + IDLE_GAP
+    }
+
+    fn drain_tap(&mut self) -> Result<(), HubError> {
+        while let Some(ev) = self.tap.poll() {
+            let Some(p) = self.pcap.as_mut() else {
+                continue;
+            };
+            match ev {
+                TapEvent::Telegram { at, bytes } => p.write_telegram(at, &bytes),
+                // Corrupted telegrams (a flipped bit, noise, two stations
+                // at once) stay in the recording, flagged.
+                TapEvent::Skipped { at, bytes, .. } => {
+                    self.corrupt_packets += 1;
+                    p.write_corrupt(at, &bytes)
+                }
+            }
+            .map_err(HubError::Pcap)?;
+        }
+        Ok(())
+    }
+
+    /// Stop: frame what is left for the recording, flush it, remove the
+    /// links; the final counters.
+    pub fn finish(mut self) -> Result<HubStatus, HubError> {
+        if self.pcap.is_some() {
+            self.tap.line_idle();
+            self.drain_tap()?;
+        }
+        let status = self.status();
+        if let Some(p) = self.pcap.take() {
+            p.into_inner()
+                .and_then(|mut w| w.flush())
+                .map_err(HubError::Pcap)?;
+        }
+        Ok(status)
+    }
+}
+
+impl Drop for Hub {
+    /// Removes the links (only those still pointing to our ptys).
+    fn drop(&mut self) {
+        remove_links(&self.stations);
+    }
+}
+
+fn remove_links(stations: &[Station]) {
+    for s in stations {
+        if std::fs::read_link(&s.link).is_ok_and(|t| t == s.tty) {
+            let _ = std::fs::remove_file(&s.link);
+        }
+    }
+}
+
+fn pty_err(e: Errno) -> HubError {
+    HubError::Pty(e.into())
+}
+
+fn set_nonblocking(fd: &OwnedFd) -> Result<(), Errno> {
+    use nix::fcntl::{fcntl, FcntlArg, OFlag};
+    let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL)?);
+    fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    Ok(())
+}
+
+/// Point `link` at `target`, replacing a stale symlink atomically.
+fn replace_symlink(target: &Path, link: &Path) -> io::Result<()> {
+    let tmp = PathBuf::from(format!("{}.dpctl-{}", link.display(), std::process::id()));
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp)?;
+    std::fs::rename(&tmp, link).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+/// Whether nobody has the pty's other end open.
+fn hung_up(master: &OwnedFd) -> bool {
+    let mut fds = [PollFd::new(master.as_fd(), PollFlags::empty())];
+    match nix::poll::poll(&mut fds, nix::poll::PollTimeout::ZERO) {
+        Ok(_) => fds[0]
+            .revents()
+            .is_some_and(|r| r.contains(PollFlags::POLLHUP)),
+        Err(_) => true,
+    }
+}
+
+fn disconnect(s: &mut Station) {
+    if s.connected {
+        tracing::debug!(link = %s.link.display(), "station disconnected");
+    }
+    s.connected = false;
+    s.queued.clear();
+    let _ = termios::tcflush(&s.master, termios::FlushArg::TCOFLUSH);
+}
+
+/// Write `bytes` to a station's pty, queueing what it does not take.
+fn deliver(s: &mut Station, bytes: &[u8], stats: &mut HubStats) {
+    stats.delivered_bytes += bytes.len() as u64;
+    if !s.queued.is_empty() {
+        flush_queue(s);
+    }
+    let mut rest = bytes;
+    if s.queued.is_empty() {
+        match nix::unistd::write(&s.master, bytes) {
+            Ok(k) => rest = &bytes[k..],
+            Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
+            Err(_) => {
+                disconnect(s);
+                return;
+            }
+        }
+    }
+    if !rest.is_empty() {
+        let room = MAX_QUEUED.saturating_sub(s.queued.len());
+        let take = rest.len().min(room);
+        s.queued.extend_from_slice(&rest[..take]);
+        stats.overrun_bytes += (rest.len() - take) as u64;
+    }
+}
+
+fn flush_queue(s: &mut Station) {
+    while !s.queued.is_empty() {
+        match nix::unistd::write(&s.master, &s.queued) {
+            Ok(k) => {
+                s.queued.drain(..k);
+            }
+            Err(Errno::EINTR) => {}
+            Err(Errno::EAGAIN) => return,
+            Err(_) => {
+                disconnect(s);
+                return;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use profibus_fdl::timing::Baud;
+    use std::io::Read;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    /// A hub in a thread of this process, polled until dropped.
+    struct Running {
+        stop: Arc<AtomicBool>,
+        thread: Option<std::thread::JoinHandle<HubStatus>>,
+        links: Vec<PathBuf>,
+    }
+
+    impl Running {
+        /// A hub of two stations with their links in `dir`.
+        fn start(dir: &Path, medium: MediumConfig) -> Running {
+            let links: Vec<PathBuf> = (0..2).map(|i| dir.join(format!("hub-{i}"))).collect();
+            let mut hub = Hub::open(&links, medium).unwrap();
+            let stop = Arc::new(AtomicBool::new(false));
+            let s = stop.clone();
+            let thread = std::thread::spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    hub.poll(None, Some(Duration::from_millis(2))).unwrap();
+                }
+                hub.finish().unwrap()
+            });
+            Running {
+                stop,
+                thread: Some(thread),
+                links,
+            }
+        }
+
+        fn open(&self, i: usize) -> std::fs::File {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&self.links[i])
+                .unwrap()
+        }
+
+        fn stop(mut self) -> HubStatus {
+            self.stop.store(true, Ordering::Relaxed);
+            self.thread.take().unwrap().join().unwrap()
+        }
+    }
+
+    impl Drop for Running {
+        fn drop(&mut self) {
+            self.stop.store(true, Ordering::Relaxed);
+            if let Some(t) = self.thread.take() {
+                let _ = t.join();
+            }
+        }
+    }
+
+    /// Write `data` on `a` until `b` reads something (the hub notices new
+    /// openers every few milliseconds); what `b` read first.
+    fn first_read(a: &mut std::fs::File, b: &mut std::fs::File, data: &[u8]) -> Vec<u8> {
+        use nix::poll::{PollFd, PollFlags, PollTimeout};
+        let mut buf = [0u8; 64];
+        for _ in 0..500 {
+            a.write_all(data).unwrap();
+            let mut fds = [PollFd::new(b.as_fd(), PollFlags::POLLIN)];
+            if nix::poll::poll(&mut fds, PollTimeout::from(200u16)).unwrap() > 0 {
+                let n = b.read(&mut buf).unwrap();
+                return buf[..n].to_vec();
+            }
+        }
+        panic!("nothing arrived");
+    }
+
+    #[test]
+    fn paced_hub_delivers_a_telegram_in_one_piece_in_process() {
+        let dir = tempfile::tempdir().unwrap();
+        let hub = Running::start(dir.path(), MediumConfig::paced(Baud::B19200));
+        let (mut a, mut b) = (hub.open(0), hub.open(1));
+        // An 11-byte telegram at 19.2 kbit/s: 6.3 ms on the wire. However
+        // late this thread reads, it gets all 11 bytes in one read.
+        let t = [
+            0x68, 0x05, 0x05, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x87, 0x16,
+        ];
+        for _ in 0..5 {
+            let got = first_read(&mut a, &mut b, &t);
+            assert_eq!(got, t);
+        }
+        drop((a, b));
+        let status = hub.stop();
+        assert!(status.medium.transmissions >= 5, "{status}");
+        assert_eq!(status.medium.collisions, 0, "{status}");
+    }
+
+    #[test]
+    fn links_are_refused_over_other_files_and_removed_at_the_end() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("hub-file");
+        std::fs::write(&file, b"precious").unwrap();
+        let e = Hub::open(std::slice::from_ref(&file), MediumConfig::default()).unwrap_err();
+        assert!(matches!(e, HubError::NotASymlink(_)), "{e}");
+        assert_eq!(std::fs::read(&file).unwrap(), b"precious");
+
+        let hub = Running::start(dir.path(), MediumConfig::default());
+        let links = hub.links.clone();
+        assert!(links.iter().all(|l| std::fs::read_link(l).is_ok()));
+        hub.stop();
+        assert!(links.iter().all(|l| std::fs::symlink_metadata(l).is_err()));
+    }
+}
