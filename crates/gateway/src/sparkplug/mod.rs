@@ -607,7 +607,8 @@ mod tests {
 
     impl Rig {
         fn new() -> Rig {
-            let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+            let dir =
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/bus.toml");
             let bus = ProfiledBus::parse(&dir, BUS).unwrap();
             let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line").unwrap();
             let node = EdgeNode::new(
