@@ -13,8 +13,8 @@ static GLOBAL: alloc_count::Counting = alloc_count::Counting;
 
 use profibus::devices::bus::ProfiledBus;
 use profibus::devices::DeviceOptions;
-use profibus::dp::busfile::BusFile;
-use profibus::dp::gsd::{Gsd, ParseOptions, MAX_FILE_LEN};
+use profibus::dp::config::busfile::BusFile;
+use profibus::dp::config::gsd::{Gsd, ParseOptions, MAX_FILE_LEN};
 use profibus_gateway::settings::MqttSettings;
 use profibus_gateway::{Gateway, SlaveInfo};
 use std::path::Path;

@@ -11,11 +11,11 @@
 //! the FDL stations, the token ring and the DP master.
 
 use profibus::devices::generic::{GenericDevice, InputPattern};
-use profibus::dp::control::ControlCommand;
 use profibus::dp::master::{
     DpMaster, Job, JobResult, MasterConfig, MasterEvent, MasterOptions, OperatingState,
     SlaveParams, SlaveState,
 };
+use profibus::dp::pdu::control::ControlCommand;
 use profibus::dp::slave::{DpSlave, Features, SlaveEvent, SlaveState as SlaveCoreState};
 use profibus::fdl::medium::MediumConfig;
 use profibus::fdl::sim::{SimBus, StationId};

@@ -9,7 +9,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
+use profibus_dp::config::gsd::{decode_latin1, Gsd, ParseOptions};
 
 fuzz_target!(|data: &[u8]| {
     let text = decode_latin1(data);

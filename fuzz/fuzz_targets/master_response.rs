@@ -22,7 +22,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use profibus_dp::master::{DpMaster, Job, MasterConfig, MasterOptions, SlaveParams};
-use profibus_dp::sap;
+use profibus_dp::pdu::sap;
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::station::Station;
 use profibus_fdl::wire::Telegram;
@@ -289,7 +289,7 @@ fuzz_target!(|data: &[u8]| {
             m.slave_params(a).unwrap().io_lengths().unwrap().1
         );
         if let Some(d) = m.diag(a) {
-            let _ = profibus_dp::diag::describe(d, None, a == 9);
+            let _ = profibus_dp::pdu::diag::describe(d, None, a == 9);
         }
     }
     while m.poll_event().is_some() {}

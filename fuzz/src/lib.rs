@@ -6,7 +6,7 @@ use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::Direction;
 use profibus_devices::{BoxedDevice, Configured, ControlInbox, DeviceOptions};
 use profibus_dp::master::SlaveParams;
-use profibus_dp::sap;
+use profibus_dp::pdu::sap;
 use profibus_dp::slave::{DpSlave, SlaveState};
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::{DataTelegram, FunctionCode, Instant};

@@ -123,8 +123,8 @@ impl SlaveArgs {
     /// The slave in the bus file.
     pub fn slave_of<'a>(
         &self,
-        bus: &'a profibus_dp::busfile::BusFile,
-    ) -> Result<&'a profibus_dp::busfile::BusSlave> {
+        bus: &'a profibus_dp::config::busfile::BusFile,
+    ) -> Result<&'a profibus_dp::config::busfile::BusSlave> {
         bus.slaves
             .iter()
             .find(|s| s.params.address == self.slave)
@@ -141,7 +141,7 @@ impl SlaveArgs {
     /// An interrupt (Ctrl-C, SIGTERM) is an error.
     pub async fn run_master(
         &self,
-        bus: &profibus_dp::busfile::BusFile,
+        bus: &profibus_dp::config::busfile::BusFile,
         mut tick: impl FnMut(
             &mut profibus_dp::master::DpMaster,
             profibus_fdl::Instant,
@@ -191,7 +191,7 @@ pub fn latency(ms: Option<f64>, port: &Port) -> Result<Duration> {
 /// (opened with `rts`).
 pub fn master_station(
     port: &str,
-    bus: &profibus_dp::busfile::BusFile,
+    bus: &profibus_dp::config::busfile::BusFile,
     dp: profibus_dp::master::DpMaster,
     latency_ms: Option<f64>,
     rts: RtsArg,

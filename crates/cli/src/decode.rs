@@ -2,7 +2,7 @@
 
 use crate::common;
 use crate::out::outln;
-use profibus_dp::describe::summaries;
+use profibus_dp::pdu::describe::summaries;
 
 /// Decode one or more telegrams given as hex bytes.
 #[derive(clap::Args)]

@@ -3,7 +3,7 @@
 
 use crate::out::{out, outln};
 use anyhow::bail;
-use profibus_dp::gsd::{FileDiagnostic, Gsd, GsdCheck, GsdSummary, ParseOptions};
+use profibus_dp::config::gsd::{FileDiagnostic, Gsd, GsdCheck, GsdSummary, ParseOptions};
 use std::path::PathBuf;
 
 /// Show or check a GSD file.

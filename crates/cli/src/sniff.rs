@@ -7,7 +7,7 @@
 //! with `!! `, with their hex and the errors they raised. `--json` prints
 //! the same as JSON lines (`"error"` marks the skipped bytes), with the
 //! DP layer of each DP telegram in a `"dp"` object
-//! (`profibus_dp::decode`: service and decoded data unit; a response is
+//! (`profibus_dp::pdu::decode`: service and decoded data unit; a response is
 //! read by the request it answers); `--pcap` records the telegrams, and
 //! the skipped bytes flagged as corrupt. On Ctrl-C / SIGTERM it prints a summary line
 //! with the codec counters and stops. On a terminal (without `--json` or
@@ -16,8 +16,8 @@
 
 use crate::common;
 use anyhow::{Context, Result};
-use profibus_dp::decode::{DpTelegram, Exchanges};
-use profibus_dp::describe::TelegramSummary;
+use profibus_dp::pdu::decode::{DpTelegram, Exchanges};
+use profibus_dp::pdu::describe::TelegramSummary;
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::listen::{listen, Heard, ListenOptions};
 use profibus_fdl::pcap::PcapWriter;
@@ -67,7 +67,7 @@ struct Seen<T: serde::Serialize> {
     t_us: u64,
     #[serde(flatten)]
     what: T,
-    /// The DP layer (`profibus_dp::decode`), for DP telegrams.
+    /// The DP layer (`profibus_dp::pdu::decode`), for DP telegrams.
     #[serde(skip_serializing_if = "Option::is_none")]
     dp: Option<DpTelegram>,
 }

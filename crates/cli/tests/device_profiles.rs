@@ -317,9 +317,9 @@ fn bm4_set_once_address_survives_a_restart() {
 /// BNF_00D0.GSD with its vendor quirks written out in standard syntax by
 /// our GSD writer (pyprofibus reads no modules from the original).
 fn omega_gsd(dir: &TempDir) -> PathBuf {
-    let g = profibus::dp::gsd::Gsd::from_file(
+    let g = profibus::dp::config::gsd::Gsd::from_file(
         repo().join("gsd/BNF_00D0.GSD"),
-        profibus::dp::gsd::ParseOptions { lenient: true },
+        profibus::dp::config::gsd::ParseOptions { lenient: true },
     )
     .unwrap()
     .gsd;

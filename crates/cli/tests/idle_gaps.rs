@@ -54,7 +54,7 @@ mod common;
 
 use common::{dpctl, repo, Bus, Lines, Proc};
 use profibus::devices::generic::GenericDevice;
-use profibus::dp::gsd::{Gsd, ParseOptions};
+use profibus::dp::config::gsd::{Gsd, ParseOptions};
 use profibus::dp::slave::DpSlave;
 use profibus::fdl::pcap::PcapReader;
 use profibus::fdl::station::passive::PassiveStation;

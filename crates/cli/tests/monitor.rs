@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use profibus::dp::sap;
+use profibus::dp::pdu::sap;
 use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
 use profibus::fdl::Telegram;
 use serde_json::Value;

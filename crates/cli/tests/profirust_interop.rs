@@ -19,7 +19,7 @@
 mod common;
 
 use common::*;
-use profibus::dp::gsd::{Gsd, ParseOptions};
+use profibus::dp::config::gsd::{Gsd, ParseOptions};
 use profirust::{dp, fdl, phy};
 use std::io::{Read, Write};
 use std::os::unix::fs::OpenOptionsExt;

@@ -6,7 +6,7 @@
 use crate::channels::{ChannelError, ChannelMap, OutputWrite, OutputWriteError, Value};
 use crate::profile::{Configured, DeviceOptions, ProfileError};
 use crate::rfid::jobs::{MasterJobs, QueueError};
-use profibus_dp::busfile::{
+use profibus_dp::config::busfile::{
     BusFile, BusFileError, DeviceEntry, DeviceError, DeviceResolver, ResolvedDevice,
 };
 use profibus_dp::master::{CommandError, DpMaster};
@@ -56,7 +56,7 @@ impl DeviceResolver for Registry {
 }
 
 impl ProfiledBus {
-    /// Read and check a bus file (see `profibus_dp::busfile`), resolving
+    /// Read and check a bus file (see `profibus_dp::config::busfile`), resolving
     /// `device = "NAME"` slaves with the profile registry.
     pub fn load(path: impl AsRef<Path>) -> Result<ProfiledBus, BusFileError> {
         Self::with_registry(|r| BusFile::load_with(path, r))

@@ -21,7 +21,7 @@ use crate::generic::{GenericDevice, GenericError, InputPattern};
 use crate::jx2::{self, script::Interpreter};
 use crate::pkw::{self, client::PkwClient};
 use crate::{gsd_files, BoxedDevice, ControlInbox, DeviceOptions, ProfileError};
-use profibus_dp::gsd::{Gsd, GsdError, LookupError, SelectionError};
+use profibus_dp::config::gsd::{Gsd, GsdError, LookupError, SelectionError};
 use profibus_dp::master::{
     DpMaster, MasterConfig, MasterConfigError, MasterOptions, SlaveParams, SlaveState,
 };

@@ -20,8 +20,8 @@
 //! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`.
 
 use crate::kit::EventQueue;
-use profibus_dp::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::config::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_cfg, expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome,
     Features, IoLayout, Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX,
@@ -35,7 +35,7 @@ use crate::address::StoredAddress;
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::profile::{ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
-use profibus_dp::gsd::ParseOptions;
+use profibus_dp::config::gsd::ParseOptions;
 use serde::Deserialize;
 
 /// Most DP-V1 records the generic device stores.
@@ -547,7 +547,7 @@ impl Profile for GenericProfile {
 pub fn module_channels(modules: &[String], cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
     let mut m = ChannelMap::new();
     let (mut inp, mut out) = (0, 0);
-    for (slot, id) in profibus_dp::cfg::identifiers(cfg).enumerate() {
+    for (slot, id) in profibus_dp::pdu::cfg::identifiers(cfg).enumerate() {
         let id = id.map_err(|e| ProfileError::Config(e.to_string()))?;
         let name = modules
             .get(slot)

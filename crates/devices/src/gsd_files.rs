@@ -3,7 +3,7 @@
 //! same files are in the repository's `gsd/` folder (see its README for
 //! their sources and the ident numbers chosen).
 
-use profibus_dp::gsd::{decode_latin1, Gsd, GsdError, ParseOptions};
+use profibus_dp::config::gsd::{decode_latin1, Gsd, GsdError, ParseOptions};
 
 /// `DPCTL_GEN.GSD`: dpctl's generic test slave.
 pub const DPCTL_GEN: &[u8] = include_bytes!("../../../gsd/DPCTL_GEN.GSD");

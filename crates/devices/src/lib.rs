@@ -141,7 +141,10 @@ pub fn profile(name: &str) -> Result<&'static ProfileEntry, ProfileError> {
         .find(|p| p.name.eq_ignore_ascii_case(name))
         .ok_or_else(|| ProfileError::Unknown {
             name: name.to_string(),
-            suggestions: profibus_dp::names::DidYouMean::new(name, PROFILES.iter().map(|p| p.name)),
+            suggestions: profibus_dp::config::names::DidYouMean::new(
+                name,
+                PROFILES.iter().map(|p| p.name),
+            ),
             available: PROFILES
                 .iter()
                 .map(|p| p.name)
@@ -191,7 +194,7 @@ pub fn pkw_dialect(ident: u16, cfg: &[u8]) -> Result<&'static pkw::Dialect, PkwL
 /// The PKW parameter number of the parameter named `name` of a slave with
 /// ident number `ident` and GSD `gsd`, from the profile with that ident
 /// number (e.g. a BM4-O-PRO-01 variable: its module's parameter number).
-pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::gsd::Gsd, name: &str) -> Option<u16> {
+pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::config::gsd::Gsd, name: &str) -> Option<u16> {
     PROFILES
         .iter()
         .filter(|p| p.ident == Some(ident))

@@ -10,7 +10,7 @@
 use crate::pkw::client::{PkwClient, PkwError, StartError};
 use crate::pkw::{Command, Dialect, Reply};
 use crate::PkwLookupError;
-use profibus_dp::busfile::BusSlave;
+use profibus_dp::config::busfile::BusSlave;
 use profibus_dp::master::{DpMaster, SlaveTask, StartupTimeout};
 use profibus_fdl::Instant;
 use serde::Serialize;

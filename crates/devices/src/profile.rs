@@ -15,8 +15,8 @@
 use crate::channels::ChannelMap;
 use crate::pkw::Dialect;
 use crate::BoxedDevice;
-use profibus_dp::gsd::Gsd;
-use profibus_dp::names::{field_names, DidYouMean};
+use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::names::{field_names, DidYouMean};
 use serde::de::DeserializeOwned;
 use serde::Deserializer;
 use std::collections::VecDeque;
@@ -78,13 +78,13 @@ pub enum ProfileError {
     AddressFile(#[from] crate::address::AddressFileError),
     /// The GSD cannot give the configuration.
     #[error(transparent)]
-    Selection(#[from] profibus_dp::gsd::SelectionError),
+    Selection(#[from] profibus_dp::config::gsd::SelectionError),
     /// A module name matches no module of the GSD, or several.
     #[error(transparent)]
-    Module(#[from] profibus_dp::gsd::LookupError),
+    Module(#[from] profibus_dp::config::gsd::LookupError),
     /// A GSD file cannot be read.
     #[error(transparent)]
-    Gsd(#[from] profibus_dp::gsd::GsdError),
+    Gsd(#[from] profibus_dp::config::gsd::GsdError),
     /// The device cannot be built from this configuration (the
     /// device's own error).
     #[error(transparent)]
@@ -283,7 +283,7 @@ pub const MAX_OPTION_FILE: u64 = 1 << 20;
 /// [`ProfileError::File`], one too large or not UTF-8
 /// [`ProfileError::Table`].
 pub fn read_option_file(path: &std::path::Path) -> Result<String, ProfileError> {
-    use profibus_dp::file::{read_text, ReadFileError};
+    use profibus_dp::config::file::{read_text, ReadFileError};
     read_text(path, MAX_OPTION_FILE, "a device option file").map_err(|e| match e {
         ReadFileError::Io(error) => ProfileError::File {
             path: path.into(),
@@ -389,7 +389,7 @@ pub const STATE_EVENT: &str = "state";
 ///
 /// // The master side: write a setpoint by name, read it back.
 /// let channels = drive.channels(&cfg)?;
-/// let mut outputs = vec![0u8; profibus_dp::cfg::totals(&cfg)?.output_bytes];
+/// let mut outputs = vec![0u8; profibus_dp::pdu::cfg::totals(&cfg)?.output_bytes];
 /// channels.write_output("setpoint1", Value::Int(1500), &mut outputs)?;
 /// let setpoint = channels
 ///     .decode(Direction::Output, &outputs)

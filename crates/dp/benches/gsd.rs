@@ -6,7 +6,7 @@
 //! Run: `cargo bench -p profibus-dp --bench gsd`. Prints the median of
 //! several rounds per case.
 
-use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions, MAX_LINE_LEN};
+use profibus_dp::config::gsd::{decode_latin1, Gsd, ParseOptions, MAX_LINE_LEN};
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

@@ -7,8 +7,8 @@
 //! joins the token ring like any master, so a scan shares the bus with
 //! running masters.
 
-use crate::diag::SlaveDiag;
-use crate::sap;
+use crate::pdu::diag::SlaveDiag;
+use crate::pdu::sap;
 use profibus_fdl::station::active::{
     CycleResult, MasterApp, Outcome, Request, Service, TokenContext,
 };
@@ -180,7 +180,7 @@ impl MasterApp for LiveListScan {
                     dsap: Some(sap::SLAVE_DIAG),
                     ssap: Some(sap::MASTER),
                     data: &[],
-                    max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
+                    max_reply_len: Some(crate::pdu::diag::MAX_DIAG_LEN as u8),
                 });
             }
         }

@@ -3,7 +3,7 @@
 //! module tables, Chk_Cfg and User_Prm_Data of the five device files match
 //! expectations checked by hand against the manuals.
 
-use profibus_dp::gsd::{
+use profibus_dp::config::gsd::{
     DiagKind, Gsd, ParseOptions, PrmInput, PrmValue, Problem, Quirk, SelectionError,
 };
 use profibus_fdl::timing::Baud;
@@ -304,7 +304,7 @@ fn jetter_jx2_profi1() {
         ])
         .unwrap();
     assert_eq!(g.chk_cfg(&s).unwrap(), [0x57, 0xD3, 0x53, 0x63, 0xE7]);
-    let t = profibus_dp::cfg::totals(&g.chk_cfg(&s).unwrap()).unwrap();
+    let t = profibus_dp::pdu::cfg::totals(&g.chk_cfg(&s).unwrap()).unwrap();
     assert_eq!((t.input_bytes, t.output_bytes), (32, 24));
     assert_eq!(g.check_selection(&s), vec![]);
     assert_eq!(g.user_prm_data(&s, &[]).unwrap(), [0x80, 0x00, 0x00]);
@@ -378,7 +378,7 @@ fn dpctl_generic_slave() {
         SelectionError::UnknownParameter {
             name: "Moed".into(),
             position: None,
-            suggestions: profibus_dp::names::DidYouMean(vec!["Mode".into()])
+            suggestions: profibus_dp::config::names::DidYouMean(vec!["Mode".into()])
         }
     );
     let e = g.user_prm_data(&s, &v(&["0:Filter=1"])).unwrap_err();
@@ -462,7 +462,7 @@ fn corpus_files() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("gsd/corpus"))
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| profibus_dp::gsd::is_gsd_file_name(p))
+        .filter(|p| profibus_dp::config::gsd::is_gsd_file_name(p))
         .collect();
     v.sort();
     v
@@ -582,8 +582,9 @@ address = 6
 gsd = "siemens_simodrive_sensor_encoder.gsi"
 modules = ["Class 1 Multiturn"]
 "#;
-    let bus = profibus_dp::busfile::BusFile::parse(&root().join("gsd/corpus/bus.toml"), text)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let bus =
+        profibus_dp::config::busfile::BusFile::parse(&root().join("gsd/corpus/bus.toml"), text)
+            .unwrap_or_else(|e| panic!("{e}"));
     let s = &bus.master.slaves;
     assert_eq!(s[0].ident_number, 0x8042);
     assert_eq!(s[0].io_lengths().unwrap(), (2, 2));

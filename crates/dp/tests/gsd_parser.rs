@@ -1,7 +1,7 @@
 //! GSD parser behaviour: syntax, errors with positions, strict and lenient
 //! mode, limits on input size.
 
-use profibus_dp::gsd::{
+use profibus_dp::config::gsd::{
     decode_latin1, encode_latin1, Allowed, DiagKind, Gsd, GsdError, ParseOptions, Parsed,
     PrmDataType, Quirk, MAX_FILE_LEN, MAX_LINE_LEN,
 };
@@ -398,7 +398,7 @@ fn warnings_with<'a>(p: &'a Parsed, needle: &str) -> Vec<&'a str> {
 
 #[test]
 fn compact_station_modules_are_alternatives() {
-    use profibus_dp::gsd::Problem;
+    use profibus_dp::config::gsd::Problem;
     // A drive that offers three PPO types: one is configured, never the
     // three together, so their sizes are not added.
     let text = format!(

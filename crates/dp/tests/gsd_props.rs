@@ -5,7 +5,7 @@
 //!   never makes the parser panic, in either mode, and whatever it parses
 //!   survives write → parse unchanged.
 
-use profibus_dp::gsd::*;
+use profibus_dp::config::gsd::*;
 use proptest::prelude::*;
 use proptest::sample::select;
 
@@ -430,7 +430,7 @@ fn edited_file() -> impl Strategy<Value = String> {
     for d in [dir.clone(), dir.join("corpus")] {
         for e in std::fs::read_dir(d).unwrap() {
             let p = e.unwrap().path();
-            if profibus_dp::gsd::is_gsd_file_name(&p) {
+            if profibus_dp::config::gsd::is_gsd_file_name(&p) {
                 texts.push(decode_latin1(&std::fs::read(p).unwrap()));
             }
         }

@@ -23,7 +23,7 @@
 //!
 //! The test fails (it does not skip) when the venv is missing.
 
-use profibus_dp::gsd::{Gsd, ParseOptions};
+use profibus_dp::config::gsd::{Gsd, ParseOptions};
 use profibus_fdl::timing::Baud;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 //! allocator watches 1000 cycles through the passive station (receive,
 //! framing, the slave core, the device, the response) on this thread.
 
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{expect_cfg, Device, DpSlave, Features, IoLayout, Reason, SlaveState};
 use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::station::Station;

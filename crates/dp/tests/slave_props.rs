@@ -1,7 +1,7 @@
 //! Arbitrary request sequences never panic the slave, never produce an
 //! oversized response, and never leave outputs set outside Data_Exch.
 
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_cfg, ClearReason, Device, DpSlave, Dpv1Outcome, Features, IoLayout, Reason, SlaveState,
 };

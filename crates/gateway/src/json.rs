@@ -481,7 +481,7 @@ impl Gateway {
                 let text = if v.diag.is_empty() {
                     vec![]
                 } else {
-                    profibus_dp::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
+                    profibus_dp::pdu::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
                 };
                 let p = DiagPayload::new(addr, v.diag, text, ts_ms, cycle);
                 msgs.push((SlaveTopic::Diag, to_bytes(&p)));

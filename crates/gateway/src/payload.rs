@@ -7,8 +7,8 @@
 
 use crate::settings::SafeState;
 use profibus_devices::channels::ChannelValues;
-use profibus_dp::diag::SlaveDiag;
 use profibus_dp::master::{OperatingState, SlaveState};
+use profibus_dp::pdu::diag::SlaveDiag;
 use serde::{Serialize, Serializer};
 
 /// Lower-case hex of bytes without separators, as the payloads carry
@@ -169,7 +169,7 @@ pub struct DiagPayload<'a> {
     /// bytes.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ident_number: Option<u16>,
-    /// The whole diagnosis in words ([`profibus_dp::diag::describe`],
+    /// The whole diagnosis in words ([`profibus_dp::pdu::diag::describe`],
     /// with the GSD's texts when known).
     pub text: Vec<String>,
     /// Wall-clock time, ms since the Unix epoch.

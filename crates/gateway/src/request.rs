@@ -260,7 +260,7 @@ fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
                 only(o, &["op", "slot", "index", "hex"])?;
                 let data = match o.get("hex") {
                     Some(serde_json::Value::String(h)) => parse_hex(h)
-                        .filter(|d| d.len() <= profibus_dp::dpv1::MAX_DATA_LEN)
+                        .filter(|d| d.len() <= profibus_dp::pdu::dpv1::MAX_DATA_LEN)
                         .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
                     _ => return Err(malformed("`hex` is missing")),
                 };

@@ -4,7 +4,7 @@ use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::ChannelMap;
 use profibus_devices::pkw::Dialect;
 use profibus_devices::ProfileError;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 
 /// What the gateway knows of one configured slave.
 #[derive(Debug, Clone)]

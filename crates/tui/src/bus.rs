@@ -18,10 +18,10 @@
 use crate::source::{BusSnapshot, BusSource, Counters, Diagnosis};
 use crate::{fit, hex, Key};
 use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value};
-use profibus_dp::diag;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use profibus_dp::master::{OperatingState, SlaveState};
 use profibus_dp::monitor::{BusCounters, MasterStatus};
+use profibus_dp::pdu::diag;
 use profibus_fdl::{Baud, Instant};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};

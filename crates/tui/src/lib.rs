@@ -27,8 +27,8 @@
 //! draw them on a `TestBackend` and read the screen as text
 //! ([`screen_text`]). Nothing here decodes process data or diagnosis by
 //! itself: channels come from `profibus_devices::channels`, module sizes
-//! from the GSD (`profibus_dp::gsd`), diagnosis words from
-//! `profibus_dp::diag`, telegrams from `profibus_fdl::wire`.
+//! from the GSD (`profibus_dp::config::gsd`), diagnosis words from
+//! `profibus_dp::pdu::diag`, telegrams from `profibus_fdl::wire`.
 
 pub mod bus;
 pub mod lines;

@@ -149,7 +149,7 @@ impl SniffView {
                     if !d.is_broadcast() && kind.expects_reply() && kind != RequestKind::FdlStatus {
                         self.awaiting = Some((d.sa, d.da));
                     }
-                    let sap = d.dsap.and_then(|s| profibus_dp::sap::name(s & 0x3F));
+                    let sap = d.dsap.and_then(|s| profibus_dp::pdu::sap::name(s & 0x3F));
                     let service = match (sap, d.dsap) {
                         (Some(n), _) => n.to_string(),
                         (None, None) if !d.data.is_empty() => "Data_Exchange".into(),
@@ -164,7 +164,7 @@ impl SniffView {
                     if status.is_negative() {
                         s.negative += 1;
                     }
-                    let sap = d.ssap.and_then(|s| profibus_dp::sap::name(s & 0x3F));
+                    let sap = d.ssap.and_then(|s| profibus_dp::pdu::sap::name(s & 0x3F));
                     let service = match sap {
                         Some(n) => format!("{n} {}", status.mnemonic()),
                         None => status.mnemonic().to_string(),

@@ -37,7 +37,7 @@ pub enum StripError {
         /// The name given.
         name: String,
         /// The closest names of the catalogue.
-        suggestions: profibus_dp::names::DidYouMean,
+        suggestions: profibus_dp::config::names::DidYouMean,
         /// The catalogue's names.
         known: String,
     },
@@ -124,7 +124,7 @@ impl Strip {
                 return Err(StripError::Unknown {
                     position: i + 1,
                     name: name.to_string(),
-                    suggestions: profibus_dp::names::DidYouMean::new(
+                    suggestions: profibus_dp::config::names::DidYouMean::new(
                         name,
                         catalogue::CATALOGUE.iter().map(|t| t.name),
                     ),

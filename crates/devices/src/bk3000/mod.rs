@@ -52,7 +52,7 @@ use crate::{ControlError, ControlInbox};
 use catalogue::{Class, Role, Sim};
 use image::{CfgError, CfgReject, Dir, Image, Options, Owner, Strip};
 use prm::{CouplerDiag, StartupMode, UserPrm};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };

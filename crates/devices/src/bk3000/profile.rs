@@ -8,7 +8,7 @@ use super::{Bk3000, IDENT};
 use crate::channels::{Channel, ChannelMap, ChannelType, Direction, Scale};
 use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
 use std::path::PathBuf;
 

@@ -3,7 +3,7 @@ use super::image::{check_cfg, CfgError, Entry, Options, Strip, StripError};
 use super::master::Bk3000Master;
 use super::prm::{PrmError, StartupMode, UserPrm};
 use super::*;
-use profibus_dp::sap;
+use profibus_dp::pdu::sap;
 use profibus_dp::slave::{DpSlave, SlaveState};
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::{DataTelegram, FunctionCode, RequestKind};
@@ -64,7 +64,7 @@ fn catalogue_has_the_issue_terminals_and_the_manual_identifiers() {
     // Every variant's identifiers carry exactly its lengths.
     for t in CATALOGUE {
         for v in t.variants {
-            let tot = profibus_dp::cfg::totals(v.cfg).unwrap();
+            let tot = profibus_dp::pdu::cfg::totals(v.cfg).unwrap();
             assert_eq!(
                 (tot.input_bytes, tot.output_bytes),
                 (v.in_len as usize, v.out_len as usize),
@@ -705,7 +705,7 @@ fn gsd_file_agrees_with_the_emulation() {
     }
     // The GSD's parameters produce User_Prm_Data the coupler decodes the
     // same way.
-    let v: Vec<profibus_dp::gsd::PrmValue> = [
+    let v: Vec<profibus_dp::config::gsd::PrmValue> = [
         "2-byte PLC interface=used",
         "Start-up mode=parameter mode with Stat_Diag",
         "K-bus cycle counter=on",
@@ -747,7 +747,7 @@ fn gsd_file_agrees_with_the_emulation() {
 #[test]
 fn gsd_names_the_coupler_diagnosis() {
     let g = crate::gsd_files::parse(crate::gsd_files::BK30BECF).unwrap();
-    let words = |d: &[u8]| profibus_dp::diag::describe(d, Some(&g), false);
+    let words = |d: &[u8]| profibus_dp::pdu::diag::describe(d, Some(&g), false);
     let mut b = Bench::new("KL1104,KL2134,KL3102,KL4002,KL9010");
     b.start(&[0; 10], &[0x50, 0x50, 0x50, 0x60, 0x10, 0x20]);
     let w = words(&b.diag());

@@ -66,8 +66,8 @@ use crate::address::{AddressFileError, StoredAddress};
 use crate::kit::{EventQueue, InboxSchedule};
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN, PKW_MODULE};
 use crate::{ControlError, ControlInbox};
-use profibus_dp::gsd::{decode_latin1, Gsd, ParseOptions};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::config::gsd::{decode_latin1, Gsd, ParseOptions};
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };

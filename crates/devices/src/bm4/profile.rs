@@ -7,7 +7,7 @@ use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::pkw::{Dialect, PKW_MODULE};
 use crate::profile::{opt_int, read_table, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
 use std::path::PathBuf;
 

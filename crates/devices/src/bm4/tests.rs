@@ -1,7 +1,7 @@
 use super::PKW as D;
 use super::*;
 use crate::pkw::Pkw;
-use profibus_dp::gsd::{Gsd, ParseOptions};
+use profibus_dp::config::gsd::{Gsd, ParseOptions};
 
 const T0: Instant = Instant::ZERO;
 

@@ -17,7 +17,7 @@
 //! WORD one word; DINT, UDINT, DWORD and REAL two words. A BOOL takes a
 //! whole byte (the manual gives no bit packing).
 
-use profibus_dp::gsd::{Gsd, Module};
+use profibus_dp::config::gsd::{Gsd, Module};
 use serde::Deserialize;
 use std::fmt;
 

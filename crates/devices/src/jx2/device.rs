@@ -1,7 +1,7 @@
 //! The bus side of the JX2-PROFI1: [`Device`] for the DP slave core.
 
 use super::{DiagKind, ErrorNumber, Jx2};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout, OwnAddress,
     Reason, SlaveState, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_WRITE_LENGTH,

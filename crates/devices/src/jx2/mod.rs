@@ -1076,7 +1076,7 @@ impl Jx2 {
         let mut outputs = 0usize;
         let mut cin: Vec<(usize, usize)> = Vec::new();
         let mut cout: Vec<(usize, usize)> = Vec::new();
-        for id in profibus_dp::cfg::identifiers(cfg) {
+        for id in profibus_dp::pdu::cfg::identifiers(cfg) {
             let id = id?;
             if let Some(len) = id.input {
                 let n = id.input_bytes();
@@ -1141,7 +1141,7 @@ impl Jx2 {
 pub enum CfgMismatch {
     /// An identifier does not decode.
     #[error(transparent)]
-    Identifier(#[from] profibus_dp::cfg::CfgError),
+    Identifier(#[from] profibus_dp::pdu::cfg::CfgError),
     /// The lengths differ from 1x102 / 1x103.
     #[error(
         "the configuration has {inputs} input and {outputs} output bytes, the module {} and {} (1x102 = {}, 1x103 = {})",

@@ -13,7 +13,7 @@ use super::{Plc, ScriptedJx2, IDENT};
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::profile::{ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
 use std::path::PathBuf;
 
@@ -183,7 +183,8 @@ consistent_outputs, consistent_output_offset";
     }
 
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
-        let t = profibus_dp::cfg::totals(cfg).map_err(|e| ProfileError::Config(e.to_string()))?;
+        let t =
+            profibus_dp::pdu::cfg::totals(cfg).map_err(|e| ProfileError::Config(e.to_string()))?;
         let mut m = ChannelMap::new();
         // Word n of an image is register (1x112) + n or (1x113) + n on
         // the PLC side; named by position.

@@ -6,7 +6,7 @@ use super::script::{Interpreter, Progress};
 use super::Plc;
 use crate::kit::INBOX_PERIOD;
 use crate::profile::ControlInbox;
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout, OwnAddress,
     Reason, SlaveState,

@@ -3,7 +3,7 @@
 //! the register clients (stdin, a control socket, a script).
 
 use super::{Jx2, WriteEffect};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome, Features, IoLayout, OwnAddress,
     Reason, SlaveState,

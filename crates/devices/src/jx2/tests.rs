@@ -4,7 +4,7 @@
 
 use super::script::{Command, Interpreter, Progress};
 use super::*;
-use profibus_dp::diag::SlaveDiag;
+use profibus_dp::pdu::diag::SlaveDiag;
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
@@ -326,7 +326,7 @@ fn error_7_prm_and_error_8_cfg() {
     let sd = SlaveDiag::parse(&d).unwrap();
     assert!(sd
         .status1
-        .contains(profibus_dp::diag::StationStatus1::PRM_FAULT));
+        .contains(profibus_dp::pdu::diag::StationStatus1::PRM_FAULT));
     r.plc("write 12101 6");
     r.prm(IDENT);
     assert_eq!(r.reg(12132), 1, "Wait_Cfg");
@@ -339,7 +339,7 @@ fn error_7_prm_and_error_8_cfg() {
     let sd = SlaveDiag::parse(&sd_bytes).unwrap();
     assert!(sd
         .status1
-        .contains(profibus_dp::diag::StationStatus1::CFG_FAULT));
+        .contains(profibus_dp::pdu::diag::StationStatus1::CFG_FAULT));
     r.prm(IDENT);
     r.cfg(&[0xD3, 0x63]);
     assert_eq!(
@@ -395,7 +395,7 @@ fn errors_9_10_diagnosis_and_example_2_kinds() {
     let sd = SlaveDiag::parse(&d).unwrap();
     assert!(!sd
         .status1
-        .contains(profibus_dp::diag::StationStatus1::EXT_DIAG));
+        .contains(profibus_dp::pdu::diag::StationStatus1::EXT_DIAG));
     assert_eq!(r.reg(12139), 0, "fetched");
     // Diag2: extended, 4 user bytes 01 00 FF FF.
     let w = r.plc("write 12140 14\nwrite 12146 1\nwrite 12147 65535\nwrite 12101 8\nwrite 12101 7");
@@ -412,7 +412,7 @@ fn errors_9_10_diagnosis_and_example_2_kinds() {
     let sd = SlaveDiag::parse(&d).unwrap();
     assert!(sd
         .status1
-        .contains(profibus_dp::diag::StationStatus1::EXT_DIAG));
+        .contains(profibus_dp::pdu::diag::StationStatus1::EXT_DIAG));
     // Diag3: static, 2 user bytes FF 00: the master stops exchanging.
     r.plc("write 12101 6\nwrite 12140 12\nwrite 12146 255\nwrite 12101 9");
     let d = r.diag();
@@ -420,13 +420,13 @@ fn errors_9_10_diagnosis_and_example_2_kinds() {
     let sd = SlaveDiag::parse(&d).unwrap();
     assert!(sd
         .status2
-        .contains(profibus_dp::diag::StationStatus2::STAT_DIAG));
+        .contains(profibus_dp::pdu::diag::StationStatus2::STAT_DIAG));
     r.plc("write 12140 10\nwrite 12101 7");
     let sd_bytes = r.diag();
     let sd = SlaveDiag::parse(&sd_bytes).unwrap();
     assert!(!sd
         .status2
-        .contains(profibus_dp::diag::StationStatus2::STAT_DIAG));
+        .contains(profibus_dp::pdu::diag::StationStatus2::STAT_DIAG));
     // Command 10 aborts a pending diagnosis: the old one stays.
     let w = r.plc("write 12140 14\nwrite 12101 8\nread 12139\nwrite 12101 10\nread 12139");
     assert_eq!(

@@ -82,8 +82,8 @@ use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
 use crate::ControlError;
 use crate::ControlInbox;
 use params::ParamTable;
-use profibus_dp::cfg::{identifiers, CfgError};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::cfg::{identifiers, CfgError};
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };

@@ -7,7 +7,7 @@ use super::tags::TagField;
 use super::Rfid;
 use crate::channels::ChannelMap;
 use crate::{ControlInbox, DeviceOptions, ProfileError};
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_dp::slave::Device;
 use profibus_fdl::Instant;

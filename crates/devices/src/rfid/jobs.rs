@@ -7,7 +7,7 @@
 use super::client::{RfidClient, RfidError, StartError};
 use super::commands::{nak_code, NakText};
 use super::{CFG, IDENT};
-use profibus_dp::busfile::BusSlave;
+use profibus_dp::config::busfile::BusSlave;
 use profibus_dp::master::{DpMaster, SlaveState, SlaveTask, StartupTimeout};
 use profibus_fdl::wire::Hex;
 use profibus_fdl::Instant;

@@ -58,7 +58,7 @@ use crate::kit::{EventQueue, InboxSchedule};
 use crate::{ControlError, ControlInbox};
 use commands::{Nak, Reader};
 use link::{Line, ReaderLink, Received};
-use profibus_dp::prm::SetPrm;
+use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_cfg, ClearReason, Device, DeviceEvent, Features, IoLayout, Reason,
 };

@@ -6,7 +6,7 @@ use super::{Rfid, CFG, IDENT, PAYLOAD_MAX};
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::profile::{ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
-use profibus_dp::gsd::Gsd;
+use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
 use std::path::PathBuf;
 

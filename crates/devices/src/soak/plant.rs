@@ -123,7 +123,7 @@ fn jx2_plc(address: u8) -> Result<BoxedDevice, SoakError> {
 /// The master's side of the built-in generic slave.
 #[derive(Debug)]
 struct BuiltIn {
-    gsd: profibus_dp::gsd::Gsd,
+    gsd: profibus_dp::config::gsd::Gsd,
     modules: Vec<String>,
 }
 
@@ -131,7 +131,7 @@ impl Configured for BuiltIn {
     fn name(&self) -> &'static str {
         "generic"
     }
-    fn gsd(&self) -> &profibus_dp::gsd::Gsd {
+    fn gsd(&self) -> &profibus_dp::config::gsd::Gsd {
         &self.gsd
     }
     fn gsd_file(&self) -> Vec<u8> {

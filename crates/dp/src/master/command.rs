@@ -20,7 +20,7 @@
 //! caller ([`CommandError::Channels`]).
 
 use super::{DpMaster, Job, JobId, OperatingState};
-use crate::control::ControlCommand;
+use crate::pdu::control::ControlCommand;
 use serde::de::{self, Deserializer};
 use serde::Deserialize;
 
@@ -414,7 +414,7 @@ fn outputs<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<u8>>, D::Error>
 }
 
 fn record<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<u8>>, D::Error> {
-    let data = bytes(d, "`data` (a DP-V1 record)", crate::dpv1::MAX_DATA_LEN)?;
+    let data = bytes(d, "`data` (a DP-V1 record)", crate::pdu::dpv1::MAX_DATA_LEN)?;
     if data.as_ref().is_some_and(Vec::is_empty) {
         return Err(de::Error::custom("`data` (a DP-V1 record) is empty"));
     }

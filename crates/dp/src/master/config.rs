@@ -1,7 +1,7 @@
 //! Configuration of a DP master and of each slave it polls.
 
-use crate::cfg::{self, CfgError};
-use crate::prm::{PrmStationStatus, SetPrm};
+use crate::pdu::cfg::{self, CfgError};
+use crate::pdu::prm::{PrmStationStatus, SetPrm};
 use profibus_fdl::timing::BusParams;
 use std::time::Duration;
 
@@ -110,9 +110,9 @@ impl SlaveParams {
         let mut user = self.user_prm_data.clone();
         if self.dpv1 && !user.is_empty() {
             if base_1ms {
-                user[0] |= crate::prm::Dpv1Status1::WD_BASE_1MS.bits();
+                user[0] |= crate::pdu::prm::Dpv1Status1::WD_BASE_1MS.bits();
             } else {
-                user[0] &= !crate::prm::Dpv1Status1::WD_BASE_1MS.bits();
+                user[0] &= !crate::pdu::prm::Dpv1Status1::WD_BASE_1MS.bits();
             }
         }
         let prm = SetPrm {

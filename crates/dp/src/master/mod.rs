@@ -110,10 +110,10 @@ pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
-use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
-use crate::diag::SlaveDiag;
-use crate::dpv1::{Dpv1Error, Pdu};
-use crate::sap;
+use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
+use crate::pdu::diag::SlaveDiag;
+use crate::pdu::dpv1::{Dpv1Error, Pdu};
+use crate::pdu::sap;
 use profibus_fdl::station::active::{
     CycleResult, FdlEvent, MasterApp, Outcome, Request, Service, TokenContext,
 };
@@ -326,7 +326,7 @@ pub enum BadResponse {
     },
     /// A DP-V1 PDU that does not decode.
     #[error(transparent)]
-    Dpv1(#[from] crate::dpv1::Dpv1ParseError),
+    Dpv1(#[from] crate::pdu::dpv1::Dpv1ParseError),
 }
 
 impl JobResult {
@@ -360,21 +360,21 @@ pub enum FaultReason {
     },
     /// The station status bytes report a fault (Prm_Fault, Cfg_Fault,
     /// Not_Supported, …); shown as the status bits in words.
-    #[error("{}", crate::diag::SlaveDiag {
+    #[error("{}", crate::pdu::diag::SlaveDiag {
         status1: *status1,
         status2: *status2,
         status3: *status3,
-        master_address: crate::diag::NO_MASTER,
+        master_address: crate::pdu::diag::NO_MASTER,
         ident_number: 0,
         ext_diag: &[],
     }.status_words())]
     Station {
         /// Station_Status_1.
-        status1: crate::diag::StationStatus1,
+        status1: crate::pdu::diag::StationStatus1,
         /// Station_Status_2.
-        status2: crate::diag::StationStatus2,
+        status2: crate::pdu::diag::StationStatus2,
         /// Station_Status_3.
-        status3: crate::diag::StationStatus3,
+        status3: crate::pdu::diag::StationStatus3,
     },
 }
 
@@ -391,7 +391,7 @@ impl FaultReason {
     /// same fault bits of Station_Status_1 (Prm_Fault, Cfg_Fault,
     /// Not_Supported; the other status bits may change between reads).
     pub fn same_as(&self, other: &FaultReason) -> bool {
-        use crate::diag::StationStatus1 as S1;
+        use crate::pdu::diag::StationStatus1 as S1;
         let bits = S1::PRM_FAULT | S1::CFG_FAULT | S1::NOT_SUPPORTED;
         match (self, other) {
             (FaultReason::Station { status1: a, .. }, FaultReason::Station { status1: b, .. }) => {
@@ -585,7 +585,7 @@ pub enum MasterConfigError {
         /// Station address.
         address: u8,
         /// The error.
-        error: crate::cfg::CfgError,
+        error: crate::pdu::cfg::CfgError,
     },
     /// A slave's I/O exceeds 244 bytes in one direction.
     #[error("slave {address}: {input} input / {output} output bytes exceed 244")]
@@ -1007,7 +1007,7 @@ impl DpMaster {
     /// (then it only counts, in [`Self::startup_failed`]). A new Cfg_Fault
     /// asks for the slave's real configuration (Get_Cfg).
     fn fault(&mut self, i: usize, reason: FaultReason) {
-        use crate::diag::StationStatus1 as S1;
+        use crate::pdu::diag::StationStatus1 as S1;
         let s = &mut self.slaves[i];
         let address = s.p.address;
         if s.fault.as_ref().is_some_and(|(f, _)| f.same_as(&reason)) {
@@ -1061,7 +1061,7 @@ impl DpMaster {
             dsap: Some(sap::SLAVE_DIAG),
             ssap: Some(sap::MASTER),
             data: &[],
-            max_reply_len: Some(crate::diag::MAX_DIAG_LEN as u8),
+            max_reply_len: Some(crate::pdu::diag::MAX_DIAG_LEN as u8),
         };
         let (step, req) = match s.state {
             SlaveState::Diag if s.read_cfg => (
@@ -1326,10 +1326,10 @@ impl DpMaster {
         if changed {
             self.emit(MasterEvent::Diag { address });
         }
-        use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
+        use crate::pdu::diag::{StationStatus1 as S1, StationStatus2 as S2};
         let state = self.slaves[i].state;
         let ident = self.slaves[i].p.ident_number;
-        let locked_by_other = d.master_address != crate::diag::NO_MASTER
+        let locked_by_other = d.master_address != crate::pdu::diag::NO_MASTER
             && d.master_address != me
             && !d.status2.contains(S2::PRM_REQ);
         match state {
@@ -1421,7 +1421,7 @@ impl DpMaster {
         let da = j.job.address();
         let max_reply_len = match j.job {
             Job::SetSlaveAdd { .. } => Some(0),
-            Job::ReadDiag { .. } => Some(crate::diag::MAX_DIAG_LEN as u8),
+            Job::ReadDiag { .. } => Some(crate::pdu::diag::MAX_DIAG_LEN as u8),
             // Get_Cfg, Rd_Inp, Rd_Outp of any slave and DP-V1 answers
             // carry up to 244 bytes: as long as the longest telegram.
             _ => None,

@@ -8,7 +8,7 @@ use super::{
     CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState, SlaveState,
     SlaveStats,
 };
-use crate::gsd::Gsd;
+use crate::config::gsd::Gsd;
 use profibus_fdl::station::active::FdlEvent;
 use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, Instant};
@@ -42,7 +42,7 @@ pub enum MasterReport {
         /// The Slave_Diag data unit.
         #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         raw: Vec<u8>,
-        /// The diagnosis in words ([`crate::diag::describe`]).
+        /// The diagnosis in words ([`crate::pdu::diag::describe`]).
         words: Vec<String>,
     },
     /// A parameterisation or configuration fault.
@@ -124,7 +124,7 @@ impl MasterReport {
             MasterEvent::Diag { address } => {
                 let raw = m.diag(address).unwrap_or(&[]).to_vec();
                 let dpv1 = m.slave_params(address).is_some_and(|p| p.dpv1);
-                let words = crate::diag::describe(&raw, gsd, dpv1);
+                let words = crate::pdu::diag::describe(&raw, gsd, dpv1);
                 MasterReport::Diag {
                     slave: address,
                     raw,
@@ -235,7 +235,7 @@ pub struct CfgGroup {
     /// The identifier bytes.
     #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
     pub bytes: Vec<u8>,
-    /// The identifiers in words ([`crate::cfg::Identifier`]'s `Display`,
+    /// The identifiers in words ([`crate::pdu::cfg::Identifier`]'s `Display`,
     /// joined by `, `), e.g. `2 words in+out`.
     pub meaning: String,
     /// The GSD module with exactly these bytes (several names joined by
@@ -261,7 +261,7 @@ impl CfgGroup {
                 .max();
             let len = match longest {
                 Some(n) => n,
-                None => match crate::cfg::identifiers(rest).next() {
+                None => match crate::pdu::cfg::identifiers(rest).next() {
                     Some(Ok(id)) => id.raw.len(),
                     Some(Err(e)) => {
                         out.push(CfgGroup {
@@ -275,7 +275,7 @@ impl CfgGroup {
                 },
             };
             let group = &rest[..len];
-            let meaning = crate::cfg::identifiers(group)
+            let meaning = crate::pdu::cfg::identifiers(group)
                 .map(|id| id.map_or_else(|e| e.to_string(), |id| id.to_string()))
                 .collect::<Vec<_>>()
                 .join(", ");

@@ -1,7 +1,7 @@
 //! Unit tests of the master core driven directly through `MasterApp`.
 
 use super::*;
-use crate::diag::{StationStatus1 as S1, StationStatus2 as S2};
+use crate::pdu::diag::{StationStatus1 as S1, StationStatus2 as S2};
 use profibus_fdl::timing::{Baud, BusParams};
 use profibus_fdl::wire::StationType;
 

@@ -18,7 +18,7 @@
 //!   the inputs of its response, split by GSD module when the bus file
 //!   names the modules, and decoded into named channels by an
 //!   [`ImageDecoder`] (device profiles give one, `profibus_devices`);
-//! - its last diagnosis, raw and in words ([`crate::diag::describe`]);
+//! - its last diagnosis, raw and in words ([`crate::pdu::diag::describe`]);
 //! - Data_Exchange cycle times, retries (a request repeated with the same
 //!   FCB, IEC 61158-4-3 frame count bit rules), errors (no reply, negative
 //!   responses, corrupt telegrams while a reply was due) and restarts.
@@ -65,12 +65,12 @@
 //! }
 //! ```
 
-use crate::busfile::BusFile;
-use crate::control::{ControlCommand, GlobalControl};
-use crate::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
-use crate::gsd::Gsd;
+use crate::config::busfile::BusFile;
+use crate::config::gsd::Gsd;
 use crate::master::{OperatingState, SlaveState};
-use crate::sap;
+use crate::pdu::control::{ControlCommand, GlobalControl};
+use crate::pdu::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
+use crate::pdu::sap;
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::tap::TapEvent;
 use profibus_fdl::wire::{

@@ -8,9 +8,9 @@
 //! and configurations it accepts, what its outputs do, what its inputs
 //! are, its extended diagnosis and its DP-V1 records.
 
-use crate::diag::ChannelIo;
-use crate::dpv1::{Dpv1Error, FN_READ, FN_WRITE};
-use crate::prm::SetPrm;
+use crate::pdu::diag::ChannelIo;
+use crate::pdu::dpv1::{AccessError, ApplicationError, Dpv1Error, ErrorClass, FN_READ, FN_WRITE};
+use crate::pdu::prm::SetPrm;
 use crate::slave::SlaveState;
 use profibus_fdl::Instant;
 use std::borrow::Cow;
@@ -169,23 +169,23 @@ impl Dpv1Outcome {
 }
 
 /// Error class "application" (Error_Code_1 high nibble 0xA).
-pub const ERR_CLASS_APPLICATION: u8 = 0xA;
+pub const ERR_CLASS_APPLICATION: u8 = ErrorClass::Application.code();
 /// Error class "access" (0xB).
-pub const ERR_CLASS_ACCESS: u8 = 0xB;
+pub const ERR_CLASS_ACCESS: u8 = ErrorClass::Access.code();
 /// Error class "resource" (0xC).
-pub const ERR_CLASS_RESOURCE: u8 = 0xC;
+pub const ERR_CLASS_RESOURCE: u8 = ErrorClass::Resource.code();
 /// Application error code "feature not supported".
-pub const ERR_FEATURE_NOT_SUPPORTED: u8 = 9;
+pub const ERR_FEATURE_NOT_SUPPORTED: u8 = ApplicationError::FeatureNotSupported.code();
 /// Access error code "invalid index".
-pub const ERR_INVALID_INDEX: u8 = 0;
+pub const ERR_INVALID_INDEX: u8 = AccessError::InvalidIndex.code();
 /// Access error code "write length error".
-pub const ERR_WRITE_LENGTH: u8 = 1;
+pub const ERR_WRITE_LENGTH: u8 = AccessError::WriteLength.code();
 /// Access error code "invalid slot".
-pub const ERR_INVALID_SLOT: u8 = 2;
+pub const ERR_INVALID_SLOT: u8 = AccessError::InvalidSlot.code();
 /// Access error code "state conflict".
-pub const ERR_STATE_CONFLICT: u8 = 5;
+pub const ERR_STATE_CONFLICT: u8 = AccessError::StateConflict.code();
 /// Access error code "invalid range".
-pub const ERR_INVALID_RANGE: u8 = 7;
+pub const ERR_INVALID_RANGE: u8 = AccessError::InvalidRange.code();
 
 /// Where the slave's station address comes from (see
 /// [`Device::own_address`]).
@@ -355,7 +355,7 @@ impl<'a> DiagWriter<'a> {
 /// is short:
 ///
 /// ```
-/// use profibus_dp::prm::SetPrm;
+/// use profibus_dp::pdu::prm::SetPrm;
 /// use profibus_dp::slave::{Device, IoLayout, Reason, expect_cfg};
 /// use profibus_fdl::Instant;
 ///
@@ -468,7 +468,7 @@ pub trait Device {
         _seq: u8,
     ) -> Result<(), Dpv1Error> {
         Err(Dpv1Error::dpv1(
-            crate::dpv1::FN_ALARM_ACK,
+            crate::pdu::dpv1::FN_ALARM_ACK,
             ERR_CLASS_APPLICATION,
             ERR_FEATURE_NOT_SUPPORTED,
         ))
@@ -648,7 +648,7 @@ pub fn expect_user_prm_len(prm: &SetPrm<'_>, len: usize) -> Result<(), Reason> {
 /// The cyclic layout of a configuration (sum of its identifiers), or why
 /// it cannot be decoded or exceeds 244 bytes in a direction.
 pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
-    let t = crate::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
+    let t = crate::pdu::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
     if t.input_bytes > super::MAX_IO_LEN || t.output_bytes > super::MAX_IO_LEN {
         return Err(format!(
             "configuration has {} input and {} output bytes, at most 244 each way",
@@ -673,7 +673,7 @@ pub(crate) fn hex(bytes: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diag::{ext_blocks, ExtDiagBlock, LINE_BREAK_3_2};
+    use crate::pdu::diag::{ext_blocks, ExtDiagBlock, LINE_BREAK_3_2};
 
     #[test]
     fn diag_writer_blocks_and_overflow() {

@@ -8,7 +8,7 @@
 //! parameters, configuration, process data, diagnosis, DP-V1 records).
 //!
 //! ```
-//! use profibus_dp::prm::SetPrm;
+//! use profibus_dp::pdu::prm::SetPrm;
 //! use profibus_dp::slave::{expect_cfg, Device, DpSlave, IoLayout, Reason, SlaveState};
 //! use profibus_fdl::station::passive::{PassiveStation, Responder};
 //! use profibus_fdl::{Baud, BusParams, Instant};
@@ -90,13 +90,13 @@ pub use device::{
 };
 pub use state::{control_words, SlaveEvent, SlaveState};
 
-use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
-use crate::diag::{
+use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
+use crate::pdu::diag::{
     StationStatus1, StationStatus2, StationStatus3, DIAG_HEADER_LEN, MAX_DIAG_LEN, NO_MASTER,
 };
-use crate::dpv1::{Dpv1Error, Pdu, FN_ALARM_ACK, FN_READ, FN_WRITE, MAX_DATA_LEN};
-use crate::prm::{Dpv1Status1, Dpv1Status2, PrmStationStatus, SetPrm};
-use crate::sap;
+use crate::pdu::dpv1::{Dpv1Error, Pdu, FN_ALARM_ACK, FN_READ, FN_WRITE, MAX_DATA_LEN};
+use crate::pdu::prm::{Dpv1Status1, Dpv1Status2, PrmStationStatus, SetPrm};
+use crate::pdu::sap;
 use profibus_fdl::station::earliest;
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::wire::consts::BROADCAST;
@@ -922,11 +922,9 @@ impl<D: Device> DpSlave<D> {
                 self.c1_finish(FN_WRITE, slot, index, data.len() as u8, outcome);
             }
             Ok(_) => self.c1_error(Dpv1Error::dpv1(function, ERR_CLASS_APPLICATION, 9)),
-            Err(crate::dpv1::Dpv1ParseError::LengthByte { .. }) => self.c1_error(Dpv1Error::dpv1(
-                function,
-                ERR_CLASS_ACCESS,
-                ERR_WRITE_LENGTH,
-            )),
+            Err(crate::pdu::dpv1::Dpv1ParseError::LengthByte { .. }) => self.c1_error(
+                Dpv1Error::dpv1(function, ERR_CLASS_ACCESS, ERR_WRITE_LENGTH),
+            ),
             Err(_) => self.c1_error(Dpv1Error::dpv1(
                 function,
                 ERR_CLASS_APPLICATION,

@@ -1,7 +1,7 @@
 //! The slave's DP state and the events it reports to its application.
 
 use super::device::{ClearReason, DeviceEvent, Reason};
-use crate::control::ControlCommand;
+use crate::pdu::control::ControlCommand;
 use std::collections::VecDeque;
 use std::fmt;
 use std::time::Duration;

@@ -1,7 +1,7 @@
 //! Behaviour of the slave core, request by request.
 
 use super::*;
-use crate::diag::{ext_blocks, ExtDiagBlock, SlaveDiag};
+use crate::pdu::diag::{ext_blocks, ExtDiagBlock, SlaveDiag};
 use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::station::Station;
 use profibus_fdl::{Baud, BusParams, Telegram};

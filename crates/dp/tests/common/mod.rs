@@ -16,7 +16,7 @@ pub fn gsd_files() -> Vec<PathBuf> {
     for dir in ["gsd", "gsd/corpus"] {
         for e in std::fs::read_dir(root().join(dir)).unwrap() {
             let p = e.unwrap().path();
-            if profibus_dp::gsd::is_gsd_file_name(&p) {
+            if profibus_dp::config::gsd::is_gsd_file_name(&p) {
                 v.push(p);
             }
         }

@@ -9,77 +9,38 @@ const FCB_BIT: u8 = 0x20;
 /// Bit 4 of a request FC: the frame count bit is valid.
 const FCV_BIT: u8 = 0x10;
 
-/// The service a request telegram asks for (FC bits 3-0, with bit 7 for
-/// Clock Value).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RequestKind {
-    /// 0: Time Event (clock synchronisation).
-    TimeEvent,
-    /// 3: Send Data with Acknowledge, low priority.
-    SdaLow,
-    /// 4: Send Data with No acknowledge, low priority.
-    SdnLow,
-    /// 5: Send Data with Acknowledge, high priority.
-    SdaHigh,
-    /// 6: Send Data with No acknowledge, high priority.
-    SdnHigh,
-    /// 7: Send and Request Data with multicast reply (MSRD).
-    Msrd,
-    /// 9: Request FDL Status (live list, GAP polling).
-    FdlStatus,
-    /// 0xC: Send and Request Data, low priority.
-    SrdLow,
-    /// 0xD: Send and Request Data, high priority.
-    SrdHigh,
-    /// 0xE: Request Ident (with reply).
-    Ident,
-    /// 0xF: Request LSAP status (deprecated).
-    LsapStatus,
-    /// 0x80: Clock Value (bit 7 set, function 0).
-    ClockValue,
-    /// Any other code: the function bits 3-0 with bit 7.
-    Unknown(u8),
+crate::enum_with_unknown! {
+    /// The service a request telegram asks for (FC bits 3-0, with bit 7
+    /// for Clock Value); `Unknown` keeps the function bits 3-0 with bit 7.
+    pub enum RequestKind(u8 & 0x8F) {
+        /// 0: Time Event (clock synchronisation).
+        TimeEvent = 0x00 => "TE",
+        /// 3: Send Data with Acknowledge, low priority.
+        SdaLow = 0x03 => "SDA_low",
+        /// 4: Send Data with No acknowledge, low priority.
+        SdnLow = 0x04 => "SDN_low",
+        /// 5: Send Data with Acknowledge, high priority.
+        SdaHigh = 0x05 => "SDA_high",
+        /// 6: Send Data with No acknowledge, high priority.
+        SdnHigh = 0x06 => "SDN_high",
+        /// 7: Send and Request Data with multicast reply (MSRD).
+        Msrd = 0x07 => "MSRD",
+        /// 9: Request FDL Status (live list, GAP polling).
+        FdlStatus = 0x09 => "FDL_Status",
+        /// 0xC: Send and Request Data, low priority.
+        SrdLow = 0x0C => "SRD_low",
+        /// 0xD: Send and Request Data, high priority.
+        SrdHigh = 0x0D => "SRD_high",
+        /// 0xE: Request Ident (with reply).
+        Ident = 0x0E => "Ident",
+        /// 0xF: Request LSAP status (deprecated).
+        LsapStatus = 0x0F => "LSAP_Status",
+        /// 0x80: Clock Value (bit 7 set, function 0).
+        ClockValue = 0x80 => "CV",
+    }
 }
 
 impl RequestKind {
-    /// Decode the function number (FC bits 3-0 plus bit 7).
-    pub const fn from_code(code: u8) -> Self {
-        match code {
-            0x00 => Self::TimeEvent,
-            0x03 => Self::SdaLow,
-            0x04 => Self::SdnLow,
-            0x05 => Self::SdaHigh,
-            0x06 => Self::SdnHigh,
-            0x07 => Self::Msrd,
-            0x09 => Self::FdlStatus,
-            0x0C => Self::SrdLow,
-            0x0D => Self::SrdHigh,
-            0x0E => Self::Ident,
-            0x0F => Self::LsapStatus,
-            0x80 => Self::ClockValue,
-            other => Self::Unknown(other & 0x8F),
-        }
-    }
-
-    /// The function number (FC bits 3-0 plus bit 7).
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::TimeEvent => 0x00,
-            Self::SdaLow => 0x03,
-            Self::SdnLow => 0x04,
-            Self::SdaHigh => 0x05,
-            Self::SdnHigh => 0x06,
-            Self::Msrd => 0x07,
-            Self::FdlStatus => 0x09,
-            Self::SrdLow => 0x0C,
-            Self::SrdHigh => 0x0D,
-            Self::Ident => 0x0E,
-            Self::LsapStatus => 0x0F,
-            Self::ClockValue => 0x80,
-            Self::Unknown(c) => c & 0x8F,
-        }
-    }
-
     /// Whether the responder answers this request (SRD, SDA, FDL status,
     /// ident, LSAP status) rather than staying silent (SDN, time event).
     pub const fn expects_reply(self) -> bool {
@@ -104,102 +65,51 @@ impl RequestKind {
         )
     }
 
-    /// Short mnemonic as used in traces.
+    /// Short mnemonic as used in traces (`"unknown"` for an unknown code).
     pub const fn mnemonic(self) -> &'static str {
-        match self {
-            Self::TimeEvent => "TE",
-            Self::SdaLow => "SDA_low",
-            Self::SdnLow => "SDN_low",
-            Self::SdaHigh => "SDA_high",
-            Self::SdnHigh => "SDN_high",
-            Self::Msrd => "MSRD",
-            Self::FdlStatus => "FDL_Status",
-            Self::SrdLow => "SRD_low",
-            Self::SrdHigh => "SRD_high",
-            Self::Ident => "Ident",
-            Self::LsapStatus => "LSAP_Status",
-            Self::ClockValue => "CV",
-            Self::Unknown(_) => "unknown",
+        match self.name() {
+            Some(name) => name,
+            None => "unknown",
         }
     }
 }
 
-/// Status of a response telegram (FC bits 3-0).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ResponseStatus {
-    /// 0: OK, positive acknowledge.
-    Ok,
-    /// 1: UE, user error (negative acknowledge).
-    Ue,
-    /// 2: RR, no resources (negative acknowledge).
-    Rr,
-    /// 3: RS, SAP not activated / service not available (negative ack).
-    Rs,
-    /// 8: DL, response data low (the normal DP reply).
-    Dl,
-    /// 9: NR, no response data.
-    Nr,
-    /// 0xA: DH, response data high (a DP slave has new diagnosis).
-    Dh,
-    /// 0xC: RDL, data not received, response data low.
-    Rdl,
-    /// 0xD: RDH, data not received, response data high.
-    Rdh,
-    /// Any other code: FC bits 3-0 with bit 7.
-    Unknown(u8),
+crate::enum_with_unknown! {
+    /// Status of a response telegram (FC bits 3-0); `Unknown` keeps FC
+    /// bits 3-0 with bit 7.
+    pub enum ResponseStatus(u8 & 0x8F) {
+        /// 0: OK, positive acknowledge.
+        Ok = 0x0 => "OK",
+        /// 1: UE, user error (negative acknowledge).
+        Ue = 0x1 => "UE",
+        /// 2: RR, no resources (negative acknowledge).
+        Rr = 0x2 => "RR",
+        /// 3: RS, SAP not activated / service not available (negative ack).
+        Rs = 0x3 => "RS",
+        /// 8: DL, response data low (the normal DP reply).
+        Dl = 0x8 => "DL",
+        /// 9: NR, no response data.
+        Nr = 0x9 => "NR",
+        /// 0xA: DH, response data high (a DP slave has new diagnosis).
+        Dh = 0xA => "DH",
+        /// 0xC: RDL, data not received, response data low.
+        Rdl = 0xC => "RDL",
+        /// 0xD: RDH, data not received, response data high.
+        Rdh = 0xD => "RDH",
+    }
 }
 
 impl ResponseStatus {
-    /// Decode the status code (FC bits 3-0 plus the reserved bit 7).
-    pub const fn from_code(code: u8) -> Self {
-        match code {
-            0x0 => Self::Ok,
-            0x1 => Self::Ue,
-            0x2 => Self::Rr,
-            0x3 => Self::Rs,
-            0x8 => Self::Dl,
-            0x9 => Self::Nr,
-            0xA => Self::Dh,
-            0xC => Self::Rdl,
-            0xD => Self::Rdh,
-            other => Self::Unknown(other & 0x8F),
-        }
-    }
-
-    /// The status code (FC bits 3-0 plus bit 7).
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Ok => 0x0,
-            Self::Ue => 0x1,
-            Self::Rr => 0x2,
-            Self::Rs => 0x3,
-            Self::Dl => 0x8,
-            Self::Nr => 0x9,
-            Self::Dh => 0xA,
-            Self::Rdl => 0xC,
-            Self::Rdh => 0xD,
-            Self::Unknown(c) => c & 0x8F,
-        }
-    }
-
     /// Negative acknowledges: the request was not carried out.
     pub const fn is_negative(self) -> bool {
         matches!(self, Self::Ue | Self::Rr | Self::Rs | Self::Rdl | Self::Rdh)
     }
 
-    /// Short mnemonic as used in traces.
+    /// Short mnemonic as used in traces (`"unknown"` for an unknown code).
     pub const fn mnemonic(self) -> &'static str {
-        match self {
-            Self::Ok => "OK",
-            Self::Ue => "UE",
-            Self::Rr => "RR",
-            Self::Rs => "RS",
-            Self::Dl => "DL",
-            Self::Nr => "NR",
-            Self::Dh => "DH",
-            Self::Rdl => "RDL",
-            Self::Rdh => "RDH",
-            Self::Unknown(_) => "unknown",
+        match self.name() {
+            Some(name) => name,
+            None => "unknown",
         }
     }
 }
@@ -373,6 +283,19 @@ mod tests {
         for b in 0..=255u8 {
             assert_eq!(FunctionCode::from_byte(b).to_byte(), b, "FC 0x{b:02X}");
         }
+    }
+
+    #[test]
+    fn codes_round_trip_and_unknown_keeps_its_bits() {
+        for c in 0..=255u8 {
+            assert_eq!(RequestKind::from_code(c).code(), c & 0x8F, "0x{c:02X}");
+            assert_eq!(ResponseStatus::from_code(c).code(), c & 0x8F, "0x{c:02X}");
+        }
+        assert_eq!(RequestKind::from_code(0xFF), RequestKind::Unknown(0x8F));
+        assert_eq!(RequestKind::SrdHigh.mnemonic(), "SRD_high");
+        assert_eq!(RequestKind::Unknown(1).mnemonic(), "unknown");
+        assert_eq!(ResponseStatus::Dh.name(), Some("DH"));
+        assert_eq!(ResponseStatus::Unknown(4).name(), None);
     }
 
     #[test]

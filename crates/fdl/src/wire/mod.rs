@@ -20,6 +20,7 @@
 //! assert_eq!((parsed.format().name(), m), ("SD1", n));
 //! ```
 
+mod code_set;
 pub mod consts;
 mod fc;
 mod hex;

@@ -267,7 +267,7 @@ impl Device {
                 Source::DiagText => Some(MetricValue::StringValue(if v.diag.is_empty() {
                     String::new()
                 } else {
-                    profibus_dp::diag::describe(v.diag, self.info.gsd.as_ref(), self.info.dpv1)
+                    profibus_dp::pdu::diag::describe(v.diag, self.info.gsd.as_ref(), self.info.dpv1)
                         .join("\n")
                 })),
             })

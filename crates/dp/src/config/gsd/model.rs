@@ -256,7 +256,7 @@ pub struct Slot {
 pub struct UnitDiagText {
     /// Bit number in the device-related diagnosis, as the GSD numbers it
     /// (this stack reads bit 0 as bit 0 of the first byte after the
-    /// block's header byte; see [`crate::diag::describe`]).
+    /// block's header byte; see [`crate::pdu::diag::describe`]).
     pub bit: u32,
     /// Text shown when the bit is set (`Unit_Diag_Bit`) or clear
     /// (`Unit_Diag_Not_Bit`).

@@ -14,7 +14,7 @@ use super::lexer::{
 };
 use super::model::*;
 use super::{DiagKind, Diagnostic, ParseOptions, Parsed, Pos, Quirk, MAX_LINE_LEN};
-use crate::cfg;
+use crate::pdu::cfg;
 use profibus_fdl::timing::Baud;
 use std::collections::HashMap;
 

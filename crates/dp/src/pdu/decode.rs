@@ -1,7 +1,7 @@
 //! The DP layer of a telegram, decoded: which DP service it carries and
 //! what its data unit says (IEC 61158-6-3; the layouts are in the modules
-//! of each service: [`crate::diag`], [`crate::prm`], [`crate::cfg`],
-//! [`crate::control`], [`crate::dpv1`]).
+//! of each service: [`crate::pdu::diag`], [`crate::pdu::prm`], [`crate::pdu::cfg`],
+//! [`crate::pdu::control`], [`crate::pdu::dpv1`]).
 //!
 //! [`decode`] is sans-IO and stateless: a telegram, and for a response the
 //! request it answers ([`Request`]), give a [`DpTelegram`] (serde-
@@ -15,7 +15,7 @@
 //! Used by `dpctl sniff --json` (the `"dp"` object of each telegram).
 //!
 //! ```
-//! use profibus_dp::decode::{Exchanges, Detail};
+//! use profibus_dp::pdu::decode::{Exchanges, Detail};
 //! use profibus_fdl::Telegram;
 //!
 //! let mut ex = Exchanges::default();
@@ -35,12 +35,12 @@
 //! assert_eq!(ident_number, 0x0ED0);
 //! ```
 
-use crate::cfg;
-use crate::control::{ControlCommand, GlobalControl, SetSlaveAdd};
-use crate::diag::{self, SlaveDiag, NO_MASTER};
-use crate::dpv1::{self, Pdu};
-use crate::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
-use crate::sap;
+use crate::pdu::cfg;
+use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
+use crate::pdu::diag::{self, SlaveDiag, NO_MASTER};
+use crate::pdu::dpv1::{self, Pdu};
+use crate::pdu::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
+use crate::pdu::sap;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
 use std::collections::BTreeMap;
 use std::fmt;

@@ -22,8 +22,8 @@
 //! as the file gives them.
 
 use super::model::*;
-use crate::cfg::{self, CfgError, CfgTotals};
-use crate::names::DidYouMean;
+use crate::config::names::DidYouMean;
+use crate::pdu::cfg::{self, CfgError, CfgTotals};
 use profibus_fdl::timing::Baud;
 use std::str::FromStr;
 

@@ -67,9 +67,9 @@
 //! A file over [`MAX_BUS_FILE`] bytes or not UTF-8 is refused before it is
 //! parsed.
 
-use crate::gsd::{Gsd, ParseOptions, PrmValue};
+use crate::config::gsd::{Gsd, ParseOptions, PrmValue};
+use crate::config::names::{field_names, DidYouMean};
 use crate::master::{MasterConfig, MasterOptions, SlaveParams};
-use crate::names::{field_names, DidYouMean};
 use profibus_fdl::timing::{Baud, BusParams};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -571,15 +571,16 @@ impl BusFile {
             column: 0,
             message: m,
         };
-        let text =
-            crate::file::read_text(path, MAX_BUS_FILE, "a bus file").map_err(|e| match e {
-                crate::file::ReadFileError::NotUtf8 { line, column, .. } => BusFileError {
+        let text = crate::config::file::read_text(path, MAX_BUS_FILE, "a bus file").map_err(
+            |e| match e {
+                crate::config::file::ReadFileError::NotUtf8 { line, column, .. } => BusFileError {
                     line,
                     column,
                     ..io(e.to_string())
                 },
                 e => io(e.to_string()),
-            })?;
+            },
+        )?;
         Self::parse_with(path, &text, resolver)
     }
 
@@ -774,7 +775,9 @@ impl BusFile {
                     }
                 };
                 let pv: PrmValue = format!("{name}={text}").parse().map_err(
-                    |e: crate::gsd::PrmValueParseError| cx.err(Some(v.span()), e.to_string()),
+                    |e: crate::config::gsd::PrmValueParseError| {
+                        cx.err(Some(v.span()), e.to_string())
+                    },
                 )?;
                 values.push(pv);
             }

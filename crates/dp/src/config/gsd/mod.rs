@@ -23,8 +23,8 @@
 //!   and kept as raw text ([`Gsd::other_value`]); only keywords outside
 //!   the standard are reported as unknown.
 //! - The semantic API in [`semantic`]: identifier decoding per module
-//!   (through [`crate::cfg`]), module lookup by exact name (an error
-//!   names the closest, [`crate::names`]), Chk_Cfg and User_Prm_Data for a module selection plus named
+//!   (through [`crate::pdu::cfg`]), module lookup by exact name (an error
+//!   names the closest, [`crate::config::names`]), Chk_Cfg and User_Prm_Data for a module selection plus named
 //!   parameter values, checks of a selection against the `Max_*` limits,
 //!   MaxTsdr per baud rate.
 //! - The writer ([`Gsd::write`]): a valid GSD file from the model, such

@@ -22,7 +22,7 @@ pub const FN_ALARM_ACK: u8 = 0x5C;
 /// Function number of Idle (class-2 keep-alive).
 pub const FN_IDLE: u8 = 0x48;
 /// Error_Decode value of DP-V1 errors.
-pub const ERROR_DECODE_DPV1: u8 = 0x80;
+pub const ERROR_DECODE_DPV1: u8 = ErrorDecode::Dpv1.code();
 /// Longest data of one read/write (244 − 4 header bytes).
 pub const MAX_DATA_LEN: usize = 240;
 
@@ -262,6 +262,16 @@ impl Dpv1Error {
         }
     }
 
+    /// Error_Decode: which protocol's error codes follow.
+    pub fn decode(&self) -> ErrorDecode {
+        ErrorDecode::from_code(self.error_decode)
+    }
+
+    /// The error class (high nibble of Error_Code_1).
+    pub fn class(&self) -> ErrorClass {
+        ErrorClass::from_code(self.error_code_1 >> 4)
+    }
+
     /// The error in words.
     pub fn describe(&self) -> String {
         let op = match self.function & 0x7F {
@@ -270,47 +280,114 @@ impl Dpv1Error {
             FN_ALARM_ACK => "alarm ack",
             _ => "request",
         };
-        let decode = match self.error_decode {
-            ERROR_DECODE_DPV1 => "DP-V1",
-            0xFE => "FMS",
-            0xFF => "HART",
-            _ => "unknown decode",
-        };
-        let (class, code) = (self.error_code_1 >> 4, self.error_code_1 & 0x0F);
-        let text = if self.error_decode == ERROR_DECODE_DPV1 {
-            match (class, code) {
-                (0xA, 0) => "application: read error",
-                (0xA, 1) => "application: write error",
-                (0xA, 2) => "application: module failure",
-                (0xA, 8) => "application: version conflict",
-                (0xA, 9) => "application: feature not supported",
-                (0xA, _) => "application: user-specific",
-                (0xB, 0) => "access: invalid index",
-                (0xB, 1) => "access: write length error",
-                (0xB, 2) => "access: invalid slot",
-                (0xB, 3) => "access: type conflict",
-                (0xB, 4) => "access: invalid area",
-                (0xB, 5) => "access: state conflict",
-                (0xB, 6) => "access: access denied",
-                (0xB, 7) => "access: invalid range",
-                (0xB, 8) => "access: invalid parameter",
-                (0xB, 9) => "access: invalid type",
-                (0xB, _) => "access: user-specific",
-                (0xC, 0) => "resource: read constraint conflict",
-                (0xC, 1) => "resource: write constraint conflict",
-                (0xC, 2) => "resource: busy",
-                (0xC, 3) => "resource: unavailable",
-                (0xC, _) => "resource: user-specific",
-                (0xD..=0xF, _) => "user-specific",
-                _ => "reserved",
+        let decode = self.decode().name().unwrap_or("unknown decode");
+        let code = self.error_code_1 & 0x0F;
+        let text = if self.decode() == ErrorDecode::Dpv1 {
+            let class = self.class();
+            let name = match class {
+                ErrorClass::Application => ApplicationError::from_code(code).name(),
+                ErrorClass::Access => AccessError::from_code(code).name(),
+                ErrorClass::Resource => ResourceError::from_code(code).name(),
+                ErrorClass::Unknown(_) => None,
+            };
+            match (class.name(), name) {
+                (Some(class), Some(name)) => format!("{class}: {name}"),
+                (Some(class), None) => format!("{class}: user-specific"),
+                (None, _) if class.code() >= 0xD => "user-specific".into(),
+                (None, _) => "reserved".into(),
             }
         } else {
-            "not a DP-V1 error"
+            "not a DP-V1 error".into()
         };
         format!(
             "{op} failed: {text} ({decode}, Error_Code_1 0x{:02X}, Error_Code_2 0x{:02X})",
             self.error_code_1, self.error_code_2
         )
+    }
+}
+
+profibus_fdl::enum_with_unknown! {
+    /// Error_Decode of a DP-V1 error response (IEC 61158-6-3): whose
+    /// error codes Error_Code_1/2 carry.
+    pub enum ErrorDecode(u8) {
+        /// 0x80: DP-V1 error classes and codes.
+        Dpv1 = 0x80 => "DP-V1",
+        /// 0xFE: FMS error codes.
+        Fms = 0xFE => "FMS",
+        /// 0xFF: HART error codes.
+        Hart = 0xFF => "HART",
+    }
+}
+
+profibus_fdl::enum_with_unknown! {
+    /// The error class of a DP-V1 error (Error_Code_1 bits 7-4). 0xD..=0xF
+    /// are user-specific, 0..=9 reserved.
+    pub enum ErrorClass(u8) {
+        /// 0xA: the application failed.
+        Application = 0xA => "application",
+        /// 0xB: the access was refused.
+        Access = 0xB => "access",
+        /// 0xC: a resource is missing.
+        Resource = 0xC => "resource",
+    }
+}
+
+profibus_fdl::enum_with_unknown! {
+    /// Error codes of class "application" (Error_Code_1 bits 3-0); the
+    /// others are user-specific.
+    pub enum ApplicationError(u8) {
+        /// 0: read error.
+        ReadError = 0 => "read error",
+        /// 1: write error.
+        WriteError = 1 => "write error",
+        /// 2: module failure.
+        ModuleFailure = 2 => "module failure",
+        /// 8: version conflict.
+        VersionConflict = 8 => "version conflict",
+        /// 9: feature not supported.
+        FeatureNotSupported = 9 => "feature not supported",
+    }
+}
+
+profibus_fdl::enum_with_unknown! {
+    /// Error codes of class "access" (Error_Code_1 bits 3-0); the others
+    /// are user-specific.
+    pub enum AccessError(u8) {
+        /// 0: invalid index.
+        InvalidIndex = 0 => "invalid index",
+        /// 1: write length error.
+        WriteLength = 1 => "write length error",
+        /// 2: invalid slot.
+        InvalidSlot = 2 => "invalid slot",
+        /// 3: type conflict.
+        TypeConflict = 3 => "type conflict",
+        /// 4: invalid area.
+        InvalidArea = 4 => "invalid area",
+        /// 5: state conflict.
+        StateConflict = 5 => "state conflict",
+        /// 6: access denied.
+        AccessDenied = 6 => "access denied",
+        /// 7: invalid range.
+        InvalidRange = 7 => "invalid range",
+        /// 8: invalid parameter.
+        InvalidParameter = 8 => "invalid parameter",
+        /// 9: invalid type.
+        InvalidType = 9 => "invalid type",
+    }
+}
+
+profibus_fdl::enum_with_unknown! {
+    /// Error codes of class "resource" (Error_Code_1 bits 3-0); the others
+    /// are user-specific.
+    pub enum ResourceError(u8) {
+        /// 0: read constraint conflict.
+        ReadConstraintConflict = 0 => "read constraint conflict",
+        /// 1: write constraint conflict.
+        WriteConstraintConflict = 1 => "write constraint conflict",
+        /// 2: resource busy.
+        Busy = 2 => "busy",
+        /// 3: resource unavailable.
+        Unavailable = 3 => "unavailable",
     }
 }
 
@@ -372,6 +449,23 @@ mod tests {
         let e = Dpv1Error::dpv1(FN_WRITE, 0xB, 0);
         assert_eq!(e.function, 0xDF);
         assert!(e.describe().contains("write failed: access: invalid index"));
+        let words = |decode: u8, code_1: u8| {
+            Dpv1Error {
+                function: 0xDE,
+                error_decode: decode,
+                error_code_1: code_1,
+                error_code_2: 0,
+            }
+            .describe()
+        };
+        assert!(words(0x80, 0xA9).contains("application: feature not supported"));
+        assert!(words(0x80, 0xA5).contains("application: user-specific"));
+        assert!(words(0x80, 0xC2).contains("resource: busy"));
+        assert!(words(0x80, 0xBF).contains("access: user-specific"));
+        assert!(words(0x80, 0xE0).contains("read failed: user-specific (DP-V1"));
+        assert!(words(0x80, 0x10).contains(": reserved (DP-V1"));
+        assert!(words(0xFE, 0xB0).contains("not a DP-V1 error (FMS"));
+        assert!(words(0x12, 0xB0).contains("(unknown decode,"));
     }
 
     #[test]

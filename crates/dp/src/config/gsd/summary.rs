@@ -236,8 +236,8 @@ impl fmt::Display for GsdSummary<'_> {
 #[cfg(feature = "serde")]
 mod ser {
     use super::{Allowed, GsdSummary, Hex, ParamInstance};
-    use crate::cfg::IoLen;
-    use crate::gsd::{FileDiagnostic, Gsd, PrmTextValue, UnitDiagText};
+    use crate::config::gsd::{FileDiagnostic, Gsd, PrmTextValue, UnitDiagText};
+    use crate::pdu::cfg::IoLen;
     use serde::{Serialize, Serializer};
 
     #[derive(Serialize)]

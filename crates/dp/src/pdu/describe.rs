@@ -3,7 +3,7 @@
 //! with the feature `serde`: one JSON object), with the DP service a SAP
 //! stands for.
 
-use crate::sap;
+use crate::pdu::sap;
 use profibus_fdl::wire::{Format, FunctionCode, Hex, ParseError, Telegram};
 use std::fmt;
 

@@ -372,7 +372,7 @@ proptest::proptest! {
         } else {
             FunctionCode::Request { kind: RequestKind::SrdHigh, fcb: true, fcv: true }
         };
-        let saps = dsap.map(|s| (s, crate::sap::MASTER));
+        let saps = dsap.map(|s| (s, crate::pdu::sap::MASTER));
         let t = DataTelegram::new(8, 2, FunctionCode::Request {
             kind: RequestKind::SrdHigh, fcb: false, fcv: true,
         }, &req).with_saps(dsap, saps.map(|s| s.1));

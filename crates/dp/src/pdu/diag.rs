@@ -535,7 +535,7 @@ mod tests {
     }
 }
 
-fn has_unit_diag(g: &crate::gsd::Gsd) -> bool {
+fn has_unit_diag(g: &crate::config::gsd::Gsd) -> bool {
     !g.unit_diag_bits.is_empty()
         || !g.unit_diag_not_bits.is_empty()
         || !g.unit_diag_areas.is_empty()
@@ -549,7 +549,7 @@ fn has_unit_diag(g: &crate::gsd::Gsd) -> bool {
 /// (this stack's reading of the GSD specification; the manuals at hand
 /// do not say). `dpv1` reads device-related blocks of DP-V1 slaves as
 /// alarm/status blocks.
-pub fn describe(du: &[u8], gsd: Option<&crate::gsd::Gsd>, dpv1: bool) -> Vec<String> {
+pub fn describe(du: &[u8], gsd: Option<&crate::config::gsd::Gsd>, dpv1: bool) -> Vec<String> {
     let d = match SlaveDiag::parse(du) {
         Ok(d) => d,
         Err(e) => return vec![e.to_string()],
@@ -611,7 +611,7 @@ pub fn describe(du: &[u8], gsd: Option<&crate::gsd::Gsd>, dpv1: bool) -> Vec<Str
 #[cfg(test)]
 mod describe_tests {
     use super::*;
-    use crate::gsd::{Gsd, ParseOptions};
+    use crate::config::gsd::{Gsd, ParseOptions};
 
     #[test]
     fn unit_diag_texts_from_the_gsd() {

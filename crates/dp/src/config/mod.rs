@@ -1,0 +1,14 @@
+//! Configuration files: what a master or slave is told before it runs.
+//!
+//! - [`gsd`]: GSD files: parser (strict and lenient), typed model,
+//!   module selection → Chk_Cfg / User_Prm_Data, writer.
+//! - [`busfile`]: the TOML bus file of a master, built on GSD files.
+//! - [`file`](mod@file): reading an input file (bus file, profile table, script)
+//!   with a size limit.
+//! - [`names`]: the closest valid names to a misspelt one ("did you
+//!   mean …?") and the keys of a serde struct.
+
+pub mod busfile;
+pub mod file;
+pub mod gsd;
+pub mod names;
