@@ -12,13 +12,14 @@
 use profibus::devices::generic::{GenericDevice, InputPattern};
 use profibus::dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
 use profibus::dp::slave::{DpSlave, Features};
-use profibus::fdl::medium::MediumConfig;
+use profibus::fdl::line::medium::MediumConfig;
 use profibus::fdl::sim::SimBus;
 use profibus::fdl::station::active::{
     ActiveConfig, ActiveStation, CycleResult, MasterApp, Request, TokenContext,
 };
 use profibus::fdl::station::passive::PassiveStation;
-use profibus::fdl::{Baud, BusParams, FdlCodec, Instant, Telegram};
+use profibus::fdl::{Baud, BusParams, Instant, Telegram};
+use profibus::io::FdlCodec;
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Duration;

@@ -20,11 +20,11 @@
 
 use profibus::devices::generic::{GenericDevice, InputPattern};
 use profibus::dp::slave::{DpSlave, Features, SlaveState};
-use profibus::fdl::driver::{self, Clock};
 use profibus::fdl::station::passive::PassiveStation;
 use profibus::fdl::station::Station;
-use profibus::fdl::transport::Port;
 use profibus::fdl::{Baud, BusParams, DataTelegram, FunctionCode, Instant, RequestKind, Telegram};
+use profibus_io::driver::{self, Clock};
+use profibus_io::transport::Port;
 use std::io::{Read, Write};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};

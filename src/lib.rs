@@ -17,3 +17,4 @@
 pub use profibus_devices as devices;
 pub use profibus_dp as dp;
 pub use profibus_fdl as fdl;
+pub use profibus_io as io;

@@ -17,13 +17,13 @@ use profibus::dp::master::{
 };
 use profibus::dp::pdu::control::ControlCommand;
 use profibus::dp::slave::{DpSlave, Features, SlaveEvent, SlaveState as SlaveCoreState};
-use profibus::fdl::medium::MediumConfig;
+use profibus::fdl::line::medium::MediumConfig;
+use profibus::fdl::line::tap::{Tap, TapEvent};
 use profibus::fdl::sim::{SimBus, StationId};
 use profibus::fdl::station::active::{
     ActiveConfig, ActiveStation, CycleResult, MasterApp, Outcome, Request, Service, TokenContext,
 };
 use profibus::fdl::station::passive::PassiveStation;
-use profibus::fdl::tap::{Tap, TapEvent};
 use profibus::fdl::wire::{FunctionCode, ResponseStatus, Telegram};
 use profibus::fdl::{Baud, BusParams, Instant};
 use std::cell::RefCell;

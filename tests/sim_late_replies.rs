@@ -10,7 +10,7 @@ use profibus::dp::master::{
     DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
 };
 use profibus::dp::slave::{DpSlave, Features};
-use profibus::fdl::medium::{Collisions, MediumConfig};
+use profibus::fdl::line::medium::{Collisions, MediumConfig};
 use profibus::fdl::sim::SimBus;
 use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus::fdl::station::passive::PassiveStation;

@@ -9,7 +9,7 @@ use profibus::dp::master::{
     ALONE_HOLD_BITS_FAST,
 };
 use profibus::dp::slave::{DpSlave, Features};
-use profibus::fdl::medium::MediumConfig;
+use profibus::fdl::line::medium::MediumConfig;
 use profibus::fdl::sim::{SimBus, StationId};
 use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus::fdl::station::passive::PassiveStation;

@@ -13,7 +13,7 @@ use profibus::dp::master::{
     DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
 };
 use profibus::dp::slave::DpSlave;
-use profibus::fdl::medium::MediumConfig;
+use profibus::fdl::line::medium::MediumConfig;
 use profibus::fdl::sim::{SimBus, StationId};
 use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus::fdl::station::passive::PassiveStation;

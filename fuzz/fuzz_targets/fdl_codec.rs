@@ -6,9 +6,8 @@
 
 use bytes::BytesMut;
 use libfuzzer_sys::fuzz_target;
-use profibus_fdl::codec::FdlCodec;
+use profibus_fdl::codec::Framer;
 use profibus_fdl::wire::Telegram;
-use tokio_util::codec::Decoder;
 
 fuzz_target!(|data: &[u8]| {
     let _ = Telegram::parse(data);
@@ -17,12 +16,12 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let cut = (cut as usize % 64) + 1;
-    let mut codec = FdlCodec::new();
+    let mut codec = Framer::new();
     let mut buf = BytesMut::new();
     let mut framed = 0usize;
     for (i, chunk) in stream.chunks(cut).enumerate() {
         buf.extend_from_slice(chunk);
-        while let Some(t) = codec.decode(&mut buf).unwrap() {
+        while let Some(t) = codec.next_telegram(&mut buf) {
             framed += 1;
             let (tel, n) = Telegram::parse(t.as_bytes()).expect("framed telegram parses");
             assert_eq!(n, t.as_bytes().len());
@@ -33,10 +32,10 @@ fuzz_target!(|data: &[u8]| {
             assert_eq!(Telegram::parse(&out[..m]).unwrap().0, tel);
         }
         if i % 3 == 2 {
-            let _ = codec.line_idle(&mut buf);
+            let _ = codec.next_after_idle(&mut buf);
         }
     }
-    while codec.decode_eof(&mut buf).unwrap().is_some() {
+    while codec.next_at_end(&mut buf).is_some() {
         framed += 1;
     }
     assert!(buf.is_empty());

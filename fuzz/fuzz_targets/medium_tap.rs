@@ -9,8 +9,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use profibus_fdl::medium::{Collisions, Medium, MediumConfig};
-use profibus_fdl::tap::{Tap, TapEvent};
+use profibus_fdl::line::medium::{Collisions, Medium, MediumConfig};
+use profibus_fdl::line::tap::{Tap, TapEvent};
 use profibus_fdl::{Baud, Instant};
 
 fuzz_target!(|data: &[u8]| {

@@ -5,7 +5,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use profibus_fdl::pcap::PcapReader;
+use profibus_fdl::capture::pcap::PcapReader;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(r) = PcapReader::new(data) {

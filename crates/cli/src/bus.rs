@@ -1,14 +1,14 @@
 //! `dpctl bus`: a virtual RS-485 multidrop bus made of ptys.
 //!
-//! The bus itself is [`profibus_fdl::transport::hub::Hub`]; this command
+//! The bus itself is [`profibus_io::transport::hub::Hub`]; this command
 //! maps its arguments, handles signals (SIGINT/SIGTERM stop, SIGUSR1
 //! prints the counters) and prints.
 
 use anyhow::{Context, Result};
 use nix::sys::signal::{SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
-use profibus_fdl::medium::{parse_rate, MediumArgs};
-use profibus_fdl::transport::hub::{Hub, HubError};
+use profibus_fdl::line::medium::{parse_rate, MediumArgs};
+use profibus_io::transport::hub::{Hub, HubError};
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
 use std::os::fd::AsFd;

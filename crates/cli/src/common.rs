@@ -3,8 +3,8 @@
 
 use crate::out::outln;
 use anyhow::{Context, Result};
-use profibus_fdl::transport::{Port, PortOptions, RtsControl, TransportError};
 use profibus_fdl::Baud;
+use profibus_io::transport::{Port, PortOptions, RtsControl, TransportError};
 use std::time::Duration;
 
 /// Line options of every command that runs a station.
@@ -147,7 +147,7 @@ impl SlaveArgs {
             profibus_fdl::Instant,
         ) -> std::ops::ControlFlow<()>,
     ) -> Result<()> {
-        use profibus_fdl::driver::{self, Clock, Stop};
+        use profibus_io::driver::{self, Clock, Stop};
         let dp = profibus_dp::master::DpMaster::new(&bus.master)?;
         let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency, self.rts)?;
         let stop = driver::run_with(
@@ -227,14 +227,14 @@ pub fn driver_options(
     port: &Port,
     busy_poll_us: u64,
     gather: bool,
-) -> Result<profibus_fdl::driver::Options> {
+) -> Result<profibus_io::driver::Options> {
     if gather && !port.may_gather() {
         anyhow::bail!(
             "--gather is for ptys only: {} is a serial line",
             port.name()
         );
     }
-    Ok(profibus_fdl::driver::Options {
+    Ok(profibus_io::driver::Options {
         gather,
         busy_poll: Duration::from_micros(busy_poll_us),
         ..Default::default()

@@ -7,7 +7,7 @@ use crate::common;
 use crate::view::{bus_view, drain_events, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::demo::{DemoSlave, Plant, BAUD};
-use profibus_fdl::pcap::PcapWriter;
+use profibus_fdl::capture::pcap::PcapWriter;
 use profibus_fdl::Instant;
 use std::cell::RefCell;
 use std::io::IsTerminal;

@@ -1,11 +1,11 @@
 //! `dpctl doctor`: what can be checked about a port, by
-//! `profibus_fdl::transport::doctor`; this prints the report (its
+//! `profibus_io::transport::doctor`; this prints the report (its
 //! `Display` text, or its JSON with `--json`).
 
 use crate::common::RtsArg;
 use anyhow::{bail, Result};
 use profibus_devices::bus::ProfiledBus;
-use profibus_fdl::transport::doctor::{diagnose, DoctorOptions};
+use profibus_io::transport::doctor::{diagnose, DoctorOptions};
 use std::path::PathBuf;
 
 /// Check a serial port for PROFIBUS: 8E1, the baud rates (custom ones

@@ -6,11 +6,11 @@ use crate::common;
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::DpMaster;
-use profibus_fdl::driver::{self, Clock};
 use profibus_gateway::sim::slave_infos;
 use profibus_gateway::{
     link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
 };
+use profibus_io::driver::{self, Clock};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 

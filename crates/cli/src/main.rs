@@ -97,7 +97,7 @@ fn main() -> ExitCode {
     logging();
     // Before any runtime starts a thread: its threads inherit the policy.
     if let Some(p) = cli.rt_priority {
-        if let Err(e) = profibus_fdl::transport::realtime::set_fifo_priority(p) {
+        if let Err(e) = profibus_io::transport::realtime::set_fifo_priority(p) {
             crate::out::errln!("dpctl: --rt-priority: {e}");
             return ExitCode::from(1);
         }

@@ -1,6 +1,6 @@
 //! `dpctl monitor`: follow another master's slaves, listening only.
 //!
-//! `profibus_fdl::listen` reads the line (it cannot write) and
+//! `profibus_io::listen` reads the line (it cannot write) and
 //! `profibus_dp::monitor::Monitor` tracks the traffic; its events and
 //! status go to the view (`crate::view`): a table on a terminal, else
 //! lines or JSON lines every `--interval`.
@@ -10,8 +10,8 @@ use crate::view::{bus_view, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::monitor::{Monitor, MonitorOptions};
-use profibus_fdl::listen::{listen, Heard, ListenOptions};
-use profibus_fdl::transport::Port;
+use profibus_io::listen::{listen, Heard, ListenOptions};
+use profibus_io::transport::Port;
 use profibus_tui::lines::monitor_slaves;
 use profibus_tui::term::LiveBus;
 use std::io::IsTerminal;

@@ -3,9 +3,9 @@
 use crate::common::{self, LineArgs};
 use anyhow::{bail, Result};
 use profibus_dp::scan::{LiveListScan, LiveRow};
-use profibus_fdl::driver::{self, Clock, Stop};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
 use profibus_fdl::BusParams;
+use profibus_io::driver::{self, Clock, Stop};
 use std::ops::ControlFlow;
 use std::time::Duration;
 

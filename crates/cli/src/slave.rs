@@ -9,7 +9,7 @@
 //! Baud rate: `--baud auto` (the default) searches on a serial line like
 //! a real slave with `Auto_Baud_supp` (fastest rate first, lock on the
 //! first valid telegram, search again after a watchdog expiry or 10 s
-//! without a valid telegram; `profibus_fdl::runner::PassiveRunner`).
+//! without a valid telegram; `profibus_io::runner::PassiveRunner`).
 //! A pty carries bytes, not bits, so there the
 //! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
 //! `--baud` names a rate (the rate sets the bit times of min TSDR and of
@@ -19,14 +19,14 @@
 
 use crate::common;
 use anyhow::bail;
-use profibus_devices::control_io::ControlSource;
-use profibus_devices::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
-use profibus_devices::jx2::clients::{self, Console};
 use profibus_devices::{ControlInbox, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
-use profibus_fdl::driver::Clock;
-use profibus_fdl::runner::{PassiveRunner, RunnerEvent};
 use profibus_fdl::Instant;
+use profibus_io::control_io::ControlSource;
+use profibus_io::driver::Clock;
+use profibus_io::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
+use profibus_io::jx2::{self as clients, Console};
+use profibus_io::runner::{PassiveRunner, RunnerEvent};
 use std::io::Write;
 use std::path::Path;
 

@@ -4,10 +4,10 @@
 mod common;
 
 use common::{require, run_dpctl, Bus, Proc, TempDir};
-use profibus::fdl::pcap::PcapReader;
-use profibus::fdl::transport::Port;
+use profibus::fdl::capture::pcap::PcapReader;
 use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
 use profibus::fdl::Baud;
+use profibus_io::transport::Port;
 use std::process::Command;
 use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -530,7 +530,7 @@ fn random_telegram(r: &mut profibus::fdl::rng::Rng) -> Vec<u8> {
 /// and the receiver's codec counts no error.
 #[tokio::test]
 async fn zero_faults_carry_100000_telegrams_unchanged() {
-    use profibus::fdl::tap::{Tap, TapEvent};
+    use profibus::fdl::line::tap::{Tap, TapEvent};
     let bus = Bus::start(2, &["--drop", "0", "--flip", "0", "--seed", "1"]);
     let mut a = open(&bus, 0);
     let mut b = open(&bus, 1);

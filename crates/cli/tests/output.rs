@@ -5,8 +5,8 @@
 mod common;
 
 use common::{dpctl, repo, require, Bus, Proc};
-use profibus::fdl::transport::Port;
 use profibus::fdl::Baud;
+use profibus_io::transport::Port;
 use std::io::Read;
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};

@@ -518,7 +518,7 @@ fn the_client_on_the_simulated_bus() {
     use profibus::devices::rfid::{Rfid, CFG, IDENT};
     use profibus::dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
     use profibus::dp::slave::DpSlave;
-    use profibus::fdl::medium::MediumConfig;
+    use profibus::fdl::line::medium::MediumConfig;
     use profibus::fdl::sim::SimBus;
     use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
     use profibus::fdl::station::passive::PassiveStation;

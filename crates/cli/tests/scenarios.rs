@@ -8,7 +8,7 @@
 mod common;
 
 use common::{all_dx, dpctl, repo, send, slave_of, Bus, Proc, TempDir};
-use profibus::fdl::pcap::PcapReader;
+use profibus::fdl::capture::pcap::PcapReader;
 use profibus::fdl::station::active::ActiveConfig;
 use profibus::fdl::wire::{FunctionCode, Telegram};
 use profibus::fdl::{Baud, BusParams};

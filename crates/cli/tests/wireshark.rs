@@ -9,7 +9,7 @@
 mod common;
 
 use common::{counter, dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
-use profibus::fdl::pcap::{PcapReader, PcapWriter};
+use profibus::fdl::capture::pcap::{PcapReader, PcapWriter};
 use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, Telegram};
 use std::io::Write;
 use std::path::{Path, PathBuf};

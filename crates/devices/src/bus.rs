@@ -409,7 +409,7 @@ mod defaults {
     use crate::jx2::script::Interpreter;
     use profibus_dp::master::{DpMaster, SlaveState};
     use profibus_dp::slave::DpSlave;
-    use profibus_fdl::medium::MediumConfig;
+    use profibus_fdl::line::medium::MediumConfig;
     use profibus_fdl::sim::SimBus;
     use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
     use profibus_fdl::station::passive::PassiveStation;

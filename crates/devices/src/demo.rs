@@ -26,11 +26,11 @@ use profibus_dp::master::{
     DpMaster, MasterConfig, MasterConfigError, MasterOptions, SlaveParams, SlaveState,
 };
 use profibus_dp::slave::DpSlave;
-use profibus_fdl::medium::MediumConfig;
+use profibus_fdl::line::medium::MediumConfig;
+use profibus_fdl::line::tap::{Tap, TapEvent};
 use profibus_fdl::sim::{SimBus, StationId};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::station::passive::PassiveStation;
-use profibus_fdl::tap::{Tap, TapEvent};
 use profibus_fdl::{Baud, BusParams, Instant};
 use std::cell::Cell;
 use std::rc::Rc;

@@ -41,15 +41,11 @@
 //!
 //! # Running devices
 //!
-//! - [`emulation`]: a device as a DP slave on a port, what `dpctl slave`
-//!   does: [`emulation::ProfileArgs`] (the device and its options; clap
-//!   flags with the `clap` feature), [`emulation::BaudChoice`] and
-//!   [`emulation::SlaveShell`] (the baud-rate search runner, keeping
-//!   Set_Slave_Add addresses and device state in files, events for text
-//!   and JSON).
-//! - `control_io` (feature `tokio`): control lines for a
-//!   [`ControlInbox`] from a file, stdin or a Unix socket, and command
-//!   lines read on a thread.
+//! This crate does no I/O. A device runs as a DP slave on a port through
+//! `profibus_io::emulation` (what `dpctl slave` does: the baud-rate search
+//! runner, keeping Set_Slave_Add addresses and device state in files);
+//! `profibus_io::control_io` feeds a [`ControlInbox`] from a file, stdin or
+//! a Unix socket, and `profibus_io::jx2` runs the JX2's register clients.
 //! - [`demo`]: the demo plant of `dpctl demo` (a master and a slave of
 //!   every profile on the simulated bus, with the PLC program that moves
 //!   them), sans-IO.
@@ -94,15 +90,14 @@
 //! the registry. Errors are [`ProfileError`] (no `String` errors); the
 //! device does no file I/O while it runs.
 
+#![forbid(unsafe_code)]
+
 pub mod address;
 pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
-#[cfg(feature = "tokio")]
-pub mod control_io;
 pub mod demo;
-pub mod emulation;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;

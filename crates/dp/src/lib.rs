@@ -20,6 +20,8 @@
 //! - [`config`]: configuration files — GSD files, the TOML bus file of a
 //!   master, and the helpers they share (file reading, closest names).
 
+#![forbid(unsafe_code)]
+
 pub mod config;
 pub mod master;
 pub mod monitor;

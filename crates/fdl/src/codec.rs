@@ -12,13 +12,15 @@
 //! pause (TSYN, or a few milliseconds on a pty), the driver calls
 //! [`Framer::line_idle`], which abandons the pending candidate.
 //!
-//! `FdlCodec` (feature `tokio-codec`, part of the default `transport`)
-//! wraps the framer as a `tokio_util` `Decoder`/`Encoder`; its items are
-//! [`RawTelegram`]s: a validated telegram as a `Bytes` slice of the receive
-//! buffer, not a copy.
+//! [`Framer::next_telegram`] frames straight out of a `BytesMut` receive
+//! buffer; its items are [`RawTelegram`]s: a validated telegram as a
+//! `Bytes` slice of the receive buffer, not a copy. `profibus_io::FdlCodec`
+//! is the same framer as a `tokio_util` `Decoder`/`Encoder`.
 
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::wire::{ParseError, Telegram};
-use bytes::Bytes;
+use bytes::{Buf, Bytes, BytesMut};
 
 /// Error counters of a [`Framer`], by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -51,7 +53,7 @@ impl CodecStats {
 
     /// The kinds of error counted, in words (`bad FCS`, `2× bad length`,
     /// `3 garbage bytes`), or `None` when there are none: why a
-    /// [`TapEvent::Skipped`](crate::tap::TapEvent::Skipped) was skipped.
+    /// [`TapEvent::Skipped`](crate::line::tap::TapEvent::Skipped) was skipped.
     pub fn error_kinds(&self) -> Option<String> {
         let mut parts = vec![];
         for (n, what) in [
@@ -74,9 +76,9 @@ impl CodecStats {
     }
 }
 
-impl std::fmt::Display for CodecStats {
+impl core::fmt::Display for CodecStats {
     /// Every counter: `N telegrams, N garbage bytes, N bad FCS, …`.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
             "{} telegrams, {} garbage bytes, {} bad FCS, {} bad length, {} missing end delimiter, {} bad format, {} truncated",
@@ -221,99 +223,55 @@ impl RawTelegram {
     }
 }
 
-#[cfg(feature = "tokio-codec")]
-pub use tokio_codec::FdlCodec;
-
-#[cfg(feature = "tokio-codec")]
-mod tokio_codec {
-    use super::{CodecStats, Framed, Framer, RawTelegram};
-    use crate::wire::{self, Telegram};
-    use bytes::{Buf, BytesMut};
-    use tokio_util::codec::{Decoder, Encoder};
-
-    /// `tokio_util` codec framing FDL telegrams; see the module docs.
-    #[derive(Debug, Default)]
-    pub struct FdlCodec {
-        framer: Framer,
+impl Framer {
+    /// Take the next telegram off the front of a receive buffer: drops the
+    /// garbage before it and returns it as a `Bytes` slice (no copy), or
+    /// `None` when the buffer holds no complete telegram yet (garbage is
+    /// dropped either way). The building block of byte-stream codecs such as
+    /// `profibus_io::FdlCodec`.
+    pub fn next_telegram(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
+        let framed = self.frame(src);
+        Self::take(framed, src)
     }
 
-    impl FdlCodec {
-        /// A codec with zeroed statistics.
-        pub fn new() -> Self {
-            Self::default()
-        }
-
-        /// Error counters so far.
-        pub fn stats(&self) -> CodecStats {
-            self.framer.stats()
-        }
-
-        /// The line went idle: abandon an incomplete candidate at the front of
-        /// `src` and return the first telegram after it, if any. A driver calls
-        /// this when no byte arrived for longer than a telegram may pause.
-        pub fn line_idle(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
-            match self.framer.line_idle(src) {
-                Framed::Telegram { skip, len } => {
-                    src.advance(skip);
-                    Some(RawTelegram(src.split_to(len).freeze()))
-                }
-                Framed::NeedMore { skip } => {
-                    src.advance(skip);
-                    None
-                }
-            }
-        }
+    /// The line went idle: abandon an incomplete candidate at the front of
+    /// `src` and return the first telegram after it, if any (see
+    /// [`Framer::line_idle`]).
+    pub fn next_after_idle(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
+        let framed = self.line_idle(src);
+        Self::take(framed, src)
     }
 
-    impl Decoder for FdlCodec {
-        type Item = RawTelegram;
-        type Error = std::io::Error;
-
-        fn decode(&mut self, src: &mut BytesMut) -> Result<Option<RawTelegram>, std::io::Error> {
-            match self.framer.frame(src) {
-                Framed::Telegram { skip, len } => {
-                    src.advance(skip);
-                    Ok(Some(RawTelegram(src.split_to(len).freeze())))
-                }
-                Framed::NeedMore { skip } => {
-                    src.advance(skip);
-                    Ok(None)
-                }
+    /// The stream ended: the next telegram in `src`, abandoning incomplete
+    /// candidates (they can never complete) until one is found or `src` is
+    /// empty.
+    pub fn next_at_end(&mut self, src: &mut BytesMut) -> Option<RawTelegram> {
+        if let Some(t) = self.next_telegram(src) {
+            return Some(t);
+        }
+        while !src.is_empty() {
+            if let Some(t) = self.next_after_idle(src) {
+                return Some(t);
             }
         }
-
-        fn decode_eof(
-            &mut self,
-            src: &mut BytesMut,
-        ) -> Result<Option<RawTelegram>, std::io::Error> {
-            if let Some(t) = self.decode(src)? {
-                return Ok(Some(t));
-            }
-            // End of stream: pending bytes can never complete; rescan after
-            // each abandoned candidate until the buffer is empty.
-            while !src.is_empty() {
-                if let Some(t) = self.line_idle(src) {
-                    return Ok(Some(t));
-                }
-            }
-            Ok(None)
-        }
+        None
     }
 
-    impl Encoder<Telegram<'_>> for FdlCodec {
-        type Error = std::io::Error;
-
-        /// Emit errors (an address or data field out of range) become
-        /// `InvalidInput` I/O errors.
-        fn encode(&mut self, item: Telegram<'_>, dst: &mut BytesMut) -> Result<(), std::io::Error> {
-            item.emit_to(dst).map(|_| ()).map_err(|e: wire::EmitError| {
-                std::io::Error::new(std::io::ErrorKind::InvalidInput, e)
-            })
+    fn take(framed: Framed, src: &mut BytesMut) -> Option<RawTelegram> {
+        match framed {
+            Framed::Telegram { skip, len } => {
+                src.advance(skip);
+                Some(RawTelegram(src.split_to(len).freeze()))
+            }
+            Framed::NeedMore { skip } => {
+                src.advance(skip);
+                None
+            }
         }
     }
 }
 
-#[cfg(all(test, feature = "tokio-codec"))]
+#[cfg(test)]
 mod tests {
     #[test]
     fn error_kinds_and_counters_in_words() {
@@ -336,11 +294,10 @@ mod tests {
     use super::*;
     use crate::testing::fdl_status;
     use bytes::BytesMut;
-    use tokio_util::codec::Decoder;
 
     #[test]
     fn fragments_one_byte_at_a_time() {
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut buf = BytesMut::new();
         let mut out = vec![];
         let stream: Vec<u8> = [
@@ -352,7 +309,7 @@ mod tests {
         .concat();
         for b in stream {
             buf.extend_from_slice(&[b]);
-            while let Some(t) = codec.decode(&mut buf).unwrap() {
+            while let Some(t) = codec.next_telegram(&mut buf) {
                 out.push(t);
             }
         }
@@ -364,11 +321,11 @@ mod tests {
 
     #[test]
     fn resyncs_after_corrupted_telegram() {
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut bad = fdl_status(3, 1);
         bad[4] ^= 1; // FCS
         let mut buf = BytesMut::from(&[bad, vec![0x00, 0x42], fdl_status(5, 1)].concat()[..]);
-        let t = codec.decode(&mut buf).unwrap().unwrap();
+        let t = codec.next_telegram(&mut buf).unwrap();
         assert_eq!(t.as_bytes(), &fdl_status(5, 1)[..]);
         let s = codec.stats();
         assert_eq!(s.bad_fcs, 1);
@@ -377,13 +334,13 @@ mod tests {
 
     #[test]
     fn idle_line_abandons_a_false_sd2_start() {
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         // "68 F0 F0 68" announces 246 more bytes; the valid telegram after it
         // is held back until the line goes idle.
         let mut buf =
             BytesMut::from(&[vec![0x68, 0xF0, 0xF0, 0x68], fdl_status(9, 1)].concat()[..]);
-        assert!(codec.decode(&mut buf).unwrap().is_none());
-        let t = codec.line_idle(&mut buf).unwrap();
+        assert!(codec.next_telegram(&mut buf).is_none());
+        let t = codec.next_after_idle(&mut buf).unwrap();
         assert_eq!(t.as_bytes(), &fdl_status(9, 1)[..]);
         assert_eq!(codec.stats().truncated, 1);
     }

@@ -86,7 +86,7 @@ impl Rng {
         }
         // 1 - U lies in (0, 1], so the logarithm is finite.
         let u = 1.0 - self.next_f64();
-        let k = (u.ln() / (-p).ln_1p()).floor();
+        let k = crate::math::floor(crate::math::ln(u) / crate::math::ln_1p(-p));
         if k >= u64::MAX as f64 {
             u64::MAX
         } else {
@@ -101,7 +101,7 @@ impl Rng {
             return u64::MAX;
         }
         let u = 1.0 - self.next_f64();
-        let ns = -u.ln() / rate_per_s * 1e9;
+        let ns = -crate::math::ln(u) / rate_per_s * 1e9;
         if ns >= u64::MAX as f64 {
             u64::MAX
         } else {

@@ -3,9 +3,9 @@
 //! derives `Serialize` on its events.
 
 use crate::wire::Hex;
+use core::fmt::Display;
+use core::time::Duration;
 use serde::Serializer;
-use std::fmt::Display;
-use std::time::Duration;
 
 /// Bytes as spaced hex text, `"01 0A FF"`.
 pub fn hex<T: AsRef<[u8]> + ?Sized, S: Serializer>(bytes: &T, s: S) -> Result<S::Ok, S::Error> {

@@ -4,8 +4,8 @@
 //! as an [`Instant`], a count of nanoseconds since an epoch the driver
 //! chooses (process start on a real line, zero on the simulated bus).
 
-use std::ops::{Add, AddAssign, Sub};
-use std::time::Duration;
+use core::ops::{Add, AddAssign, Sub};
+use core::time::Duration;
 
 /// A point in time: nanoseconds since the driver's epoch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
@@ -56,8 +56,8 @@ impl Sub<Instant> for Instant {
     }
 }
 
-impl std::fmt::Display for Instant {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl core::fmt::Display for Instant {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
             "{}.{:06}s",

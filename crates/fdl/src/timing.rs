@@ -24,10 +24,12 @@
 //! token-lost timeout TTO = 6·TSL + 2·n·TSL (n = own address) from
 //! profirust.
 
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::wire::consts::BITS_PER_CHAR;
-use std::fmt;
-use std::str::FromStr;
-use std::time::Duration;
+use core::fmt;
+use core::str::FromStr;
+use core::time::Duration;
 
 /// A PROFIBUS baud rate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -169,10 +171,10 @@ impl FromStr for Baud {
         };
         let err = || UnknownBaud(s.to_string());
         let v: f64 = num.trim().parse().map_err(|_| err())?;
-        let mut bps = (v * mult).round();
+        let mut bps = crate::math::round(v * mult);
         // GSD style "187.5" / "9.6" means kbit/s.
         if mult == 1.0 && v < 1000.0 {
-            bps = (v * 1000.0).round();
+            bps = crate::math::round(v * 1000.0);
         }
         if !(0.0..=u32::MAX as f64).contains(&bps) {
             return Err(err());

@@ -1,8 +1,8 @@
-//! Tests of the RS-485 line model (`profibus_fdl::medium`) together with
+//! Tests of the RS-485 line model (`profibus_fdl::line::medium`) together with
 //! the codec: pacing, serialisation, fault injection and its detection.
 
 use profibus_fdl::codec::{Framed, Framer};
-use profibus_fdl::medium::{Collisions, Delivery, Medium, MediumConfig, MediumStats};
+use profibus_fdl::line::medium::{Collisions, Delivery, Medium, MediumConfig, MediumStats};
 use profibus_fdl::rng::Rng;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, Telegram};
 use profibus_fdl::{Baud, Instant};

@@ -1,8 +1,8 @@
 //! Property tests of the tap (passive framing with time stamps) and the
 //! pcap reader/writer: arbitrary input never panics, nothing is lost.
 
-use profibus_fdl::pcap::{PcapFormat, PcapReader, PcapWriter};
-use profibus_fdl::tap::{Tap, TapEvent};
+use profibus_fdl::capture::pcap::{PcapFormat, PcapReader, PcapWriter};
+use profibus_fdl::line::tap::{Tap, TapEvent};
 use profibus_fdl::Instant;
 use proptest::prelude::*;
 use std::time::Duration;

@@ -3,7 +3,7 @@
 //! TTR, a master leaving, a master joining through GAP polling, a lost
 //! token, simultaneous claims, address collision and a duplicate token.
 
-use profibus_fdl::medium::{Collisions, MediumConfig};
+use profibus_fdl::line::medium::{Collisions, MediumConfig};
 use profibus_fdl::sim::{SimBus, StationId};
 use profibus_fdl::station::active::{
     ActiveConfig, ActiveStation, CycleResult, FdlEvent, MasterApp, Outcome, Request, RingState,
@@ -84,12 +84,11 @@ impl Station for Injector {
 /// A tap that frames the line (deliveries come in chunks) and records
 /// every token telegram as (arrival, SA, DA).
 fn token_tap(tokens: Rc<RefCell<Vec<(Instant, u8, u8)>>>) -> profibus_fdl::sim::Tap {
-    use tokio_util::codec::Decoder;
-    let mut codec = profibus_fdl::FdlCodec::new();
+    let mut codec = profibus_fdl::Framer::new();
     let mut buf = bytes::BytesMut::new();
     Box::new(move |at, _from, bytes| {
         buf.extend_from_slice(bytes);
-        while let Ok(Some(t)) = codec.decode(&mut buf) {
+        while let Some(t) = codec.next_telegram(&mut buf) {
             if let Telegram::Token { da, sa } = t.telegram() {
                 tokens.borrow_mut().push((at, sa, da));
             }

@@ -1,10 +1,9 @@
 //! Property tests of the telegram wire format and the streaming codec.
 
 use bytes::BytesMut;
-use profibus_fdl::codec::FdlCodec;
+use profibus_fdl::codec::Framer;
 use profibus_fdl::wire::{DataTelegram, Format, FunctionCode, Telegram};
 use proptest::prelude::*;
-use tokio_util::codec::Decoder;
 
 #[derive(Debug, Clone)]
 enum Owned {
@@ -111,10 +110,10 @@ proptest! {
     #[test]
     fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
         let _ = Telegram::parse(&bytes);
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut buf = BytesMut::from(&bytes[..]);
         let mut framed = 0usize;
-        while let Some(t) = codec.decode_eof(&mut buf).unwrap() {
+        while let Some(t) = codec.next_at_end(&mut buf) {
             // Everything the codec returns is a valid telegram.
             prop_assert!(Telegram::parse(t.as_bytes()).is_ok());
             framed += 1;
@@ -132,21 +131,21 @@ proptest! {
         t in telegram(),
     ) {
         let want = t.bytes();
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut buf = BytesMut::from(&garbage[..]);
         // Whatever the garbage holds is framed or dropped by the time the
         // line has been idle.
         loop {
-            if codec.decode(&mut buf).unwrap().is_some() {
+            if codec.next_telegram(&mut buf).is_some() {
                 continue;
             }
             if buf.is_empty() {
                 break;
             }
-            codec.line_idle(&mut buf);
+            codec.next_after_idle(&mut buf);
         }
         buf.extend_from_slice(&want);
-        let got = codec.decode(&mut buf).unwrap().expect("telegram after garbage");
+        let got = codec.next_telegram(&mut buf).expect("telegram after garbage");
         prop_assert_eq!(got.as_bytes(), &want[..]);
         prop_assert!(buf.is_empty());
     }
@@ -159,10 +158,10 @@ proptest! {
         t in telegram(),
     ) {
         let want = t.bytes();
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut buf = BytesMut::from(&garbage[..]);
         buf.extend_from_slice(&want);
-        let got = codec.decode(&mut buf).unwrap().expect("telegram after garbage");
+        let got = codec.next_telegram(&mut buf).expect("telegram after garbage");
         prop_assert_eq!(got.as_bytes(), &want[..]);
         prop_assert_eq!(codec.stats().garbage_bytes, garbage.len() as u64);
     }
@@ -173,7 +172,7 @@ proptest! {
         cuts in proptest::collection::vec(1usize..40, 1..50),
     ) {
         let stream: Vec<u8> = ts.iter().flat_map(|t| t.bytes()).collect();
-        let mut codec = FdlCodec::new();
+        let mut codec = Framer::new();
         let mut buf = BytesMut::new();
         let mut got = vec![];
         let mut pos = 0;
@@ -183,7 +182,7 @@ proptest! {
             buf.extend_from_slice(&stream[pos..pos + n]);
             pos += n;
             i += 1;
-            while let Some(t) = codec.decode(&mut buf).unwrap() {
+            while let Some(t) = codec.next_telegram(&mut buf) {
                 got.push(t.as_bytes().to_vec());
             }
         }

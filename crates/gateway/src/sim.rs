@@ -12,7 +12,7 @@ use profibus_devices::generic::{GenericDevice, GenericError};
 use profibus_devices::{BoxedDevice, ProfileError};
 use profibus_dp::master::{DpMaster, MasterConfigError};
 use profibus_dp::slave::DpSlave;
-use profibus_fdl::medium::MediumConfig;
+use profibus_fdl::line::medium::MediumConfig;
 use profibus_fdl::sim::{SimBus, StationId};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
 use profibus_fdl::station::passive::PassiveStation;

@@ -72,8 +72,6 @@
 //! reads 0x2001 while BUSY after a reset, 0x0001 after; error 11 (memory
 //! test) can only be provoked on purpose ([`Jx2::fail_memory_test`]).
 
-#[cfg(feature = "tokio")]
-pub mod clients;
 mod device;
 pub mod profile;
 pub mod script;

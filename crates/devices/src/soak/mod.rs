@@ -55,7 +55,7 @@ pub use stats::Distribution;
 use ledger::{Ledger, Recorded};
 use plant::{MasterStation, PlantSlave, SlaveStation};
 use profibus_dp::master::{MasterEvent, SlaveState};
-use profibus_fdl::medium::{MediumConfig, MediumStats};
+use profibus_fdl::line::medium::{MediumConfig, MediumStats};
 use profibus_fdl::sim::{SimBus, StationId};
 use profibus_fdl::{Baud, Instant};
 use serde::Serialize;
@@ -398,7 +398,7 @@ pub enum SoakError {
     Master(#[from] profibus_dp::master::MasterConfigError),
     /// A fault setting is out of range.
     #[error(transparent)]
-    Medium(#[from] profibus_fdl::medium::MediumConfigError),
+    Medium(#[from] profibus_fdl::line::medium::MediumConfigError),
     /// A JX2 PLC setup error.
     #[error("jx2: {0}")]
     Jx2(String),

@@ -1,7 +1,7 @@
 //! Recovery-time distributions with fixed memory, and the process's
 //! resident set.
 
-use profibus_fdl::medium::MediumStats;
+use profibus_fdl::line::medium::MediumStats;
 use serde::ser::SerializeStruct;
 use serde::{Serialize, Serializer};
 use std::time::Duration;

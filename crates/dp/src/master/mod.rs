@@ -55,9 +55,9 @@
 //!
 //! ```no_run
 //! use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
-//! use profibus_fdl::driver::{run, Clock};
+//! use profibus_io::driver::{run, Clock};
 //! use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-//! use profibus_fdl::transport::Port;
+//! use profibus_io::transport::Port;
 //! use profibus_fdl::{Baud, BusParams};
 //! use std::ops::ControlFlow;
 //!

@@ -2,7 +2,7 @@
 //! tracks what it does with every slave, without sending a byte.
 //!
 //! [`Monitor`] is sans-IO. Feed it the telegrams a passive listener
-//! frames off the line ([`profibus_fdl::tap::Tap`] gives them with the
+//! frames off the line ([`profibus_fdl::line::tap::Tap`] gives them with the
 //! time their first byte arrived) with [`Monitor::observe`], and the
 //! bytes the framer had to skip with [`Monitor::observe_skipped`]. It
 //! pairs each request with the telegram that follows it (the response,
@@ -72,7 +72,7 @@ use crate::pdu::control::{ControlCommand, GlobalControl};
 use crate::pdu::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
 use crate::pdu::sap;
 use profibus_fdl::codec::CodecStats;
-use profibus_fdl::tap::TapEvent;
+use profibus_fdl::line::tap::TapEvent;
 use profibus_fdl::wire::{
     DataTelegram, FunctionCode, Hex, RequestKind, ResponseStatus, StationType,
 };

@@ -446,7 +446,7 @@ proptest! {
     fn arbitrary_bytes_through_the_tap_never_panic(
         chunks in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..64), 0..40)
     ) {
-        let mut tap = profibus_fdl::tap::Tap::new();
+        let mut tap = profibus_fdl::line::tap::Tap::new();
         let mut m = Monitor::new(vec![], MonitorOptions::default());
         for (i, c) in chunks.iter().enumerate() {
             tap.push(Instant::from_nanos(i as u64 * 1000), c);
@@ -455,12 +455,12 @@ proptest! {
             }
             while let Some(ev) = tap.poll() {
                 match ev {
-                    profibus_fdl::tap::TapEvent::Telegram { at, bytes } => {
+                    profibus_fdl::line::tap::TapEvent::Telegram { at, bytes } => {
                         if let Ok((tg, _)) = Telegram::parse(&bytes) {
                             m.observe(at, &tg);
                         }
                     }
-                    profibus_fdl::tap::TapEvent::Skipped { at, errors, .. } => m.observe_skipped(at, &errors),
+                    profibus_fdl::line::tap::TapEvent::Skipped { at, errors, .. } => m.observe_skipped(at, &errors),
                 }
             }
         }

@@ -74,12 +74,14 @@
 //! other SAPs (see `reply_matches`).
 
 use super::{earliest, RxPath, Station};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::timing::BusParams;
 use crate::wire::{
     consts, DataTelegram, FunctionCode, RequestKind, ResponseStatus, StationType, Telegram,
 };
-use std::time::Duration;
+use core::time::Duration;
 
 /// Configuration of an active station.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -320,9 +322,9 @@ pub enum FdlEvent {
     },
 }
 
-impl std::fmt::Display for FdlEvent {
+impl core::fmt::Display for FdlEvent {
     /// The event in words, as `dpctl` prints it.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
             FdlEvent::GapStatus {
                 address,

@@ -3,6 +3,8 @@
 //! line.
 
 use super::passive::{Reply, Responder};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::wire::{DataTelegram, ResponseStatus};
 

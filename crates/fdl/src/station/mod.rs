@@ -23,7 +23,10 @@
 //!   message cycles (requests with FCB/FCV, slot-time timeout and retries)
 //!   for an [`active::MasterApp`].
 
+#[allow(unused_imports)]
+use crate::prelude::*;
 pub mod active;
+pub mod autobaud;
 pub mod echo;
 pub mod passive;
 

@@ -20,6 +20,8 @@
 //! answered. Telegrams not addressed to the station are ignored.
 
 use super::{earliest, RxPath, Station};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::timing::BusParams;
 use crate::wire::{
@@ -120,7 +122,7 @@ pub struct PassiveStation<R> {
 impl<R: Responder> PassiveStation<R> {
     /// A passive station with bus parameters `params`.
     pub fn new(app: R, params: BusParams) -> Self {
-        Self::with_latency_allowance(app, params, std::time::Duration::ZERO)
+        Self::with_latency_allowance(app, params, core::time::Duration::ZERO)
     }
 
     /// A passive station on a transport that adds latency (ptys, USB
@@ -130,7 +132,7 @@ impl<R: Responder> PassiveStation<R> {
     pub fn with_latency_allowance(
         app: R,
         params: BusParams,
-        allowance: std::time::Duration,
+        allowance: core::time::Duration,
     ) -> Self {
         let slack = params.slot_duration() + allowance;
         PassiveStation {

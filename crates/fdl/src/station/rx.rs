@@ -3,10 +3,12 @@
 //! with an idle deadline after which an incomplete telegram is abandoned.
 
 use crate::codec::{CodecStats, Framed, Framer};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::timing::Baud;
 use crate::wire::{consts, frame_len, Telegram};
-use std::time::Duration;
+use core::time::Duration;
 
 /// Receive buffer plus framer; see the module docs.
 #[derive(Debug)]

@@ -1,6 +1,8 @@
 //! Bytes as hex text, the one formatter every crate and `dpctl` use.
 
-use std::fmt;
+#[allow(unused_imports)]
+use crate::prelude::*;
+use core::fmt;
 
 /// Bytes shown as upper-case hex: `Hex(&[1, 10, 255])` displays as
 /// `01 0A FF`; the alternate form `{:#}` leaves out the spaces

@@ -11,6 +11,8 @@
 
 use super::consts::*;
 use super::fc::FunctionCode;
+#[allow(unused_imports)]
+use crate::prelude::*;
 use bytes::{BufMut, BytesMut};
 
 /// Frame check sequence: arithmetic sum modulo 256 of the covered bytes

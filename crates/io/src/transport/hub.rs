@@ -45,15 +45,15 @@
 //! an eventfd) and calls it in a loop; [`Hub::finish`] flushes the pcap
 //! recording and removes the links (dropping the hub removes them too).
 
-use crate::codec::CodecStats;
-use crate::medium::{Medium, MediumConfig, MediumStats};
-use crate::pcap::PcapWriter;
-use crate::tap::{Tap, TapEvent};
-use crate::time::Instant;
 use nix::errno::Errno;
 use nix::poll::{PollFd, PollFlags};
 use nix::sys::termios::{self, SetArg};
 use nix::sys::time::TimeSpec;
+use profibus_fdl::capture::pcap::PcapWriter;
+use profibus_fdl::codec::CodecStats;
+use profibus_fdl::line::medium::{Medium, MediumConfig, MediumStats};
+use profibus_fdl::line::tap::{Tap, TapEvent};
+use profibus_fdl::time::Instant;
 use std::fmt;
 use std::io::{self, Write};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
@@ -577,7 +577,7 @@ fn flush_queue(s: &mut Station) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::timing::Baud;
+    use profibus_fdl::timing::Baud;
     use std::io::Read;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::Arc;

@@ -2,7 +2,7 @@
 //! from a file, stdin, or a Unix socket whose connections each send lines
 //! (`dpctl slave --control`). Needs a tokio runtime (feature `tokio`).
 
-use crate::ControlInbox;
+use profibus_devices::ControlInbox;
 use std::io;
 use std::path::{Path, PathBuf};
 use tokio::io::{AsyncBufReadExt, AsyncRead, BufReader};

@@ -6,11 +6,11 @@
 //! [`Heard::Tick`] comes at least every [`ListenOptions::tick`] even on a
 //! silent line, for status output and timeouts.
 
-use crate::codec::CodecStats;
-use crate::tap::{Tap, TapEvent};
-use crate::time::Instant;
-use crate::timing::BusParams;
 use crate::transport::Port;
+use profibus_fdl::codec::CodecStats;
+use profibus_fdl::line::tap::{Tap, TapEvent};
+use profibus_fdl::time::Instant;
+use profibus_fdl::timing::BusParams;
 use std::future::Future;
 use std::io;
 use std::ops::ControlFlow;

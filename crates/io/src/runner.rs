@@ -9,12 +9,12 @@
 //! takes the application back, searches again and builds a new station.
 //! Any embedder of a slave uses it the way `dpctl slave` does.
 
-use crate::autobaud::{AutoBaud, Relisten, RELISTEN_AFTER};
 use crate::driver::{self, Clock, Stop};
-use crate::station::passive::{PassiveStation, Responder};
-use crate::timing::{Baud, BusParams};
 use crate::transport::{Port, TransportError};
-use crate::Instant;
+use profibus_fdl::station::autobaud::{AutoBaud, Relisten, RELISTEN_AFTER};
+use profibus_fdl::station::passive::{PassiveStation, Responder};
+use profibus_fdl::timing::{Baud, BusParams};
+use profibus_fdl::Instant;
 use std::cell::{Cell, RefCell};
 use std::future::Future;
 use std::ops::ControlFlow;
@@ -234,9 +234,9 @@ async fn search<F: Future<Output = ()>>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::station::passive::Reply;
     use crate::testing::fdl_status;
-    use crate::wire::{DataTelegram, ResponseStatus};
+    use profibus_fdl::station::passive::Reply;
+    use profibus_fdl::wire::{DataTelegram, ResponseStatus};
 
     /// The error and its sources as `{:#}` of anyhow prints them.
     fn chain(e: &dyn std::error::Error) -> String {

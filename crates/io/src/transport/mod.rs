@@ -50,8 +50,8 @@ pub mod hub;
 pub mod realtime;
 mod rs485;
 
-use crate::timing::Baud;
 use mio_serial::SerialStream;
+use profibus_fdl::timing::Baud;
 use std::future::Future;
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd};
@@ -391,7 +391,7 @@ impl Port {
 
     /// The transport's latency, the allowance to add to slot times and
     /// token timeouts when the user gives none
-    /// ([`crate::station::active::ActiveConfig::latency_allowance`]). USB
+    /// ([`profibus_fdl::station::active::ActiveConfig::latency_allowance`]). USB
     /// serial adapters buffer for up to 16 ms (the FTDI latency timer):
     /// 20 ms. A pty answers within a millisecond even on a loaded machine:
     /// 5 ms. A serial device server collects the characters of its line
@@ -415,7 +415,7 @@ impl Port {
     /// Whether the port may hand over each telegram only once its last
     /// character has crossed the wire, so that an answer's first character
     /// comes its whole wire time late
-    /// ([`crate::station::active::ActiveConfig::whole_telegrams`]): true on
+    /// ([`profibus_fdl::station::active::ActiveConfig::whole_telegrams`]): true on
     /// a pty (a paced `dpctl bus` does so) and on a TCP serial device
     /// server (which packs a telegram into one packet); false on a serial
     /// port, whose characters come as they arrive.

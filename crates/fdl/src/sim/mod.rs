@@ -8,11 +8,11 @@
 //! with the same seed is identical.
 //!
 //! ```
-//! use profibus_fdl::medium::MediumConfig;
+//! use profibus_fdl::line::medium::MediumConfig;
 //! use profibus_fdl::sim::SimBus;
 //! use profibus_fdl::station::active::{ActiveConfig, ActiveStation, MasterApp, TokenContext, Request, CycleResult};
 //! use profibus_fdl::{Baud, BusParams, Instant};
-//! use std::time::Duration;
+//! use core::time::Duration;
 //!
 //! struct Idle;
 //! impl MasterApp for Idle {
@@ -27,11 +27,13 @@
 //! assert!(tokens > 10, "{tokens}");
 //! ```
 
-use crate::medium::{Medium, MediumConfig, MediumStats};
+use crate::line::medium::{Medium, MediumConfig, MediumStats};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::station::Station;
 use crate::time::Instant;
-use std::any::Any;
-use std::time::Duration;
+use core::any::Any;
+use core::time::Duration;
 
 /// A station the simulator can hand back by its concrete type.
 pub trait SimStation: Station + Any {

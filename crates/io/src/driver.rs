@@ -39,8 +39,8 @@
 //! Gathering several telegrams into one write ([`Options::gather`]) gives
 //! this up for speed on ptys; it is off by default.
 
-use crate::station::Station;
-use crate::time::Instant;
+use profibus_fdl::station::Station;
+use profibus_fdl::time::Instant;
 use std::future::Future;
 use std::io;
 use std::ops::ControlFlow;
@@ -694,9 +694,9 @@ async fn wait_for(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::station::echo::Echo;
-    use crate::station::passive::PassiveStation;
-    use crate::timing::{Baud, BusParams};
+    use profibus_fdl::station::echo::Echo;
+    use profibus_fdl::station::passive::PassiveStation;
+    use profibus_fdl::timing::{Baud, BusParams};
 
     #[tokio::test]
     async fn passive_station_answers_over_a_duplex_stream() {

@@ -9,9 +9,11 @@
 //! byte vectors.
 
 use crate::codec::{CodecStats, Framed, Framer};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::wire::Hex;
-use std::collections::VecDeque;
+use alloc::collections::VecDeque;
 
 /// What a [`Tap`] found on the line.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -71,8 +73,8 @@ impl<'a> Skipped<'a> {
     }
 }
 
-impl std::fmt::Display for Skipped<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl core::fmt::Display for Skipped<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let (why, n, raw) = (&self.error, self.skipped, self.raw);
         write!(f, "{why}: {n} bytes skipped: {raw}")
     }
@@ -232,7 +234,7 @@ mod tests {
     }
 
     fn all(tap: &mut Tap) -> Vec<TapEvent> {
-        std::iter::from_fn(|| tap.poll()).collect()
+        core::iter::from_fn(|| tap.poll()).collect()
     }
 
     #[test]

@@ -3,24 +3,24 @@
 //!
 //! - [`ProfileArgs`]: the device to emulate and its options, as command
 //!   line flags (with the `clap` feature) or filled in by hand; it
-//!   configures the profile from the [registry](crate::PROFILES).
+//!   configures the profile from the [registry](profibus_devices::PROFILES).
 //! - [`BaudChoice`]: a fixed rate, or the search of a slave with
 //!   `Auto_Baud_supp` (on a pty or a serial server the rate is nominal).
 //! - [`SlaveShell`]: runs a [`DpSlave`] with
-//!   [`PassiveRunner`](profibus_fdl::runner::PassiveRunner) (search again
+//!   [`PassiveRunner`](crate::runner::PassiveRunner) (search again
 //!   after a watchdog expiry), keeps what the device reports outside its
 //!   request path (an accepted Set_Slave_Add in the profile's address
 //!   file, [`STATE_EVENT`] state in its state file) and reports
 //!   everything as [`Emitted`] events (`Display` for text, `Serialize`
 //!   for JSON lines).
 
-use crate::address::StoredAddress;
-use crate::generic::InputPattern;
-use crate::{Configured, DeviceOptions, ProfileEntry, ProfileError, STATE_EVENT};
+use crate::driver::Clock;
+use crate::runner::{PassiveRunner, RunnerError, RunnerEvent, Step};
+use crate::transport::Port;
+use profibus_devices::address::StoredAddress;
+use profibus_devices::generic::InputPattern;
+use profibus_devices::{Configured, DeviceOptions, ProfileEntry, ProfileError, STATE_EVENT};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress, SlaveEvent, SlaveState, SlaveStats};
-use profibus_fdl::driver::Clock;
-use profibus_fdl::runner::{PassiveRunner, RunnerError, RunnerEvent, Step};
-use profibus_fdl::transport::Port;
 use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, Instant};
 use std::fmt;
@@ -256,8 +256,8 @@ impl ProfileArgs {
 
     fn entry(&self) -> Result<&'static ProfileEntry, EmulationError> {
         match &self.device {
-            Some(name) => crate::profile(name).map_err(EmulationError::UnknownProfile),
-            None => Ok(crate::profile("generic")?),
+            Some(name) => profibus_devices::profile(name).map_err(EmulationError::UnknownProfile),
+            None => Ok(profibus_devices::profile("generic")?),
         }
     }
 
@@ -288,8 +288,8 @@ impl ProfileArgs {
     pub fn device(
         &self,
         e: &Emulated,
-        control: Option<crate::ControlInbox>,
-    ) -> Result<crate::BoxedDevice, EmulationError> {
+        control: Option<profibus_devices::ControlInbox>,
+    ) -> Result<profibus_devices::BoxedDevice, EmulationError> {
         e.profile.device(control).map_err(|e| self.in_words(e))
     }
 }
@@ -335,7 +335,7 @@ impl BaudChoice {
             BaudChoice::Fixed(b) => (false, b),
             BaudChoice::Auto if nominal => (false, Self::NOMINAL),
             BaudChoice::Auto | BaudChoice::Search => {
-                (true, profibus_fdl::autobaud::SEARCH_ORDER[0])
+                (true, profibus_fdl::station::autobaud::SEARCH_ORDER[0])
             }
         }
     }

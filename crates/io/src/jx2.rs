@@ -10,10 +10,10 @@
 //! waiting on a bit wakes at each bus event and each register write of
 //! another client.
 
-use super::profile::Options;
-use super::script::{Interpreter, ParseError, Progress, Reply};
-use super::{BadModuleNumber, Plc, SharedJx2};
-use profibus_fdl::driver::Clock;
+use crate::driver::Clock;
+use profibus_devices::jx2::profile::Options;
+use profibus_devices::jx2::script::{Interpreter, ParseError, Progress, Reply};
+use profibus_devices::jx2::{BadModuleNumber, Plc, SharedJx2};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};

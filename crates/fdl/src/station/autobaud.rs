@@ -15,10 +15,12 @@
 //! the rate changes it reconfigures the port.
 
 use crate::codec::{Framed, Framer};
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::time::Instant;
 use crate::timing::Baud;
 use crate::wire::Telegram;
-use std::time::Duration;
+use core::time::Duration;
 
 /// The rates in the order they are tried: fastest first.
 pub const SEARCH_ORDER: [Baud; 11] = [

@@ -11,7 +11,7 @@
 //! # Use
 //!
 //! ```
-//! # use profibus_fdl::medium::{Medium, MediumConfig};
+//! # use profibus_fdl::line::medium::{Medium, MediumConfig};
 //! # use profibus_fdl::{Baud, Instant};
 //! let mut m = Medium::new(3, MediumConfig::paced(Baud::B19200));
 //! m.transmit(Instant::ZERO, 0, &[0x10, 0x02, 0x01, 0x49, 0x4C, 0x16]);
@@ -69,13 +69,15 @@
 //! the seed, so the drop and flip counts depend only on the sequence of
 //! characters carried, not on how they were timed or split into writes.
 
+#[allow(unused_imports)]
+use crate::prelude::*;
 use crate::rng::{splitmix64, Rng};
 use crate::time::Instant;
 use crate::timing::Baud;
 use crate::wire::consts::BITS_PER_CHAR;
+use alloc::collections::VecDeque;
 use bytes::Bytes;
-use std::collections::VecDeque;
-use std::fmt;
+use core::fmt;
 
 /// Longest noise burst in characters; burst lengths are uniform in
 /// `1..=NOISE_BURST_MAX`.
@@ -667,8 +669,8 @@ impl Medium {
         now
     }
 
-    fn noise_gap(&mut self) -> std::time::Duration {
-        std::time::Duration::from_nanos(self.noise_rng.exponential_nanos(self.cfg.noise_rate))
+    fn noise_gap(&mut self) -> core::time::Duration {
+        core::time::Duration::from_nanos(self.noise_rng.exponential_nanos(self.cfg.noise_rate))
     }
 
     /// Apply drop and flip to one character.
@@ -748,7 +750,7 @@ mod tests {
     }
 
     use super::*;
-    use std::time::Duration;
+    use core::time::Duration;
 
     fn drain(m: &mut Medium, until: Instant) -> Vec<Delivery> {
         let mut out = vec![];

@@ -23,7 +23,7 @@
 //! checks that could not be made).
 
 use super::{is_pty_fd, RtsControl, TCP_SCHEME};
-use crate::timing::{Baud, BusParams};
+use profibus_fdl::timing::{Baud, BusParams};
 use std::fmt;
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd};
