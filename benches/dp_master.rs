@@ -106,7 +106,7 @@ fn start_slave(dpctl: &Path, port: &Path) -> Kill {
             .args(["slave", "--addr", "8", "--baud", "1.5M", "--port"])
             .arg(port)
             .arg("--gsd")
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "2 words in/out"])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -208,7 +208,7 @@ fn dpctl_rate(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n\
              [options]\n{options}\n\
              [[slave]]\naddress = 8\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
-            repo().join("gsd/DPCTL_GEN.GSD").display()
+            repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ),
     )
     .unwrap();
@@ -277,7 +277,7 @@ fn pyprofibus_rate(dpctl: &Path, dir: &Path, kind: &Line, n: u32) -> Rate {
         .arg("--port")
         .arg(&a)
         .arg("--gsd")
-        .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+        .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
         .args([
             "--addr",
             "8",
@@ -416,7 +416,7 @@ fn cpu_time() -> f64 {
 fn pyprofibus_cost(n: u32) -> f64 {
     let out = Command::new(python())
         .arg(repo().join("benches/support/pyprofibus_dummy.py"))
-        .arg(repo().join("gsd/corpus/pyprofibus_dummy_compact.gsd"))
+        .arg(repo().join("crates/devices/gsd/corpus/pyprofibus_dummy_compact.gsd"))
         .arg(n.to_string())
         .stderr(Stdio::null())
         .output()
@@ -433,7 +433,7 @@ fn rss_125(dpctl: &Path, dir: &Path) -> u64 {
     for addr in 1..=125 {
         t.push_str(&format!(
             "[[slave]]\naddress = {addr}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
-            repo().join("gsd/DPCTL_GEN.GSD").display()
+            repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ));
     }
     let cfg = dir.join("big.toml");

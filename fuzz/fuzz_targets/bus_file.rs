@@ -2,7 +2,7 @@
 //! (`ProfiledBus::parse`: TOML, slaves from GSD modules or `device =
 //! "NAME"` with options, bus parameters) on arbitrary text, plus the
 //! gateway's `[mqtt]` settings and the named channels of what loads.
-//! GSD and data paths resolve against the repository's `gsd/` directory,
+//! GSD and data paths resolve against the repository's `crates/devices/gsd/` directory,
 //! so the fuzzer can name the real GSD files. Checks: no panic; an error
 //! names the file and a line inside the text; what loads gives a master
 //! configuration `DpMaster::new` accepts.

@@ -4,7 +4,7 @@
 //! turns quirks into errors); and whatever parses survives write → parse
 //! unchanged.
 //!
-//! Run: `cargo +nightly fuzz run gsd_parse fuzz/corpus/gsd_parse gsd gsd/corpus -- -dict=fuzz/gsd.dict`
+//! Run: `cargo +nightly fuzz run gsd_parse fuzz/corpus/gsd_parse crates/devices/gsd crates/devices/gsd/corpus -- -dict=fuzz/gsd.dict`
 
 #![no_main]
 

@@ -14,10 +14,10 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Duration;
 
-/// The repository's `gsd/` directory (bus files of the targets live
+/// The repository's `crates/devices/gsd/` directory (bus files of the targets live
 /// there, so relative GSD and data paths resolve).
 pub fn gsd_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gsd")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/devices/gsd")
 }
 
 /// A configured profile with the master's Set_Prm and Chk_Cfg for it.
@@ -38,7 +38,7 @@ impl Fixture {
 }
 
 /// Configure profile `name` with `options` (TOML lines, paths relative
-/// to `gsd/`) from the registry, and load the bus file whose slave 8 has
+/// to `crates/devices/gsd/`) from the registry, and load the bus file whose slave 8 has
 /// the `[[slave]]` keys `slave` for the master's side (for the generic
 /// profile: `gsd` and `modules`; otherwise `device` and the options).
 pub fn fixture(name: &str, options: &str, slave: &str) -> Fixture {

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """pyprofibus (an independent DP master) drives an emulated BK3000
-(`dpctl slave --device bk3000`) with the modules of gsd/BK30BECF.GSD and
+(`dpctl slave --device bk3000`) with the modules of crates/devices/gsd/BK30BECF.GSD and
 sends fixed outputs.
 
 Used by crates/cli/tests/bk3000.rs. Prints {"event": "dx", "cycle": n, "inputs": HEX}

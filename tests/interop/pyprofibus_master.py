@@ -3,7 +3,7 @@
 line or pty and checks the process data both ways.
 
 Used by the interop test (crates/cli/tests/slave_interop.rs) against
-`dpctl slave --gsd gsd/DPCTL_GEN.GSD --inputs echo ...`: the slave echoes
+`dpctl slave --gsd crates/devices/gsd/DPCTL_GEN.GSD --inputs echo ...`: the slave echoes
 the outputs, so every Data_Exchange answer must equal the first bytes of
 the outputs sent with it. A freeze phase checks Global_Control: while
 frozen the inputs must stay at the value latched by the Freeze command.

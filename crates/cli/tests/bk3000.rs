@@ -2,7 +2,7 @@
 //! with a mixed terminal strip on one end of a socat pty pair, and on the
 //! other `dpctl master` with a `device = "bk3000"` bus file (named
 //! channels both ways, a wrong configuration, a pulled terminal) or
-//! pyprofibus with `gsd/BK30BECF.GSD`; and the BK3000 of `dpctl demo`.
+//! pyprofibus with `crates/devices/gsd/BK30BECF.GSD`; and the BK3000 of `dpctl demo`.
 //!
 //! Needs socat and `.venv` with pyprofibus (scripts/setup-test-env); the
 //! tests fail when they are missing.
@@ -318,7 +318,7 @@ fn pyprofibus_exchanges_data_with_the_coupler_through_its_gsd() {
         .arg("--port")
         .arg(&r.master_port)
         .arg("--gsd")
-        .arg(repo().join("gsd/BK30BECF.GSD"))
+        .arg(repo().join("crates/devices/gsd/BK30BECF.GSD"))
         .args(["--addr", "15", "--in-len", "5", "--out-len", "5"])
         .args(["--outputs", "4000000005", "--cycles", "30"])
         .stdout(Stdio::piped())

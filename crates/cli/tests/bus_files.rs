@@ -23,13 +23,11 @@ fn dpctl_in(dir: &Path, args: &[&str]) -> (std::process::ExitStatus, String) {
     )
 }
 
-/// A directory where the repository's relative paths (gsd/…, crates/…)
+/// A directory where the repository's relative paths (crates/…)
 /// resolve as from the repository's root, as the README's commands run.
 fn workdir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    for d in ["gsd", "crates"] {
-        std::os::unix::fs::symlink(repo().join(d), dir.path().join(d)).unwrap();
-    }
+    std::os::unix::fs::symlink(repo().join("crates"), dir.path().join("crates")).unwrap();
     dir
 }
 
@@ -184,8 +182,8 @@ fn a_wrong_name_is_one_line_with_its_place_and_the_closest_names() {
     let d = dir.path();
     for (slave, want) in [
         (
-            "address = 5\ngsd = \"gsd/DPCTL_GEN.GSD\"\nmodules = [\"3 words in/out\"]\n",
-            "dpctl: bad.toml:8:12: slave 5: gsd/DPCTL_GEN.GSD: no module named \
+            "address = 5\ngsd = \"crates/devices/gsd/DPCTL_GEN.GSD\"\nmodules = [\"3 words in/out\"]\n",
+            "dpctl: bad.toml:8:12: slave 5: crates/devices/gsd/DPCTL_GEN.GSD: no module named \
              `3 words in/out`; did you mean `2 words in/out`?",
         ),
         (
@@ -220,7 +218,12 @@ fn a_wrong_name_is_one_line_with_its_place_and_the_closest_names() {
     // The same names on the command line of `dpctl slave`.
     for (args, want) in [
         (
-            &["--gsd", "gsd/DPCTL_GEN.GSD", "--module", "3 words in/out"][..],
+            &[
+                "--gsd",
+                "crates/devices/gsd/DPCTL_GEN.GSD",
+                "--module",
+                "3 words in/out",
+            ][..],
             "no module named `3 words in/out`; did you mean `2 words in/out`?",
         ),
         (

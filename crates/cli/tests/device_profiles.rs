@@ -318,7 +318,7 @@ fn bm4_set_once_address_survives_a_restart() {
 /// our GSD writer (pyprofibus reads no modules from the original).
 fn omega_gsd(dir: &TempDir) -> PathBuf {
     let g = profibus::dp::config::gsd::Gsd::from_file(
-        repo().join("gsd/BNF_00D0.GSD"),
+        repo().join("crates/devices/gsd/BNF_00D0.GSD"),
         profibus::dp::config::gsd::ParseOptions { lenient: true },
     )
     .unwrap()
@@ -509,12 +509,12 @@ fn pyprofibus_pkw(
 #[test]
 fn pyprofibus_runs_both_profiles_into_data_exchange_with_pkw() {
     let py = python();
-    // BM4 with the manual's MyGSDFile.gsd from gsd/.
+    // BM4 with the manual's MyGSDFile.gsd from crates/devices/gsd/.
     let r = rig("py-bm4", &bm4(&["--addr", "6"]), false);
     pyprofibus_pkw(
         &r,
         &py,
-        &repo().join("gsd/MyGSDFile.gsd"),
+        &repo().join("crates/devices/gsd/MyGSDFile.gsd"),
         6,
         &["Bedarfsdaten PKW", "ud_MyReadVar1", "u_MyWriteVar2"],
         (12, 10),

@@ -17,7 +17,7 @@ fn slave(bus: &Bus, link: usize) -> Proc {
             .args(["slave", "--addr", "5", "--baud", "1.5M", "--port"])
             .arg(bus.link(link))
             .arg("--gsd")
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "1 byte in"])
             .stdout(Stdio::null())
             .stderr(Stdio::null()),
@@ -44,7 +44,7 @@ fn master_names_two_slaves_at_one_address(extra: &[&str]) {
         format!(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 5\ngsd = \"{}\"\n\
              modules = [\"1 byte in\"]\n",
-            repo().join("gsd/DPCTL_GEN.GSD").display()
+            repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ),
     )
     .unwrap();

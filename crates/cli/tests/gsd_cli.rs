@@ -6,7 +6,7 @@ use common::{repo, run_dpctl as dpctl, TempDir};
 use std::path::PathBuf;
 
 fn gsd(name: &str) -> PathBuf {
-    repo().join("gsd").join(name)
+    repo().join("crates/devices/gsd").join(name)
 }
 
 #[test]

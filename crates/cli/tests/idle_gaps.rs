@@ -204,7 +204,11 @@ impl IdleFramer {
 fn idle_framing_slave(link: PathBuf, baud: Baud, stop: Arc<AtomicBool>, c: Arc<Counters>) {
     use nix::poll::{PollFd, PollFlags};
     use nix::sys::time::TimeSpec;
-    let parsed = Gsd::from_file(repo().join("gsd/DPCTL_GEN.GSD"), ParseOptions::LENIENT).unwrap();
+    let parsed = Gsd::from_file(
+        repo().join("crates/devices/gsd/DPCTL_GEN.GSD"),
+        ParseOptions::LENIENT,
+    )
+    .unwrap();
     let dev = GenericDevice::from_gsd(&parsed.gsd, &["2 words in/out"]).unwrap();
     let mut station = PassiveStation::new(DpSlave::new(dev, SLAVE), BusParams::defaults(baud));
     // An ASIC's receiver is never late: this one runs ahead of every
@@ -382,7 +386,7 @@ fn poll_idle_framing_slave(
              [[slave]]\naddress = {SLAVE}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
             baud.bps(),
             if hold { "alone_hold_bits = 3000" } else { "" },
-            repo().join("gsd/DPCTL_GEN.GSD").display()
+            repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ),
     )
     .unwrap();

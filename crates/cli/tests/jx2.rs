@@ -33,7 +33,10 @@ struct Jx2 {
 }
 
 fn gsd() -> String {
-    repo().join("gsd/JX2P0DC3.GSD").display().to_string()
+    repo()
+        .join("crates/devices/gsd/JX2P0DC3.GSD")
+        .display()
+        .to_string()
 }
 
 /// `dpctl slave --device jx2 --json` with a script (may be empty) and a

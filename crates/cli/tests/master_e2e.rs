@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 const WAIT: Duration = Duration::from_secs(40);
 
 fn gen_gsd() -> PathBuf {
-    repo().join("gsd/DPCTL_GEN.GSD")
+    repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
 }
 
 /// `dpctl bus` with `n` stations, and its link prefix (`<prefix>0 …`).

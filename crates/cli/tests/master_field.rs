@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 const WAIT: Duration = Duration::from_secs(60);
 
 fn write_bus(dir: &TempDir, baud: &str, slaves: &[(u8, &str)]) -> std::path::PathBuf {
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let mut t = format!("[master]\naddress = 2\nbaud = \"{baud}\"\n");
     for (a, m) in slaves {
         t.push_str(&format!(
@@ -112,7 +112,7 @@ fn cfg_fault_backs_off_reports_once_and_shows_both_configurations() {
             .args(["slave", "--port"])
             .arg(bus.link(1))
             .args(["--addr", "10", "--baud", "1.5M", "--gsd"])
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "4 words out consistent"])
             .stdout(Stdio::null())
             .stderr(Stdio::null()),

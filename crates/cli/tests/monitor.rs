@@ -21,7 +21,11 @@ const COMMANDS: &str = r#"{"slave": 3, "outputs": "12 34 56 78"}
 "#;
 
 fn bus_file(dir: &TempDir) -> std::path::PathBuf {
-    std::fs::copy(repo().join("gsd/DPCTL_GEN.GSD"), dir.path("DPCTL_GEN.GSD")).unwrap();
+    std::fs::copy(
+        repo().join("crates/devices/gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
     let bus = dir.path("bus.toml");
     std::fs::write(&bus, BUS).unwrap();
     bus
@@ -56,7 +60,7 @@ fn monitor_follows_a_master_and_its_slaves_to_data_exchange() {
             .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
             .arg(line.link(1))
             .arg("--gsd")
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "1 byte in", "--module", "2 words in/out"])
             .stdout(Stdio::null())
             .stdin(Stdio::null()),
@@ -261,7 +265,11 @@ fn monitor_takes_slaves_out_of_data_exchange_when_their_master_stops() {
          gsd = \"DPCTL_GEN.GSD\"\nmodules = [\"1 byte in\"]\n",
     )
     .unwrap();
-    std::fs::copy(repo().join("gsd/DPCTL_GEN.GSD"), dir.path("DPCTL_GEN.GSD")).unwrap();
+    std::fs::copy(
+        repo().join("crates/devices/gsd/DPCTL_GEN.GSD"),
+        dir.path("DPCTL_GEN.GSD"),
+    )
+    .unwrap();
     let mut monitor = Proc::spawn(
         "dpctl monitor",
         Command::new(dpctl())
@@ -281,7 +289,7 @@ fn monitor_takes_slaves_out_of_data_exchange_when_their_master_stops() {
             .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
             .arg(line.link(1))
             .arg("--gsd")
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "1 byte in"])
             .stdout(Stdio::null())
             .stdin(Stdio::null()),

@@ -75,7 +75,7 @@ impl ClosedStdout {
 
 #[test]
 fn one_shot_commands_end_quietly_when_nobody_reads_their_output() {
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let gsd = gsd.to_str().unwrap();
     for args in [
         &["gsd", "show", gsd][..],

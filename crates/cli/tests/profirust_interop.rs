@@ -4,7 +4,7 @@
 //! (pyprofibus uses SRD high), passes the token to itself and polls its
 //! GAP; the slave must reach Data_Exchange and echo changing outputs.
 //!
-//! The parameters and configuration come from `gsd/DPCTL_GEN.GSD` through
+//! The parameters and configuration come from `crates/devices/gsd/DPCTL_GEN.GSD` through
 //! this stack's GSD parser (profirust has no GSD parser of its own).
 //!
 //! profirust's own PHYs cannot open a pty: `LinuxRs485Phy` asserts that
@@ -112,7 +112,7 @@ fn profirust_master_reaches_data_exchange_with_dpctl_slave() {
     let dir = TempDir::new("profirust");
     let (a, b) = (dir.path("master"), dir.path("slave"));
     let _socat = pty_pair(&a, &b);
-    let gsd_path = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd_path = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let gsd = Gsd::from_file(&gsd_path, ParseOptions::STRICT)
         .expect("DPCTL_GEN.GSD parses")
         .gsd;

@@ -56,7 +56,7 @@ fn rig_with(tags: &str, profile: bool) -> Rig {
     } else {
         format!(
             "gsd = \"{}\"\nmodules = [\"16 Byte In/Out\"]",
-            repo().join("gsd/AEGI0DC4.GSD").display()
+            repo().join("crates/devices/gsd/AEGI0DC4.GSD").display()
         )
     };
     // HSA 8: the master's GAP polls (FDL_Status) stay below the reader's
@@ -395,7 +395,7 @@ fn pyprofibus_runs_the_reader_into_data_exchange_and_the_ver_handshake() {
         .arg("--port")
         .arg(&a)
         .arg("--gsd")
-        .arg(repo().join("gsd/AEGI0DC4.GSD"))
+        .arg(repo().join("crates/devices/gsd/AEGI0DC4.GSD"))
         .args(["--addr", "9", "--command", "VER"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());

@@ -21,7 +21,7 @@ fn slave(bus: &Bus, i: usize, addr: u8) -> Proc {
         Command::new(dpctl())
             .args(["slave", "--port", &bus.link_str(i)])
             .args(["--addr", &addr.to_string(), "--gsd"])
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "2 words in/out"])
             .stdout(Stdio::null())
             .stderr(Stdio::null()),

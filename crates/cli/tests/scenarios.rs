@@ -23,7 +23,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 const WAIT: Duration = Duration::from_secs(60);
 
 fn gen_gsd() -> PathBuf {
-    repo().join("gsd/DPCTL_GEN.GSD")
+    repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
 }
 
 fn wall() -> f64 {

@@ -93,7 +93,7 @@ fn start_slave(port: &Path, extra: &[&str]) -> (Proc, Lines) {
             .args(["slave", "--port"])
             .arg(port)
             .arg("--gsd")
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "2 words in/out", "--json"])
             .args(extra)
             .stdout(Stdio::piped())
@@ -240,7 +240,7 @@ fn usage_and_input_errors() {
         Some(2)
     );
     // Input errors: exit 1 with one line on stderr.
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let gsd = gsd.to_str().unwrap();
     let no_port = ["--port", "/nonexistent/x", "--addr", "3"];
     for extra in [

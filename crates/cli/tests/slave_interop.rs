@@ -1,7 +1,7 @@
 //! `dpctl slave` against independent DP masters over socat pty pairs.
 //!
 //! pyprofibus (PyPI) parameterises and configures the generic slave from
-//! `gsd/DPCTL_GEN.GSD`, then runs 1000 Data_Exchange cycles with changing
+//! `crates/devices/gsd/DPCTL_GEN.GSD`, then runs 1000 Data_Exchange cycles with changing
 //! outputs and a freeze phase; the slave echoes the outputs. Both sides
 //! check the values: the Python master the echo it gets back, this test
 //! the outputs the slave reports (`--show-data --json`).
@@ -56,7 +56,7 @@ fn pyprofibus_master_exchanges_1000_cycles_with_dpctl_slave() {
     let dir = TempDir::new("pyprofibus");
     let (a, b) = (dir.path("master"), dir.path("slave"));
     let _socat = pty_pair(&a, &b);
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     assert!(gsd.exists(), "{} is missing", gsd.display());
 
     let mut slave_cmd = Command::new(dpctl());

@@ -77,7 +77,7 @@ fn sniff_json_decodes_the_dp_layer_of_each_service() {
     let sniff = Proc::spawn_captured(cmd);
     // The sniffer listens once the hub sees its pty open.
     bus.wait_connected(1);
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let _slave = Proc::spawn(
         "dpctl slave",
         Command::new(dpctl())

@@ -71,7 +71,7 @@ fn slave(link: &Path, addr: u8) -> Proc {
             .args(["slave", "--port"])
             .arg(link)
             .args(["--addr", &addr.to_string(), "--baud", "19200", "--gsd"])
-            .arg(repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "2 words in/out"])
             .stdout(Stdio::null())
             .stderr(Stdio::null()),
@@ -91,7 +91,7 @@ fn master_reaches_data_exchange_through_a_serial_device_server() {
         format!(
             "[master]\naddress = 2\nbaud = \"19200\"\n[[slave]]\naddress = 10\ngsd = \"{}\"\n\
              modules = [\"2 words in/out\"]\nwatchdog_ms = 5000\ninitial_outputs = [1, 2, 3, 4]\n",
-            repo().join("gsd/DPCTL_GEN.GSD").display()
+            repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ),
     )
     .unwrap();

@@ -153,7 +153,7 @@ fn rows_in_data_exchange(screen: &str) -> usize {
 }
 
 fn gen_gsd() -> PathBuf {
-    common::repo().join("gsd/DPCTL_GEN.GSD")
+    common::repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
 }
 
 /// A bus file: a GSD slave at 8 ("2 words in/out") and an Omega drive

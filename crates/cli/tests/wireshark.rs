@@ -61,7 +61,7 @@ fn tshark_filtered(capture: &Path, filter: Option<&str>, fields: &[&str]) -> Vec
 fn record_startup(dir: &TempDir) -> PathBuf {
     let pcap = dir.path("startup.pcapng");
     let bus = Bus::start(2, &["--pcap", pcap.to_str().unwrap()]);
-    let gsd = repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let mut slave = Proc::spawn(
         "dpctl slave",
         Command::new(dpctl())

@@ -213,7 +213,7 @@ mod tests {
 
     #[test]
     fn set_channels_commands_write_named_outputs_all_or_none() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gsd/bus.toml");
         let text = bus_text!(
             "[[slave]]\naddress = 25\ndevice = \"omega\"\nsetpoints = 1\nactual_values = 1\npkw = false\n"
         );
@@ -253,12 +253,12 @@ mod tests {
 
     #[test]
     fn bm4_and_omega_from_a_bus_file() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gsd/bus.toml");
         let text = bus_text!(
             r#"[[slave]]
 address = 6
 device = "bm4"
-vars = "../crates/devices/data/bm4_example_vars.toml"
+vars = "../data/bm4_example_vars.toml"
 modules = ["ud_MyReadVar1", "ud_MyWriteVar1"]
 "#
         );
@@ -356,7 +356,7 @@ terminals_file = "strip.txt"
 
     #[test]
     fn profile_options_named_like_slave_keys_go_under_the_profile_name() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gsd/bus.toml");
         // Omega's `params` (a parameter file) and generic's `gsd` and
         // `modules`: under the profile's name, relative to the bus file.
         let text = bus_text!(
@@ -364,7 +364,7 @@ terminals_file = "strip.txt"
 address = 25
 device = "omega"
 pkw = false
-omega.params = "../crates/devices/data/omega_vparams.toml"
+omega.params = "../data/omega_vparams.toml"
 
 [[slave]]
 address = 7
@@ -379,7 +379,7 @@ lenient = true
         let params = omega.device.as_ref().unwrap().options.get("params");
         assert_eq!(
             params.and_then(|v| v.as_str()),
-            Some("../crates/devices/data/omega_vparams.toml")
+            Some("../data/omega_vparams.toml")
         );
         let generic = &bus.file.slaves[1];
         assert_eq!(generic.modules.len(), 2, "{:?}", generic.modules);
@@ -430,7 +430,7 @@ mod defaults {
 
     #[test]
     fn every_profile_reaches_data_exchange_with_its_defaults() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gsd/bus.toml");
         for p in crate::PROFILES {
             let text = format!(
                 "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 7\ndevice = \"{}\"\n{}",

@@ -1,22 +1,22 @@
 //! The GSD files of the emulated devices, built into the binary so that
 //! `dpctl demo` and the device profiles need no files at run time. The
-//! same files are in the repository's `gsd/` folder (see its README for
+//! same files are in the repository's `crates/devices/gsd/` folder (see its README for
 //! their sources and the ident numbers chosen).
 
 use profibus_dp::config::gsd::{decode_latin1, Gsd, GsdError, ParseOptions};
 
 /// `DPCTL_GEN.GSD`: dpctl's generic test slave.
-pub const DPCTL_GEN: &[u8] = include_bytes!("../../../gsd/DPCTL_GEN.GSD");
+pub const DPCTL_GEN: &[u8] = include_bytes!("../gsd/DPCTL_GEN.GSD");
 /// `BM4OPRO1.GSD`: Baumüller BM4-O-PRO-01 default configuration.
-pub const BM4OPRO1: &[u8] = include_bytes!("../../../gsd/BM4OPRO1.GSD");
+pub const BM4OPRO1: &[u8] = include_bytes!("../gsd/BM4OPRO1.GSD");
 /// `MyGSDFile.gsd`: the BM4-O-PRO-01 manual's generated example.
-pub const BM4_EXAMPLE: &[u8] = include_bytes!("../../../gsd/MyGSDFile.gsd");
+pub const BM4_EXAMPLE: &[u8] = include_bytes!("../gsd/MyGSDFile.gsd");
 /// `BNF_00D0.GSD`: Baumüller Omega Drive-Line II option board.
-pub const BNF_00D0: &[u8] = include_bytes!("../../../gsd/BNF_00D0.GSD");
+pub const BNF_00D0: &[u8] = include_bytes!("../gsd/BNF_00D0.GSD");
 /// `BK30BECF.GSD`: Beckhoff BK3000 bus coupler.
-pub const BK30BECF: &[u8] = include_bytes!("../../../gsd/BK30BECF.GSD");
+pub const BK30BECF: &[u8] = include_bytes!("../gsd/BK30BECF.GSD");
 /// `AEGI0DC4.GSD`: AEG ID ARE I2/K1 PFB RFID reader.
-pub const AEGI0DC4: &[u8] = include_bytes!("../../../gsd/AEGI0DC4.GSD");
+pub const AEGI0DC4: &[u8] = include_bytes!("../gsd/AEGI0DC4.GSD");
 
 /// Parse one of the built-in files (leniently: some keep their vendor
 /// quirks).

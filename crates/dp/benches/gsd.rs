@@ -39,7 +39,7 @@ fn measure<T>(name: &str, mut f: impl FnMut() -> T) {
 
 fn file(name: &str) -> (PathBuf, String) {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../gsd")
+        .join("../devices/gsd")
         .join(name);
     let text = decode_latin1(&std::fs::read(&p).unwrap());
     (p, text)

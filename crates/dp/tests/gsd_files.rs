@@ -1,4 +1,4 @@
-//! The GSD files in `gsd/` and `gsd/corpus/`: every file parses (strictly
+//! The GSD files in `crates/devices/gsd/` and `crates/devices/gsd/corpus/`: every file parses (strictly
 //! where it has no vendor quirks), writes back to the same model, and the
 //! module tables, Chk_Cfg and User_Prm_Data of the five device files match
 //! expectations checked by hand against the manuals.
@@ -95,7 +95,7 @@ fn every_file_parses_and_round_trips() {
 
 #[test]
 fn omega_bnf_00d0() {
-    let g = load("gsd/BNF_00D0.GSD");
+    let g = load("crates/devices/gsd/BNF_00D0.GSD");
     assert_eq!(g.ident_number, 0x00D0);
     assert_eq!(g.vendor_name.as_deref(), Some("BAUMÜLLER"));
     assert_eq!(g.user_prm_data_len, Some(5));
@@ -167,7 +167,7 @@ fn omega_bnf_00d0() {
 
 #[test]
 fn bm4_default_file() {
-    let g = load("gsd/BM4OPRO1.GSD");
+    let g = load("crates/devices/gsd/BM4OPRO1.GSD");
     assert_eq!(g.ident_number, 0x0008);
     assert_eq!(g.implementation_type.as_deref(), Some("DPC31"));
     assert!(g.set_slave_add_supp && g.auto_baud_supp && !g.freeze_mode_supp);
@@ -199,9 +199,12 @@ fn bm4_default_file() {
     let id = m.identifiers().next().unwrap().unwrap();
     assert_eq!(id.manufacturer, [0x02, 0x07]);
     // The commented-out header is a quirk: a warning when lenient.
-    let w = Gsd::from_file(root().join("gsd/BM4OPRO1.GSD"), ParseOptions::LENIENT)
-        .unwrap()
-        .warnings;
+    let w = Gsd::from_file(
+        root().join("crates/devices/gsd/BM4OPRO1.GSD"),
+        ParseOptions::LENIENT,
+    )
+    .unwrap()
+    .warnings;
     assert_eq!(w.len(), 1);
     assert_eq!(w[0].kind, DiagKind::Quirk(Quirk::CommentedSectionHeader));
     assert_eq!((w[0].pos.line, w[0].pos.col), (18, 1));
@@ -209,7 +212,7 @@ fn bm4_default_file() {
 
 #[test]
 fn bm4_example_file() {
-    let g = load("gsd/MyGSDFile.gsd");
+    let g = load("crates/devices/gsd/MyGSDFile.gsd");
     assert_eq!(
         io_table(&g),
         [(8, 8), (4, 0), (4, 0), (0, 4), (0, 2), (4, 0)]
@@ -254,7 +257,7 @@ fn bm4_example_file() {
 
 #[test]
 fn beckhoff_bk3000() {
-    let g = load("gsd/BK30BECF.GSD");
+    let g = load("crates/devices/gsd/BK30BECF.GSD");
     assert_eq!(g.ident_number, 0xBECF);
     assert!(g.fms_supp && g.freeze_mode_supp && g.sync_mode_supp && !g.dpv1_slave);
     assert_eq!(g.supported_bauds().last(), Some(&Baud::B1500000));
@@ -287,7 +290,7 @@ fn beckhoff_bk3000() {
 
 #[test]
 fn jetter_jx2_profi1() {
-    let g = load("gsd/JX2P0DC3.GSD");
+    let g = load("crates/devices/gsd/JX2P0DC3.GSD");
     assert!(g.dpv1_slave && g.c1_read_write_supp);
     assert_eq!(g.c1_max_data_len, Some(240));
     assert_eq!(g.max_diag_data_len, Some(32));
@@ -321,7 +324,7 @@ fn jetter_jx2_profi1() {
 
 #[test]
 fn aeg_id_reader() {
-    let g = load("gsd/AEGI0DC4.GSD");
+    let g = load("crates/devices/gsd/AEGI0DC4.GSD");
     assert!(!g.modular_station);
     let s = g.default_selection();
     assert_eq!(s, [0]);
@@ -338,7 +341,7 @@ fn aeg_id_reader() {
 
 #[test]
 fn dpctl_generic_slave() {
-    let g = load("gsd/DPCTL_GEN.GSD");
+    let g = load("crates/devices/gsd/DPCTL_GEN.GSD");
     assert_eq!(g.ident_number, 0x0DCE);
     assert!(g.dpv1_slave && g.c1_read_write_supp && g.freeze_mode_supp && g.sync_mode_supp);
     assert!(g.set_slave_add_supp);
@@ -407,7 +410,7 @@ fn dpctl_generic_slave() {
 #[test]
 fn corpus_user_prm_data() {
     // ABB RPBA-01: 24 bytes; "Cut-Off time" (Unsigned16, default 1) at 2.
-    let g = load("gsd/corpus/proview_abb_rpba01.gsd");
+    let g = load("crates/devices/gsd/corpus/proview_abb_rpba01.gsd");
     let mut want = vec![0u8; 24];
     want[3] = 1;
     assert_eq!(g.user_prm_data(&[], &[]).unwrap(), want);
@@ -423,14 +426,14 @@ fn corpus_user_prm_data() {
     assert_eq!(d[1], 0b01_0010); // BitArea(0-1)=2, BitArea(4-5)=1
     assert_eq!(&d[22..24], &[0x12, 0x34]);
     // SEW: the Bit(0) default 1 is already in the constant bytes.
-    let g = load("gsd/corpus/proview_sew_movidrive_dfp21.gsd");
+    let g = load("crates/devices/gsd/corpus/proview_sew_movidrive_dfp21.gsd");
     assert_eq!(
         g.user_prm_data(&[], &[]).unwrap(),
         [0x00, 0x00, 0x00, 0x06, 0x81, 0x00, 0x00, 0x01, 0x01]
     );
     // Siemens diagnostic repeater: BitArea(0-7) default 0x54 at 7, two
     // Bit defaults of 1 at 10.
-    let g = load("gsd/corpus/proview_siemens_diag_repeater.gsd");
+    let g = load("crates/devices/gsd/corpus/proview_siemens_diag_repeater.gsd");
     assert_eq!(
         g.user_prm_data(&[], &[]).unwrap(),
         [0x80, 0x00, 0x08, 0x08, 0x81, 0x00, 0x00, 0x54, 0x00, 0x00, 0x03]
@@ -445,7 +448,7 @@ fn corpus_user_prm_data() {
     // pyprofibus's compact dummy means all its modules together; a
     // compact station's modules are otherwise alternatives, and the
     // default is the first.
-    let g = load("gsd/corpus/pyprofibus_dummy_compact.gsd");
+    let g = load("crates/devices/gsd/corpus/pyprofibus_dummy_compact.gsd");
     assert_eq!(g.default_selection(), [0]);
     let all = [0, 1, 2];
     assert_eq!(g.check_selection(&all), vec![]);
@@ -457,9 +460,9 @@ fn corpus_user_prm_data() {
     ));
 }
 
-/// The files of `gsd/corpus/` (every GSD extension), sorted.
+/// The files of `crates/devices/gsd/corpus/` (every GSD extension), sorted.
 fn corpus_files() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("gsd/corpus"))
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("crates/devices/gsd/corpus"))
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| profibus_dp::config::gsd::is_gsd_file_name(p))
@@ -500,7 +503,7 @@ fn vendor_corpus_parses_leniently() {
 fn vendor_corpus_details() {
     // ABB FPBA-01 (CR LF, a byte list continued over four lines, 22
     // alternative PPO modules of a modular station with Max_Module 1).
-    let g = load("gsd/corpus/abb_fpba01_acs880.gsd");
+    let g = load("crates/devices/gsd/corpus/abb_fpba01_acs880.gsd");
     assert_eq!(g.ident_number, 0x0959);
     assert_eq!(g.modules.len(), 22);
     assert_eq!(g.modules[8].cfg, [0xF3, 0xF1, 0xF1, 0xF1]);
@@ -518,13 +521,13 @@ fn vendor_corpus_details() {
     }
     // Siemens direct key module: a module line continued with `\`,
     // Latin-1 comments, `Freeze_Mode_supp=1;ja`.
-    let g = load("gsd/corpus/siemens_direct_key_module_siem8007.gsd");
+    let g = load("crates/devices/gsd/corpus/siemens_direct_key_module_siem8007.gsd");
     assert_eq!(g.modules[0].cfg, [0x21, 0x15]);
     assert!(g.freeze_mode_supp && g.sync_mode_supp && g.set_slave_add_supp);
     assert_eq!(g.user_prm_data(&[0], &[]).unwrap(), [0; 5]);
     // SIMODRIVE sensor (Italian .gsi, encoder profile): module
     // parameters with Latin-1 names.
-    let g = load("gsd/corpus/siemens_simodrive_sensor_encoder.gsi");
+    let g = load("crates/devices/gsd/corpus/siemens_simodrive_sensor_encoder.gsi");
     assert_eq!(g.slave_family.as_ref().unwrap().main, 7);
     assert_eq!(g.modules.len(), 11);
     assert_eq!(g.prm_definition(2).unwrap().name, "Funzionalità classe 2");
@@ -535,7 +538,7 @@ fn vendor_corpus_details() {
     // schtiot DP-V1 slave: keywords of DP-V1, I&M and a UnitDiagType
     // block, all known.
     let p = Gsd::from_file(
-        root().join("gsd/corpus/schtiot_dpv10008.gsd"),
+        root().join("crates/devices/gsd/corpus/schtiot_dpv10008.gsd"),
         ParseOptions::STRICT,
     )
     .unwrap();
@@ -548,7 +551,11 @@ fn vendor_corpus_details() {
 fn localised_files_of_one_device_read_alike() {
     // The DP/RS 232C link in English, French, German and Spanish: the
     // same device, the German file with German texts.
-    let read = |ext: &str| load(&format!("gsd/corpus/siemens_dp_rs232c_link.{ext}"));
+    let read = |ext: &str| {
+        load(&format!(
+            "crates/devices/gsd/corpus/siemens_dp_rs232c_link.{ext}"
+        ))
+    };
     let en = read("gse");
     for ext in ["gsf", "gsg", "gss"] {
         let g = read(ext);
@@ -582,9 +589,11 @@ address = 6
 gsd = "siemens_simodrive_sensor_encoder.gsi"
 modules = ["Class 1 Multiturn"]
 "#;
-    let bus =
-        profibus_dp::config::busfile::BusFile::parse(&root().join("gsd/corpus/bus.toml"), text)
-            .unwrap_or_else(|e| panic!("{e}"));
+    let bus = profibus_dp::config::busfile::BusFile::parse(
+        &root().join("crates/devices/gsd/corpus/bus.toml"),
+        text,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let s = &bus.master.slaves;
     assert_eq!(s[0].ident_number, 0x8042);
     assert_eq!(s[0].io_lengths().unwrap(), (2, 2));

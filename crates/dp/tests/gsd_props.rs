@@ -425,7 +425,7 @@ fn token_soup() -> impl Strategy<Value = String> {
 
 /// The real files, with random edits.
 fn edited_file() -> impl Strategy<Value = String> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd");
     let mut texts = Vec::new();
     for d in [dir.clone(), dir.join("corpus")] {
         for e in std::fs::read_dir(d).unwrap() {

@@ -1,6 +1,6 @@
 //! Cross-check with an independent GSD parser: pyprofibus 1.13 (from PyPI,
 //! installed in `.venv` by `scripts/setup-test-env`) reads every file in
-//! `gsd/` and `gsd/corpus/` and must see the same ident number, module
+//! `crates/devices/gsd/` and `crates/devices/gsd/corpus/` and must see the same ident number, module
 //! names and identifier bytes, baud rates and limits as we do; it also
 //! reads what our writer makes of each file.
 //!

@@ -28,7 +28,7 @@ fn find<'a>(msgs: &'a Msgs, topic: &str) -> Option<&'a serde_json::Value> {
 /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
 /// PKW (25) and an RFID reader (30), all writable but the reader.
 fn plant() -> (Gateway, SimPlant, ProfiledBus) {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/plant.toml");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/plant.toml");
     let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
         [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
         [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\

@@ -26,7 +26,7 @@ impl Rig {
 
     /// A rig whose settings `f` changes first.
     fn with(f: impl FnOnce(&mut MqttSettings)) -> Rig {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/bus.toml");
         let bus = ProfiledBus::parse(&dir, BUS).unwrap();
         let mut settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line").unwrap();
         f(&mut settings);

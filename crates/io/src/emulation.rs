@@ -657,7 +657,7 @@ mod tests {
 
     fn generic_args() -> ProfileArgs {
         ProfileArgs {
-            gsd: Some(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/DPCTL_GEN.GSD").into()),
+            gsd: Some(concat!(env!("CARGO_MANIFEST_DIR"), "/../devices/gsd/DPCTL_GEN.GSD").into()),
             modules: vec!["2 words in/out".into()],
             ..ProfileArgs::default()
         }

@@ -164,7 +164,7 @@ pub fn echo_bus_text(mqtt: &str) -> String {
 /// `bus.toml` with `text` in `dir`, beside a copy of DPCTL_GEN.GSD (the
 /// GSD file the bus files of these tests name).
 pub fn write_bus(dir: &TempDir, text: &str) -> PathBuf {
-    let gsd = super::repo().join("gsd/DPCTL_GEN.GSD");
+    let gsd = super::repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     std::fs::copy(gsd, dir.path("DPCTL_GEN.GSD")).unwrap();
     let bus = dir.path("bus.toml");
     std::fs::write(&bus, text).unwrap();
@@ -180,7 +180,7 @@ pub fn echo_slave(port: &Path) -> Proc {
             .args(["slave", "--port"])
             .arg(port)
             .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
-            .arg(super::repo().join("gsd/DPCTL_GEN.GSD"))
+            .arg(super::repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
             .args(["--module", "2 words in/out"])
             .stdout(Stdio::null())
             .stderr(Stdio::null()),

@@ -1,5 +1,5 @@
 //! Beckhoff BK3000 PROFIBUS-DP bus coupler with its K-bus terminal strip
-//! (ident 0xBECF, `gsd/BK30BECF.GSD`), after the manual "PROFIBUS Koppler
+//! (ident 0xBECF, `crates/devices/gsd/BK30BECF.GSD`), after the manual "PROFIBUS Koppler
 //! BK3000 … LC3100", Technische Dokumentation, version 2.3 of 27.11.2006
 //! (from its page summaries, cited as "p. N"; facts cut off there come from the
 //! English edition of the same manual and Beckhoff's Information System,

@@ -48,7 +48,7 @@ fn generated_gsd_has_the_example_files_modules() {
     let text = d.gsd_text();
     let ours = Gsd::parse(&text, ParseOptions::STRICT).unwrap().gsd;
     let theirs = Gsd::from_file(
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/MyGSDFile.gsd"),
+        concat!(env!("CARGO_MANIFEST_DIR"), "/gsd/MyGSDFile.gsd"),
         ParseOptions { lenient: true },
     )
     .unwrap()
@@ -99,7 +99,7 @@ fn chk_cfg_takes_table_modules_only() {
         (vec![0x42, 0xC1], "does not start"),
     ] {
         let e = d.check_cfg(&bad).unwrap_err();
-        assert!(e.as_str().contains(why), "{bad:02X?}: {e}");
+        assert!(e.to_string().contains(why), "{bad:02X?}: {e}");
         assert_eq!(d.led(), Led::ConfigurationError);
     }
     // Default table: the "all modules" module, alone or after PKW.

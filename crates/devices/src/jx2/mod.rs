@@ -67,7 +67,7 @@
 //!
 //! Choices where the manual is silent or contradicts itself (see
 //! `docs/devices/jx2.md`): the ident number 0x0DC3 is ours
-//! (`gsd/JX2P0DC3.GSD`); 1x102/1x103 go to 122 (not 102); the diagnosis
+//! (`crates/devices/gsd/JX2P0DC3.GSD`); 1x102/1x103 go to 122 (not 102); the diagnosis
 //! length is 10..=32 (not 6..=32); the DS-write length is 1x119; status
 //! reads 0x2001 while BUSY after a reset, 0x0001 after; error 11 (memory
 //! test) can only be provoked on purpose ([`Jx2::fail_memory_test`]).
@@ -88,7 +88,7 @@ use std::fmt;
 use std::time::Duration;
 
 /// `JX2P0DC3.GSD`, written for this project from the manual.
-pub const GSD: &[u8] = include_bytes!("../../../../gsd/JX2P0DC3.GSD");
+pub const GSD: &[u8] = include_bytes!("../../gsd/JX2P0DC3.GSD");
 
 /// Ident number of the emulation (ours: the manual gives none).
 pub const IDENT: u16 = 0x0DC3;

@@ -131,7 +131,7 @@ impl fmt::Display for CommandResult {
 pub enum RunError {
     /// The slave is not configured as the reader.
     #[error(
-        "slave {0} is configured {h}; the reader has 16 bytes in and out (3F, gsd/AEGI0DC4.GSD)", h = Hex(.1)
+        "slave {0} is configured {h}; the reader has 16 bytes in and out (3F, crates/devices/gsd/AEGI0DC4.GSD)", h = Hex(.1)
     )]
     NotAReader(u8, Vec<u8>),
     /// The reader did not reach Data_Exchange.

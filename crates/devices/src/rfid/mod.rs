@@ -27,7 +27,7 @@
 //!
 //! # Identity
 //!
-//! Ident number 0x0DC4 and `gsd/AEGI0DC4.GSD` are this project's choice
+//! Ident number 0x0DC4 and `crates/devices/gsd/AEGI0DC4.GSD` are this project's choice
 //! (the manual names neither, see the GSD's header): a compact station
 //! with the one module `0x3F` (16 bytes in and out), no User_Prm_Data, no
 //! sync, freeze, Set_Slave_Add or DP-V1, 6 bytes of diagnosis (none
@@ -65,7 +65,7 @@ use profibus_dp::slave::{
 use profibus_fdl::Instant;
 use tags::{parse_uid, TagField};
 
-/// The ident number (our choice, `gsd/AEGI0DC4.GSD`).
+/// The ident number (our choice, `crates/devices/gsd/AEGI0DC4.GSD`).
 pub const IDENT: u16 = 0x0DC4;
 
 /// `AEGI0DC4.GSD`.

@@ -956,7 +956,7 @@ mod tests {
     use super::*;
 
     fn gsd_dir() -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../gsd/bus.toml")
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/bus.toml")
     }
 
     /// A bus file whose slave 25 is the device profile `omega2`; its
@@ -964,7 +964,7 @@ mod tests {
     const OMEGA2_BUS: &str =
         "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 25\ndevice = \"omega2\"\n";
 
-    /// `text` parsed as gsd/bus.toml with the device profile `omega2`.
+    /// `text` parsed as crates/devices/gsd/bus.toml with the device profile `omega2`.
     fn with_omega2(text: &str) -> Result<BusFile, BusFileError> {
         BusFile::parse_with(&gsd_dir(), text, &OneProfile)
     }
@@ -1092,7 +1092,7 @@ modules = ["no such module"]
         }
     }
 
-    /// The error of `text` as gsd/bus.toml with the profile `omega2`:
+    /// The error of `text` as crates/devices/gsd/bus.toml with the profile `omega2`:
     /// `line:col: message`.
     fn error_of(text: &str) -> String {
         let e = with_omega2(text).unwrap_err();

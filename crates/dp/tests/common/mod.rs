@@ -10,10 +10,10 @@ pub fn root() -> PathBuf {
         .unwrap()
 }
 
-/// Every `.gsd` file in `gsd/` and `gsd/corpus/`, sorted.
+/// Every `.gsd` file in `crates/devices/gsd/` and `crates/devices/gsd/corpus/`, sorted.
 pub fn gsd_files() -> Vec<PathBuf> {
     let mut v = Vec::new();
-    for dir in ["gsd", "gsd/corpus"] {
+    for dir in ["crates/devices/gsd", "crates/devices/gsd/corpus"] {
         for e in std::fs::read_dir(root().join(dir)).unwrap() {
             let p = e.unwrap().path();
             if profibus_dp::config::gsd::is_gsd_file_name(&p) {

@@ -81,9 +81,12 @@ impl Drop for Broker {
     }
 }
 
-/// A bus file's text, parsed as if it were in `gsd/` (for its GSDs).
+/// A bus file's text, parsed as if it were in `crates/devices/gsd/` (for its GSDs).
 pub fn bus(text: &str) -> ProfiledBus {
-    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../gsd/bus.toml"));
+    let path = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../devices/gsd/bus.toml"
+    ));
     ProfiledBus::parse(path, text).unwrap()
 }
 
