@@ -4,58 +4,16 @@
 //! device profile run that profile's device; slaves given by GSD modules
 //! run the generic device with inputs that echo the outputs.
 
-use crate::core::SlaveInfo;
-use crate::link::{MqttLink, Session};
+use crate::link::MqttLink;
+use crate::session::Session;
+pub use crate::slave::slave_infos;
 use profibus_devices::bus::ProfiledBus;
-use profibus_devices::ProfileError;
 use profibus_fdl::Instant;
 use profibus_plant::{Plant, PlantError};
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
-
-/// Why a simulated plant could not be built.
-#[derive(Debug, thiserror::Error)]
-pub enum SimError {
-    /// The plant's master or a slave's device.
-    #[error(transparent)]
-    Plant(#[from] PlantError),
-    /// A device profile.
-    #[error("slave {0}: {1}")]
-    Profile(u8, ProfileError),
-}
-
-/// The gateway's view of a bus file's slaves: names, named channels
-/// (device profiles' channels; `MODULE[i]` bytes for slaves given by GSD
-/// modules), GSDs, PKW dialects, RFID readers.
-pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
-    profiled
-        .file
-        .slaves
-        .iter()
-        .map(|s| {
-            let a = s.params.address;
-            Ok(SlaveInfo {
-                address: a,
-                name: s.params.name.clone(),
-                ident_number: s.params.ident_number,
-                channels: Some(
-                    profiled
-                        .channels(a)
-                        .unwrap_or_else(|| {
-                            profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
-                        })
-                        .map_err(|e| SimError::Profile(a, e))?,
-                ),
-                gsd: Some(s.gsd.clone()),
-                dpv1: s.params.dpv1,
-                pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
-                rfid: s.params.ident_number == profibus_devices::rfid::IDENT,
-            })
-        })
-        .collect()
-}
 
 /// Paces a [`Plant`] on the wall clock: each turn runs the line up to
 /// the time elapsed since [`Pacer::new`], at most [`Pacer::MOST`] of bus
@@ -132,7 +90,7 @@ pub async fn serve<S: Session + Send + 'static>(
     mut gateway: S,
     mut link: MqttLink,
     shutdown: impl Future<Output = ()>,
-) -> Result<(), SimError> {
+) -> Result<(), PlantError> {
     let stop = Arc::new(AtomicBool::new(false));
     let (done, mut ended) = tokio::sync::oneshot::channel();
     let flag = stop.clone();
@@ -147,7 +105,7 @@ pub async fn serve<S: Session + Send + 'static>(
                 std::thread::sleep(pause);
             }
         });
-        let _ = done.send(run.map(|()| (gateway, link)).map_err(SimError::from));
+        let _ = done.send(run.map(|()| (gateway, link)));
     });
     let result = tokio::select! {
         _ = shutdown => {
