@@ -239,7 +239,7 @@ fn a_rogue_master_cannot_parameterise_configure_or_write_a_locked_slave() {
         .filter_map(|e| match e {
             SlaveEvent::Refused {
                 master: 2, service, ..
-            } => Some(service),
+            } => Some(service.as_str()),
             _ => None,
         })
         .collect();

@@ -614,10 +614,10 @@ mod tests {
         assert!(d.check_prm(&SetPrm::parse(&p).unwrap()).is_ok());
         let p = prm(&[0, 6]);
         let e = d.check_prm(&SetPrm::parse(&p).unwrap()).unwrap_err();
-        assert!(e.as_str().contains("Speed"));
+        assert!(e.to_string().contains("Speed"));
         let p = prm(&[0]);
         let e = d.check_prm(&SetPrm::parse(&p).unwrap()).unwrap_err();
-        assert!(e.as_str().contains("1 bytes, the GSD gives 2"));
+        assert!(e.to_string().contains("1 bytes, the GSD gives 2"));
     }
 
     #[test]
@@ -749,7 +749,7 @@ EndModule
         let bad = mk(&[0x80, 0, 0, 4, 0xFF, 0x9C]);
         let e = d.check_prm(&SetPrm::parse(&bad).unwrap()).unwrap_err();
         assert!(
-            e.as_str()
+            e.to_string()
                 .contains("`Mode` (User_Prm_Data byte 3) = 4, allowed 0..=3"),
             "{e}"
         );

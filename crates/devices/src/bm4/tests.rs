@@ -99,7 +99,7 @@ fn chk_cfg_takes_table_modules_only() {
         (vec![0x42, 0xC1], "does not start"),
     ] {
         let e = d.check_cfg(&bad).unwrap_err();
-        assert!(e.as_str().contains(why), "{bad:02X?}: {e}");
+        assert!(e.to_string().contains(why), "{bad:02X?}: {e}");
         assert_eq!(d.led(), Led::ConfigurationError);
     }
     // Default table: the "all modules" module, alone or after PKW.

@@ -128,7 +128,7 @@ impl fmt::Display for Identifier<'_> {
 }
 
 /// A configuration byte sequence that cannot be decoded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, thiserror::Error)]
 pub enum CfgError {
     /// A special-format identifier announces more bytes than remain.
     #[error("identifier at byte {offset} announces {needed} bytes, only {available} remain")]

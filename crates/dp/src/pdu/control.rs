@@ -30,7 +30,7 @@ pub struct GlobalControl {
 }
 
 /// A data unit of the wrong length.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, thiserror::Error)]
 #[error("{service} needs {expected} bytes, got {got}")]
 pub struct LengthError {
     /// The service.

@@ -97,7 +97,7 @@ pub struct SetPrm<'a> {
 }
 
 /// A Set_Prm data unit that cannot be decoded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, thiserror::Error)]
 pub enum PrmError {
     /// Fewer than 7 bytes.
     #[error("Set_Prm of {0} bytes is shorter than the 7 standard bytes")]

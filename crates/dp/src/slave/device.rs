@@ -11,47 +11,8 @@
 use crate::pdu::diag::ChannelIo;
 use crate::pdu::dpv1::{AccessError, ApplicationError, Dpv1Error, ErrorClass, FN_READ, FN_WRITE};
 use crate::pdu::prm::SetPrm;
-use crate::slave::SlaveState;
+use crate::slave::{Reason, SlaveState};
 use profibus_fdl::Instant;
-use std::borrow::Cow;
-use std::fmt;
-
-/// Why a device refused something (a parameter or configuration telegram,
-/// an address change), in words for people. It appears in the slave's
-/// events; the master sees only the fault bit.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize), serde(transparent))]
-pub struct Reason(pub Cow<'static, str>);
-
-impl Reason {
-    /// A reason from a static or owned string.
-    pub fn new(text: impl Into<Cow<'static, str>>) -> Reason {
-        Reason(text.into())
-    }
-
-    /// The reason in words.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-}
-
-impl fmt::Display for Reason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl From<&'static str> for Reason {
-    fn from(s: &'static str) -> Reason {
-        Reason(Cow::Borrowed(s))
-    }
-}
-
-impl From<String> for Reason {
-    fn from(s: String) -> Reason {
-        Reason(Cow::Owned(s))
-    }
-}
 
 /// The optional DP functions a device supports (the matching GSD keys in
 /// brackets). The slave core refuses what is not supported: a Set_Prm
@@ -608,25 +569,18 @@ impl<D: Device + ?Sized> Device for Box<D> {
 /// Compare a Chk_Cfg configuration with the one a device expects, byte for
 /// byte, and return the layout. The reason names the first difference.
 pub fn expect_cfg(expected: &[u8], got: &[u8]) -> Result<IoLayout, Reason> {
-    if let Some(i) = expected.iter().zip(got).position(|(a, b)| a != b) {
-        return Err(format!(
-            "configuration byte {i} is 0x{:02X}, expected 0x{:02X} (expected {}, got {})",
-            got[i],
-            expected[i],
-            hex(expected),
-            hex(got)
-        )
-        .into());
+    if let Some(index) = expected.iter().zip(got).position(|(a, b)| a != b) {
+        return Err(Reason::CfgByte {
+            index,
+            expected: expected.to_vec(),
+            got: got.to_vec(),
+        });
     }
     if expected.len() != got.len() {
-        return Err(format!(
-            "configuration has {} bytes, expected {} (expected {}, got {})",
-            got.len(),
-            expected.len(),
-            hex(expected),
-            hex(got)
-        )
-        .into());
+        return Err(Reason::CfgLength {
+            expected: expected.to_vec(),
+            got: got.to_vec(),
+        });
     }
     layout_of(got)
 }
@@ -637,24 +591,22 @@ pub fn expect_user_prm_len(prm: &SetPrm<'_>, len: usize) -> Result<(), Reason> {
     if prm.user_prm_data.len() == len {
         Ok(())
     } else {
-        Err(format!(
-            "User_Prm_Data has {} bytes, the GSD gives {len}",
-            prm.user_prm_data.len()
-        )
-        .into())
+        Err(Reason::UserPrmLen {
+            got: prm.user_prm_data.len(),
+            expected: len,
+        })
     }
 }
 
 /// The cyclic layout of a configuration (sum of its identifiers), or why
 /// it cannot be decoded or exceeds 244 bytes in a direction.
 pub fn layout_of(cfg: &[u8]) -> Result<IoLayout, Reason> {
-    let t = crate::pdu::cfg::totals(cfg).map_err(|e| Reason::from(e.to_string()))?;
+    let t = crate::pdu::cfg::totals(cfg)?;
     if t.input_bytes > super::MAX_IO_LEN || t.output_bytes > super::MAX_IO_LEN {
-        return Err(format!(
-            "configuration has {} input and {} output bytes, at most 244 each way",
-            t.input_bytes, t.output_bytes
-        )
-        .into());
+        return Err(Reason::CfgTooLong {
+            inputs: t.input_bytes,
+            outputs: t.output_bytes,
+        });
     }
     Ok(IoLayout {
         inputs: t.input_bytes,
@@ -718,11 +670,11 @@ mod tests {
         );
         let e = expect_cfg(&[0x31, 0x20], &[0x31, 0x21]).unwrap_err();
         assert!(e
-            .as_str()
+            .to_string()
             .starts_with("configuration byte 1 is 0x21, expected 0x20"));
         let e = expect_cfg(&[0x31], &[0x31, 0x21]).unwrap_err();
         assert!(e
-            .as_str()
+            .to_string()
             .starts_with("configuration has 2 bytes, expected 1"));
         assert!(layout_of(&[0x42]).is_err());
     }

@@ -79,15 +79,17 @@
 //!   in Data_Exch with DPV1_Enable, for the owning master.
 
 mod device;
+mod reason;
 mod state;
 
 pub use device::Device;
 pub use device::{
     expect_cfg, expect_user_prm_len, layout_of, ClearReason, DeviceEvent, DiagWriter, Dpv1Outcome,
-    Features, IoLayout, OwnAddress, Reason, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION,
-    ERR_CLASS_RESOURCE, ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE,
-    ERR_INVALID_SLOT, ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
+    Features, IoLayout, OwnAddress, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_CLASS_RESOURCE,
+    ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE, ERR_INVALID_SLOT,
+    ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
 };
+pub use reason::{Reason, Service};
 pub use state::{control_words, SlaveEvent, SlaveState};
 
 use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
@@ -96,7 +98,7 @@ use crate::pdu::diag::{
 };
 use crate::pdu::dpv1::{Dpv1Error, Pdu, FN_ALARM_ACK, FN_READ, FN_WRITE, MAX_DATA_LEN};
 use crate::pdu::prm::{Dpv1Status1, Dpv1Status2, PrmStationStatus, SetPrm};
-use crate::pdu::sap;
+use crate::pdu::sap::{self, Sap};
 use profibus_fdl::station::earliest;
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::wire::consts::BROADCAST;
@@ -300,9 +302,8 @@ impl<D: Device> DpSlave<D> {
         self.events.push(e);
     }
 
-    fn refuse(&mut self, master: u8, service: &'static str, reason: impl Into<Reason>) {
+    fn refuse(&mut self, master: u8, service: Service, reason: Reason) {
         self.stats.refused += 1;
-        let reason = reason.into();
         self.event(SlaveEvent::Refused {
             master,
             service,
@@ -409,15 +410,11 @@ impl<D: Device> DpSlave<D> {
 
     fn data_exchange(&mut self, now: Instant, from: u8, du: &[u8], out: &mut [u8]) -> Reply {
         if self.state != SlaveState::DataExch {
-            self.refuse(from, "Data_Exchange", "not in Data_Exch");
+            self.refuse(from, Service::DataExchange, Reason::NotInDataExch);
             return NEGATIVE_RS;
         }
         if !self.is_owner(from) {
-            self.refuse(
-                from,
-                "Data_Exchange",
-                "the slave is locked to another master",
-            );
+            self.refuse(from, Service::DataExchange, Reason::LockedToAnother);
             return NEGATIVE_RS;
         }
         let want = self.layout.outputs;
@@ -431,16 +428,14 @@ impl<D: Device> DpSlave<D> {
                 self.clear_outputs(now, ClearReason::FailSafe);
             }
         } else {
-            self.stats.refused += 1;
-            self.event(SlaveEvent::Refused {
-                master: from,
-                service: "Data_Exchange",
-                reason: Reason::new(if du.len() < want {
-                    "fewer output bytes than configured"
-                } else {
-                    "more output bytes than configured"
-                }),
-            });
+            self.refuse(
+                from,
+                Service::DataExchange,
+                Reason::OutputLength {
+                    got: du.len(),
+                    configured: want,
+                },
+            );
             self.enter(now, SlaveState::WaitPrm, ClearReason::LeftDataExchange);
             return NEGATIVE_RS;
         }
@@ -490,18 +485,14 @@ impl<D: Device> DpSlave<D> {
     fn set_prm(&mut self, now: Instant, from: u8, du: &[u8]) -> Reply {
         if let Some(owner) = self.owner {
             if owner != from {
-                self.refuse(
-                    from,
-                    "Set_Prm",
-                    format!("the slave is locked to master {owner}"),
-                );
+                self.refuse(from, Service::Sap(Sap::SetPrm), Reason::LockedTo { owner });
                 return Reply::ShortAck;
             }
         }
         let prm = match SetPrm::parse(du) {
             Ok(p) => p,
             Err(e) => {
-                self.prm_fault(now, from, e.to_string().into(), false);
+                self.prm_fault(now, from, e.into(), false);
                 return Reply::ShortAck;
             }
         };
@@ -511,7 +502,8 @@ impl<D: Device> DpSlave<D> {
             self.event(SlaveEvent::Unlocked { master: from });
             return Reply::ShortAck;
         }
-        if let Err((reason, not_supported)) = self.check_prm(&prm) {
+        if let Err(reason) = self.check_prm(&prm) {
+            let not_supported = reason.is_not_supported();
             self.prm_fault(now, from, reason, not_supported);
             return Reply::ShortAck;
         }
@@ -562,103 +554,72 @@ impl<D: Device> DpSlave<D> {
         Reply::ShortAck
     }
 
-    /// The standard checks of a Set_Prm; `Err((reason, not_supported))`.
-    fn check_prm(&self, prm: &SetPrm<'_>) -> Result<(), (Reason, bool)> {
+    /// The standard checks of a Set_Prm (EN 50170 part 3: Station_Status,
+    /// the watchdog factors, the DPV1_Status bytes against the slave's
+    /// features).
+    fn check_prm(&self, prm: &SetPrm<'_>) -> Result<(), Reason> {
         let f = self.features;
-        let ident = self.device.ident_number();
-        if prm.ident_number != ident {
-            return Err((
-                format!(
-                    "ident number 0x{:04X}, this slave is 0x{ident:04X}",
-                    prm.ident_number
-                )
-                .into(),
-                false,
-            ));
+        let own = self.device.ident_number();
+        if prm.ident_number != own {
+            return Err(Reason::IdentNumber {
+                got: prm.ident_number,
+                own,
+            });
         }
         let st = prm.station_status;
         if st.bits() & 0x07 != 0 {
-            return Err((
-                format!("reserved Station_Status bits set (0x{:02X})", st.bits()).into(),
-                false,
-            ));
+            return Err(Reason::ReservedStationStatus {
+                station_status: st.bits(),
+            });
         }
         if st.contains(PrmStationStatus::WD_ON) && (prm.wd_fact_1 == 0 || prm.wd_fact_2 == 0) {
-            return Err((
-                format!(
-                    "WD_On with WD_Fact_1 = {}, WD_Fact_2 = {} (each must be 1..=255)",
-                    prm.wd_fact_1, prm.wd_fact_2
-                )
-                .into(),
-                false,
-            ));
+            return Err(Reason::WatchdogFactor {
+                wd_fact_1: prm.wd_fact_1,
+                wd_fact_2: prm.wd_fact_2,
+            });
         }
         if st.contains(PrmStationStatus::SYNC_REQ) && !f.sync {
-            return Err((
-                "Sync_Req, but the slave does not support sync mode".into(),
-                true,
-            ));
+            return Err(Reason::SyncReqUnsupported);
         }
         if st.contains(PrmStationStatus::FREEZE_REQ) && !f.freeze {
-            return Err((
-                "Freeze_Req, but the slave does not support freeze mode".into(),
-                true,
-            ));
+            return Err(Reason::FreezeReqUnsupported);
         }
         if f.dpv1 {
             let Some((s1, s2, s3)) = prm.dpv1_status() else {
-                return Err((
-                    format!(
-                        "a DP-V1 slave needs the 3 DPV1_Status bytes, User_Prm_Data has {}",
-                        prm.user_prm_data.len()
-                    )
-                    .into(),
-                    false,
-                ));
+                return Err(Reason::Dpv1StatusMissing {
+                    user_prm_len: prm.user_prm_data.len(),
+                });
             };
             if s1.bits() & 0x18 != 0 {
-                return Err((
-                    format!("reserved DPV1_Status_1 bits set (0x{:02X})", s1.bits()).into(),
-                    false,
-                ));
+                return Err(Reason::ReservedDpv1Status1 {
+                    status_1: s1.bits(),
+                });
             }
             let dpv2 = Dpv1Status1::PUBLISHER_ENABLE
                 | Dpv1Status1::DIS_STOP_CONTROL
                 | Dpv1Status1::DIS_START_CONTROL;
             if s1.intersects(dpv2) {
-                return Err((
-                    "DP-V2 functions (publisher, start/stop control) are not supported".into(),
-                    true,
-                ));
+                return Err(Reason::Dpv2Unsupported);
             }
             if s1.contains(Dpv1Status1::FAIL_SAFE) && !f.fail_safe {
-                return Err(("Fail_Safe, but the slave does not support it".into(), true));
+                return Err(Reason::FailSafeUnsupported);
             }
             let alarms = s2.bits() & !Dpv1Status2::CHECK_CFG_MODE.bits();
             if alarms & 0x02 != 0 {
-                return Err((
-                    format!("reserved DPV1_Status_2 bit 1 set (0x{:02X})", s2.bits()).into(),
-                    false,
-                ));
+                return Err(Reason::ReservedDpv1Status2 {
+                    status_2: s2.bits(),
+                });
             }
             if alarms != 0 && !(f.alarms && s1.contains(Dpv1Status1::DPV1_ENABLE)) {
-                return Err((
-                    format!(
-                        "alarms enabled (DPV1_Status_2 0x{:02X}), but the slave has none",
-                        s2.bits()
-                    )
-                    .into(),
-                    true,
-                ));
+                return Err(Reason::AlarmsUnsupported {
+                    status_2: s2.bits(),
+                });
             }
             if s3 & 0x60 != 0 {
-                return Err((
-                    format!("reserved DPV1_Status_3 bits set (0x{s3:02X})").into(),
-                    false,
-                ));
+                return Err(Reason::ReservedDpv1Status3 { status_3: s3 });
             }
             if s3 & 0x90 != 0 {
-                return Err(("isochronous mode and PrmCmd are not supported".into(), true));
+                return Err(Reason::IsochronousUnsupported);
             }
         }
         Ok(())
@@ -678,20 +639,19 @@ impl<D: Device> DpSlave<D> {
 
     fn chk_cfg(&mut self, now: Instant, from: u8, du: &[u8]) -> Reply {
         if self.state == SlaveState::WaitPrm {
-            self.refuse(from, "Chk_Cfg", "not parameterised (Wait_Prm)");
+            self.refuse(from, Service::Sap(Sap::ChkCfg), Reason::NotParameterised);
             return Reply::ShortAck;
         }
         if !self.is_owner(from) {
-            self.refuse(from, "Chk_Cfg", "the slave is locked to another master");
+            self.refuse(from, Service::Sap(Sap::ChkCfg), Reason::LockedToAnother);
             return Reply::ShortAck;
         }
         let checked = self.device.check_cfg(du).and_then(|l| {
             if l.inputs > MAX_IO_LEN || l.outputs > MAX_IO_LEN {
-                Err(format!(
-                    "layout of {} input and {} output bytes exceeds 244",
-                    l.inputs, l.outputs
-                )
-                .into())
+                Err(Reason::LayoutTooLong {
+                    inputs: l.inputs,
+                    outputs: l.outputs,
+                })
             } else {
                 Ok(l)
             }
@@ -724,11 +684,12 @@ impl<D: Device> DpSlave<D> {
     }
 
     fn global_control(&mut self, now: Instant, from: u8, du: &[u8]) {
+        const GC: Service = Service::Sap(Sap::GlobalControl);
         if self.state != SlaveState::DataExch || !self.is_owner(from) {
             return;
         }
         let Ok(gc) = GlobalControl::parse(du) else {
-            self.refuse(from, "Global_Control", "data unit is not 2 bytes");
+            self.refuse(from, GC, Reason::ControlLength);
             return;
         };
         if !gc.addresses(self.group_ident) {
@@ -743,7 +704,7 @@ impl<D: Device> DpSlave<D> {
         self.clear_mode = clear;
         if cmd.intersects(ControlCommand::SYNC | ControlCommand::UNSYNC) {
             if !f.sync {
-                self.refuse(from, "Global_Control", "sync mode is not supported");
+                self.refuse(from, GC, Reason::SyncUnsupported);
             } else if cmd.contains(ControlCommand::UNSYNC) {
                 self.sync_mode = false;
             } else {
@@ -755,7 +716,7 @@ impl<D: Device> DpSlave<D> {
         }
         if cmd.intersects(ControlCommand::FREEZE | ControlCommand::UNFREEZE) {
             if !f.freeze {
-                self.refuse(from, "Global_Control", "freeze mode is not supported");
+                self.refuse(from, GC, Reason::FreezeUnsupported);
             } else if cmd.contains(ControlCommand::UNFREEZE) {
                 self.freeze_mode = false;
             } else {
@@ -778,33 +739,30 @@ impl<D: Device> DpSlave<D> {
 
     fn set_slave_add(&mut self, from: u8, du: &[u8]) -> Reply {
         let refused = |s: &mut Self, reason: Reason| {
-            s.refuse(from, "Set_Slave_Add", reason);
+            s.refuse(from, Service::Sap(Sap::SetSlaveAdd), reason);
             false
         };
         let ok = if !self.features.set_slave_add {
-            refused(self, "the slave does not support Set_Slave_Add".into())
+            refused(self, Reason::SetSlaveAddUnsupported)
         } else if self.state != SlaveState::WaitPrm {
-            refused(self, "only accepted in Wait_Prm".into())
+            refused(self, Reason::OnlyInWaitPrm)
         } else if self.no_add_chg {
-            refused(
-                self,
-                "No_Add_Chg was set: the address cannot be changed through the bus".into(),
-            )
+            refused(self, Reason::NoAddChg)
         } else {
             match SetSlaveAdd::parse(du) {
-                Err(e) => refused(self, e.to_string().into()),
+                Err(e) => refused(self, e.into()),
                 Ok(s) if s.ident_number != self.device.ident_number() => refused(
                     self,
-                    format!(
-                        "ident number 0x{:04X}, this slave is 0x{:04X}",
-                        s.ident_number,
-                        self.device.ident_number()
-                    )
-                    .into(),
+                    Reason::IdentNumber {
+                        got: s.ident_number,
+                        own: self.device.ident_number(),
+                    },
                 ),
                 Ok(s) if s.new_address > MAX_SLAVE_ADDRESS => refused(
                     self,
-                    format!("new address {} is above 125", s.new_address).into(),
+                    Reason::AddressAbove125 {
+                        address: s.new_address,
+                    },
                 ),
                 Ok(s) => {
                     match self
@@ -843,11 +801,7 @@ impl<D: Device> DpSlave<D> {
             && self.state == SlaveState::DataExch
             && self.is_owner(from))
         {
-            self.refuse(
-                from,
-                "MSAC_C1",
-                "DP-V1 read/write is active only in Data_Exch with DPV1_Enable, for the owning master",
-            );
+            self.refuse(from, Service::Sap(Sap::MsacC1), Reason::C1Inactive);
             return None;
         }
         if !du.is_empty() {
@@ -974,11 +928,7 @@ impl<D: Device> DpSlave<D> {
             && self.state == SlaveState::DataExch
             && self.is_owner(from))
         {
-            self.refuse(
-                from,
-                "Alarm_Ack",
-                "alarms are active only in Data_Exch with DPV1_Enable, for the owning master",
-            );
+            self.refuse(from, Service::Sap(Sap::AlarmAck), Reason::AlarmsInactive);
             return None;
         }
         let pdu = match Pdu::parse_request(du) {
@@ -1073,8 +1023,11 @@ impl<D: Device> Responder for DpSlave<D> {
         // SRD alone. An SDA or MSRD is answered "SAP not activated" (RS)
         // and nothing is executed.
         if !matches!(kind, RequestKind::SrdLow | RequestKind::SrdHigh) {
-            let service = req.dsap.and_then(sap::name).unwrap_or("Data_Exchange");
-            self.refuse(from, service, "DP services are SRD only");
+            let service = match req.dsap.map(|s| (s, sap::name(s))) {
+                Some((s, Some(_))) => Service::Sap(Sap::from_code(s)),
+                _ => Service::DataExchange,
+            };
+            self.refuse(from, service, Reason::SrdOnly);
             return NEGATIVE_RS;
         }
         match (req.dsap, req.ssap) {
@@ -1132,7 +1085,7 @@ impl<D: Device> Responder for DpSlave<D> {
                     }
                 }
                 sap::RD_INP | sap::RD_OUTP => {
-                    self.refuse(from, sap::name(dsap).unwrap_or("?"), "not in Data_Exch");
+                    self.refuse(from, Service::of_dsap(Some(dsap)), Reason::NotInDataExch);
                     rs(req)
                 }
                 sap::SET_SLAVE_ADD => self.set_slave_add(from, req.data),

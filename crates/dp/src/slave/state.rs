@@ -1,6 +1,7 @@
 //! The slave's DP state and the events it reports to its application.
 
-use super::device::{ClearReason, DeviceEvent, Reason};
+use super::device::{ClearReason, DeviceEvent};
+use super::reason::{Reason, Service};
 use crate::pdu::control::ControlCommand;
 use std::collections::VecDeque;
 use std::fmt;
@@ -155,7 +156,7 @@ pub enum SlaveEvent {
         /// The master that sent it.
         master: u8,
         /// The DP service.
-        service: &'static str,
+        service: Service,
         /// Why, in words.
         reason: Reason,
     },

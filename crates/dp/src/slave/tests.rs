@@ -430,7 +430,7 @@ fn cfg_fault_returns_to_wait_prm() {
             _ => None,
         })
         .unwrap();
-    assert!(reason.as_str().contains("byte 1 is 0x13, expected 0x12"));
+    assert!(reason.to_string().contains("byte 1 is 0x13, expected 0x12"));
     // Chk_Cfg in Wait_Prm is not accepted.
     assert_eq!(b.sap(t(0), MASTER, sap::CHK_CFG, &CFG), Ans::Sc);
     assert_eq!(b.slave.state(), SlaveState::WaitPrm);
@@ -1128,7 +1128,7 @@ fn dp_saps_serve_srd_only() {
     assert!(b.events().iter().any(|e| matches!(
         e,
         SlaveEvent::Refused {
-            service: "Chk_Cfg",
+            service: Service::Sap(Sap::ChkCfg),
             ..
         }
     )));
