@@ -42,6 +42,7 @@
 //! broker is back, when it returns to Operate. It is logged and reported
 //! in the status once the broker is back.
 
+use crate::field::Field;
 use crate::topics::SparkplugId;
 use serde::de::IgnoredAny;
 use serde::Deserialize;
@@ -193,44 +194,26 @@ pub enum SettingsError {
     BadUrl(String),
 }
 
-/// A value of type `T`, or anything else (kept apart so that each key
-/// gets its own message).
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-enum Lenient<T> {
-    Valid(T),
-    Invalid(IgnoredAny),
-}
-
-impl<T> Lenient<T> {
-    fn valid(self) -> Option<T> {
-        match self {
-            Lenient::Valid(v) => Some(v),
-            Lenient::Invalid(_) => None,
-        }
-    }
-}
-
 /// The `[mqtt]` table as written.
 #[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 struct RawSettings {
-    broker: Option<Lenient<String>>,
-    client_id: Option<Lenient<String>>,
-    prefix: Option<Lenient<String>>,
-    bus: Option<Lenient<String>>,
-    qos: Option<Lenient<u8>>,
-    publish: Option<Lenient<String>>,
-    interval_ms: Option<Lenient<u64>>,
-    writable: Option<Lenient<Vec<RawAccess>>>,
-    outputs_timeout_ms: Option<Lenient<u64>>,
-    safe_state: Option<Lenient<String>>,
-    job_timeout_ms: Option<Lenient<u64>>,
-    username: Option<Lenient<String>>,
-    password_file: Option<Lenient<String>>,
-    password_env: Option<Lenient<String>>,
-    ca_file: Option<Lenient<String>>,
-    sparkplug: Option<Lenient<String>>,
+    broker: Field<String>,
+    client_id: Field<String>,
+    prefix: Field<String>,
+    bus: Field<String>,
+    qos: Field<u8>,
+    publish: Field<String>,
+    interval_ms: Field<u64>,
+    writable: Field<Vec<RawAccess>>,
+    outputs_timeout_ms: Field<u64>,
+    safe_state: Field<String>,
+    job_timeout_ms: Field<u64>,
+    username: Field<String>,
+    password_file: Field<String>,
+    password_env: Field<String>,
+    ca_file: Field<String>,
+    sparkplug: Field<String>,
 }
 
 /// One entry of `writable` as written: `3` or `{ address = 3, channels = ["a"] }`.
@@ -238,14 +221,15 @@ struct RawSettings {
 #[serde(untagged)]
 enum RawAccess {
     Entry(RawEntry),
-    Address(Lenient<u8>),
+    Address(Field<u8>),
 }
 
 /// A table entry of `writable`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
 struct RawEntry {
-    address: Option<Lenient<u8>>,
-    channels: Option<Lenient<Vec<Lenient<String>>>>,
+    address: Field<u8>,
+    channels: Field<Vec<Field<String>>>,
     /// Keys other than these two (refused, by name).
     #[serde(flatten)]
     unknown: BTreeMap<String, IgnoredAny>,
@@ -259,17 +243,17 @@ fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
 }
 
 /// A non-empty string key, when given.
-fn string(v: Option<Lenient<String>>, key: &'static str) -> Result<Option<String>, SettingsError> {
-    match v.map(Lenient::valid) {
+fn string(v: Field<String>, key: &'static str) -> Result<Option<String>, SettingsError> {
+    match v.given() {
         None => Ok(None),
-        Some(Some(s)) if !s.is_empty() => Ok(Some(s)),
+        Some(Ok(s)) if !s.is_empty() => Ok(Some(s)),
         Some(_) => Err(bad(key, "must be a non-empty string")),
     }
 }
 
 /// A string key naming one of `choices` (absent: the first).
 fn choice<T: Copy>(
-    v: Option<Lenient<String>>,
+    v: Field<String>,
     key: &'static str,
     choices: &[(&str, T)],
 ) -> Result<T, SettingsError> {
@@ -288,10 +272,10 @@ fn choice<T: Copy>(
 }
 
 /// A time in ms (1 ms to a day), when given.
-fn millis(v: Option<Lenient<u64>>, key: &'static str) -> Result<Option<Duration>, SettingsError> {
-    match v.map(Lenient::valid) {
+fn millis(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, SettingsError> {
+    match v.given() {
         None => Ok(None),
-        Some(Some(ms @ 1..=86_400_000)) => Ok(Some(Duration::from_millis(ms))),
+        Some(Ok(ms @ 1..=86_400_000)) => Ok(Some(Duration::from_millis(ms))),
         Some(_) => Err(bad(key, "must be 1..=86400000")),
     }
 }
@@ -330,9 +314,9 @@ impl MqttSettings {
         if prefix.split('/').any(|l| !topic_level(l)) {
             return Err(bad("prefix", format!("`{prefix}` is not a topic prefix")));
         }
-        let qos = match t.qos.map(Lenient::valid) {
+        let qos = match t.qos.given() {
             None => 1,
-            Some(Some(q @ 0..=2)) => q,
+            Some(Ok(q @ 0..=2)) => q,
             Some(_) => return Err(bad("qos", "must be 0, 1 or 2")),
         };
         let publish = choice(
@@ -345,10 +329,10 @@ impl MqttSettings {
             ],
         )?;
         let interval = millis(t.interval_ms, "interval_ms")?.unwrap_or(Duration::from_secs(1));
-        let writable: Vec<WriteAccess> = match t.writable.map(Lenient::valid) {
+        let writable: Vec<WriteAccess> = match t.writable.given() {
             None => vec![],
-            Some(Some(a)) => a.into_iter().map(access).collect::<Result<_, _>>()?,
-            Some(None) => return Err(bad("writable", "must be a list of station addresses")),
+            Some(Ok(a)) => a.into_iter().map(access).collect::<Result<_, _>>()?,
+            Some(Err(())) => return Err(bad("writable", "must be a list of station addresses")),
         };
         if let Some(w) = writable
             .iter()
@@ -452,8 +436,8 @@ impl MqttSettings {
 
 /// One entry of `writable`: `3` or `{ address = 3, channels = ["a"] }`.
 fn access(v: RawAccess) -> Result<WriteAccess, SettingsError> {
-    let address = |v: Option<Lenient<u8>>| match v.and_then(Lenient::valid) {
-        Some(n @ 0..=125) => Ok(n),
+    let address = |v: Field<u8>| match v {
+        Field::Valid(n @ 0..=125) => Ok(n),
         _ => Err(bad("writable", "takes station addresses 0..=125")),
     };
     match v {
@@ -461,11 +445,11 @@ fn access(v: RawAccess) -> Result<WriteAccess, SettingsError> {
             if let Some(k) = e.unknown.keys().next() {
                 return Err(bad("writable", format!("entry has an unknown key `{k}`")));
             }
-            let channels = match e.channels.map(Lenient::valid) {
-                Some(Some(a)) => a
+            let channels = match e.channels.given() {
+                Some(Ok(a)) => a
                     .into_iter()
-                    .map(|c| match c.valid() {
-                        Some(s) if !s.is_empty() => Ok(s),
+                    .map(|c| match c {
+                        Field::Valid(s) if !s.is_empty() => Ok(s),
                         _ => Err(bad("writable", "`channels` takes channel names")),
                     })
                     .collect::<Result<_, _>>()?,
@@ -476,7 +460,7 @@ fn access(v: RawAccess) -> Result<WriteAccess, SettingsError> {
                 channels: Some(channels),
             })
         }
-        RawAccess::Address(a) => Ok(WriteAccess::full(address(Some(a))?)),
+        RawAccess::Address(a) => Ok(WriteAccess::full(address(a)?)),
     }
 }
 
@@ -598,6 +582,10 @@ mod tests {
             (
                 "writable = [{ address = 3, channels = [\"\"] }]",
                 "[mqtt]: `writable` `channels` takes channel names",
+            ),
+            (
+                "writable = [{ address = 3 }]",
+                "[mqtt]: `writable` an entry table needs `channels = [..]`",
             ),
             (
                 "writable = [{ channels = [\"a\"] }]",
