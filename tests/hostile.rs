@@ -6,7 +6,7 @@
 //! the input's size) and bounded time. The limits are documented in
 //! RELIABILITY.md ("Hostile input").
 
-mod alloc_count;
+use profibus_io::alloc_count;
 
 #[global_allocator]
 static GLOBAL: alloc_count::Counting = alloc_count::Counting;
