@@ -254,11 +254,12 @@ fn dpctl_rate(
 
 /// CPU seconds of reaped children so far.
 fn children_cpu() -> f64 {
-    // SAFETY: getrusage writes into the struct it is given.
-    let mut ru: nix::libc::rusage = unsafe { std::mem::zeroed() };
-    unsafe { nix::libc::getrusage(nix::libc::RUSAGE_CHILDREN, &mut ru) };
-    let t = |tv: nix::libc::timeval| tv.tv_sec as f64 + tv.tv_usec as f64 * 1e-6;
-    t(ru.ru_utime) + t(ru.ru_stime)
+    use nix::sys::resource::{getrusage, UsageWho};
+    use nix::sys::time::TimeValLike;
+    let Ok(ru) = getrusage(UsageWho::RUSAGE_CHILDREN) else {
+        return 0.0;
+    };
+    (ru.user_time().num_microseconds() + ru.system_time().num_microseconds()) as f64 * 1e-6
 }
 
 fn python() -> PathBuf {

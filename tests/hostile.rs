@@ -6,7 +6,7 @@
 //! the input's size) and bounded time. The limits are documented in
 //! RELIABILITY.md ("Hostile input").
 
-mod alloc_count;
+use profibus_io::alloc_count;
 
 #[global_allocator]
 static GLOBAL: alloc_count::Counting = alloc_count::Counting;
@@ -15,8 +15,8 @@ use profibus::devices::bus::ProfiledBus;
 use profibus::devices::DeviceOptions;
 use profibus::dp::config::busfile::BusFile;
 use profibus::dp::config::gsd::{Gsd, ParseOptions, MAX_FILE_LEN};
-use profibus_gateway::core::{Gateway, SlaveInfo};
 use profibus_gateway::settings::MqttSettings;
+use profibus_gateway::{Gateway, SlaveInfo};
 use std::path::Path;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};

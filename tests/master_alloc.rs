@@ -12,7 +12,7 @@ use profibus::fdl::station::Station;
 use profibus::fdl::{Baud, BusParams, Instant};
 use std::time::Duration;
 
-mod alloc_count;
+use profibus_io::alloc_count;
 
 #[global_allocator]
 static GLOBAL: alloc_count::Counting = alloc_count::Counting;

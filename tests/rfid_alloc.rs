@@ -8,7 +8,7 @@ use profibus::devices::rfid::link::{Line, ReaderLink};
 use profibus::fdl::Instant;
 use std::time::Duration;
 
-mod alloc_count;
+use profibus_io::alloc_count;
 
 #[global_allocator]
 static GLOBAL: alloc_count::Counting = alloc_count::Counting;

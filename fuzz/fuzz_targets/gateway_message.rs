@@ -24,7 +24,7 @@ use profibus_devices::channels::Direction;
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
 use profibus_fdl::{Baud, BusParams, Instant};
 use profibus_fuzz::{cached, profile_fixture, Fixture};
-use profibus_gateway::core::{Gateway, Service, SlaveInfo};
+use profibus_gateway::{Gateway, Service, SlaveInfo};
 use profibus_gateway::settings::MqttSettings;
 use std::sync::OnceLock;
 use std::time::Duration;

@@ -6,6 +6,10 @@
 //! (`dpctl … | head -1`) ends the command quietly with status 0
 //! ([`out`]).
 
+// The doc comments of clap arguments are `--help` texts, not rustdoc:
+// brackets such as `HOST[:PORT]` there are not links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
 mod bus;
 mod common;
 mod completions;

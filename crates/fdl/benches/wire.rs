@@ -3,6 +3,8 @@
 //! core, at least as fast as profirust).
 //!
 //! Run: `cargo bench -p profibus-fdl --bench wire`
+// `criterion_main!` defines an undocumented `pub fn main`.
+#![allow(missing_docs)]
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use profibus_fdl::wire::Telegram;

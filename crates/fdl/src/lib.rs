@@ -14,7 +14,7 @@
 //!   [`station::Station`] trait: the passive responder (DP slave side), the
 //!   active station (token ring, GAP, requester; DP master side) and the
 //!   baud-rate search of a passive station ([`station::autobaud`]).
-//! - [`line`]: the RS-485 line: [`line::medium`], a sans-IO model of the
+//! - [`line`](mod@line): the RS-485 line: [`line::medium`], a sans-IO model of the
 //!   medium (broadcast, pacing at the baud rate, collisions, fault
 //!   injection) shared by the virtual bus and the simulator, and
 //!   [`line::tap`], passive framing of a timed byte stream into telegrams

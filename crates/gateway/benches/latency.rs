@@ -16,8 +16,8 @@
 
 mod support;
 
-use profibus_gateway::core::hex;
 use profibus_gateway::link;
+use profibus_gateway::payload::hex;
 use profibus_gateway::sim::Pacer;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use std::collections::HashMap;

@@ -59,7 +59,7 @@
 //! jobs and the device crate's `PkwClient` and `RfidClient`, one PKW or
 //! RFID job per slave at a time, each within `[mqtt] job_timeout_ms`.
 //!
-//! Queues are bounded per slave: at most [`core::QUEUE_LIMIT`] (8) output
+//! Queues are bounded per slave: at most [`request::QUEUE_LIMIT`] (8) output
 //! writes and DP-V1 requests wait for the next cycle boundary, and 8 PKW
 //! or RFID jobs for the slave's client; one more is answered
 //! `{"ok": false, "error": "slave N: too many requests waiting (at most 8)"}`
@@ -87,6 +87,24 @@
 //! `[mqtt] outputs_timeout_ms` without a broker the outputs go to
 //! `[mqtt] safe_state` once (default `keep`: the last values stay), which
 //! is logged and, once the broker is back, reported in the status.
+//!
+//! # Modules
+//!
+//! In layers: each module uses only the modules before it in this list
+//! (the test `layers` checks it), so the cores know no connection and
+//! nothing below the driver knows the simulated plant.
+//!
+//! 1. [`topics`]: the topic names, plain and Sparkplug B.
+//! 2. [`slave`]: what the gateway knows of a configured slave.
+//! 3. [`settings`]: the `[mqtt]` table.
+//! 4. [`request`]: requests from clients, parsed from their payloads.
+//! 5. [`payload`]: the JSON payloads the plain mode publishes.
+//! 6. [`session`]: the [`Session`] interface of the cores, [`Publish`].
+//! 7. [`outage`]: the outputs while the broker is away.
+//! 8. [`json`]: the plain JSON core, [`Gateway`].
+//! 9. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
+//! 10. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
+//! 11. [`sim`]: the simulated plant of `dpctl gateway --sim`.
 //!
 //! # Example
 //!
@@ -139,15 +157,92 @@
 //!
 //! [`DpMaster`]: profibus_dp::master::DpMaster
 
-pub mod core;
+pub mod json;
 pub mod link;
 pub mod outage;
 pub mod payload;
+pub mod request;
+pub mod session;
 pub mod settings;
 pub mod sim;
+pub mod slave;
 pub mod sparkplug;
+pub mod topics;
 
-pub use crate::core::{Gateway, Publish, Service, SlaveInfo, Topics};
-pub use link::{Connection, ConnectionError, LinkEvent, MqttLink, Session};
+pub use json::Gateway;
+pub use link::{Connection, ConnectionError, LinkEvent, MqttLink};
+pub use session::{LinkSetup, Publish, Session};
 pub use settings::{Broker, MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
-pub use sparkplug::{EdgeNode, SparkplugId};
+pub use slave::{slave_infos, SlaveInfo, SlaveInfoError};
+pub use sparkplug::EdgeNode;
+pub use topics::{Service, SparkplugId, Topics};
+
+/// The module order of the crate documentation's layers.
+#[cfg(test)]
+const LAYERS: [&str; 11] = [
+    "topics",
+    "slave",
+    "settings",
+    "request",
+    "payload",
+    "session",
+    "outage",
+    "json",
+    "sparkplug",
+    "link",
+    "sim",
+];
+
+#[cfg(test)]
+mod layers {
+    use super::LAYERS;
+    use std::path::Path;
+
+    /// The `crate::` paths a source file's code (not its comments or
+    /// tests) names.
+    fn uses(text: &str) -> Vec<String> {
+        let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        code.lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .flat_map(|l| l.split("crate::").skip(1))
+            .map(|rest| {
+                rest.chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_module_uses_only_the_layers_before_it() {
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        for (rank, module) in LAYERS.iter().enumerate() {
+            let file = src.join(format!("{module}.rs"));
+            let files = if file.exists() {
+                vec![file]
+            } else {
+                std::fs::read_dir(src.join(module))
+                    .unwrap()
+                    .map(|e| e.unwrap().path())
+                    .collect()
+            };
+            for f in files {
+                let text = std::fs::read_to_string(&f).unwrap();
+                for used in uses(&text) {
+                    let at = LAYERS.iter().position(|m| *m == used);
+                    assert!(
+                        used == *module || at.is_some_and(|at| at < rank),
+                        "{}: uses crate::{used}, not a layer before `{module}`",
+                        f.display()
+                    );
+                }
+            }
+        }
+        let files = std::fs::read_dir(&src).unwrap().count();
+        assert_eq!(
+            files,
+            LAYERS.len() + 1,
+            "every module in LAYERS, and lib.rs"
+        );
+    }
+}

@@ -12,7 +12,7 @@
 //! the client's queue full (the broker is away) is dropped, and the
 //! gateway republishes every retained topic when the broker is back.
 
-use crate::core::{Gateway, Publish};
+use crate::session::{Publish, Session};
 use crate::settings::{parse_broker, Broker, MqttSettings, PasswordSource, SettingsError};
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
@@ -37,78 +37,6 @@ pub enum LinkEvent {
         /// Payload.
         payload: Vec<u8>,
     },
-}
-
-/// A gateway core as the link and the driver see it: the plain JSON
-/// [`Gateway`] or the Sparkplug B [`crate::sparkplug::EdgeNode`]. All
-/// sans-IO: the driver hands in link events and the master, and sends
-/// what [`Session::poll_publish`] returns.
-pub trait Session {
-    /// The settings (client id, QoS, …).
-    fn settings(&self) -> &MqttSettings;
-    /// What the connection needs of this core: subscriptions and wills.
-    fn link_setup(&self) -> LinkSetup;
-    /// The broker accepted the connection.
-    fn connected(&mut self, ts_ms: u64);
-    /// The connection was lost (or a connection attempt failed).
-    fn disconnected(&mut self, ts_ms: u64);
-    /// A message arrived on a subscribed topic.
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64);
-    /// One step at a cycle boundary of the master; `now` is the master's
-    /// time, `ts_ms` the wall clock in ms since the Unix epoch.
-    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64);
-    /// The next message to send, if any.
-    fn poll_publish(&mut self) -> Option<Publish>;
-    /// The message to publish before a clean disconnect (the broker sends
-    /// no will then).
-    fn last_will(&self) -> Publish;
-}
-
-/// What a [`Session`] asks of its connection.
-pub struct LinkSetup {
-    /// QoS of every publish and subscription (0..=2).
-    pub qos: u8,
-    /// QoS of the last will.
-    pub will_qos: u8,
-    /// Topic filters subscribed to on every connection.
-    pub filters: Vec<String>,
-    /// The last will of the next connection attempt, called before the
-    /// first and before every later attempt (after each
-    /// [`LinkEvent::Disconnected`]).
-    pub will: Box<dyn FnMut() -> Publish + Send>,
-}
-
-impl Session for Gateway {
-    fn settings(&self) -> &MqttSettings {
-        Gateway::settings(self)
-    }
-    fn link_setup(&self) -> LinkSetup {
-        let will = Gateway::last_will(self);
-        LinkSetup {
-            qos: self.settings().qos,
-            will_qos: self.settings().qos,
-            filters: self.topics().request_filters(),
-            will: Box::new(move || will.clone()),
-        }
-    }
-    fn connected(&mut self, ts_ms: u64) {
-        Gateway::connected(self, ts_ms)
-    }
-    fn disconnected(&mut self, ts_ms: u64) {
-        Gateway::disconnected(self, ts_ms)
-    }
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
-        Gateway::handle_message(self, topic, payload, ts_ms)
-    }
-    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
-        Gateway::step(self, m, now, ts_ms)
-    }
-    fn poll_publish(&mut self) -> Option<Publish> {
-        Gateway::poll_publish(self)
-    }
-    fn last_will(&self) -> Publish {
-        Gateway::last_will(self)
-    }
 }
 
 /// A failed publish. The message includes the cause, which is therefore

@@ -42,7 +42,7 @@
 //! broker is back, when it returns to Operate. It is logged and reported
 //! in the status once the broker is back.
 
-use crate::sparkplug::SparkplugId;
+use crate::topics::SparkplugId;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 

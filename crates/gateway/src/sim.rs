@@ -4,8 +4,9 @@
 //! profile's device; slaves given by GSD modules run the generic device
 //! with inputs that echo the outputs.
 
-use crate::core::SlaveInfo;
-use crate::link::{MqttLink, Session};
+use crate::link::MqttLink;
+use crate::session::Session;
+pub use crate::slave::slave_infos;
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::generic::{GenericDevice, GenericError};
 use profibus_devices::{BoxedDevice, ProfileError};
@@ -81,37 +82,6 @@ impl SimPlant {
             .station_mut::<ActiveStation<DpMaster>>(self.master)
             .app_mut()
     }
-}
-
-/// The gateway's view of a bus file's slaves: names, named channels
-/// (device profiles' channels; `MODULE[i]` bytes for slaves given by GSD
-/// modules), GSDs, PKW dialects, RFID readers.
-pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SimError> {
-    profiled
-        .file
-        .slaves
-        .iter()
-        .map(|s| {
-            let a = s.params.address;
-            Ok(SlaveInfo {
-                address: a,
-                name: s.params.name.clone(),
-                ident_number: s.params.ident_number,
-                channels: Some(
-                    profiled
-                        .channels(a)
-                        .unwrap_or_else(|| {
-                            profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
-                        })
-                        .map_err(|e| SimError::Profile(a, e))?,
-                ),
-                gsd: Some(s.gsd.clone()),
-                dpv1: s.params.dpv1,
-                pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
-                rfid: s.params.ident_number == profibus_devices::rfid::IDENT,
-            })
-        })
-        .collect()
 }
 
 /// Paces a [`SimPlant`] on the wall clock: each turn runs the line up to

@@ -7,7 +7,7 @@
 //! - [`BaudChoice`]: a fixed rate, or the search of a slave with
 //!   `Auto_Baud_supp` (on a pty or a serial server the rate is nominal).
 //! - [`SlaveShell`]: runs a [`DpSlave`] with
-//!   [`PassiveRunner`](crate::runner::PassiveRunner) (search again
+//!   [`PassiveRunner`] (search again
 //!   after a watchdog expiry), keeps what the device reports outside its
 //!   request path (an accepted Set_Slave_Add in the profile's address
 //!   file, [`STATE_EVENT`] state in its state file) and reports

@@ -12,7 +12,7 @@
 //!   one async byte stream, [`transport::Port`]; the virtual bus
 //!   [`transport::hub`] behind `dpctl bus`; the line [`transport::doctor`];
 //!   real-time scheduling ([`transport::realtime`]) and the kernel's RS-485
-//!   mode ([`transport::rs485`]).
+//!   mode (`transport::rs485`).
 //! - [`driver`]: the thin tokio shell that runs any `profibus_fdl`
 //!   station (an active master or a passive slave) on a byte stream,
 //!   with its [`driver::Clock`].
@@ -28,7 +28,10 @@
 //! - [`jx2`]: the JX2-PROFI1's register clients (console, control socket,
 //!   script) while the slave runs.
 //! - [`FdlCodec`]: the FDL framer as a `tokio_util` codec.
+//! - [`alloc_count`]: a counting global allocator for the tests and
+//!   benchmarks that prove allocation-free steady states.
 
+pub mod alloc_count;
 pub mod codec;
 pub mod control_io;
 pub mod driver;

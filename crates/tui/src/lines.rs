@@ -64,7 +64,7 @@ impl SlaveInfo {
         })
     }
 
-    /// The slave for a [`BusView`](crate::bus::BusView): decoded by its
+    /// The slave for a [`BusView`]: decoded by its
     /// channels, else by its GSD modules.
     pub fn spec(&self) -> SlaveSpec {
         SlaveSpec {

@@ -135,12 +135,27 @@ pub enum Scale {
     /// A digital channel (0/1).
     Bit,
     /// A signed 16-bit word, `full` units at 0x7FFF.
-    Signed { full: f64, unit: &'static str },
+    Signed {
+        /// The value at 0x7FFF.
+        full: f64,
+        /// The unit (`"V"`, `"mA"` …).
+        unit: &'static str,
+    },
     /// A 16-bit word read as unsigned 0..0x7FFF = 0..`full` units
     /// (negative raw values are out of range).
-    Positive { full: f64, unit: &'static str },
+    Positive {
+        /// The value at 0x7FFF.
+        full: f64,
+        /// The unit.
+        unit: &'static str,
+    },
     /// A signed 16-bit word, `per_digit` units per digit.
-    Digit { per_digit: f64, unit: &'static str },
+    Digit {
+        /// Units per digit.
+        per_digit: f64,
+        /// The unit.
+        unit: &'static str,
+    },
     /// A plain unsigned number (counter, encoder position).
     Count,
 }

@@ -1,7 +1,7 @@
 //! FDL stations as sans-IO state machines.
 //!
 //! A station has no I/O and no clock of its own. A driver (the tokio
-//! driver in [`crate::driver`], the virtual-time simulator in
+//! driver in `profibus_io::driver`, the virtual-time simulator in
 //! [`crate::sim`], a fuzzer) feeds it through the [`Station`] trait:
 //!
 //! 1. bytes received from the line with the time they arrived

@@ -2,7 +2,7 @@
 //! from the master's view of it) and the output writes of a DCMD.
 
 use super::proto::{DataType, Metric, MetricValue};
-use crate::core::SlaveInfo;
+use crate::slave::SlaveInfo;
 use profibus_devices::channels::{Channel, ChannelMap, ChannelType, Direction, Value};
 use profibus_dp::master::SlaveView;
 

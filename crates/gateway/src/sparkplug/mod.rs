@@ -78,11 +78,12 @@
 pub mod metrics;
 pub mod proto;
 
-use crate::core::{Publish, SlaveInfo};
-use crate::link::{LinkSetup, Session};
+pub use crate::topics::{IdError, MessageType, SparkplugId, NAMESPACE};
+
 use crate::outage::Outage;
+use crate::session::{LinkSetup, Publish, Session};
 use crate::settings::MqttSettings;
-use crate::sim::SimError;
+use crate::slave::{slave_infos, SlaveInfo, SlaveInfoError};
 use metrics::{CommandError, Device, OutputWrite};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::ChannelMap;
@@ -91,104 +92,16 @@ use profibus_fdl::Instant;
 use prost::Message;
 use proto::{DataType, Metric, MetricValue, Payload};
 use std::collections::VecDeque;
-use std::fmt;
 
-/// The Sparkplug B topic namespace.
-pub const NAMESPACE: &str = "spBv1.0";
 /// The node metric that asks for a rebirth.
 pub const REBIRTH: &str = "Node Control/Rebirth";
 /// The birth/death sequence metric.
 pub const BD_SEQ: &str = "bdSeq";
 
-/// A Sparkplug group id and edge node id.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SparkplugId {
-    /// Group id.
-    pub group: String,
-    /// Edge node id.
-    pub edge: String,
-}
-
-/// A `GROUP/EDGE` that is not two valid ids.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` is not GROUP/EDGE (two non-empty ids without `/`, `+` or `#`)")]
-pub struct IdError(String);
-
-impl SparkplugId {
-    /// Parse `GROUP/EDGE`.
-    pub fn parse(text: &str) -> Result<SparkplugId, IdError> {
-        let valid = |s: &str| !s.is_empty() && !s.contains(['/', '+', '#', '\0']);
-        match text.split_once('/') {
-            Some((g, e)) if valid(g) && valid(e) => Ok(SparkplugId {
-                group: g.into(),
-                edge: e.into(),
-            }),
-            _ => Err(IdError(text.into())),
-        }
-    }
-
-    /// The topic of an edge node message: `spBv1.0/GROUP/TYPE/EDGE`.
-    pub fn node_topic(&self, t: MessageType) -> String {
-        format!("{NAMESPACE}/{}/{}/{}", self.group, t.name(), self.edge)
-    }
-
-    /// The topic of a device message: `spBv1.0/GROUP/TYPE/EDGE/DEVICE`.
-    pub fn device_topic(&self, t: MessageType, device: &str) -> String {
-        format!("{}/{device}", self.node_topic(t))
-    }
-}
-
-impl std::str::FromStr for SparkplugId {
-    type Err = IdError;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        SparkplugId::parse(s)
-    }
-}
-
-impl fmt::Display for SparkplugId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}/{}", self.group, self.edge)
-    }
-}
-
-/// The Sparkplug message types this edge node uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MessageType {
-    /// Edge node birth.
-    NBirth,
-    /// Edge node death (the last will).
-    NDeath,
-    /// Device birth.
-    DBirth,
-    /// Device death.
-    DDeath,
-    /// Device data.
-    DData,
-    /// Edge node command.
-    NCmd,
-    /// Device command.
-    DCmd,
-}
-
-impl MessageType {
-    /// The topic level.
-    pub fn name(self) -> &'static str {
-        match self {
-            MessageType::NBirth => "NBIRTH",
-            MessageType::NDeath => "NDEATH",
-            MessageType::DBirth => "DBIRTH",
-            MessageType::DDeath => "DDEATH",
-            MessageType::DData => "DDATA",
-            MessageType::NCmd => "NCMD",
-            MessageType::DCmd => "DCMD",
-        }
-    }
-}
-
 /// The devices of a bus file's slaves: channels from the device
 /// profiles, or one byte per GSD module.
-pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SimError> {
-    let infos = crate::sim::slave_infos(profiled)?;
+pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SlaveInfoError> {
+    let infos = slave_infos(profiled)?;
     infos
         .into_iter()
         .map(|info| {
@@ -201,8 +114,12 @@ pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SimError> {
                         .iter()
                         .find(|s| s.params.address == info.address)
                         .expect("slave_infos lists the bus file's slaves");
-                    profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
-                        .map_err(|e| SimError::Profile(info.address, e))?
+                    profibus_devices::generic::module_channels(&s.modules, &s.params.cfg).map_err(
+                        |error| SlaveInfoError {
+                            address: info.address,
+                            error,
+                        },
+                    )?
                 }
             };
             Ok(Device::new(info, channels))
@@ -594,111 +511,6 @@ impl Session for EdgeNode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::SimPlant;
-
-    /// Master 1 with two GSD slaves, 3 (named) and 4; 3 writable.
-    const BUS: &str = include_str!("../../tests/data/sparkplug_bus.toml");
-
-    struct Rig {
-        plant: SimPlant,
-        node: EdgeNode,
-        t: u64,
-    }
-
-    impl Rig {
-        fn new() -> Rig {
-            let dir =
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/bus.toml");
-            let bus = ProfiledBus::parse(&dir, BUS).unwrap();
-            let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line").unwrap();
-            let node = EdgeNode::new(
-                settings,
-                SparkplugId::parse("G/E").unwrap(),
-                devices(&bus).unwrap(),
-            );
-            Rig {
-                plant: SimPlant::new(&bus).unwrap(),
-                node,
-                t: 0,
-            }
-        }
-
-        /// Run 1 ms of bus time, step the node; what it published.
-        fn tick(&mut self) -> Vec<(String, Payload)> {
-            self.t += 1;
-            self.plant
-                .run_until(Instant::from_nanos(self.t * 1_000_000));
-            let now = self.plant.now();
-            self.node.step(self.plant.master(), now, 1000 + self.t);
-            std::iter::from_fn(|| self.node.poll_publish())
-                .map(|p| {
-                    assert!(!p.retain);
-                    (p.topic, Payload::decode(p.payload.as_slice()).unwrap())
-                })
-                .collect()
-        }
-
-        /// Tick until `topic` is published (at most 2 s of bus time);
-        /// everything published meanwhile.
-        fn until(&mut self, topic: &str) -> Vec<(String, Payload)> {
-            let mut all = vec![];
-            for _ in 0..2000 {
-                all.extend(self.tick());
-                if all.iter().any(|(t, _)| t == topic) {
-                    return all;
-                }
-            }
-            panic!(
-                "no {topic}; got {:?}",
-                all.iter().map(|m| &m.0).collect::<Vec<_>>()
-            );
-        }
-    }
-
-    fn value<'a>(p: &'a Payload, name: &str) -> Option<&'a MetricValue> {
-        p.metrics
-            .iter()
-            .find(|m| m.name.as_deref() == Some(name))
-            .and_then(|m| m.value.as_ref())
-    }
-
-    fn find<'a>(msgs: &'a [(String, Payload)], topic: &str) -> &'a Payload {
-        &msgs.iter().rev().find(|(t, _)| t == topic).unwrap().1
-    }
-
-    fn cmd(metrics: Vec<Metric>) -> Vec<u8> {
-        Payload {
-            timestamp: Some(1),
-            metrics,
-            ..Default::default()
-        }
-        .encode_to_vec()
-    }
-
-    fn write(name: &str, v: MetricValue) -> Metric {
-        Metric {
-            name: Some(name.into()),
-            value: Some(v),
-            ..Default::default()
-        }
-    }
-
-    #[test]
-    fn ids_and_topics() {
-        let id = SparkplugId::parse("plant/line1").unwrap();
-        assert_eq!(id.to_string(), "plant/line1");
-        assert_eq!(
-            id.node_topic(MessageType::NBirth),
-            "spBv1.0/plant/NBIRTH/line1"
-        );
-        assert_eq!(
-            id.device_topic(MessageType::DData, "7"),
-            "spBv1.0/plant/DDATA/line1/7"
-        );
-        for bad in ["plant", "a/b/c", "/e", "g/", "g+/e", "g/#"] {
-            assert!(SparkplugId::parse(bad).is_err(), "{bad}");
-        }
-    }
 
     #[test]
     fn signed_values_are_twos_complement() {
@@ -717,227 +529,4 @@ mod tests {
 
     use metrics::{decode_value, encode_value};
     use profibus_devices::channels::Value;
-
-    #[test]
-    fn births_data_commands_rebirth_and_bdseq() {
-        let mut r = Rig::new();
-        // The wills of successive connection attempts count bdSeq.
-        let mut setup = r.node.link_setup();
-        assert_eq!((setup.qos, setup.will_qos), (0, 1));
-        assert_eq!(setup.filters, ["spBv1.0/G/NCMD/E", "spBv1.0/G/DCMD/E/+"]);
-        for bd in 0..3u64 {
-            let w = (setup.will)();
-            assert_eq!(w.topic, "spBv1.0/G/NDEATH/E");
-            let p = Payload::decode(w.payload.as_slice()).unwrap();
-            assert_eq!((p.seq, p.metrics.len()), (None, 1));
-            assert_eq!(value(&p, BD_SEQ), Some(&MetricValue::LongValue(bd)));
-        }
-        // Nothing before the connection.
-        assert!(r.tick().is_empty());
-        r.node.connected(0);
-        let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
-        let mut msgs = msgs.into_iter();
-        let (t, nbirth) = msgs.next().unwrap();
-        assert_eq!(t, "spBv1.0/G/NBIRTH/E");
-        assert_eq!(nbirth.seq, Some(0));
-        assert_eq!(value(&nbirth, BD_SEQ), Some(&MetricValue::LongValue(0)));
-        assert_eq!(
-            value(&nbirth, REBIRTH),
-            Some(&MetricValue::BooleanValue(false))
-        );
-        let births: Vec<_> = msgs.collect();
-        assert_eq!(births.len(), 2, "{births:?}");
-        assert_eq!(births[0].0, "spBv1.0/G/DBIRTH/E/3");
-        assert_eq!(births[0].1.seq, Some(1));
-        assert_eq!(births[1].1.seq, Some(2));
-        let b3 = &births[0].1;
-        assert_eq!(
-            value(b3, metrics::NAME),
-            Some(&MetricValue::StringValue("echo".into()))
-        );
-        let ch = b3
-            .metrics
-            .iter()
-            .find(|m| m.name.as_deref() == Some("Outputs/2 words in_out[0]"))
-            .unwrap();
-        assert_eq!(ch.datatype, Some(DataType::UInt8.code()));
-        assert!(b3.metrics.iter().all(|m| m.datatype.is_some()));
-
-        // A DCMD: the image and a channel at once; the echo slave's
-        // inputs follow, in one DDATA with only what changed.
-        r.node.handle_message(
-            "spBv1.0/G/DCMD/E/3",
-            &cmd(vec![
-                write(
-                    metrics::OUTPUT_IMAGE,
-                    MetricValue::BytesValue(vec![1, 2, 3, 4]),
-                ),
-                write("Outputs/2 words in_out[3]", MetricValue::IntValue(0xaa)),
-            ]),
-            0,
-        );
-        let msgs = r.until("spBv1.0/G/DDATA/E/3");
-        assert_eq!(r.plant.master().outputs(3).unwrap(), [1, 2, 3, 0xaa]);
-        let echoed = |msgs: &[(String, Payload)]| {
-            msgs.iter().any(|(t, p)| {
-                t == "spBv1.0/G/DDATA/E/3"
-                    && value(p, metrics::INPUT_IMAGE)
-                        == Some(&MetricValue::BytesValue(vec![1, 2, 3, 0xaa]))
-            })
-        };
-        let mut later = msgs.clone();
-        for _ in 0..2000 {
-            if echoed(&later) {
-                break;
-            }
-            later.extend(r.tick());
-        }
-        assert!(echoed(&later), "the echoed inputs in a DDATA");
-        let dd = find(&msgs, "spBv1.0/G/DDATA/E/3");
-        assert!(dd.metrics.iter().all(|m| m.datatype.is_none()));
-        assert!(value(dd, metrics::NAME).is_none(), "only changes");
-        assert!(dd.seq.unwrap() >= 3);
-
-        // Refused, nothing written: a slave not writable, an unknown
-        // metric next to a good one, an input, a value out of range.
-        for (topic, ms) in [
-            (
-                "spBv1.0/G/DCMD/E/4",
-                vec![write(
-                    metrics::OUTPUT_IMAGE,
-                    MetricValue::BytesValue(vec![9; 4]),
-                )],
-            ),
-            (
-                "spBv1.0/G/DCMD/E/3",
-                vec![
-                    write("Outputs/2 words in_out[0]", MetricValue::IntValue(9)),
-                    write("Outputs/nope", MetricValue::IntValue(9)),
-                ],
-            ),
-            (
-                "spBv1.0/G/DCMD/E/3",
-                vec![write("Inputs/2 words in_out[0]", MetricValue::IntValue(9))],
-            ),
-            (
-                "spBv1.0/G/DCMD/E/3",
-                vec![write(
-                    "Outputs/2 words in_out[0]",
-                    MetricValue::IntValue(300),
-                )],
-            ),
-            (
-                "spBv1.0/G/DCMD/E/3",
-                vec![write(
-                    metrics::OUTPUT_IMAGE,
-                    MetricValue::BytesValue(vec![9; 3]),
-                )],
-            ),
-            ("spBv1.0/G/DCMD/E/9", vec![]),
-        ] {
-            r.node.handle_message(topic, &cmd(ms), 0);
-            r.tick();
-            assert_eq!(
-                r.plant.master().outputs(3).unwrap(),
-                [1, 2, 3, 0xaa],
-                "{topic}"
-            );
-            assert_eq!(r.plant.master().outputs(4).unwrap(), [0; 4], "{topic}");
-        }
-        r.node.handle_message("spBv1.0/G/DCMD/E/3", b"\xff\xff", 0);
-
-        // Rebirth: NBIRTH (seq 0, same bdSeq) and both DBIRTHs again.
-        r.node.handle_message(
-            "spBv1.0/G/NCMD/E",
-            &cmd(vec![write(REBIRTH, MetricValue::BooleanValue(true))]),
-            0,
-        );
-        let msgs = r.tick();
-        let topics: Vec<&str> = msgs.iter().map(|(t, _)| t.as_str()).collect();
-        assert_eq!(
-            topics,
-            [
-                "spBv1.0/G/NBIRTH/E",
-                "spBv1.0/G/DBIRTH/E/3",
-                "spBv1.0/G/DBIRTH/E/4"
-            ]
-        );
-        assert_eq!(msgs[0].1.seq, Some(0));
-        assert_eq!(value(&msgs[0].1, BD_SEQ), Some(&MetricValue::LongValue(0)));
-        assert_eq!(msgs[2].1.seq, Some(2));
-
-        // A new connection: bdSeq 1 in the NBIRTH and the will.
-        r.node.disconnected(0);
-        assert!(r.tick().is_empty());
-        r.node.connected(0);
-        let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
-        assert_eq!(value(&msgs[0].1, BD_SEQ), Some(&MetricValue::LongValue(1)));
-        let will = Payload::decode(r.node.last_will().payload.as_slice()).unwrap();
-        assert_eq!(value(&will, BD_SEQ), Some(&MetricValue::LongValue(1)));
-    }
-
-    #[test]
-    fn seq_wraps_after_255() {
-        let mut r = Rig::new();
-        r.node.connected(0);
-        r.until("spBv1.0/G/DBIRTH/E/4");
-        // A rebirth restarts at 0 whatever came before.
-        r.node.seq = 200;
-        r.node.handle_message(
-            "spBv1.0/G/NCMD/E",
-            &cmd(vec![write(REBIRTH, MetricValue::BooleanValue(true))]),
-            0,
-        );
-        let seqs: Vec<_> = r.tick().iter().map(|(_, p)| p.seq).collect();
-        assert_eq!(seqs, [Some(0), Some(1), Some(2)]);
-        // 255, then 0: the DDATA of the outputs written, then the one of
-        // the inputs the echo slave sends back a cycle later.
-        r.node.seq = 255;
-        r.node.handle_message(
-            "spBv1.0/G/DCMD/E/3",
-            &cmd(vec![write(
-                metrics::OUTPUT_IMAGE,
-                MetricValue::BytesValue(vec![7; 4]),
-            )]),
-            0,
-        );
-        let mut seqs = vec![];
-        for _ in 0..2000 {
-            seqs.extend(r.tick().iter().map(|(_, p)| p.seq.unwrap()));
-            if seqs.len() >= 2 {
-                break;
-            }
-        }
-        assert_eq!(seqs[..2], [255, 0]);
-    }
-
-    #[test]
-    fn outputs_go_to_the_safe_state_without_a_broker() {
-        let mut r = Rig::new();
-        r.node.settings.outputs_timeout = Some(std::time::Duration::from_millis(100));
-        r.node.settings.safe_state = crate::settings::SafeState::Zero;
-        r.node.connected(0);
-        r.until("spBv1.0/G/DBIRTH/E/4");
-        r.node.handle_message(
-            "spBv1.0/G/DCMD/E/3",
-            &cmd(vec![write(
-                metrics::OUTPUT_IMAGE,
-                MetricValue::BytesValue(vec![5; 4]),
-            )]),
-            0,
-        );
-        r.tick();
-        assert_eq!(r.plant.master().outputs(3).unwrap(), [5; 4]);
-        // The broker goes away at ts 1000 + t; 100 ms later the outputs
-        // of the writable slave are zero.
-        r.node.disconnected(1000 + r.t);
-        for _ in 0..99 {
-            r.tick();
-        }
-        assert_eq!(r.plant.master().outputs(3).unwrap(), [5; 4], "not yet");
-        for _ in 0..2 {
-            r.tick();
-        }
-        assert_eq!(r.plant.master().outputs(3).unwrap(), [0; 4]);
-    }
 }

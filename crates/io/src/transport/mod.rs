@@ -40,7 +40,7 @@
 //!
 //! [`hub`] is the virtual RS-485 bus of ptys behind `dpctl bus`. The
 //! in-process simulated bus is not a `Port`: it is the sans-IO
-//! [`crate::medium::Medium`] driven on virtual time.
+//! [`Medium`](profibus_fdl::line::medium::Medium) driven on virtual time.
 //!
 //! [`realtime`] puts a station process under `SCHED_FIFO`, so that it
 //! runs at its deadlines on a busy machine (`dpctl --rt-priority`).

@@ -7,42 +7,8 @@ use profibus_dp::slave::{expect_cfg, Device, DpSlave, Features, IoLayout, Reason
 use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::station::Station;
 use profibus_fdl::{Baud, BusParams, DataTelegram, FunctionCode, Instant, RequestKind, Telegram};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+use profibus_io::alloc_count::{self, Counting};
 use std::time::Duration;
-
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note() {
-    // `try_with`: thread-locals may be gone while a thread exits.
-    let _ = ARMED.try_with(|a| {
-        if a.get() {
-            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
-        }
-    });
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        note();
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        note();
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -172,14 +138,14 @@ fn data_exchange_does_not_allocate() {
         reqs.push((b, g, outputs));
     }
 
-    ARMED.with(|a| a.set(true));
-    let mut lens = 0usize;
-    for (dx, gc, _) in &reqs {
-        lens += exchange(&mut st, &mut now, dx);
-        exchange(&mut st, &mut now, gc);
-    }
-    ARMED.with(|a| a.set(false));
-    let allocations = COUNT.with(|c| c.get());
+    let (lens, allocations) = alloc_count::on_this_thread(|| {
+        let mut lens = 0usize;
+        for (dx, gc, _) in &reqs {
+            lens += exchange(&mut st, &mut now, dx);
+            exchange(&mut st, &mut now, gc);
+        }
+        lens
+    });
 
     // The cycles really ran: 244 inputs in SD2 (244 + 9 bytes) each.
     assert_eq!(lens, 1000 * (244 + 9));

@@ -1,520 +1,27 @@
-//! The sans-IO gateway: topics and payloads from a DP master's slaves,
-//! and writes and requests from MQTT messages. No broker, no clock: the
-//! driver hands in messages and the time, and sends what
-//! [`Gateway::poll_publish`] returns.
+//! The plain JSON core, [`Gateway`]: sans-IO, topics and payloads from a
+//! DP master's slaves, and writes and requests from MQTT messages. No
+//! broker, no clock: the driver hands in messages and the time, and
+//! sends what [`Gateway::poll_publish`] returns.
 
 use crate::outage::Outage;
 use crate::payload::{
-    to_bytes, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout, SlaveStatePayload,
-    Status,
+    hex, to_bytes, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout,
+    SlaveStatePayload, Status,
 };
+use crate::request::{parse_request, OutputWrite, ReplyTo, Request, RequestError, QUEUE_LIMIT};
+use crate::session::{LinkSetup, Publish, Session};
 use crate::settings::{MqttSettings, PublishMode};
-use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value};
+use crate::slave::SlaveInfo;
+use crate::topics::{Service, SlaveTopic, Topics};
+use profibus_devices::channels::{Direction, OutputWriteError};
 use profibus_devices::pkw::client::PkwClient;
-use profibus_devices::pkw::{self, Dialect, PKW_LEN};
+use profibus_devices::pkw::{self, PKW_LEN};
 use profibus_devices::rfid::client::RfidClient;
-use profibus_dp::config::gsd::Gsd;
 use profibus_dp::master::{
     DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveHandle, SlaveState,
 };
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
-
-pub use crate::payload::hex;
-
-/// A message for the broker.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Publish {
-    /// Topic.
-    pub topic: String,
-    /// Payload (JSON text).
-    pub payload: Vec<u8>,
-    /// Whether the broker keeps it for late subscribers.
-    pub retain: bool,
-}
-
-/// What the gateway knows of one configured slave.
-#[derive(Debug, Clone)]
-pub struct SlaveInfo {
-    /// Station address.
-    pub address: u8,
-    /// Name from the bus file.
-    pub name: String,
-    /// Ident number (PKW parameters by name: [`profibus_devices::pkw_parameter`]).
-    pub ident_number: u16,
-    /// Named channels of its images (device profiles), if any.
-    pub channels: Option<ChannelMap>,
-    /// Its GSD, for diagnosis texts.
-    pub gsd: Option<Gsd>,
-    /// Whether it is a DP-V1 slave (diagnosis decoding, DP-V1 requests).
-    pub dpv1: bool,
-    /// The dialect of its PKW channel, if it has one (PKW requests).
-    pub pkw: Option<&'static Dialect>,
-    /// Whether it is an RFID reader with the 16-byte command handshake
-    /// (RFID requests).
-    pub rfid: bool,
-}
-
-/// The topics of one gateway: `<prefix>/<bus>/…`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Topics {
-    base: String,
-}
-
-/// What a request topic asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Service {
-    /// `<addr>/outputs/set`: the output image or named output channels.
-    Outputs,
-    /// `<addr>/dpv1/request`: a DP-V1 (MSAC_C1) data record read or write.
-    Dpv1,
-    /// `<addr>/pkw/request`: a parameter job over the PKW channel.
-    Pkw,
-    /// `<addr>/rfid/request`: one command line to an RFID reader.
-    Rfid,
-}
-
-impl Service {
-    /// Every service.
-    pub const ALL: [Service; 4] = [Service::Outputs, Service::Dpv1, Service::Pkw, Service::Rfid];
-
-    /// The request topic's suffix.
-    pub fn request(self) -> &'static str {
-        match self {
-            Service::Outputs => "outputs/set",
-            Service::Dpv1 => "dpv1/request",
-            Service::Pkw => "pkw/request",
-            Service::Rfid => "rfid/request",
-        }
-    }
-
-    /// The default response topic's suffix.
-    pub fn response(self) -> &'static str {
-        match self {
-            Service::Outputs => "outputs/response",
-            Service::Dpv1 => "dpv1/response",
-            Service::Pkw => "pkw/response",
-            Service::Rfid => "rfid/response",
-        }
-    }
-}
-
-/// The per-slave topics.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SlaveTopic {
-    /// `<addr>/state`: the slave's state in the master (retained).
-    State,
-    /// `<addr>/inputs`: the input image (retained).
-    Inputs,
-    /// `<addr>/outputs`: the output image sent (retained).
-    Outputs,
-    /// `<addr>/diag`: the last diagnosis (retained).
-    Diag,
-    /// A request topic (subscribed).
-    Request(Service),
-    /// The default response topic of a service.
-    Response(Service),
-}
-
-impl SlaveTopic {
-    fn suffix(self) -> &'static str {
-        match self {
-            SlaveTopic::State => "state",
-            SlaveTopic::Inputs => "inputs",
-            SlaveTopic::Outputs => "outputs",
-            SlaveTopic::Diag => "diag",
-            SlaveTopic::Request(s) => s.request(),
-            SlaveTopic::Response(s) => s.response(),
-        }
-    }
-}
-
-impl Topics {
-    /// Topics under `prefix` for the bus `bus`.
-    pub fn new(prefix: &str, bus: &str) -> Topics {
-        Topics {
-            base: format!("{prefix}/{bus}"),
-        }
-    }
-
-    /// `<prefix>/<bus>/status`: the gateway's status (retained; the last
-    /// will sets it offline).
-    pub fn status(&self) -> String {
-        format!("{}/status", self.base)
-    }
-
-    /// A slave's topic.
-    pub fn slave(&self, address: u8, t: SlaveTopic) -> String {
-        format!("{}/{address}/{}", self.base, t.suffix())
-    }
-
-    /// The filters the gateway subscribes to: one per [`Service`].
-    pub fn request_filters(&self) -> Vec<String> {
-        Service::ALL
-            .iter()
-            .map(|s| format!("{}/+/{}", self.base, s.request()))
-            .collect()
-    }
-
-    /// The service and station address of a request topic
-    /// (`<prefix>/<bus>/<addr>/outputs/set`, …), `None` for any other
-    /// topic. An address that is not a number is an error.
-    pub fn parse_request(&self, topic: &str) -> Option<(Service, Result<u8, BadAddress>)> {
-        let rest = topic.strip_prefix(&self.base)?.strip_prefix('/')?;
-        Service::ALL.iter().find_map(|&s| {
-            let addr = rest.strip_suffix(s.request())?.strip_suffix('/')?;
-            if addr.contains('/') {
-                return None;
-            }
-            Some((s, addr.parse::<u8>().map_err(|_| BadAddress(addr.into()))))
-        })
-    }
-}
-
-/// The address part of a request topic is not a station address.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` in a request topic is not a station address")]
-pub struct BadAddress(pub String);
-
-/// Bytes of a non-empty hex string (as `profibus_fdl::wire::parse_hex`
-/// takes it: `0a0b`, `0a 0b`, `0a:0b`, `0x0a,0x0b`).
-pub fn parse_hex(text: &str) -> Option<Vec<u8>> {
-    profibus_fdl::wire::parse_hex(text)
-        .ok()
-        .filter(|b| !b.is_empty())
-}
-
-/// What a write of outputs asks for: the whole image or named channels,
-/// checked by the rule the terminal view shares
-/// ([`OutputWrite::check`], [`OutputWrite::apply`]).
-pub use profibus_devices::channels::OutputWrite;
-
-/// A request from a message, checked for form (not yet for permission).
-#[derive(Debug, Clone, PartialEq)]
-pub enum Request {
-    /// Set outputs.
-    Outputs(OutputWrite),
-    /// DP-V1 read of a data record.
-    Dpv1Read {
-        /// Slot.
-        slot: u8,
-        /// Index.
-        index: u8,
-        /// Bytes wanted (1..=240).
-        length: u8,
-    },
-    /// DP-V1 write of a data record.
-    Dpv1Write {
-        /// Slot.
-        slot: u8,
-        /// Index.
-        index: u8,
-        /// Data (1..=240 bytes).
-        data: Vec<u8>,
-    },
-    /// A PKW job.
-    Pkw {
-        /// Parameter number (0..=2047).
-        pnu: u16,
-        /// What to do.
-        command: pkw::Command,
-    },
-    /// A PKW job on a parameter the device names (a BM4 variable module);
-    /// [`Gateway::handle_message`] resolves the name into [`Request::Pkw`].
-    PkwNamed {
-        /// The parameter's name.
-        name: String,
-        /// What to do.
-        command: pkw::Command,
-    },
-    /// An RFID command line (without CR).
-    Rfid(Vec<u8>),
-}
-
-impl Request {
-    /// Whether the request changes the slave (needs write access).
-    pub fn writes(&self) -> bool {
-        match self {
-            Request::Outputs(_) | Request::Dpv1Write { .. } | Request::Rfid(_) => true,
-            Request::Dpv1Read { .. } => false,
-            Request::Pkw { command, .. } | Request::PkwNamed { command, .. } => !matches!(
-                command,
-                pkw::Command::Read | pkw::Command::ReadElement(_) | pkw::Command::Describe(_)
-            ),
-        }
-    }
-}
-
-/// Where a request's answer goes: the id and topic of the request.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct ReplyTo {
-    /// The request's `"id"` (any JSON value), repeated in the answer.
-    pub id: Option<serde_json::Value>,
-    /// The request's `"reply_to"` topic; `None`: the service's response
-    /// topic of the slave.
-    pub topic: Option<String>,
-}
-
-/// Why a request was refused or failed.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RequestError {
-    /// The payload is not a request of this service.
-    #[error("malformed request: {0}")]
-    Malformed(String),
-    /// The topic's address is not a configured slave.
-    #[error("no slave {0} on this bus")]
-    UnknownSlave(String),
-    /// The bus file's `[mqtt] writable` does not list the slave.
-    #[error("slave {0} is not writable over MQTT (see [mqtt] writable)")]
-    Unauthorised(u8),
-    /// An output write that breaks the rule of output writes (a short
-    /// image, an unknown channel, a value that does not fit), or a write
-    /// beyond the channels `[mqtt] writable` allows.
-    #[error(transparent)]
-    Write(#[from] OutputWriteError),
-    /// The slave does not offer the service (no PKW channel, not a
-    /// reader, not DP-V1).
-    #[error("slave {address} has no {what}")]
-    Unsupported {
-        /// Station address.
-        address: u8,
-        /// What it lacks.
-        what: &'static str,
-    },
-    /// A PKW request names a parameter the slave's device does not have.
-    #[error("slave {address} has no parameter named `{name}`")]
-    NoParameter {
-        /// Station address.
-        address: u8,
-        /// The name.
-        name: String,
-    },
-    /// Too many requests waiting for the slave ([`QUEUE_LIMIT`]).
-    #[error("slave {0}: too many requests waiting (at most {QUEUE_LIMIT})")]
-    Busy(u8),
-    /// A payload larger than [`MAX_PAYLOAD`].
-    #[error("payload of {size} bytes is larger than the {limit} bytes a request may have")]
-    TooLarge {
-        /// The payload's size.
-        size: usize,
-        /// [`MAX_PAYLOAD`].
-        limit: usize,
-    },
-    /// The job ran and failed.
-    #[error("{0}")]
-    Failed(String),
-}
-
-/// The largest request payload the gateway reads, in bytes (an output
-/// image is at most 244 bytes, a DP-V1 record 240: this leaves room for
-/// hex, JSON and names, and bounds what one message can cost).
-pub const MAX_PAYLOAD: usize = 64 * 1024;
-
-fn malformed(text: impl Into<String>) -> RequestError {
-    RequestError::Malformed(text.into())
-}
-
-/// Whether `t` may be published to (not empty, no wildcards).
-fn publishable(t: &str) -> bool {
-    !t.is_empty() && !t.contains(['+', '#', '\0'])
-}
-
-/// A request parsed from the payload of `service`'s request topic, and
-/// where its answer goes (known even when the rest is malformed).
-///
-/// Payloads are JSON objects with the service's fields and optionally
-/// `"id"` (any JSON value, repeated in the answer) and `"reply_to"` (a
-/// topic for the answer instead of the slave's response topic). An
-/// output write may also be a bare hex string (the whole image).
-pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Request, RequestError>) {
-    if payload.len() > MAX_PAYLOAD {
-        let e = RequestError::TooLarge {
-            size: payload.len(),
-            limit: MAX_PAYLOAD,
-        };
-        return (ReplyTo::default(), Err(e));
-    }
-    let text = match std::str::from_utf8(payload) {
-        Ok(t) => t,
-        Err(_) => return (ReplyTo::default(), Err(malformed("payload is not UTF-8"))),
-    };
-    let image = |s: &str| {
-        parse_hex(s)
-            .map(|b| Request::Outputs(OutputWrite::Image(b)))
-            .ok_or_else(|| malformed("neither a JSON object nor hex"))
-    };
-    let o = match serde_json::from_str::<serde_json::Value>(text) {
-        Ok(serde_json::Value::Object(o)) => o,
-        Ok(serde_json::Value::String(s)) if service == Service::Outputs => {
-            return (ReplyTo::default(), image(&s))
-        }
-        Err(_) if service == Service::Outputs => return (ReplyTo::default(), image(text)),
-        _ => return (ReplyTo::default(), Err(malformed("expected a JSON object"))),
-    };
-    let mut to = ReplyTo {
-        id: o.get("id").cloned(),
-        topic: None,
-    };
-    match o.get("reply_to") {
-        None => {}
-        Some(serde_json::Value::String(t)) if publishable(t) => to.topic = Some(t.clone()),
-        Some(_) => {
-            return (
-                to,
-                Err(malformed("`reply_to` must be a topic without wildcards")),
-            )
-        }
-    }
-    let r = body(service, &o);
-    (to, r)
-}
-
-type Obj = serde_json::Map<String, serde_json::Value>;
-
-fn only(o: &Obj, keys: &[&str]) -> Result<(), RequestError> {
-    match o
-        .keys()
-        .find(|k| !keys.contains(&k.as_str()) && !matches!(k.as_str(), "id" | "reply_to"))
-    {
-        Some(k) => Err(malformed(format!("unknown field `{k}`"))),
-        None => Ok(()),
-    }
-}
-
-fn int(o: &Obj, key: &str, min: i64, max: i64) -> Result<Option<i64>, RequestError> {
-    match o.get(key) {
-        None => Ok(None),
-        Some(v) => match v.as_i64() {
-            Some(n) if (min..=max).contains(&n) => Ok(Some(n)),
-            _ => Err(malformed(format!(
-                "`{key}` must be an integer {min}..={max}"
-            ))),
-        },
-    }
-}
-
-fn need<T>(v: Option<T>, key: &str) -> Result<T, RequestError> {
-    v.ok_or_else(|| malformed(format!("`{key}` is missing")))
-}
-
-fn op(o: &Obj, ops: &[&str]) -> Result<String, RequestError> {
-    match o.get("op") {
-        Some(serde_json::Value::String(s)) if ops.contains(&s.as_str()) => Ok(s.clone()),
-        _ => {
-            let ops: Vec<String> = ops.iter().map(|o| format!("\"{o}\"")).collect();
-            Err(malformed(format!("`op` must be one of {}", ops.join(", "))))
-        }
-    }
-}
-
-fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
-    match service {
-        Service::Outputs => {
-            only(o, &["hex", "channels"])?;
-            outputs_body(o)
-        }
-        Service::Dpv1 => {
-            let slot = need(int(o, "slot", 0, 254)?, "slot")? as u8;
-            let index = need(int(o, "index", 0, 254)?, "index")? as u8;
-            if op(o, &["read", "write"])? == "read" {
-                only(o, &["op", "slot", "index", "length"])?;
-                let length = int(o, "length", 1, 240)?.unwrap_or(240) as u8;
-                Ok(Request::Dpv1Read {
-                    slot,
-                    index,
-                    length,
-                })
-            } else {
-                only(o, &["op", "slot", "index", "hex"])?;
-                let data = match o.get("hex") {
-                    Some(serde_json::Value::String(h)) => parse_hex(h)
-                        .filter(|d| d.len() <= profibus_dp::pdu::dpv1::MAX_DATA_LEN)
-                        .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
-                    _ => return Err(malformed("`hex` is missing")),
-                };
-                Ok(Request::Dpv1Write { slot, index, data })
-            }
-        }
-        Service::Pkw => {
-            only(o, &["op", "pnu", "index", "value", "dword", "element"])?;
-            let pnu = match o.get("pnu") {
-                Some(serde_json::Value::String(n)) if !n.is_empty() => Err(n.clone()),
-                _ => Ok(need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16),
-            };
-            let index = int(o, "index", 0, 0xFFFF)?.map(|i| i as u16);
-            let command = match op(o, &["read", "write", "describe"])?.as_str() {
-                "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
-                "describe" => {
-                    pkw::Command::Describe(need(int(o, "element", 0, 0xFFFF)?, "element")? as u16)
-                }
-                _ => {
-                    let v = need(int(o, "value", i32::MIN as i64, u32::MAX as i64)?, "value")?;
-                    let dword = match o.get("dword") {
-                        None => !(-0x8000..=0xFFFF).contains(&v),
-                        Some(serde_json::Value::Bool(b)) => *b,
-                        Some(_) => return Err(malformed("`dword` must be true or false")),
-                    };
-                    if !dword && !(-0x8000..=0xFFFF).contains(&v) {
-                        return Err(malformed("`value` does not fit a word"));
-                    }
-                    let (w, d) = (v as u16, v as u32);
-                    match (index, dword) {
-                        (None, false) => pkw::Command::WriteWord(w),
-                        (None, true) => pkw::Command::WriteDword(d),
-                        (Some(index), false) => pkw::Command::WriteElementWord { index, value: w },
-                        (Some(index), true) => pkw::Command::WriteElementDword { index, value: d },
-                    }
-                }
-            };
-            Ok(match pnu {
-                Ok(pnu) => Request::Pkw { pnu, command },
-                Err(name) => Request::PkwNamed { name, command },
-            })
-        }
-        Service::Rfid => {
-            only(o, &["command"])?;
-            match o.get("command") {
-                Some(serde_json::Value::String(c)) if !c.is_empty() && c.is_ascii() => {
-                    Ok(Request::Rfid(c.trim_end_matches('\r').as_bytes().to_vec()))
-                }
-                _ => Err(malformed("`command` must be a non-empty ASCII string")),
-            }
-        }
-    }
-}
-
-fn outputs_body(o: &Obj) -> Result<Request, RequestError> {
-    let req = match (o.get("hex"), o.get("channels")) {
-        (Some(serde_json::Value::String(h)), None) => {
-            OutputWrite::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
-        }
-        (None, Some(serde_json::Value::Object(c))) if !c.is_empty() => OutputWrite::Channels(
-            c.iter()
-                .map(|(k, v)| {
-                    let val = match v {
-                        serde_json::Value::Bool(b) => Value::Bool(*b),
-                        serde_json::Value::Number(n) => match n.as_i64() {
-                            Some(i) => Value::Int(i),
-                            None => Value::Float(n.as_f64().unwrap_or(f64::NAN)),
-                        },
-                        _ => {
-                            return Err(malformed(format!(
-                                "channel `{k}`: value must be a number or a boolean"
-                            )))
-                        }
-                    };
-                    Ok((k.clone(), val))
-                })
-                .collect::<Result<_, _>>()?,
-        ),
-        _ => {
-            return Err(malformed(
-                "give either `hex` (a string) or `channels` (an object)",
-            ))
-        }
-    };
-    Ok(Request::Outputs(req))
-}
 
 /// The last published state of a slave.
 #[derive(Debug, Default, Clone)]
@@ -539,12 +46,6 @@ struct Queued {
     request: Request,
     target: Target,
 }
-
-/// Requests one slave may have waiting in each of its two queues: output
-/// writes and DP-V1 jobs until the next [`Gateway::step`], PKW or RFID
-/// jobs for the slave's client. One more is answered
-/// [`RequestError::Busy`] and changes nothing.
-pub const QUEUE_LIMIT: usize = 8;
 
 #[derive(Debug)]
 struct Entry {
@@ -1101,11 +602,44 @@ fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Targe
     }
 }
 
+impl Session for Gateway {
+    fn settings(&self) -> &MqttSettings {
+        Gateway::settings(self)
+    }
+    fn link_setup(&self) -> LinkSetup {
+        let will = Gateway::last_will(self);
+        LinkSetup {
+            qos: self.settings().qos,
+            will_qos: self.settings().qos,
+            filters: self.topics().request_filters(),
+            will: Box::new(move || will.clone()),
+        }
+    }
+    fn connected(&mut self, ts_ms: u64) {
+        Gateway::connected(self, ts_ms)
+    }
+    fn disconnected(&mut self, ts_ms: u64) {
+        Gateway::disconnected(self, ts_ms)
+    }
+    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        Gateway::handle_message(self, topic, payload, ts_ms)
+    }
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
+        Gateway::step(self, m, now, ts_ms)
+    }
+    fn poll_publish(&mut self) -> Option<Publish> {
+        Gateway::poll_publish(self)
+    }
+    fn last_will(&self) -> Publish {
+        Gateway::last_will(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::settings::SafeState;
-    use profibus_devices::channels::ChannelType;
+    use profibus_devices::channels::{ChannelMap, ChannelType};
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};
     use serde_json::json;
@@ -1165,135 +699,6 @@ mod tests {
 
     fn find<'a>(msgs: &'a Msgs, topic: &str) -> Option<&'a serde_json::Value> {
         msgs.iter().find(|(t, _, _)| t == topic).map(|(_, v, _)| v)
-    }
-
-    #[test]
-    fn topics_and_hex() {
-        let t = Topics::new("plant/a", "seg1");
-        assert_eq!(t.status(), "plant/a/seg1/status");
-        assert_eq!(t.slave(7, SlaveTopic::Inputs), "plant/a/seg1/7/inputs");
-        assert_eq!(
-            t.request_filters(),
-            [
-                "plant/a/seg1/+/outputs/set",
-                "plant/a/seg1/+/dpv1/request",
-                "plant/a/seg1/+/pkw/request",
-                "plant/a/seg1/+/rfid/request"
-            ]
-        );
-        assert_eq!(
-            t.parse_request("plant/a/seg1/7/outputs/set"),
-            Some((Service::Outputs, Ok(7)))
-        );
-        assert_eq!(
-            t.parse_request("plant/a/seg1/7/pkw/request"),
-            Some((Service::Pkw, Ok(7)))
-        );
-        assert_eq!(
-            t.parse_request("plant/a/seg1/x/outputs/set"),
-            Some((Service::Outputs, Err(BadAddress("x".into()))))
-        );
-        assert_eq!(t.parse_request("plant/a/seg1/7/outputs"), None);
-        assert_eq!(t.parse_request("plant/a/seg1/7/pkw/response"), None);
-        assert_eq!(t.parse_request("plant/a/seg2/7/outputs/set"), None);
-        assert_eq!(hex(&[0, 0xab]), "00ab");
-        assert_eq!(parse_hex("0x00 ab:01"), Some(vec![0, 0xab, 1]));
-        assert_eq!(parse_hex("abc"), None);
-        assert_eq!(parse_hex("zz"), None);
-        assert_eq!(parse_hex(""), None);
-    }
-
-    #[test]
-    fn request_payloads() {
-        let out = |p: &[u8]| parse_request(Service::Outputs, p);
-        assert_eq!(
-            out(b"0102").1.unwrap(),
-            Request::Outputs(OutputWrite::Image(vec![1, 2]))
-        );
-        assert_eq!(
-            out(b"\"0102\"").1.unwrap(),
-            Request::Outputs(OutputWrite::Image(vec![1, 2]))
-        );
-        let (to, r) =
-            out(br#"{"channels": {"a": 1, "b": true, "c": 1.5}, "id": "x", "reply_to": "me/r"}"#);
-        assert_eq!(
-            to,
-            ReplyTo {
-                id: Some("x".into()),
-                topic: Some("me/r".into())
-            }
-        );
-        assert_eq!(
-            r.unwrap(),
-            Request::Outputs(OutputWrite::Channels(vec![
-                ("a".into(), Value::Int(1)),
-                ("b".into(), Value::Bool(true)),
-                ("c".into(), Value::Float(1.5)),
-            ]))
-        );
-        // The id is known even when the rest is malformed.
-        let (to, r) = out(br#"{"hexx": "01", "id": 4}"#);
-        assert_eq!(to.id, Some(4.into()));
-        assert!(matches!(r, Err(RequestError::Malformed(_))));
-        for bad in [
-            &b"{\"hex\": \"01\", \"channels\": {}}"[..],
-            b"{\"channels\": {\"a\": \"1\"}}",
-            b"{\"hex\": \"01\", \"reply_to\": \"a/#\"}",
-            b"[1]",
-            b"\xff",
-            b"",
-        ] {
-            assert!(
-                matches!(out(bad).1, Err(RequestError::Malformed(_))),
-                "{bad:?}"
-            );
-        }
-        let pkw = |p: &[u8]| parse_request(Service::Pkw, p).1;
-        assert_eq!(
-            pkw(br#"{"op": "read", "pnu": 1000}"#).unwrap(),
-            Request::Pkw {
-                pnu: 1000,
-                command: pkw::Command::Read
-            }
-        );
-        assert_eq!(
-            pkw(br#"{"op": "write", "pnu": 5, "value": -2}"#).unwrap(),
-            Request::Pkw {
-                pnu: 5,
-                command: pkw::Command::WriteWord(0xfffe)
-            }
-        );
-        assert_eq!(
-            pkw(br#"{"op": "write", "pnu": 5, "value": 70000, "index": 2}"#).unwrap(),
-            Request::Pkw {
-                pnu: 5,
-                command: pkw::Command::WriteElementDword {
-                    index: 2,
-                    value: 70000
-                }
-            }
-        );
-        assert!(pkw(br#"{"op": "write", "pnu": 5, "value": 70000, "dword": false}"#).is_err());
-        assert!(pkw(br#"{"op": "read", "pnu": 3000}"#).is_err());
-        assert!(pkw(br#"{"op": "erase", "pnu": 3}"#).is_err());
-        assert!(pkw(b"0102").is_err());
-        let dpv1 = |p: &[u8]| parse_request(Service::Dpv1, p).1;
-        assert_eq!(
-            dpv1(br#"{"op": "write", "slot": 1, "index": 2, "hex": "0a0b"}"#).unwrap(),
-            Request::Dpv1Write {
-                slot: 1,
-                index: 2,
-                data: vec![10, 11]
-            }
-        );
-        assert!(dpv1(br#"{"op": "read", "slot": 1}"#).is_err());
-        assert!(dpv1(br#"{"op": "read", "slot": 1, "index": 2, "length": 0}"#).is_err());
-        assert_eq!(
-            parse_request(Service::Rfid, br#"{"command": "VER"}"#)
-                .1
-                .unwrap(),
-            Request::Rfid(b"VER".to_vec())
-        );
     }
 
     #[test]
@@ -1524,165 +929,5 @@ mod tests {
             assert_eq!(st["master"], "operate", "{st}");
             assert_eq!(m.operating_state(), OperatingState::Operate);
         }
-    }
-
-    /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
-    /// PKW (25) and an RFID reader (30), all writable but the reader.
-    fn plant() -> (Gateway, crate::sim::SimPlant) {
-        let dir =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/plant.toml");
-        let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
-            [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
-            [[slave]]\naddress = 25\ndevice = \"omega\"\n\n\
-            [[slave]]\naddress = 30\ndevice = \"rfid\"\n\n\
-            [[slave]]\naddress = 40\ndevice = \"bk3000\"\nterminals = [\"KL3102\", \"KL9010\"]\n\n\
-            [[slave]]\naddress = 26\ndevice = \"bm4\"\nexample = true\nvariables = [\"ud_MyReadVar1\"]\n\n\
-            [mqtt]\nbus = \"p\"\nwritable = [3, 25]\n";
-        let bus = profibus_devices::bus::ProfiledBus::parse(&dir, text).unwrap();
-        let s = crate::MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
-        let g = Gateway::new(s, crate::sim::slave_infos(&bus).unwrap());
-        (g, crate::sim::SimPlant::new(&bus).unwrap())
-    }
-
-    /// Run the plant 1 ms at a time until a message on `topic` (at most
-    /// 2 s of bus time).
-    fn run_until(g: &mut Gateway, p: &mut crate::sim::SimPlant, topic: &str) -> serde_json::Value {
-        for _ in 0..2000 {
-            let t = p.now() + std::time::Duration::from_millis(1);
-            p.run_until(t);
-            let ms = p.now().as_nanos() / 1_000_000;
-            g.step(p.master(), t, ms);
-            if let Some(v) = find(&drain(g), topic) {
-                return v.clone();
-            }
-        }
-        panic!("no message on {topic}");
-    }
-
-    #[test]
-    fn dpv1_pkw_and_rfid_requests_are_answered() {
-        let (mut g, mut p) = plant();
-        g.connected(0);
-        let mut seen = vec![];
-        for _ in 0..2000 {
-            let t = p.now() + std::time::Duration::from_millis(1);
-            p.run_until(t);
-            g.step(p.master(), t, 0);
-            seen.extend(drain(&mut g));
-            let m = p.master();
-            if [3, 25, 26, 30, 40]
-                .iter()
-                .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
-            {
-                break;
-            }
-        }
-        // Decoded values next to the hex: GSD module bytes of the generic
-        // slave, the Omega's profile channels.
-        let v = &find(&seen, "profibus/p/3/outputs").unwrap()["values"];
-        assert_eq!(v["2 words in/out[0]"], 0, "{v}");
-        let v = &find(&seen, "profibus/p/25/inputs").unwrap()["values"];
-        assert!(v.get("status1").is_some() && v.get("pke").is_some(), "{v}");
-        // Units where the profile scales a channel: the BK3000's KL3102
-        // (±10 V); the diagnosis decoded by its standard bytes.
-        let last = |topic: &str| {
-            seen.iter()
-                .rev()
-                .find(|(t, _, _)| t == topic)
-                .map(|(_, v, _)| v.clone())
-                .unwrap()
-        };
-        let bk = last("profibus/p/40/inputs");
-        assert_eq!(bk["units"]["1.KL3102.1"], "V", "{bk}");
-        assert!(bk["values"]["1.KL3102.1"].is_f64(), "{bk}");
-        let d = last("profibus/p/3/diag");
-        assert_eq!(d["master"], 1, "{d}");
-        assert_eq!(d["station_status"], "WD_On", "{d}");
-        assert!(d["ident_number"].is_u64() && d["text"].is_array(), "{d}");
-        // DP-V1: write a record, read it back.
-        g.handle_message(
-            "profibus/p/3/dpv1/request",
-            br#"{"op": "write", "slot": 1, "index": 7, "hex": "cafe", "id": 1}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
-        assert_eq!(
-            (r["ok"].as_bool(), r["id"].as_i64()),
-            (Some(true), Some(1)),
-            "{r}"
-        );
-        g.handle_message(
-            "profibus/p/3/dpv1/request",
-            br#"{"op": "read", "slot": 1, "index": 7, "id": 2}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
-        assert_eq!(r["hex"], "cafe", "{r}");
-        g.handle_message(
-            "profibus/p/3/dpv1/request",
-            br#"{"op": "read", "slot": 1, "index": 99, "id": 3}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/3/dpv1/response");
-        assert_eq!(r["ok"], false, "{r}");
-        // PKW: two jobs queued at once run one after the other.
-        g.handle_message(
-            "profibus/p/25/pkw/request",
-            br#"{"op": "write", "pnu": 1000, "value": 305419896, "id": "w"}"#,
-            0,
-        );
-        g.handle_message(
-            "profibus/p/25/pkw/request",
-            br#"{"op": "read", "pnu": 1000, "id": "r", "reply_to": "me/pkw"}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/25/pkw/response");
-        assert_eq!(
-            (r["ok"].as_bool(), r["id"].as_str()),
-            (Some(true), Some("w")),
-            "{r}"
-        );
-        let r = run_until(&mut g, &mut p, "me/pkw");
-        assert_eq!(r["value"], 0x1234_5678, "{r}");
-        assert_eq!(r["response"], "23e8000012345678", "{r}");
-        // PKW by name: a BM4 variable module of the GSD is its parameter
-        // (`di_MyReadVar3`: PNU 4); an unknown name is refused.
-        g.handle_message(
-            "profibus/p/26/pkw/request",
-            br#"{"op": "read", "pnu": "di_MyReadVar3", "id": "n"}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
-        assert_eq!(
-            (r["ok"].as_bool(), r["id"].as_str()),
-            (Some(true), Some("n")),
-            "{r}"
-        );
-        assert_eq!(&r["request"].as_str().unwrap()[..4], "1004", "{r}");
-        g.handle_message(
-            "profibus/p/26/pkw/request",
-            br#"{"op": "read", "pnu": "nope"}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/26/pkw/response");
-        assert_eq!(r["error"], "slave 26 has no parameter named `nope`", "{r}");
-        // RFID: the reader is not writable; a read-only request would be
-        // answered, a command is refused.
-        g.handle_message("profibus/p/30/rfid/request", br#"{"command": "VER"}"#, 0);
-        let r = run_until(&mut g, &mut p, "profibus/p/30/rfid/response");
-        assert!(r["error"].as_str().unwrap().contains("not writable"), "{r}");
-        let mut s = g.settings().clone();
-        s.writable.push(crate::settings::WriteAccess::full(30));
-        let infos = g.slaves.iter().map(|e| e.info.clone()).collect();
-        let mut g = Gateway::new(s, infos);
-        g.connected(0);
-        g.handle_message(
-            "profibus/p/30/rfid/request",
-            br#"{"command": "VER", "id": 5}"#,
-            0,
-        );
-        let r = run_until(&mut g, &mut p, "profibus/p/30/rfid/response");
-        assert_eq!(r["ok"], true, "{r}");
-        assert!(!r["answer"].as_str().unwrap().is_empty(), "{r}");
     }
 }
