@@ -191,24 +191,24 @@ fn bm4_pkw_examples_of_the_manual() {
     );
 }
 
-/// The README's PKW example as written: its `BUS.toml` block (taken from
-/// README.md) and its `dpctl slave --device bm4` line, then `dpctl pkw
+/// The PKW example of docs/devices/bm4.md as written: its `BUS.toml` block
+/// and its `dpctl slave --device bm4` line, then `dpctl pkw
 /// … --slave 6 read di_MyReadVar3` gives the manual's 3000.
 #[test]
-fn readme_pkw_example_works_as_written() {
-    let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
+fn bm4_page_pkw_example_works_as_written() {
+    let readme = std::fs::read_to_string(repo().join("docs/devices/bm4.md")).unwrap();
     let after = readme
         .split("`BUS.toml` for these two slaves")
         .nth(1)
-        .expect("README shows BUS.toml for the PKW examples");
+        .expect("docs/devices/bm4.md shows BUS.toml for the PKW examples");
     let block = after.split("```toml\n").nth(1).unwrap();
     let bus_text = block.split("```").next().unwrap();
     let line = readme
         .lines()
         .find(|l| l.starts_with("dpctl slave --port PTY --device bm4 --addr 6 "))
-        .expect("README's bm4 slave line");
-    // The README's arguments after the port, without `--write-gsd`, its
-    // paths relative to the repository (where the README runs them).
+        .expect("docs/devices/bm4.md's bm4 slave line");
+    // The page's arguments after the port, without `--write-gsd`, its
+    // paths relative to the repository (where the page runs them).
     let mut args: Vec<String> = line
         .split_whitespace()
         .skip(4)

@@ -805,7 +805,7 @@ mod tests {
     }
 
     /// A station started before `dpctl bus` or socat has made its link
-    /// (a script, the README's tour) waits for the link, says so in one
+    /// (a script, the tour in docs/tour.md) waits for the link, says so in one
     /// line, and opens it once it is there.
     #[test]
     fn a_link_that_does_not_exist_yet_is_waited_for() {

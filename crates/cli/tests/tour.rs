@@ -1,6 +1,5 @@
-//! The five-minute tour of README.md, run as written: the ```sh blocks
-//! between the headings "## A five-minute tour" and the next "## ", in
-//! order, in one bash, as a user pasting them would. So the tour cannot
+//! The five-minute tour of docs/tour.md, run as written: its ```sh
+//! blocks, in order, in one bash, as a user pasting them would. So the tour cannot
 //! rot: a changed flag, output or file name fails this test.
 //!
 //! What differs from a user's shell, and why:
@@ -45,17 +44,11 @@ impl Drop for Group {
     }
 }
 
-/// The tour: the ```sh blocks of README.md from "## A five-minute tour"
-/// to the next "## " heading, each as its text.
-fn tour_blocks(readme: &str) -> Vec<String> {
-    let start = readme
-        .find("\n## A five-minute tour\n")
-        .expect("README.md has a section \"## A five-minute tour\"");
-    let section = &readme[start + 1..];
-    let end = section[3..].find("\n## ").map_or(section.len(), |i| i + 3);
+/// The tour: the ```sh blocks of docs/tour.md, each as its text.
+fn tour_blocks(page: &str) -> Vec<String> {
     let mut blocks = Vec::new();
     let mut block: Option<String> = None;
-    for line in section[..end].lines() {
+    for line in page.lines() {
         match (&mut block, line.trim_end()) {
             (None, "```sh") => block = Some(String::new()),
             (Some(b), "```") => {
@@ -96,19 +89,19 @@ fn script(blocks: &[String], scratch: &str, port: u16) -> String {
 }
 
 #[test]
-fn tour_blocks_are_the_sections_sh_blocks() {
-    let readme = "# x\n```sh\nno\n```\n## A five-minute tour\ntext\n```sh\na\nb\n```\n\
-                  ```text\nno\n```\n```sh\nc\n```\n## Next\n```sh\nno\n```\n";
-    assert_eq!(tour_blocks(readme), ["a\nb\n", "c\n"]);
+fn tour_blocks_are_the_pages_sh_blocks() {
+    let page = "# A five-minute tour\ntext with ```sh inline\n```sh\na\nb\n```\n\
+                ```text\nno\n```\n## Next\n```sh\nc\n```\n";
+    assert_eq!(tour_blocks(page), ["a\nb\n", "c\n"]);
 }
 
 #[test]
-fn the_readme_tour_runs_as_written() {
+fn the_tour_runs_as_written() {
     for tool in ["bash", "tshark", "mosquitto_sub", "mosquitto_pub"] {
         require(tool);
     }
-    let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
-    let blocks = tour_blocks(&readme);
+    let page = std::fs::read_to_string(repo().join("docs/tour.md")).unwrap();
+    let blocks = tour_blocks(&page);
     assert!(blocks.len() >= 5, "the tour's blocks: {blocks:?}");
     let dir = TempDir::new("tour");
     let scratch = dir.0.to_str().unwrap().to_string();
