@@ -4,10 +4,10 @@
 //! maps its arguments, handles signals (SIGINT/SIGTERM stop, SIGUSR1
 //! prints the counters) and prints.
 
+use crate::medium_args::{parse_rate, MediumArgs};
 use anyhow::{Context, Result};
 use nix::sys::signal::{SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
-use profibus_fdl::line::medium::{parse_rate, MediumArgs};
 use profibus_io::transport::hub::{Hub, HubError};
 use std::fs::File;
 use std::io::{BufWriter, Write as _};

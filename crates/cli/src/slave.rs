@@ -18,13 +18,14 @@
 //! arrive, for transports that deliver bytes late.
 
 use crate::common;
+use crate::profile_args::ProfileArgs;
 use anyhow::bail;
 use profibus_devices::{ControlInbox, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
 use profibus_fdl::Instant;
 use profibus_io::control_io::ControlSource;
 use profibus_io::driver::Clock;
-use profibus_io::emulation::{BaudChoice, Emitted, ProfileArgs, ShellEvent, SlaveShell};
+use profibus_io::emulation::{BaudChoice, Emitted, ShellEvent, SlaveShell};
 use profibus_io::jx2::{self as clients, Console};
 use profibus_io::runner::{PassiveRunner, RunnerEvent};
 use std::io::Write;
@@ -129,7 +130,8 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let clock = Clock::start();
     let path = args.port.clone().expect("clap requires --port");
     let choice: BaudChoice = args.baud.parse()?;
-    let emulated = args.profile.configure(args.addr)?;
+    let device = args.profile.choice()?;
+    let emulated = device.configure(args.addr)?;
     for w in emulated.profile.warnings() {
         emit(
             args.json,
@@ -157,7 +159,7 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
             }
             inbox
         });
-        args.profile.device(&emulated, control)?
+        device.device(&emulated, control)?
     };
     let addr = match emulated.profile.address().or(args.addr) {
         Some(a) => a,
