@@ -94,17 +94,18 @@
 //! (the test `layers` checks it), so the cores know no connection and
 //! nothing below the driver knows the simulated plant.
 //!
-//! 1. [`topics`]: the topic names, plain and Sparkplug B.
-//! 2. [`slave`]: what the gateway knows of a configured slave.
-//! 3. [`settings`]: the `[mqtt]` table.
-//! 4. [`request`]: requests from clients, parsed from their payloads.
-//! 5. [`payload`]: the JSON payloads the plain mode publishes.
-//! 6. [`session`]: the [`Session`] interface of the cores, [`Publish`].
-//! 7. [`outage`]: the outputs while the broker is away.
-//! 8. [`json`]: the plain JSON core, [`Gateway`].
-//! 9. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
-//! 10. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
-//! 11. [`sim`]: the simulated plant of `dpctl gateway --sim`.
+//! 1. [`field`]: a field parsed leniently, checked afterwards.
+//! 2. [`topics`]: the topic names, plain and Sparkplug B.
+//! 3. [`slave`]: what the gateway knows of a configured slave.
+//! 4. [`settings`]: the `[mqtt]` table.
+//! 5. [`request`]: requests from clients, parsed from their payloads.
+//! 6. [`payload`]: the JSON payloads the plain mode publishes.
+//! 7. [`session`]: the [`Session`] interface of the cores, [`Publish`].
+//! 8. [`outage`]: the outputs while the broker is away.
+//! 9. [`json`]: the plain JSON core, [`Gateway`].
+//! 10. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
+//! 11. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
+//! 12. [`sim`]: the simulated plant of `dpctl gateway --sim`.
 //!
 //! # Example
 //!
@@ -157,6 +158,7 @@
 //!
 //! [`DpMaster`]: profibus_dp::master::DpMaster
 
+pub mod field;
 pub mod json;
 pub mod link;
 pub mod outage;
@@ -179,7 +181,8 @@ pub use topics::{Service, SparkplugId, Topics};
 
 /// The module order of the crate documentation's layers.
 #[cfg(test)]
-const LAYERS: [&str; 11] = [
+const LAYERS: [&str; 12] = [
+    "field",
     "topics",
     "slave",
     "settings",

@@ -4,9 +4,13 @@
 //! ([`ReplyTo`]), and why a request is refused ([`RequestError`]).
 //! Payload fields: `docs/gateway.md`.
 
+use crate::field::Field;
 use crate::topics::Service;
 use profibus_devices::channels::{OutputWriteError, Value};
 use profibus_devices::pkw;
+use serde::de::IgnoredAny;
+use serde::Deserialize;
+use std::collections::BTreeMap;
 
 /// Bytes of a non-empty hex string (as `profibus_fdl::wire::parse_hex`
 /// takes it: `0a0b`, `0a 0b`, `0a:0b`, `0x0a,0x0b`).
@@ -175,53 +179,97 @@ pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Reque
             .map(|b| Request::Outputs(OutputWrite::Image(b)))
             .ok_or_else(|| malformed("neither a JSON object nor hex"))
     };
-    let o = match serde_json::from_str::<serde_json::Value>(text) {
-        Ok(serde_json::Value::Object(o)) => o,
-        Ok(serde_json::Value::String(s)) if service == Service::Outputs => {
-            return (ReplyTo::default(), image(&s))
+    let not_object = || malformed("expected a JSON object");
+    // A JSON document's first character tells an object from the rest.
+    let object = text
+        .trim_start_matches([' ', '\t', '\n', '\r'])
+        .starts_with('{');
+    let parsed = match (object, service) {
+        (true, _) => serde_json::from_str::<Fields>(text).ok(),
+        (false, Service::Outputs) => {
+            let r = match serde_json::from_str::<Field<String>>(text) {
+                Ok(Field::Valid(s)) => image(&s),
+                Ok(_) => Err(not_object()),
+                Err(_) => image(text),
+            };
+            return (ReplyTo::default(), r);
         }
-        Err(_) if service == Service::Outputs => return (ReplyTo::default(), image(text)),
-        _ => return (ReplyTo::default(), Err(malformed("expected a JSON object"))),
+        (false, _) => None,
+    };
+    let f = match parsed {
+        Some(f) => f,
+        None if service == Service::Outputs => return (ReplyTo::default(), image(text)),
+        None => return (ReplyTo::default(), Err(not_object())),
     };
     let mut to = ReplyTo {
-        id: o.get("id").cloned(),
+        id: match f.id.clone() {
+            Field::Valid(v) => Some(v),
+            _ => None,
+        },
         topic: None,
     };
-    match o.get("reply_to") {
-        None => {}
-        Some(serde_json::Value::String(t)) if publishable(t) => to.topic = Some(t.clone()),
-        Some(_) => {
+    match f.reply_to.clone() {
+        Field::Absent => {}
+        Field::Valid(t) if publishable(&t) => to.topic = Some(t),
+        _ => {
             return (
                 to,
                 Err(malformed("`reply_to` must be a topic without wildcards")),
             )
         }
     }
-    let r = body(service, &o);
+    let r = f.request(service);
     (to, r)
 }
 
-type Obj = serde_json::Map<String, serde_json::Value>;
-
-fn only(o: &Obj, keys: &[&str]) -> Result<(), RequestError> {
-    match o
-        .keys()
-        .find(|k| !keys.contains(&k.as_str()) && !matches!(k.as_str(), "id" | "reply_to"))
-    {
-        Some(k) => Err(malformed(format!("unknown field `{k}`"))),
-        None => Ok(()),
-    }
+/// A number of a named output channel.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum Number {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
 }
 
-fn int(o: &Obj, key: &str, min: i64, max: i64) -> Result<Option<i64>, RequestError> {
-    match o.get(key) {
-        None => Ok(None),
-        Some(v) => match v.as_i64() {
-            Some(n) if (min..=max).contains(&n) => Ok(Some(n)),
-            _ => Err(malformed(format!(
-                "`{key}` must be an integer {min}..={max}"
-            ))),
-        },
+/// A PKW parameter: its number or the name the device gives it.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Pnu {
+    Number(i64),
+    Name(String),
+}
+
+/// The fields of a request object, as written (every service's; each
+/// service takes its own).
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
+struct Fields {
+    id: Field<serde_json::Value>,
+    reply_to: Field<String>,
+    op: Field<String>,
+    slot: Field<i64>,
+    index: Field<i64>,
+    length: Field<i64>,
+    hex: Field<String>,
+    channels: Field<BTreeMap<String, Field<Number>>>,
+    pnu: Field<Pnu>,
+    value: Field<i64>,
+    dword: Field<bool>,
+    element: Field<i64>,
+    command: Field<String>,
+    /// Any other field (refused by name).
+    #[serde(flatten)]
+    other: BTreeMap<String, IgnoredAny>,
+}
+
+/// An integer field in `min..=max`, when given.
+fn int(v: &Field<i64>, key: &str, min: i64, max: i64) -> Result<Option<i64>, RequestError> {
+    match v {
+        Field::Absent => Ok(None),
+        Field::Valid(n) if (min..=max).contains(n) => Ok(Some(*n)),
+        _ => Err(malformed(format!(
+            "`{key}` must be an integer {min}..={max}"
+        ))),
     }
 }
 
@@ -229,123 +277,171 @@ fn need<T>(v: Option<T>, key: &str) -> Result<T, RequestError> {
     v.ok_or_else(|| malformed(format!("`{key}` is missing")))
 }
 
-fn op(o: &Obj, ops: &[&str]) -> Result<String, RequestError> {
-    match o.get("op") {
-        Some(serde_json::Value::String(s)) if ops.contains(&s.as_str()) => Ok(s.clone()),
-        _ => {
-            let ops: Vec<String> = ops.iter().map(|o| format!("\"{o}\"")).collect();
-            Err(malformed(format!("`op` must be one of {}", ops.join(", "))))
+impl Fields {
+    /// The names of the fields given.
+    fn given(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = [
+            ("op", self.op.is_given()),
+            ("slot", self.slot.is_given()),
+            ("index", self.index.is_given()),
+            ("length", self.length.is_given()),
+            ("hex", self.hex.is_given()),
+            ("channels", self.channels.is_given()),
+            ("pnu", self.pnu.is_given()),
+            ("value", self.value.is_given()),
+            ("dword", self.dword.is_given()),
+            ("element", self.element.is_given()),
+            ("command", self.command.is_given()),
+        ]
+        .into_iter()
+        .filter_map(|(n, given)| given.then_some(n))
+        .chain(self.other.keys().map(String::as_str))
+        .collect();
+        names.sort_unstable();
+        names
+    }
+
+    /// Only `keys` (besides `id` and `reply_to`): the first other field
+    /// by name is refused.
+    fn only(&self, keys: &[&str]) -> Result<(), RequestError> {
+        match self.given().into_iter().find(|k| !keys.contains(k)) {
+            Some(k) => Err(malformed(format!("unknown field `{k}`"))),
+            None => Ok(()),
         }
     }
-}
 
-fn body(service: Service, o: &Obj) -> Result<Request, RequestError> {
-    match service {
-        Service::Outputs => {
-            only(o, &["hex", "channels"])?;
-            outputs_body(o)
+    fn op(&self, ops: &[&str]) -> Result<String, RequestError> {
+        match &self.op {
+            Field::Valid(s) if ops.contains(&s.as_str()) => Ok(s.clone()),
+            _ => {
+                let ops: Vec<String> = ops.iter().map(|o| format!("\"{o}\"")).collect();
+                Err(malformed(format!("`op` must be one of {}", ops.join(", "))))
+            }
         }
-        Service::Dpv1 => {
-            let slot = need(int(o, "slot", 0, 254)?, "slot")? as u8;
-            let index = need(int(o, "index", 0, 254)?, "index")? as u8;
-            if op(o, &["read", "write"])? == "read" {
-                only(o, &["op", "slot", "index", "length"])?;
-                let length = int(o, "length", 1, 240)?.unwrap_or(240) as u8;
-                Ok(Request::Dpv1Read {
-                    slot,
-                    index,
-                    length,
-                })
-            } else {
-                only(o, &["op", "slot", "index", "hex"])?;
-                let data = match o.get("hex") {
-                    Some(serde_json::Value::String(h)) => parse_hex(h)
-                        .filter(|d| d.len() <= profibus_dp::pdu::dpv1::MAX_DATA_LEN)
-                        .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
-                    _ => return Err(malformed("`hex` is missing")),
+    }
+
+    /// The request of `service` these fields make.
+    fn request(&self, service: Service) -> Result<Request, RequestError> {
+        match service {
+            Service::Outputs => {
+                self.only(&["hex", "channels"])?;
+                self.outputs()
+            }
+            Service::Dpv1 => {
+                let slot = need(int(&self.slot, "slot", 0, 254)?, "slot")? as u8;
+                let index = need(int(&self.index, "index", 0, 254)?, "index")? as u8;
+                if self.op(&["read", "write"])? == "read" {
+                    self.only(&["op", "slot", "index", "length"])?;
+                    let length = int(&self.length, "length", 1, 240)?.unwrap_or(240) as u8;
+                    Ok(Request::Dpv1Read {
+                        slot,
+                        index,
+                        length,
+                    })
+                } else {
+                    self.only(&["op", "slot", "index", "hex"])?;
+                    let data = match &self.hex {
+                        Field::Valid(h) => parse_hex(h)
+                            .filter(|d| d.len() <= profibus_dp::pdu::dpv1::MAX_DATA_LEN)
+                            .ok_or_else(|| malformed("`hex` must be 1..=240 bytes of hex"))?,
+                        _ => return Err(malformed("`hex` is missing")),
+                    };
+                    Ok(Request::Dpv1Write { slot, index, data })
+                }
+            }
+            Service::Pkw => {
+                self.only(&["op", "pnu", "index", "value", "dword", "element"])?;
+                let pnu = match &self.pnu {
+                    Field::Valid(Pnu::Name(n)) if !n.is_empty() => Err(n.clone()),
+                    p => {
+                        let p = match p {
+                            Field::Valid(Pnu::Number(n)) => Field::Valid(*n),
+                            Field::Absent => Field::Absent,
+                            _ => Field::Invalid,
+                        };
+                        Ok(need(int(&p, "pnu", 0, 0x7FF)?, "pnu")? as u16)
+                    }
                 };
-                Ok(Request::Dpv1Write { slot, index, data })
+                let index = int(&self.index, "index", 0, 0xFFFF)?.map(|i| i as u16);
+                let command = match self.op(&["read", "write", "describe"])?.as_str() {
+                    "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
+                    "describe" => pkw::Command::Describe(need(
+                        int(&self.element, "element", 0, 0xFFFF)?,
+                        "element",
+                    )? as u16),
+                    _ => {
+                        let range = (i32::MIN as i64, u32::MAX as i64);
+                        let v = need(int(&self.value, "value", range.0, range.1)?, "value")?;
+                        let dword = match self.dword {
+                            Field::Absent => !(-0x8000..=0xFFFF).contains(&v),
+                            Field::Valid(b) => b,
+                            Field::Invalid => {
+                                return Err(malformed("`dword` must be true or false"))
+                            }
+                        };
+                        if !dword && !(-0x8000..=0xFFFF).contains(&v) {
+                            return Err(malformed("`value` does not fit a word"));
+                        }
+                        let (w, d) = (v as u16, v as u32);
+                        match (index, dword) {
+                            (None, false) => pkw::Command::WriteWord(w),
+                            (None, true) => pkw::Command::WriteDword(d),
+                            (Some(index), false) => {
+                                pkw::Command::WriteElementWord { index, value: w }
+                            }
+                            (Some(index), true) => {
+                                pkw::Command::WriteElementDword { index, value: d }
+                            }
+                        }
+                    }
+                };
+                Ok(match pnu {
+                    Ok(pnu) => Request::Pkw { pnu, command },
+                    Err(name) => Request::PkwNamed { name, command },
+                })
             }
-        }
-        Service::Pkw => {
-            only(o, &["op", "pnu", "index", "value", "dword", "element"])?;
-            let pnu = match o.get("pnu") {
-                Some(serde_json::Value::String(n)) if !n.is_empty() => Err(n.clone()),
-                _ => Ok(need(int(o, "pnu", 0, 0x7FF)?, "pnu")? as u16),
-            };
-            let index = int(o, "index", 0, 0xFFFF)?.map(|i| i as u16);
-            let command = match op(o, &["read", "write", "describe"])?.as_str() {
-                "read" => index.map_or(pkw::Command::Read, pkw::Command::ReadElement),
-                "describe" => {
-                    pkw::Command::Describe(need(int(o, "element", 0, 0xFFFF)?, "element")? as u16)
-                }
-                _ => {
-                    let v = need(int(o, "value", i32::MIN as i64, u32::MAX as i64)?, "value")?;
-                    let dword = match o.get("dword") {
-                        None => !(-0x8000..=0xFFFF).contains(&v),
-                        Some(serde_json::Value::Bool(b)) => *b,
-                        Some(_) => return Err(malformed("`dword` must be true or false")),
-                    };
-                    if !dword && !(-0x8000..=0xFFFF).contains(&v) {
-                        return Err(malformed("`value` does not fit a word"));
+            Service::Rfid => {
+                self.only(&["command"])?;
+                match &self.command {
+                    Field::Valid(c) if !c.is_empty() && c.is_ascii() => {
+                        Ok(Request::Rfid(c.trim_end_matches('\r').as_bytes().to_vec()))
                     }
-                    let (w, d) = (v as u16, v as u32);
-                    match (index, dword) {
-                        (None, false) => pkw::Command::WriteWord(w),
-                        (None, true) => pkw::Command::WriteDword(d),
-                        (Some(index), false) => pkw::Command::WriteElementWord { index, value: w },
-                        (Some(index), true) => pkw::Command::WriteElementDword { index, value: d },
-                    }
+                    _ => Err(malformed("`command` must be a non-empty ASCII string")),
                 }
-            };
-            Ok(match pnu {
-                Ok(pnu) => Request::Pkw { pnu, command },
-                Err(name) => Request::PkwNamed { name, command },
-            })
-        }
-        Service::Rfid => {
-            only(o, &["command"])?;
-            match o.get("command") {
-                Some(serde_json::Value::String(c)) if !c.is_empty() && c.is_ascii() => {
-                    Ok(Request::Rfid(c.trim_end_matches('\r').as_bytes().to_vec()))
-                }
-                _ => Err(malformed("`command` must be a non-empty ASCII string")),
             }
         }
     }
-}
 
-fn outputs_body(o: &Obj) -> Result<Request, RequestError> {
-    let req = match (o.get("hex"), o.get("channels")) {
-        (Some(serde_json::Value::String(h)), None) => {
-            OutputWrite::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
-        }
-        (None, Some(serde_json::Value::Object(c))) if !c.is_empty() => OutputWrite::Channels(
-            c.iter()
-                .map(|(k, v)| {
-                    let val = match v {
-                        serde_json::Value::Bool(b) => Value::Bool(*b),
-                        serde_json::Value::Number(n) => match n.as_i64() {
-                            Some(i) => Value::Int(i),
-                            None => Value::Float(n.as_f64().unwrap_or(f64::NAN)),
-                        },
-                        _ => {
-                            return Err(malformed(format!(
-                                "channel `{k}`: value must be a number or a boolean"
-                            )))
-                        }
-                    };
-                    Ok((k.clone(), val))
-                })
-                .collect::<Result<_, _>>()?,
-        ),
-        _ => {
-            return Err(malformed(
-                "give either `hex` (a string) or `channels` (an object)",
-            ))
-        }
-    };
-    Ok(Request::Outputs(req))
+    fn outputs(&self) -> Result<Request, RequestError> {
+        let req = match (&self.hex, &self.channels) {
+            (Field::Valid(h), Field::Absent) => {
+                OutputWrite::Image(parse_hex(h).ok_or_else(|| malformed("`hex` is not hex"))?)
+            }
+            (Field::Absent, Field::Valid(c)) if !c.is_empty() => OutputWrite::Channels(
+                c.iter()
+                    .map(|(k, v)| {
+                        let val = match v {
+                            Field::Valid(Number::Bool(b)) => Value::Bool(*b),
+                            Field::Valid(Number::Int(i)) => Value::Int(*i),
+                            Field::Valid(Number::Float(x)) => Value::Float(*x),
+                            _ => {
+                                return Err(malformed(format!(
+                                    "channel `{k}`: value must be a number or a boolean"
+                                )))
+                            }
+                        };
+                        Ok((k.clone(), val))
+                    })
+                    .collect::<Result<_, _>>()?,
+            ),
+            _ => {
+                return Err(malformed(
+                    "give either `hex` (a string) or `channels` (an object)",
+                ))
+            }
+        };
+        Ok(Request::Outputs(req))
+    }
 }
 
 /// Requests one slave may have waiting in each of its two queues: output
@@ -364,6 +460,126 @@ mod tests {
         assert_eq!(parse_hex("abc"), None);
         assert_eq!(parse_hex("zz"), None);
         assert_eq!(parse_hex(""), None);
+    }
+
+    #[test]
+    fn each_malformed_request_has_its_message() {
+        use Service::*;
+        for (service, payload, message) in [
+            (Outputs, &b"zz"[..], "neither a JSON object nor hex"),
+            (Outputs, b"[1]", "expected a JSON object"),
+            (
+                Outputs,
+                b"{\"hex\": 1}",
+                "give either `hex` (a string) or `channels` (an object)",
+            ),
+            (Outputs, b"{\"hex\": \"zz\"}", "`hex` is not hex"),
+            (
+                Outputs,
+                b"{\"hex\": \"01\", \"b\": 1, \"a\": 2}",
+                "unknown field `a`",
+            ),
+            (
+                Outputs,
+                b"{\"channels\": {\"a\": null}}",
+                "channel `a`: value must be a number or a boolean",
+            ),
+            (
+                Outputs,
+                b"{\"hex\": \"01\", \"reply_to\": 7}",
+                "`reply_to` must be a topic without wildcards",
+            ),
+            (Dpv1, b"\"0102\"", "expected a JSON object"),
+            (Dpv1, b"{\"op\": \"read\"}", "`slot` is missing"),
+            (
+                Dpv1,
+                b"{\"op\": \"read\", \"slot\": null, \"index\": 1}",
+                "`slot` must be an integer 0..=254",
+            ),
+            (
+                Dpv1,
+                b"{\"op\": \"read\", \"slot\": 1, \"index\": 255}",
+                "`index` must be an integer 0..=254",
+            ),
+            (
+                Dpv1,
+                b"{\"op\": \"erase\", \"slot\": 1, \"index\": 2}",
+                "`op` must be one of \"read\", \"write\"",
+            ),
+            (
+                Dpv1,
+                b"{\"op\": \"read\", \"slot\": 1, \"index\": 2, \"hex\": \"01\"}",
+                "unknown field `hex`",
+            ),
+            (
+                Dpv1,
+                b"{\"op\": \"write\", \"slot\": 1, \"index\": 2}",
+                "`hex` is missing",
+            ),
+            (
+                Dpv1,
+                b"{\"op\": \"write\", \"slot\": 1, \"index\": 2, \"hex\": \"\"}",
+                "`hex` must be 1..=240 bytes of hex",
+            ),
+            (Pkw, b"{\"op\": \"read\"}", "`pnu` is missing"),
+            (
+                Pkw,
+                b"{\"op\": \"read\", \"pnu\": \"\"}",
+                "`pnu` must be an integer 0..=2047",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"read\", \"pnu\": 1, \"index\": -1}",
+                "`index` must be an integer 0..=65535",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"describe\", \"pnu\": 1}",
+                "`element` is missing",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"write\", \"pnu\": 1}",
+                "`value` is missing",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"write\", \"pnu\": 1, \"value\": 1, \"dword\": 1}",
+                "`dword` must be true or false",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"write\", \"pnu\": 1, \"value\": 70000, \"dword\": false}",
+                "`value` does not fit a word",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"write\", \"pnu\": 1, \"value\": 5000000000}",
+                "`value` must be an integer -2147483648..=4294967295",
+            ),
+            (
+                Pkw,
+                b"{\"op\": \"read\", \"pnu\": 1, \"slot\": 1}",
+                "unknown field `slot`",
+            ),
+            (
+                Rfid,
+                b"{\"command\": \"\"}",
+                "`command` must be a non-empty ASCII string",
+            ),
+            (Rfid, b"{}", "`command` must be a non-empty ASCII string"),
+        ] {
+            let e = parse_request(service, payload).1.unwrap_err();
+            let text = String::from_utf8_lossy(payload);
+            assert_eq!(
+                e.to_string(),
+                format!("malformed request: {message}"),
+                "{text}"
+            );
+        }
+        // `null` is an id like any other JSON value.
+        let (to, _) = parse_request(Outputs, br#"{"hex": "01", "id": null}"#);
+        assert_eq!(to.id, Some(serde_json::Value::Null));
     }
 
     #[test]

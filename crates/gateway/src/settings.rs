@@ -42,7 +42,11 @@
 //! broker is back, when it returns to Operate. It is logged and reported
 //! in the status once the broker is back.
 
+use crate::field::Field;
 use crate::topics::SparkplugId;
+use serde::de::IgnoredAny;
+use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -190,24 +194,46 @@ pub enum SettingsError {
     BadUrl(String),
 }
 
-const KEYS: &[&str] = &[
-    "broker",
-    "client_id",
-    "prefix",
-    "bus",
-    "qos",
-    "publish",
-    "interval_ms",
-    "writable",
-    "outputs_timeout_ms",
-    "safe_state",
-    "job_timeout_ms",
-    "username",
-    "password_file",
-    "password_env",
-    "ca_file",
-    "sparkplug",
-];
+/// The `[mqtt]` table as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct RawSettings {
+    broker: Field<String>,
+    client_id: Field<String>,
+    prefix: Field<String>,
+    bus: Field<String>,
+    qos: Field<u8>,
+    publish: Field<String>,
+    interval_ms: Field<u64>,
+    writable: Field<Vec<RawAccess>>,
+    outputs_timeout_ms: Field<u64>,
+    safe_state: Field<String>,
+    job_timeout_ms: Field<u64>,
+    username: Field<String>,
+    password_file: Field<String>,
+    password_env: Field<String>,
+    ca_file: Field<String>,
+    sparkplug: Field<String>,
+}
+
+/// One entry of `writable` as written: `3` or `{ address = 3, channels = ["a"] }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawAccess {
+    Entry(RawEntry),
+    Address(Field<u8>),
+}
+
+/// A table entry of `writable`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
+struct RawEntry {
+    address: Field<u8>,
+    channels: Field<Vec<Field<String>>>,
+    /// Keys other than these two (refused, by name).
+    #[serde(flatten)]
+    unknown: BTreeMap<String, IgnoredAny>,
+}
 
 fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
     SettingsError::Bad {
@@ -216,21 +242,22 @@ fn bad(key: &'static str, problem: impl Into<String>) -> SettingsError {
     }
 }
 
-fn string(t: &toml::Table, key: &'static str) -> Result<Option<String>, SettingsError> {
-    match t.get(key) {
+/// A non-empty string key, when given.
+fn string(v: Field<String>, key: &'static str) -> Result<Option<String>, SettingsError> {
+    match v.given() {
         None => Ok(None),
-        Some(toml::Value::String(s)) if !s.is_empty() => Ok(Some(s.clone())),
+        Some(Ok(s)) if !s.is_empty() => Ok(Some(s)),
         Some(_) => Err(bad(key, "must be a non-empty string")),
     }
 }
 
 /// A string key naming one of `choices` (absent: the first).
 fn choice<T: Copy>(
-    t: &toml::Table,
+    v: Field<String>,
     key: &'static str,
     choices: &[(&str, T)],
 ) -> Result<T, SettingsError> {
-    let Some(name) = string(t, key)? else {
+    let Some(name) = string(v, key)? else {
         return Ok(choices[0].1);
     };
     match choices.iter().find(|(n, _)| *n == name) {
@@ -241,6 +268,15 @@ fn choice<T: Copy>(
             let list = format!("{} or {last}", rest.join(", "));
             Err(bad(key, format!("`{name}` is not {list}")))
         }
+    }
+}
+
+/// A time in ms (1 ms to a day), when given.
+fn millis(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, SettingsError> {
+    match v.given() {
+        None => Ok(None),
+        Some(Ok(ms @ 1..=86_400_000)) => Ok(Some(Duration::from_millis(ms))),
+        Some(_) => Err(bad(key, "must be 1..=86400000")),
     }
 }
 
@@ -256,26 +292,35 @@ impl MqttSettings {
         table: Option<&toml::Table>,
         default_bus: &str,
     ) -> Result<MqttSettings, SettingsError> {
-        let empty = toml::Table::new();
-        let t = table.unwrap_or(&empty);
-        if let Some(k) = t.keys().find(|k| !KEYS.contains(&k.as_str())) {
-            return Err(SettingsError::UnknownKey(k.clone()));
-        }
-        let bus = string(t, "bus")?.unwrap_or_else(|| default_bus.to_string());
+        let t = match table {
+            None => RawSettings::default(),
+            Some(t) => toml::Value::Table(t.clone())
+                .try_into::<RawSettings>()
+                .map_err(|e| {
+                    // The only error left: a key this version does not know.
+                    let m = e.message();
+                    let key = m
+                        .split('`')
+                        .nth(1)
+                        .filter(|_| m.starts_with("unknown field"));
+                    SettingsError::UnknownKey(key.unwrap_or(m).to_string())
+                })?,
+        };
+        let bus = string(t.bus, "bus")?.unwrap_or_else(|| default_bus.to_string());
         if !topic_level(&bus) {
             return Err(bad("bus", format!("`{bus}` is not one topic level")));
         }
-        let prefix = string(t, "prefix")?.unwrap_or_else(|| "profibus".into());
+        let prefix = string(t.prefix, "prefix")?.unwrap_or_else(|| "profibus".into());
         if prefix.split('/').any(|l| !topic_level(l)) {
             return Err(bad("prefix", format!("`{prefix}` is not a topic prefix")));
         }
-        let qos = match t.get("qos") {
+        let qos = match t.qos.given() {
             None => 1,
-            Some(toml::Value::Integer(q @ 0..=2)) => *q as u8,
+            Some(Ok(q @ 0..=2)) => q,
             Some(_) => return Err(bad("qos", "must be 0, 1 or 2")),
         };
         let publish = choice(
-            t,
+            t.publish,
             "publish",
             &[
                 ("change", PublishMode::OnChange),
@@ -283,19 +328,11 @@ impl MqttSettings {
                 ("both", PublishMode::Both),
             ],
         )?;
-        // A time in ms (1 ms to a day), when given.
-        let ms = |key: &'static str| match t.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Integer(ms @ 1..=86_400_000)) => {
-                Ok(Some(Duration::from_millis(*ms as u64)))
-            }
-            Some(_) => Err(bad(key, "must be 1..=86400000")),
-        };
-        let interval = ms("interval_ms")?.unwrap_or(Duration::from_secs(1));
-        let writable: Vec<WriteAccess> = match t.get("writable") {
+        let interval = millis(t.interval_ms, "interval_ms")?.unwrap_or(Duration::from_secs(1));
+        let writable: Vec<WriteAccess> = match t.writable.given() {
             None => vec![],
-            Some(toml::Value::Array(a)) => a.iter().map(access).collect::<Result<_, _>>()?,
-            Some(_) => return Err(bad("writable", "must be a list of station addresses")),
+            Some(Ok(a)) => a.into_iter().map(access).collect::<Result<_, _>>()?,
+            Some(Err(())) => return Err(bad("writable", "must be a list of station addresses")),
         };
         if let Some(w) = writable
             .iter()
@@ -307,10 +344,11 @@ impl MqttSettings {
                 format!("lists slave {} twice", w.1.address),
             ));
         }
-        let outputs_timeout = ms("outputs_timeout_ms")?;
-        let job_timeout = ms("job_timeout_ms")?.unwrap_or(Duration::from_secs(2));
+        let outputs_timeout = millis(t.outputs_timeout_ms, "outputs_timeout_ms")?;
+        let job_timeout =
+            millis(t.job_timeout_ms, "job_timeout_ms")?.unwrap_or(Duration::from_secs(2));
         let safe_state = choice(
-            t,
+            t.safe_state,
             "safe_state",
             &[
                 ("keep", SafeState::Keep),
@@ -318,7 +356,10 @@ impl MqttSettings {
                 ("clear", SafeState::Clear),
             ],
         )?;
-        let password = match (string(t, "password_file")?, string(t, "password_env")?) {
+        let password = match (
+            string(t.password_file, "password_file")?,
+            string(t.password_env, "password_env")?,
+        ) {
             (Some(_), Some(_)) => {
                 return Err(bad(
                     "password_file",
@@ -329,21 +370,22 @@ impl MqttSettings {
             (None, Some(v)) => Some(PasswordSource::Env(v)),
             (None, None) => None,
         };
-        let username = string(t, "username")?;
+        let username = string(t.username, "username")?;
         if password.is_some() && username.is_none() {
             return Err(bad("username", "is needed with a password"));
         }
-        let ca_file = string(t, "ca_file")?.map(PathBuf::from);
-        let broker = string(t, "broker")?;
+        let ca_file = string(t.ca_file, "ca_file")?.map(PathBuf::from);
+        let broker = string(t.broker, "broker")?;
         if let Some(b) = &broker {
             parse_broker(b)?;
         }
-        let sparkplug = string(t, "sparkplug")?
+        let sparkplug = string(t.sparkplug, "sparkplug")?
             .map(|s| SparkplugId::parse(&s).map_err(|e| bad("sparkplug", e.to_string())))
             .transpose()?;
+        let client_id = string(t.client_id, "client_id")?;
         Ok(MqttSettings {
             broker,
-            client_id: string(t, "client_id")?.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
+            client_id: client_id.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
             prefix,
             bus,
             qos,
@@ -393,35 +435,32 @@ impl MqttSettings {
 }
 
 /// One entry of `writable`: `3` or `{ address = 3, channels = ["a"] }`.
-fn access(v: &toml::Value) -> Result<WriteAccess, SettingsError> {
-    let address = |v: Option<&toml::Value>| match v {
-        Some(toml::Value::Integer(n @ 0..=125)) => Ok(*n as u8),
+fn access(v: RawAccess) -> Result<WriteAccess, SettingsError> {
+    let address = |v: Field<u8>| match v {
+        Field::Valid(n @ 0..=125) => Ok(n),
         _ => Err(bad("writable", "takes station addresses 0..=125")),
     };
     match v {
-        toml::Value::Table(t) => {
-            if let Some(k) = t
-                .keys()
-                .find(|k| !matches!(k.as_str(), "address" | "channels"))
-            {
+        RawAccess::Entry(e) => {
+            if let Some(k) = e.unknown.keys().next() {
                 return Err(bad("writable", format!("entry has an unknown key `{k}`")));
             }
-            let channels = match t.get("channels") {
-                Some(toml::Value::Array(a)) => a
-                    .iter()
+            let channels = match e.channels.given() {
+                Some(Ok(a)) => a
+                    .into_iter()
                     .map(|c| match c {
-                        toml::Value::String(s) if !s.is_empty() => Ok(s.clone()),
+                        Field::Valid(s) if !s.is_empty() => Ok(s),
                         _ => Err(bad("writable", "`channels` takes channel names")),
                     })
                     .collect::<Result<_, _>>()?,
                 _ => return Err(bad("writable", "an entry table needs `channels = [..]`")),
             };
             Ok(WriteAccess {
-                address: address(t.get("address"))?,
+                address: address(e.address)?,
                 channels: Some(channels),
             })
         }
-        v => Ok(WriteAccess::full(address(Some(v))?)),
+        RawAccess::Address(a) => Ok(WriteAccess::full(address(a)?)),
     }
 }
 
@@ -508,6 +547,68 @@ mod tests {
         assert!(parse("safe_state = \"off\"").is_err());
         assert!(parse("outputs_timeout_ms = 0").is_err());
         assert!(parse("broker = \"http://x\"").is_err());
+    }
+
+    #[test]
+    fn each_bad_setting_has_its_message() {
+        for (text, message) in [
+            ("retain = true", "[mqtt]: unknown key `retain`"),
+            ("bus = 3", "[mqtt]: `bus` must be a non-empty string"),
+            ("bus = \"a/b\"", "[mqtt]: `bus` `a/b` is not one topic level"),
+            ("prefix = \"a/#\"", "[mqtt]: `prefix` `a/#` is not a topic prefix"),
+            ("qos = \"1\"", "[mqtt]: `qos` must be 0, 1 or 2"),
+            (
+                "publish = \"sometimes\"",
+                "[mqtt]: `publish` `sometimes` is not change, interval or both",
+            ),
+            ("interval_ms = 0", "[mqtt]: `interval_ms` must be 1..=86400000"),
+            ("job_timeout_ms = 1.5", "[mqtt]: `job_timeout_ms` must be 1..=86400000"),
+            (
+                "writable = 3",
+                "[mqtt]: `writable` must be a list of station addresses",
+            ),
+            (
+                "writable = [\"3\"]",
+                "[mqtt]: `writable` takes station addresses 0..=125",
+            ),
+            (
+                "writable = [{ address = 3, channels = [\"a\"], x = 1 }]",
+                "[mqtt]: `writable` entry has an unknown key `x`",
+            ),
+            (
+                "writable = [{ address = 3, channels = \"a\" }]",
+                "[mqtt]: `writable` an entry table needs `channels = [..]`",
+            ),
+            (
+                "writable = [{ address = 3, channels = [\"\"] }]",
+                "[mqtt]: `writable` `channels` takes channel names",
+            ),
+            (
+                "writable = [{ address = 3 }]",
+                "[mqtt]: `writable` an entry table needs `channels = [..]`",
+            ),
+            (
+                "writable = [{ channels = [\"a\"] }]",
+                "[mqtt]: `writable` takes station addresses 0..=125",
+            ),
+            ("writable = [4, 4]", "[mqtt]: `writable` lists slave 4 twice"),
+            ("safe_state = \"off\"", "[mqtt]: `safe_state` `off` is not keep, zero or clear"),
+            (
+                "username = \"u\"\npassword_file = \"f\"\npassword_env = \"E\"",
+                "[mqtt]: `password_file` and `password_env` exclude each other",
+            ),
+            ("password_env = \"E\"", "[mqtt]: `username` is needed with a password"),
+            (
+                "broker = \"http://x\"",
+                "broker URL `http://x` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]",
+            ),
+            (
+                "sparkplug = \"g\"",
+                "[mqtt]: `sparkplug` `g` is not GROUP/EDGE (two non-empty ids without `/`, `+` or `#`)",
+            ),
+        ] {
+            assert_eq!(parse(text).unwrap_err().to_string(), message, "{text}");
+        }
     }
 
     #[test]

@@ -592,266 +592,440 @@ impl BusFile {
 
     /// Check the text of a bus file whose `device = "NAME"` entries
     /// `resolver` resolves.
+    ///
+    /// The steps, each a function: every key checked where it is (which
+    /// also yields the profile options), the `[master]` table, each
+    /// `[[slave]]` (its GSD or device profile, its modules, its
+    /// User_Prm_Data, its parameters), then the `[bus]` table against the
+    /// slaves' needs and the `[options]`. The first error found is
+    /// returned.
     pub fn parse_with(
         path: &Path,
         text: &str,
         resolver: &dyn DeviceResolver,
     ) -> Result<BusFile, BusFileError> {
         let cx = Ctx { path, text };
-        // Every key with its position first: a misspelt key is named
-        // where it is, with the closest valid keys.
-        // (The parsed document is dropped before the file is read again
-        // below: a large file costs one parse at a time.)
-        {
-            let doc = toml_edit::ImDocument::parse(text)
-                .map_err(|e| cx.err(e.span(), e.message().trim_end()))?;
-            cx.check_keys(doc.as_table())?;
-        }
-        // The slaves' tables once more as plain tables: the keys that are
-        // not slave keys are a profile's options. Checked first, so that a
-        // profile option given where a slave key of the same name goes
-        // gets its own message rather than the slave key's type error.
-        let tables: SlaveTables =
-            toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
-        let mut profile_options = Vec::with_capacity(tables.slave.len());
-        for t in &tables.slave {
-            profile_options.push(cx.profile_options(t)?);
-        }
+        let profile_options = cx.read_keys()?;
         let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
         let mut warnings = Vec::new();
-
-        let m = raw.master.get_ref();
-        let address = *m.address.get_ref();
-        if address > 125 {
-            return Err(cx.err(
-                Some(m.address.span()),
-                format!("master address {address} is outside 0..=125"),
-            ));
-        }
-        let baud = match m.baud.get_ref() {
-            BaudValue::Number(n) => Baud::from_bps(*n).ok_or_else(|| {
-                cx.err(
-                    Some(m.baud.span()),
-                    format!("{n} is not a PROFIBUS baud rate"),
-                )
-            })?,
-            BaudValue::Text(s) => s
-                .parse::<Baud>()
-                .map_err(|e| cx.err(Some(m.baud.span()), e.to_string()))?,
-        };
+        let (address, baud) = cx.master(&raw.master)?;
+        let master = Master { address, baud };
 
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut slaves = Vec::new();
         let mut seen = [false; 128];
         let mut max_tsdr_needed = 0u32;
         for (n, rs) in raw.slave.iter().enumerate() {
-            let s = rs.get_ref();
-            let addr = *s.address.get_ref();
             let options = profile_options.get(n).cloned().unwrap_or_default();
-            if addr > 125 || addr == address {
-                return Err(cx.err(
-                    Some(s.address.span()),
-                    format!(
-                        "slave address {addr} is invalid (0..=125 and not the master's {address})"
-                    ),
-                ));
-            }
-            if std::mem::replace(&mut seen[addr as usize], true) {
-                return Err(cx.err(
-                    Some(s.address.span()),
-                    format!("a second slave with address {addr}"),
-                ));
-            }
-            // Where the GSD came from, for error positions.
-            let (gsd_path, gsd, device, source_span, module_names) = match (&s.gsd, &s.device) {
-                (Some(g), None) => {
-                    let gsd_path = dir.join(g.get_ref());
-                    let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
-                        .map_err(|e| cx.err(Some(g.span()), format!("GSD file: {e}")))?;
-                    for w in &parsed.warnings {
-                        warnings.push(format!("{}:{w}", gsd_path.display()));
-                    }
-                    let names: Vec<(String, Option<std::ops::Range<usize>>)> = s
-                        .modules
-                        .iter()
-                        .map(|m| (m.get_ref().clone(), Some(m.span())))
-                        .collect();
-                    (gsd_path, parsed.gsd, None, g.span(), names)
+            let site = SlaveSite {
+                n,
+                dir,
+                options,
+                resolver,
+            };
+            let (slave, max_tsdr) = cx.slave(master, rs, site, &mut seen, &mut warnings)?;
+            max_tsdr_needed = max_tsdr_needed.max(max_tsdr.unwrap_or(0));
+            slaves.push(slave);
+        }
+
+        let params = cx.bus_params(raw.bus.as_ref(), baud, max_tsdr_needed, &mut warnings)?;
+        let options = master_options(raw.options.unwrap_or_default());
+        Ok(BusFile {
+            path: path.to_path_buf(),
+            master: MasterConfig {
+                address,
+                params,
+                slaves: slaves.iter().map(|s| s.params.clone()).collect(),
+                options,
+            },
+            slaves,
+            warnings,
+            mqtt: raw.mqtt,
+        })
+    }
+}
+
+/// The master's address and baud rate, which every slave is checked
+/// against.
+#[derive(Clone, Copy)]
+struct Master {
+    address: u8,
+    baud: Baud,
+}
+
+/// Where a `[[slave]]` table stands: its index among the slave tables,
+/// the bus file's directory (GSD paths are relative to it), its profile
+/// options and the resolver of `device = "NAME"`.
+struct SlaveSite<'r> {
+    n: usize,
+    dir: &'r Path,
+    options: toml::Table,
+    resolver: &'r dyn DeviceResolver,
+}
+
+/// Where a slave's GSD came from: a file or a device profile.
+struct GsdSource {
+    /// The GSD file, or the words ``the GSD of device `NAME` ``.
+    gsd_path: PathBuf,
+    gsd: Gsd,
+    device: Option<DeviceEntry>,
+    /// `gsd = …` or `device = …`: where errors about the GSD are shown.
+    span: std::ops::Range<usize>,
+    /// The module names to configure, with their position in the file
+    /// (`None`: chosen by the device profile).
+    modules: Vec<(String, Option<std::ops::Range<usize>>)>,
+}
+
+impl GsdSource {
+    /// The GSD for people: the file, or the device profile's.
+    fn describe(&self) -> String {
+        match &self.device {
+            Some(d) => format!("device `{}`", d.name),
+            None => self.gsd_path.display().to_string(),
+        }
+    }
+}
+
+impl Ctx<'_> {
+    /// Step 1, the keys: every key of the file with its position first,
+    /// so that a misspelt key is named where it is with the closest valid
+    /// keys; then each `[[slave]]` table's profile options (checked before
+    /// the typed read, so that a profile option given where a slave key
+    /// of the same name goes gets its own message rather than the slave
+    /// key's type error).
+    fn read_keys(&self) -> Result<Vec<toml::Table>, BusFileError> {
+        // The parsed document is dropped before the file is read again:
+        // a large file costs one parse at a time.
+        {
+            let doc = toml_edit::ImDocument::parse(self.text)
+                .map_err(|e| self.err(e.span(), e.message().trim_end()))?;
+            self.check_keys(doc.as_table())?;
+        }
+        let tables: SlaveTables =
+            toml::from_str(self.text).map_err(|e| self.err(e.span(), e.message()))?;
+        tables
+            .slave
+            .iter()
+            .map(|t| self.profile_options(t))
+            .collect()
+    }
+
+    /// Step 2, the `[master]` table: its address and baud rate.
+    fn master(&self, m: &Spanned<RawMaster>) -> Result<(u8, Baud), BusFileError> {
+        let m = m.get_ref();
+        let address = *m.address.get_ref();
+        if address > 125 {
+            return Err(self.err(
+                Some(m.address.span()),
+                format!("master address {address} is outside 0..=125"),
+            ));
+        }
+        let baud = match m.baud.get_ref() {
+            BaudValue::Number(n) => Baud::from_bps(*n).ok_or_else(|| {
+                self.err(
+                    Some(m.baud.span()),
+                    format!("{n} is not a PROFIBUS baud rate"),
+                )
+            })?,
+            BaudValue::Text(s) => s
+                .parse::<Baud>()
+                .map_err(|e| self.err(Some(m.baud.span()), e.to_string()))?,
+        };
+        Ok((address, baud))
+    }
+
+    /// Step 3, one `[[slave]]` table: its address, its GSD (file or
+    /// device profile), its modules, its User_Prm_Data and the master's
+    /// parameters for it. Returns the slave and the GSD's `MaxTsdr` at the
+    /// baud rate, which the bus parameters must allow.
+    fn slave(
+        &self,
+        master: Master,
+        rs: &Spanned<RawSlave>,
+        site: SlaveSite<'_>,
+        seen: &mut [bool; 128],
+        warnings: &mut Vec<String>,
+    ) -> Result<(BusSlave, Option<u32>), BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        if addr > 125 || addr == master.address {
+            return Err(self.err(
+                Some(s.address.span()),
+                format!(
+                    "slave address {addr} is invalid (0..=125 and not the master's {})",
+                    master.address
+                ),
+            ));
+        }
+        if std::mem::replace(&mut seen[addr as usize], true) {
+            return Err(self.err(
+                Some(s.address.span()),
+                format!("a second slave with address {addr}"),
+            ));
+        }
+        let source = self.gsd_source(rs, site, warnings)?;
+        let baud = master.baud;
+        if !source.gsd.supports_baud(baud) {
+            return Err(self.err(
+                Some(source.span.clone()),
+                format!(
+                    "slave {addr}: {} does not support {baud}",
+                    source.describe()
+                ),
+            ));
+        }
+        let max_tsdr = source.gsd.max_tsdr(baud);
+        let (selection, names) = self.modules(rs, &source)?;
+        let gsd = &source.gsd;
+        let cfg = gsd
+            .chk_cfg(&selection)
+            .map_err(|e| self.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
+        let user_prm_data = self.user_prm_data(rs, gsd, &selection)?;
+        let params = self.slave_params(rs, gsd, cfg, user_prm_data)?;
+        let GsdSource {
+            gsd_path,
+            gsd,
+            device,
+            ..
+        } = source;
+        let slave = BusSlave {
+            params,
+            gsd_path,
+            device,
+            gsd,
+            modules: names,
+        };
+        Ok((slave, max_tsdr))
+    }
+
+    /// The slave's GSD: `gsd = FILE` (read leniently, its quirks added
+    /// to `warnings`) with `modules`, or `device = NAME` resolved by the
+    /// site's resolver. Exactly one of the two.
+    fn gsd_source(
+        &self,
+        rs: &Spanned<RawSlave>,
+        site: SlaveSite<'_>,
+        warnings: &mut Vec<String>,
+    ) -> Result<GsdSource, BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        match (&s.gsd, &s.device) {
+            (Some(g), None) => {
+                let gsd_path = site.dir.join(g.get_ref());
+                let parsed = Gsd::from_file(&gsd_path, ParseOptions { lenient: true })
+                    .map_err(|e| self.err(Some(g.span()), format!("GSD file: {e}")))?;
+                for w in &parsed.warnings {
+                    warnings.push(format!("{}:{w}", gsd_path.display()));
                 }
-                (None, Some(d)) => {
-                    if let Some(m) = s.modules.first() {
-                        return Err(cx.err(
-                            Some(m.span()),
-                            format!("slave {addr}: a device profile chooses its modules; give its options instead"),
-                        ));
-                    }
-                    let entry = DeviceEntry {
-                        name: d.get_ref().clone(),
-                        dir: dir.to_path_buf(),
-                        options,
+                let modules = s
+                    .modules
+                    .iter()
+                    .map(|m| (m.get_ref().clone(), Some(m.span())))
+                    .collect();
+                Ok(GsdSource {
+                    gsd_path,
+                    gsd: parsed.gsd,
+                    device: None,
+                    span: g.span(),
+                    modules,
+                })
+            }
+            (None, Some(d)) => {
+                if let Some(m) = s.modules.first() {
+                    return Err(self.err(
+                        Some(m.span()),
+                        format!("slave {addr}: a device profile chooses its modules; give its options instead"),
+                    ));
+                }
+                let entry = DeviceEntry {
+                    name: d.get_ref().clone(),
+                    dir: site.dir.to_path_buf(),
+                    options: site.options,
+                };
+                let r = site.resolver.resolve(&entry, addr).map_err(|e| {
+                    let at = match &e.option {
+                        // Parsed again for the key's position: only on
+                        // this error.
+                        Some(key) => toml_edit::ImDocument::parse(self.text)
+                            .ok()
+                            .and_then(|doc| option_at(doc.as_table(), site.n, &entry.name, key)),
+                        None => None,
                     };
-                    let r = resolver.resolve(&entry, addr).map_err(|e| {
-                        let at = match &e.option {
-                            // Parsed again for the key's position: only
-                            // on this error.
-                            Some(key) => toml_edit::ImDocument::parse(text)
-                                .ok()
-                                .and_then(|doc| option_at(doc.as_table(), n, &entry.name, key)),
-                            None => None,
-                        };
-                        let at = at.or(Some(d.span()));
-                        cx.err(at, format!("slave {addr}: {e}"))
-                    })?;
-                    let names = r.modules.into_iter().map(|m| (m, None)).collect();
-                    (
-                        PathBuf::from(format!("the GSD of device `{}`", entry.name)),
-                        r.gsd,
-                        Some(entry),
-                        d.span(),
-                        names,
-                    )
-                }
-                _ => {
-                    return Err(cx.err(
-                        Some(rs.span()),
-                        format!("slave {addr}: give either `gsd` (with `modules`) or `device`"),
+                    let at = at.or(Some(d.span()));
+                    self.err(at, format!("slave {addr}: {e}"))
+                })?;
+                Ok(GsdSource {
+                    gsd_path: PathBuf::from(format!("the GSD of device `{}`", entry.name)),
+                    gsd: r.gsd,
+                    device: Some(entry),
+                    span: d.span(),
+                    modules: r.modules.into_iter().map(|m| (m, None)).collect(),
+                })
+            }
+            _ => Err(self.err(
+                Some(rs.span()),
+                format!("slave {addr}: give either `gsd` (with `modules`) or `device`"),
+            )),
+        }
+    }
+
+    /// Step 4, module resolution: each module name found in the GSD (by
+    /// exact name), or the GSD's default selection when none is given;
+    /// then the selection checked against the GSD's limits. Returns the
+    /// module indexes and their names.
+    fn modules(
+        &self,
+        rs: &Spanned<RawSlave>,
+        source: &GsdSource,
+    ) -> Result<(Vec<usize>, Vec<String>), BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        let gsd = &source.gsd;
+        let mut selection = Vec::new();
+        let mut names = Vec::new();
+        for (m, span) in &source.modules {
+            let i = gsd.find_module_index(m).map_err(|e| {
+                self.err(
+                    span.clone().or(Some(source.span.clone())),
+                    format!("slave {addr}: {}: {e}", source.describe()),
+                )
+            })?;
+            selection.push(i);
+            names.push(gsd.modules[i].name.clone());
+        }
+        if source.modules.is_empty() {
+            selection = gsd.default_selection();
+            names = selection
+                .iter()
+                .map(|&i| gsd.modules[i].name.clone())
+                .collect();
+        }
+        let problems = gsd.check_selection(&selection);
+        if !problems.is_empty() {
+            let span = s.modules.first().map(|m| m.span()).unwrap_or(rs.span());
+            let all: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
+            return Err(self.err(Some(span), format!("slave {addr}: {}", all.join("; "))));
+        }
+        Ok((selection, names))
+    }
+
+    /// The slave's User_Prm_Data: the GSD's defaults for the selected
+    /// modules with the `params` table's values by name.
+    fn user_prm_data(
+        &self,
+        rs: &Spanned<RawSlave>,
+        gsd: &Gsd,
+        selection: &[usize],
+    ) -> Result<Vec<u8>, BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        let mut values = Vec::new();
+        for (name, v) in &s.params {
+            let text = match v.get_ref() {
+                toml::Value::Integer(i) => i.to_string(),
+                toml::Value::String(t) => t.clone(),
+                toml::Value::Boolean(b) => (*b as u8).to_string(),
+                other => {
+                    return Err(self.err(
+                        Some(v.span()),
+                        format!("parameter `{name}`: {other} is neither a number nor a text"),
                     ))
                 }
             };
-            // The GSD for people: the file, or the device profile's.
-            let source = match &device {
-                Some(d) => format!("device `{}`", d.name),
-                None => gsd_path.display().to_string(),
-            };
-            if !gsd.supports_baud(baud) {
-                return Err(cx.err(
-                    Some(source_span.clone()),
-                    format!("slave {addr}: {source} does not support {baud}"),
-                ));
-            }
-            if let Some(t) = gsd.max_tsdr(baud) {
-                max_tsdr_needed = max_tsdr_needed.max(t);
-            }
-            let mut selection = Vec::new();
-            let mut names = Vec::new();
-            for (m, span) in &module_names {
-                let i = gsd.find_module_index(m).map_err(|e| {
-                    cx.err(
-                        span.clone().or(Some(source_span.clone())),
-                        format!("slave {addr}: {source}: {e}"),
-                    )
-                })?;
-                selection.push(i);
-                names.push(gsd.modules[i].name.clone());
-            }
-            if module_names.is_empty() {
-                selection = gsd.default_selection();
-                names = selection
-                    .iter()
-                    .map(|&i| gsd.modules[i].name.clone())
-                    .collect();
-            }
-            let problems = gsd.check_selection(&selection);
-            if let Some(p) = problems.first() {
-                let span = s.modules.first().map(|m| m.span()).unwrap_or(rs.span());
-                let all: Vec<String> = problems.iter().map(|p| p.to_string()).collect();
-                let _ = p;
-                return Err(cx.err(Some(span), format!("slave {addr}: {}", all.join("; "))));
-            }
-            let cfg = gsd
-                .chk_cfg(&selection)
-                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
-            let mut values = Vec::new();
-            for (name, v) in &s.params {
-                let text = match v.get_ref() {
-                    toml::Value::Integer(i) => i.to_string(),
-                    toml::Value::String(t) => t.clone(),
-                    toml::Value::Boolean(b) => (*b as u8).to_string(),
-                    other => {
-                        return Err(cx.err(
-                            Some(v.span()),
-                            format!("parameter `{name}`: {other} is neither a number nor a text"),
-                        ))
-                    }
-                };
-                let pv: PrmValue = format!("{name}={text}").parse().map_err(
-                    |e: crate::config::gsd::PrmValueParseError| {
-                        cx.err(Some(v.span()), e.to_string())
-                    },
-                )?;
-                values.push(pv);
-            }
-            let user_prm_data = gsd
-                .user_prm_data(&selection, &values)
-                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
-            let flag = |f: &Option<Spanned<bool>>| f.as_ref().is_some_and(|v| *v.get_ref());
-            let span = |f: &Option<Spanned<bool>>| f.as_ref().map(|v| v.span());
-            if flag(&s.sync) && !gsd.sync_mode_supp {
-                return Err(cx.err(
-                    span(&s.sync),
-                    format!("slave {addr}: the GSD says the device has no sync mode"),
-                ));
-            }
-            if flag(&s.freeze) && !gsd.freeze_mode_supp {
-                return Err(cx.err(
-                    span(&s.freeze),
-                    format!("slave {addr}: the GSD says the device has no freeze mode"),
-                ));
-            }
-            let mut p = SlaveParams::new(addr, gsd.ident_number, cfg);
-            p.name = s.name.clone().unwrap_or_else(|| {
-                gsd.model_name
-                    .clone()
-                    .unwrap_or_else(|| format!("slave {addr}"))
-            });
-            p.watchdog = match s.watchdog_ms {
-                Some(0) => None,
-                Some(ms) => Some(Duration::from_millis(ms)),
-                None => Some(Duration::from_secs(1)),
-            };
-            p.group = s.group.unwrap_or(0);
-            p.sync = flag(&s.sync);
-            p.freeze = flag(&s.freeze);
-            p.user_prm_data = user_prm_data;
-            p.dpv1 = s.dpv1.unwrap_or(gsd.dpv1_slave);
-            p.fail_safe = gsd.fail_safe;
-            p.min_slave_interval =
-                Duration::from_micros(100 * gsd.min_slave_intervall.unwrap_or(0) as u64);
-            p.dpv1_timeout = Duration::from_millis(
-                10 * gsd.c1_response_timeout.map_or(100, |t| t.max(1)) as u64,
-            );
-            let (_, output_len) = p
-                .io_lengths()
-                .map_err(|e| cx.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
-            if let Some(io) = &s.initial_outputs {
-                if io.get_ref().len() > output_len {
-                    return Err(cx.err(
-                        Some(io.span()),
-                        format!(
-                            "slave {addr}: {} initial output bytes, the modules have {output_len}",
-                            io.get_ref().len()
-                        ),
-                    ));
-                }
-                p.initial_outputs = io.get_ref().clone();
-            }
-            if p.set_prm().len() > 244 {
-                return Err(cx.err(
-                    Some(rs.span()),
-                    format!("slave {addr}: Set_Prm would exceed 244 bytes"),
-                ));
-            }
-            slaves.push(BusSlave {
-                params: p,
-                gsd_path,
-                device,
-                gsd,
-                modules: names,
-            });
+            let pv: PrmValue = format!("{name}={text}").parse().map_err(
+                |e: crate::config::gsd::PrmValueParseError| self.err(Some(v.span()), e.to_string()),
+            )?;
+            values.push(pv);
         }
+        gsd.user_prm_data(selection, &values)
+            .map_err(|e| self.err(Some(rs.span()), format!("slave {addr}: {e}")))
+    }
 
+    /// Step 5, the checks of a slave: sync and freeze only where the GSD
+    /// has them, the initial outputs within the output length, Set_Prm
+    /// within 244 bytes; and the master's parameters for the slave
+    /// (name, watchdog, group, DP-V1, intervals from the GSD).
+    fn slave_params(
+        &self,
+        rs: &Spanned<RawSlave>,
+        gsd: &Gsd,
+        cfg: Vec<u8>,
+        user_prm_data: Vec<u8>,
+    ) -> Result<SlaveParams, BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        let flag = |f: &Option<Spanned<bool>>| f.as_ref().is_some_and(|v| *v.get_ref());
+        let span = |f: &Option<Spanned<bool>>| f.as_ref().map(|v| v.span());
+        if flag(&s.sync) && !gsd.sync_mode_supp {
+            return Err(self.err(
+                span(&s.sync),
+                format!("slave {addr}: the GSD says the device has no sync mode"),
+            ));
+        }
+        if flag(&s.freeze) && !gsd.freeze_mode_supp {
+            return Err(self.err(
+                span(&s.freeze),
+                format!("slave {addr}: the GSD says the device has no freeze mode"),
+            ));
+        }
+        let mut p = SlaveParams::new(addr, gsd.ident_number, cfg);
+        p.name = s.name.clone().unwrap_or_else(|| {
+            gsd.model_name
+                .clone()
+                .unwrap_or_else(|| format!("slave {addr}"))
+        });
+        p.watchdog = match s.watchdog_ms {
+            Some(0) => None,
+            Some(ms) => Some(Duration::from_millis(ms)),
+            None => Some(Duration::from_secs(1)),
+        };
+        p.group = s.group.unwrap_or(0);
+        p.sync = flag(&s.sync);
+        p.freeze = flag(&s.freeze);
+        p.user_prm_data = user_prm_data;
+        p.dpv1 = s.dpv1.unwrap_or(gsd.dpv1_slave);
+        p.fail_safe = gsd.fail_safe;
+        p.min_slave_interval =
+            Duration::from_micros(100 * gsd.min_slave_intervall.unwrap_or(0) as u64);
+        p.dpv1_timeout =
+            Duration::from_millis(10 * gsd.c1_response_timeout.map_or(100, |t| t.max(1)) as u64);
+        let (_, output_len) = p
+            .io_lengths()
+            .map_err(|e| self.err(Some(rs.span()), format!("slave {addr}: {e}")))?;
+        if let Some(io) = &s.initial_outputs {
+            if io.get_ref().len() > output_len {
+                return Err(self.err(
+                    Some(io.span()),
+                    format!(
+                        "slave {addr}: {} initial output bytes, the modules have {output_len}",
+                        io.get_ref().len()
+                    ),
+                ));
+            }
+            p.initial_outputs = io.get_ref().clone();
+        }
+        if p.set_prm().len() > 244 {
+            return Err(self.err(
+                Some(rs.span()),
+                format!("slave {addr}: Set_Prm would exceed 244 bytes"),
+            ));
+        }
+        Ok(p)
+    }
+
+    /// Step 6, the `[bus]` table: the defaults of the baud rate with the
+    /// file's values; max TSDR raised to the slaves' largest `MaxTsdr`
+    /// and the slot time to max TSDR + 15 unless the file sets them (then
+    /// too low a value is an error); the result validated.
+    fn bus_params(
+        &self,
+        bus: Option<&Spanned<RawBus>>,
+        baud: Baud,
+        max_tsdr_needed: u32,
+        warnings: &mut Vec<String>,
+    ) -> Result<BusParams, BusFileError> {
         let mut params = BusParams::defaults(baud);
-        let b = raw.bus.as_ref().map(|b| b.get_ref());
+        let b = bus.map(|b| b.get_ref());
         let set = |v: Option<u32>, d: &mut u32| {
             if let Some(v) = v {
                 *d = v;
@@ -870,8 +1044,8 @@ impl BusFile {
         }
         if max_tsdr_needed > params.max_tsdr {
             if b.is_some_and(|b| b.max_tsdr.is_some()) {
-                return Err(cx.err(
-                    raw.bus.as_ref().map(|b| b.span()),
+                return Err(self.err(
+                    bus.map(|b| b.span()),
                     format!(
                         "max_tsdr {} is below the slaves' MaxTsdr of {max_tsdr_needed} at {baud}",
                         params.max_tsdr
@@ -886,8 +1060,8 @@ impl BusFile {
         }
         if params.slot_time < params.max_tsdr + 15 {
             if b.is_some_and(|b| b.slot_time.is_some()) {
-                return Err(cx.err(
-                    raw.bus.as_ref().map(|b| b.span()),
+                return Err(self.err(
+                    bus.map(|b| b.span()),
                     format!(
                         "slot_time {} must be at least max TSDR + 15 = {}",
                         params.slot_time,
@@ -899,37 +1073,29 @@ impl BusFile {
         }
         params
             .validate()
-            .map_err(|e| cx.err(raw.bus.as_ref().map(|b| b.span()), e.to_string()))?;
+            .map_err(|e| self.err(bus.map(|b| b.span()), e.to_string()))?;
+        Ok(params)
+    }
+}
 
-        let o = raw.options.unwrap_or_default();
-        let d = MasterOptions::default();
-        let ms = |v: Option<u64>| v.filter(|&x| x > 0).map(Duration::from_millis);
-        let options = MasterOptions {
-            lost_after: o.lost_after.unwrap_or(d.lost_after).max(1),
-            reprobe_interval: o
-                .reprobe_ms
-                .map(Duration::from_millis)
-                .unwrap_or(d.reprobe_interval),
-            diag_interval: ms(o.diag_interval_ms),
-            global_control_interval: match o.global_control_ms {
-                None => d.global_control_interval,
-                Some(v) => ms(Some(v)),
-            },
-            not_ready_limit: d.not_ready_limit,
-            alone_hold_bits: o.alone_hold_bits.unwrap_or(d.alone_hold_bits),
-        };
-        Ok(BusFile {
-            path: path.to_path_buf(),
-            master: MasterConfig {
-                address,
-                params,
-                slaves: slaves.iter().map(|s| s.params.clone()).collect(),
-                options,
-            },
-            slaves,
-            warnings,
-            mqtt: raw.mqtt,
-        })
+/// Step 7, the `[options]` table: the master's options, defaults where
+/// the file gives none (a 0 ms interval is off).
+fn master_options(o: RawOptions) -> MasterOptions {
+    let d = MasterOptions::default();
+    let ms = |v: Option<u64>| v.filter(|&x| x > 0).map(Duration::from_millis);
+    MasterOptions {
+        lost_after: o.lost_after.unwrap_or(d.lost_after).max(1),
+        reprobe_interval: o
+            .reprobe_ms
+            .map(Duration::from_millis)
+            .unwrap_or(d.reprobe_interval),
+        diag_interval: ms(o.diag_interval_ms),
+        global_control_interval: match o.global_control_ms {
+            None => d.global_control_interval,
+            Some(v) => ms(Some(v)),
+        },
+        not_ready_limit: d.not_ready_limit,
+        alone_hold_bits: o.alone_hold_bits.unwrap_or(d.alone_hold_bits),
     }
 }
 
