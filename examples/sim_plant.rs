@@ -1,5 +1,5 @@
 //! The simulated plant of `dpctl demo`: a DP master and the emulated
-//! slaves of the library's plant (generic GSD devices, BM4-O-PRO-01,
+//! slaves of `profibus-plant`'s demo plant (generic GSD devices, BM4-O-PRO-01,
 //! Omega, BK3000, JX2-PROFI1; `dpctl demo` adds its RFID reader) on a
 //! paced 1.5 Mbit/s line in virtual time, with the
 //! demo's PLC program writing outputs and running PKW jobs. Runs two
@@ -8,12 +8,12 @@
 //!
 //! Run: `cargo run --example sim_plant`
 
-use profibus::devices::demo::Plant;
 use profibus::fdl::Instant;
+use profibus_plant::demo::DemoPlant;
 use std::time::Duration;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut plant = Plant::new(vec![])?;
+    let mut plant = DemoPlant::new(vec![])?;
     let end = Instant::ZERO + Duration::from_secs(2);
     while plant.now() < end {
         plant.advance(None); // one step of bus time
