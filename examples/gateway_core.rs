@@ -8,8 +8,8 @@
 //! Run: `cargo run --example gateway_core`
 
 use profibus::devices::bus::ProfiledBus;
-use profibus_gateway::sim::SimPlant;
 use profibus_gateway::{slave_infos, Gateway, MqttSettings};
+use profibus_plant::Plant;
 use std::time::Duration;
 
 const BUS: &str = r#"
@@ -32,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let bus = ProfiledBus::parse(&dir, BUS)?;
     let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line1")?;
     let mut gateway = Gateway::new(settings, slave_infos(&bus)?);
-    let mut plant = SimPlant::new(&bus)?;
+    let mut plant = Plant::from_bus(&bus)?;
     gateway.connected(0);
     for ms in 1..=300u64 {
         // One millisecond of bus time, then the gateway at the boundary.
