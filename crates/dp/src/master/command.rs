@@ -50,10 +50,46 @@ pub enum MasterCommand {
 /// Why a command was refused; nothing of it was executed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum CommandError {
-    /// Not a command: the text, a field or a value is wrong (the message
-    /// names the field).
-    #[error("{0}")]
-    Invalid(String),
+    /// Not a JSON object of the command's shape, or a field's value is
+    /// wrong (the message names the field).
+    #[error("{message}")]
+    Json {
+        /// serde_json's message, with the position only where it helps.
+        message: String,
+    },
+    /// None of the command keys is given.
+    #[error(
+        "no command: give one of slave, operating, global_control, read_diag, get_cfg, rd_inp, rd_outp, dpv1_read, dpv1_write, set_slave_add"
+    )]
+    NoCommand,
+    /// More than one command key in one line.
+    #[error("one command per line, not {}", given.join(" and "))]
+    SeveralCommands {
+        /// The command keys given.
+        given: Vec<&'static str>,
+    },
+    /// A field of another command.
+    #[error("`{field}` does not belong to `{command}`")]
+    ForeignField {
+        /// The field.
+        field: &'static str,
+        /// The command given.
+        command: &'static str,
+    },
+    /// A field the command needs is missing.
+    #[error("`{command}` needs `{field}`")]
+    MissingField {
+        /// The field.
+        field: &'static str,
+        /// The command given.
+        command: &'static str,
+    },
+    /// `slave` with both `outputs` and `set`.
+    #[error("give `outputs` or `set`, not both")]
+    OutputsAndSet,
+    /// `slave` with neither `outputs` nor `set`.
+    #[error("`slave` needs `outputs` (or `set` by channel name)")]
+    NoOutputs,
     /// Outputs by channel name: for the device profile layer.
     #[error("outputs by channel name need the slave's device profile")]
     Channels,
@@ -88,8 +124,9 @@ impl MasterCommand {
     /// Read one command from a JSON object (one line of `dpctl master
     /// --input`).
     pub fn from_json(text: &str) -> Result<MasterCommand, CommandError> {
-        let raw: Raw =
-            serde_json::from_str(text).map_err(|e| CommandError::Invalid(json_error(&e)))?;
+        let raw: Raw = serde_json::from_str(text).map_err(|e| CommandError::Json {
+            message: json_error(&e),
+        })?;
         raw.into_command()
     }
 }
@@ -216,8 +253,8 @@ struct Raw {
     no_add_chg: Option<bool>,
 }
 
-fn need<T>(v: Option<T>, field: &str, command: &str) -> Result<T, CommandError> {
-    v.ok_or_else(|| CommandError::Invalid(format!("`{command}` needs `{field}`")))
+fn need<T>(v: Option<T>, field: &'static str, command: &'static str) -> Result<T, CommandError> {
+    v.ok_or(CommandError::MissingField { field, command })
 }
 
 impl Raw {
@@ -234,20 +271,11 @@ impl Raw {
             ("dpv1_write", self.dpv1_write.is_some()),
             ("set_slave_add", self.set_slave_add.is_some()),
         ];
-        let given: Vec<&str> = keys.iter().filter(|k| k.1).map(|k| k.0).collect();
+        let given: Vec<&'static str> = keys.iter().filter(|k| k.1).map(|k| k.0).collect();
         let command = match given[..] {
             [one] => one,
-            [] => {
-                return Err(CommandError::Invalid(
-                    "no command: give one of slave, operating, global_control, read_diag, get_cfg, rd_inp, rd_outp, dpv1_read, dpv1_write, set_slave_add".into(),
-                ))
-            }
-            _ => {
-                return Err(CommandError::Invalid(format!(
-                    "one command per line, not {}",
-                    given.join(" and ")
-                )))
-            }
+            [] => return Err(CommandError::NoCommand),
+            _ => return Err(CommandError::SeveralCommands { given }),
         };
         // Fields that belong to other commands are mistakes, not noise.
         let fields = [
@@ -268,9 +296,7 @@ impl Raw {
         ];
         for (field, present, owners) in fields {
             if present && !owners.contains(&command) {
-                return Err(CommandError::Invalid(format!(
-                    "`{field}` does not belong to `{command}`"
-                )));
+                return Err(CommandError::ForeignField { field, command });
             }
         }
         let job = |j| Ok(MasterCommand::Job(j));
@@ -280,12 +306,8 @@ impl Raw {
                 match (self.outputs, self.set) {
                     (Some(data), None) => Ok(MasterCommand::SetOutputs { slave, data }),
                     (None, Some(_)) => Err(CommandError::Channels),
-                    (Some(_), Some(_)) => Err(CommandError::Invalid(
-                        "give `outputs` or `set`, not both".into(),
-                    )),
-                    (None, None) => Err(CommandError::Invalid(
-                        "`slave` needs `outputs` (or `set` by channel name)".into(),
-                    )),
+                    (Some(_), Some(_)) => Err(CommandError::OutputsAndSet),
+                    (None, None) => Err(CommandError::NoOutputs),
                 }
             }
             "operating" => Ok(MasterCommand::Operating(
