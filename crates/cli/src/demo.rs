@@ -6,9 +6,10 @@
 use crate::common;
 use crate::view::{bus_view, drain_events, Line, SlaveInfo, View};
 use anyhow::{Context, Result};
-use profibus_devices::demo::{DemoSlave, Plant, BAUD};
 use profibus_fdl::capture::pcap::PcapWriter;
 use profibus_fdl::Instant;
+use profibus_plant::demo::{DemoPlant, BAUD};
+use profibus_plant::PlantSlave;
 use std::cell::RefCell;
 use std::io::IsTerminal;
 use std::rc::Rc;
@@ -53,15 +54,16 @@ async fn demo(args: Args) -> Result<()> {
     // The RFID reader with a tag that comes and goes, and the PLC's
     // commands to it.
     let (mut reader, parts) = profibus_devices::rfid::demo::DemoReader::new(RFID_ADDRESS)?;
-    let rfid = DemoSlave {
+    let rfid = PlantSlave {
         address: RFID_ADDRESS,
         name: "RFID reader ARE I2 (rfid)".into(),
-        gsd: parts.gsd,
+        gsd: Some(parts.gsd),
         modules: parts.modules,
         channels: Some(parts.channels),
+        profile: Some("rfid"),
     };
-    let mut plant = Plant::new(vec![(rfid, parts.device)])?;
-    let info: Vec<SlaveInfo> = plant.slaves().iter().map(SlaveInfo::from).collect();
+    let mut plant = DemoPlant::new(vec![(rfid, parts.device)])?;
+    let info: Vec<SlaveInfo> = plant.slaves().iter().map(slave_info).collect();
     let pcap = (args.pcap.as_deref())
         .map(|p| {
             PcapWriter::create(p, Duration::ZERO)
@@ -111,7 +113,7 @@ async fn demo(args: Args) -> Result<()> {
             let pause = if behind {
                 Duration::ZERO
             } else {
-                profibus_devices::demo::STEP
+                profibus_plant::demo::STEP
             };
             tokio::select! {
                 _ = &mut shutdown => break,
@@ -136,4 +138,15 @@ async fn demo(args: Args) -> Result<()> {
         w.flush()?;
     }
     Ok(())
+}
+
+/// What the view shows of a slave of the plant.
+fn slave_info(s: &PlantSlave) -> SlaveInfo {
+    SlaveInfo {
+        address: s.address,
+        name: s.name.clone(),
+        gsd: s.gsd.clone(),
+        channels: s.channels.clone(),
+        modules: s.modules.clone(),
+    }
 }

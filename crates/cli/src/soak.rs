@@ -1,9 +1,9 @@
-//! `dpctl soak`: the fault soak of `profibus_devices::soak` (a master and
+//! `dpctl soak`: the fault soak of `profibus_plant::soak` (a master and
 //! one slave of every device profile on the simulated bus, with faults
 //! on the line), printed.
 
 use anyhow::{bail, Result};
-use profibus_devices::soak::{self, SoakConfig};
+use profibus_plant::soak::{self, SoakConfig};
 use std::time::Duration;
 
 /// Run the fault soak: a master and one slave of every device profile on

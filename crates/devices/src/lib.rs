@@ -46,9 +46,8 @@
 //! runner, keeping Set_Slave_Add addresses and device state in files);
 //! `profibus_io::control_io` feeds a [`ControlInbox`] from a file, stdin or
 //! a Unix socket, and `profibus_io::jx2` runs the JX2's register clients.
-//! - [`demo`]: the demo plant of `dpctl demo` (a master and a slave of
-//!   every profile on the simulated bus, with the PLC program that moves
-//!   them), sans-IO.
+//! The demo plant of `dpctl demo` and the fault soak (a master and a
+//! slave of every profile on the simulated bus) are in `profibus-plant`.
 //!
 //! # How to add a profile
 //!
@@ -97,7 +96,6 @@ pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
-pub mod demo;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;
@@ -107,7 +105,6 @@ pub mod pkw;
 pub mod pkw_task;
 pub mod profile;
 pub mod rfid;
-pub mod soak;
 
 pub use profile::{
     Configured, ControlError, ControlInbox, DeviceOptions, Profile, ProfileEntry, ProfileError,

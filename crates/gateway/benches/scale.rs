@@ -24,8 +24,9 @@
 mod support;
 
 use profibus_gateway::link;
-use profibus_gateway::sim::{Pacer, SimPlant};
+use profibus_gateway::sim::Pacer;
 use profibus_gateway::{sparkplug, EdgeNode, MqttLink, Session, SparkplugId};
+use profibus_plant::Plant;
 use std::io::BufRead;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -90,7 +91,7 @@ fn gateway(
 /// The loop of one gateway: the plant paced, new outputs every `write`,
 /// the core stepped after every turn; timed into `c`.
 fn drive(
-    plant: &mut SimPlant,
+    plant: &mut Plant,
     pacer: &Pacer,
     gw: &mut impl Session,
     link: &mut MqttLink,

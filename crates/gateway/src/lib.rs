@@ -44,7 +44,8 @@
 //! ```
 //! use profibus_devices::bus::ProfiledBus;
 //! use profibus_fdl::Instant;
-//! use profibus_gateway::sim::{slave_infos, SimPlant};
+//! use profibus_gateway::sim::slave_infos;
+//! use profibus_plant::Plant;
 //! use profibus_gateway::{Gateway, MqttSettings};
 //! use std::path::Path;
 //! use std::time::Duration;
@@ -58,7 +59,7 @@
 //! )?;
 //! let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line")?;
 //! let mut gateway = Gateway::new(settings, slave_infos(&bus)?);
-//! let mut plant = SimPlant::new(&bus)?;
+//! let mut plant = Plant::from_bus(&bus)?;
 //! gateway.connected(0);
 //! gateway.handle_message(
 //!     "profibus/line/25/outputs/set",

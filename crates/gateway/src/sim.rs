@@ -1,90 +1,21 @@
 //! A bus file's slaves as emulated devices on the in-process simulated
-//! bus, paced at the bus file's baud rate: a gateway with no hardware
-//! (`dpctl gateway --sim`). Slaves given as a device profile run that
-//! profile's device; slaves given by GSD modules run the generic device
-//! with inputs that echo the outputs.
+//! bus ([`Plant::from_bus`]), paced at the bus file's baud rate: a
+//! gateway with no hardware (`dpctl gateway --sim`). Slaves given as a
+//! device profile run that profile's device; slaves given by GSD modules
+//! run the generic device with inputs that echo the outputs.
 
 use crate::link::MqttLink;
 use crate::session::Session;
 pub use crate::slave::slave_infos;
 use profibus_devices::bus::ProfiledBus;
-use profibus_devices::generic::{GenericDevice, GenericError};
-use profibus_devices::{BoxedDevice, ProfileError};
-use profibus_dp::master::{DpMaster, MasterConfigError};
-use profibus_dp::slave::DpSlave;
-use profibus_fdl::line::medium::MediumConfig;
-use profibus_fdl::sim::{SimBus, StationId};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-use profibus_fdl::station::passive::PassiveStation;
 use profibus_fdl::Instant;
+use profibus_plant::{Plant, PlantError};
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-/// Why a simulated plant could not be built.
-#[derive(Debug, thiserror::Error)]
-pub enum SimError {
-    /// The master's configuration.
-    #[error(transparent)]
-    Master(#[from] MasterConfigError),
-    /// A device profile.
-    #[error("slave {0}: {1}")]
-    Profile(u8, ProfileError),
-    /// A slave given by GSD modules.
-    #[error("slave {0}: {1}")]
-    Generic(u8, GenericError),
-}
-
-/// The master and the emulated slaves of a bus file on a simulated line.
-pub struct SimPlant {
-    bus: SimBus,
-    master: StationId,
-}
-
-impl SimPlant {
-    /// Build the plant of `profiled`.
-    pub fn new(profiled: &ProfiledBus) -> Result<SimPlant, SimError> {
-        let file = &profiled.file;
-        let params = file.master.params;
-        let mut bus = SimBus::new(MediumConfig::paced(params.baud));
-        let master = bus.add(ActiveStation::new(
-            ActiveConfig::new(file.master.address, params),
-            DpMaster::new(&file.master)?,
-        ));
-        for s in &file.slaves {
-            let a = s.params.address;
-            let device: BoxedDevice = match profiled.profile(a) {
-                Some(p) => p.device(None).map_err(|e| SimError::Profile(a, e))?,
-                None => Box::new(
-                    GenericDevice::from_gsd(&s.gsd, &s.modules)
-                        .map_err(|e| SimError::Generic(a, e))?,
-                ),
-            };
-            bus.add(PassiveStation::new(DpSlave::new(device, a), params));
-        }
-        Ok(SimPlant { bus, master })
-    }
-
-    /// Run the line up to `t` (virtual time since the start).
-    pub fn run_until(&mut self, t: Instant) {
-        self.bus.run_until(t);
-    }
-
-    /// The virtual time.
-    pub fn now(&self) -> Instant {
-        self.bus.now()
-    }
-
-    /// The DP master.
-    pub fn master(&mut self) -> &mut DpMaster {
-        self.bus
-            .station_mut::<ActiveStation<DpMaster>>(self.master)
-            .app_mut()
-    }
-}
-
-/// Paces a [`SimPlant`] on the wall clock: each turn runs the line up to
+/// Paces a [`Plant`] on the wall clock: each turn runs the line up to
 /// the time elapsed since [`Pacer::new`], at most [`Pacer::MOST`] of bus
 /// time per turn, so on a machine too busy to keep up the line runs
 /// slower than real time and the rest of the loop still gets its turn.
@@ -110,7 +41,7 @@ impl Pacer {
 
     /// The bus time the next turn runs to, and whether the line is
     /// behind the wall clock by more than [`Pacer::MOST`].
-    pub fn target(&self, plant: &SimPlant) -> (Instant, bool) {
+    pub fn target(&self, plant: &Plant) -> (Instant, bool) {
         let wall = self.bus_time(std::time::Instant::now());
         let most = plant.now() + Self::MOST;
         if wall > most {
@@ -132,7 +63,7 @@ impl Pacer {
 
     /// One turn: run the line to [`Pacer::target`]; returns the pause
     /// before the next turn ([`Pacer::TICK`], zero when behind).
-    pub fn advance(&self, plant: &mut SimPlant) -> Duration {
+    pub fn advance(&self, plant: &mut Plant) -> Duration {
         let (t, behind) = self.target(plant);
         plant.run_until(t);
         if behind {
@@ -159,12 +90,12 @@ pub async fn serve<S: Session + Send + 'static>(
     mut gateway: S,
     mut link: MqttLink,
     shutdown: impl Future<Output = ()>,
-) -> Result<(), SimError> {
+) -> Result<(), PlantError> {
     let stop = Arc::new(AtomicBool::new(false));
     let (done, mut ended) = tokio::sync::oneshot::channel();
     let flag = stop.clone();
     std::thread::spawn(move || {
-        let run = SimPlant::new(&profiled).map(|mut plant| {
+        let run = Plant::from_bus(&profiled).map(|mut plant| {
             let pacer = Pacer::new();
             while !flag.load(Ordering::Relaxed) {
                 let pause = pacer.advance(&mut plant);

@@ -4,8 +4,8 @@
 
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::SlaveState;
-use profibus_gateway::sim::SimPlant;
 use profibus_gateway::{slave_infos, Gateway, MqttSettings, WriteAccess};
+use profibus_plant::Plant;
 
 type Msgs = Vec<(String, serde_json::Value, bool)>;
 
@@ -27,7 +27,7 @@ fn find<'a>(msgs: &'a Msgs, topic: &str) -> Option<&'a serde_json::Value> {
 
 /// A simulated plant: a generic DP-V1 slave (3), an Omega drive with
 /// PKW (25) and an RFID reader (30), all writable but the reader.
-fn plant() -> (Gateway, SimPlant, ProfiledBus) {
+fn plant() -> (Gateway, Plant, ProfiledBus) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../devices/gsd/plant.toml");
     let text = "[master]\naddress = 1\nbaud = \"1.5M\"\n\n\
         [[slave]]\naddress = 3\ngsd = \"DPCTL_GEN.GSD\"\nmodules = [\"2 words in/out\"]\n\n\
@@ -39,13 +39,13 @@ fn plant() -> (Gateway, SimPlant, ProfiledBus) {
     let bus = ProfiledBus::parse(&dir, text).unwrap();
     let s = MqttSettings::from_table(bus.file.mqtt.as_ref(), "p").unwrap();
     let g = Gateway::new(s, slave_infos(&bus).unwrap());
-    let plant = SimPlant::new(&bus).unwrap();
+    let plant = Plant::from_bus(&bus).unwrap();
     (g, plant, bus)
 }
 
 /// Run the plant 1 ms at a time until a message on `topic` (at most
 /// 2 s of bus time).
-fn run_until(g: &mut Gateway, p: &mut SimPlant, topic: &str) -> serde_json::Value {
+fn run_until(g: &mut Gateway, p: &mut Plant, topic: &str) -> serde_json::Value {
     for _ in 0..2000 {
         let t = p.now() + std::time::Duration::from_millis(1);
         p.run_until(t);

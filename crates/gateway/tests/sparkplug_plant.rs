@@ -4,17 +4,17 @@
 
 use profibus_devices::bus::ProfiledBus;
 use profibus_fdl::Instant;
-use profibus_gateway::sim::SimPlant;
 use profibus_gateway::sparkplug::proto::{DataType, Metric, MetricValue, Payload};
 use profibus_gateway::sparkplug::{devices, metrics, BD_SEQ, REBIRTH};
 use profibus_gateway::{EdgeNode, MqttSettings, SafeState, Session, SparkplugId};
+use profibus_plant::Plant;
 use prost::Message;
 
 /// Master 1 with two GSD slaves, 3 (named) and 4; 3 writable.
 const BUS: &str = include_str!("data/sparkplug_bus.toml");
 
 struct Rig {
-    plant: SimPlant,
+    plant: Plant,
     node: EdgeNode,
     t: u64,
 }
@@ -36,7 +36,7 @@ impl Rig {
             devices(&bus).unwrap(),
         );
         Rig {
-            plant: SimPlant::new(&bus).unwrap(),
+            plant: Plant::from_bus(&bus).unwrap(),
             node,
             t: 0,
         }

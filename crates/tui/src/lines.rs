@@ -5,7 +5,6 @@
 use crate::bus::{BusView, Decoding, SlaveSpec};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::{ChannelMap, ImageValues};
-use profibus_devices::demo::DemoSlave;
 use profibus_devices::profile::ProfileError;
 use profibus_dp::config::busfile::{BusFile, BusSlave};
 use profibus_dp::config::gsd::Gsd;
@@ -76,19 +75,6 @@ impl SlaveInfo {
                 (None, Some(g)) => Decoding::modules(g, &self.modules),
                 (None, None) => Decoding::None,
             },
-        }
-    }
-}
-
-impl From<&DemoSlave> for SlaveInfo {
-    /// A slave of the demo plant.
-    fn from(s: &DemoSlave) -> SlaveInfo {
-        SlaveInfo {
-            address: s.address,
-            name: s.name.clone(),
-            gsd: Some(s.gsd.clone()),
-            channels: s.channels.clone(),
-            modules: s.modules.clone(),
         }
     }
 }

@@ -100,7 +100,7 @@ mod stop;
 mod task;
 mod wait;
 
-pub use command::{CommandError, CommandOutcome, MasterCommand};
+pub use command::{CommandError, CommandOutcome, MasterCommand, Queue};
 pub use config::{
     MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
     DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST, STARTUP_RETRY_MAX,

@@ -6,8 +6,9 @@
 #![allow(dead_code)]
 
 use profibus_devices::bus::ProfiledBus;
-use profibus_gateway::sim::{slave_infos, Pacer, SimPlant};
+use profibus_gateway::sim::{slave_infos, Pacer};
 use profibus_gateway::{Broker as BrokerUrl, Connection, Gateway, MqttLink, MqttSettings, Session};
+use profibus_plant::Plant;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
@@ -95,7 +96,7 @@ pub fn bus(text: &str) -> ProfiledBus {
 pub fn run_gateway<R>(
     text: &str,
     port: u16,
-    turns: impl FnOnce(&mut SimPlant, &Pacer, &mut Gateway, &mut MqttLink) -> R,
+    turns: impl FnOnce(&mut Plant, &Pacer, &mut Gateway, &mut MqttLink) -> R,
 ) -> R {
     let make = |p: &ProfiledBus, s| Gateway::new(s, slave_infos(p).unwrap());
     run_session(text, port, make, turns)
@@ -110,7 +111,7 @@ pub fn run_session<S: Session, R>(
     text: &str,
     port: u16,
     make: impl FnOnce(&ProfiledBus, MqttSettings) -> S,
-    turns: impl FnOnce(&mut SimPlant, &Pacer, &mut S, &mut MqttLink) -> R,
+    turns: impl FnOnce(&mut Plant, &Pacer, &mut S, &mut MqttLink) -> R,
 ) -> R {
     let profiled = bus(text);
     let settings = MqttSettings::from_table(profiled.file.mqtt.as_ref(), "bench").unwrap();
@@ -132,7 +133,7 @@ pub fn run_session<S: Session, R>(
     let client = std::thread::spawn(move || {
         let _ = rt.block_on(stopped);
     });
-    let mut plant = SimPlant::new(&profiled).unwrap();
+    let mut plant = Plant::from_bus(&profiled).unwrap();
     let r = turns(&mut plant, &Pacer::new(), &mut gw, &mut link);
     let _ = stop.send(());
     let _ = client.join();

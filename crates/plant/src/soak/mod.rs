@@ -53,7 +53,7 @@ pub use ledger::Integrity;
 pub use stats::Distribution;
 
 use ledger::{Ledger, Recorded};
-use plant::{MasterStation, PlantSlave, SlaveStation};
+use plant::{MasterStation, SlaveStation};
 use profibus_dp::master::{MasterEvent, SlaveState};
 use profibus_fdl::line::medium::{MediumConfig, MediumStats};
 use profibus_fdl::sim::{SimBus, StationId};
@@ -391,11 +391,11 @@ pub enum SoakError {
         name: &'static str,
         /// The cause (in the message; not also `source()`, so that a
         /// printed error chain names it once).
-        error: crate::ProfileError,
+        error: profibus_devices::ProfileError,
     },
-    /// The master cannot be configured.
+    /// The plant's builder refused a slave or the master.
     #[error(transparent)]
-    Master(#[from] profibus_dp::master::MasterConfigError),
+    Plant(#[from] crate::PlantError),
     /// A fault setting is out of range.
     #[error(transparent)]
     Medium(#[from] profibus_fdl::line::medium::MediumConfigError),
@@ -418,7 +418,7 @@ enum Msg {
 pub fn run(cfg: &SoakConfig, mut progress: impl FnMut(&Progress)) -> Result<SoakReport, SoakError> {
     cfg.medium().validate()?;
     // Configure once here so that setup errors come back as errors.
-    plant::slaves(cfg)?;
+    plant::stations(cfg)?;
     let heartbeat = Arc::new(AtomicU64::new(0));
     let (tx, rx) = mpsc::channel();
     let worker = {
@@ -531,32 +531,24 @@ impl Soak {
         heartbeat: Arc<AtomicU64>,
         tx: mpsc::Sender<Msg>,
     ) -> Result<Soak, SoakError> {
-        let slaves: Vec<PlantSlave> = plant::slaves(cfg)?;
-        let master_cfg = plant::master_config(cfg, &slaves)?;
-        let ledger = Rc::new(RefCell::new(Ledger::new(slaves.len() + 1)));
-        let mut bus = SimBus::new(cfg.medium());
-        let master = bus.add(Recorded::new(
-            plant::master_station(cfg, &master_cfg)?,
-            0,
-            ledger.clone(),
-        ));
+        let stations = plant::stations(cfg)?;
+        let ledger = Rc::new(RefCell::new(Ledger::new(stations.slaves.len() + 1)));
+        let mut bus = SimBus::new(stations.medium);
+        let master = bus.add(Recorded::new(stations.master, 0, ledger.clone()));
         let mut tracked = Vec::new();
-        for (i, s) in slaves.into_iter().enumerate() {
-            let station = bus.add(Recorded::new(
-                plant::slave_station(cfg, s.device, s.address),
-                i + 1,
-                ledger.clone(),
-            ));
+        for (i, (s, station)) in stations.slaves.into_iter().enumerate() {
+            let station = bus.add(Recorded::new(station, i + 1, ledger.clone()));
+            let profile = plant::profile(&s);
             tracked.push(Tracked {
                 station,
                 address: s.address,
-                profile: s.profile,
+                profile,
                 last: Default::default(),
                 disturbed: None,
                 dx_left: None,
                 summary: SlaveSummary {
                     address: s.address,
-                    profile: s.profile.into(),
+                    profile: profile.into(),
                     ..SlaveSummary::default()
                 },
             });

@@ -10,9 +10,9 @@ fn short(cycles: u64) -> SoakConfig {
 
 #[test]
 fn every_profile_has_a_slave_and_reaches_data_exchange() {
-    let slaves = plant::slaves(&SoakConfig::default()).unwrap();
-    let names: Vec<&str> = slaves.iter().map(|s| s.profile).collect();
-    for p in crate::PROFILES {
+    let slaves = plant::stations(&SoakConfig::default()).unwrap().slaves;
+    let names: Vec<&str> = slaves.iter().map(|(s, _)| plant::profile(s)).collect();
+    for p in profibus_devices::PROFILES {
         assert!(names.contains(&p.name), "{} missing", p.name);
     }
     // A clean line: no disturbance at all.
@@ -92,4 +92,19 @@ fn forged_tokens_are_counted_and_every_invariant_holds() {
         )),
         "{text}"
     );
+}
+
+#[test]
+fn a_profile_error_is_named_once() {
+    let e = profibus_devices::profile::read_option_file(std::path::Path::new(
+        "/nonexistent/params.toml",
+    ))
+    .unwrap_err();
+    // The cause is in the message and not also the source, so that a
+    // printed chain (`dpctl: {e:#}`) names it once.
+    let e = SoakError::Profile {
+        name: "omega",
+        error: e,
+    };
+    assert!(std::error::Error::source(&e).is_none());
 }

@@ -1,37 +1,31 @@
 //! The demo plant of `dpctl demo`: a DP master (station 1) and emulated
-//! slaves of every profile on an in-process [`SimBus`] at 1.5 Mbit/s,
+//! slaves of every profile on the simulated bus ([`Plant`]) at 1.5 Mbit/s,
 //! with the PLC program that moves them.
 //!
 //! Sans-IO: the plant runs on virtual time only when told to
-//! ([`Plant::advance`]); [`Plant::step`] runs one pass of the PLC program
+//! ([`DemoPlant::advance`]); [`DemoPlant::step`] runs one pass of the PLC program
 //! (ramps and a speed profile on the outputs, the BM4's own PLC counting a
 //! variable, rounds of PKW jobs on the BM4 and the Omega drive) and
 //! returns the PKW jobs that ended. A program showing the plant reads the
-//! master through [`Plant::master`] and the slaves through
-//! [`Plant::slaves`].
+//! master through [`DemoPlant::master`] and the slaves through
+//! [`DemoPlant::slaves`].
 //!
 //! The slaves: a generic echo (3) and counter (4) device from
 //! `DPCTL-GEN.gsd`, a Baumüller BM4-O-PRO-01 with the manual's example
 //! variables (6), an Omega Drive-Line II (25), a Beckhoff BK3000 with a
 //! mixed terminal strip (9), a JX2-PROFI1 whose PLC configured it and runs
-//! a program (7), and whatever else the caller adds ([`Plant::new`]).
+//! a program (7), and whatever else the caller adds ([`DemoPlant::new`]).
 
-use crate::channels::{ChannelMap, Value};
-use crate::generic::{GenericDevice, GenericError, InputPattern};
-use crate::jx2::{self, script::Interpreter};
-use crate::pkw::{self, client::PkwClient};
-use crate::{gsd_files, BoxedDevice, ControlInbox, DeviceOptions, ProfileError};
-use profibus_dp::config::gsd::{Gsd, GsdError, LookupError, SelectionError};
-use profibus_dp::master::{
-    DpMaster, MasterConfig, MasterConfigError, MasterOptions, SlaveParams, SlaveState,
-};
-use profibus_dp::slave::DpSlave;
-use profibus_fdl::line::medium::MediumConfig;
+use crate::{Plant, PlantError, PlantSlave};
+use profibus_devices::channels::{ChannelMap, Value};
+use profibus_devices::generic::InputPattern;
+use profibus_devices::jx2::{self, script::Interpreter};
+use profibus_devices::pkw::{self, client::PkwClient};
+use profibus_devices::{gsd_files, BoxedDevice, ControlInbox};
+use profibus_dp::config::gsd::GsdError;
+use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_fdl::line::tap::{Tap, TapEvent};
-use profibus_fdl::sim::{SimBus, StationId};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-use profibus_fdl::station::passive::PassiveStation;
-use profibus_fdl::{Baud, BusParams, Instant};
+use profibus_fdl::{Baud, Instant};
 use std::cell::Cell;
 use std::rc::Rc;
 use std::time::Duration;
@@ -42,7 +36,7 @@ pub const BAUD: Baud = Baud::B1500000;
 /// Station address of the plant's master.
 pub const MASTER_ADDRESS: u8 = 1;
 
-/// Longest stretch of bus time one [`Plant::advance`] runs.
+/// Longest stretch of bus time one [`DemoPlant::advance`] runs.
 pub const STEP: Duration = Duration::from_millis(20);
 
 /// Station address of the BM4-O-PRO-01.
@@ -81,29 +75,12 @@ goto loop
 /// Why the plant cannot be built.
 #[derive(Debug, thiserror::Error)]
 pub enum DemoError {
-    /// A device profile refused its options.
+    /// The plant's builder refused a slave or the master.
     #[error(transparent)]
-    Profile(#[from] ProfileError),
-    /// A generic device cannot be built from its GSD.
-    #[error("building {name}: {error}")]
-    Generic {
-        /// The slave's name.
-        name: String,
-        /// Why.
-        error: GenericError,
-    },
+    Plant(#[from] PlantError),
     /// A shipped GSD file does not parse.
     #[error(transparent)]
     Gsd(#[from] GsdError),
-    /// A module name matches no module of a GSD.
-    #[error(transparent)]
-    Module(#[from] LookupError),
-    /// A GSD cannot give a configuration.
-    #[error(transparent)]
-    Selection(#[from] SelectionError),
-    /// The master refused its configuration.
-    #[error(transparent)]
-    Master(#[from] MasterConfigError),
     /// The JX2 PLC's script does not parse.
     #[error(transparent)]
     Script(#[from] jx2::script::ParseError),
@@ -115,67 +92,44 @@ pub enum DemoError {
     Jx2NotConfigured,
 }
 
-/// A slave of the plant as a master and a view see it.
-#[derive(Clone)]
-pub struct DemoSlave {
-    /// Station address.
-    pub address: u8,
-    /// Its name for people.
-    pub name: String,
-    /// Its GSD.
-    pub gsd: Gsd,
-    /// The GSD modules it is configured with, in slot order.
-    pub modules: Vec<String>,
-    /// Named channels of its process images, where the profile has them.
-    pub channels: Option<ChannelMap>,
-}
-
-type Master = ActiveStation<DpMaster>;
-type Slave = PassiveStation<DpSlave<BoxedDevice>>;
-
 /// The whole plant: see the module docs.
-pub struct Plant {
-    bus: SimBus,
-    master: StationId,
-    slaves: Vec<DemoSlave>,
+pub struct DemoPlant {
+    plant: Plant,
     telegrams: Rc<Cell<u64>>,
     /// Commands for the BM4's own PLC program.
     bm4: ControlInbox,
+    /// The channels the PLC program writes by name: the Omega's and the
+    /// BM4's.
+    channels: [Option<ChannelMap>; 2],
     ramp: u16,
     next_output: Instant,
     pkw: [DemoPkw; 2],
 }
 
-impl Plant {
+impl DemoPlant {
     /// The plant with its own slaves, then `extra` (a slave and its
     /// device each), on a line paced at [`BAUD`].
-    pub fn new(extra: Vec<(DemoSlave, BoxedDevice)>) -> Result<Plant, DemoError> {
-        let params = BusParams::defaults(BAUD);
+    pub fn new(extra: Vec<(PlantSlave, BoxedDevice)>) -> Result<DemoPlant, DemoError> {
         let bm4 = ControlInbox::new();
-        let mut slaves = own_slaves(bm4.clone())?;
-        slaves.extend(extra);
-        let cfg = master_config(params, slaves.iter().map(|s| &s.0))?;
-        let mut bus = SimBus::new(MediumConfig::paced(BAUD));
-        let master = bus.add(Master::new(
-            ActiveConfig::new(MASTER_ADDRESS, params),
-            DpMaster::new(&cfg)?,
-        ));
-        let mut described = Vec::with_capacity(slaves.len());
-        for (s, device) in slaves {
-            bus.add(Slave::new(DpSlave::new(device, s.address), params));
-            described.push(s);
+        let mut builder = own_slaves(bm4.clone())?;
+        for (slave, device) in extra {
+            builder = builder.slave(slave, device);
         }
-        let mut plant = Plant {
-            bus,
-            master,
-            slaves: described,
+        let plant = builder.build()?;
+        let channels = [OMEGA_ADDRESS, BM4_ADDRESS].map(|a| {
+            let s = plant.slaves().iter().find(|s| s.address == a)?;
+            s.channels.clone()
+        });
+        let mut plant = DemoPlant {
+            plant,
+            channels,
             telegrams: Rc::new(Cell::new(0)),
             bm4,
             ramp: 0,
             next_output: Instant::ZERO,
             pkw: [
-                DemoPkw::new(BM4_ADDRESS, &crate::bm4::PKW, &BM4_JOBS),
-                DemoPkw::new(OMEGA_ADDRESS, &crate::omega::PKW, &OMEGA_JOBS),
+                DemoPkw::new(BM4_ADDRESS, &profibus_devices::bm4::PKW, &BM4_JOBS),
+                DemoPkw::new(OMEGA_ADDRESS, &profibus_devices::omega::PKW, &OMEGA_JOBS),
             ],
         };
         plant.on_telegram(|_, _| {});
@@ -183,11 +137,11 @@ impl Plant {
     }
 
     /// Hand every valid telegram on the line (with its time) to `f`, e.g.
-    /// a pcap writer; [`Plant::telegrams`] counts them either way.
+    /// a pcap writer; [`DemoPlant::telegrams`] counts them either way.
     pub fn on_telegram(&mut self, mut f: impl FnMut(Instant, &[u8]) + 'static) {
         let count = self.telegrams.clone();
         let mut tap = Tap::new();
-        self.bus.set_tap(Box::new(move |at, _from, bytes| {
+        self.plant.bus().set_tap(Box::new(move |at, _from, bytes| {
             tap.push(at, bytes);
             while let Some(ev) = tap.poll() {
                 if let TapEvent::Telegram { at, bytes } = ev {
@@ -199,18 +153,18 @@ impl Plant {
     }
 
     /// The slaves, in bus order.
-    pub fn slaves(&self) -> &[DemoSlave] {
-        &self.slaves
+    pub fn slaves(&self) -> &[PlantSlave] {
+        self.plant.slaves()
     }
 
     /// The master's DP application.
     pub fn master(&mut self) -> &mut DpMaster {
-        self.bus.station_mut::<Master>(self.master).app_mut()
+        self.plant.master()
     }
 
     /// Virtual time of the bus.
     pub fn now(&self) -> Instant {
-        self.bus.now()
+        self.plant.now()
     }
 
     /// Valid telegrams seen on the line so far.
@@ -229,17 +183,17 @@ impl Plant {
     /// a machine too slow for the clock falls behind it, but the plant
     /// goes on. Returns whether the bus is behind `wall`.
     pub fn advance(&mut self, wall: Option<Instant>) -> bool {
-        let step = self.bus.now() + STEP;
-        self.bus.run_until(wall.map_or(step, |w| w.min(step)));
-        wall.is_some_and(|w| self.bus.now() < w)
+        let step = self.plant.now() + STEP;
+        self.plant.run_until(wall.map_or(step, |w| w.min(step)));
+        wall.is_some_and(|w| self.plant.now() < w)
     }
 
     /// One pass of the PLC program at the bus's time: new outputs every
     /// 100 ms, except for the slaves `by_hand` names (a person writes
     /// theirs), and the PKW jobs. Returns the PKW jobs that ended.
     pub fn step(&mut self, by_hand: impl Fn(u8) -> bool) -> Vec<PkwDone> {
-        let now = self.bus.now();
-        let m = self.bus.station_mut::<Master>(self.master).app_mut();
+        let now = self.plant.now();
+        let m = self.plant.master();
         if now >= self.next_output {
             self.next_output = now + Duration::from_millis(100);
             self.ramp = self.ramp.wrapping_add(1);
@@ -258,22 +212,19 @@ impl Plant {
                     m.set_outputs(a, data);
                 }
             }
-            let channels = |a: u8| {
-                let s = self.slaves.iter().find(|s| s.address == a)?;
-                s.channels.as_ref()
-            };
+            let [omega, bm4] = &self.channels;
             // Omega: a speed profile up to 3000 and back in 20 s; the
             // drive's actual value follows the setpoint.
             let speed = 3000 - (i64::from(ramp % 200) - 100).abs() * 30;
             if !by_hand(OMEGA_ADDRESS) {
                 let v = [("setpoint1", Value::Int(speed))];
-                write_channels(m, OMEGA_ADDRESS, channels(OMEGA_ADDRESS), &v);
+                write_channels(m, OMEGA_ADDRESS, omega.as_ref(), &v);
             }
             // BM4: the master writes u_MyWriteVar2; the b maXX PLC's own
             // program counts ud_MyReadVar1.
             if !by_hand(BM4_ADDRESS) {
                 let v = [("u_MyWriteVar2", Value::Int(i64::from(ramp % 1000)))];
-                write_channels(m, BM4_ADDRESS, channels(BM4_ADDRESS), &v);
+                write_channels(m, BM4_ADDRESS, bm4.as_ref(), &v);
             }
             self.bm4
                 .push(format!("set ud_MyReadVar1 {}", u32::from(ramp) * 7));
@@ -289,7 +240,7 @@ impl Plant {
     pub fn summary(&mut self) -> PlantSummary {
         let now = self.now();
         let telegrams = self.telegrams();
-        let addresses: Vec<u8> = self.slaves.iter().map(|s| s.address).collect();
+        let addresses: Vec<u8> = self.slaves().iter().map(|s| s.address).collect();
         let m = self.master();
         let c = m.cycle_stats();
         let inputs = addresses
@@ -349,79 +300,35 @@ impl std::fmt::Display for PlantSummary {
     }
 }
 
-/// A profile's slave as a bus file with `device = "NAME"` and `options`
-/// (`KEY=VALUE`) would configure it; its commands arrive in `control`.
-fn profiled(
-    address: u8,
-    label: &str,
-    name: &str,
-    options: &[&str],
-    control: Option<ControlInbox>,
-) -> Result<(DemoSlave, BoxedDevice), DemoError> {
-    let mut o = DeviceOptions::new();
-    for kv in options {
-        o.set_pair(kv)?;
-    }
-    let p = crate::profile(name)?.configure(&o, Some(address))?;
-    let slave = DemoSlave {
-        address,
-        name: label.into(),
-        gsd: p.gsd().clone(),
-        modules: p.modules(),
-        channels: Some(p.channels(&p.chk_cfg()?)?),
-    };
-    Ok((slave, p.device(control)?))
-}
-
-/// A generic device of `gsd` with `modules`.
-fn generic(
-    gsd: &Gsd,
-    address: u8,
-    name: &str,
-    modules: &[&str],
-    inputs: InputPattern,
-) -> Result<(DemoSlave, BoxedDevice), DemoError> {
-    let dev = GenericDevice::from_gsd(gsd, modules)
-        .map_err(|error| DemoError::Generic {
-            name: name.into(),
-            error,
-        })?
-        .with_inputs(inputs);
-    let slave = DemoSlave {
-        address,
-        name: name.into(),
-        gsd: gsd.clone(),
-        modules: modules.iter().map(|m| m.to_string()).collect(),
-        channels: None,
-    };
-    Ok((slave, Box::new(dev)))
-}
-
 /// The plant's own slaves; `bm4` takes the commands of the
 /// BM4-O-PRO-01's own PLC program.
-fn own_slaves(bm4: ControlInbox) -> Result<Vec<(DemoSlave, BoxedDevice)>, DemoError> {
+fn own_slaves(bm4: ControlInbox) -> Result<crate::PlantBuilder, DemoError> {
     let gen = gsd_files::parse(gsd_files::DPCTL_GEN)?;
     let echo = ["2 words in/out", "8 bytes in consistent"];
     let strip = format!("terminals={BK3000_STRIP}");
-    let jx2 = DemoSlave {
+    let jx2 = PlantSlave {
         address: JX2_ADDRESS,
         name: "JX2-PROFI1 (jx2)".into(),
-        gsd: gsd_files::parse(jx2::GSD)?,
+        gsd: Some(gsd_files::parse(jx2::GSD)?),
         modules: vec!["INPUT : 4 words".into(), "OUTPUT : 4 words".into()],
         channels: None,
+        profile: Some(jx2::profile::NAME),
     };
-    Ok(vec![
-        generic(&gen, 3, "echo (generic)", &echo, InputPattern::Echo)?,
-        generic(
-            &gen,
+    let b = Plant::builder()
+        .baud(BAUD)
+        .master(MASTER_ADDRESS)
+        .watchdog(Duration::from_millis(200))
+        .generic(3, "echo (generic)", &gen, &echo, InputPattern::Echo)?
+        .generic(
             4,
             "counter (generic)",
+            &gen,
             &["2 words in/out"],
             InputPattern::Counter,
-        )?,
+        )?
         // Baumüller BM4-O-PRO-01 with the manual's example variables and
         // its generated GSD; PKW module first.
-        profiled(
+        .profile(
             BM4_ADDRESS,
             "BM4-O-PRO-01 (bm4)",
             "bm4",
@@ -430,26 +337,26 @@ fn own_slaves(bm4: ControlInbox) -> Result<Vec<(DemoSlave, BoxedDevice)>, DemoEr
                 r#"variables=["ud_MyReadVar1", "u_MyWriteVar2"]"#,
             ],
             Some(bm4),
-        )?,
+        )?
         // Omega Drive-Line II: PKW, status / control, 2 values each way.
-        profiled(
+        .profile(
             OMEGA_ADDRESS,
             "Omega Drive-Line II (omega)",
             "omega",
             &[],
             None,
-        )?,
+        )?
         // Beckhoff BK3000 with a mixed terminal strip, from its rotary
         // switches (station 9).
-        profiled(
+        .profile(
             BK3000_ADDRESS,
             "BK3000 bus coupler (bk3000)",
             "bk3000",
             &[&strip, "switch-ones=9"],
             None,
-        )?,
-        (jx2, Box::new(jx2_plc()?)),
-    ])
+        )?
+        .slave(jx2, Box::new(jx2_plc()?));
+    Ok(b)
 }
 
 /// The JX2-PROFI1: configured and initialised by its PLC, the PLC's
@@ -465,30 +372,6 @@ fn jx2_plc() -> Result<jx2::ScriptedJx2, DemoError> {
     }
     let program = Interpreter::script(JX2_PROGRAM)?;
     Ok(jx2::ScriptedJx2::new(plc, program, None))
-}
-
-/// The master's configuration: every slave with its GSD modules and a
-/// 200 ms watchdog.
-fn master_config<'a>(
-    params: BusParams,
-    slaves: impl Iterator<Item = &'a DemoSlave>,
-) -> Result<MasterConfig, DemoError> {
-    let mut out = Vec::new();
-    for s in slaves {
-        let sel = s.gsd.select(&s.modules)?;
-        let mut p = SlaveParams::new(s.address, s.gsd.ident_number, s.gsd.chk_cfg(&sel)?);
-        p.name = s.name.clone();
-        p.user_prm_data = s.gsd.user_prm_data(&sel, &[])?;
-        p.dpv1 = s.gsd.dpv1_slave;
-        p.watchdog = Some(Duration::from_millis(200));
-        out.push(p);
-    }
-    Ok(MasterConfig {
-        address: MASTER_ADDRESS,
-        params,
-        slaves: out,
-        options: MasterOptions::default(),
-    })
 }
 
 /// Write named output channels of the slave at `address` (all or none).
@@ -618,7 +501,7 @@ mod tests {
 
     #[test]
     fn the_plant_exchanges_data_moves_its_outputs_and_runs_pkw_jobs() {
-        let mut plant = Plant::new(vec![]).unwrap();
+        let mut plant = DemoPlant::new(vec![]).unwrap();
         let addresses: Vec<u8> = plant.slaves().iter().map(|s| s.address).collect();
         assert_eq!(
             addresses,
