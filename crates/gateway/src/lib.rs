@@ -5,88 +5,14 @@
 //! boundary and queues [`Publish`]es, and it turns messages into output
 //! writes; [`MqttLink`] is the thin driver on the `rumqttc` client.
 //!
-//! # Sparkplug B mode
+//! With `--sparkplug GROUP/EDGE` (or `sparkplug` in `[mqtt]`) the master
+//! is a Sparkplug B edge node instead, [`EdgeNode`]. Both cores
+//! implement [`Session`], the interface the link and drivers use.
 //!
-//! With `--sparkplug GROUP/EDGE` (or `sparkplug` in `[mqtt]`) the
-//! master is a Sparkplug B edge node instead, [`EdgeNode`]: protobuf
-//! payloads under `spBv1.0/…`, births and deaths, DCMD writes. Topics,
-//! metrics, datatypes and what is not supported: [`sparkplug`]. Both
-//! cores implement [`Session`], the interface the link and drivers use.
-//!
-//! # Topics (plain JSON mode)
-//!
-//! Under `<prefix>/<bus>/` (from the bus file's `[mqtt]` table, see
-//! [`settings`]):
-//!
-//! | topic | retained | payload |
-//! |---|---|---|
-//! | `status` | yes | `{"state": "online", "master", "ts", "slaves", "writable"}` (+ `"outputs_timeout"` after an outage that reached it); `master` is the master's operating state (`operate`, `clear`, `stop`), republished at once when it changes; the last will sets `{"state": "offline"}` |
-//! | `<addr>/state` | yes | `{"address", "name", "state", "ts", "cycle"}` (+ `"fault"` after a parameterisation/configuration fault); published in the step after any change (slave lost, back) |
-//! | `<addr>/inputs` | yes | `{"address", "hex", "values", "units", "ts", "cycle"}`; `values` (`{"name": value}`, named channels) for slaves with a device profile or GSD modules, scaled channels in their unit; `units` (`{"name": "V"}`) only when some channel is scaled |
-//! | `<addr>/outputs` | yes | the output image sent, same form |
-//! | `<addr>/diag` | yes | `{"address", "hex", "station_status", "master", "ident_number", "text", "ts", "cycle"}`: the last Slave_Diag, published in the step after it changes; `station_status` (the status bits in words, `"OK"` when none is set), `master` (the parameterising master, `null` for none) and `ident_number` when it has its 6 standard bytes; `text` the whole diagnosis in words (GSD texts where known) |
-//! | `<addr>/outputs/set`, `<addr>/dpv1/request`, `<addr>/pkw/request`, `<addr>/rfid/request` | — | requests from clients: see below |
-//! | `<addr>/outputs/response`, `…/dpv1/response`, `…/pkw/response`, `…/rfid/response` | no | `{"ok", "error"?, "id"?, "ts", …}`: the answers |
-//!
-//! `ts` is the wall-clock time in ms since the Unix epoch, `cycle` the
-//! master's poll cycle counter. The payloads are the typed values of
-//! [`payload`].
-//!
-//! # Requests and answers
-//!
-//! The client is MQTT 3.1.1 (one link for both modes; rumqttc's MQTT 5
-//! client is a separate API), so a request carries its correlation in
-//! the payload: every request is a JSON object that may have `"id"` (any
-//! JSON value, repeated in the answer) and `"reply_to"` (a topic without
-//! wildcards for the answer; default: the service's response topic of the
-//! slave). Each request gets exactly one answer: `{"ok": true, …}` with
-//! the result, or `{"ok": false, "error": "…"}`; a malformed, unknown or
-//! unauthorised request changes nothing and is logged.
-//!
-//! | topic | payload | answer fields |
-//! |---|---|---|
-//! | `outputs/set` | a bare hex string (the whole image), `{"hex"}` (the whole image, exactly the output length) or `{"channels": {"name": value}}` (named output channels of a profiled slave) | — |
-//! | `dpv1/request` | `{"op": "read", "slot", "index", "length"?}` (length 1..=240, default 240) or `{"op": "write", "slot", "index", "hex"}` | `"hex"` (read) |
-//! | `pkw/request` | `{"op": "read", "pnu", "index"?}`, `{"op": "write", "pnu", "value", "index"?, "dword"?}` (a word unless the value needs a double word or `"dword": true`; negative values two's complement) or `{"op": "describe", "pnu", "element"}`; `"pnu"` is a number 0..=2047 or the name the device gives the parameter (a BM4 variable module of its GSD, e.g. `"di_MyReadVar3"`) | `"value"`, `"dword"`, `"request"`, `"response"` (the PKW words, hex) |
-//! | `rfid/request` | `{"command": "RD 00 01"}` (one command line) | `"answer"` (text), `"hex"` |
-//!
-//! Permissions come from `[mqtt] writable` (see [`settings`]): output
-//! writes, DP-V1 writes, PKW writes and RFID commands need the slave
-//! listed; a slave listed with `channels` takes only writes of those
-//! channels. Reads are open for every configured slave. DP-V1 requests
-//! need a DP-V1 slave, PKW requests a slave with a PKW channel (BM4,
-//! Omega), RFID requests a reader; they run through the master's MSAC_C1
-//! jobs and the device crate's `PkwClient` and `RfidClient`, one PKW or
-//! RFID job per slave at a time, each within `[mqtt] job_timeout_ms`.
-//!
-//! Queues are bounded per slave: at most [`request::QUEUE_LIMIT`] (8) output
-//! writes and DP-V1 requests wait for the next cycle boundary, and 8 PKW
-//! or RFID jobs for the slave's client; one more is answered
-//! `{"ok": false, "error": "slave N: too many requests waiting (at most 8)"}`
-//! on its response topic and changes nothing.
-//!
-//! An output write is checked as a whole and applied to the slave's
-//! image at once between two polls, so one Data_Exchange carries all of
-//! it. (A PKW or RFID job writes its words into the same image: a whole
-//! image written during such a job overwrites them.)
-//!
-//! # Connection
-//!
-//! `mqtt://HOST[:PORT]` is plain TCP, `mqtts://HOST[:PORT]` TLS with
-//! rustls (CA certificates from `[mqtt] ca_file`, else the system's); a
-//! user name and a password from a file or an environment variable (see
-//! [`settings`]); [`Connection::from_settings`] reads them.
-//!
-//! # Broker faults
-//!
-//! The bus keeps running while the broker is away. The link reconnects
-//! with a growing pause (100 ms doubling to 5 s); on every connection the
-//! status and every retained topic are published again. The link logs
-//! one line each for its start, the connection, a loss and the
-//! reconnection, with the broker's URL ([`link`]). After
-//! `[mqtt] outputs_timeout_ms` without a broker the outputs go to
-//! `[mqtt] safe_state` once (default `keep`: the last values stay), which
-//! is logged and, once the broker is back, reported in the status.
+//! The protocol (topics, payloads, requests and answers, the `[mqtt]`
+//! settings, the Sparkplug B mapping, QoS and retain, what happens while
+//! the broker is away) is described in one place: `docs/gateway.md` in
+//! the repository.
 //!
 //! # Modules
 //!

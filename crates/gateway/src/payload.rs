@@ -3,7 +3,7 @@
 //! [`SlaveState`], the slave's Slave_Diag decoded by [`SlaveDiag`], the
 //! images decoded by the device profile's or GSD's [`ChannelValues`]
 //! (with the units of scaled channels). Field names and meaning: the
-//! topic table of the [crate] documentation.
+//! topic table of `docs/gateway.md` in the repository.
 
 use crate::settings::SafeState;
 use profibus_devices::channels::ChannelValues;

@@ -56,7 +56,7 @@ pub enum Request {
         command: pkw::Command,
     },
     /// A PKW job on a parameter the device names (a BM4 variable module);
-    /// [`Gateway::handle_message`] resolves the name into [`Request::Pkw`].
+    /// [`crate::Gateway::handle_message`] resolves the name into [`Request::Pkw`].
     PkwNamed {
         /// The parameter's name.
         name: String,
@@ -445,7 +445,7 @@ impl Fields {
 }
 
 /// Requests one slave may have waiting in each of its two queues: output
-/// writes and DP-V1 jobs until the next [`Gateway::step`], PKW or RFID
+/// writes and DP-V1 jobs until the next [`crate::Gateway::step`], PKW or RFID
 /// jobs for the slave's client. One more is answered
 /// [`RequestError::Busy`] and changes nothing.
 pub const QUEUE_LIMIT: usize = 8;

@@ -1,46 +1,7 @@
-//! The gateway's settings: the bus file's `[mqtt]` table.
-//!
-//! ```toml
-//! [mqtt]
-//! broker = "mqtt://localhost:1883"   # `dpctl gateway --mqtt` overrides it
-//! client_id = "dpctl-gateway-line1"  # default: dpctl-gateway-<bus>
-//! prefix = "profibus"                # first topic level
-//! bus = "line1"                      # second topic level; default: the file's stem
-//! qos = 1                            # 0, 1 or 2
-//! publish = "change"                 # "change", "interval" or "both"
-//! interval_ms = 1000                 # period of "interval" / "both"
-//! writable = [3, { address = 6, channels = ["speed"] }]
-//! outputs_timeout_ms = 5000          # without a broker this long: safe state
-//! safe_state = "keep"                # "keep" (default), "zero" or "clear"
-//! job_timeout_ms = 2000              # DP-V1, PKW and RFID requests give up after this
-//! username = "gateway1"              # MQTT user name
-//! password_file = "mqtt.secret"      # its password: the file's first line ...
-//! password_env = "MQTT_PASSWORD"     # ... or this environment variable (not both)
-//! ca_file = "ca.crt"                 # mqtts://: CA certificates (PEM); default: the system's
-//! sparkplug = "plant/line1"          # Sparkplug B mode, GROUP/EDGE (see crate::sparkplug)
-//! ```
-//!
-//! `broker` is `mqtt://HOST[:PORT]` (plain TCP, port 1883) or
-//! `mqtts://HOST[:PORT]` (TLS with rustls, port 8883; the server's
-//! certificate must name HOST). Relative paths are relative to the bus
-//! file ([`MqttSettings::relative_to`]). The password never appears in
-//! the bus file.
-//!
-//! `writable` says what MQTT may change (default: nothing). A station
-//! address alone gives full write access to that slave: its whole output
-//! image and named channels, DP-V1 writes, PKW writes and RFID commands.
-//! `{ address, channels }` allows only writes of those named output
-//! channels (`outputs/set` with `"channels"`). Reads (DP-V1 read, PKW
-//! read and describe) are allowed for every configured slave.
-//!
-//! `outputs_timeout_ms`: after this long without a broker connection the
-//! gateway puts the outputs into `safe_state` once: `keep` leaves the last
-//! values (the default; also when no timeout is set), `zero` writes zeros
-//! to the whole output image of every writable slave (they stay zero
-//! until the next write), `clear` puts the master into the Clear state
-//! (outputs cleared on the line, Global_Control Clear_Data) until the
-//! broker is back, when it returns to Operate. It is logged and reported
-//! in the status once the broker is back.
+//! The gateway's settings: the bus file's `[mqtt]` table, parsed into
+//! [`MqttSettings`] ([`MqttSettings::from_table`],
+//! [`MqttSettings::for_bus_file`]). Every key, its default and meaning:
+//! `docs/gateway.md` in the repository.
 
 use crate::field::Field;
 use crate::topics::SparkplugId;

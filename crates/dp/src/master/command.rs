@@ -108,7 +108,25 @@ pub enum CommandError {
     },
     /// The Global_Control or job queue is full; try again later.
     #[error("the {0} queue is full")]
-    QueueFull(&'static str),
+    QueueFull(Queue),
+}
+
+/// The master's command queues.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Queue {
+    /// Global_Control telegrams to send.
+    GlobalControl,
+    /// Class-2 and DP-V1 jobs.
+    Job,
+}
+
+impl std::fmt::Display for Queue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Queue::GlobalControl => "Global_Control",
+            Queue::Job => "job",
+        })
+    }
 }
 
 /// What a command did.
@@ -187,13 +205,13 @@ impl DpMaster {
                 if self.global_control(command, group) {
                     Ok(CommandOutcome::Applied)
                 } else {
-                    Err(CommandError::QueueFull("Global_Control"))
+                    Err(CommandError::QueueFull(Queue::GlobalControl))
                 }
             }
             MasterCommand::Job(job) => self
                 .submit(job)
                 .map(CommandOutcome::JobQueued)
-                .ok_or(CommandError::QueueFull("job")),
+                .ok_or(CommandError::QueueFull(Queue::Job)),
         }
     }
 }

@@ -353,3 +353,32 @@ mod tests {
         assert_eq!(Service::of_dsap(Some(53)).as_str(), "?");
     }
 }
+
+#[cfg(all(test, feature = "serde"))]
+mod json {
+    use super::*;
+    use crate::slave::SlaveEvent;
+
+    #[test]
+    fn events_serialise_service_and_reason_as_words() {
+        let e = SlaveEvent::Refused {
+            master: 2,
+            service: Service::Sap(Sap::ChkCfg),
+            reason: Reason::LockedToAnother,
+        };
+        assert_eq!(
+            serde_json::to_value(&e).unwrap(),
+            serde_json::json!({
+                "event": "refused",
+                "master": 2,
+                "service": "Chk_Cfg",
+                "reason": "the slave is locked to another master",
+            })
+        );
+        let e = SlaveEvent::CfgFault {
+            master: 2,
+            reason: Reason::from("own words"),
+        };
+        assert_eq!(serde_json::to_value(&e).unwrap()["reason"], "own words");
+    }
+}

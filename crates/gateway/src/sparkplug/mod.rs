@@ -3,77 +3,12 @@
 //! GROUP/EDGE`, or `sparkplug = "GROUP/EDGE"` in the bus file's `[mqtt]`
 //! table).
 //!
-//! # Topics
-//!
-//! `spBv1.0/GROUP/TYPE/EDGE[/DEVICE]`, where DEVICE is the slave's
-//! station address in decimal (unique on a bus and always a valid topic
-//! level; the bus file's name is the device's `Properties/Name` metric):
-//!
-//! | type | when | payload |
-//! |---|---|---|
-//! | `NBIRTH` | on every connection and on a rebirth request | `seq` 0, `bdSeq`, `Node Control/Rebirth` (false) |
-//! | `NDEATH` | the MQTT last will (QoS 1), and before a clean stop | `bdSeq` only, no `seq` |
-//! | `DBIRTH` | a slave enters Data_Exchange (and after each NBIRTH) | every metric of the device |
-//! | `DDATA` | a metric changed since the last DBIRTH/DDATA | the changed metrics |
-//! | `DDEATH` | the slave leaves Data_Exchange | `seq` and timestamp only |
-//! | `NCMD` (subscribed) | `Node Control/Rebirth` = true | NBIRTH and every DBIRTH again |
-//! | `DCMD` (subscribed) | output writes | see below |
-//!
-//! Everything is published with QoS 0 and without retain, as the
-//! specification asks; `seq` counts 0..=255 and wraps across NBIRTH,
-//! DBIRTH, DDATA and DDEATH (NBIRTH restarts it at 0). `bdSeq` (Int64,
-//! as Eclipse Tahu sends it) starts at 0 and counts every MQTT CONNECT
-//! modulo 256: the last will of each connection attempt carries the
-//! value its NBIRTH will have. Payload and metric timestamps are the
-//! wall clock in ms since the Unix epoch.
-//!
-//! # Metrics of a device
-//!
-//! | name | datatype | |
-//! |---|---|---|
-//! | `Properties/Address` | UInt8 | station address |
-//! | `Properties/Name` | String | the slave's name in the bus file |
-//! | `Properties/Ident Number` | UInt16 | from its GSD |
-//! | `Image/Inputs`, `Image/Outputs` | Bytes | the whole process images |
-//! | `Inputs/<channel>`, `Outputs/<channel>` | see below | one per named channel |
-//! | `Diagnosis/Bytes` | Bytes | the last Slave_Diag response |
-//! | `Diagnosis/Text` | String | it decoded (GSD texts), one finding a line |
-//!
-//! Channels are the device profile's ([`profibus_devices::channels`]:
-//! BK3000 terminals, BM4 variables, Omega words, …) or, for a slave
-//! given by GSD modules, one UInt8 per process data byte named
-//! `MODULE[i]` ([`profibus_devices::generic::module_channels`]); a `/`
-//! in a channel name becomes `_`. Datatypes: bits Boolean, U8/I8/U16/
-//! I16/U32/I32 as UInt8/Int8/UInt16/Int16/UInt32/Int32 (signed values
-//! two's complement in `int_value`), F32 Float, channels in engineering
-//! units Double.
-//!
-//! # Writes (DCMD)
-//!
-//! A DCMD to a slave listed in `[mqtt] writable` may set `Outputs/…`
-//! metrics (by name, with a value of the birth's datatype) and
-//! `Image/Outputs` (Bytes, exactly the output length). The command is
-//! checked as a whole and applied at once between two polls, so one
-//! Data_Exchange carries all of it (the image first, then the
-//! channels). A `{ address, channels = [...] }` entry of `writable`
-//! allows only those output channels (not the image). A command with
-//! one bad metric, or to a slave not writable, changes nothing and is
-//! logged (Sparkplug has no reply
-//! topic: the next DDATA shows the outputs as they are).
-//!
-//! # Broker faults
-//!
-//! As in the plain mode: the bus keeps running, the link reconnects,
-//! and every connection gets a new bdSeq, NBIRTH and DBIRTHs;
-//! `outputs_timeout_ms` / `safe_state` act the same way
-//! ([`crate::outage`]).
-//!
-//! # Not supported
-//!
-//! Metric aliases (names are always sent), NDATA (the node has no
-//! metrics that change), templates, datasets, properties, historical
-//! data, host STATE awareness (the node births whether or not a primary
-//! host is online), MQTT 5, and the plain mode's interval publishing.
+//! An NBIRTH on every connection, a DBIRTH when a slave enters
+//! Data_Exchange, DDATA with the metrics that changed, DDEATH when it
+//! leaves, NDEATH as the last will; DCMD writes outputs, NCMD asks for a
+//! rebirth. Topics, metrics, datatypes, QoS, `seq` and `bdSeq`, and what
+//! is not supported: `docs/gateway.md` in the repository. The broker
+//! outage and the outputs' safe state: [`crate::outage`].
 
 pub mod metrics;
 pub mod proto;
