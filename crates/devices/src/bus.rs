@@ -9,6 +9,7 @@ use crate::rfid::jobs::{MasterJobs, QueueError};
 use profibus_dp::config::busfile::{
     BusFile, BusFileError, DeviceEntry, DeviceError, DeviceResolver, ResolvedDevice,
 };
+use profibus_dp::config::layout::SlaveLayout;
 use profibus_dp::master::{CommandError, DpMaster};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -86,6 +87,18 @@ impl ProfiledBus {
             .iter()
             .find(|(a, _)| *a == address)
             .map(|(_, p)| p.as_ref())
+    }
+
+    /// The configured-slave layouts of the bus file's slaves, in bus
+    /// order: modules with their byte spans, and capabilities from each
+    /// slave's profile ([`crate::capabilities`]).
+    pub fn layouts(&self) -> Vec<SlaveLayout> {
+        (self.file.slaves.iter())
+            .map(|s| SlaveLayout {
+                capabilities: crate::capabilities(s.params.ident_number, &s.params.cfg),
+                ..SlaveLayout::of_slave(s)
+            })
+            .collect()
     }
 
     /// The named channels of the slave at `address` for the configuration
@@ -209,6 +222,24 @@ mod tests {
         ($slaves:literal) => {
             concat!("[master]\naddress = 2\nbaud = \"1.5M\"\n\n", $slaves)
         };
+    }
+
+    #[test]
+    fn layouts_give_module_spans_and_the_profiles_capabilities() {
+        use profibus_dp::config::layout::{Capabilities, Span};
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("gsd/bus.toml");
+        let text = bus_text!(
+            "[[slave]]\naddress = 25\ndevice = \"omega\"\n\n[[slave]]\naddress = 30\ndevice = \"rfid\"\n"
+        );
+        let bus = ProfiledBus::parse(&dir, text).unwrap();
+        let l = bus.layouts();
+        assert_eq!((l[0].address, l[1].address), (25, 30));
+        assert_eq!(l[0].capabilities, Capabilities::PKW);
+        assert_eq!(l[1].capabilities, Capabilities::RFID);
+        // The Omega's PKW module first: 8 bytes each way, then the rest.
+        let m = &l[0].modules;
+        assert_eq!(m[0].inputs, Span { offset: 0, len: 8 });
+        assert_eq!(m[1].inputs.offset, 8);
     }
 
     #[test]
