@@ -18,7 +18,7 @@ mod support;
 
 use profibus_gateway::link;
 use profibus_gateway::payload::hex;
-use profibus_gateway::sim::Pacer;
+use profibus_io::pace::Pacer;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -94,7 +94,7 @@ fn main() {
         // A bound in case messages are lost: three times the planned run.
         let deadline = Instant::now() + Duration::from_millis(150 * samples as u64 + 10_000);
         while !done.load(Ordering::Relaxed) && Instant::now() < deadline {
-            let (target, behind) = pacer.target(plant);
+            let (target, behind) = pacer.target(plant.now());
             while plant.now() < target {
                 let t = (plant.now() + piece).min(target);
                 plant.run_until(t);

@@ -24,8 +24,8 @@
 mod support;
 
 use profibus_gateway::link;
-use profibus_gateway::sim::Pacer;
 use profibus_gateway::{sparkplug, EdgeNode, MqttLink, Session, SparkplugId};
+use profibus_io::pace::Pacer;
 use profibus_plant::Plant;
 use std::io::BufRead;
 use std::process::{Command, Stdio};
@@ -105,7 +105,7 @@ fn drive(
     let addresses: Vec<u8> = plant.master().slave_addresses().collect();
     while !stop.load(Ordering::Relaxed) {
         let t0 = Instant::now();
-        let pause = pacer.advance(plant);
+        let pause = pacer.turn(plant.now(), |t| plant.run_until(t));
         if let Some(w) = write.filter(|_| t0 >= next_write) {
             next_write = t0 + w;
             value = value.wrapping_add(1);

@@ -27,6 +27,8 @@
 //!   file, stdin or a Unix socket.
 //! - [`jx2`]: the JX2-PROFI1's register clients (console, control socket,
 //!   script) while the slave runs.
+//! - [`pace`]: a simulated line in step with the wall clock
+//!   (`dpctl gateway --sim`).
 //! - [`FdlCodec`]: the FDL framer as a `tokio_util` codec.
 //! - [`alloc_count`]: a counting global allocator for the tests and
 //!   benchmarks that prove allocation-free steady states.
@@ -38,6 +40,7 @@ pub mod driver;
 pub mod emulation;
 pub mod jx2;
 pub mod listen;
+pub mod pace;
 pub mod runner;
 #[cfg(test)]
 mod testing;

@@ -51,47 +51,8 @@
 //!
 //! A gateway copies the inputs of a slave somewhere else and writes
 //! outputs it got from elsewhere, between two events of the driver, with
-//! no locks and no allocation:
-//!
-//! ```no_run
-//! use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams, SlaveState};
-//! use profibus_io::driver::{run, Clock};
-//! use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
-//! use profibus_io::transport::Port;
-//! use profibus_fdl::{Baud, BusParams};
-//! use std::ops::ControlFlow;
-//!
-//! # async fn gateway() -> Result<(), Box<dyn std::error::Error>> {
-//! let params = BusParams::defaults(Baud::B1500000);
-//! let cfg = MasterConfig {
-//!     address: 1,
-//!     params,
-//!     // Slave 8: 2 bytes in, 2 bytes out (identifiers 0x11, 0x21).
-//!     slaves: vec![SlaveParams::new(8, 0x0DCE, vec![0x11, 0x21])],
-//!     options: MasterOptions::default(),
-//! };
-//! let master = DpMaster::new(&cfg)?;
-//! let valve = master.handle(8).expect("configured");
-//! let mut station = ActiveStation::new(ActiveConfig::new(1, params), master);
-//! let mut port = Port::open("/dev/ttyUSB0", Baud::B1500000)?;
-//! let mut setpoint: u16 = 0;
-//! run(&mut station, &mut port, Clock::start(), std::future::pending(), |st, _now| {
-//!     let m = st.app_mut();
-//!     let view = m.slave(valve);
-//!     if view.state == SlaveState::DataExchange {
-//!         let level = u16::from_be_bytes([view.inputs[0], view.inputs[1]]);
-//!         setpoint = if level < 500 { 1000 } else { 0 };
-//!     }
-//!     m.outputs_mut(valve).copy_from_slice(&setpoint.to_be_bytes());
-//!     while let Some(event) = m.poll_event() {
-//!         eprintln!("{event:?}"); // state changes, diagnosis, faults
-//!     }
-//!     ControlFlow::Continue(())
-//! })
-//! .await?;
-//! # Ok(())
-//! # }
-//! ```
+//! no locks and no allocation: the module docs of `profibus_io::driver`
+//! show that loop on a serial line.
 
 mod command;
 mod config;

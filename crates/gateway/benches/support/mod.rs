@@ -6,8 +6,9 @@
 #![allow(dead_code)]
 
 use profibus_devices::bus::ProfiledBus;
-use profibus_gateway::sim::{slave_infos, Pacer};
+use profibus_gateway::sim::slave_infos;
 use profibus_gateway::{Broker as BrokerUrl, Connection, Gateway, MqttLink, MqttSettings, Session};
+use profibus_io::pace::Pacer;
 use profibus_plant::Plant;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
