@@ -183,6 +183,16 @@ pub fn pkw_dialect(ident: u16, cfg: &[u8]) -> Result<&'static pkw::Dialect, PkwL
     })
 }
 
+/// What a slave with ident number `ident` configured with `cfg`
+/// (Chk_Cfg bytes) can do beyond cyclic data, from the profile with that
+/// ident number ([`Profile::capabilities`]); none for an unknown product.
+pub fn capabilities(ident: u16, cfg: &[u8]) -> profibus_dp::config::layout::Capabilities {
+    PROFILES
+        .iter()
+        .filter(|p| p.ident == Some(ident))
+        .fold(Default::default(), |c, p| c | p.capabilities(cfg))
+}
+
 /// The PKW parameter number of the parameter named `name` of a slave with
 /// ident number `ident` and GSD `gsd`, from the profile with that ident
 /// number (e.g. a BM4-O-PRO-01 variable: its module's parameter number).
@@ -220,6 +230,18 @@ mod tests {
             "{omega}"
         );
         assert!(options.starts_with("         options: "), "{omega}");
+    }
+
+    #[test]
+    fn capabilities_come_from_the_profile() {
+        use profibus_dp::config::layout::Capabilities;
+        assert_eq!(capabilities(bm4::IDENT, &[0x73]), Capabilities::PKW);
+        assert_eq!(
+            capabilities(omega::IDENT, &[0x71, 0x53, 0x63]),
+            Capabilities::empty()
+        );
+        assert_eq!(capabilities(rfid::IDENT, &rfid::CFG), Capabilities::RFID);
+        assert_eq!(capabilities(0x1234, &[0x73]), Capabilities::empty());
     }
 
     #[test]

@@ -16,6 +16,7 @@ use crate::channels::ChannelMap;
 use crate::pkw::Dialect;
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::layout::Capabilities;
 use profibus_dp::config::names::{field_names, DidYouMean};
 use serde::de::DeserializeOwned;
 use serde::Deserializer;
@@ -478,6 +479,18 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
         Self::PKW.filter(|_| cfg.first() == Some(&crate::pkw::PKW_MODULE))
     }
 
+    /// What a slave of this product configured with `cfg` (Chk_Cfg
+    /// bytes) can do beyond cyclic data, for the master side (the
+    /// gateway's PKW and RFID requests). Default: [`Capabilities::PKW`]
+    /// when [`Profile::pkw_dialect`] finds the PKW module.
+    fn capabilities(cfg: &[u8]) -> Capabilities {
+        if Self::pkw_dialect(cfg).is_some() {
+            Capabilities::PKW
+        } else {
+            Capabilities::empty()
+        }
+    }
+
     /// The PKW parameter number the product gives a parameter named
     /// `name` in its GSD `gsd` (e.g. a BM4-O-PRO-01 variable module),
     /// for clients that take names; `None`: names are not parameters.
@@ -584,6 +597,7 @@ pub struct ProfileEntry {
     configure: ConfigureFn,
     pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
     pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
+    capabilities: fn(&[u8]) -> Capabilities,
 }
 
 impl std::fmt::Display for ProfileEntry {
@@ -618,6 +632,7 @@ impl ProfileEntry {
             configure: configure_boxed::<P>,
             pkw_dialect: P::pkw_dialect,
             pkw_parameter: P::pkw_parameter,
+            capabilities: P::capabilities,
         }
     }
 
@@ -634,6 +649,11 @@ impl ProfileEntry {
     /// See [`Profile::pkw_dialect`].
     pub fn pkw_dialect(&self, cfg: &[u8]) -> Option<&'static Dialect> {
         (self.pkw_dialect)(cfg)
+    }
+
+    /// See [`Profile::capabilities`].
+    pub fn capabilities(&self, cfg: &[u8]) -> Capabilities {
+        (self.capabilities)(cfg)
     }
 
     /// See [`Profile::pkw_parameter`].

@@ -5,6 +5,7 @@ use profibus_devices::channels::ChannelMap;
 use profibus_devices::pkw::Dialect;
 use profibus_devices::ProfileError;
 use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::layout::Capabilities;
 
 /// What the gateway knows of one configured slave.
 #[derive(Debug, Clone)]
@@ -64,7 +65,8 @@ pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SlaveInfoEr
                 gsd: Some(s.gsd.clone()),
                 dpv1: s.params.dpv1,
                 pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
-                rfid: s.params.ident_number == profibus_devices::rfid::IDENT,
+                rfid: profibus_devices::capabilities(s.params.ident_number, &s.params.cfg)
+                    .contains(Capabilities::RFID),
             })
         })
         .collect()

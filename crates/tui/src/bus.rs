@@ -19,6 +19,7 @@ use crate::source::{BusSnapshot, BusSource, Counters, Diagnosis};
 use crate::{fit, hex, Key};
 use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value};
 use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::layout::ModuleLayout;
 use profibus_dp::master::{OperatingState, SlaveState};
 use profibus_dp::monitor::{BusCounters, MasterStatus};
 use profibus_dp::pdu::diag;
@@ -41,36 +42,14 @@ pub enum Decoding {
     Channels(ChannelMap),
     /// The GSD modules the master configured, in slot order: each
     /// module's part of the images.
-    Modules(Vec<ModuleSpan>),
-}
-
-/// One configured GSD module and its share of the process images.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ModuleSpan {
-    /// The module's name in the GSD.
-    pub name: String,
-    /// Input bytes.
-    pub inputs: usize,
-    /// Output bytes.
-    pub outputs: usize,
+    Modules(Vec<ModuleLayout>),
 }
 
 impl Decoding {
     /// The modules `names` of `gsd` with their input and output sizes;
     /// [`Decoding::None`] when a name is not in the GSD.
     pub fn modules<S: AsRef<str>>(gsd: &Gsd, names: &[S]) -> Decoding {
-        let mut spans = vec![];
-        for n in names {
-            let Some(io) = gsd.module(n.as_ref()).and_then(|m| m.io().ok()) else {
-                return Decoding::None;
-            };
-            spans.push(ModuleSpan {
-                name: n.as_ref().to_string(),
-                inputs: io.input_bytes,
-                outputs: io.output_bytes,
-            });
-        }
-        Decoding::Modules(spans)
+        ModuleLayout::all_of_gsd(gsd, names).map_or(Decoding::None, Decoding::Modules)
     }
 
     /// One image decoded, one entry per channel or module: `name=value`
@@ -85,22 +64,16 @@ impl Decoding {
                     None => format!("{}={v}", c.name),
                 })
                 .collect(),
-            Decoding::Modules(spans) => {
-                let mut at = 0;
-                let mut out = vec![];
-                for s in spans {
-                    let n = match dir {
-                        Direction::Input => s.inputs,
-                        Direction::Output => s.outputs,
+            Decoding::Modules(modules) => modules
+                .iter()
+                .filter_map(|m| {
+                    let span = match dir {
+                        Direction::Input => m.inputs,
+                        Direction::Output => m.outputs,
                     };
-                    if n > 0 {
-                        let part = image.get(at..(at + n).min(image.len())).unwrap_or(&[]);
-                        out.push(format!("{}: {}", s.name, hex(part)));
-                    }
-                    at += n;
-                }
-                out
-            }
+                    (span.len > 0).then(|| format!("{}: {}", m.name, hex(span.of(image))))
+                })
+                .collect(),
         }
     }
 }
@@ -883,6 +856,7 @@ mod tests {
     use super::*;
     use crate::screen_text;
     use profibus_devices::channels::ChannelType;
+    use profibus_dp::config::layout::Span as ModuleSpan;
     use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::BusParams;
     use ratatui::backend::TestBackend;
@@ -1154,15 +1128,15 @@ mod tests {
     #[test]
     fn modules_split_the_images_by_gsd_module() {
         let d = Decoding::Modules(vec![
-            ModuleSpan {
+            ModuleLayout {
                 name: "2 words in".into(),
-                inputs: 4,
-                outputs: 0,
+                inputs: ModuleSpan { offset: 0, len: 4 },
+                outputs: ModuleSpan { offset: 0, len: 0 },
             },
-            ModuleSpan {
+            ModuleLayout {
                 name: "1 byte out".into(),
-                inputs: 1,
-                outputs: 1,
+                inputs: ModuleSpan { offset: 4, len: 1 },
+                outputs: ModuleSpan { offset: 0, len: 1 },
             },
         ]);
         assert_eq!(

@@ -7,6 +7,7 @@ use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::profile::{ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::layout::Capabilities;
 use serde::Deserialize;
 use std::path::PathBuf;
 
@@ -40,6 +41,11 @@ impl Profile for RfidProfile {
     type Options = Options;
     const NAME: &'static str = "rfid";
     const SUMMARY: &'static str = "AEG ID RFID reader ARE I2 / K1 PFB (ident 0x0DC4): 16-byte handshake carrying reader commands (VER, GT, RD, WD, TOR)";
+
+    /// The reader's 16-byte command handshake.
+    fn capabilities(_cfg: &[u8]) -> Capabilities {
+        Capabilities::RFID
+    }
     const OPTIONS_HELP: &'static str = "--tags FILE.toml (tags with UID and memory, which one is in the field, \
 the reader's timing; rewritten when a tag's memory changes or a tag enters or leaves; default: no tags), \
 --control SOCKET|FILE|- (commands: enter UID, leave, tags, status); bus file: tags";

@@ -5,10 +5,13 @@
 //! - [`busfile`]: the TOML bus file of a master, built on GSD files.
 //! - [`file`](mod@file): reading an input file (bus file, profile table, script)
 //!   with a size limit.
+//! - [`layout`]: a configured slave's modules with their byte spans and
+//!   its capabilities, worked out once from the bus file.
 //! - [`names`]: the closest valid names to a misspelt one ("did you
 //!   mean …?") and the keys of a serde struct.
 
 pub mod busfile;
 pub mod file;
 pub mod gsd;
+pub mod layout;
 pub mod names;

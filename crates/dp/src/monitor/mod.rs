@@ -67,6 +67,7 @@
 
 use crate::config::busfile::BusFile;
 use crate::config::gsd::Gsd;
+use crate::config::layout::ModuleLayout;
 use crate::master::{OperatingState, SlaveState};
 use crate::pdu::control::{ControlCommand, GlobalControl};
 use crate::pdu::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
@@ -160,8 +161,8 @@ pub struct SlaveInfo {
     pub gsd: Option<Gsd>,
     /// Whether it is a DP-V1 slave (reads its diagnosis blocks as alarms).
     pub dpv1: bool,
-    /// GSD modules in slot order: name, input bytes, output bytes.
-    pub modules: Vec<(String, usize, usize)>,
+    /// GSD modules in slot order, with their spans of the images.
+    pub modules: Vec<ModuleLayout>,
     /// Named channels of its images (a slave given as a device profile).
     pub decoder: Option<Box<dyn ImageDecoder>>,
 }
@@ -176,14 +177,7 @@ impl SlaveInfo {
                 name: s.params.name.clone(),
                 gsd: Some(s.gsd.clone()),
                 dpv1: s.params.dpv1,
-                modules: s
-                    .modules
-                    .iter()
-                    .filter_map(|m| {
-                        let io = s.gsd.module(m)?.io().ok()?;
-                        Some((m.clone(), io.input_bytes, io.output_bytes))
-                    })
-                    .collect(),
+                modules: ModuleLayout::of_gsd(&s.gsd, &s.modules),
                 decoder: None,
             })
             .collect()
@@ -1176,22 +1170,13 @@ impl fmt::Display for SlaveStatus {
 }
 
 fn slave_status(s: &SlaveTrack) -> SlaveStatus {
-    let mut modules = vec![];
-    let (mut i, mut o) = (0usize, 0usize);
-    for (name, ni, no) in &s.info.modules {
-        let slice = |img: &[u8], at: usize, n: usize| {
-            img.get(at.min(img.len())..(at + n).min(img.len()))
-                .unwrap_or(&[])
-                .to_vec()
-        };
-        modules.push(ModuleData {
-            name: name.clone(),
-            inputs: slice(&s.inputs, i, *ni),
-            outputs: slice(&s.outputs, o, *no),
-        });
-        i += ni;
-        o += no;
-    }
+    let modules = (s.info.modules.iter())
+        .map(|m| ModuleData {
+            name: m.name.clone(),
+            inputs: m.inputs.of(&s.inputs).to_vec(),
+            outputs: m.outputs.of(&s.outputs).to_vec(),
+        })
+        .collect();
     let channels = s.info.decoder.as_ref().map(|d| Channels {
         inputs: d.decode(Image::Inputs, &s.inputs),
         outputs: d.decode(Image::Outputs, &s.outputs),

@@ -1,4 +1,5 @@
 use super::*;
+use crate::config::layout::Span;
 use profibus_fdl::wire::Format;
 use proptest::prelude::*;
 
@@ -52,7 +53,18 @@ fn info() -> Vec<SlaveInfo> {
     vec![SlaveInfo {
         address: S,
         name: "io".into(),
-        modules: vec![("in 1 byte".into(), 1, 0), ("out 2 bytes".into(), 0, 2)],
+        modules: vec![
+            ModuleLayout {
+                name: "in 1 byte".into(),
+                inputs: Span { offset: 0, len: 1 },
+                outputs: Span { offset: 0, len: 0 },
+            },
+            ModuleLayout {
+                name: "out 2 bytes".into(),
+                inputs: Span { offset: 1, len: 0 },
+                outputs: Span { offset: 0, len: 2 },
+            },
+        ],
         ..SlaveInfo::default()
     }]
 }
