@@ -24,10 +24,19 @@ fn dpctl_in(dir: &Path, args: &[&str]) -> (std::process::ExitStatus, String) {
 }
 
 /// A directory where the repository's relative paths (crates/…)
-/// resolve as from the repository's root, as the README's commands run.
+/// resolve as from the repository's root, as the docs' commands run.
+/// The built-in GSD files are there too: a doc that copies one next to
+/// its bus file (`cp crates/devices/gsd/DPCTL_GEN.GSD /tmp/gw/`, before
+/// the here-document) names it without a directory.
 fn workdir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     std::os::unix::fs::symlink(repo().join("crates"), dir.path().join("crates")).unwrap();
+    for e in std::fs::read_dir(repo().join("crates/devices/gsd")).unwrap() {
+        let p = e.unwrap().path();
+        if profibus::dp::config::gsd::is_gsd_file_name(&p) {
+            std::os::unix::fs::symlink(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+        }
+    }
     dir
 }
 
