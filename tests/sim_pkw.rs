@@ -9,25 +9,16 @@ use profibus::devices::omega::Omega;
 use profibus::devices::omega::PKW as OMEGA;
 use profibus::devices::pkw::client::{PkwAnswer, PkwClient, PkwError};
 use profibus::devices::pkw::{Command, Reply};
-use profibus::dp::master::{
-    DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
-};
-use profibus::dp::slave::DpSlave;
-use profibus::fdl::line::medium::MediumConfig;
-use profibus::fdl::sim::{SimBus, StationId};
-use profibus::fdl::station::active::{ActiveConfig, ActiveStation};
-use profibus::fdl::station::passive::PassiveStation;
-use profibus::fdl::{Baud, BusParams};
+use profibus::dp::master::{MasterEvent, SlaveParams, SlaveState};
+use profibus_plant::Plant;
 use std::time::Duration;
-
-type Master = ActiveStation<DpMaster>;
 
 const BM4_ADDR: u8 = 6;
 const OMEGA_ADDR: u8 = 25;
 
-fn plant(omega_cfg: &[u8]) -> (SimBus, StationId) {
-    let params = BusParams::defaults(Baud::B1500000);
-    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+/// Master 2 with the BM4-O-PRO-01 (example variables) and an Omega
+/// configured with `omega_cfg`, from the plant builder.
+fn plant(omega_cfg: &[u8]) -> Plant {
     let t = profibus::devices::bm4::vars::VarTable::example();
     let bm4_cfg = [
         vec![0x73],
@@ -39,46 +30,28 @@ fn plant(omega_cfg: &[u8]) -> (SimBus, StationId) {
     b.user_prm_data = vec![0; 3];
     let mut o = SlaveParams::new(OMEGA_ADDR, 0x00D0, omega_cfg.to_vec());
     o.user_prm_data = vec![0; 5];
-    let cfg = MasterConfig {
-        address: 2,
-        params,
-        slaves: vec![b, o],
-        options: MasterOptions::default(),
-    };
-    let m = bus.add(ActiveStation::new(
-        ActiveConfig::new(2, params),
-        DpMaster::new(&cfg).unwrap(),
-    ));
-    bus.add(PassiveStation::new(
-        DpSlave::new(Bm4::example(BM4_ADDR), BM4_ADDR),
-        params,
-    ));
-    bus.add(PassiveStation::new(
-        DpSlave::new(Omega::with_defaults(), OMEGA_ADDR),
-        params,
-    ));
-    (bus, m)
-}
-
-fn slave_state(bus: &SimBus, m: StationId, a: u8) -> Option<SlaveState> {
-    bus.station::<Master>(m).app().slave_state(a)
+    Plant::builder()
+        .master(2)
+        .slave_params(b, Box::new(Bm4::example(BM4_ADDR)))
+        .slave_params(o, Box::new(Omega::with_defaults()))
+        .build()
+        .unwrap()
 }
 
 /// Run one PKW job on slave `addr`, 1 ms of bus time per step.
 fn job(
-    bus: &mut SimBus,
-    m: StationId,
+    p: &mut Plant,
     client: &mut PkwClient,
     addr: u8,
     pnu: u16,
     cmd: Command,
 ) -> Result<PkwAnswer, PkwError> {
-    client.start(bus.now(), pnu, cmd).unwrap();
+    client.start(p.now(), pnu, cmd).unwrap();
     let mut result = None;
     for _ in 0..2000 {
-        bus.run_for(Duration::from_millis(1));
-        let now = bus.now();
-        let dp = bus.station_mut::<Master>(m).app_mut();
+        p.run_for(Duration::from_millis(1));
+        let now = p.now();
+        let dp = p.master();
         let cycle = dp.slave_stats(addr).unwrap().data_exchanges;
         let inputs = dp.inputs(addr).unwrap().to_vec();
         let mut outputs = dp.outputs(addr).unwrap().to_vec();
@@ -97,18 +70,17 @@ fn job(
 
 #[test]
 fn pkw_jobs_over_the_simulated_bus() {
-    let (mut bus, m) = plant(&[0x73, 0x71, 0x51, 0x61]);
-    assert!(bus.run_while(Duration::from_millis(500), |b| {
+    let mut p = plant(&[0x73, 0x71, 0x51, 0x61]);
+    assert!(p.run_while(Duration::from_millis(500), |m| {
         [BM4_ADDR, OMEGA_ADDR]
             .iter()
-            .all(|&a| slave_state(b, m, a) == Some(SlaveState::DataExchange))
+            .all(|&a| m.slave_state(a) == Some(SlaveState::DataExchange))
     }));
     let mut c = PkwClient::new(&BM4, Duration::from_millis(200));
-    let a = job(&mut bus, m, &mut c, BM4_ADDR, 4, Command::Read).unwrap();
+    let a = job(&mut p, &mut c, BM4_ADDR, 4, Command::Read).unwrap();
     assert_eq!(a.response.to_string(), "2004 0000 0000 0BB8");
     let a = job(
-        &mut bus,
-        m,
+        &mut p,
         &mut c,
         BM4_ADDR,
         2,
@@ -116,17 +88,16 @@ fn pkw_jobs_over_the_simulated_bus() {
     )
     .unwrap();
     assert_eq!(a.response.to_string(), "2002 0000 1234 5678");
-    let e = job(&mut bus, m, &mut c, BM4_ADDR, 9, Command::Read).unwrap_err();
+    let e = job(&mut p, &mut c, BM4_ADDR, 9, Command::Read).unwrap_err();
     assert!(matches!(e, PkwError::Refused { code: 0x000B, .. }), "{e}");
 
     let mut c = PkwClient::new(&OMEGA, Duration::from_millis(200));
-    let a = job(&mut bus, m, &mut c, OMEGA_ADDR, 127, Command::WriteWord(4)).unwrap();
+    let a = job(&mut p, &mut c, OMEGA_ADDR, 127, Command::WriteWord(4)).unwrap();
     assert_eq!(a.response.to_string(), "107F 0000 0000 0004");
-    let a = job(&mut bus, m, &mut c, OMEGA_ADDR, 126, Command::Describe(6)).unwrap();
+    let a = job(&mut p, &mut c, OMEGA_ADDR, 126, Command::Describe(6)).unwrap();
     assert_eq!(a.reply, Reply::Element(0x000F));
     let a = job(
-        &mut bus,
-        m,
+        &mut p,
         &mut c,
         OMEGA_ADDR,
         1000,
@@ -134,10 +105,10 @@ fn pkw_jobs_over_the_simulated_bus() {
     )
     .unwrap();
     assert_eq!(a.response.to_string(), "23E8 0000 1234 5678");
-    let a = job(&mut bus, m, &mut c, OMEGA_ADDR, 1000, Command::Read).unwrap();
+    let a = job(&mut p, &mut c, OMEGA_ADDR, 1000, Command::Read).unwrap();
     assert_eq!(a.reply, Reply::Dword(0x1234_5678));
     // Both slaves kept exchanging data throughout.
-    let dp = bus.station::<Master>(m).app();
+    let dp = p.master_ref();
     assert_eq!(dp.slave_stats(BM4_ADDR).unwrap().restarts, 0);
     assert_eq!(dp.slave_stats(OMEGA_ADDR).unwrap().restarts, 0);
 }
@@ -145,17 +116,11 @@ fn pkw_jobs_over_the_simulated_bus() {
 #[test]
 fn omega_configuration_against_the_rules_is_a_cfg_fault() {
     // Status / control module missing.
-    let (mut bus, m) = plant(&[0x73, 0x51, 0x61]);
-    bus.run_for(Duration::from_millis(300));
-    assert_eq!(
-        slave_state(&bus, m, BM4_ADDR),
-        Some(SlaveState::DataExchange)
-    );
-    assert_ne!(
-        slave_state(&bus, m, OMEGA_ADDR),
-        Some(SlaveState::DataExchange)
-    );
-    let dp = bus.station_mut::<Master>(m).app_mut();
+    let mut p = plant(&[0x73, 0x51, 0x61]);
+    p.run_for(Duration::from_millis(300));
+    let dp = p.master();
+    assert_eq!(dp.slave_state(BM4_ADDR), Some(SlaveState::DataExchange));
+    assert_ne!(dp.slave_state(OMEGA_ADDR), Some(SlaveState::DataExchange));
     let mut faults = vec![];
     while let Some(e) = dp.poll_event() {
         if let MasterEvent::Fault { address, reason } = e {
