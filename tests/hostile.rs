@@ -15,6 +15,7 @@ use profibus::devices::bus::ProfiledBus;
 use profibus::devices::DeviceOptions;
 use profibus::dp::config::busfile::BusFile;
 use profibus::dp::config::gsd::{Gsd, ParseOptions, MAX_FILE_LEN};
+use profibus::dp::config::layout::SlaveLayout;
 use profibus_gateway::settings::MqttSettings;
 use profibus_gateway::{Gateway, SlaveInfo};
 use std::path::Path;
@@ -346,14 +347,15 @@ fn gateway() -> Gateway {
     let mut gw = Gateway::new(
         settings,
         vec![SlaveInfo {
-            address: 8,
-            name: "s8".into(),
-            ident_number: 0x0815,
+            layout: SlaveLayout {
+                address: 8,
+                name: "s8".into(),
+                ident_number: 0x0815,
+                dpv1: true,
+                ..SlaveLayout::default()
+            },
             channels: None,
-            gsd: None,
-            dpv1: true,
             pkw: None,
-            rfid: false,
         }],
     );
     gw.connected(0);

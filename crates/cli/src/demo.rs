@@ -63,7 +63,12 @@ async fn demo(args: Args) -> Result<()> {
         profile: Some("rfid"),
     };
     let mut plant = DemoPlant::new(vec![(rfid, parts.device)])?;
-    let info: Vec<SlaveInfo> = plant.slaves().iter().map(slave_info).collect();
+    let info: Vec<SlaveInfo> = (plant.slaves().iter())
+        .map(|s| SlaveInfo {
+            layout: s.layout(),
+            channels: s.channels.clone(),
+        })
+        .collect();
     let pcap = (args.pcap.as_deref())
         .map(|p| {
             PcapWriter::create(p, Duration::ZERO)
@@ -138,15 +143,4 @@ async fn demo(args: Args) -> Result<()> {
         w.flush()?;
     }
     Ok(())
-}
-
-/// What the view shows of a slave of the plant.
-fn slave_info(s: &PlantSlave) -> SlaveInfo {
-    SlaveInfo {
-        address: s.address,
-        name: s.name.clone(),
-        gsd: s.gsd.clone(),
-        channels: s.channels.clone(),
-        modules: s.modules.clone(),
-    }
 }

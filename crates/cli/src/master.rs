@@ -149,7 +149,12 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             last_now = now;
             let m = st.app_mut();
             while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
-                let channels = |a| info.iter().find(|s| s.address == a)?.channels.as_ref();
+                let channels = |a| {
+                    info.iter()
+                        .find(|s| s.layout.address == a)?
+                        .channels
+                        .as_ref()
+                };
                 let result = execute_input(m, channels, &mut rfid, &line);
                 if let Some(shown) = CommandLine::of(&line, result) {
                     view.event(&shown);

@@ -53,7 +53,7 @@ pub fn run(args: Args) -> Result<()> {
         master_timeout: Duration::from_millis(args.master_timeout),
         ..MonitorOptions::default()
     };
-    let mut monitor = Monitor::new(monitor_slaves(&bus.file, &info), options);
+    let mut monitor = Monitor::new(monitor_slaves(&info), options);
     let rt = common::runtime()?;
     let baud = bus.file.master.params.baud;
     let mut port = {

@@ -134,8 +134,8 @@ pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View
             profibus_dp::master::MasterEvent::Diag { address }
             | profibus_dp::master::MasterEvent::CfgMismatch { address } => slaves_info
                 .iter()
-                .find(|s| s.address == *address)
-                .and_then(|s| s.gsd.as_ref()),
+                .find(|s| s.layout.address == *address)
+                .and_then(|s| s.layout.gsd.as_ref()),
             _ => None,
         };
         let report = MasterReport::new(m, e, gsd);

@@ -100,7 +100,7 @@ impl Gateway {
                 .into_iter()
                 .map(|info| Entry {
                     pkw: info.pkw.map(|d| PkwClient::new(d, timeout)),
-                    rfid: info.rfid.then(|| RfidClient::new(timeout)),
+                    rfid: info.rfid().then(|| RfidClient::new(timeout)),
                     info,
                     published: Published::default(),
                     fault: None,
@@ -192,18 +192,22 @@ impl Gateway {
     /// Check `request` for slave `address` against the configuration and
     /// the permissions.
     fn check(&self, address: u8, request: &Request) -> Result<(), RequestError> {
-        let Some(entry) = self.slaves.iter().find(|e| e.info.address == address) else {
+        let Some(entry) = self
+            .slaves
+            .iter()
+            .find(|e| e.info.layout.address == address)
+        else {
             return Err(RequestError::UnknownSlave(address.to_string()));
         };
         let unsupported = |what| Err(RequestError::Unsupported { address, what });
         match request {
-            Request::Dpv1Read { .. } | Request::Dpv1Write { .. } if !entry.info.dpv1 => {
+            Request::Dpv1Read { .. } | Request::Dpv1Write { .. } if !entry.info.layout.dpv1 => {
                 return unsupported("DP-V1 (`dpv1 = true` in the bus file)")
             }
             Request::Pkw { .. } | Request::PkwNamed { .. } if entry.info.pkw.is_none() => {
                 return unsupported("PKW channel")
             }
-            Request::Rfid(_) if !entry.info.rfid => return unsupported("RFID reader handshake"),
+            Request::Rfid(_) if !entry.info.rfid() => return unsupported("RFID reader handshake"),
             _ => {}
         }
         if !request.writes() {
@@ -238,12 +242,13 @@ impl Gateway {
         let info = &self
             .slaves
             .iter()
-            .find(|e| e.info.address == address)
+            .find(|e| e.info.layout.address == address)
             .expect("checked")
             .info;
-        info.gsd
+        info.layout
+            .gsd
             .as_ref()
-            .and_then(|g| profibus_devices::pkw_parameter(info.ident_number, g, &name))
+            .and_then(|g| profibus_devices::pkw_parameter(info.layout.ident_number, g, &name))
             .map(|pnu| Request::Pkw { pnu, command })
             .ok_or(RequestError::NoParameter { address, name })
     }
@@ -278,7 +283,7 @@ impl Gateway {
         let e = self
             .slaves
             .iter_mut()
-            .find(|e| e.info.address == address)
+            .find(|e| e.info.layout.address == address)
             .expect("checked");
         let waiting = match q.request {
             Request::Outputs(_) | Request::Dpv1Read { .. } | Request::Dpv1Write { .. } => {
@@ -307,7 +312,11 @@ impl Gateway {
             match ev {
                 MasterEvent::Fault { address, reason } => {
                     tracing::warn!(address, %reason, "slave fault");
-                    if let Some(e) = self.slaves.iter_mut().find(|e| e.info.address == address) {
+                    if let Some(e) = self
+                        .slaves
+                        .iter_mut()
+                        .find(|e| e.info.layout.address == address)
+                    {
                         e.fault = Some(reason.to_string());
                         e.published.state = None;
                     }
@@ -395,7 +404,7 @@ impl Gateway {
         let map = self
             .slaves
             .iter()
-            .find(|e| e.info.address == address)
+            .find(|e| e.info.layout.address == address)
             .and_then(|e| e.info.channels.as_ref());
         let allowed = self
             .settings
@@ -410,7 +419,7 @@ impl Gateway {
         Status::Online {
             master: m.operating_state(),
             ts: ts_ms,
-            slaves: self.slaves.iter().map(|e| e.info.address).collect(),
+            slaves: self.slaves.iter().map(|e| e.info.layout.address).collect(),
             writable: self.settings.writable.iter().map(|w| w.address).collect(),
             outputs_timeout: self.outage.safe_applied().map(|at| OutputsTimeout {
                 safe_state: self.settings.safe_state,
@@ -433,7 +442,7 @@ impl Gateway {
         let on_change = self.settings.publish != PublishMode::Interval;
         let cycle = m.cycle_stats().cycles;
         for i in 0..self.slaves.len() {
-            let addr = self.slaves[i].info.address;
+            let addr = self.slaves[i].info.layout.address;
             let Some(h) = m.handle(addr) else { continue };
             let v = m.slave(h);
             let e = &mut self.slaves[i];
@@ -442,7 +451,7 @@ impl Gateway {
                 e.published.state = Some(v.state);
                 let p = SlaveStatePayload {
                     address: addr,
-                    name: &e.info.name,
+                    name: &e.info.layout.name,
                     state: v.state,
                     fault: e.fault.as_deref(),
                     ts: ts_ms,
@@ -481,7 +490,11 @@ impl Gateway {
                 let text = if v.diag.is_empty() {
                     vec![]
                 } else {
-                    profibus_dp::pdu::diag::describe(v.diag, e.info.gsd.as_ref(), e.info.dpv1)
+                    profibus_dp::pdu::diag::describe(
+                        v.diag,
+                        e.info.layout.gsd.as_ref(),
+                        e.info.layout.dpv1,
+                    )
                 };
                 let p = DiagPayload::new(addr, v.diag, text, ts_ms, cycle);
                 msgs.push((SlaveTopic::Diag, to_bytes(&p)));
@@ -576,7 +589,7 @@ impl JobClient for RfidClient {
 /// Start the next PKW or RFID job of a slave when its client is idle,
 /// and drive the running one.
 fn drive(e: &mut Entry, m: &mut DpMaster, now: Instant, answers: &mut Vec<(Target, Outcome)>) {
-    let Some(h) = m.handle(e.info.address) else {
+    let Some(h) = m.handle(e.info.layout.address) else {
         return;
     };
     let client: Option<&mut dyn JobClient> = match (&mut e.pkw, &mut e.rfid) {
@@ -640,6 +653,7 @@ mod tests {
     use super::*;
     use crate::settings::SafeState;
     use profibus_devices::channels::{ChannelMap, ChannelType};
+    use profibus_dp::config::layout::SlaveLayout;
     use profibus_dp::master::{MasterConfig, MasterOptions, SlaveParams};
     use profibus_fdl::{Baud, BusParams};
     use serde_json::json;
@@ -669,14 +683,14 @@ mod tests {
             toml::from_str("writable = [3, { address = 5, channels = [\"speed\"] }]").unwrap();
         let settings = crate::MqttSettings::from_table(Some(&t), "l1").unwrap();
         let info = |address, channels| SlaveInfo {
-            address,
-            name: format!("s{address}"),
-            ident_number: 0x1234,
+            layout: SlaveLayout {
+                address,
+                name: format!("s{address}"),
+                ident_number: 0x1234,
+                ..SlaveLayout::default()
+            },
             channels,
-            gsd: None,
-            dpv1: false,
             pkw: None,
-            rfid: false,
         };
         let g = Gateway::new(
             settings,

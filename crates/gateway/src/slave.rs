@@ -4,29 +4,29 @@ use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::ChannelMap;
 use profibus_devices::pkw::Dialect;
 use profibus_devices::ProfileError;
-use profibus_dp::config::gsd::Gsd;
-use profibus_dp::config::layout::Capabilities;
+use profibus_dp::config::layout::{Capabilities, SlaveLayout};
 
-/// What the gateway knows of one configured slave.
+/// What the gateway knows of one configured slave: its layout
+/// ([`ProfiledBus::layouts`]), its named channels and its PKW dialect.
 #[derive(Debug, Clone)]
 pub struct SlaveInfo {
-    /// Station address.
-    pub address: u8,
-    /// Name from the bus file.
-    pub name: String,
-    /// Ident number (PKW parameters by name: [`profibus_devices::pkw_parameter`]).
-    pub ident_number: u16,
+    /// Address, name, ident number (PKW parameters by name:
+    /// [`profibus_devices::pkw_parameter`]), GSD (diagnosis texts), DP-V1
+    /// (diagnosis decoding, DP-V1 requests) and capabilities (RFID
+    /// requests).
+    pub layout: SlaveLayout,
     /// Named channels of its images (device profiles), if any.
     pub channels: Option<ChannelMap>,
-    /// Its GSD, for diagnosis texts.
-    pub gsd: Option<Gsd>,
-    /// Whether it is a DP-V1 slave (diagnosis decoding, DP-V1 requests).
-    pub dpv1: bool,
     /// The dialect of its PKW channel, if it has one (PKW requests).
     pub pkw: Option<&'static Dialect>,
+}
+
+impl SlaveInfo {
     /// Whether it is an RFID reader with the 16-byte command handshake
     /// (RFID requests).
-    pub rfid: bool,
+    pub fn rfid(&self) -> bool {
+        self.layout.capabilities.contains(Capabilities::RFID)
+    }
 }
 
 /// A slave whose named channels cannot be worked out (its device
@@ -40,33 +40,23 @@ pub struct SlaveInfoError {
     pub error: ProfileError,
 }
 
-/// The gateway's view of a bus file's slaves: names, named channels
-/// (device profiles' channels; `MODULE[i]` bytes for slaves given by GSD
-/// modules), GSDs, PKW dialects, RFID readers.
+/// The gateway's view of a bus file's slaves: their layouts, named
+/// channels (device profiles' channels; `MODULE[i]` bytes for slaves given
+/// by GSD modules) and PKW dialects.
 pub fn slave_infos(profiled: &ProfiledBus) -> Result<Vec<SlaveInfo>, SlaveInfoError> {
-    profiled
-        .file
-        .slaves
-        .iter()
-        .map(|s| {
-            let a = s.params.address;
+    (profiled.file.slaves.iter())
+        .zip(profiled.layouts())
+        .map(|(s, layout)| {
+            let a = layout.address;
+            let channels = (profiled.channels(a))
+                .unwrap_or_else(|| {
+                    profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
+                })
+                .map_err(|error| SlaveInfoError { address: a, error })?;
             Ok(SlaveInfo {
-                address: a,
-                name: s.params.name.clone(),
-                ident_number: s.params.ident_number,
-                channels: Some(
-                    profiled
-                        .channels(a)
-                        .unwrap_or_else(|| {
-                            profibus_devices::generic::module_channels(&s.modules, &s.params.cfg)
-                        })
-                        .map_err(|error| SlaveInfoError { address: a, error })?,
-                ),
-                gsd: Some(s.gsd.clone()),
-                dpv1: s.params.dpv1,
+                layout,
+                channels: Some(channels),
                 pkw: profibus_devices::pkw_dialect(s.params.ident_number, &s.params.cfg).ok(),
-                rfid: profibus_devices::capabilities(s.params.ident_number, &s.params.cfg)
-                    .contains(Capabilities::RFID),
             })
         })
         .collect()

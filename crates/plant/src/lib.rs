@@ -39,6 +39,7 @@ use profibus_devices::channels::ChannelMap;
 use profibus_devices::generic::{GenericDevice, GenericError, InputPattern};
 use profibus_devices::{BoxedDevice, Configured, ControlInbox, DeviceOptions, ProfileError};
 use profibus_dp::config::gsd::{Gsd, LookupError, SelectionError};
+use profibus_dp::config::layout::{ModuleLayout, SlaveLayout};
 use profibus_dp::master::{
     DpMaster, MasterConfig, MasterConfigError, MasterOptions, SlaveParams, SlaveState,
 };
@@ -75,6 +76,24 @@ pub struct PlantSlave {
     pub channels: Option<ChannelMap>,
     /// The device profile it runs, if any.
     pub profile: Option<&'static str>,
+}
+
+impl PlantSlave {
+    /// Its layout as a view sees it: address, name, GSD and the GSD
+    /// modules with their spans; the ident number from its GSD; DP-V1 and
+    /// capabilities are left unset.
+    pub fn layout(&self) -> SlaveLayout {
+        SlaveLayout {
+            address: self.address,
+            name: self.name.clone(),
+            ident_number: self.gsd.as_ref().map_or(0, |g| g.ident_number),
+            modules: (self.gsd.as_ref())
+                .map(|g| ModuleLayout::of_gsd(g, &self.modules))
+                .unwrap_or_default(),
+            gsd: self.gsd.clone(),
+            ..SlaveLayout::default()
+        }
+    }
 }
 
 /// Why a plant cannot be built.

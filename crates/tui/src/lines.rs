@@ -6,8 +6,7 @@ use crate::bus::{BusView, Decoding, SlaveSpec};
 use profibus_devices::bus::ProfiledBus;
 use profibus_devices::channels::{ChannelMap, ImageValues};
 use profibus_devices::profile::ProfileError;
-use profibus_dp::config::busfile::{BusFile, BusSlave};
-use profibus_dp::config::gsd::Gsd;
+use profibus_dp::config::layout::SlaveLayout;
 use profibus_dp::master::{DpMaster, MasterStatus, SlaveStatus};
 use profibus_dp::monitor;
 use profibus_fdl::{Baud, Instant};
@@ -15,20 +14,15 @@ use serde::Serialize;
 use std::fmt;
 
 /// What a view shows of a slave of a bus file besides the master's
-/// state.
+/// state: its layout, and the named channels of its images.
 #[derive(Debug, Clone)]
 pub struct SlaveInfo {
-    /// Station address.
-    pub address: u8,
-    /// Name.
-    pub name: String,
-    /// The GSD, for diagnosis texts.
-    pub gsd: Option<Gsd>,
+    /// Address, name, GSD (for diagnosis texts) and GSD modules with
+    /// their spans.
+    pub layout: SlaveLayout,
     /// Named channels of its process images (a slave given as a device
     /// profile).
     pub channels: Option<ChannelMap>,
-    /// The GSD modules the master configures, in slot order.
-    pub modules: Vec<String>,
 }
 
 /// A slave's device profile could not give its channels.
@@ -42,37 +36,33 @@ pub struct SlaveProfileError {
 }
 
 impl SlaveInfo {
-    /// The slaves of a bus file, with the named channels of those given
-    /// as device profiles; the error names the slave whose profile failed.
+    /// The slaves of a bus file ([`ProfiledBus::layouts`]), with the named
+    /// channels of those given as device profiles; the error names the
+    /// slave whose profile failed.
     pub fn of_bus(bus: &ProfiledBus) -> Result<Vec<SlaveInfo>, SlaveProfileError> {
-        (bus.file.slaves.iter())
-            .map(|s| SlaveInfo::of_slave(bus, s))
+        (bus.layouts().into_iter())
+            .map(|layout| {
+                let address = layout.address;
+                let channels = bus.channels(address).transpose();
+                Ok(SlaveInfo {
+                    layout,
+                    channels: channels.map_err(|error| SlaveProfileError { address, error })?,
+                })
+            })
             .collect()
-    }
-
-    /// The slave `s` of `bus`.
-    fn of_slave(bus: &ProfiledBus, s: &BusSlave) -> Result<SlaveInfo, SlaveProfileError> {
-        let address = s.params.address;
-        let channels = bus.channels(address).transpose();
-        Ok(SlaveInfo {
-            address,
-            name: s.params.name.clone(),
-            gsd: Some(s.gsd.clone()),
-            channels: channels.map_err(|error| SlaveProfileError { address, error })?,
-            modules: s.modules.clone(),
-        })
     }
 
     /// The slave for a [`BusView`]: decoded by its
     /// channels, else by its GSD modules.
     pub fn spec(&self) -> SlaveSpec {
+        let l = &self.layout;
         SlaveSpec {
-            address: self.address,
-            name: self.name.clone(),
-            gsd: self.gsd.clone(),
-            decoding: match (&self.channels, &self.gsd) {
+            address: l.address,
+            name: l.name.clone(),
+            gsd: l.gsd.clone(),
+            decoding: match (&self.channels, &l.gsd) {
                 (Some(c), _) => Decoding::Channels(c.clone()),
-                (None, Some(g)) => Decoding::modules(g, &self.modules),
+                (None, Some(_)) => Decoding::Modules(l.modules.clone()),
                 (None, None) => Decoding::None,
             },
         }
@@ -89,18 +79,15 @@ pub fn bus_view(title: &str, baud: Baud, info: &[SlaveInfo]) -> BusView {
     )
 }
 
-/// The slaves of `bus` for a passive monitor
-/// ([`profibus_dp::monitor`]): their GSD modules, and the named channels
-/// of `info` (of the same bus, [`SlaveInfo::of_bus`]) as decoders.
-pub fn monitor_slaves(bus: &BusFile, info: &[SlaveInfo]) -> Vec<monitor::SlaveInfo> {
-    let mut slaves = monitor::SlaveInfo::from_bus(bus);
-    for s in &mut slaves {
-        let channels = info.iter().find(|i| i.address == s.address);
-        if let Some(c) = channels.and_then(|i| i.channels.clone()) {
-            s.decoder = Some(Box::new(c));
-        }
-    }
-    slaves
+/// The slaves `info` for a passive monitor ([`profibus_dp::monitor`]):
+/// their layouts, and their named channels as decoders.
+pub fn monitor_slaves(info: &[SlaveInfo]) -> Vec<monitor::SlaveInfo> {
+    (info.iter())
+        .map(|i| monitor::SlaveInfo {
+            layout: i.layout.clone(),
+            decoder: (i.channels.clone()).map(|c| Box::new(c) as Box<dyn monitor::ImageDecoder>),
+        })
+        .collect()
 }
 
 /// An event an application makes itself: `{"event": KIND, …body}` in
@@ -211,14 +198,14 @@ impl StatusLine {
         let slaves = info
             .iter()
             .map(|s| {
-                let status = SlaveStatus::of(m, s.address);
+                let status = SlaveStatus::of(m, s.layout.address);
                 let channels = s
                     .channels
                     .as_ref()
                     .map(|map| map.values(&status.inputs, &status.outputs));
                 SlaveLine {
                     status: SlaveStatus {
-                        name: s.name.clone(),
+                        name: s.layout.name.clone(),
                         ..status
                     },
                     channels,

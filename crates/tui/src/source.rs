@@ -194,17 +194,18 @@ impl BusSource for Monitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use profibus_dp::config::layout::SlaveLayout;
     use profibus_dp::monitor::{MonitorOptions, SlaveInfo};
     use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
     use profibus_fdl::Telegram;
 
     #[test]
     fn a_monitor_snapshot_has_the_ring_the_line_and_the_slaves_it_heard() {
-        let slaves = vec![SlaveInfo {
+        let slaves = vec![SlaveInfo::from(SlaveLayout {
             address: 8,
             name: "valve".into(),
-            ..SlaveInfo::default()
-        }];
+            ..SlaveLayout::default()
+        })];
         let mut mon = Monitor::new(slaves, MonitorOptions::default());
         let data = |da, sa, fc, du| {
             Telegram::Data(DataTelegram {

@@ -44,7 +44,9 @@
 //! use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
 //! use profibus_fdl::{Instant, Telegram};
 //!
-//! let slaves = vec![SlaveInfo { address: 8, name: "valve".into(), ..SlaveInfo::default() }];
+//! use profibus_dp::config::layout::SlaveLayout;
+//! let valve = SlaveLayout { address: 8, name: "valve".into(), ..SlaveLayout::default() };
+//! let slaves = vec![SlaveInfo::from(valve)];
 //! let mut monitor = Monitor::new(slaves, MonitorOptions::default());
 //! let request = FunctionCode::Request { kind: RequestKind::SrdHigh, fcb: true, fcv: true };
 //! let response = FunctionCode::slave_response(ResponseStatus::Dl);
@@ -66,8 +68,7 @@
 //! ```
 
 use crate::config::busfile::BusFile;
-use crate::config::gsd::Gsd;
-use crate::config::layout::ModuleLayout;
+use crate::config::layout::SlaveLayout;
 use crate::master::{OperatingState, SlaveState};
 use crate::pdu::control::{ControlCommand, GlobalControl};
 use crate::pdu::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
@@ -150,36 +151,30 @@ pub trait ImageDecoder: Send + fmt::Debug {
 }
 
 /// What the monitor knows of a slave before seeing any traffic: its
-/// entry in a bus file.
+/// layout from a bus file, and a decoder for its images.
 #[derive(Debug, Default)]
 pub struct SlaveInfo {
-    /// Station address.
-    pub address: u8,
-    /// Name for people.
-    pub name: String,
-    /// Its GSD, for diagnosis texts.
-    pub gsd: Option<Gsd>,
-    /// Whether it is a DP-V1 slave (reads its diagnosis blocks as alarms).
-    pub dpv1: bool,
-    /// GSD modules in slot order, with their spans of the images.
-    pub modules: Vec<ModuleLayout>,
+    /// Address, name, GSD (for diagnosis texts), DP-V1 (reads its
+    /// diagnosis blocks as alarms) and GSD modules with their spans.
+    pub layout: SlaveLayout,
     /// Named channels of its images (a slave given as a device profile).
     pub decoder: Option<Box<dyn ImageDecoder>>,
 }
 
+impl From<SlaveLayout> for SlaveInfo {
+    fn from(layout: SlaveLayout) -> SlaveInfo {
+        SlaveInfo {
+            layout,
+            decoder: None,
+        }
+    }
+}
+
 impl SlaveInfo {
-    /// The slaves of a bus file, with their GSD modules' sizes.
+    /// The slaves of a bus file, with their GSD modules' spans.
     pub fn from_bus(bus: &BusFile) -> Vec<SlaveInfo> {
-        bus.slaves
-            .iter()
-            .map(|s| SlaveInfo {
-                address: s.params.address,
-                name: s.params.name.clone(),
-                gsd: Some(s.gsd.clone()),
-                dpv1: s.params.dpv1,
-                modules: ModuleLayout::of_gsd(&s.gsd, &s.modules),
-                decoder: None,
-            })
+        (SlaveLayout::of_bus(bus).into_iter())
+            .map(SlaveInfo::from)
             .collect()
     }
 }
@@ -604,7 +599,7 @@ impl Monitor {
             options,
             slaves: slaves
                 .into_iter()
-                .map(|s| (s.address, SlaveTrack::new(s)))
+                .map(|s| (s.layout.address, SlaveTrack::new(s)))
                 .collect(),
             masters: BTreeMap::new(),
             pending: None,
@@ -662,10 +657,10 @@ impl Monitor {
 
     fn slave(&mut self, address: u8) -> &mut SlaveTrack {
         self.slaves.entry(address).or_insert_with(|| {
-            SlaveTrack::new(SlaveInfo {
+            SlaveTrack::new(SlaveInfo::from(SlaveLayout {
                 address,
-                ..SlaveInfo::default()
-            })
+                ..SlaveLayout::default()
+            }))
         })
     }
 
@@ -1013,7 +1008,7 @@ impl Monitor {
         let s = self.slave(address);
         if s.diag_raw != data {
             s.diag_raw = data.to_vec();
-            s.diag_words = diag::describe(data, s.info.gsd.as_ref(), s.info.dpv1);
+            s.diag_words = diag::describe(data, s.info.layout.gsd.as_ref(), s.info.layout.dpv1);
             let e = MonitorEvent::Diag {
                 address,
                 raw: s.diag_raw.clone(),
@@ -1170,7 +1165,7 @@ impl fmt::Display for SlaveStatus {
 }
 
 fn slave_status(s: &SlaveTrack) -> SlaveStatus {
-    let modules = (s.info.modules.iter())
+    let modules = (s.info.layout.modules.iter())
         .map(|m| ModuleData {
             name: m.name.clone(),
             inputs: m.inputs.of(&s.inputs).to_vec(),
@@ -1182,8 +1177,8 @@ fn slave_status(s: &SlaveTrack) -> SlaveStatus {
         outputs: d.decode(Image::Outputs, &s.outputs),
     });
     SlaveStatus {
-        address: s.info.address,
-        name: s.info.name.clone(),
+        address: s.info.layout.address,
+        name: s.info.layout.name.clone(),
         state: s.state,
         master: s.master,
         inputs: s.inputs.clone(),

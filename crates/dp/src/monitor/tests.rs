@@ -1,5 +1,5 @@
 use super::*;
-use crate::config::layout::Span;
+use crate::config::layout::{ModuleLayout, Span};
 use profibus_fdl::wire::Format;
 use proptest::prelude::*;
 
@@ -50,7 +50,7 @@ fn events(m: &mut Monitor) -> Vec<MonitorEvent> {
 }
 
 fn info() -> Vec<SlaveInfo> {
-    vec![SlaveInfo {
+    vec![SlaveInfo::from(SlaveLayout {
         address: S,
         name: "io".into(),
         modules: vec![
@@ -65,8 +65,8 @@ fn info() -> Vec<SlaveInfo> {
                 outputs: Span { offset: 0, len: 2 },
             },
         ],
-        ..SlaveInfo::default()
-    }]
+        ..SlaveLayout::default()
+    })]
 }
 
 /// Diag data unit: status bytes and master address.

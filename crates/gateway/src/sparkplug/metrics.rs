@@ -180,6 +180,13 @@ pub struct OutputWrite {
 }
 
 impl Device {
+    /// The device of a slave with its own channels (none if it has
+    /// none).
+    pub fn of_info(info: SlaveInfo) -> Device {
+        let channels = info.channels.clone().unwrap_or_default();
+        Device::new(info, channels)
+    }
+
     /// The device of a slave; `channels` as [`SlaveInfo::channels`] or
     /// derived from its GSD modules.
     pub fn new(info: SlaveInfo, channels: ChannelMap) -> Device {
@@ -195,7 +202,7 @@ impl Device {
                 source: Source::Name,
             },
         ];
-        if let Some(g) = &info.gsd {
+        if let Some(g) = &info.layout.gsd {
             metrics.push(MetricDef {
                 name: IDENT.into(),
                 datatype: DataType::UInt16,
@@ -238,7 +245,7 @@ impl Device {
 
     /// The Sparkplug device id: the station address in decimal.
     pub fn id(&self) -> String {
-        self.info.address.to_string()
+        self.info.layout.address.to_string()
     }
 
     /// The value of every metric (in [`Device::metrics`] order) in the
@@ -248,8 +255,8 @@ impl Device {
         self.metrics
             .iter()
             .map(|m| match &m.source {
-                Source::Address => Some(MetricValue::IntValue(self.info.address as u32)),
-                Source::Name => Some(MetricValue::StringValue(self.info.name.clone())),
+                Source::Address => Some(MetricValue::IntValue(self.info.layout.address as u32)),
+                Source::Name => Some(MetricValue::StringValue(self.info.layout.name.clone())),
                 Source::Ident(n) => Some(MetricValue::IntValue(*n as u32)),
                 Source::Image(Direction::Input) => Some(MetricValue::BytesValue(v.inputs.to_vec())),
                 Source::Image(Direction::Output) => {
@@ -267,8 +274,12 @@ impl Device {
                 Source::DiagText => Some(MetricValue::StringValue(if v.diag.is_empty() {
                     String::new()
                 } else {
-                    profibus_dp::pdu::diag::describe(v.diag, self.info.gsd.as_ref(), self.info.dpv1)
-                        .join("\n")
+                    profibus_dp::pdu::diag::describe(
+                        v.diag,
+                        self.info.layout.gsd.as_ref(),
+                        self.info.layout.dpv1,
+                    )
+                    .join("\n")
                 })),
             })
             .collect()

@@ -21,7 +21,6 @@ use crate::settings::MqttSettings;
 use crate::slave::{slave_infos, SlaveInfo, SlaveInfoError};
 use metrics::{CommandError, Device, OutputWrite};
 use profibus_devices::bus::ProfiledBus;
-use profibus_devices::channels::ChannelMap;
 use profibus_dp::master::{DpMaster, MasterEvent, SlaveState};
 use profibus_fdl::Instant;
 use prost::Message;
@@ -36,30 +35,10 @@ pub const BD_SEQ: &str = "bdSeq";
 /// The devices of a bus file's slaves: channels from the device
 /// profiles, or one byte per GSD module.
 pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SlaveInfoError> {
+    // `slave_infos` gives every slave channels: its profile's, or its
+    // modules' bytes.
     let infos = slave_infos(profiled)?;
-    infos
-        .into_iter()
-        .map(|info| {
-            let channels = match &info.channels {
-                Some(c) => c.clone(),
-                None => {
-                    let s = profiled
-                        .file
-                        .slaves
-                        .iter()
-                        .find(|s| s.params.address == info.address)
-                        .expect("slave_infos lists the bus file's slaves");
-                    profibus_devices::generic::module_channels(&s.modules, &s.params.cfg).map_err(
-                        |error| SlaveInfoError {
-                            address: info.address,
-                            error,
-                        },
-                    )?
-                }
-            };
-            Ok(Device::new(info, channels))
-        })
-        .collect()
+    Ok(infos.into_iter().map(Device::of_info).collect())
 }
 
 /// What the edge node knows of one device.
@@ -144,13 +123,7 @@ impl EdgeNode {
     /// An edge node for slaves described by [`SlaveInfo`]s only (slaves
     /// without named channels get none).
     pub fn from_infos(settings: MqttSettings, id: SparkplugId, infos: Vec<SlaveInfo>) -> EdgeNode {
-        let devices = infos
-            .into_iter()
-            .map(|i| {
-                let c = i.channels.clone().unwrap_or_else(ChannelMap::new);
-                Device::new(i, c)
-            })
-            .collect();
+        let devices = infos.into_iter().map(Device::of_info).collect();
         EdgeNode::new(settings, id, devices)
     }
 
@@ -233,7 +206,7 @@ impl EdgeNode {
         let Some(e) = self.devices.iter().find(|e| e.device.id() == device) else {
             return Err(CommandError::UnknownDevice(device.into()));
         };
-        let address = e.device.info.address;
+        let address = e.device.info.layout.address;
         let access = self
             .settings
             .access(address)
@@ -295,7 +268,7 @@ impl EdgeNode {
             self.nbirth(ts);
         }
         for i in 0..self.devices.len() {
-            let addr = self.devices[i].device.info.address;
+            let addr = self.devices[i].device.info.layout.address;
             let Some(h) = m.handle(addr) else { continue };
             let v = m.slave(h);
             let exchanging = v.state == SlaveState::DataExchange;
@@ -414,7 +387,7 @@ impl Session for EdgeNode {
             let Some(e) = self
                 .devices
                 .iter()
-                .find(|e| e.device.info.address == p.address)
+                .find(|e| e.device.info.layout.address == p.address)
             else {
                 continue;
             };
