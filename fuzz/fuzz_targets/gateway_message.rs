@@ -21,11 +21,12 @@
 
 use libfuzzer_sys::fuzz_target;
 use profibus_devices::channels::Direction;
+use profibus_dp::config::layout::{Capabilities, SlaveLayout};
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
 use profibus_fdl::{Baud, BusParams, Instant};
 use profibus_fuzz::{cached, profile_fixture, Fixture};
-use profibus_gateway::{Gateway, Service, SlaveInfo};
 use profibus_gateway::settings::MqttSettings;
+use profibus_gateway::{Gateway, Service, SlaveInfo};
 use std::sync::OnceLock;
 use std::time::Duration;
 
@@ -84,26 +85,33 @@ fn setup() -> Setup {
         options: MasterOptions::default(),
     };
     let info = |address: u8| SlaveInfo {
-        address,
-        name: format!("s{address}"),
-        ident_number: master
-            .slaves
-            .iter()
-            .find(|s| s.address == address)
-            .map_or(0, |s| s.ident_number),
+        layout: SlaveLayout {
+            address,
+            name: format!("s{address}"),
+            ident_number: master
+                .slaves
+                .iter()
+                .find(|s| s.address == address)
+                .map_or(0, |s| s.ident_number),
+            gsd: None,
+            dpv1: address == 10,
+            modules: vec![],
+            capabilities: if address == 9 {
+                Capabilities::RFID
+            } else {
+                Capabilities::empty()
+            },
+        },
         channels: if address == 8 {
             omega_map.clone()
         } else {
             None
         },
-        gsd: None,
-        dpv1: address == 10,
         pkw: if address == 8 {
             profibus_devices::profile("omega").unwrap().pkw
         } else {
             None
         },
-        rfid: address == 9,
     };
     Setup {
         settings,

@@ -19,6 +19,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use profibus_devices::channels::Direction;
+use profibus_dp::config::layout::{Capabilities, SlaveLayout};
 use profibus_dp::master::{DpMaster, MasterConfig, MasterOptions, SlaveParams};
 use profibus_fdl::{Baud, BusParams, Instant};
 use profibus_fuzz::{cached, profile_fixture, Fixture};
@@ -64,18 +65,21 @@ fn setup() -> Setup {
         options: MasterOptions::default(),
     };
     let info = |address: u8| SlaveInfo {
-        address,
-        name: format!("s{address}"),
-        ident_number: master
-            .slaves
-            .iter()
-            .find(|s| s.address == address)
-            .map_or(0, |s| s.ident_number),
+        layout: SlaveLayout {
+            address,
+            name: format!("s{address}"),
+            ident_number: master
+                .slaves
+                .iter()
+                .find(|s| s.address == address)
+                .map_or(0, |s| s.ident_number),
+            gsd: None,
+            dpv1: false,
+            modules: vec![],
+            capabilities: Capabilities::empty(),
+        },
         channels: if address == 8 { map.clone() } else { None },
-        gsd: None,
-        dpv1: false,
         pkw: None,
-        rfid: false,
     };
     let mut names = outs;
     names.extend(
