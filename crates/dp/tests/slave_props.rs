@@ -116,6 +116,22 @@ fn good_prm() -> Vec<u8> {
     vec![0xB8, 20, 1, 11, 0x47, 0x11, 1, 0xC0, 0xFC, 0x00]
 }
 
+/// Class 2: Initiate (1 s), polls, requests, I&M calls, Idle, Abort.
+fn class2() -> impl Strategy<Value = (Option<(u8, Option<u8>)>, Vec<u8>)> {
+    let on = |data: Vec<u8>| (47u8..=48).prop_map(move |s| (Some((s, Some(50))), data.clone()));
+    prop_oneof![
+        2 => Just((Some((49u8, Some(50u8))), vec![
+            0x57, 0, 0, 0, 0x00, 0x64, 0x01, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 0, 0, 0
+        ])),
+        3 => on(vec![]),
+        1 => on(vec![0x5E, 0, 255, 68]),
+        1 => on(vec![0x5F, 0, 255, 4, 8, 0, 0xFD, 0xE8]),
+        1 => on(vec![0x51, 1, 2, 1, 7]),
+        1 => on(vec![0x48, 0]),
+        1 => on(vec![0x58, 0, 0x20, 0]),
+    ]
+}
+
 /// A request that a master could plausibly send (to reach every state).
 fn plausible() -> impl Strategy<Value = Req> {
     let service = prop_oneof![
@@ -133,16 +149,7 @@ fn plausible() -> impl Strategy<Value = Req> {
         1 => Just((Some((50, Some(51))), vec![0x5C, 1, 2, 0x0C])),
         1 => Just((Some((55, Some(62))), vec![9, 0x47, 0x11, 0])),
         1 => Just((Some((61, Some(62))), vec![0x40, 0, 0, 0, 0x47, 0x11, 0])),
-        // Class 2: Initiate (1 s), polls, requests, I&M calls, Idle, Abort.
-        2 => Just((Some((49, Some(50))), vec![
-            0x57, 0, 0, 0, 0x00, 0x64, 0x01, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 0, 0, 0
-        ])),
-        3 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![])),
-        1 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![0x5E, 0, 255, 68])),
-        1 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![0x5F, 0, 255, 4, 8, 0, 0xFD, 0xE8])),
-        1 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![0x51, 1, 2, 1, 7])),
-        1 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![0x48, 0])),
-        1 => (47u8..=48).prop_map(|s| (Some((s, Some(50))), vec![0x58, 0, 0x20, 0])),
+        1 => class2(),
     ];
     (
         prop_oneof![6 => Just(2u8), 1 => Just(3u8)],

@@ -1005,7 +1005,7 @@ fn wire_request(da: u8, sa: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> 
 }
 
 /// The passive station plus the slave, at the byte level.
-fn wire(st: &mut PassiveStation<DpSlave<TestDevice>>, now: Instant, bytes: &[u8]) -> Vec<u8> {
+fn wire<R: Responder>(st: &mut PassiveStation<R>, now: Instant, bytes: &[u8]) -> Vec<u8> {
     st.handle_rx(now, bytes);
     let mut at = now;
     for _ in 0..4 {
@@ -1266,3 +1266,5 @@ fn dpv1_lengths_are_checked_against_c1_max_data_len() {
     assert_eq!(ask(&mut b, req), [0x5F, 1, 2, 32]);
     assert_eq!(ask(&mut b, vec![0x5E, 1, 2, 32])[..4], [0x5E, 1, 2, 32]);
 }
+
+mod c2;
