@@ -49,12 +49,17 @@
 //! Several connections, to several slaves or to one slave (as far as its
 //! `C2_Max_Count_Channels` allows), run at once.
 
+mod run;
 #[cfg(test)]
 mod tests;
 
+pub use crate::master::records::{RecordAnswer, RecordOp, RecordOps, SingleOp};
 use crate::pdu::c2::{
     Abort, AbortReason, AddrParams, C2Pdu, InitiateReq, FEATURE_DPV1_RW, MASTER_SAP, RM_SAP,
 };
+pub use run::Class2Run;
+
+use crate::master::records::LengthError;
 use crate::pdu::dpv1::{Dpv1Error, MAX_DATA_LEN};
 use profibus_fdl::station::active::{
     CycleResult, MasterApp, Outcome, Request, Service, TokenContext,
@@ -140,107 +145,29 @@ impl fmt::Display for ConnId {
     }
 }
 
-/// A request on an open connection.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum C2Op {
-    /// Read up to `length` bytes (1..=240) of the record (slot, index).
-    Read {
-        /// Slot 0..=254.
-        slot: u8,
-        /// Index (255: the I&M call).
-        index: u8,
-        /// Bytes wanted.
-        length: u8,
-    },
-    /// Write `data` (1..=240 bytes) to the record.
-    Write {
-        /// Slot.
-        slot: u8,
-        /// Index.
-        index: u8,
-        /// The data.
-        data: Vec<u8>,
-    },
-    /// Data_Transport: send `data` (1..=240 bytes), get data back.
-    Transport {
-        /// Slot.
-        slot: u8,
-        /// Index.
-        index: u8,
-        /// The data sent.
-        data: Vec<u8>,
-    },
-}
-
-impl C2Op {
-    /// `read`, `write` or `transport`.
-    pub fn name(&self) -> &'static str {
-        match self {
-            C2Op::Read { .. } => "read",
-            C2Op::Write { .. } => "write",
-            C2Op::Transport { .. } => "transport",
-        }
+/// A request on a connection, as the class-2 PDU it is sent as.
+fn op_pdu(op: &RecordOp) -> C2Pdu<'_> {
+    match op {
+        &RecordOp::Read {
+            slot,
+            index,
+            length,
+        } => C2Pdu::ReadReq {
+            slot,
+            index,
+            length,
+        },
+        RecordOp::Write { slot, index, data } => C2Pdu::WriteReq {
+            slot: *slot,
+            index: *index,
+            data,
+        },
+        RecordOp::Transport { slot, index, data } => C2Pdu::DataTransportReq {
+            slot: *slot,
+            index: *index,
+            data,
+        },
     }
-
-    /// Slot and index.
-    pub fn record(&self) -> (u8, u8) {
-        match *self {
-            C2Op::Read { slot, index, .. }
-            | C2Op::Write { slot, index, .. }
-            | C2Op::Transport { slot, index, .. } => (slot, index),
-        }
-    }
-
-    fn check(&self) -> Result<(), Class2Error> {
-        let len = match self {
-            C2Op::Read { length, .. } => *length as usize,
-            C2Op::Write { data, .. } | C2Op::Transport { data, .. } => data.len(),
-        };
-        if len == 0 || len > MAX_DATA_LEN {
-            return Err(Class2Error::Length {
-                op: self.name(),
-                len,
-            });
-        }
-        Ok(())
-    }
-
-    fn pdu(&self) -> C2Pdu<'_> {
-        match self {
-            &C2Op::Read {
-                slot,
-                index,
-                length,
-            } => C2Pdu::ReadReq {
-                slot,
-                index,
-                length,
-            },
-            C2Op::Write { slot, index, data } => C2Pdu::WriteReq {
-                slot: *slot,
-                index: *index,
-                data,
-            },
-            C2Op::Transport { slot, index, data } => C2Pdu::DataTransportReq {
-                slot: *slot,
-                index: *index,
-                data,
-            },
-        }
-    }
-}
-
-/// The slave's answer to a [`C2Op`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum C2Answer {
-    /// Read.res: the data read.
-    Read(Vec<u8>),
-    /// Write.res: the length the slave confirmed.
-    Written(u8),
-    /// Data_Transport response: the data returned.
-    Transport(Vec<u8>),
-    /// A negative response (the connection stays open).
-    Negative(Dpv1Error),
 }
 
 /// What the slave said in Initiate.res.
@@ -277,9 +204,9 @@ pub enum Class2Event {
         /// Its slave.
         slave: u8,
         /// The request.
-        op: C2Op,
+        op: RecordOp,
         /// The answer.
-        answer: C2Answer,
+        answer: RecordAnswer,
     },
     /// The connection is closed.
     Closed {
@@ -354,7 +281,9 @@ pub enum Class2Error {
     },
     /// The slave's answer did not answer the request; the connection was
     /// aborted (RE).
-    #[error("slave {slave} answered the {op} with {what}: connection aborted (invalid response PDU)")]
+    #[error(
+        "slave {slave} answered the {op} with {what}: connection aborted (invalid response PDU)"
+    )]
     BadResponse {
         /// The slave.
         slave: u8,
@@ -367,13 +296,8 @@ pub enum Class2Error {
     #[error("{0} is closed")]
     NotOpen(ConnId),
     /// A request of no bytes or more than 240.
-    #[error("a class-2 {op} carries 1..=240 bytes, not {len}")]
-    Length {
-        /// The request.
-        op: &'static str,
-        /// Its length.
-        len: usize,
-    },
+    #[error(transparent)]
+    Length(#[from] LengthError),
 }
 
 fn status_words(s: ResponseStatus) -> &'static str {
@@ -420,8 +344,8 @@ struct Conn {
     /// The connection SAP (49 until the RM assigned one).
     sap: u8,
     poll_timeout: u16,
-    queue: VecDeque<C2Op>,
-    current: Option<C2Op>,
+    queue: VecDeque<RecordOp>,
+    current: Option<RecordOp>,
     /// When the set-up or the current op began (its response timeout).
     since: Instant,
     /// When this master last sent on the connection (Idle is due after
@@ -490,7 +414,7 @@ impl Class2Master {
 
     /// Queue a request on `conn` (sent once the connection is open and
     /// the requests before it are answered).
-    pub fn request(&mut self, conn: ConnId, op: C2Op) -> Result<(), Class2Error> {
+    pub fn request(&mut self, conn: ConnId, op: RecordOp) -> Result<(), Class2Error> {
         op.check()?;
         let c = self
             .conn_mut(conn)
@@ -550,8 +474,7 @@ impl Class2Master {
             return;
         }
         let slave = c.slave;
-        if c
-            .silent_since
+        if c.silent_since
             .is_some_and(|t| now.saturating_duration_since(t) > send_timeout)
         {
             // The slave has dropped the connection on its side by now:
@@ -567,7 +490,7 @@ impl Class2Master {
         }
         let waiting = match c.phase {
             Phase::Initiate | Phase::Opening => Some("initiate"),
-            Phase::Open | Phase::Polling => c.current.as_ref().map(C2Op::name),
+            Phase::Open | Phase::Polling => c.current.as_ref().map(RecordOp::name),
             Phase::Idling | Phase::Aborting => None,
         };
         if let Some(op) = waiting {
@@ -648,7 +571,7 @@ impl Class2Master {
                     }
                 }
                 match &c.current {
-                    Some(op) => (Sent::Request, pdu_len(op.pdu(), &mut self.req)),
+                    Some(op) => (Sent::Request, pdu_len(op_pdu(op), &mut self.req)),
                     None if now.saturating_duration_since(c.last_sent) >= idle_after => {
                         (Sent::Idle, pdu_len(C2Pdu::Idle, &mut self.req))
                     }
@@ -745,17 +668,17 @@ impl Class2Master {
                     return self.bad_response(i, format!("an unasked {}", words(&pdu)));
                 };
                 let answer = match (&op, pdu) {
-                    (_, C2Pdu::Error(e)) if e.function & 0x7F == op.pdu().function() => {
-                        C2Answer::Negative(e)
+                    (_, C2Pdu::Error(e)) if e.function & 0x7F == op_pdu(&op).function() => {
+                        RecordAnswer::Negative(e)
                     }
-                    (C2Op::Read { .. }, C2Pdu::ReadRes { data, .. }) => {
-                        C2Answer::Read(data.to_vec())
+                    (RecordOp::Read { .. }, C2Pdu::ReadRes { data, .. }) => {
+                        RecordAnswer::Read(data.to_vec())
                     }
-                    (C2Op::Write { .. }, C2Pdu::WriteRes { length, .. }) => {
-                        C2Answer::Written(length)
+                    (RecordOp::Write { .. }, C2Pdu::WriteRes { length, .. }) => {
+                        RecordAnswer::Written(length)
                     }
-                    (C2Op::Transport { .. }, C2Pdu::DataTransportRes { data, .. }) => {
-                        C2Answer::Transport(data.to_vec())
+                    (RecordOp::Transport { .. }, C2Pdu::DataTransportRes { data, .. }) => {
+                        RecordAnswer::Transport(data.to_vec())
                     }
                     (op, pdu) => {
                         let what = words(&pdu);
@@ -763,7 +686,11 @@ impl Class2Master {
                         let c = &mut self.conns[i];
                         c.current = None;
                         let e = Class2Error::BadResponse { slave, op, what };
-                        return self.abort(i, Abort::msac_c2(AbortReason::InvalidResponse), Some(e));
+                        return self.abort(
+                            i,
+                            Abort::msac_c2(AbortReason::InvalidResponse),
+                            Some(e),
+                        );
                     }
                 };
                 c.phase = Phase::Open;
@@ -783,7 +710,7 @@ impl Class2Master {
         let c = &self.conns[i];
         let op = match c.phase {
             Phase::Initiate | Phase::Opening => "initiate",
-            _ => c.current.as_ref().map_or("idle", C2Op::name),
+            _ => c.current.as_ref().map_or("idle", RecordOp::name),
         };
         let e = Class2Error::BadResponse {
             slave: c.slave,

@@ -2,6 +2,7 @@
 //! (`shared/reference/dpv1-c2-im-alarms.md` §4.4, §4.6), not our encoder's.
 
 use super::*;
+use crate::master::records::LengthError;
 use profibus_fdl::wire::StationType;
 
 fn t(ms: u64) -> Instant {
@@ -80,7 +81,11 @@ fn open(m: &mut Class2Master, slave: u8, now: Instant) -> ConnId {
     assert_eq!(service, Service::SrdLow);
     answer(m, now, slave, dl(&[0x56, 0x30, 0x00, 0x64]));
     let (_, dsap, ssap, data, _) = visit(m, now).unwrap();
-    assert_eq!((dsap, ssap, data.len()), (0x30, 50, 0), "polls SAP 48 empty");
+    assert_eq!(
+        (dsap, ssap, data.len()),
+        (0x30, 50, 0),
+        "polls SAP 48 empty"
+    );
     answer(m, now, slave, Outcome::ShortAck);
     assert_eq!(m.poll_event(), None, "not ready yet");
     let (_, dsap, _, data, _) = visit(m, now).unwrap();
@@ -118,7 +123,7 @@ fn initiate_read_im0_idle_and_close_with_the_reference_bytes() {
     // Read I&M0 the reference's way: the call header, then the read.
     m.request(
         conn,
-        C2Op::Write {
+        RecordOp::Write {
             slot: 0,
             index: 255,
             data: vec![0x08, 0x00, 0xFD, 0xE8],
@@ -127,7 +132,7 @@ fn initiate_read_im0_idle_and_close_with_the_reference_bytes() {
     .unwrap();
     m.request(
         conn,
-        C2Op::Read {
+        RecordOp::Read {
             slot: 0,
             index: 255,
             length: 68,
@@ -144,7 +149,7 @@ fn initiate_read_im0_idle_and_close_with_the_reference_bytes() {
     assert!(matches!(
         m.poll_event(),
         Some(Class2Event::Answer {
-            answer: C2Answer::Written(4),
+            answer: RecordAnswer::Written(4),
             ..
         })
     ));
@@ -156,7 +161,7 @@ fn initiate_read_im0_idle_and_close_with_the_reference_bytes() {
     match m.poll_event() {
         Some(Class2Event::Answer {
             op,
-            answer: C2Answer::Read(d),
+            answer: RecordAnswer::Read(d),
             ..
         }) => {
             assert_eq!(op.record(), (0, 255));
@@ -183,7 +188,7 @@ fn initiate_read_im0_idle_and_close_with_the_reference_bytes() {
     assert_eq!(
         m.request(
             conn,
-            C2Op::Read {
+            RecordOp::Read {
                 slot: 0,
                 index: 1,
                 length: 1
@@ -206,7 +211,7 @@ fn an_abort_from_the_slave_closes_the_connection_in_words() {
         let conn = open(&mut m, 8, t(0));
         m.request(
             conn,
-            C2Op::Read {
+            RecordOp::Read {
                 slot: 1,
                 index: 2,
                 length: 4,
@@ -231,7 +236,7 @@ fn a_slave_that_falls_silent_is_reported_after_send_timeout() {
     let conn = open(&mut m, 8, t(0));
     m.request(
         conn,
-        C2Op::Read {
+        RecordOp::Read {
             slot: 1,
             index: 2,
             length: 4,
@@ -259,7 +264,7 @@ fn an_answer_that_never_comes_is_a_timeout_and_an_abort_to() {
     let conn = open(&mut m, 8, t(0));
     m.request(
         conn,
-        C2Op::Transport {
+        RecordOp::Transport {
             slot: 1,
             index: 2,
             data: vec![1],
@@ -283,10 +288,7 @@ fn an_answer_that_never_comes_is_a_timeout_and_an_abort_to() {
         error.unwrap().to_string(),
         "slave 8: no answer to the transport within 5000 ms"
     );
-    assert_eq!(
-        sent.unwrap().msac_c2_reason(),
-        Some(AbortReason::Timeout)
-    );
+    assert_eq!(sent.unwrap().msac_c2_reason(), Some(AbortReason::Timeout));
 }
 
 #[test]
@@ -337,7 +339,7 @@ fn a_negative_response_keeps_the_connection_open() {
     let conn = open(&mut m, 8, t(0));
     m.request(
         conn,
-        C2Op::Read {
+        RecordOp::Read {
             slot: 3,
             index: 9,
             length: 4,
@@ -348,9 +350,11 @@ fn a_negative_response_keeps_the_connection_open() {
     answer(&mut m, t(10), 8, dl(&[0xDE, 0x80, 0xB0, 0x00]));
     match m.poll_event() {
         Some(Class2Event::Answer {
-            answer: C2Answer::Negative(e),
+            answer: RecordAnswer::Negative(e),
             ..
-        }) => assert!(e.describe().starts_with("read failed: access: invalid index")),
+        }) => assert!(e
+            .describe()
+            .starts_with("read failed: access: invalid index")),
         other => panic!("{other:?}"),
     }
     assert!(m.is_open(conn));
@@ -362,7 +366,7 @@ fn an_answer_to_another_request_aborts_with_re() {
     let conn = open(&mut m, 8, t(0));
     m.request(
         conn,
-        C2Op::Read {
+        RecordOp::Read {
             slot: 3,
             index: 9,
             length: 4,
@@ -398,14 +402,17 @@ fn two_slaves_at_once_take_turns_and_a_late_token_sends_nothing() {
     assert_eq!((first, second), (8, 9));
     assert!(m.poll_request(&ctx(t(0), 2)).is_none(), "visit done");
     for _ in 0..2 {
-        let r = m.poll_request(&ctx(t(1), 0)).map(|r| (r.da, r.dsap)).unwrap();
+        let r = m
+            .poll_request(&ctx(t(1), 0))
+            .map(|r| (r.da, r.dsap))
+            .unwrap();
         answer(&mut m, t(1), r.0, dl(&INITIATE_RES));
         assert_eq!(r.1, Some(if r.0 == 8 { 0x30 } else { 0x2F }));
     }
     assert!(m.is_open(a) && m.is_open(b));
     m.request(
         b,
-        C2Op::Read {
+        RecordOp::Read {
             slot: 0,
             index: 1,
             length: 1,
@@ -417,16 +424,16 @@ fn two_slaves_at_once_take_turns_and_a_late_token_sends_nothing() {
     assert_eq!(
         m.request(
             a,
-            C2Op::Write {
+            RecordOp::Write {
                 slot: 0,
                 index: 1,
                 data: vec![]
             }
         ),
-        Err(Class2Error::Length {
+        Err(Class2Error::Length(LengthError {
             op: "write",
             len: 0
-        })
+        }))
     );
 }
 
@@ -446,4 +453,33 @@ fn send_timeout_in_ten_ms_units_and_defaults_per_rate() {
         Class2Config::for_baud(Baud::B187500).send_timeout,
         Duration::from_secs(8)
     );
+}
+
+#[test]
+fn a_run_opens_sends_its_request_and_closes() {
+    let mut m = master();
+    let op = RecordOp::Read {
+        slot: 1,
+        index: 2,
+        length: 2,
+    };
+    let mut run = Class2Run::new(8, SingleOp::new(op));
+    assert!(run.tick(&mut m, t(0)).is_continue());
+    // Initiate, RM, Initiate.res.
+    visit(&mut m, t(0)).unwrap();
+    answer(&mut m, t(0), 8, dl(&[0x56, 0x30, 0x00, 0x64]));
+    visit(&mut m, t(1)).unwrap();
+    answer(&mut m, t(1), 8, dl(&INITIATE_RES));
+    assert!(run.tick(&mut m, t(1)).is_continue());
+    assert_eq!(run.opened().map(|o| o.sap), Some(48));
+    let (_, _, _, data, _) = visit(&mut m, t(2)).unwrap();
+    assert_eq!(data, [0x5E, 0x01, 0x02, 0x02]);
+    answer(&mut m, t(2), 8, dl(&[0x5E, 0x01, 0x02, 0x02, 0xCA, 0xFE]));
+    assert!(run.tick(&mut m, t(2)).is_continue());
+    let (_, _, _, data, _) = visit(&mut m, t(3)).unwrap();
+    assert_eq!(data, [0x58, 0x00, 0x20, 0x00], "closed after the answer");
+    answer(&mut m, t(3), 8, Outcome::ShortAck);
+    assert!(run.tick(&mut m, t(3)).is_break());
+    let ops = run.finish().unwrap();
+    assert_eq!(ops.answer, Some(RecordAnswer::Read(vec![0xCA, 0xFE])));
 }
