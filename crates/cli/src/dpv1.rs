@@ -19,8 +19,8 @@ use crate::common::{self, RtsArg};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::class2::{
-    Class2Config, Class2Error, Class2Master, Class2Run, Opened, RecordAnswer, RecordOp,
-    RecordOps, SingleOp,
+    Class2Config, Class2Error, Class2Master, Class2Run, Opened, RecordAnswer, RecordOp, RecordOps,
+    SingleOp,
 };
 use profibus_dp::config::busfile::BusFile;
 use profibus_dp::master::records::C1Records;
@@ -121,6 +121,11 @@ pub struct Link {
     pub json: bool,
 }
 
+/// How a class-2 run ended: the requests with their answers and the
+/// slave's Initiate.res, or why the connection failed (with the answers
+/// before it).
+pub type Class2Outcome<O> = std::result::Result<(O, Option<Opened>), (Class2Error, O)>;
+
 /// The class-1 path's arguments and its bus file.
 fn class1(link: &Link) -> Result<(common::SlaveArgs, BusFile)> {
     let Some(config) = link.config.clone() else {
@@ -178,10 +183,7 @@ impl Link {
     /// Run `ops` on a class-2 connection of a master of its own. The
     /// outer error: the set-up; the inner one: the connection failed
     /// (with the answers before it).
-    pub fn run_class2<O: RecordOps>(
-        &self,
-        ops: O,
-    ) -> Result<std::result::Result<(O, Option<Opened>), (Class2Error, O)>> {
+    pub fn run_class2<O: RecordOps>(&self, ops: O) -> Result<Class2Outcome<O>> {
         let bus = match &self.config {
             Some(path) => Some(ProfiledBus::load(path)?.file),
             None => None,

@@ -74,7 +74,11 @@ pub fn run(args: Args) -> Result<()> {
         bail!("{e}");
     }
     match (&reader.records[0], &reader.written) {
-        (_, Some(Err(e))) => bail!("slave {}: writing I&M1 failed: {}", link.slave, e.describe()),
+        (_, Some(Err(e))) => bail!(
+            "slave {}: writing I&M1 failed: {}",
+            link.slave,
+            e.describe()
+        ),
         (Some(ImRead::Record(_)), _) => Ok(()),
         (Some(ImRead::Refused(e)), _) => {
             bail!("slave {} does not serve I&M0: {}", link.slave, e.describe())
@@ -224,7 +228,10 @@ impl Report<'_> {
 
 fn im0_text(im: &Im0) -> String {
     let rows = [
-        ("manufacturer", format!("0x{:04X} ({})", im.manufacturer_id, im.manufacturer_id)),
+        (
+            "manufacturer",
+            format!("0x{:04X} ({})", im.manufacturer_id, im.manufacturer_id),
+        ),
         ("order number", im.order_id()),
         ("serial number", im.serial_number()),
         ("hardware revision", im.hardware_revision.to_string()),
@@ -240,7 +247,10 @@ fn im0_text(im: &Im0) -> String {
                 type_words(im.profile_specific_type)
             ),
         ),
-        ("I&M version", format!("{}.{}", im.im_version.0, im.im_version.1)),
+        (
+            "I&M version",
+            format!("{}.{}", im.im_version.0, im.im_version.1),
+        ),
         ("I&M supported", im.im_supported.describe()),
     ];
     rows.iter()
@@ -301,7 +311,10 @@ mod tests {
         };
         let text = report.text();
         assert!(text.starts_with("slave 8 I&M1 written\nslave 8 I&M0 (class 2, SAP 48):\n"));
-        assert!(text.contains("  manufacturer       0x001A (26)\n"), "{text}");
+        assert!(
+            text.contains("  manufacturer       0x001A (26)\n"),
+            "{text}"
+        );
         assert!(text.contains("  order number       FPBA-01\n"), "{text}");
         assert!(text.contains("  software revision  V1.2.3\n"), "{text}");
         assert!(
@@ -330,7 +343,10 @@ mod tests {
         assert_eq!(j["im1"]["tag_function"], "pump 3");
         assert_eq!(j["im1"]["tag_location"], "hall B");
         assert_eq!(j["im2"]["installation_date"], "");
-        assert!(j["im4"]["error"].as_str().unwrap().contains("invalid index"));
+        assert!(j["im4"]["error"]
+            .as_str()
+            .unwrap()
+            .contains("invalid index"));
         assert_eq!(j["write_tag"]["ok"], true);
     }
 }
