@@ -43,6 +43,7 @@ pub mod image;
 pub mod master;
 pub mod prm;
 pub mod profile;
+pub mod user;
 
 #[cfg(test)]
 mod tests;
@@ -709,6 +710,7 @@ impl Class {
         match self {
             Class::DigitalIn => "digital inputs",
             Class::DigitalOut => "digital outputs",
+            Class::DigitalInOut => "digital inputs and outputs",
             Class::Complex => "byte-oriented",
             Class::Passive => "no process data",
         }

@@ -824,3 +824,5 @@ fn terminals_file_option() {
         .to_string();
     assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
 }
+
+mod fidelity;
