@@ -43,6 +43,7 @@ pub mod image;
 pub mod master;
 pub mod prm;
 pub mod profile;
+pub mod registers;
 pub mod user;
 
 #[cfg(test)]
@@ -83,6 +84,11 @@ pub struct Bk3000 {
     inputs: Vec<u8>,
     pinned: BTreeMap<String, i64>,
     counter: u8,
+    /// Register sets of the complex terminals' channels (position, channel).
+    regs: BTreeMap<(usize, u8), registers::Channel>,
+    /// Diagnosis messages of terminal channels in error (English edition
+    /// p. 50: terminal, channel, 3 reserved, status byte, 2 reserved).
+    term_diag: Vec<[u8; 8]>,
     events: EventQueue,
     inbox: InboxSchedule,
 }
@@ -91,6 +97,14 @@ impl Bk3000 {
     /// A coupler with `strip`, automatic configuration, default settings.
     pub fn new(strip: Strip) -> Bk3000 {
         let image = strip.default_image(Options::default());
+        let mut regs = BTreeMap::new();
+        for (k, slot) in strip.slots().iter().enumerate() {
+            if slot.ty.class == Class::Complex {
+                for ch in 1..=slot.ty.channels {
+                    regs.insert((k + 1, ch), registers::Channel::new(slot.ty));
+                }
+            }
+        }
         Bk3000 {
             present: vec![true; strip.len()],
             strip,
@@ -104,6 +118,8 @@ impl Bk3000 {
             inputs: vec![],
             pinned: BTreeMap::new(),
             counter: 0,
+            regs,
+            term_diag: vec![],
             events: EventQueue::with_limit(256),
             inbox: InboxSchedule::default(),
         }
@@ -201,6 +217,11 @@ impl Bk3000 {
             })?
             .clone();
         let raw = match (e.owner, e.role) {
+            // Out-of-range values stay out of range: the terminal reports
+            // over- or underrange in its status byte.
+            (Owner::Terminal(p), Role::Value) if self.regs.contains_key(&(p, e.channel)) => {
+                self.strip.slots()[p - 1].ty.scale.from_engineering_unclamped(v)
+            }
             (Owner::Terminal(p), Role::Value) => {
                 self.strip.slots()[p - 1].ty.scale.from_engineering(v)
             }
@@ -413,27 +434,8 @@ impl Bk3000 {
         let t = now.as_nanos() as f64 / 1e9;
         let ch = e.channel as f64;
         match e.role {
-            Role::Status => {
-                // Register communication: the status byte acknowledges
-                // the control byte while bit 7 (register access) is set.
-                let c = self.control_byte(pos, e.channel);
-                if c & 0x80 != 0 {
-                    c as i64
-                } else {
-                    0
-                }
-            }
-            Role::Control | Role::Reserved => 0,
+            Role::Status | Role::Control | Role::Reserved => 0,
             Role::Value => {
-                let c = self.control_byte(pos, e.channel);
-                if c & 0xC0 == 0x80 && e.bytes >= 2 {
-                    // Register read: R8 is the terminal type (e.g. 3102).
-                    return if c & 0x3F == 8 {
-                        ty.name[2..].parse::<i64>().unwrap_or(0)
-                    } else {
-                        0
-                    };
-                }
                 match ty.sim {
                     Sim::Walk => {
                         let step = (t / 0.5) as u64 % ty.channels as u64;
@@ -464,6 +466,128 @@ impl Bk3000 {
         }
     }
 
+    /// Run every input channel with a register set through its scaling,
+    /// filter and range check: (position, channel) → (value, status).
+    fn process_channels(&mut self, now: Instant) -> BTreeMap<(usize, u8), (i64, u8)> {
+        let mut out = BTreeMap::new();
+        let values: Vec<image::Entry> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == Dir::In && e.role == Role::Value && e.bytes == 2)
+            .filter(|e| matches!(e.owner, Owner::Terminal(p) if self.regs.contains_key(&(p, e.channel))))
+            .cloned()
+            .collect();
+        for e in values {
+            let Owner::Terminal(p) = e.owner else { continue };
+            let raw = match self.pinned.get(&e.name) {
+                Some(&v) => v,
+                None => self.simulate(&e, now),
+            };
+            let scale = self.strip.slots()[p - 1].ty.scale;
+            if let Some(ch) = self.regs.get_mut(&(p, e.channel)) {
+                out.insert((p, e.channel), ch.process(raw, &scale));
+            }
+        }
+        // Channels in error get a diagnosis message (English ed. p. 50).
+        let msgs: Vec<[u8; 8]> = out
+            .iter()
+            .filter(|(_, (_, st))| st & registers::status::ERROR != 0)
+            .map(|(&(p, ch), &(_, st))| [p as u8, ch, 0, 0, 0, st, 0, 0])
+            .collect();
+        if msgs != self.term_diag {
+            self.term_diag = msgs;
+            self.diag_changed = true;
+        }
+        out
+    }
+
+    /// A terminal's status byte or value: register communication while
+    /// the control byte's bit 7 is set (status = control without the
+    /// write bit; value = the register read, 0 after a write), else the
+    /// processed value and status.
+    fn terminal_input(
+        &self,
+        e: &image::Entry,
+        pos: usize,
+        processed: &BTreeMap<(usize, u8), (i64, u8)>,
+        now: Instant,
+    ) -> i64 {
+        let c = self.control_byte(pos, e.channel);
+        let reg_mode = c & 0x80 != 0 && self.regs.contains_key(&(pos, e.channel));
+        match e.role {
+            Role::Status if reg_mode => (c & !0x40) as i64,
+            Role::Status => match self.pinned.get(&e.name) {
+                Some(&v) => v,
+                None => processed.get(&(pos, e.channel)).map_or(0, |p| p.1 as i64),
+            },
+            Role::Value if reg_mode && e.bytes >= 2 => {
+                if c & 0x40 != 0 {
+                    0
+                } else {
+                    let r = self.regs[&(pos, e.channel)].read(c & 0x3F);
+                    r as i16 as i64
+                }
+            }
+            _ => match processed.get(&(pos, e.channel)) {
+                Some(&(v, _)) if e.bytes == 2 => v,
+                _ => match self.pinned.get(&e.name) {
+                    Some(&v) => v,
+                    None => self.simulate(e, now),
+                },
+            },
+        }
+    }
+
+    /// Register writes of the control bytes with bits 7 and 6 set: the
+    /// channel's output word into register `control & 0x3F`.
+    fn register_writes(&mut self) {
+        let writes: Vec<(usize, u8, u8, u16)> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == Dir::Out && e.role == Role::Control)
+            .filter_map(|e| {
+                let Owner::Terminal(p) = e.owner else { return None };
+                let c = Image::get(e, &self.outputs) as u8;
+                if c & 0xC0 != 0xC0 {
+                    return None;
+                }
+                let v = self
+                    .image
+                    .entries
+                    .iter()
+                    .find(|o| {
+                        o.dir == Dir::Out
+                            && o.owner == e.owner
+                            && o.channel == e.channel
+                            && o.role == Role::Value
+                    })
+                    .map_or(0, |o| Image::get(o, &self.outputs));
+                Some((p, e.channel, c & 0x3F, v as u16))
+            })
+            .collect();
+        for (p, ch, r, v) in writes {
+            let Some(set) = self.regs.get_mut(&(p, ch)) else { continue };
+            let name = self.strip.slots()[p - 1].ty.name;
+            match set.write(r, v) {
+                Ok(()) => self.events.note(
+                    "register",
+                    format!("terminal {p} ({name}) channel {ch}: R{r} = 0x{v:04X}"),
+                ),
+                Err(e) => self.events.note(
+                    "register",
+                    format!("terminal {p} ({name}) channel {ch}: write refused: {e}"),
+                ),
+            }
+        }
+    }
+
+    /// Register `r` of channel `ch` of terminal `pos` (1-based).
+    pub fn register(&self, pos: usize, ch: u8, r: u8) -> Option<u16> {
+        self.regs.get(&(pos, ch)).map(|c| c.read(r))
+    }
+
     fn control_byte(&self, pos: usize, channel: u8) -> u8 {
         self.image
             .entries
@@ -482,6 +606,7 @@ impl Bk3000 {
             return;
         }
         let old = std::mem::replace(&mut self.outputs, outputs.to_vec());
+        self.register_writes();
         let changed: Vec<String> = self
             .image
             .entries
@@ -615,8 +740,12 @@ impl Device for Bk3000 {
         inputs.fill(0);
         if !self.held && self.kbus_ok() {
             self.counter = self.counter.wrapping_add(1).max(1);
+            let processed = self.process_channels(now);
             for e in self.image.entries.iter().filter(|e| e.dir == Dir::In) {
                 let v = match (e.owner, self.pinned.get(&e.name)) {
+                    (Owner::Terminal(p), _) if e.role == Role::Status || e.role == Role::Value => {
+                        self.terminal_input(e, p, &processed, now)
+                    }
                     (_, Some(&v)) => v,
                     (Owner::CycleCounter, None) => self.counter as i64,
                     (Owner::PlcInterface, None) => match e.role {
@@ -651,7 +780,17 @@ impl Device for Bk3000 {
     }
 
     fn diagnosis(&mut self, _now: Instant, diag: &mut DiagWriter<'_>) {
-        let payload = self.diag.payload();
+        let mut payload = self.diag.payload();
+        if !self.term_diag.is_empty() {
+            if payload.is_empty() {
+                payload.push(0);
+            }
+            // Room for 7 messages after the length and reserved bytes.
+            let room = (MAX_DIAG_LEN as usize - 8 - (payload.len() - 1)) / 8;
+            for m in self.term_diag.iter().take(room) {
+                payload.extend_from_slice(m);
+            }
+        }
         if !payload.is_empty() {
             diag.device(&payload);
             diag.set_ext_diag();
