@@ -74,6 +74,10 @@ pub const MAX_DIAG_LEN: u8 = 64;
 pub struct Bk3000 {
     strip: Strip,
     present: Vec<bool>,
+    /// Terminals that do not answer on the K-bus (`mute N`).
+    muted: Vec<bool>,
+    /// Terminals replaced while running (`swap N TYPE`).
+    swapped: Vec<Option<&'static catalogue::TerminalType>>,
     programmed: Option<Vec<u8>>,
     prm: UserPrm,
     image: Image,
@@ -107,6 +111,8 @@ impl Bk3000 {
         }
         Bk3000 {
             present: vec![true; strip.len()],
+            muted: vec![false; strip.len()],
+            swapped: vec![None; strip.len()],
             strip,
             programmed: None,
             prm: UserPrm::default(),
@@ -203,7 +209,7 @@ impl Bk3000 {
     }
 
     fn kbus_ok(&self) -> bool {
-        self.diag.kbus == 0
+        self.diag.kbus == 0 && self.diag.init == 0
     }
 
     /// Pin the input channel `name` to the engineering value `v` (digital
@@ -220,7 +226,10 @@ impl Bk3000 {
             // Out-of-range values stay out of range: the terminal reports
             // over- or underrange in its status byte.
             (Owner::Terminal(p), Role::Value) if self.regs.contains_key(&(p, e.channel)) => {
-                self.strip.slots()[p - 1].ty.scale.from_engineering_unclamped(v)
+                self.strip.slots()[p - 1]
+                    .ty
+                    .scale
+                    .from_engineering_unclamped(v)
             }
             (Owner::Terminal(p), Role::Value) => {
                 self.strip.slots()[p - 1].ty.scale.from_engineering(v)
@@ -303,19 +312,77 @@ impl Bk3000 {
 
     fn update_kbus(&mut self) {
         let before = self.diag;
-        match self.present.iter().position(|p| !p) {
-            Some(i) => {
-                self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::RECEIVE;
-                self.diag.kbus_code = (prm::KBUS_CODE_BREAK, i as u8);
-            }
-            None => {
-                self.diag.kbus = 0;
-                self.diag.kbus_code = (0, 0);
-            }
+        self.diag.init &= !prm::init_err::TERMINAL_TYPES;
+        // p. 19-20: the first fault along the K-bus decides the code.
+        if let Some(i) = self.present.iter().position(|p| !p) {
+            self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::RECEIVE;
+            self.diag.kbus_code = (prm::KBUS_CODE_BREAK, i as u8);
+        } else if self.muted.iter().any(|m| *m) {
+            self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::TIMEOUT;
+            self.diag.kbus_code = (prm::KBUS_CODE_COMMAND, 0);
+        } else if let Some(i) = self.swapped.iter().position(|s| s.is_some()) {
+            self.diag.init |= prm::init_err::TERMINAL_TYPES;
+            self.diag.kbus = prm::kbus_err::KBUS;
+            self.diag.kbus_code = (prm::KBUS_CODE_FORMAT, i as u8 + 1);
+        } else {
+            self.diag.kbus = 0;
+            self.diag.kbus_code = (0, 0);
         }
         if self.diag != before {
             self.diag_changed = true;
         }
+    }
+
+    /// Terminal `pos` stops answering on the K-bus (`mute N`), or answers
+    /// again (`unmute N`): K-bus command error, 3 pulses then 0.
+    pub fn mute(&mut self, pos: usize, mute: bool) -> Result<String, ControlError> {
+        self.check_pos(pos)?;
+        self.muted[pos - 1] = mute;
+        self.update_kbus();
+        let name = self.strip.slots()[pos - 1].ty.name;
+        Ok(if mute {
+            let (c, a) = self.diag.kbus_code;
+            format!(
+                "terminal {pos} ({name}) does not answer: K-bus command error; {}",
+                prm::blink_text(c, a)
+            )
+        } else if self.kbus_ok() {
+            format!("terminal {pos} ({name}) answers again: K-bus running")
+        } else {
+            format!("terminal {pos} ({name}) answers again")
+        })
+    }
+
+    /// Replace terminal `pos` by `ty` while the coupler runs (`swap N
+    /// TYPE`): the strip no longer is the one found at start-up:
+    /// initialisation error "terminal types", K-bus halted, blink code 14
+    /// then N, until the original type is plugged back.
+    pub fn swap(&mut self, pos: usize, ty: &str) -> Result<String, ControlError> {
+        self.check_pos(pos)?;
+        let orig = self.strip.slots()[pos - 1].ty;
+        let new = catalogue::lookup(ty)
+            .ok_or_else(|| ControlError::Argument(format!("`{ty}` is not in the catalogue")))?;
+        self.swapped[pos - 1] = (new.name != orig.name).then_some(new);
+        self.update_kbus();
+        Ok(if new.name == orig.name {
+            format!(
+                "terminal {pos} is a {} again{}",
+                orig.name,
+                if self.kbus_ok() {
+                    ": K-bus running"
+                } else {
+                    ""
+                }
+            )
+        } else {
+            let (c, a) = self.diag.kbus_code;
+            format!(
+                "terminal {pos}: {} replaced by {}: the strip changed; {}",
+                orig.name,
+                new.name,
+                prm::blink_text(c, a)
+            )
+        })
     }
 
     /// Apply one control command: `status`, `set NAME VALUE`, `release
@@ -356,6 +423,13 @@ impl Bk3000 {
                 }
             },
             "pull" => self.pull(num(w.next())?),
+            "mute" => self.mute(num(w.next())?, true),
+            "unmute" => self.mute(num(w.next())?, false),
+            "swap" => {
+                let pos = num(w.next())?;
+                let ty = w.next().ok_or_else(|| arg("`swap N TYPE`"))?;
+                self.swap(pos, ty)
+            }
             "plug" => self.plug(num(w.next())?),
             "run" => {
                 if self.held {
@@ -369,7 +443,7 @@ impl Bk3000 {
             "" => Err(arg("empty command")),
             other => Err(ControlError::Unknown {
                 command: other.to_string(),
-                known: "status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run",
+                known: "status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, mute N, unmute N, swap N TYPE, run",
             }),
         }
     }
@@ -435,34 +509,32 @@ impl Bk3000 {
         let ch = e.channel as f64;
         match e.role {
             Role::Status | Role::Control | Role::Reserved => 0,
-            Role::Value => {
-                match ty.sim {
-                    Sim::Walk => {
-                        let step = (t / 0.5) as u64 % ty.channels as u64;
-                        (step + 1 == e.channel as u64) as i64
-                    }
-                    Sim::Sine => ty
-                        .scale
-                        .from_engineering(5.0 * (std::f64::consts::TAU * t / 20.0 + ch).sin()),
-                    Sim::Temperature => ty.scale.from_engineering(
-                        22.5 + 2.5 * (std::f64::consts::TAU * t / 60.0 + ch).sin(),
-                    ),
-                    Sim::Counter => (t * 10.0) as i64 & 0xFFFF_FFFF,
-                    Sim::Encoder => (t * 100.0) as i64 & 0x00FF_FFFF,
-                    Sim::Echo => self
-                        .image
-                        .entries
-                        .iter()
-                        .find(|o| {
-                            o.dir == Dir::Out
-                                && o.owner == e.owner
-                                && o.channel == e.channel
-                                && o.role == Role::Value
-                        })
-                        .map_or(0, |o| Image::get(o, &self.outputs)),
-                    Sim::None => 0,
+            Role::Value => match ty.sim {
+                Sim::Walk => {
+                    let step = (t / 0.5) as u64 % ty.channels as u64;
+                    (step + 1 == e.channel as u64) as i64
                 }
-            }
+                Sim::Sine => ty
+                    .scale
+                    .from_engineering(5.0 * (std::f64::consts::TAU * t / 20.0 + ch).sin()),
+                Sim::Temperature => ty
+                    .scale
+                    .from_engineering(22.5 + 2.5 * (std::f64::consts::TAU * t / 60.0 + ch).sin()),
+                Sim::Counter => (t * 10.0) as i64 & 0xFFFF_FFFF,
+                Sim::Encoder => (t * 100.0) as i64 & 0x00FF_FFFF,
+                Sim::Echo => self
+                    .image
+                    .entries
+                    .iter()
+                    .find(|o| {
+                        o.dir == Dir::Out
+                            && o.owner == e.owner
+                            && o.channel == e.channel
+                            && o.role == Role::Value
+                    })
+                    .map_or(0, |o| Image::get(o, &self.outputs)),
+                Sim::None => 0,
+            },
         }
     }
 
@@ -479,7 +551,9 @@ impl Bk3000 {
             .cloned()
             .collect();
         for e in values {
-            let Owner::Terminal(p) = e.owner else { continue };
+            let Owner::Terminal(p) = e.owner else {
+                continue;
+            };
             let raw = match self.pinned.get(&e.name) {
                 Some(&v) => v,
                 None => self.simulate(&e, now),
@@ -548,7 +622,9 @@ impl Bk3000 {
             .iter()
             .filter(|e| e.dir == Dir::Out && e.role == Role::Control)
             .filter_map(|e| {
-                let Owner::Terminal(p) = e.owner else { return None };
+                let Owner::Terminal(p) = e.owner else {
+                    return None;
+                };
                 let c = Image::get(e, &self.outputs) as u8;
                 if c & 0xC0 != 0xC0 {
                     return None;
@@ -568,7 +644,9 @@ impl Bk3000 {
             })
             .collect();
         for (p, ch, r, v) in writes {
-            let Some(set) = self.regs.get_mut(&(p, ch)) else { continue };
+            let Some(set) = self.regs.get_mut(&(p, ch)) else {
+                continue;
+            };
             let name = self.strip.slots()[p - 1].ty.name;
             match set.write(r, v) {
                 Ok(()) => self.events.note(
@@ -621,6 +699,43 @@ impl Bk3000 {
                 format!("terminal outputs: {}", changed.join(", ")),
             );
         }
+    }
+
+    /// RunOnCfgFault (p. 46): the master's configuration describes a
+    /// maximal strip; the coupler runs anyway with the master's lengths,
+    /// maps its real strip's automatic image where it fits, and reports
+    /// the CfgData error in its diagnosis (no Cfg_Fault).
+    fn run_on_cfg_fault(&mut self, rej: CfgReject, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        let totals = match profibus_dp::pdu::cfg::totals(cfg) {
+            Ok(t) if t.input_bytes <= image::MAX_IO && t.output_bytes <= image::MAX_IO => t,
+            _ => return Err(self.cfg_fault(rej)),
+        };
+        let (p, n) = rej.error.blink();
+        self.diag.cfg = (rej.error.code(), rej.error.byte());
+        self.diag_changed = true;
+        self.events.note(
+            "io-err",
+            format!("RunOnCfgFault: running with the master's configuration; I/O-ERR {p} pulses, then {n}: {}", rej.error),
+        );
+        let mut img = self.strip.default_image(self.options());
+        img.entries.retain(|e| {
+            let len = match e.dir {
+                Dir::In => totals.input_bytes,
+                Dir::Out => totals.output_bytes,
+            };
+            e.byte + (e.bytes.max(1) as usize) <= len
+        });
+        img.in_len = totals.input_bytes;
+        img.out_len = totals.output_bytes;
+        img.cfg = cfg.to_vec();
+        let layout = IoLayout {
+            inputs: img.in_len,
+            outputs: img.out_len,
+        };
+        self.image = img;
+        self.outputs = vec![0; layout.outputs];
+        self.inputs = vec![0; layout.inputs];
+        Ok(layout)
     }
 
     fn cfg_fault(&mut self, rej: CfgReject) -> Reason {
@@ -725,6 +840,9 @@ impl Device for Bk3000 {
                 self.inputs = vec![0; layout.inputs];
                 Ok(layout)
             }
+            Err(rej) if self.prm.run_on_cfg_fault && !self.prm.programmed => {
+                self.run_on_cfg_fault(rej, cfg)
+            }
             Err(rej) => Err(self.cfg_fault(rej)),
         }
     }
@@ -817,7 +935,9 @@ impl Device for Bk3000 {
 
     fn handle_timeout(&mut self, now: Instant) {
         for line in self.inbox.due(now) {
-            let kbus = line.starts_with("pull") || line.starts_with("plug");
+            let kbus = ["pull", "plug", "mute", "unmute", "swap"]
+                .iter()
+                .any(|c| line.starts_with(c));
             match self.control(&line) {
                 Ok(text) if kbus => self.events.note("kbus", text),
                 Ok(text) => self.events.note("control", text),

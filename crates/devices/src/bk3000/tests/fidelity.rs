@@ -272,7 +272,10 @@ fn register_set_code_word_and_scaling() {
     assert_eq!(i16::from_be_bytes([i[1], i[2]]), 0x7FFF);
     let d = b.diag();
     assert_ne!(d[0] & 0x08, 0, "Ext_Diag");
-    assert!(d[8..].chunks(8).any(|m| m == [1, 1, 0, 0, 0, 0x42, 0, 0]), "{d:02X?}");
+    assert!(
+        d[8..].chunks(8).any(|m| m == [1, 1, 0, 0, 0, 0x42, 0, 0]),
+        "{d:02X?}"
+    );
     // R0 holds the raw value, R6 the status byte.
     assert_eq!(reg_read(&mut b, 6).1, 0x42);
     // Restore the factory settings (R7 = 0x7000): scaling off again.
@@ -304,4 +307,71 @@ fn status_byte_underrange_on_a_unipolar_range_and_limits() {
     let first = b.dx(&[0; 6]);
     let v = i16::from_be_bytes([first[1], first[2]]);
     assert!(v > 0 && v < 16384, "filtered: {v}");
+}
+
+#[test]
+fn run_on_cfg_fault_runs_with_a_maximal_configuration() {
+    // The master is set up for KL1104,KL2134,KL3102,KL4002 (p. 46: "in
+    // einer Maximal-Konfiguration"); only KL1104,KL3102 are plugged.
+    let mut b = Bench::new("KL3102,KL1104,KL9010");
+    let max = [0x50, 0x50, 0x60, 0x60, 0x10, 0x20];
+    let mut u = [0u8; 10];
+    b.start(&u, &max);
+    assert_eq!(
+        b.slave.state(),
+        SlaveState::WaitPrm,
+        "refused without the mode"
+    );
+    u[1] = 0x01;
+    b.start(&u, &max);
+    assert_eq!(b.slave.state(), SlaveState::DataExch, "RunOnCfgFault");
+    assert!(b.slave.device().user_prm().run_on_cfg_fault);
+    // The master's lengths: 5 in, 5 out; the plugged terminals' data
+    // where the automatic image puts them; the fault in the diagnosis.
+    b.slave.device_mut().control("set 1.1 5").unwrap();
+    b.slave.device_mut().control("set 2.1 1").unwrap();
+    let i = b.dx(&[0; 5]);
+    assert_eq!(i.len(), 5);
+    assert_eq!(i16::from_be_bytes([i[0], i[1]]), 16384);
+    assert_eq!(i[4] & 1, 1, "KL1104 bit after the words");
+    let d = b.diag();
+    assert_eq!(d[0] & 0x04, 0, "no Cfg_Fault");
+    assert_eq!(d[12], 2, "CfgData error 2 in the coupler's message");
+}
+
+#[test]
+fn kbus_faults_raise_their_codes_and_init_bits() {
+    let (mut b, m) = Bench::started("KL1104,KL2134,KL3102,KL9010");
+    let out = vec![0u8; m.image().out_len];
+    b.dx(&out);
+    // A terminal that does not answer: K-bus command error, 3 pulses, 0.
+    let t = b.slave.device_mut().control("mute 3").unwrap();
+    assert!(t.contains("3 pulses, then 0"), "{t}");
+    let d = b.diag();
+    assert_ne!(d[1] & 0x02, 0, "Stat_Diag");
+    assert_eq!(&d[16..24], &[0, 254, 0, 0x22, 3, 0, 0, 0]);
+    assert!(Bk3000Master::describe_diag(&d[6..])
+        .iter()
+        .any(|l| l.contains("does not answer")));
+    assert!(b.dx(&out).iter().all(|&x| x == 0), "inputs 0");
+    b.slave.device_mut().control("unmute 3").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A changed strip: init error bit 3, 14 pulses then the terminal.
+    let t = b.slave.device_mut().control("swap 2 KL2408").unwrap();
+    assert!(t.contains("14 pulses, then 2"), "{t}");
+    let d = b.diag();
+    assert_eq!(&d[16..24], &[0, 254, 0x08, 0x20, 14, 2, 0, 0]);
+    let words = Bk3000Master::describe_diag(&d[6..]);
+    assert!(
+        words
+            .iter()
+            .any(|l| l.contains("error reading the terminal types")),
+        "{words:?}"
+    );
+    b.slave.device_mut().control("swap 2 KL2134").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A pulled terminal still wins over the others (code 4).
+    b.slave.device_mut().control("mute 3").unwrap();
+    b.slave.device_mut().control("pull 2").unwrap();
+    assert_eq!(&b.diag()[16..24], &[0, 254, 0, 0x24, 4, 1, 0, 0]);
 }
