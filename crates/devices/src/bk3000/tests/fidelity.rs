@@ -218,3 +218,160 @@ fn user_terminal_types_from_the_bus_file_and_device_opt() {
         "{e}"
     );
 }
+
+/// Write register `r` of KL3102 channel 1 (complete mapping, terminal
+/// 1): control 0xC0 | r, the value in the output word.
+fn reg_write(b: &mut Bench, r: u8, v: u16) -> Vec<u8> {
+    let mut out = vec![0u8; 6];
+    out[0] = 0xC0 | r;
+    out[1..3].copy_from_slice(&v.to_be_bytes());
+    b.dx(&out)
+}
+
+fn reg_read(b: &mut Bench, r: u8) -> (u8, u16) {
+    let mut out = vec![0u8; 6];
+    out[0] = 0x80 | r;
+    let i = b.dx(&out);
+    (i[0], u16::from_be_bytes([i[1], i[2]]))
+}
+
+#[test]
+fn register_set_code_word_and_scaling() {
+    let (mut b, _m) = Bench::started("KL3102:complete,KL9010");
+    // Data sheet example 1: control 0x88 reads R8, status 0x88, 3102.
+    assert_eq!(reg_read(&mut b, 8), (0x88, 3102));
+    assert_eq!(reg_read(&mut b, 9), (0x89, 0x3141), "software version 1A");
+    // Without the code word the user area keeps its value.
+    let i = reg_write(&mut b, 34, 0x0200);
+    assert_eq!(i[0], 0xA2, "write acknowledged: control without bit 6");
+    assert_eq!(reg_read(&mut b, 34).1, 0x0100, "R34 write-protected");
+    // Example 2: control 0xDF writes the code word 0x1235 into R31,
+    // status 0x9F acknowledges.
+    let i = reg_write(&mut b, 31, 0x1235);
+    assert_eq!((i[0], i[1], i[2]), (0x9F, 0, 0));
+    // User scaling: gain 2 (0x0200), offset 100, feature bit 0.
+    reg_write(&mut b, 34, 0x0200);
+    reg_write(&mut b, 33, 100);
+    reg_write(&mut b, 32, 0x0003);
+    assert_eq!(reg_read(&mut b, 32).1, 0x0003);
+    // Manufacturer settings and ROM stay.
+    reg_write(&mut b, 20, 0x0300);
+    reg_write(&mut b, 8, 1234);
+    assert_eq!(reg_read(&mut b, 20).1, 0x0100);
+    assert_eq!(reg_read(&mut b, 8).1, 3102);
+    // Process data mode: 2.5 V = raw 8192 → 100 + 2·8192 = 16484.
+    b.slave.device_mut().control("set 1.1 2.5").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 100 + 2 * 8192);
+    assert_eq!(i[0], 0, "in range");
+    // 6 V ·2 is beyond 0x7FFF: overrange and error, value clamped; the
+    // channel's diagnosis message names terminal 1, channel 1.
+    b.slave.device_mut().control("set 1.1 6").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x42, "overrange + error");
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 0x7FFF);
+    let d = b.diag();
+    assert_ne!(d[0] & 0x08, 0, "Ext_Diag");
+    assert!(
+        d[8..].chunks(8).any(|m| m == [1, 1, 0, 0, 0, 0x42, 0, 0]),
+        "{d:02X?}"
+    );
+    // R0 holds the raw value, R6 the status byte.
+    assert_eq!(reg_read(&mut b, 6).1, 0x42);
+    // Restore the factory settings (R7 = 0x7000): scaling off again.
+    reg_write(&mut b, 7, 0x7000);
+    b.slave.device_mut().control("set 1.1 2.5").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 8192);
+    assert_eq!(b.diag().len(), 6, "error gone, diagnosis empty");
+}
+
+#[test]
+fn status_byte_underrange_on_a_unipolar_range_and_limits() {
+    let (mut b, _m) = Bench::started("KL3022:complete,KL9010");
+    // 4..20 mA: 2 mA is below the range.
+    b.slave.device_mut().control("set 1.1 2").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x41, "underrange + error");
+    assert_eq!(&i[1..3], &[0, 0]);
+    // Limit 1 (R35) with feature bit 9: 12 mA is above 4000.
+    reg_write(&mut b, 31, 0x1235);
+    reg_write(&mut b, 35, 4000);
+    reg_write(&mut b, 32, 0x0202);
+    b.slave.device_mut().control("set 1.1 12").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x04, "limit 1: value above");
+    // Filter R37 = 2: the value moves a quarter of the way per cycle.
+    reg_write(&mut b, 37, 2);
+    b.slave.device_mut().control("set 1.1 4").unwrap();
+    let first = b.dx(&[0; 6]);
+    let v = i16::from_be_bytes([first[1], first[2]]);
+    assert!(v > 0 && v < 16384, "filtered: {v}");
+}
+
+#[test]
+fn run_on_cfg_fault_runs_with_a_maximal_configuration() {
+    // The master is set up for KL1104,KL2134,KL3102,KL4002 (p. 46: "in
+    // einer Maximal-Konfiguration"); only KL1104,KL3102 are plugged.
+    let mut b = Bench::new("KL3102,KL1104,KL9010");
+    let max = [0x50, 0x50, 0x60, 0x60, 0x10, 0x20];
+    let mut u = [0u8; 10];
+    b.start(&u, &max);
+    assert_eq!(
+        b.slave.state(),
+        SlaveState::WaitPrm,
+        "refused without the mode"
+    );
+    u[1] = 0x01;
+    b.start(&u, &max);
+    assert_eq!(b.slave.state(), SlaveState::DataExch, "RunOnCfgFault");
+    assert!(b.slave.device().user_prm().run_on_cfg_fault);
+    // The master's lengths: 5 in, 5 out; the plugged terminals' data
+    // where the automatic image puts them; the fault in the diagnosis.
+    b.slave.device_mut().control("set 1.1 5").unwrap();
+    b.slave.device_mut().control("set 2.1 1").unwrap();
+    let i = b.dx(&[0; 5]);
+    assert_eq!(i.len(), 5);
+    assert_eq!(i16::from_be_bytes([i[0], i[1]]), 16384);
+    assert_eq!(i[4] & 1, 1, "KL1104 bit after the words");
+    let d = b.diag();
+    assert_eq!(d[0] & 0x04, 0, "no Cfg_Fault");
+    assert_eq!(d[12], 2, "CfgData error 2 in the coupler's message");
+}
+
+#[test]
+fn kbus_faults_raise_their_codes_and_init_bits() {
+    let (mut b, m) = Bench::started("KL1104,KL2134,KL3102,KL9010");
+    let out = vec![0u8; m.image().out_len];
+    b.dx(&out);
+    // A terminal that does not answer: K-bus command error, 3 pulses, 0.
+    let t = b.slave.device_mut().control("mute 3").unwrap();
+    assert!(t.contains("3 pulses, then 0"), "{t}");
+    let d = b.diag();
+    assert_ne!(d[1] & 0x02, 0, "Stat_Diag");
+    assert_eq!(&d[16..24], &[0, 254, 0, 0x22, 3, 0, 0, 0]);
+    assert!(Bk3000Master::describe_diag(&d[6..])
+        .iter()
+        .any(|l| l.contains("does not answer")));
+    assert!(b.dx(&out).iter().all(|&x| x == 0), "inputs 0");
+    b.slave.device_mut().control("unmute 3").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A changed strip: init error bit 3, 14 pulses then the terminal.
+    let t = b.slave.device_mut().control("swap 2 KL2408").unwrap();
+    assert!(t.contains("14 pulses, then 2"), "{t}");
+    let d = b.diag();
+    assert_eq!(&d[16..24], &[0, 254, 0x08, 0x20, 14, 2, 0, 0]);
+    let words = Bk3000Master::describe_diag(&d[6..]);
+    assert!(
+        words
+            .iter()
+            .any(|l| l.contains("error reading the terminal types")),
+        "{words:?}"
+    );
+    b.slave.device_mut().control("swap 2 KL2134").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A pulled terminal still wins over the others (code 4).
+    b.slave.device_mut().control("mute 3").unwrap();
+    b.slave.device_mut().control("pull 2").unwrap();
+    assert_eq!(&b.diag()[16..24], &[0, 254, 0, 0x24, 4, 1, 0, 0]);
+}
