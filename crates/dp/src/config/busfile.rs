@@ -31,6 +31,8 @@
 //! sync = false
 //! freeze = false
 //! initial_outputs = [0, 0]               # optional
+//! alarms = ["diagnostic", "process"]     # DP-V1 alarms to enable (default: all the
+//!                                        # GSD declares; false: none)
 //!
 //! [mqtt]                 # optional: settings of `dpctl gateway`, kept raw
 //! prefix = "profibus"    # (see the `profibus-gateway` crate)
@@ -70,6 +72,8 @@
 use crate::config::gsd::{Gsd, ParseOptions, PrmValue};
 use crate::config::names::{field_names, DidYouMean};
 use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+use crate::pdu::alarm::{AlarmEnable, AlarmMode};
+use crate::pdu::prm::Dpv1Status2;
 use profibus_fdl::timing::{Baud, BusParams};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -150,6 +154,7 @@ pub const SLAVE_KEYS: &[&str] = &[
     "freeze",
     "initial_outputs",
     "dpv1",
+    "alarms",
 ];
 
 /// The `[[slave]]` tables as plain tables, for the profile options.
@@ -175,6 +180,15 @@ struct RawSlave {
     freeze: Option<Spanned<bool>>,
     initial_outputs: Option<Spanned<Vec<u8>>>,
     dpv1: Option<bool>,
+    alarms: Option<Spanned<RawAlarms>>,
+}
+
+/// `alarms = ["diagnostic", …]`, `alarms = false` or `alarms = true`.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawAlarms {
+    All(bool),
+    Names(Vec<Spanned<String>>),
 }
 
 /// A slave given as a device profile: `device = "NAME"` and the other
@@ -984,6 +998,7 @@ impl Ctx<'_> {
         p.freeze = flag(&s.freeze);
         p.user_prm_data = user_prm_data;
         p.dpv1 = s.dpv1.unwrap_or(gsd.dpv1_slave);
+        (p.alarms, p.alarm_mode) = self.alarms(rs, gsd, p.dpv1)?;
         p.fail_safe = gsd.fail_safe;
         p.min_slave_interval =
             Duration::from_micros(100 * gsd.min_slave_intervall.unwrap_or(0) as u64);
@@ -1011,6 +1026,72 @@ impl Ctx<'_> {
             ));
         }
         Ok(p)
+    }
+
+    /// The DP-V1 alarms Set_Prm enables (DPV1_Status_2) and the
+    /// Alarm_Mode (DPV1_Status_3): every alarm type the GSD declares
+    /// (`Diagnostic_Alarm_supp`, …) unless the slave's `alarms` key
+    /// names fewer (`alarms = ["diagnostic", …]`) or none (`alarms =
+    /// false`). A name that is no alarm type, or an alarm the GSD does
+    /// not declare, is an error at the name. The mode is sequence mode
+    /// with the most alarms `Alarm_Sequence_Mode_Count` allows, else
+    /// type mode (one per type).
+    fn alarms(
+        &self,
+        rs: &Spanned<RawSlave>,
+        gsd: &Gsd,
+        dpv1: bool,
+    ) -> Result<(Dpv1Status2, AlarmMode), BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        let declared = if dpv1 {
+            gsd.declared_alarms()
+        } else {
+            Dpv1Status2::empty()
+        };
+        let mode = gsd.alarm_mode();
+        let names = match s.alarms.as_ref().map(|a| (a.get_ref(), a.span())) {
+            None | Some((RawAlarms::All(true), _)) => return Ok((declared, mode)),
+            Some((RawAlarms::All(false), _)) => return Ok((Dpv1Status2::empty(), mode)),
+            Some((RawAlarms::Names(n), _)) if n.is_empty() => {
+                return Ok((Dpv1Status2::empty(), mode))
+            }
+            Some((RawAlarms::Names(_), span)) if !dpv1 => {
+                return Err(self.err(
+                    Some(span),
+                    format!("slave {addr}: alarms need a DP-V1 slave, and the GSD says it is none"),
+                ))
+            }
+            Some((RawAlarms::Names(n), _)) => n,
+        };
+        let valid = AlarmEnable::ALL.map(AlarmEnable::name);
+        let mut want = Dpv1Status2::empty();
+        for n in names {
+            let name = n.get_ref();
+            let Some(e) = AlarmEnable::from_name(name) else {
+                return Err(self.err(
+                    Some(n.span()),
+                    format!(
+                        "slave {addr}: unknown alarm type `{name}`{}",
+                        key_hint(name, &valid)
+                    ),
+                ));
+            };
+            if !declared.contains(e.bit()) {
+                return Err(self.err(
+                    Some(n.span()),
+                    format!(
+                        "slave {addr}: {} does not declare {name} alarms (no {} = 1)",
+                        gsd.model_name
+                            .as_deref()
+                            .map_or("the GSD".to_string(), |m| format!("the GSD of {m}")),
+                        e.gsd_keyword()
+                    ),
+                ));
+            }
+            want |= e.bit();
+        }
+        Ok((want, mode))
     }
 
     /// Step 6, the `[bus]` table: the defaults of the baud rate with the

@@ -5,8 +5,8 @@
 //! JSON lines.
 
 use super::{
-    CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState, SlaveState,
-    SlaveStats,
+    AlarmNotice, CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState,
+    SlaveState, SlaveStats,
 };
 use crate::config::gsd::Gsd;
 use profibus_fdl::station::active::FdlEvent;
@@ -17,8 +17,8 @@ use std::fmt;
 /// A [`MasterEvent`] together with what it refers to: the diagnosis in
 /// words, a job's result. Built with [`MasterReport::new`] right after
 /// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
-/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `job`, `ring`,
-/// `duplicate_address`) and the slave's address as `slave`.
+/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `alarm`, `job`,
+/// `ring`, `duplicate_address`) and the slave's address as `slave`.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -79,6 +79,30 @@ pub enum MasterReport {
         configured: Vec<CfgGroup>,
         /// The slave's answer to Get_Cfg.
         actual: Vec<CfgGroup>,
+    },
+    /// A DP-V1 alarm, once acknowledged or given up
+    /// ([`MasterEvent::Alarm`]).
+    Alarm {
+        /// Station address.
+        slave: u8,
+        /// Alarm_Type in one word (`diagnostic`, `process`, `pull`,
+        /// `plug`, `status`, `update`, `manufacturer`).
+        #[cfg_attr(feature = "serde", serde(rename = "type"))]
+        alarm_type: &'static str,
+        /// Slot_Number.
+        slot: u8,
+        /// `appears`, `disappears`, `disappears-still-faulty` (or `none`).
+        specifier: &'static str,
+        /// Sequence number (0..=31).
+        seq: u8,
+        /// Diagnostic_User_Data.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+        data: Vec<u8>,
+        /// The alarm in words, with the GSD's texts for its data where
+        /// the GSD has them, and why it was not acknowledged.
+        text: String,
+        /// The slave confirmed the Alarm_Ack.
+        acknowledged: bool,
     },
     /// A job ended.
     Job {
@@ -152,6 +176,7 @@ impl MasterReport {
                 ),
                 actual: CfgGroup::split(m.actual_cfg(address).unwrap_or(&[]), gsd),
             },
+            MasterEvent::Alarm { address, alarm } => MasterReport::alarm(address, &alarm, gsd),
             MasterEvent::JobDone(id) => {
                 let (data, result) = match m.take_result(id) {
                     Some(JobResult::Data(d)) => (Some(d), "ok".to_string()),
@@ -172,6 +197,41 @@ impl MasterReport {
     }
 }
 
+impl MasterReport {
+    /// The report of an alarm of slave `slave`, its text with the
+    /// `gsd`'s diagnosis texts for the alarm's data.
+    pub fn alarm(slave: u8, alarm: &AlarmNotice, gsd: Option<&Gsd>) -> MasterReport {
+        let b = alarm.block();
+        let named = gsd.map_or_else(Vec::new, |g| {
+            let mut body = vec![b.alarm_type.code(), b.slot, b.specifier.byte()];
+            body.extend_from_slice(b.data);
+            crate::pdu::diag::unit_diag_words(g, &body, 24)
+        });
+        let mut text = if named.is_empty() {
+            b.describe()
+        } else {
+            let plain = AlarmNotice {
+                data: vec![],
+                ..alarm.clone()
+            };
+            format!("{}: {}", plain.block().describe(), named.join("; "))
+        };
+        if let Some(p) = &alarm.problem {
+            text = format!("{text} ({p})");
+        }
+        MasterReport::Alarm {
+            slave,
+            alarm_type: b.alarm_type.word(),
+            slot: b.slot,
+            specifier: b.specifier.change.word(),
+            seq: b.specifier.seq,
+            data: alarm.data.clone(),
+            text,
+            acknowledged: alarm.acknowledged,
+        }
+    }
+}
+
 impl fmt::Display for MasterReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -182,6 +242,19 @@ impl fmt::Display for MasterReport {
                 write!(f, "slave {slave} diagnosis: {}", words.join("; "))
             }
             MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
+            MasterReport::Alarm {
+                slave,
+                text,
+                acknowledged,
+                ..
+            } => {
+                let ack = if *acknowledged {
+                    "acknowledged"
+                } else {
+                    "NOT acknowledged"
+                };
+                write!(f, "slave {slave} alarm: {text} [{ack}]")
+            }
             MasterReport::FaultEnded {
                 slave,
                 reason,
