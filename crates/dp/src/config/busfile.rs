@@ -180,15 +180,8 @@ struct RawSlave {
     freeze: Option<Spanned<bool>>,
     initial_outputs: Option<Spanned<Vec<u8>>>,
     dpv1: Option<bool>,
-    alarms: Option<Spanned<RawAlarms>>,
-}
-
-/// `alarms = ["diagnostic", …]`, `alarms = false` or `alarms = true`.
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum RawAlarms {
-    All(bool),
-    Names(Vec<Spanned<String>>),
+    /// `alarms = ["diagnostic", …]`, `alarms = false` or `alarms = true`.
+    alarms: Option<Spanned<toml::Value>>,
 }
 
 /// A slave given as a device profile: `device = "NAME"` and the other
@@ -1050,27 +1043,48 @@ impl Ctx<'_> {
             Dpv1Status2::empty()
         };
         let mode = gsd.alarm_mode();
-        let names = match s.alarms.as_ref().map(|a| (a.get_ref(), a.span())) {
-            None | Some((RawAlarms::All(true), _)) => return Ok((declared, mode)),
-            Some((RawAlarms::All(false), _)) => return Ok((Dpv1Status2::empty(), mode)),
-            Some((RawAlarms::Names(n), _)) if n.is_empty() => {
-                return Ok((Dpv1Status2::empty(), mode))
-            }
-            Some((RawAlarms::Names(_), span)) if !dpv1 => {
-                return Err(self.err(
-                    Some(span),
-                    format!("slave {addr}: alarms need a DP-V1 slave, and the GSD says it is none"),
-                ))
-            }
-            Some((RawAlarms::Names(n), _)) => n,
+        let Some(raw) = &s.alarms else {
+            return Ok((declared, mode));
+        };
+        let span = raw.span();
+        let names: Vec<&str> = match raw.get_ref() {
+            toml::Value::Boolean(true) => return Ok((declared, mode)),
+            toml::Value::Boolean(false) => return Ok((Dpv1Status2::empty(), mode)),
+            toml::Value::Array(a) => a.iter().filter_map(|v| v.as_str()).collect(),
+            _ => vec![],
+        };
+        let list = matches!(raw.get_ref(), toml::Value::Array(a) if a.len() == names.len());
+        if !list {
+            return Err(self.err(
+                Some(span),
+                format!(
+                    "slave {addr}: `alarms` is a list of alarm types (diagnostic, process, \
+                     pull_plug, status, update, manufacturer), or false"
+                ),
+            ));
+        }
+        if names.is_empty() {
+            return Ok((Dpv1Status2::empty(), mode));
+        }
+        if !dpv1 {
+            return Err(self.err(
+                Some(span),
+                format!("slave {addr}: alarms need a DP-V1 slave, and the GSD says it is none"),
+            ));
+        }
+        // Where a name is: its quoted text inside the list.
+        let at = |name: &str| {
+            let inside = self.text.get(span.clone()).unwrap_or("");
+            let quoted = format!("\"{name}\"");
+            let i = inside.find(&quoted).or_else(|| inside.find(name));
+            Some(i.map_or(span.clone(), |i| span.start + i..span.end))
         };
         let valid = AlarmEnable::ALL.map(AlarmEnable::name);
         let mut want = Dpv1Status2::empty();
-        for n in names {
-            let name = n.get_ref();
+        for name in names {
             let Some(e) = AlarmEnable::from_name(name) else {
                 return Err(self.err(
-                    Some(n.span()),
+                    at(name),
                     format!(
                         "slave {addr}: unknown alarm type `{name}`{}",
                         key_hint(name, &valid)
@@ -1079,7 +1093,7 @@ impl Ctx<'_> {
             };
             if !declared.contains(e.bit()) {
                 return Err(self.err(
-                    Some(n.span()),
+                    at(name),
                     format!(
                         "slave {addr}: {} does not declare {name} alarms (no {} = 1)",
                         gsd.model_name
@@ -1352,6 +1366,55 @@ modules = ["no such module"]
         format!(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 5\ngsd = \"DPCTL_GEN.GSD\"\n{modules}\n"
         )
+    }
+
+    #[test]
+    fn alarms_default_to_the_gsd_and_the_key_narrows_or_switches_them_off() {
+        use crate::pdu::prm::Dpv1Status2 as S2;
+        let bus = |line: &str| {
+            format!(
+                "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 9\n\
+                 gsd = \"../../cli/tests/data/DPCTL_ALM.GSD\"\nmodules = [\"1 byte in\"]\n{line}\n"
+            )
+        };
+        let params = |line: &str| {
+            load(&bus(line))
+                .unwrap_or_else(|e| panic!("{e}"))
+                .master
+                .slaves[0]
+                .clone()
+        };
+        let p = params("");
+        assert_eq!(
+            p.alarms,
+            S2::DIAGNOSTIC_ALARM | S2::PROCESS_ALARM | S2::PULL_PLUG_ALARM
+        );
+        assert_eq!(p.alarm_mode.0, 3, "Alarm_Sequence_Mode_Count=8: mode 3");
+        // DPV1_Enable, the enables, Alarm_Mode.
+        assert_eq!(&p.set_prm()[7..], &[0x80, 0xE0, 0x03]);
+        assert_eq!(params("alarms = [\"process\"]").alarms, S2::PROCESS_ALARM);
+        let off = params("alarms = false");
+        assert!(off.alarms.is_empty());
+        assert_eq!(&off.set_prm()[7..], &[0x80, 0x00, 0x00]);
+        let e = load(&bus("alarms = [\"prozess\"]")).unwrap_err();
+        assert_eq!((e.line, e.column), (8, 11), "{e}");
+        assert!(
+            e.message
+                .ends_with("unknown alarm type `prozess`; did you mean `process`?"),
+            "{e}"
+        );
+        let e = load(&bus("alarms = \"all\"")).unwrap_err();
+        assert!(e.message.contains("is a list of alarm types"), "{e}");
+        // DPCTL_GEN.GSD is DP-V1 without alarms.
+        let e = load(&gen_bus(
+            "modules = [\"1 byte in\"]\nalarms = [\"diagnostic\"]",
+        ))
+        .unwrap_err();
+        assert!(
+            e.message
+                .contains("does not declare diagnostic alarms (no Diagnostic_Alarm_supp = 1)"),
+            "{e}"
+        );
     }
 
     #[test]

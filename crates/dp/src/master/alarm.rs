@@ -59,7 +59,8 @@ impl AlarmNotice {
         }
     }
 
-    fn new(b: &AlarmBlock<'_>) -> AlarmNotice {
+    /// A block just read: not acknowledged (yet).
+    pub fn new(b: &AlarmBlock<'_>) -> AlarmNotice {
         AlarmNotice {
             alarm_type: b.alarm_type,
             slot: b.slot,
@@ -71,7 +72,7 @@ impl AlarmNotice {
     }
 
     /// The same alarm: type, slot and sequence number.
-    fn same(&self, b: &AlarmBlock<'_>) -> bool {
+    pub fn same(&self, b: &AlarmBlock<'_>) -> bool {
         self.alarm_type == b.alarm_type
             && self.slot == b.slot
             && self.specifier.seq == b.specifier.seq

@@ -68,7 +68,7 @@ pub use config::{
     MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
     DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST, STARTUP_RETRY_MAX,
 };
-pub use report::{CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use report::{AlarmReport, CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};

@@ -82,28 +82,7 @@ pub enum MasterReport {
     },
     /// A DP-V1 alarm, once acknowledged or given up
     /// ([`MasterEvent::Alarm`]).
-    Alarm {
-        /// Station address.
-        slave: u8,
-        /// Alarm_Type in one word (`diagnostic`, `process`, `pull`,
-        /// `plug`, `status`, `update`, `manufacturer`).
-        #[cfg_attr(feature = "serde", serde(rename = "type"))]
-        alarm_type: &'static str,
-        /// Slot_Number.
-        slot: u8,
-        /// `appears`, `disappears`, `disappears-still-faulty` (or `none`).
-        specifier: &'static str,
-        /// Sequence number (0..=31).
-        seq: u8,
-        /// Diagnostic_User_Data.
-        #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
-        data: Vec<u8>,
-        /// The alarm in words, with the GSD's texts for its data where
-        /// the GSD has them, and why it was not acknowledged.
-        text: String,
-        /// The slave confirmed the Alarm_Ack.
-        acknowledged: bool,
-    },
+    Alarm(AlarmReport),
     /// A job ended.
     Job {
         /// The job's number.
@@ -176,7 +155,9 @@ impl MasterReport {
                 ),
                 actual: CfgGroup::split(m.actual_cfg(address).unwrap_or(&[]), gsd),
             },
-            MasterEvent::Alarm { address, alarm } => MasterReport::alarm(address, &alarm, gsd),
+            MasterEvent::Alarm { address, alarm } => {
+                MasterReport::Alarm(AlarmReport::new(address, &alarm, gsd))
+            }
             MasterEvent::JobDone(id) => {
                 let (data, result) = match m.take_result(id) {
                     Some(JobResult::Data(d)) => (Some(d), "ok".to_string()),
@@ -197,10 +178,40 @@ impl MasterReport {
     }
 }
 
-impl MasterReport {
-    /// The report of an alarm of slave `slave`, its text with the
-    /// `gsd`'s diagnosis texts for the alarm's data.
-    pub fn alarm(slave: u8, alarm: &AlarmNotice, gsd: Option<&Gsd>) -> MasterReport {
+/// A DP-V1 alarm for people and JSON, as `dpctl master` and `dpctl
+/// monitor` report it: `{"event": "alarm", "slave", "type", "slot",
+/// "specifier", "seq", "data", "text", "acknowledged"}`, type and
+/// specifier in words, data in hex.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct AlarmReport {
+    /// Station address.
+    pub slave: u8,
+    /// Alarm_Type in one word (`diagnostic`, `process`, `pull`, `plug`,
+    /// `status`, `update`, `manufacturer`).
+    #[cfg_attr(feature = "serde", serde(rename = "type"))]
+    pub alarm_type: &'static str,
+    /// Slot_Number.
+    pub slot: u8,
+    /// `appears`, `disappears`, `disappears-still-faulty` (or `none`).
+    pub specifier: &'static str,
+    /// Sequence number (0..=31).
+    pub seq: u8,
+    /// Diagnostic_User_Data.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
+    /// The alarm in words, with the GSD's texts for its data where the
+    /// GSD has them ([`crate::pdu::diag::unit_diag_words`]), and why it
+    /// was not acknowledged.
+    pub text: String,
+    /// The slave confirmed the Alarm_Ack.
+    pub acknowledged: bool,
+}
+
+impl AlarmReport {
+    /// The report of `alarm` of slave `slave`, its text with the `gsd`'s
+    /// diagnosis texts for the alarm's data.
+    pub fn new(slave: u8, alarm: &AlarmNotice, gsd: Option<&Gsd>) -> AlarmReport {
         let b = alarm.block();
         let named = gsd.map_or_else(Vec::new, |g| {
             let mut body = vec![b.alarm_type.code(), b.slot, b.specifier.byte()];
@@ -219,7 +230,7 @@ impl MasterReport {
         if let Some(p) = &alarm.problem {
             text = format!("{text} ({p})");
         }
-        MasterReport::Alarm {
+        AlarmReport {
             slave,
             alarm_type: b.alarm_type.word(),
             slot: b.slot,
@@ -229,6 +240,18 @@ impl MasterReport {
             text,
             acknowledged: alarm.acknowledged,
         }
+    }
+}
+
+/// `slave 9 alarm: diagnostic alarm slot 1, seq 0, appears: … [acknowledged]`.
+impl fmt::Display for AlarmReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ack = if self.acknowledged {
+            "acknowledged"
+        } else {
+            "NOT acknowledged"
+        };
+        write!(f, "slave {} alarm: {} [{ack}]", self.slave, self.text)
     }
 }
 
@@ -242,19 +265,7 @@ impl fmt::Display for MasterReport {
                 write!(f, "slave {slave} diagnosis: {}", words.join("; "))
             }
             MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
-            MasterReport::Alarm {
-                slave,
-                text,
-                acknowledged,
-                ..
-            } => {
-                let ack = if *acknowledged {
-                    "acknowledged"
-                } else {
-                    "NOT acknowledged"
-                };
-                write!(f, "slave {slave} alarm: {text} [{ack}]")
-            }
+            MasterReport::Alarm(a) => a.fmt(f),
             MasterReport::FaultEnded {
                 slave,
                 reason,
