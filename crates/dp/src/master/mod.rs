@@ -57,6 +57,7 @@
 mod alarm;
 mod command;
 mod config;
+pub mod records;
 mod report;
 mod stop;
 mod task;
