@@ -98,6 +98,7 @@ pub mod bus;
 pub mod channels;
 pub mod generic;
 pub mod gsd_files;
+pub mod identity;
 pub mod jx2;
 mod kit;
 pub mod omega;
