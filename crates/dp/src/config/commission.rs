@@ -65,17 +65,18 @@ pub struct DeviceMatch {
 /// configuration (the layer above implements it with its registry).
 pub trait ProfileMatcher {
     /// A profile with ident number `ident` and options that give exactly
-    /// `cfg`; `Err` with the words of why a profile of that ident does
+    /// `cfg` for the slave at `address`; `Err` with the words of why a profile of that ident does
     /// not fit (written as a comment), `Ok(None)` when no profile has
     /// the ident.
-    fn device_for(&self, ident: u16, cfg: &[u8]) -> Result<Option<DeviceMatch>, String>;
+    fn device_for(&self, address: u8, ident: u16, cfg: &[u8])
+        -> Result<Option<DeviceMatch>, String>;
 }
 
 /// No device profiles.
 pub struct NoProfiles;
 
 impl ProfileMatcher for NoProfiles {
-    fn device_for(&self, _ident: u16, _cfg: &[u8]) -> Result<Option<DeviceMatch>, String> {
+    fn device_for(&self, _: u8, _ident: u16, _cfg: &[u8]) -> Result<Option<DeviceMatch>, String> {
         Ok(None)
     }
 }
@@ -204,7 +205,7 @@ fn plan_one(s: &ScannedSlave, library: &GsdLibrary, profiles: &dyn ProfileMatche
         plan.result = Err(NotConfigured::NoCfg);
         return plan;
     };
-    let profile_note = match profiles.device_for(ident, cfg) {
+    let profile_note = match profiles.device_for(s.address, ident, cfg) {
         Ok(Some(m)) => {
             plan.result = Ok(Configuration::Device(m));
             return plan;
@@ -657,7 +658,7 @@ mod tests {
     fn a_profile_match_is_written_as_a_device() {
         struct One;
         impl ProfileMatcher for One {
-            fn device_for(&self, ident: u16, _: &[u8]) -> Result<Option<DeviceMatch>, String> {
+            fn device_for(&self, _: u8, ident: u16, _: &[u8]) -> Result<Option<DeviceMatch>, String> {
                 let mut options = toml::Table::new();
                 options.insert("setpoints".into(), 2.into());
                 options.insert("params".into(), "p.toml".into());
