@@ -15,7 +15,12 @@ use profibus_fdl::wire::Hex;
 pub struct Registry;
 
 impl ProfileMatcher for Registry {
-    fn device_for(&self, address: u8, ident: u16, cfg: &[u8]) -> Result<Option<DeviceMatch>, String> {
+    fn device_for(
+        &self,
+        address: u8,
+        ident: u16,
+        cfg: &[u8],
+    ) -> Result<Option<DeviceMatch>, String> {
         let mut known = Vec::new();
         for p in PROFILES.iter().filter(|p| p.ident == Some(ident)) {
             known.push(p.name);
@@ -85,6 +90,9 @@ mod tests {
         // Unknown ident: no profile; known ident, foreign bytes: why.
         assert_eq!(r.device_for(5, 0x4711, &[0x10]), Ok(None));
         let e = r.device_for(5, crate::rfid::IDENT, &[0x10]).unwrap_err();
-        assert!(e.starts_with("device profile `rfid` knows ident 0x0DC4"), "{e}");
+        assert!(
+            e.starts_with("device profile `rfid` knows ident 0x0DC4"),
+            "{e}"
+        );
     }
 }

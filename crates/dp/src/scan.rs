@@ -18,12 +18,12 @@
 
 use crate::pdu::diag::SlaveDiag;
 use crate::pdu::sap;
-use std::collections::BTreeMap;
 use profibus_fdl::station::active::{
     CycleResult, MasterApp, Outcome, Request, Service, TokenContext,
 };
 use profibus_fdl::time::Instant;
 use profibus_fdl::wire::{ResponseStatus, StationType};
+use std::collections::BTreeMap;
 
 /// What the scan learnt about one address.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -68,8 +68,12 @@ pub trait ProfileMatcher {
     /// `cfg` for the slave at `address`; `Err` with the words of why a profile of that ident does
     /// not fit (written as a comment), `Ok(None)` when no profile has
     /// the ident.
-    fn device_for(&self, address: u8, ident: u16, cfg: &[u8])
-        -> Result<Option<DeviceMatch>, String>;
+    fn device_for(
+        &self,
+        address: u8,
+        ident: u16,
+        cfg: &[u8],
+    ) -> Result<Option<DeviceMatch>, String>;
 }
 
 /// No device profiles.
@@ -344,6 +348,21 @@ pub fn built_in_files(plans: &[SlavePlan], library: &GsdLibrary) -> Vec<(String,
     out
 }
 
+/// The watchdog written for each slave: three target rotation times
+/// (TTR of [`BusParams::defaults`], which the bus file keeps unless its
+/// `[bus]` table says otherwise), at least 1 s, in whole 100 ms. A
+/// master shares the token with other masters (a second master scanning
+/// the bus holds it up to one TTR), and a slave whose watchdog runs out
+/// between two polls leaves Data_Exchange: 1 s is short at 19.2 kbit/s,
+/// where one TTR of 32436 bit times is 1.7 s.
+///
+/// [`BusParams::defaults`]: profibus_fdl::timing::BusParams::defaults
+pub fn watchdog_ms(baud: Baud) -> u64 {
+    let p = profibus_fdl::timing::BusParams::defaults(baud);
+    let ttr = baud.bits_to_duration(u64::from(p.ttr)).as_millis() as u64;
+    (3 * ttr).div_ceil(100).max(10) * 100
+}
+
 /// A TOML string (quoted and escaped).
 fn quote(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
@@ -464,7 +483,7 @@ pub fn bus_file_text(plans: &[SlavePlan], o: &WriteOptions) -> String {
                 }
             }
         }
-        let _ = writeln!(t, "watchdog_ms = 1000");
+        let _ = writeln!(t, "watchdog_ms = {}", watchdog_ms(o.baud));
     }
     let left: Vec<&SlavePlan> = plans.iter().filter(|p| p.result.is_err()).collect();
     if !left.is_empty() {
@@ -498,7 +517,11 @@ pub fn describe(p: &SlavePlan, dir: &Path) -> String {
         .unwrap_or_default();
     let what = match &p.result {
         Ok(Configuration::Device(d)) => {
-            let opts: Vec<String> = d.options.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+            let opts: Vec<String> = d
+                .options
+                .iter()
+                .map(|(k, v)| format!("{k} = {v}"))
+                .collect();
             if opts.is_empty() {
                 format!("device `{}`", d.name)
             } else {
@@ -632,7 +655,10 @@ mod tests {
             text.contains("# also fits: modules = [\"8 DI\", \"8 DI\", \"8 DO\"]"),
             "{text}"
         );
-        assert!(text.contains("params = { \"Diagnosis\" = \"on\" }"), "{text}");
+        assert!(
+            text.contains("params = { \"Diagnosis\" = \"on\" }"),
+            "{text}"
+        );
         assert!(
             text.contains("# slave 6 (ident 0x4712): no GSD for ident 0x4712"),
             "{text}"
@@ -655,10 +681,22 @@ mod tests {
     }
 
     #[test]
+    fn watchdog_covers_three_token_rotations() {
+        assert_eq!(watchdog_ms(Baud::B1500000), 1000);
+        // TTR 32436 bit times at 19.2 kbit/s: 1689 ms.
+        assert_eq!(watchdog_ms(Baud::B19200), 5100);
+    }
+
+    #[test]
     fn a_profile_match_is_written_as_a_device() {
         struct One;
         impl ProfileMatcher for One {
-            fn device_for(&self, _: u8, ident: u16, _: &[u8]) -> Result<Option<DeviceMatch>, String> {
+            fn device_for(
+                &self,
+                _: u8,
+                ident: u16,
+                _: &[u8],
+            ) -> Result<Option<DeviceMatch>, String> {
                 let mut options = toml::Table::new();
                 options.insert("setpoints".into(), 2.into());
                 options.insert("params".into(), "p.toml".into());
