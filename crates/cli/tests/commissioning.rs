@@ -37,6 +37,45 @@ fn gsd_text(ident: u16, modular: bool, modules: &[(&str, &str)]) -> String {
     t
 }
 
+/// `dpctl gsd install FILES` with the user library under `data`.
+fn install(data: &Path, files: &[&Path]) -> Output {
+    let mut cmd = Command::new(dpctl());
+    cmd.args(["gsd", "install"])
+        .args(files)
+        .env("XDG_DATA_HOME", data);
+    Proc::spawn_captured(cmd).finish(GUARD)
+}
+
+#[test]
+fn gsd_install_refuses_a_file_that_does_not_parse() {
+    let dir = TempDir::new("gsd-install");
+    let data = dir.path("data");
+    let good = dir.path("GOOD.gsd");
+    std::fs::write(&good, gsd_text(0x0DC7, false, &[("m", "0x10")])).unwrap();
+    let bad = dir.path("BAD.gsd");
+    std::fs::write(&bad, "#Profibus_DP\nIdent_Number=zz\n").unwrap();
+    // One bad file: nothing is installed, the error has file:line:col.
+    let out = install(&data, &[&good, &bad]);
+    assert!(!out.status.success());
+    assert_eq!(
+        out.stderr.trim(),
+        format!(
+            "dpctl: {}:2:14: expected a number for `Ident_Number`, found `zz` (not installed)",
+            bad.display()
+        )
+    );
+    assert!(!data.join("dpctl/gsd/GOOD.gsd").exists());
+    let out = install(&data, &[&good]);
+    assert!(out.status.success(), "{}", out.stderr);
+    assert_eq!(
+        out.stdout.trim(),
+        format!(
+            "installed {} (ident 0x0DC7, test 0x0DC7)",
+            data.join("dpctl/gsd/GOOD.gsd").display()
+        )
+    );
+}
+
 /// `dpctl slave` on link `i` at `addr` from `gsd` with `modules`.
 fn slave(bus: &Bus, i: usize, addr: u8, gsd: &Path, modules: &[&str]) -> Proc {
     let mut cmd = Command::new(dpctl());
@@ -106,7 +145,13 @@ fn segment(dir: &TempDir) -> Segment {
     // The library's files: a compact station (a localised variant), and
     // the "no fit" station's file with other modules than the slave has.
     let compact = gsd_text(0x0DC8, false, &[("4 in", "0x13"), ("4 in 4 out", "0x33")]);
-    std::fs::write(gsd_dir.join("COMPACT.gse"), &compact).unwrap();
+    // The compact station's file (a localised variant) comes from the
+    // user library, where `dpctl gsd install` puts it.
+    let gse = dir.path("COMPACT.gse");
+    std::fs::write(&gse, &compact).unwrap();
+    let out = install(&data, &[&gse]);
+    assert!(out.status.success(), "{}", out.stderr);
+    assert!(out.stdout.starts_with("installed "), "{}", out.stdout);
     std::fs::write(
         gsd_dir.join("NOFIT.gsd"),
         gsd_text(0x0DC9, true, &[("8 DI", "0x10"), ("8 DO", "0x20")]),
@@ -182,7 +227,13 @@ fn check_plans(rows: &[Value], owner: Option<u8>) {
     assert_eq!(s8["owner"], owner);
     let s9 = row(rows, 9);
     assert_eq!(s9["modules"], serde_json::json!(["4 in 4 out"]), "{s9}");
-    assert!(s9["gsd"].as_str().unwrap().ends_with("COMPACT.gse"), "{s9}");
+    assert!(
+        s9["gsd"]
+            .as_str()
+            .unwrap()
+            .ends_with("dpctl/gsd/COMPACT.gse"),
+        "{s9}"
+    );
     let s10 = row(rows, 10);
     assert_eq!(s10["device"], "omega", "{s10}");
     assert_eq!(s10["owner"], owner);
