@@ -296,12 +296,13 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
-/// `e` without its leading "slave N" (the outcome line names the slave
-/// already).
+/// `e` with its leading "slave N" as "the slave" (the outcome line names
+/// the slave already), "slave N: " dropped.
 fn without_slave(slave: u8, e: &str) -> String {
     let prefix = format!("slave {slave}");
     match e.strip_prefix(&prefix) {
-        Some(rest) => rest.trim_start_matches(':').trim_start().to_string(),
+        Some(rest) if rest.starts_with(':') => rest[1..].trim_start().to_string(),
+        Some(rest) => format!("the slave{rest}"),
         None => e.to_string(),
     }
 }
