@@ -32,9 +32,11 @@ pub struct ProfileArgs {
     /// Device profile to emulate (see --list-devices).
     #[arg(long, value_name = "NAME")]
     pub device: Option<String>,
-    /// An option of the device profile, KEY=VALUE (repeatable); with
-    /// --gsd, of the generic device (I&M0: order_id, serial_number,
-    /// manufacturer_id).
+    /// An option of the device profile, KEY=VALUE (repeatable). Every
+    /// profile also takes ident=0x… (the ident number it reports) and
+    /// gsd=FILE (a vendor's GSD file: ident number, modules, parameters).
+    /// With --gsd: an option of the generic device (I&M0: order_id,
+    /// serial_number, manufacturer_id).
     #[arg(long = "device-opt", value_name = "KEY=VALUE")]
     pub device_opts: Vec<String>,
     /// List the device profiles and exit.
