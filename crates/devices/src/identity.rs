@@ -327,6 +327,9 @@ impl Device for IdentityDevice {
     ) -> Result<(), Dpv1Error> {
         self.inner.alarm_ack(now, slot, alarm_type, seq)
     }
+    fn take_alarm(&mut self) -> Option<profibus_dp::slave::Alarm> {
+        self.inner.take_alarm()
+    }
     fn set_address(
         &mut self,
         new_address: u8,
@@ -356,5 +359,45 @@ impl Device for IdentityDevice {
     }
     fn handle_timeout(&mut self, now: Instant) {
         self.inner.handle_timeout(now)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The names of the methods of the first `impl … {` block starting
+    /// with `head` in `src`.
+    fn methods(src: &str, head: &str) -> Vec<String> {
+        let start = src.find(head).expect(head);
+        let body = &src[start..];
+        let end = body.find("\n}\n").unwrap();
+        let mut v: Vec<String> = body[..end]
+            .split("fn ")
+            .skip(1)
+            .map(|s| s.split(['(', '<']).next().unwrap().trim().to_string())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn every_device_method_is_passed_on() {
+        // A method added to `Device` must be passed to the device behind;
+        // `impl Device for Box<D>` in profibus-dp lists them all.
+        let dp = include_str!("../../dp/src/slave/device.rs");
+        let ours = include_str!("identity.rs");
+        assert_eq!(
+            methods(ours, "impl Device for IdentityDevice"),
+            methods(dp, "impl<D: Device + ?Sized> Device for Box<D>")
+        );
+    }
+
+    #[test]
+    fn ident_option_values() {
+        use super::parse_ident;
+        assert_eq!(parse_ident(&toml::Value::Integer(0x0DC3)).unwrap(), 0x0DC3);
+        assert_eq!(parse_ident(&"0x08AE".into()).unwrap(), 0x08AE);
+        assert_eq!(parse_ident(&"16#08AE".into()).unwrap(), 0x08AE);
+        let e = parse_ident(&toml::Value::Integer(70000)).unwrap_err();
+        assert!(e.to_string().contains("outside 0..=0xFFFF"), "{e}");
     }
 }
