@@ -19,6 +19,7 @@ mod doctor;
 mod dpv1;
 mod gateway;
 mod gsd;
+mod im;
 mod master;
 mod medium_args;
 mod monitor;
@@ -78,8 +79,12 @@ enum Command {
     /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
     /// 16-byte handshake.
     Rfid(rfid::Args),
-    /// Read or write a DP-V1 data record (slot, index) of a slave.
+    /// Read or write a DP-V1 data record (slot, index) of a slave, as the
+    /// bus file's class-1 master or as a class-2 master (--class2).
     Dpv1(dpv1::Args),
+    /// Read a slave's I&M0..I&M4 (identification and maintenance) in
+    /// words, or write its I&M1 tag.
+    Im(im::Args),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     Completions(completions::Args),
     /// Print the man page dpctl(1), or write all pages with --out-dir.
@@ -120,6 +125,7 @@ fn main() -> ExitCode {
         Command::Pkw(a) => pkw::run(a),
         Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),
+        Command::Im(a) => im::run(a),
         Command::Completions(a) => completions::run(a),
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),

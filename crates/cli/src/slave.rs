@@ -7,8 +7,8 @@
 //! object per line with `--json`).
 //!
 //! Baud rate: `--baud auto` (the default) searches on a serial line like
-//! a real slave with `Auto_Baud_supp` (fastest rate first, lock on the
-//! first valid telegram, search again after a watchdog expiry or 10 s
+//! a real slave with `Auto_Baud_supp` (only the rates of the device's GSD
+//! `*_supp` keywords, fastest first, lock on the first valid telegram, search again after a watchdog expiry or 10 s
 //! without a valid telegram; `profibus_io::runner::PassiveRunner`).
 //! A pty carries bytes, not bits, so there the
 //! rate is nominal: the slave locks at once, at 19.2 kbit/s unless
@@ -22,6 +22,7 @@ use crate::profile_args::ProfileArgs;
 use anyhow::bail;
 use profibus_devices::{ControlInbox, PROFILES};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress};
+use profibus_fdl::station::autobaud::BaudSet;
 use profibus_fdl::Instant;
 use profibus_io::control_io::ControlSource;
 use profibus_io::driver::Clock;
@@ -170,7 +171,14 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
     let mut port = args.rts.open(&path, BaudChoice::NOMINAL)?;
     let latency = common::latency(args.latency, &port)?;
     let options = common::driver_options(&port, args.busy_poll, args.gather)?;
-    let (search, first) = choice.plan(&port);
+    // The search keeps to the rates the device's GSD supports (`*_supp`).
+    let rates: BaudSet = emulated
+        .profile
+        .gsd()
+        .supported_bauds()
+        .into_iter()
+        .collect();
+    let (search, first) = choice.plan_within(&port, rates);
     port.set_baud(first)?;
     let slave = DpSlave::new(device, addr);
     let start = ShellEvent::start(
@@ -187,7 +195,10 @@ async fn run_async(args: Args) -> anyhow::Result<()> {
         plc.lock().module.set_baud(first.bps());
     }
     let mut shell = SlaveShell::new(
-        PassiveRunner::new(search, latency, options),
+        PassiveRunner {
+            rates,
+            ..PassiveRunner::new(search, latency, options)
+        },
         &*emulated.profile,
     );
     shell.show_data = args.show_data;

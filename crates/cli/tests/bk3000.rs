@@ -389,3 +389,47 @@ fn the_demo_runs_a_bk3000_with_named_channels() {
     assert!(ch["inputs"]["3.KL3102.1"].is_f64(), "{ch}");
     assert!(ch["outputs"]["4.KL4002.1"].as_f64().unwrap() > 0.0, "{ch}");
 }
+
+/// Manual p. 24: the BK3000 runs at up to 1.5 Mbit/s (only the BK3100 and
+/// BK3110 reach 12 Mbit/s), and its GSD stops at `1.5M_supp`. On a pty
+/// every rate passes the bytes, so an unrestricted search would lock at
+/// the first rate it tries, 12 Mbit/s; the coupler's search starts at
+/// 1.5 Mbit/s and never listens faster.
+#[test]
+fn baud_search_keeps_to_the_rates_of_the_gsd() {
+    let dir = TempDir::new("bk3000-baud");
+    let (a, b) = (dir.path("master"), dir.path("slave"));
+    let _socat = pty_pair(&a, &b);
+    let mut slave = Proc::spawn(
+        "dpctl slave",
+        Command::new(dpctl())
+            .args(["slave", "--device", "bk3000", "--terminals", STRIP])
+            .args(["--addr", "15", "--baud", "search", "--json", "--port"])
+            .arg(&b)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit()),
+    );
+    let mut out = started(&mut slave, WAIT);
+    // FDL Status request to station 15 from the master at 2 (SD1).
+    let fs = [0x10, 15, 2, 0x49, (15u8 + 2 + 0x49), 0x16];
+    let mut line = std::fs::OpenOptions::new().write(true).open(&a).unwrap();
+    assert!(
+        wait_for_lock(&mut line, &fs, &mut out),
+        "no baud_locked: {:?}",
+        out.1
+    );
+    let locked: Value =
+        serde_json::from_str(out.1.iter().find(|l| l.contains("baud_locked")).unwrap()).unwrap();
+    assert_eq!(locked["baud"], 1_500_000, "the fastest rate of the GSD");
+}
+
+/// Send `telegram` until the slave reports its rate.
+fn wait_for_lock(line: &mut std::fs::File, telegram: &[u8], out: &mut Lines) -> bool {
+    for _ in 0..20 {
+        line.write_all(telegram).unwrap();
+        if out.wait_for("baud_locked", Duration::from_millis(500)) {
+            return true;
+        }
+    }
+    false
+}

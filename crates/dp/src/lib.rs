@@ -22,6 +22,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod class2;
 pub mod config;
 pub mod master;
 pub mod monitor;

@@ -19,6 +19,7 @@ use crate::transport::Port;
 use profibus_devices::address::StoredAddress;
 use profibus_devices::{Configured, DeviceOptions, ProfileEntry, ProfileError, STATE_EVENT};
 use profibus_dp::slave::{Device, DpSlave, OwnAddress, SlaveEvent, SlaveState, SlaveStats};
+use profibus_fdl::station::autobaud::BaudSet;
 use profibus_fdl::wire::Hex;
 use profibus_fdl::{Baud, Instant};
 use std::fmt;
@@ -160,13 +161,17 @@ impl BaudChoice {
     /// a serial server (`tcp://`) every byte arrives intact whatever the
     /// rate, so `Auto` takes the nominal rate there.
     pub fn plan(self, port: &Port) -> (bool, Baud) {
+        self.plan_within(port, BaudSet::ALL)
+    }
+
+    /// [`BaudChoice::plan`] for a device that supports only `rates` (its
+    /// GSD's `*_supp` keywords): a search starts at the fastest of them.
+    pub fn plan_within(self, port: &Port, rates: BaudSet) -> (bool, Baud) {
         let nominal = port.is_pty() || port.is_tcp();
         match self {
             BaudChoice::Fixed(b) => (false, b),
             BaudChoice::Auto if nominal => (false, Self::NOMINAL),
-            BaudChoice::Auto | BaudChoice::Search => {
-                (true, profibus_fdl::station::autobaud::SEARCH_ORDER[0])
-            }
+            BaudChoice::Auto | BaudChoice::Search => (true, rates.fastest()),
         }
     }
 }

@@ -11,7 +11,7 @@
 
 use crate::driver::{self, Clock, Stop};
 use crate::transport::{Port, TransportError};
-use profibus_fdl::station::autobaud::{AutoBaud, Relisten, RELISTEN_AFTER};
+use profibus_fdl::station::autobaud::{AutoBaud, BaudSet, Relisten, RELISTEN_AFTER};
 use profibus_fdl::station::passive::{PassiveStation, Responder};
 use profibus_fdl::timing::{Baud, BusParams};
 use profibus_fdl::Instant;
@@ -86,6 +86,9 @@ pub struct PassiveRunner {
     pub latency: Duration,
     /// How the driver writes.
     pub options: driver::Options,
+    /// With `search`: the rates searched (the device's GSD `*_supp`
+    /// rates; default all).
+    pub rates: BaudSet,
 }
 
 impl PassiveRunner {
@@ -97,6 +100,7 @@ impl PassiveRunner {
             silence: RELISTEN_AFTER,
             latency,
             options,
+            rates: BaudSet::ALL,
         }
     }
 
@@ -119,7 +123,7 @@ impl PassiveRunner {
         tokio::pin!(shutdown);
         loop {
             let baud = if self.search {
-                match search(port, &clock, shutdown.as_mut()).await? {
+                match search(port, &clock, self.rates, shutdown.as_mut()).await? {
                     Some(b) => {
                         on_event(clock.now(), RunnerEvent::BaudLocked { baud: b });
                         b
@@ -197,9 +201,10 @@ impl PassiveRunner {
 async fn search<F: Future<Output = ()>>(
     port: &mut Port,
     clock: &Clock,
+    rates: BaudSet,
     mut shutdown: std::pin::Pin<&mut F>,
 ) -> Result<Option<Baud>, RunnerError> {
-    let mut ab = AutoBaud::new(clock.now());
+    let mut ab = AutoBaud::new(clock.now()).with_rates(rates);
     port.set_baud(ab.baud())?;
     let mut buf = [0u8; 512];
     loop {

@@ -100,6 +100,12 @@ impl Strip {
     /// the strip's rules (end terminal last, at most 64 terminals, at
     /// most 244 bytes each way in the chosen mappings).
     pub fn parse(list: &str) -> Result<Strip, StripError> {
+        Strip::parse_with(list, &[])
+    }
+
+    /// [`Strip::parse`] with terminal types the user described
+    /// ([`super::user`]) besides the catalogue.
+    pub fn parse_with(list: &str, extra: &[&'static TerminalType]) -> Result<Strip, StripError> {
         let mut names = vec![];
         for line in list.lines() {
             let line = line.split('#').next().unwrap_or("");
@@ -108,11 +114,19 @@ impl Strip {
                     .filter(|s| !s.is_empty()),
             );
         }
-        Strip::from_names(&names)
+        Strip::from_names_with(&names, extra)
     }
 
     /// A strip from terminal names (with optional `:mapping`).
     pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Strip, StripError> {
+        Strip::from_names_with(names, &[])
+    }
+
+    /// [`Strip::from_names`] with user terminal types besides the catalogue.
+    pub fn from_names_with<S: AsRef<str>>(
+        names: &[S],
+        extra: &[&'static TerminalType],
+    ) -> Result<Strip, StripError> {
         let mut slots = vec![];
         for (i, n) in names.iter().enumerate() {
             let n = n.as_ref().trim();
@@ -120,13 +134,20 @@ impl Strip {
                 Some((a, b)) => (a, Some(b)),
                 None => (n, None),
             };
-            let Some(ty) = catalogue::lookup(name) else {
+            let user = extra
+                .iter()
+                .copied()
+                .find(|t| t.name.eq_ignore_ascii_case(name));
+            let Some(ty) = user.or_else(|| catalogue::lookup(name)) else {
                 return Err(StripError::Unknown {
                     position: i + 1,
                     name: name.to_string(),
                     suggestions: profibus_dp::config::names::DidYouMean::new(
                         name,
-                        catalogue::CATALOGUE.iter().map(|t| t.name),
+                        catalogue::CATALOGUE
+                            .iter()
+                            .chain(extra.iter().copied())
+                            .map(|t| t.name),
                     ),
                     known: catalogue::CATALOGUE
                         .iter()
@@ -383,24 +404,22 @@ impl Image {
         }
         let (mut ib, mut ob) = (0usize, 0usize);
         for (k, slot) in strip.slots.iter().enumerate() {
-            let (dir, base, bits) = match slot.ty.class {
-                Class::DigitalIn => (Dir::In, i, &mut ib),
-                Class::DigitalOut => (Dir::Out, o, &mut ob),
-                _ => continue,
-            };
-            for ch in 1..=slot.ty.channels {
-                entries.push(Entry {
-                    owner: Owner::Terminal(k + 1),
-                    terminal: slot.ty.name,
-                    channel: ch,
-                    role: Role::Value,
-                    dir,
-                    byte: base + *bits / 8,
-                    bit: Some((*bits % 8) as u8),
-                    bytes: 0,
-                    name: format!("{}.{}.{ch}", k + 1, slot.ty.name),
-                });
-                *bits += 1;
+            let (nin, nout) = slot.ty.digital_bits();
+            for (dir, base, bits, n) in [(Dir::In, i, &mut ib, nin), (Dir::Out, o, &mut ob, nout)] {
+                for ch in 1..=n {
+                    entries.push(Entry {
+                        owner: Owner::Terminal(k + 1),
+                        terminal: slot.ty.name,
+                        channel: ch,
+                        role: Role::Value,
+                        dir,
+                        byte: base + *bits / 8,
+                        bit: Some((*bits % 8) as u8),
+                        bytes: 0,
+                        name: format!("{}.{}.{ch}", k + 1, slot.ty.name),
+                    });
+                    *bits += 1;
+                }
             }
         }
         let (din, dout) = (ib.div_ceil(8), ob.div_ceil(8));

@@ -43,6 +43,8 @@ pub mod image;
 pub mod master;
 pub mod prm;
 pub mod profile;
+pub mod registers;
+pub mod user;
 
 #[cfg(test)]
 mod tests;
@@ -72,6 +74,10 @@ pub const MAX_DIAG_LEN: u8 = 64;
 pub struct Bk3000 {
     strip: Strip,
     present: Vec<bool>,
+    /// Terminals that do not answer on the K-bus (`mute N`).
+    muted: Vec<bool>,
+    /// Terminals replaced while running (`swap N TYPE`).
+    swapped: Vec<Option<&'static catalogue::TerminalType>>,
     programmed: Option<Vec<u8>>,
     prm: UserPrm,
     image: Image,
@@ -82,6 +88,11 @@ pub struct Bk3000 {
     inputs: Vec<u8>,
     pinned: BTreeMap<String, i64>,
     counter: u8,
+    /// Register sets of the complex terminals' channels (position, channel).
+    regs: BTreeMap<(usize, u8), registers::Channel>,
+    /// Diagnosis messages of terminal channels in error (English edition
+    /// p. 50: terminal, channel, 3 reserved, status byte, 2 reserved).
+    term_diag: Vec<[u8; 8]>,
     events: EventQueue,
     inbox: InboxSchedule,
 }
@@ -90,8 +101,18 @@ impl Bk3000 {
     /// A coupler with `strip`, automatic configuration, default settings.
     pub fn new(strip: Strip) -> Bk3000 {
         let image = strip.default_image(Options::default());
+        let mut regs = BTreeMap::new();
+        for (k, slot) in strip.slots().iter().enumerate() {
+            if slot.ty.class == Class::Complex {
+                for ch in 1..=slot.ty.channels {
+                    regs.insert((k + 1, ch), registers::Channel::new(slot.ty));
+                }
+            }
+        }
         Bk3000 {
             present: vec![true; strip.len()],
+            muted: vec![false; strip.len()],
+            swapped: vec![None; strip.len()],
             strip,
             programmed: None,
             prm: UserPrm::default(),
@@ -103,6 +124,8 @@ impl Bk3000 {
             inputs: vec![],
             pinned: BTreeMap::new(),
             counter: 0,
+            regs,
+            term_diag: vec![],
             events: EventQueue::with_limit(256),
             inbox: InboxSchedule::default(),
         }
@@ -186,7 +209,7 @@ impl Bk3000 {
     }
 
     fn kbus_ok(&self) -> bool {
-        self.diag.kbus == 0
+        self.diag.kbus == 0 && self.diag.init == 0
     }
 
     /// Pin the input channel `name` to the engineering value `v` (digital
@@ -200,6 +223,14 @@ impl Bk3000 {
             })?
             .clone();
         let raw = match (e.owner, e.role) {
+            // Out-of-range values stay out of range: the terminal reports
+            // over- or underrange in its status byte.
+            (Owner::Terminal(p), Role::Value) if self.regs.contains_key(&(p, e.channel)) => {
+                self.strip.slots()[p - 1]
+                    .ty
+                    .scale
+                    .from_engineering_unclamped(v)
+            }
             (Owner::Terminal(p), Role::Value) => {
                 self.strip.slots()[p - 1].ty.scale.from_engineering(v)
             }
@@ -281,19 +312,77 @@ impl Bk3000 {
 
     fn update_kbus(&mut self) {
         let before = self.diag;
-        match self.present.iter().position(|p| !p) {
-            Some(i) => {
-                self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::RECEIVE;
-                self.diag.kbus_code = (prm::KBUS_CODE_BREAK, i as u8);
-            }
-            None => {
-                self.diag.kbus = 0;
-                self.diag.kbus_code = (0, 0);
-            }
+        self.diag.init &= !prm::init_err::TERMINAL_TYPES;
+        // p. 19-20: the first fault along the K-bus decides the code.
+        if let Some(i) = self.present.iter().position(|p| !p) {
+            self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::RECEIVE;
+            self.diag.kbus_code = (prm::KBUS_CODE_BREAK, i as u8);
+        } else if self.muted.iter().any(|m| *m) {
+            self.diag.kbus = prm::kbus_err::KBUS | prm::kbus_err::TIMEOUT;
+            self.diag.kbus_code = (prm::KBUS_CODE_COMMAND, 0);
+        } else if let Some(i) = self.swapped.iter().position(|s| s.is_some()) {
+            self.diag.init |= prm::init_err::TERMINAL_TYPES;
+            self.diag.kbus = prm::kbus_err::KBUS;
+            self.diag.kbus_code = (prm::KBUS_CODE_FORMAT, i as u8 + 1);
+        } else {
+            self.diag.kbus = 0;
+            self.diag.kbus_code = (0, 0);
         }
         if self.diag != before {
             self.diag_changed = true;
         }
+    }
+
+    /// Terminal `pos` stops answering on the K-bus (`mute N`), or answers
+    /// again (`unmute N`): K-bus command error, 3 pulses then 0.
+    pub fn mute(&mut self, pos: usize, mute: bool) -> Result<String, ControlError> {
+        self.check_pos(pos)?;
+        self.muted[pos - 1] = mute;
+        self.update_kbus();
+        let name = self.strip.slots()[pos - 1].ty.name;
+        Ok(if mute {
+            let (c, a) = self.diag.kbus_code;
+            format!(
+                "terminal {pos} ({name}) does not answer: K-bus command error; {}",
+                prm::blink_text(c, a)
+            )
+        } else if self.kbus_ok() {
+            format!("terminal {pos} ({name}) answers again: K-bus running")
+        } else {
+            format!("terminal {pos} ({name}) answers again")
+        })
+    }
+
+    /// Replace terminal `pos` by `ty` while the coupler runs (`swap N
+    /// TYPE`): the strip no longer is the one found at start-up:
+    /// initialisation error "terminal types", K-bus halted, blink code 14
+    /// then N, until the original type is plugged back.
+    pub fn swap(&mut self, pos: usize, ty: &str) -> Result<String, ControlError> {
+        self.check_pos(pos)?;
+        let orig = self.strip.slots()[pos - 1].ty;
+        let new = catalogue::lookup(ty)
+            .ok_or_else(|| ControlError::Argument(format!("`{ty}` is not in the catalogue")))?;
+        self.swapped[pos - 1] = (new.name != orig.name).then_some(new);
+        self.update_kbus();
+        Ok(if new.name == orig.name {
+            format!(
+                "terminal {pos} is a {} again{}",
+                orig.name,
+                if self.kbus_ok() {
+                    ": K-bus running"
+                } else {
+                    ""
+                }
+            )
+        } else {
+            let (c, a) = self.diag.kbus_code;
+            format!(
+                "terminal {pos}: {} replaced by {}: the strip changed; {}",
+                orig.name,
+                new.name,
+                prm::blink_text(c, a)
+            )
+        })
     }
 
     /// Apply one control command: `status`, `set NAME VALUE`, `release
@@ -334,6 +423,13 @@ impl Bk3000 {
                 }
             },
             "pull" => self.pull(num(w.next())?),
+            "mute" => self.mute(num(w.next())?, true),
+            "unmute" => self.mute(num(w.next())?, false),
+            "swap" => {
+                let pos = num(w.next())?;
+                let ty = w.next().ok_or_else(|| arg("`swap N TYPE`"))?;
+                self.swap(pos, ty)
+            }
             "plug" => self.plug(num(w.next())?),
             "run" => {
                 if self.held {
@@ -347,7 +443,7 @@ impl Bk3000 {
             "" => Err(arg("empty command")),
             other => Err(ControlError::Unknown {
                 command: other.to_string(),
-                known: "status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run",
+                known: "status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, mute N, unmute N, swap N TYPE, run",
             }),
         }
     }
@@ -412,55 +508,162 @@ impl Bk3000 {
         let t = now.as_nanos() as f64 / 1e9;
         let ch = e.channel as f64;
         match e.role {
-            Role::Status => {
-                // Register communication: the status byte acknowledges
-                // the control byte while bit 7 (register access) is set.
-                let c = self.control_byte(pos, e.channel);
-                if c & 0x80 != 0 {
-                    c as i64
-                } else {
-                    0
+            Role::Status | Role::Control | Role::Reserved => 0,
+            Role::Value => match ty.sim {
+                Sim::Walk => {
+                    let step = (t / 0.5) as u64 % ty.channels as u64;
+                    (step + 1 == e.channel as u64) as i64
                 }
-            }
-            Role::Control | Role::Reserved => 0,
-            Role::Value => {
-                let c = self.control_byte(pos, e.channel);
-                if c & 0xC0 == 0x80 && e.bytes >= 2 {
-                    // Register read: R8 is the terminal type (e.g. 3102).
-                    return if c & 0x3F == 8 {
-                        ty.name[2..].parse::<i64>().unwrap_or(0)
-                    } else {
-                        0
-                    };
-                }
-                match ty.sim {
-                    Sim::Walk => {
-                        let step = (t / 0.5) as u64 % ty.channels as u64;
-                        (step + 1 == e.channel as u64) as i64
-                    }
-                    Sim::Sine => ty
-                        .scale
-                        .from_engineering(5.0 * (std::f64::consts::TAU * t / 20.0 + ch).sin()),
-                    Sim::Temperature => ty.scale.from_engineering(
-                        22.5 + 2.5 * (std::f64::consts::TAU * t / 60.0 + ch).sin(),
-                    ),
-                    Sim::Counter => (t * 10.0) as i64 & 0xFFFF_FFFF,
-                    Sim::Encoder => (t * 100.0) as i64 & 0x00FF_FFFF,
-                    Sim::Echo => self
-                        .image
-                        .entries
-                        .iter()
-                        .find(|o| {
-                            o.dir == Dir::Out
-                                && o.owner == e.owner
-                                && o.channel == e.channel
-                                && o.role == Role::Value
-                        })
-                        .map_or(0, |o| Image::get(o, &self.outputs)),
-                    Sim::None => 0,
-                }
+                Sim::Sine => ty
+                    .scale
+                    .from_engineering(5.0 * (std::f64::consts::TAU * t / 20.0 + ch).sin()),
+                Sim::Temperature => ty
+                    .scale
+                    .from_engineering(22.5 + 2.5 * (std::f64::consts::TAU * t / 60.0 + ch).sin()),
+                Sim::Counter => (t * 10.0) as i64 & 0xFFFF_FFFF,
+                Sim::Encoder => (t * 100.0) as i64 & 0x00FF_FFFF,
+                Sim::Echo => self
+                    .image
+                    .entries
+                    .iter()
+                    .find(|o| {
+                        o.dir == Dir::Out
+                            && o.owner == e.owner
+                            && o.channel == e.channel
+                            && o.role == Role::Value
+                    })
+                    .map_or(0, |o| Image::get(o, &self.outputs)),
+                Sim::None => 0,
+            },
+        }
+    }
+
+    /// Run every input channel with a register set through its scaling,
+    /// filter and range check: (position, channel) → (value, status).
+    fn process_channels(&mut self, now: Instant) -> BTreeMap<(usize, u8), (i64, u8)> {
+        let mut out = BTreeMap::new();
+        let values: Vec<image::Entry> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == Dir::In && e.role == Role::Value && e.bytes == 2)
+            .filter(|e| matches!(e.owner, Owner::Terminal(p) if self.regs.contains_key(&(p, e.channel))))
+            .cloned()
+            .collect();
+        for e in values {
+            let Owner::Terminal(p) = e.owner else {
+                continue;
+            };
+            let raw = match self.pinned.get(&e.name) {
+                Some(&v) => v,
+                None => self.simulate(&e, now),
+            };
+            let scale = self.strip.slots()[p - 1].ty.scale;
+            if let Some(ch) = self.regs.get_mut(&(p, e.channel)) {
+                out.insert((p, e.channel), ch.process(raw, &scale));
             }
         }
+        // Channels in error get a diagnosis message (English ed. p. 50).
+        let msgs: Vec<[u8; 8]> = out
+            .iter()
+            .filter(|(_, (_, st))| st & registers::status::ERROR != 0)
+            .map(|(&(p, ch), &(_, st))| [p as u8, ch, 0, 0, 0, st, 0, 0])
+            .collect();
+        if msgs != self.term_diag {
+            self.term_diag = msgs;
+            self.diag_changed = true;
+        }
+        out
+    }
+
+    /// A terminal's status byte or value: register communication while
+    /// the control byte's bit 7 is set (status = control without the
+    /// write bit; value = the register read, 0 after a write), else the
+    /// processed value and status.
+    fn terminal_input(
+        &self,
+        e: &image::Entry,
+        pos: usize,
+        processed: &BTreeMap<(usize, u8), (i64, u8)>,
+        now: Instant,
+    ) -> i64 {
+        let c = self.control_byte(pos, e.channel);
+        let reg_mode = c & 0x80 != 0 && self.regs.contains_key(&(pos, e.channel));
+        match e.role {
+            Role::Status if reg_mode => (c & !0x40) as i64,
+            Role::Status => match self.pinned.get(&e.name) {
+                Some(&v) => v,
+                None => processed.get(&(pos, e.channel)).map_or(0, |p| p.1 as i64),
+            },
+            Role::Value if reg_mode && e.bytes >= 2 => {
+                if c & 0x40 != 0 {
+                    0
+                } else {
+                    let r = self.regs[&(pos, e.channel)].read(c & 0x3F);
+                    r as i16 as i64
+                }
+            }
+            _ => match processed.get(&(pos, e.channel)) {
+                Some(&(v, _)) if e.bytes == 2 => v,
+                _ => match self.pinned.get(&e.name) {
+                    Some(&v) => v,
+                    None => self.simulate(e, now),
+                },
+            },
+        }
+    }
+
+    /// Register writes of the control bytes with bits 7 and 6 set: the
+    /// channel's output word into register `control & 0x3F`.
+    fn register_writes(&mut self) {
+        let writes: Vec<(usize, u8, u8, u16)> = self
+            .image
+            .entries
+            .iter()
+            .filter(|e| e.dir == Dir::Out && e.role == Role::Control)
+            .filter_map(|e| {
+                let Owner::Terminal(p) = e.owner else {
+                    return None;
+                };
+                let c = Image::get(e, &self.outputs) as u8;
+                if c & 0xC0 != 0xC0 {
+                    return None;
+                }
+                let v = self
+                    .image
+                    .entries
+                    .iter()
+                    .find(|o| {
+                        o.dir == Dir::Out
+                            && o.owner == e.owner
+                            && o.channel == e.channel
+                            && o.role == Role::Value
+                    })
+                    .map_or(0, |o| Image::get(o, &self.outputs));
+                Some((p, e.channel, c & 0x3F, v as u16))
+            })
+            .collect();
+        for (p, ch, r, v) in writes {
+            let Some(set) = self.regs.get_mut(&(p, ch)) else {
+                continue;
+            };
+            let name = self.strip.slots()[p - 1].ty.name;
+            match set.write(r, v) {
+                Ok(()) => self.events.note(
+                    "register",
+                    format!("terminal {p} ({name}) channel {ch}: R{r} = 0x{v:04X}"),
+                ),
+                Err(e) => self.events.note(
+                    "register",
+                    format!("terminal {p} ({name}) channel {ch}: write refused: {e}"),
+                ),
+            }
+        }
+    }
+
+    /// Register `r` of channel `ch` of terminal `pos` (1-based).
+    pub fn register(&self, pos: usize, ch: u8, r: u8) -> Option<u16> {
+        self.regs.get(&(pos, ch)).map(|c| c.read(r))
     }
 
     fn control_byte(&self, pos: usize, channel: u8) -> u8 {
@@ -481,6 +684,7 @@ impl Bk3000 {
             return;
         }
         let old = std::mem::replace(&mut self.outputs, outputs.to_vec());
+        self.register_writes();
         let changed: Vec<String> = self
             .image
             .entries
@@ -495,6 +699,43 @@ impl Bk3000 {
                 format!("terminal outputs: {}", changed.join(", ")),
             );
         }
+    }
+
+    /// RunOnCfgFault (p. 46): the master's configuration describes a
+    /// maximal strip; the coupler runs anyway with the master's lengths,
+    /// maps its real strip's automatic image where it fits, and reports
+    /// the CfgData error in its diagnosis (no Cfg_Fault).
+    fn run_on_cfg_fault(&mut self, rej: CfgReject, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        let totals = match profibus_dp::pdu::cfg::totals(cfg) {
+            Ok(t) if t.input_bytes <= image::MAX_IO && t.output_bytes <= image::MAX_IO => t,
+            _ => return Err(self.cfg_fault(rej)),
+        };
+        let (p, n) = rej.error.blink();
+        self.diag.cfg = (rej.error.code(), rej.error.byte());
+        self.diag_changed = true;
+        self.events.note(
+            "io-err",
+            format!("RunOnCfgFault: running with the master's configuration; I/O-ERR {p} pulses, then {n}: {}", rej.error),
+        );
+        let mut img = self.strip.default_image(self.options());
+        img.entries.retain(|e| {
+            let len = match e.dir {
+                Dir::In => totals.input_bytes,
+                Dir::Out => totals.output_bytes,
+            };
+            e.byte + (e.bytes.max(1) as usize) <= len
+        });
+        img.in_len = totals.input_bytes;
+        img.out_len = totals.output_bytes;
+        img.cfg = cfg.to_vec();
+        let layout = IoLayout {
+            inputs: img.in_len,
+            outputs: img.out_len,
+        };
+        self.image = img;
+        self.outputs = vec![0; layout.outputs];
+        self.inputs = vec![0; layout.inputs];
+        Ok(layout)
     }
 
     fn cfg_fault(&mut self, rej: CfgReject) -> Reason {
@@ -599,6 +840,9 @@ impl Device for Bk3000 {
                 self.inputs = vec![0; layout.inputs];
                 Ok(layout)
             }
+            Err(rej) if self.prm.run_on_cfg_fault && !self.prm.programmed => {
+                self.run_on_cfg_fault(rej, cfg)
+            }
             Err(rej) => Err(self.cfg_fault(rej)),
         }
     }
@@ -614,8 +858,12 @@ impl Device for Bk3000 {
         inputs.fill(0);
         if !self.held && self.kbus_ok() {
             self.counter = self.counter.wrapping_add(1).max(1);
+            let processed = self.process_channels(now);
             for e in self.image.entries.iter().filter(|e| e.dir == Dir::In) {
                 let v = match (e.owner, self.pinned.get(&e.name)) {
+                    (Owner::Terminal(p), _) if e.role == Role::Status || e.role == Role::Value => {
+                        self.terminal_input(e, p, &processed, now)
+                    }
                     (_, Some(&v)) => v,
                     (Owner::CycleCounter, None) => self.counter as i64,
                     (Owner::PlcInterface, None) => match e.role {
@@ -650,7 +898,17 @@ impl Device for Bk3000 {
     }
 
     fn diagnosis(&mut self, _now: Instant, diag: &mut DiagWriter<'_>) {
-        let payload = self.diag.payload();
+        let mut payload = self.diag.payload();
+        if !self.term_diag.is_empty() {
+            if payload.is_empty() {
+                payload.push(0);
+            }
+            // Room for 7 messages after the length and reserved bytes.
+            let room = (MAX_DIAG_LEN as usize - 8 - (payload.len() - 1)) / 8;
+            for m in self.term_diag.iter().take(room) {
+                payload.extend_from_slice(m);
+            }
+        }
         if !payload.is_empty() {
             diag.device(&payload);
             diag.set_ext_diag();
@@ -677,7 +935,9 @@ impl Device for Bk3000 {
 
     fn handle_timeout(&mut self, now: Instant) {
         for line in self.inbox.due(now) {
-            let kbus = line.starts_with("pull") || line.starts_with("plug");
+            let kbus = ["pull", "plug", "mute", "unmute", "swap"]
+                .iter()
+                .any(|c| line.starts_with(c));
             match self.control(&line) {
                 Ok(text) if kbus => self.events.note("kbus", text),
                 Ok(text) => self.events.note("control", text),
@@ -709,6 +969,7 @@ impl Class {
         match self {
             Class::DigitalIn => "digital inputs",
             Class::DigitalOut => "digital outputs",
+            Class::DigitalInOut => "digital inputs and outputs",
             Class::Complex => "byte-oriented",
             Class::Passive => "no process data",
         }

@@ -7,6 +7,7 @@
 //! | byte | bits | meaning | BK3000 |
 //! |---|---|---|---|
 //! | 0 | 7 | DPV1 class-1 services | must be 0 (no DP-V1, p. 55) |
+//! | 1 | 0 | RunOnCfgFault mode (p. 46; byte inferred) | 0/1 |
 //! | 2 | 3 | DPV1 diagnosis format | must be 0 (old format only) |
 //! | 3 | 0-1 | start-up mode: 0 data exchange, 1 parameter mode, 2 parameter mode with Stat_Diag | 3 is faulty |
 //! | 3 | 3 | K-bus cycle counter (Beckhoff infosys "UserPrmData of the Bus Couplers") | 0/1 |
@@ -61,6 +62,10 @@ pub struct UserPrm {
     pub plc_interface: bool,
     /// Programmed instead of automatic configuration.
     pub programmed: bool,
+    /// RunOnCfgFault mode (p. 46): run with a maximal configuration.
+    /// Byte 1 bit 0 (the summary cuts the byte off; Beckhoff's later
+    /// couplers put "CfgData checking deactivated" there: inferred).
+    pub run_on_cfg_fault: bool,
 }
 
 /// The UserPrm error of the coupler's diagnosis (manufacturer byte 2) and
@@ -146,6 +151,7 @@ impl UserPrm {
             cycle_counter: data[3] & 0x08 != 0,
             plc_interface: data[5] & 0x01 != 0,
             programmed,
+            run_on_cfg_fault: data[1] & 0x01 != 0,
         })
     }
 
@@ -157,14 +163,22 @@ impl UserPrm {
             StartupMode::Parameter => 1,
             StartupMode::ParameterStatDiag => 2,
         } | (self.cycle_counter as u8) << 3;
+        b[1] = self.run_on_cfg_fault as u8;
         b[5] = self.plc_interface as u8;
         b[9] = (self.programmed as u8) << 1;
         b
     }
 }
 
-/// Initialisation error bits (second coupler message, byte 2).
+/// Initialisation error bits (second coupler message, byte 2; English
+/// edition p. 51).
 pub mod init_err {
+    /// Error reading the EEPROM.
+    pub const EEPROM: u8 = 1 << 0;
+    /// Error checking the programmed configuration.
+    pub const PROGRAMMED_CFG: u8 = 1 << 2;
+    /// Error reading the terminal types on the K-bus.
+    pub const TERMINAL_TYPES: u8 = 1 << 3;
     /// Terminal not supported.
     pub const TERMINAL_NOT_SUPPORTED: u8 = 1 << 4;
     /// Too much output data.
@@ -175,6 +189,9 @@ pub mod init_err {
 
 /// K-bus error bits (second coupler message, byte 3).
 pub mod kbus_err {
+    /// Too many timeouts on command execution (a terminal did not
+    /// acknowledge).
+    pub const TIMEOUT: u8 = 1 << 1;
     /// Too many errors receiving input data.
     pub const RECEIVE: u8 = 1 << 2;
     /// Terminal bus (K-bus) error.
@@ -184,6 +201,16 @@ pub mod kbus_err {
 /// K-bus error code 4: data error, break behind terminal n (blink code
 /// table of the Beckhoff couplers; the BK3000 summary cut the table off).
 pub const KBUS_CODE_BREAK: u8 = 4;
+
+/// K-bus error code 3, argument 0: K-bus command error (no terminal, or a
+/// terminal defective: it does not answer). Beckhoff couplers' blink code
+/// table (the BK3000 summary cut it off; not from the manual).
+pub const KBUS_CODE_COMMAND: u8 = 3;
+
+/// Error code 14, argument n: terminal n has the wrong format (the strip
+/// changed since start-up). Beckhoff couplers' blink code table, not from
+/// the manual.
+pub const KBUS_CODE_FORMAT: u8 = 14;
 
 /// First byte after the length byte (reserved, 0).
 const RESERVED: u8 = 0;
@@ -298,7 +325,27 @@ impl CouplerDiag {
             c => out.push(format!("CfgData error {c}")),
         }
         if self.init != 0 {
-            out.push(format!("initialisation error bits 0x{:02X}", self.init));
+            let mut what = vec![];
+            for (bit, text) in [
+                (init_err::EEPROM, "error reading the EEPROM"),
+                (
+                    init_err::PROGRAMMED_CFG,
+                    "error checking the programmed configuration",
+                ),
+                (init_err::TERMINAL_TYPES, "error reading the terminal types"),
+                (init_err::TERMINAL_NOT_SUPPORTED, "terminal not supported"),
+                (init_err::TOO_MUCH_OUTPUT, "too much output data"),
+                (init_err::TOO_MUCH_INPUT, "too much input data"),
+            ] {
+                if self.init & bit != 0 {
+                    what.push(text);
+                }
+            }
+            out.push(format!(
+                "initialisation error bits 0x{:02X}: {}",
+                self.init,
+                what.join(", ")
+            ));
         }
         if self.kbus != 0 {
             let (code, arg) = self.kbus_code;
@@ -308,6 +355,10 @@ impl CouplerDiag {
                 } else {
                     format!("K-bus data error, break behind terminal {arg}")
                 }
+            } else if code == KBUS_CODE_COMMAND {
+                "K-bus command error: a terminal does not answer".to_string()
+            } else if code == KBUS_CODE_FORMAT {
+                format!("terminal {arg} has the wrong format: the strip changed")
             } else {
                 format!("K-bus error code {code}, argument {arg}")
             };

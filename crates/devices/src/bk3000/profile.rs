@@ -3,8 +3,9 @@
 //! `terminals = [...]` in a bus file.
 
 use super::catalogue::Role;
+use super::catalogue::TerminalType;
 use super::image::{self, CfgReject, Dir, Image, Options as ImageOptions, Owner, Strip};
-use super::{Bk3000, IDENT};
+use super::{user, Bk3000, IDENT};
 use crate::channels::{Channel, ChannelMap, ChannelType, Direction, Scale};
 use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
@@ -42,6 +43,11 @@ pub struct Options {
     pub switch_tens: Option<u8>,
     /// Table 70: the programmed configuration (hex bytes).
     pub programmed_cfg: Option<String>,
+    /// Terminal types the catalogue lacks ([`super::user`]): a table of
+    /// tables, `[slave.terminal_types.KL3404]` in a bus file.
+    pub terminal_types: Option<toml::Table>,
+    /// The same from a TOML file (`--device-opt terminal-types-file=FILE`).
+    pub terminal_types_file: Option<PathBuf>,
 }
 
 /// A BK3000 with its strip.
@@ -71,6 +77,28 @@ fn invalid(e: impl ToString) -> ProfileError {
 pub const DEFAULT_STRIP: &str = "KL1002,KL1002,KL1002,KL1002,KL1002,KL2012,KL2012,KL2012,KL3002,\
 KL4002,KL4002,KL3002,KL9100,KL1002,KL1002,KL1002,KL2012,KL2012,KL4002,KL9010";
 
+/// The terminal types the options describe (`terminal_types` and
+/// `terminal_types_file`).
+pub fn user_types(o: &Options) -> Result<Vec<&'static TerminalType>, ProfileError> {
+    let mut out = vec![];
+    if let Some(t) = &o.terminal_types {
+        out.extend(user::parse_table(t).map_err(|e| ProfileError::BadOption {
+            key: "terminal_types".into(),
+            message: e.to_string(),
+        })?);
+    }
+    if let Some(path) = &o.terminal_types_file {
+        let text = crate::profile::read_option_file(path)?;
+        out.extend(
+            user::parse_text(&text).map_err(|message| ProfileError::Table {
+                path: path.clone(),
+                message,
+            })?,
+        );
+    }
+    Ok(out)
+}
+
 /// The strip the options name; [`DEFAULT_STRIP`] without `terminals`.
 pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
     let list = match (&o.terminals, &o.terminals_file) {
@@ -82,7 +110,8 @@ pub fn strip(o: &Options) -> Result<Strip, ProfileError> {
         (None, Some(path)) => crate::profile::read_option_file(path)?,
         (None, None) => DEFAULT_STRIP.to_string(),
     };
-    let s = Strip::parse(&list).map_err(|e| match &o.terminals_file {
+    let extra = user_types(o)?;
+    let s = Strip::parse_with(&list, &extra).map_err(|e| match &o.terminals_file {
         Some(path) => ProfileError::Table {
             path: path.clone(),
             message: e.to_string(),
@@ -138,8 +167,9 @@ impl Profile for Bk3000Profile {
 bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the manual's appendix example strip), \
 --switch-ones N --switch-tens N (rotary switches, instead of --addr), \
 --device-opt programmed-cfg=HEX (table 70), \
+--device-opt terminal-types-file=FILE.toml (terminals the catalogue lacks; bus file: [slave.terminal_types.NAME]), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
-    const PATH_OPTIONS: &'static [&'static str] = &["terminals_file"];
+    const PATH_OPTIONS: &'static [&'static str] = &["terminals_file", "terminal_types_file"];
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {

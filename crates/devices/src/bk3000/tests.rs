@@ -484,6 +484,7 @@ fn startup_parameter_mode_and_cycle_counter() {
         cycle_counter: true,
         plc_interface: true,
         programmed: false,
+        ..Default::default()
     };
     b.start(&prm.emit(), &[0xB1, 0x10, 0x10, 0x20]);
     assert_eq!(b.slave.state(), SlaveState::DataExch);
@@ -724,7 +725,8 @@ fn gsd_file_agrees_with_the_emulation() {
             startup: StartupMode::ParameterStatDiag,
             cycle_counter: true,
             plc_interface: true,
-            programmed: false
+            programmed: false,
+            run_on_cfg_fault: false,
         }
     );
     assert_eq!(g.user_prm_data(&sel, &[]).unwrap(), prm::DEFAULT_USER_PRM);
@@ -824,3 +826,5 @@ fn terminals_file_option() {
         .to_string();
     assert!(e.contains("strip.txt") && e.contains("end terminal"), "{e}");
 }
+
+mod fidelity;

@@ -56,6 +56,7 @@
 
 mod command;
 mod config;
+pub mod records;
 mod report;
 mod stop;
 mod task;

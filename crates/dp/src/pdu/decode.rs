@@ -35,14 +35,17 @@
 //! assert_eq!(ident_number, 0x0ED0);
 //! ```
 
+use crate::pdu::alarm::{self, DiagBlock};
+use crate::pdu::c2::{C2Pdu, InitiateRes};
 use crate::pdu::cfg;
 use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::pdu::diag::{self, SlaveDiag, NO_MASTER};
 use crate::pdu::dpv1::{self, Pdu};
+use crate::pdu::im::{self, CallHeader, Im0};
 use crate::pdu::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
 use crate::pdu::sap;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 /// What a decoder needs to know of a request to read its response.
@@ -85,6 +88,30 @@ pub struct CfgIdentifier {
     pub output_bytes: usize,
 }
 
+/// A DP-V1 alarm block of a Slave_Diag response, with the field names of
+/// the master's `alarm` event.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct AlarmInfo {
+    /// Alarm type in one word (`diagnostic`, `process`, `pull`, `plug`,
+    /// `status`, `update`, `manufacturer`, `reserved`).
+    #[cfg_attr(feature = "serde", serde(rename = "type"))]
+    pub alarm_type: &'static str,
+    /// The type's code.
+    pub type_code: u8,
+    /// Slot number.
+    pub slot: u8,
+    /// `appears`, `disappears`, `disappears-still-faulty` or `none`.
+    pub specifier: &'static str,
+    /// Sequence number 0..=31.
+    pub seq: u8,
+    /// Add_Ack: the user must confirm beyond Alarm_Ack.
+    pub add_ack: bool,
+    /// Diagnostic_User_Data.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
+}
+
 /// What the data unit of a DP telegram says, per service.
 #[derive(Debug, Clone, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
@@ -104,6 +131,10 @@ pub enum Detail {
         ext_diag: Vec<String>,
         /// Bit 2 of Station_Status_2 (always 1 in a slave's diagnosis).
         valid: bool,
+        /// The DP-V1 alarm blocks, when this capture saw the slave
+        /// parameterised with DPV1_Enable (empty otherwise).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        alarms: Vec<AlarmInfo>,
     },
     /// A Set_Prm request.
     SetPrm {
@@ -192,6 +223,11 @@ pub enum Detail {
         /// A negative response in words.
         #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
         error: Option<String>,
+        /// The PDU in words where there is more to say than the fields
+        /// above: Initiate parameters, the RM's connection SAP, an
+        /// Abort's instance and reason, an I&M call and its record.
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+        text: Option<String>,
     },
     /// The data unit does not decode as its service's.
     Malformed {
@@ -220,6 +256,13 @@ pub struct DpTelegram {
 /// short acknowledge) answers, when known. `None`: no DP telegram (a
 /// token, FDL status and ident requests, other SAPs).
 pub fn decode(telegram: &Telegram<'_>, answers: Option<&Request>) -> Option<DpTelegram> {
+    decode_in(telegram, answers, false)
+}
+
+/// [`decode`], reading device-related diagnosis blocks as DP-V1 alarm
+/// and status blocks when `dpv1` (the slave was seen parameterised with
+/// DPV1_Enable).
+fn decode_in(telegram: &Telegram<'_>, answers: Option<&Request>, dpv1: bool) -> Option<DpTelegram> {
     let d = match telegram {
         Telegram::Token { .. } => return None,
         Telegram::ShortAck => {
@@ -234,7 +277,7 @@ pub fn decode(telegram: &Telegram<'_>, answers: Option<&Request>) -> Option<DpTe
     };
     match d.fc {
         FunctionCode::Request { kind, .. } => request(d, kind),
-        FunctionCode::Response { status, .. } => response(d, status, answers),
+        FunctionCode::Response { status, .. } => response(d, status, answers, dpv1),
     }
 }
 
@@ -280,6 +323,7 @@ fn request(d: &DataTelegram<'_>, kind: RequestKind) -> Option<DpTelegram> {
             },
             Err(e) => malformed(e),
         }),
+        Some(s) if s <= sap::MSAC_C2_INITIATE => Some(c2_pdu(du, true)),
         Some(s) if s <= sap::MSAC_C1 => Some(dpv1_pdu(du, true)),
         _ if du.is_empty() => None,
         _ => Some(Detail::Malformed {
@@ -297,6 +341,7 @@ fn response(
     d: &DataTelegram<'_>,
     status: ResponseStatus,
     answers: Option<&Request>,
+    dpv1: bool,
 ) -> Option<DpTelegram> {
     let answers = answers.filter(|r| r.master == d.da && r.slave == d.sa);
     // The slave's SAP is the response's SSAP; a response without SAPs
@@ -316,7 +361,7 @@ fn response(
                 inputs: du.to_vec(),
                 new_diag: matches!(status, ResponseStatus::Dh | ResponseStatus::Rdh),
             }),
-            Some(sap::SLAVE_DIAG) => Some(slave_diag(du)),
+            Some(sap::SLAVE_DIAG) => Some(slave_diag(du, dpv1)),
             Some(sap::GET_CFG) => Some(config(du)),
             Some(sap::RD_INP) => Some(Detail::Inputs {
                 inputs: du.to_vec(),
@@ -325,6 +370,7 @@ fn response(
             Some(sap::RD_OUTP) => Some(Detail::Outputs {
                 outputs: du.to_vec(),
             }),
+            Some(s) if s <= sap::MSAC_C2_INITIATE && !du.is_empty() => Some(c2_pdu(du, false)),
             Some(s) if s <= sap::MSAC_C1 && !du.is_empty() => Some(dpv1_pdu(du, false)),
             _ => None,
         }
@@ -415,7 +461,7 @@ fn config(du: &[u8]) -> Detail {
     }
 }
 
-fn slave_diag(du: &[u8]) -> Detail {
+fn slave_diag(du: &[u8], dpv1: bool) -> Detail {
     let d = match SlaveDiag::parse(du) {
         Ok(d) => d,
         Err(e) => return malformed(e),
@@ -432,9 +478,27 @@ fn slave_diag(du: &[u8]) -> Detail {
         master_address: (d.master_address != NO_MASTER).then_some(d.master_address),
         ident_number: d.ident_number,
         ext_diag: diag::ext_blocks(d.ext_diag)
-            .map(|b| b.describe(false))
+            .map(|b| b.describe(dpv1))
             .collect(),
         valid: d.is_valid(),
+        alarms: if dpv1 {
+            alarm::dpv1_blocks(d.ext_diag)
+                .filter_map(|b| match b {
+                    DiagBlock::Alarm(a) => Some(AlarmInfo {
+                        alarm_type: a.alarm_type.word(),
+                        type_code: a.alarm_type.code(),
+                        slot: a.slot,
+                        specifier: a.specifier.change.word(),
+                        seq: a.specifier.seq,
+                        add_ack: a.specifier.add_ack,
+                        data: a.data.to_vec(),
+                    }),
+                    DiagBlock::Status(_) => None,
+                })
+                .collect()
+        } else {
+            vec![]
+        },
     }
 }
 
@@ -446,6 +510,7 @@ fn dpv1_pdu(du: &[u8], request: bool) -> Detail {
         slot,
         index,
         length,
+        text: im_text(index, data),
         data: data.map(<[u8]>::to_vec),
         error,
     };
@@ -497,6 +562,160 @@ fn dpv1_pdu(du: &[u8], request: bool) -> Detail {
     }
 }
 
+/// Words for an I&M call on index 255: the record selected, and I&M0's
+/// identity or I&M1..4's fields when the data carry the record.
+fn im_text(index: Option<u8>, data: Option<&[u8]>) -> Option<String> {
+    if index != Some(im::CALL_INDEX) {
+        return None;
+    }
+    let (h, rest) = CallHeader::parse(data?).ok()?;
+    let Some(n) = h.im_number() else {
+        return Some(format!("call FI_Index {}", h.fi_index));
+    };
+    let mut s = format!("I&M{n} call");
+    if rest.len() == im::RECORD_LEN {
+        if n == 0 {
+            if let Ok(r) = Im0::parse(rest) {
+                s.push_str(&format!(
+                    ": manufacturer {}, order {:?}, serial {:?}, hardware {}, software {}, {}",
+                    r.manufacturer_id,
+                    r.order_id(),
+                    r.serial_number(),
+                    r.hardware_revision,
+                    r.software_revision,
+                    r.im_supported.describe()
+                ));
+            }
+        } else if let Ok(r) = im::ImRecord::parse(n, rest) {
+            for (name, value) in r.fields() {
+                s.push_str(&format!(", {name} {value:?}"));
+            }
+        }
+    }
+    Some(s)
+}
+
+/// A class-2 (MSAC_C2) PDU on SAPs 0..=49 (`profibus_dp::pdu::c2`). An
+/// empty request polls for the answer.
+fn c2_pdu(du: &[u8], request: bool) -> Detail {
+    let pdu =
+        |pdu, slot, index, length, data: Option<&[u8]>, error, text: Option<String>| Detail::Dpv1 {
+            pdu,
+            slot,
+            index,
+            length,
+            text: text.or_else(|| im_text(index, data)),
+            data: data.map(<[u8]>::to_vec),
+            error,
+        };
+    if du.is_empty() {
+        return pdu("Poll", None, None, None, None, None, None);
+    }
+    let parsed = if request {
+        C2Pdu::parse_request(du)
+    } else {
+        C2Pdu::parse_response(du)
+    };
+    let len = |x: &[u8]| Some(x.len().min(255) as u8);
+    let init = |r: &InitiateRes<'_>| {
+        format!(
+            "Max_Len_Data_Unit {}, features 0x{:02X}{:02X}, profile 0x{:04X}",
+            r.max_len_data_unit,
+            r.features_supported_1,
+            r.features_supported_2,
+            r.profile_ident_number
+        )
+    };
+    match parsed {
+        Ok(C2Pdu::InitiateReq(r)) => pdu(
+            "Initiate",
+            None,
+            None,
+            None,
+            None,
+            None,
+            Some(format!(
+                "Send_Timeout {} ms, features 0x{:02X}{:02X}, profile 0x{:04X}",
+                u32::from(r.send_timeout) * 10,
+                r.features_supported_1,
+                r.features_supported_2,
+                r.profile_ident_number
+            )),
+        ),
+        Ok(C2Pdu::InitiateRes(r)) => pdu("Initiate", None, None, None, None, None, Some(init(&r))),
+        Ok(C2Pdu::Rm(r)) => pdu(
+            "Resource_Manager",
+            None,
+            None,
+            None,
+            None,
+            None,
+            Some(format!(
+                "connection SAP {}, Poll_Timeout {}",
+                r.sap, r.poll_timeout
+            )),
+        ),
+        Ok(C2Pdu::ReadReq {
+            slot,
+            index,
+            length,
+        }) => pdu(
+            "Read",
+            Some(slot),
+            Some(index),
+            Some(length),
+            None,
+            None,
+            None,
+        ),
+        Ok(C2Pdu::ReadRes { slot, index, data }) => pdu(
+            "Read",
+            Some(slot),
+            Some(index),
+            len(data),
+            Some(data),
+            None,
+            None,
+        ),
+        Ok(C2Pdu::WriteReq { slot, index, data }) => pdu(
+            "Write",
+            Some(slot),
+            Some(index),
+            len(data),
+            Some(data),
+            None,
+            None,
+        ),
+        Ok(C2Pdu::WriteRes {
+            slot,
+            index,
+            length,
+        }) => pdu(
+            "Write",
+            Some(slot),
+            Some(index),
+            Some(length),
+            None,
+            None,
+            None,
+        ),
+        Ok(C2Pdu::DataTransportReq { slot, index, data })
+        | Ok(C2Pdu::DataTransportRes { slot, index, data }) => pdu(
+            "Data_Transport",
+            Some(slot),
+            Some(index),
+            len(data),
+            Some(data),
+            None,
+            None,
+        ),
+        Ok(C2Pdu::Idle) => pdu("Idle", None, None, None, None, None, None),
+        Ok(C2Pdu::Abort(a)) => pdu("Abort", None, None, None, None, None, Some(a.describe())),
+        Ok(C2Pdu::Error(e)) => pdu("Error", None, None, None, None, Some(e.describe()), None),
+        Err(e) => malformed(e),
+    }
+}
+
 /// Pairs responses with their requests on a stream of telegrams (see the
 /// module docs) and decodes each.
 #[derive(Debug, Default, Clone)]
@@ -505,6 +724,9 @@ pub struct Exchanges {
     last: BTreeMap<(u8, u8), Request>,
     /// The request a short acknowledge would answer now.
     pending: Option<Request>,
+    /// Slaves last parameterised with DPV1_Enable (their device-related
+    /// diagnosis blocks are alarm and status blocks).
+    dpv1: BTreeSet<u8>,
 }
 
 impl Exchanges {
@@ -522,12 +744,20 @@ impl Exchanges {
                     if self.pending.is_some() {
                         self.last.insert((r.master, r.slave), r);
                     }
+                    if r.dsap == Some(sap::SET_PRM) {
+                        let dpv1 = SetPrm::parse(d.data).ok().and_then(|p| p.dpv1_status());
+                        if dpv1.is_some_and(|(s1, _, _)| s1.contains(Dpv1Status1::DPV1_ENABLE)) {
+                            self.dpv1.insert(r.slave);
+                        } else {
+                            self.dpv1.remove(&r.slave);
+                        }
+                    }
                     decode(telegram, None)
                 }
                 _ => {
                     self.pending = None;
                     let r = self.last.get(&(d.da, d.sa)).copied();
-                    decode(telegram, r.as_ref())
+                    decode_in(telegram, r.as_ref(), self.dpv1.contains(&d.sa))
                 }
             },
         }

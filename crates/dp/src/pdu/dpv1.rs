@@ -278,6 +278,10 @@ impl Dpv1Error {
             FN_READ => "read",
             FN_WRITE => "write",
             FN_ALARM_ACK => "alarm ack",
+            FN_IDLE => "idle",
+            0x51 => "data transport",
+            0x56 => "connection set-up (resource manager)",
+            0x57 => "initiate",
             _ => "request",
         };
         let decode = self.decode().name().unwrap_or("unknown decode");

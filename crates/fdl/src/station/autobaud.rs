@@ -1,7 +1,8 @@
 //! Baud-rate search of a passive station (GSD `Auto_Baud_supp`), sans-IO.
 //!
 //! A slave with auto-baud listens at one rate after the other, from
-//! 12 Mbit/s down to 9.6 kbit/s, until a valid telegram with a frame
+//! 12 Mbit/s down to 9.6 kbit/s (only the rates the device supports, its
+//! GSD's `*_supp` keywords, see [`AutoBaud::with_rates`]), until a valid telegram with a frame
 //! check sequence (SD1, SD2 or SD3: start delimiter, length, FCS and end
 //! delimiter all right) decodes, and then locks to that rate. A master
 //! always produces such telegrams (FDL Status requests of its GAP poll,
@@ -37,6 +38,61 @@ pub const SEARCH_ORDER: [Baud; 11] = [
     Baud::B9600,
 ];
 
+/// A set of baud rates (the rates a device supports, from its GSD's
+/// `*_supp` keywords).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BaudSet(u16);
+
+impl BaudSet {
+    /// Every rate of PROFIBUS-DP.
+    pub const ALL: BaudSet = BaudSet((1 << SEARCH_ORDER.len()) - 1);
+
+    /// No rate.
+    pub const EMPTY: BaudSet = BaudSet(0);
+
+    fn bit(baud: Baud) -> u16 {
+        let i = SEARCH_ORDER.iter().position(|&b| b == baud).unwrap_or(0);
+        1 << i
+    }
+
+    /// Whether `baud` is in the set.
+    pub fn contains(self, baud: Baud) -> bool {
+        self.0 & Self::bit(baud) != 0
+    }
+
+    /// The set with `baud` added.
+    pub fn with(self, baud: Baud) -> BaudSet {
+        BaudSet(self.0 | Self::bit(baud))
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// The rates in search order (fastest first).
+    pub fn iter(self) -> impl Iterator<Item = Baud> {
+        SEARCH_ORDER.into_iter().filter(move |&b| self.contains(b))
+    }
+
+    /// The fastest rate of the set ([`Baud::B12000000`] for an empty set).
+    pub fn fastest(self) -> Baud {
+        self.iter().next().unwrap_or(SEARCH_ORDER[0])
+    }
+}
+
+impl Default for BaudSet {
+    fn default() -> BaudSet {
+        BaudSet::ALL
+    }
+}
+
+impl FromIterator<Baud> for BaudSet {
+    fn from_iter<I: IntoIterator<Item = Baud>>(iter: I) -> BaudSet {
+        iter.into_iter().fold(BaudSet::EMPTY, BaudSet::with)
+    }
+}
+
 /// Least time spent listening at one rate.
 pub const MIN_DWELL: Duration = Duration::from_millis(100);
 
@@ -49,6 +105,7 @@ pub struct AutoBaud {
     buf: Vec<u8>,
     locked: Option<Baud>,
     min_dwell: Duration,
+    rates: BaudSet,
 }
 
 impl AutoBaud {
@@ -67,7 +124,34 @@ impl AutoBaud {
             buf: Vec::with_capacity(1024),
             locked: None,
             min_dwell,
+            rates: BaudSet::ALL,
         }
+    }
+
+    /// The search limited to `rates` (a device's GSD `*_supp` rates): it
+    /// never listens, and so never locks, at another rate. An empty set
+    /// means every rate.
+    pub fn with_rates(mut self, rates: BaudSet) -> AutoBaud {
+        self.rates = if rates.is_empty() {
+            BaudSet::ALL
+        } else {
+            rates
+        };
+        self.idx = self.next_idx(SEARCH_ORDER.len() - 1);
+        self
+    }
+
+    /// The rates searched.
+    pub fn rates(&self) -> BaudSet {
+        self.rates
+    }
+
+    /// The index of the first searched rate after `idx` (wrapping).
+    fn next_idx(&self, idx: usize) -> usize {
+        (1..=SEARCH_ORDER.len())
+            .map(|k| (idx + k) % SEARCH_ORDER.len())
+            .find(|&i| self.rates.contains(SEARCH_ORDER[i]))
+            .unwrap_or(0)
     }
 
     /// The rate to listen at now (the locked rate once locked).
@@ -131,7 +215,7 @@ impl AutoBaud {
     /// next rate (wrapping around) and returns it.
     pub fn handle_timeout(&mut self, now: Instant) -> Option<Baud> {
         if self.poll_timeout().is_some_and(|t| t <= now) {
-            self.idx = (self.idx + 1) % SEARCH_ORDER.len();
+            self.idx = self.next_idx(self.idx);
             self.since = now;
             self.buf.clear();
             self.framer = Framer::new();
@@ -143,7 +227,7 @@ impl AutoBaud {
     /// Start searching again from the fastest rate (e.g. after the
     /// watchdog expired).
     pub fn restart(&mut self, now: Instant) {
-        *self = Self::with_dwell(now, self.min_dwell);
+        *self = Self::with_dwell(now, self.min_dwell).with_rates(self.rates);
     }
 }
 
@@ -242,6 +326,57 @@ mod tests {
         }
         assert!(ab.buf.len() <= 2 * crate::wire::consts::MAX_TELEGRAM_LEN);
         assert_eq!(ab.locked(), None);
+    }
+
+    #[test]
+    fn keeps_to_the_devices_rates() {
+        // A BK3000 (GSD: 9.6k … 1.5M; manual p. 24: 1.5 Mbit/s at most).
+        let bk3000: BaudSet = [
+            Baud::B9600,
+            Baud::B19200,
+            Baud::B93750,
+            Baud::B187500,
+            Baud::B500000,
+            Baud::B1500000,
+        ]
+        .into_iter()
+        .collect();
+        let mut ab =
+            AutoBaud::with_dwell(Instant::ZERO, Duration::from_millis(1)).with_rates(bk3000);
+        assert_eq!(ab.baud(), Baud::B1500000, "starts at its fastest rate");
+        let mut seen = vec![ab.baud()];
+        let mut now = Instant::ZERO;
+        for _ in 0..2 * SEARCH_ORDER.len() {
+            now = ab.poll_timeout().unwrap();
+            seen.push(ab.handle_timeout(now).unwrap());
+        }
+        for fast in [
+            Baud::B12000000,
+            Baud::B6000000,
+            Baud::B3000000,
+            Baud::B45450,
+            Baud::B31250,
+        ] {
+            assert!(!seen.contains(&fast), "listened at {fast:?}: {seen:?}");
+        }
+        assert_eq!(
+            &seen[..7],
+            &[
+                Baud::B1500000,
+                Baud::B500000,
+                Baud::B187500,
+                Baud::B93750,
+                Baud::B19200,
+                Baud::B9600,
+                Baud::B1500000
+            ]
+        );
+        ab.restart(now);
+        assert_eq!(ab.baud(), Baud::B1500000, "a new search keeps the set");
+        // The empty set means all rates.
+        let all = AutoBaud::new(Instant::ZERO).with_rates(BaudSet::EMPTY);
+        assert_eq!(all.baud(), Baud::B12000000);
+        assert_eq!(BaudSet::ALL.iter().count(), SEARCH_ORDER.len());
     }
 
     #[test]

@@ -106,6 +106,7 @@ fn slave_diag_request_and_response() {
             ident_number: 0x0ED0,
             ext_diag: vec![],
             valid: true,
+            alarms: vec![],
         })
     );
     let Some(Detail::SlaveDiag {
@@ -268,6 +269,7 @@ fn dpv1_read_poll_and_error() {
             length,
             data,
             error: error.map(String::from),
+            text: None,
         })
     };
     assert_eq!(
@@ -381,4 +383,114 @@ proptest::proptest! {
         let _ = ex.decode(&Telegram::Data(t));
         let _ = ex.decode(&Telegram::ShortAck);
     }
+}
+
+/// An SD2 frame `68 L L 68 DA SA FC DSAP SSAP DU FCS 16` with the SAP
+/// extension bits set; FCS = sum of DA … DU modulo 256 (IEC 61158-4-3).
+fn sd2(da: u8, sa: u8, fc: u8, dsap: u8, ssap: u8, du: &[u8]) -> Vec<u8> {
+    let mut body = vec![da | 0x80, sa | 0x80, fc, dsap, ssap];
+    body.extend_from_slice(du);
+    let l = body.len() as u8;
+    let fcs = body.iter().fold(0u8, |a, b| a.wrapping_add(*b));
+    let mut t = vec![0x68, l, l, 0x68];
+    t.extend(body);
+    t.extend([fcs, 0x16]);
+    t
+}
+
+fn text_of(ex: &mut Exchanges, t: &[u8]) -> (&'static str, Option<String>, Option<String>) {
+    let (t, _) = Telegram::parse(t).unwrap();
+    match ex.decode(&t).unwrap() {
+        DpTelegram {
+            detail: Some(Detail::Dpv1 {
+                pdu, text, error, ..
+            }),
+            ..
+        } => (pdu, text, error),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn class_2_connection_and_im0() {
+    let mut ex = Exchanges::default();
+    // Initiate.req of the reference (Send_Timeout 1 s) to the RM on SAP 49.
+    let init = [
+        0x57, 0, 0, 0, 0x00, 0x64, 0x01, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 0, 0, 0,
+    ];
+    let (pdu, text, _) = text_of(&mut ex, &sd2(8, 2, 0x6D, 49, 50, &init));
+    assert_eq!(pdu, "Initiate");
+    assert_eq!(
+        text.unwrap(),
+        "Send_Timeout 1000 ms, features 0x0100, profile 0x0000"
+    );
+    let (pdu, text, _) = text_of(&mut ex, &sd2(2, 8, 0x08, 50, 49, &[0x56, 0x30, 0x00, 0x64]));
+    assert_eq!(pdu, "Resource_Manager");
+    assert_eq!(text.unwrap(), "connection SAP 48, Poll_Timeout 100");
+    // Write the I&M0 call header on slot 0 index 255, then the answer.
+    let call = [0x5F, 0x00, 0xFF, 0x04, 0x08, 0x00, 0xFD, 0xE8];
+    let (pdu, text, _) = text_of(&mut ex, &sd2(8, 2, 0x7D, 48, 50, &call));
+    assert_eq!((pdu, text.as_deref()), ("Write", Some("I&M0 call")));
+    let mut res = vec![0x5E, 0x00, 0xFF, 0x44, 0x08, 0x00, 0xFD, 0xE8];
+    let mut im0 = [b' '; 64];
+    im0[10..12].copy_from_slice(&[0x01, 0x1E]);
+    im0[12..19].copy_from_slice(b"6ES7-XY");
+    im0[48..50].copy_from_slice(&[0, 3]);
+    im0[50..54].copy_from_slice(&[b'V', 2, 1, 0]);
+    im0[62..64].copy_from_slice(&[0x00, 0x02]);
+    res.extend_from_slice(&im0);
+    let (pdu, text, _) = text_of(&mut ex, &sd2(2, 8, 0x08, 50, 48, &res));
+    assert_eq!(pdu, "Read");
+    assert_eq!(
+        text.unwrap(),
+        "I&M0 call: manufacturer 286, order \"6ES7-XY\", serial \"\", hardware 3, \
+         software V2.1.0, I&M1 (0x0002)"
+    );
+    // Abort by the MSAC_C2 instance, reason TO; a negative Data_Transport.
+    let (pdu, text, _) = text_of(&mut ex, &sd2(8, 2, 0x6D, 48, 50, &[0x58, 0, 0x13, 0]));
+    assert_eq!(pdu, "Abort");
+    assert_eq!(text.unwrap(), "aborted by MSAC_C2: connection timeout (TO)");
+    let (pdu, _, error) = text_of(&mut ex, &sd2(2, 8, 0x08, 50, 48, &[0xD1, 0x80, 0xA9, 0]));
+    assert_eq!(pdu, "Error");
+    assert!(error
+        .unwrap()
+        .starts_with("data transport failed: application: feature not supported"));
+}
+
+#[test]
+fn alarm_blocks_of_a_dpv1_slave() {
+    let mut ex = Exchanges::default();
+    // Ext_Diag, master 2, ident 0x0ED0, a diagnostic alarm slot 2 seq 1
+    // appears with 3 bytes of data.
+    let du = [
+        0x08, 0x0C, 0x00, 0x02, 0x0E, 0xD0, 0x07, 0x01, 0x02, 0x09, 0xAA, 0xBB, 0xCC,
+    ];
+    let res = sd2(2, 8, 0x08, 62, 60, &du);
+    let alarms = |ex: &mut Exchanges| {
+        detail(ex, &DIAG_REQ);
+        let (t, _) = Telegram::parse(&res).unwrap();
+        match ex.decode(&t).unwrap().detail {
+            Some(Detail::SlaveDiag { alarms, .. }) => alarms,
+            other => panic!("{other:?}"),
+        }
+    };
+    // Before a DP-V1 Set_Prm the block is plain device diagnosis.
+    assert!(alarms(&mut ex).is_empty());
+    detail(&mut ex, &PRM_DPV1);
+    let a = alarms(&mut ex);
+    assert_eq!(
+        a,
+        vec![AlarmInfo {
+            alarm_type: "diagnostic",
+            type_code: 1,
+            slot: 2,
+            specifier: "appears",
+            seq: 1,
+            add_ack: false,
+            data: vec![0xAA, 0xBB, 0xCC],
+        }]
+    );
+    // An Alarm_Ack to SAP 50 from SAP 51.
+    let (pdu, _, _) = text_of(&mut ex, &sd2(8, 2, 0x6D, 50, 51, &[0x5C, 2, 1, 0x09]));
+    assert_eq!(pdu, "Alarm_Ack");
 }

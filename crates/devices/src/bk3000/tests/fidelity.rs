@@ -1,0 +1,377 @@
+//! Issue 30: the BK3000 as its manual describes it (catalogue, user
+//! terminals, RunOnCfgFault, free placement, register access, the PLC
+//! interface, K-bus and initialisation errors).
+
+use super::*;
+use crate::bk3000::catalogue::Source;
+use crate::bk3000::user;
+
+#[test]
+fn catalogue_has_every_terminal_the_manual_names() {
+    // p. 49-51 and the FMS list of p. 63.
+    for (name, cfgs) in [
+        (
+            "KL3012",
+            &[
+                &[0x50u8, 0x50][..],
+                &[0xB2, 0xB2],
+                &[0xC0, 0x00, 0x82, 0xC0, 0x00, 0x82],
+            ][..],
+        ),
+        ("KL3022", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        ("KL3032", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        ("KL3042", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        ("KL3052", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        ("KL3062", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        ("KL3302", &[&[0x50, 0x50][..], &[0xB2, 0xB2]]),
+        // "KL3xx2, KL3351 … 0x50 (muß je Klemme zweimal verwendet werden)"
+        (
+            "KL3351",
+            &[
+                &[0x50, 0x50][..],
+                &[0xB2, 0xB2],
+                &[0xC0, 0x00, 0x82, 0xC0, 0x00, 0x82],
+            ],
+        ),
+        // "KL2502, KL5302 1 Kanal: 0xB2 (zweimal) 2 Kanäle: 0xB5 (einmal)"
+        ("KL5302", &[&[0xB2, 0xB2][..], &[0xB5]]),
+        // "126 Byte Data-Area 0xC0,0xFF"
+        ("DATA126", &[&[0xC0, 0xFF, 0xFF][..]]),
+    ] {
+        let t = lookup(name).unwrap_or_else(|| panic!("{name} missing"));
+        assert_eq!(t.source, Source::Manual, "{name}");
+        for c in cfgs {
+            assert!(t.variants.iter().any(|v| v.cfg == *c), "{name}: {c:02X?}");
+        }
+        let s = strip(&format!("{name},KL9010"));
+        for v in t.variants {
+            assert!(
+                check_cfg(&s, Options::default(), v.cfg).is_ok(),
+                "{name} {:02X?}",
+                v.cfg
+            );
+        }
+    }
+    // The data area: 2 + 126 bytes each way, read back.
+    let (mut b, m) = Bench::started("DATA126,KL9010");
+    assert_eq!((m.image().in_len, m.image().out_len), (128, 128));
+    let mut out = vec![0u8; 128];
+    out[2..4].copy_from_slice(&[0x12, 0x34]);
+    out[126..128].copy_from_slice(&[0xAB, 0xCD]);
+    b.dx(&out);
+    let i = b.dx(&out);
+    assert_eq!(&i[2..4], &[0x12, 0x34]);
+    assert_eq!(&i[126..128], &[0xAB, 0xCD]);
+    // "C0 FF" alone is too few CfgData (the second length byte missing).
+    assert_eq!(
+        check_cfg(&strip("DATA126,KL9010"), Options::default(), &[0xC0, 0xFF])
+            .unwrap_err()
+            .error,
+        CfgError::TooFew
+    );
+}
+
+#[test]
+fn common_kl_families_run_with_their_data_sheet_sizes() {
+    let n = CATALOGUE
+        .iter()
+        .filter(|t| t.source == Source::Datasheet)
+        .count();
+    assert!(n >= 60, "{n} data-sheet terminals");
+    assert!(CATALOGUE.len() >= 85, "{}", CATALOGUE.len());
+    // Every catalogue terminal runs in a strip, every format checks.
+    for t in CATALOGUE.iter().filter(|t| t.name != "KL9010") {
+        let s = strip(&format!("{},KL9010", t.name));
+        let img = s.default_image(Options::default());
+        assert!(
+            check_cfg(&s, Options::default(), &img.cfg).is_ok(),
+            "{}",
+            t.name
+        );
+        let (bi, bo) = t.digital_bits();
+        assert_eq!(
+            img.digital,
+            ((bi as usize).div_ceil(8), (bo as usize).div_ceil(8)),
+            "{}",
+            t.name
+        );
+    }
+    // A digital terminal with inputs and outputs (KL1859: 8 + 8).
+    let s = strip("KL1859,KL2012,KL9010");
+    let img = s.default_image(Options::default());
+    assert_eq!(img.cfg, [0x10, 0x21]);
+    assert_eq!(entry(&img, "2.KL2012.1").bit, Some(0));
+    assert_eq!(entry(&img, "2.KL2012.1").byte, 1);
+    // 1- and 4-channel analog terminals by analogy with KL3xx2.
+    let s = strip("KL3404,KL4001:complete,KL9010");
+    assert_eq!(
+        s.default_image(Options::default()).cfg,
+        [0x50, 0x50, 0x50, 0x50, 0xB2]
+    );
+}
+
+const USER_TYPES: &str = r#"
+[KL3408]
+type = "complex"
+summary = "8 analog inputs 0..10 V, described by the user"
+channels = 8
+bytes_in = 24
+bytes_out = 24
+status = true
+cfg = "B2 B2 B2 B2 B2 B2 B2 B2"
+compact_cfg = "0x57"
+compact_bytes_in = 16
+range = [0.0, 10.0]
+unit = "V"
+registers = { R8 = 3408, R9 = 0x3141 }
+
+[KL1889]
+type = "digital"
+bits_in = 16
+"#;
+
+#[test]
+fn user_terminal_types_from_toml() {
+    let extra = user::parse_text(USER_TYPES).unwrap();
+    let s = Strip::parse_with("KL1889,KL3408,KL3408:compact,KL9010", &extra).unwrap();
+    let img = s.default_image(Options::default());
+    assert_eq!(img.in_len, 24 + 16 + 2);
+    assert_eq!(img.out_len, 24);
+    assert_eq!(
+        img.cfg,
+        [0xB2, 0xB2, 0xB2, 0xB2, 0xB2, 0xB2, 0xB2, 0xB2, 0x57, 0x11]
+    );
+    assert_eq!(entry(&img, "2.KL3408.8.status").byte, 21);
+    assert_eq!(entry(&img, "2.KL3408.8").byte, 22);
+    assert_eq!(entry(&img, "3.KL3408.1").byte, 24);
+    let ty = extra.iter().find(|t| t.name == "KL3408").unwrap();
+    assert_eq!(ty.source, Source::User);
+    assert_eq!(ty.type_number(), 3408);
+    // A pinned value in the user's unit.
+    let mut dev = Bk3000::new(s);
+    dev.control("set 3.1 5").unwrap();
+    // Bad descriptions: one line naming the terminal and the key.
+    for (text, words) in [
+        (
+            "[X1]\ntype = \"analog\"",
+            "terminal type `X1`: type `analog`: one of digital, complex, passive",
+        ),
+        (
+            "[X1]\ntype = \"complex\"\nbytes_in = 3\nchannels = 2\ncfg = \"B2\"",
+            "3 bytes do not split evenly over 2 channels",
+        ),
+        ("[X1]\ntype = \"complex\"\nbytes_in = 2", "needs cfg"),
+        (
+            "[X1]\ntype = \"complex\"\nbytes_in = 2\ncfg = \"zz\"",
+            "cfg `zz` is not hex bytes",
+        ),
+        (
+            "[KL3102]\ntype = \"passive\"",
+            "the catalogue has it already",
+        ),
+        ("[X1]\ntype = \"digital\"", "needs bits_in or bits_out"),
+        (
+            "[X1]\ntype = \"digital\"\nbits_in = 2\nregisters = { R99 = 1 }",
+            "registers are R0..R63",
+        ),
+        (
+            "[X1]\ntype = \"digital\"\nbitsin = 2",
+            "unknown field `bitsin`",
+        ),
+    ] {
+        let e = user::parse_text(text).unwrap_err();
+        assert!(e.contains(words), "{text}: {e}");
+    }
+    // Unknown names suggest the user's types too.
+    let e = Strip::parse_with("KL3409,KL9010", &extra).unwrap_err();
+    assert!(e.to_string().contains("KL3408"), "{e}");
+}
+
+#[test]
+fn user_terminal_types_from_the_bus_file_and_device_opt() {
+    use crate::profile::DeviceOptions;
+    let entry = crate::PROFILES.iter().find(|p| p.name == "bk3000").unwrap();
+    // Bus file: [slave.terminal_types.KL3408] is a table in the options.
+    let table: toml::Table = USER_TYPES.parse().unwrap();
+    let mut o = DeviceOptions::new();
+    o.set("terminals", "KL1889,KL3408,KL9010");
+    o.set("terminal_types", toml::Value::Table(table));
+    let p = entry.configure(&o, Some(5)).unwrap();
+    let ch = p
+        .channels(&[0xB2; 8].iter().copied().chain([0x11]).collect::<Vec<_>>())
+        .unwrap();
+    assert!(ch.channels.iter().any(|c| c.name == "2.KL3408.8"), "{ch:?}");
+    // --device-opt terminal-types-file=FILE
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("types.toml");
+    std::fs::write(&f, USER_TYPES).unwrap();
+    let mut o = DeviceOptions::new();
+    o.set_text("terminals", "KL3408,KL9010");
+    o.set_pair(&format!("terminal-types-file={}", f.display()))
+        .unwrap();
+    assert!(entry.configure(&o, Some(5)).unwrap().device(None).is_ok());
+    // A faulty file names the file and the terminal.
+    std::fs::write(&f, "[KL3408]\ntype = \"complex\"\n").unwrap();
+    let e = entry.configure(&o, Some(5)).unwrap_err().to_string();
+    assert!(
+        e.contains("types.toml") && e.contains("KL3408") && e.contains("needs cfg"),
+        "{e}"
+    );
+}
+
+/// Write register `r` of KL3102 channel 1 (complete mapping, terminal
+/// 1): control 0xC0 | r, the value in the output word.
+fn reg_write(b: &mut Bench, r: u8, v: u16) -> Vec<u8> {
+    let mut out = vec![0u8; 6];
+    out[0] = 0xC0 | r;
+    out[1..3].copy_from_slice(&v.to_be_bytes());
+    b.dx(&out)
+}
+
+fn reg_read(b: &mut Bench, r: u8) -> (u8, u16) {
+    let mut out = vec![0u8; 6];
+    out[0] = 0x80 | r;
+    let i = b.dx(&out);
+    (i[0], u16::from_be_bytes([i[1], i[2]]))
+}
+
+#[test]
+fn register_set_code_word_and_scaling() {
+    let (mut b, _m) = Bench::started("KL3102:complete,KL9010");
+    // Data sheet example 1: control 0x88 reads R8, status 0x88, 3102.
+    assert_eq!(reg_read(&mut b, 8), (0x88, 3102));
+    assert_eq!(reg_read(&mut b, 9), (0x89, 0x3141), "software version 1A");
+    // Without the code word the user area keeps its value.
+    let i = reg_write(&mut b, 34, 0x0200);
+    assert_eq!(i[0], 0xA2, "write acknowledged: control without bit 6");
+    assert_eq!(reg_read(&mut b, 34).1, 0x0100, "R34 write-protected");
+    // Example 2: control 0xDF writes the code word 0x1235 into R31,
+    // status 0x9F acknowledges.
+    let i = reg_write(&mut b, 31, 0x1235);
+    assert_eq!((i[0], i[1], i[2]), (0x9F, 0, 0));
+    // User scaling: gain 2 (0x0200), offset 100, feature bit 0.
+    reg_write(&mut b, 34, 0x0200);
+    reg_write(&mut b, 33, 100);
+    reg_write(&mut b, 32, 0x0003);
+    assert_eq!(reg_read(&mut b, 32).1, 0x0003);
+    // Manufacturer settings and ROM stay.
+    reg_write(&mut b, 20, 0x0300);
+    reg_write(&mut b, 8, 1234);
+    assert_eq!(reg_read(&mut b, 20).1, 0x0100);
+    assert_eq!(reg_read(&mut b, 8).1, 3102);
+    // Process data mode: 2.5 V = raw 8192 → 100 + 2·8192 = 16484.
+    b.slave.device_mut().control("set 1.1 2.5").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 100 + 2 * 8192);
+    assert_eq!(i[0], 0, "in range");
+    // 6 V ·2 is beyond 0x7FFF: overrange and error, value clamped; the
+    // channel's diagnosis message names terminal 1, channel 1.
+    b.slave.device_mut().control("set 1.1 6").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x42, "overrange + error");
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 0x7FFF);
+    let d = b.diag();
+    assert_ne!(d[0] & 0x08, 0, "Ext_Diag");
+    assert!(
+        d[8..].chunks(8).any(|m| m == [1, 1, 0, 0, 0, 0x42, 0, 0]),
+        "{d:02X?}"
+    );
+    // R0 holds the raw value, R6 the status byte.
+    assert_eq!(reg_read(&mut b, 6).1, 0x42);
+    // Restore the factory settings (R7 = 0x7000): scaling off again.
+    reg_write(&mut b, 7, 0x7000);
+    b.slave.device_mut().control("set 1.1 2.5").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i16::from_be_bytes([i[1], i[2]]), 8192);
+    assert_eq!(b.diag().len(), 6, "error gone, diagnosis empty");
+}
+
+#[test]
+fn status_byte_underrange_on_a_unipolar_range_and_limits() {
+    let (mut b, _m) = Bench::started("KL3022:complete,KL9010");
+    // 4..20 mA: 2 mA is below the range.
+    b.slave.device_mut().control("set 1.1 2").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x41, "underrange + error");
+    assert_eq!(&i[1..3], &[0, 0]);
+    // Limit 1 (R35) with feature bit 9: 12 mA is above 4000.
+    reg_write(&mut b, 31, 0x1235);
+    reg_write(&mut b, 35, 4000);
+    reg_write(&mut b, 32, 0x0202);
+    b.slave.device_mut().control("set 1.1 12").unwrap();
+    let i = b.dx(&[0; 6]);
+    assert_eq!(i[0], 0x04, "limit 1: value above");
+    // Filter R37 = 2: the value moves a quarter of the way per cycle.
+    reg_write(&mut b, 37, 2);
+    b.slave.device_mut().control("set 1.1 4").unwrap();
+    let first = b.dx(&[0; 6]);
+    let v = i16::from_be_bytes([first[1], first[2]]);
+    assert!(v > 0 && v < 16384, "filtered: {v}");
+}
+
+#[test]
+fn run_on_cfg_fault_runs_with_a_maximal_configuration() {
+    // The master is set up for KL1104,KL2134,KL3102,KL4002 (p. 46: "in
+    // einer Maximal-Konfiguration"); only KL1104,KL3102 are plugged.
+    let mut b = Bench::new("KL3102,KL1104,KL9010");
+    let max = [0x50, 0x50, 0x60, 0x60, 0x10, 0x20];
+    let mut u = [0u8; 10];
+    b.start(&u, &max);
+    assert_eq!(
+        b.slave.state(),
+        SlaveState::WaitPrm,
+        "refused without the mode"
+    );
+    u[1] = 0x01;
+    b.start(&u, &max);
+    assert_eq!(b.slave.state(), SlaveState::DataExch, "RunOnCfgFault");
+    assert!(b.slave.device().user_prm().run_on_cfg_fault);
+    // The master's lengths: 5 in, 5 out; the plugged terminals' data
+    // where the automatic image puts them; the fault in the diagnosis.
+    b.slave.device_mut().control("set 1.1 5").unwrap();
+    b.slave.device_mut().control("set 2.1 1").unwrap();
+    let i = b.dx(&[0; 5]);
+    assert_eq!(i.len(), 5);
+    assert_eq!(i16::from_be_bytes([i[0], i[1]]), 16384);
+    assert_eq!(i[4] & 1, 1, "KL1104 bit after the words");
+    let d = b.diag();
+    assert_eq!(d[0] & 0x04, 0, "no Cfg_Fault");
+    assert_eq!(d[12], 2, "CfgData error 2 in the coupler's message");
+}
+
+#[test]
+fn kbus_faults_raise_their_codes_and_init_bits() {
+    let (mut b, m) = Bench::started("KL1104,KL2134,KL3102,KL9010");
+    let out = vec![0u8; m.image().out_len];
+    b.dx(&out);
+    // A terminal that does not answer: K-bus command error, 3 pulses, 0.
+    let t = b.slave.device_mut().control("mute 3").unwrap();
+    assert!(t.contains("3 pulses, then 0"), "{t}");
+    let d = b.diag();
+    assert_ne!(d[1] & 0x02, 0, "Stat_Diag");
+    assert_eq!(&d[16..24], &[0, 254, 0, 0x22, 3, 0, 0, 0]);
+    assert!(Bk3000Master::describe_diag(&d[6..])
+        .iter()
+        .any(|l| l.contains("does not answer")));
+    assert!(b.dx(&out).iter().all(|&x| x == 0), "inputs 0");
+    b.slave.device_mut().control("unmute 3").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A changed strip: init error bit 3, 14 pulses then the terminal.
+    let t = b.slave.device_mut().control("swap 2 KL2408").unwrap();
+    assert!(t.contains("14 pulses, then 2"), "{t}");
+    let d = b.diag();
+    assert_eq!(&d[16..24], &[0, 254, 0x08, 0x20, 14, 2, 0, 0]);
+    let words = Bk3000Master::describe_diag(&d[6..]);
+    assert!(
+        words
+            .iter()
+            .any(|l| l.contains("error reading the terminal types")),
+        "{words:?}"
+    );
+    b.slave.device_mut().control("swap 2 KL2134").unwrap();
+    assert_eq!(b.diag().len(), 6);
+    // A pulled terminal still wins over the others (code 4).
+    b.slave.device_mut().control("mute 3").unwrap();
+    b.slave.device_mut().control("pull 2").unwrap();
+    assert_eq!(&b.diag()[16..24], &[0, 254, 0, 0x24, 4, 1, 0, 0]);
+}
