@@ -193,6 +193,29 @@ d.v1_class = ProtoField.uint8("pbdp.dpv1.error_class", "Error class", base.HEX, 
 d.v1_code = ProtoField.uint8("pbdp.dpv1.error_code", "Error code", base.HEX, nil, 0x0F)
 d.v1_ec2 = ProtoField.uint8("pbdp.dpv1.error_code_2", "Error_Code_2", base.HEX)
 d.v1_poll = ProtoField.bool("pbdp.dpv1.poll", "Poll (request without data)")
+-- DP-V1 alarm and status blocks (in Slave_Diag) and Alarm_Ack
+-- (dpv1-c2-im-alarms.md §4.4-4.5: type, slot, specifier = Seq_Nr b7-3,
+-- Add_Ack b2, appears/disappears b1-0).
+local ALARM_TYPES = {
+  [1] = "diagnostic", [2] = "process", [3] = "pull", [4] = "plug", [5] = "status", [6] = "update",
+}
+local STATUS_TYPES = {
+  [0x81] = "status message", [0x82] = "module status", [0x83] = "DXB link status",
+  [0x9E] = "PrmCmdAck", [0x9F] = "Red_State",
+}
+local ALARM_CHANGES = {
+  [0] = "none", [1] = "appears", [2] = "disappears", [3] = "disappears-still-faulty",
+}
+d.alarm = ProtoField.bytes("pbdp.alarm", "DP-V1 alarm block")
+d.alarm_type = ProtoField.uint8("pbdp.alarm.type", "Alarm_Type", base.DEC, ALARM_TYPES)
+d.alarm_slot = ProtoField.uint8("pbdp.alarm.slot", "Slot_Number", base.DEC)
+d.alarm_spec = ProtoField.uint8("pbdp.alarm.specifier", "Alarm_Specifier", base.HEX)
+d.alarm_seq = ProtoField.uint8("pbdp.alarm.seq", "Seq_Nr", base.DEC, nil, 0xF8)
+d.alarm_addack = ProtoField.bool("pbdp.alarm.add_ack", "Add_Ack", 8, nil, 0x04)
+d.alarm_change = ProtoField.uint8("pbdp.alarm.change", "Appears/disappears", base.DEC,
+  ALARM_CHANGES, 0x03)
+d.alarm_data = ProtoField.bytes("pbdp.alarm.data", "Diagnostic_User_Data")
+d.status_type = ProtoField.uint8("pbdp.status.type", "Status_Type", base.HEX, STATUS_TYPES)
 -- Data_Exchange
 d.outputs = ProtoField.bytes("pbdp.outputs", "Outputs")
 d.inputs = ProtoField.bytes("pbdp.inputs", "Inputs")
@@ -293,6 +316,9 @@ local function dissect_set_prm(tvb, tree)
   if tvb:len() > 7 then tree:add(d.prm_user, tvb(7)) end
 end
 
+-- Defined with the alarm fields below.
+local dissect_dpv1_blocks
+
 local function dissect_diag(tvb, tree)
   if tvb:len() < 6 then
     tree:add_proto_expert_info(e_len, "Slave_Diag response shorter than 6 bytes")
@@ -311,7 +337,61 @@ local function dissect_diag(tvb, tree)
   tree:add(d.diag_s3, tvb(2, 1)):add(d.diag_ovf, tvb(2, 1))
   tree:add(d.diag_master, tvb(3, 1))
   tree:add(d.diag_ident, tvb(4, 2))
-  if tvb:len() > 6 then tree:add(d.diag_ext, tvb(6)) end
+  if tvb:len() > 6 then
+    tree:add(d.diag_ext, tvb(6))
+    dissect_dpv1_blocks(tvb(6):tvb(), tree)
+  end
+end
+
+local function alarm_type_text(t)
+  if ALARM_TYPES[t] then return ALARM_TYPES[t] end
+  if t >= 32 and t <= 126 then return "manufacturer" end
+  return "reserved"
+end
+
+-- Alarm_Type, Slot_Number, Alarm_Specifier at `tvb(0..3)`; returns the
+-- alarm in words ("diagnostic alarm slot 1 seq 0 appears").
+local function alarm_fields(tvb, tree)
+  local t, slot, spec = tvb(0, 1):uint(), tvb(1, 1):uint(), tvb(2, 1):uint()
+  tree:add(d.alarm_type, tvb(0, 1))
+  tree:add(d.alarm_slot, tvb(1, 1))
+  local st = tree:add(d.alarm_spec, tvb(2, 1))
+  st:add(d.alarm_seq, tvb(2, 1)); st:add(d.alarm_addack, tvb(2, 1)); st:add(d.alarm_change, tvb(2, 1))
+  return string.format("%s alarm slot %d seq %d %s", alarm_type_text(t), slot,
+    bit.rshift(spec, 3), ALARM_CHANGES[bit.band(spec, 3)])
+end
+
+-- The DP-V1 alarm and status blocks of an extended diagnosis: the
+-- device-related blocks (header b7-6 = 00, length 4..63) whose type byte
+-- is an alarm type (1..6, 32..126) or a status type (0x81..0x83, 0x9E,
+-- 0x9F). Other blocks are left to the "Extended diagnosis" bytes.
+function dissect_dpv1_blocks(tvb, tree)
+  local pos, len = 0, tvb:len()
+  while pos < len do
+    local h = tvb(pos, 1):uint()
+    local kind = bit.rshift(h, 6)
+    local n
+    if kind == 2 then n = 3 else n = bit.band(h, 0x3F) end
+    if n == 0 or pos + n > len then return end
+    if kind == 0 and n >= 4 then
+      local t = tvb(pos + 1, 1):uint()
+      local alarm = (t >= 1 and t <= 6) or (t >= 32 and t <= 126)
+      if alarm then
+        local at = tree:add(d.alarm, tvb(pos, n))
+        local words = alarm_fields(tvb(pos + 1, 3):tvb(), at)
+        if n > 4 then at:add(d.alarm_data, tvb(pos + 4, n - 4)) end
+        at:set_text("DP-V1 alarm: " .. words)
+      elseif STATUS_TYPES[t] then
+        local at = tree:add(d.alarm, tvb(pos, n))
+        at:add(d.status_type, tvb(pos + 1, 1))
+        at:add(d.alarm_slot, tvb(pos + 2, 1))
+        at:add(d.alarm_change, tvb(pos + 3, 1))
+        if n > 4 then at:add(d.alarm_data, tvb(pos + 4, n - 4)) end
+        at:set_text("DP-V1 status: " .. STATUS_TYPES[t] .. " slot " .. tvb(pos + 2, 1):uint())
+      end
+    end
+    pos = pos + n
+  end
 end
 
 local function dissect_gc(tvb, tree)
@@ -352,6 +432,10 @@ local function dissect_dpv1(tvb, tree, request)
     end
     tree:add_proto_expert_info(e_len, "DP-V1 error shorter than 4 bytes")
     return name
+  end
+  if tvb:len() >= 4 and fn == 0x5C then
+    local words = alarm_fields(tvb(1, 3):tvb(), tree)
+    return name .. " " .. words
   end
   if tvb:len() >= 4 and (fn == 0x5E or fn == 0x5F) then
     tree:add(d.v1_slot, tvb(1, 1))

@@ -1,5 +1,6 @@
 //! `dpctl gsd show FILE` and `dpctl gsd check FILE`: what a GSD file
-//! describes, and what is wrong with it.
+//! describes, and what is wrong with it; `dpctl gsd install FILE…`: copy
+//! files into the user library that `dpctl scan --write-config` searches.
 
 use crate::out::{out, outln};
 use anyhow::bail;
@@ -21,6 +22,19 @@ enum Cmd {
     /// Check a GSD file: print its errors and warnings with
     /// file:line:col; exit status 1 when it has errors.
     Check(CheckArgs),
+    /// Copy GSD files into the user library ($XDG_DATA_HOME/dpctl/gsd,
+    /// default ~/.local/share/dpctl/gsd), where `dpctl scan
+    /// --write-config` finds them by ident number. Each file is parsed
+    /// first: one that does not parse is refused with file:line:col and
+    /// nothing is copied.
+    Install(InstallArgs),
+}
+
+#[derive(clap::Args)]
+struct InstallArgs {
+    /// The GSD files (`.gsd` or a localised `.gse`, `.gsg`, …).
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -55,6 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.cmd {
         Cmd::Show(a) => show(a),
         Cmd::Check(a) => check(a),
+        Cmd::Install(a) => install(a),
     }
 }
 
@@ -102,6 +117,41 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     }
     if !a.json {
         outln!("{check}")?;
+    }
+    Ok(())
+}
+
+fn install(a: InstallArgs) -> anyhow::Result<()> {
+    use profibus_dp::config::library::{first_error, is_gsd_name, user_dir};
+    let dir = user_dir()
+        .ok_or_else(|| anyhow::anyhow!("no user library: neither XDG_DATA_HOME nor HOME is set"))?;
+    // Every file parsed before any is copied.
+    let mut parsed = Vec::new();
+    for f in &a.files {
+        if !is_gsd_name(f) {
+            bail!(
+                "{}: not a GSD file name (.gsd, or a localised .gse, .gsg, …)",
+                f.display()
+            );
+        }
+        let name = f
+            .file_name()
+            .ok_or_else(|| anyhow::anyhow!("{}: names no file", f.display()))?;
+        match Gsd::from_file(f, ParseOptions::LENIENT) {
+            Ok(p) => parsed.push((f, name, p.gsd)),
+            Err(e) => bail!("{} (not installed)", first_error(f, &e)),
+        }
+    }
+    std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+    for (from, name, gsd) in parsed {
+        let to = dir.join(name);
+        std::fs::copy(from, &to).map_err(|e| anyhow::anyhow!("{}: {e}", to.display()))?;
+        let model = gsd.model_name.as_deref().unwrap_or("no Model_Name").trim();
+        outln!(
+            "installed {} (ident 0x{:04X}, {model})",
+            to.display(),
+            gsd.ident_number
+        )?;
     }
     Ok(())
 }

@@ -96,8 +96,11 @@ pub struct ProfileArgs {
     /// `leave`, `tags`, `status`. jx2: a Unix socket to create for register
     /// commands (`read 12100`, `write 12102 16`, ...; stdin always takes
     /// them too). bk3000: `status`, `outputs`, `set NAME VALUE`, `release
-    /// NAME|all`, `pull N`, `plug N`, `run`.
-    #[arg(long, value_name = "FILE", requires = "device")]
+    /// NAME|all`, `pull N`, `plug N`, `run`. generic (--gsd): `alarm TYPE
+    /// SLOT appears|disappears [HEX]` (a DP-V1 alarm: diagnostic, process,
+    /// pull, plug, status, update, manufacturer or a type number; the GSD
+    /// must declare it, the master enable it).
+    #[arg(long, value_name = "FILE")]
     pub control: Option<String>,
     /// jx2: the module number x of the registers 1x100..1x999 (1..9,
     /// default 2).

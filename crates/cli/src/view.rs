@@ -132,6 +132,7 @@ pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View
     while let Some(e) = m.poll_event() {
         let gsd = match &e {
             profibus_dp::master::MasterEvent::Diag { address }
+            | profibus_dp::master::MasterEvent::Alarm { address, .. }
             | profibus_dp::master::MasterEvent::CfgMismatch { address } => slaves_info
                 .iter()
                 .find(|s| s.layout.address == *address)

@@ -515,3 +515,97 @@ fn bus_pcap_keeps_corrupted_telegrams_for_the_fcs_filter() {
         out.stderr
     );
 }
+
+/// DP-V1 alarms: an alarm and a status block in a Slave_Diag, the
+/// master's Alarm_Ack (SAP 51 → 50) and the slave's echo, written from
+/// the layouts of dpv1-c2-im-alarms.md §4.4-4.5.
+#[test]
+fn dissector_decodes_alarm_blocks_and_alarm_ack() {
+    use profibus::fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
+    use profibus::fdl::Telegram;
+    let dir = TempDir::new("wireshark-alarms");
+    let path = dir.path("alarms.pcapng");
+    let emit = |t: Telegram<'_>| {
+        let mut buf = [0u8; 80];
+        let n = t.emit(&mut buf).unwrap();
+        buf[..n].to_vec()
+    };
+    let request = FunctionCode::Request {
+        kind: RequestKind::SrdHigh,
+        fcb: true,
+        fcv: true,
+    };
+    let response = FunctionCode::slave_response(ResponseStatus::Dl);
+    // Slave 9 → master 2: Ext_Diag; a diagnostic alarm of slot 1, seq 5,
+    // Add_Ack, appears (0x2D), data 02 00; a module status block.
+    let diag = emit(Telegram::Data(DataTelegram {
+        da: 2,
+        sa: 9,
+        fc: response,
+        dsap: Some(62),
+        ssap: Some(60),
+        data: &[
+            0x08, 0x0C, 0x00, 0x02, 0x0D, 0xCA, 0x06, 0x01, 0x01, 0x2D, 0x02, 0x00, 0x05, 0x82,
+            0x00, 0x01, 0x10,
+        ],
+        format: None,
+    }));
+    let ack = [0x5C, 0x01, 0x01, 0x2D];
+    let ack_req = emit(Telegram::Data(DataTelegram {
+        da: 9,
+        sa: 2,
+        fc: request,
+        dsap: Some(50),
+        ssap: Some(51),
+        data: &ack,
+        format: None,
+    }));
+    let ack_res = emit(Telegram::Data(DataTelegram {
+        da: 2,
+        sa: 9,
+        fc: response,
+        dsap: Some(51),
+        ssap: Some(50),
+        data: &ack,
+        format: None,
+    }));
+    let mut w = PcapWriter::new(
+        std::fs::File::create(&path).unwrap(),
+        Duration::from_secs(1),
+    )
+    .unwrap();
+    for (i, t) in [diag, ack_req, ack_res].iter().enumerate() {
+        w.write_packet(Duration::from_millis(i as u64 + 1), t)
+            .unwrap();
+    }
+    w.flush().unwrap();
+    drop(w);
+    let rows = tshark_fields(
+        &path,
+        &[
+            "pbdp.service",
+            "pbdp.alarm.type",
+            "pbdp.alarm.slot",
+            "pbdp.alarm.seq",
+            "pbdp.alarm.add_ack",
+            "pbdp.alarm.change",
+            "pbdp.alarm.data",
+            "pbdp.status.type",
+            "pbdp.dpv1.function",
+        ],
+    );
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    let d = &rows[0];
+    assert_eq!(d[0], "Slave_Diag", "{d:?}");
+    // The status block's slot (0) follows the alarm's (1).
+    assert_eq!(
+        &d[1..8],
+        &["1", "1,0", "5", "1", "1,1", "0200,10", "0x82"],
+        "{d:?}"
+    );
+    for r in &rows[1..] {
+        assert_eq!(r[0], "Alarm_Ack", "{r:?}");
+        assert_eq!(&r[1..6], &["1", "1", "5", "1", "1"], "{r:?}");
+        assert_eq!(r[8], "0x5c", "{r:?}");
+    }
+}

@@ -15,13 +15,21 @@
 //! - Set_Slave_Add (when supported): accepted unless No_Add_Chg was
 //!   stored before ([`GenericDevice::with_stored_address`]); the program
 //!   running the slave keeps the address ([`crate::address`]).
+//! - DP-V1 alarms (when the description declares any `*_Alarm_supp`):
+//!   the control command `alarm TYPE SLOT appears|disappears [HEX]`
+//!   ([`GenericDevice::control`], `dpctl slave --control`) raises one;
+//!   the slave core queues it, reports it in Slave_Diag and waits for the
+//!   master's Alarm_Ack.
 //!
 //! [`GenericProfile`] is the `generic` entry of the profile registry: the
 //! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`.
 
-use crate::kit::EventQueue;
+use crate::kit::{EventQueue, InboxSchedule};
+use crate::profile::ControlError;
 use profibus_dp::config::gsd::{Gsd, LookupError, PrmDataType, SelectionError};
+use profibus_dp::pdu::alarm::{AlarmChange, AlarmType};
 use profibus_dp::pdu::prm::SetPrm;
+use profibus_dp::slave::Alarm;
 use profibus_dp::slave::{
     expect_cfg, expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Dpv1Outcome,
     Features, IoLayout, Reason, ERR_CLASS_ACCESS, ERR_CLASS_RESOURCE, ERR_INVALID_INDEX,
@@ -29,6 +37,7 @@ use profibus_dp::slave::{
 };
 use profibus_fdl::Instant;
 use std::collections::BTreeMap;
+use std::collections::VecDeque;
 use std::path::PathBuf;
 
 use crate::address::StoredAddress;
@@ -130,6 +139,9 @@ pub struct GenericDevice {
     static_diag: bool,
     new_diag: bool,
     events: EventQueue,
+    inbox: InboxSchedule,
+    /// Alarms raised, for the slave core to take.
+    alarms: VecDeque<Alarm>,
 }
 
 impl std::fmt::Debug for GenericDevice {
@@ -170,6 +182,8 @@ impl GenericDevice {
             static_diag: false,
             new_diag: false,
             events: EventQueue::default(),
+            inbox: InboxSchedule::default(),
+            alarms: VecDeque::new(),
         }
     }
 
@@ -215,13 +229,7 @@ impl GenericDevice {
             set_slave_add: gsd.set_slave_add_supp,
             dpv1: gsd.dpv1_slave,
             c1_read_write: gsd.dpv1_slave && gsd.c1_read_write_supp,
-            alarms: gsd.dpv1_slave
-                && (gsd.diagnostic_alarm_supp
-                    || gsd.process_alarm_supp
-                    || gsd.pull_plug_alarm_supp
-                    || gsd.status_alarm_supp
-                    || gsd.update_alarm_supp
-                    || gsd.manufacturer_specific_alarm_supp),
+            alarms: !gsd.declared_alarms().is_empty(),
             fail_safe: gsd.fail_safe,
             max_diag_len: gsd.max_diag_data_len.unwrap_or(244).clamp(6, 244),
             c1_max_data_len: gsd.c1_max_data_len.unwrap_or(240).clamp(1, 240),
@@ -283,6 +291,89 @@ impl GenericDevice {
     /// The DP-V1 record at `slot`/`index`.
     pub fn record(&self, slot: u8, index: u8) -> Option<&[u8]> {
         self.records.get(&(slot, index)).map(Vec::as_slice)
+    }
+
+    /// Read control commands from `inbox` ([`GenericDevice::control`]).
+    pub fn with_inbox(mut self, inbox: ControlInbox) -> Self {
+        self.inbox.set(inbox);
+        self
+    }
+
+    /// Apply one control command: `alarm TYPE SLOT CHANGE [HEX]` raises a
+    /// DP-V1 alarm. TYPE is `diagnostic`, `process`, `pull`, `plug`,
+    /// `status`, `update`, `manufacturer` or a type number (32..=126
+    /// manufacturer-specific); SLOT 0..=254; CHANGE `appears`,
+    /// `disappears` or `disappears-still-faulty`; HEX the
+    /// Diagnostic_User_Data (at most 59 bytes). Returns the answer in
+    /// words; the slave core reports what becomes of the alarm.
+    pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
+        let mut w = line.split_whitespace();
+        let arg = |m: String| ControlError::Argument(m);
+        const USAGE: &str = "`alarm TYPE SLOT appears|disappears [HEX]`";
+        match w.next().unwrap_or("") {
+            "alarm" => {
+                if !self.features.alarms {
+                    return Err(ControlError::Refused(format!(
+                        "{}: the GSD declares no DP-V1 alarms (Diagnostic_Alarm_supp, …)",
+                        self.name
+                    )));
+                }
+                let t = w
+                    .next()
+                    .ok_or_else(|| arg(format!("{USAGE}: TYPE missing")))?;
+                let alarm_type = AlarmType::from_word(t).ok_or_else(|| {
+                    arg(format!(
+                        "unknown alarm type `{t}` (diagnostic, process, pull, plug, status, \
+                         update, manufacturer, or a number 1..=126)"
+                    ))
+                })?;
+                let slot = w
+                    .next()
+                    .ok_or_else(|| arg(format!("{USAGE}: SLOT missing")))?;
+                let slot: u8 = slot
+                    .parse()
+                    .ok()
+                    .filter(|s| *s <= 254)
+                    .ok_or_else(|| arg(format!("slot `{slot}` is not 0..=254")))?;
+                let c = w
+                    .next()
+                    .ok_or_else(|| arg(format!("{USAGE}: appears|disappears missing")))?;
+                let change = AlarmChange::from_word(c)
+                    .filter(|c| *c != AlarmChange::None)
+                    .ok_or_else(|| {
+                        arg(format!(
+                            "`{c}`: give appears, disappears or disappears-still-faulty"
+                        ))
+                    })?;
+                let hex: Vec<&str> = w.collect();
+                let data = profibus_fdl::wire::parse_hex(&hex.join(" "))
+                    .map_err(|e| arg(format!("alarm data: {e}")))?;
+                if data.len() > profibus_dp::pdu::alarm::MAX_ALARM_DATA_LEN {
+                    return Err(arg(format!(
+                        "{} bytes of alarm data, at most 59 fit into an alarm block",
+                        data.len()
+                    )));
+                }
+                let text = format!(
+                    "{} alarm slot {slot} {} raised",
+                    alarm_type.word(),
+                    change.word()
+                );
+                self.alarms.push_back(Alarm {
+                    alarm_type,
+                    slot,
+                    change,
+                    add_ack: false,
+                    data,
+                });
+                Ok(text)
+            }
+            "" => Err(arg("empty command".into())),
+            other => Err(ControlError::Unknown {
+                command: other.to_string(),
+                known: "alarm TYPE SLOT appears|disappears [HEX]",
+            }),
+        }
     }
 
     /// Set the extended diagnosis: a device-related block with `data`
@@ -421,6 +512,23 @@ impl Device for GenericDevice {
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         self.events.pop()
     }
+
+    fn take_alarm(&mut self) -> Option<Alarm> {
+        self.alarms.pop_front()
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.inbox.deadline()
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        for line in self.inbox.due(now) {
+            match self.control(&line) {
+                Ok(text) => self.events.note("control", text),
+                Err(e) => self.events.note("control-error", e.to_string()),
+            }
+        }
+    }
 }
 
 /// The options of the `generic` profile.
@@ -523,11 +631,14 @@ impl Profile for GenericProfile {
         self.options.address_file.clone()
     }
 
-    fn device(&self, _control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
-        let dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)
+    fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
+        let mut dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)
             .map_err(|e| ProfileError::Device(Box::new(e)))?
             .with_inputs(self.pattern)
             .with_stored_address(self.stored);
+        if let Some(inbox) = control {
+            dev = dev.with_inbox(inbox);
+        }
         Ok(Box::new(dev))
     }
 
@@ -797,5 +908,62 @@ EndModule
             no_add_chg: false,
         }));
         assert!(d.set_address(18, false, &[]).is_ok());
+    }
+}
+
+#[cfg(test)]
+mod alarm_tests {
+    use super::*;
+    use profibus_dp::config::gsd::ParseOptions;
+
+    fn alarm_device(alarms: bool) -> GenericDevice {
+        let mut text = String::from_utf8_lossy(crate::gsd_files::DPCTL_GEN).into_owned();
+        if alarms {
+            text.push_str("\nDiagnostic_Alarm_supp=1\nProcess_Alarm_supp=1\n");
+        }
+        let gsd = Gsd::parse(&text, ParseOptions::LENIENT).unwrap().gsd;
+        GenericDevice::from_gsd(&gsd, &["1 byte in"]).unwrap()
+    }
+
+    #[test]
+    fn the_alarm_command_raises_an_alarm_for_the_core() {
+        let mut d = alarm_device(true);
+        assert!(d.features().alarms);
+        assert_eq!(
+            d.control("alarm diagnostic 1 appears 01 02").unwrap(),
+            "diagnostic alarm slot 1 appears raised"
+        );
+        d.control("alarm 40 0 disappears-still-faulty").unwrap();
+        let a = d.take_alarm().unwrap();
+        assert_eq!(
+            (a.alarm_type, a.slot, a.change, &a.data[..]),
+            (
+                AlarmType::Diagnostic,
+                1,
+                AlarmChange::Appears,
+                &[1u8, 2][..]
+            )
+        );
+        let a = d.take_alarm().unwrap();
+        assert!(a.alarm_type.is_manufacturer());
+        assert_eq!(d.take_alarm(), None);
+        for (line, want) in [
+            (
+                "alarm diagnostik 1 appears",
+                "unknown alarm type `diagnostik`",
+            ),
+            ("alarm process 255 appears", "slot `255` is not 0..=254"),
+            ("alarm process 1 comes", "give appears, disappears"),
+            ("alarm process 1 appears zz", "alarm data"),
+            ("alarm process", "SLOT missing"),
+            ("alarms", "unknown command `alarms`"),
+        ] {
+            let e = d.control(line).unwrap_err().to_string();
+            assert!(e.contains(want), "{line}: {e}");
+        }
+        let e = alarm_device(false)
+            .control("alarm process 1 appears")
+            .unwrap_err();
+        assert!(e.to_string().contains("declares no DP-V1 alarms"), "{e}");
     }
 }

@@ -18,6 +18,22 @@ pub const BK30BECF: &[u8] = include_bytes!("../gsd/BK30BECF.GSD");
 /// `AEGI0DC4.GSD`: AEG ID ARE I2/K1 PFB RFID reader.
 pub const AEGI0DC4: &[u8] = include_bytes!("../gsd/AEGI0DC4.GSD");
 
+/// `JX2P0DC3.GSD`: Jetter JX2-PROFI1.
+pub const JX2P0DC3: &[u8] = crate::jx2::GSD;
+
+/// Every built-in file by its file name, for a GSD library
+/// (`profibus_dp::config::library::GsdLibrary::add_built_in`). The
+/// manual's example `MyGSDFile.gsd` is left out: it has the ident of
+/// `BM4OPRO1.GSD` with other modules.
+pub const BUILT_IN: &[(&str, &[u8])] = &[
+    ("DPCTL_GEN.GSD", DPCTL_GEN),
+    ("BM4OPRO1.GSD", BM4OPRO1),
+    ("BNF_00D0.GSD", BNF_00D0),
+    ("BK30BECF.GSD", BK30BECF),
+    ("AEGI0DC4.GSD", AEGI0DC4),
+    ("JX2P0DC3.GSD", JX2P0DC3),
+];
+
 /// Parse one of the built-in files (leniently: some keep their vendor
 /// quirks).
 pub fn parse(bytes: &[u8]) -> Result<Gsd, GsdError> {

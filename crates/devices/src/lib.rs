@@ -96,6 +96,7 @@ pub mod bk3000;
 pub mod bm4;
 pub mod bus;
 pub mod channels;
+pub mod commission;
 pub mod generic;
 pub mod gsd_files;
 pub mod jx2;

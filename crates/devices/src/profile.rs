@@ -502,6 +502,17 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
     fn warnings(&self) -> Vec<String> {
         vec![]
     }
+
+    /// Commissioning (`dpctl scan --write-config`): option sets that may
+    /// give a slave of this product the configuration `cfg` (its Get_Cfg
+    /// answer), most likely first. The caller configures each and keeps
+    /// the first whose Chk_Cfg is `cfg`, so a guess costs nothing but
+    /// time. Default: the profile's default options only. A product
+    /// whose options the configuration tells (the JX2's word counts, a
+    /// coupler's terminal strip) derives them from `cfg`.
+    fn options_for_cfg(_cfg: &[u8]) -> Vec<DeviceOptions> {
+        vec![DeviceOptions::new()]
+    }
 }
 
 /// A configured profile, object-safe: what programs hold
@@ -598,6 +609,7 @@ pub struct ProfileEntry {
     pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
     pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
     capabilities: fn(&[u8]) -> Capabilities,
+    options_for_cfg: fn(&[u8]) -> Vec<DeviceOptions>,
 }
 
 impl std::fmt::Display for ProfileEntry {
@@ -633,6 +645,7 @@ impl ProfileEntry {
             pkw_dialect: P::pkw_dialect,
             pkw_parameter: P::pkw_parameter,
             capabilities: P::capabilities,
+            options_for_cfg: P::options_for_cfg,
         }
     }
 
@@ -659,6 +672,17 @@ impl ProfileEntry {
     /// See [`Profile::pkw_parameter`].
     pub fn pkw_parameter(&self, gsd: &Gsd, name: &str) -> Option<u16> {
         (self.pkw_parameter)(gsd, name)
+    }
+
+    /// The options of this profile, among [`Profile::options_for_cfg`],
+    /// whose Chk_Cfg is exactly `cfg`; `address` as for
+    /// [`ProfileEntry::configure`].
+    pub fn options_giving(&self, cfg: &[u8], address: Option<u8>) -> Option<DeviceOptions> {
+        (self.options_for_cfg)(cfg).into_iter().find(|o| {
+            self.configure(o, address)
+                .and_then(|p| p.chk_cfg())
+                .is_ok_and(|c| c == cfg)
+        })
     }
 }
 

@@ -592,9 +592,12 @@ fn keywords_of_the_standard_are_known() {
         ]
     );
     let g = &p.gsd;
-    // Every line but `C1_Read_Write_required` (in the model) is kept,
-    // with the two unknown ones.
-    assert_eq!(g.other.len(), station.len() - 1 + 2, "{:#?}", g.other);
+    // Every line but `C1_Read_Write_required`, `Alarm_Sequence_Mode_Count`
+    // and `Alarm_Type_Mode_supp` (in the model) is kept, with the two
+    // unknown ones.
+    assert_eq!(g.other.len(), station.len() - 3 + 2, "{:#?}", g.other);
+    assert_eq!(g.alarm_sequence_mode_count, Some(2));
+    assert!(g.alarm_type_mode_supp);
     assert!(!g.c1_read_write_required);
     assert_eq!(g.other_flag("fail_safe_required"), Some(true));
     assert_eq!(g.other_flag("PRMCMD_SUPP"), Some(true));

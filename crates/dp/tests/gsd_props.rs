@@ -338,6 +338,8 @@ fn gsd() -> impl Strategy<Value = Gsd> {
             status_alarm_supp: f[9],
             update_alarm_supp: f[10],
             manufacturer_specific_alarm_supp: f[11] && f[0],
+            alarm_type_mode_supp: f[6] && f[7],
+            alarm_sequence_mode_count: c2_max_count_channels,
             modules,
             slots,
             unit_diag_bits,

@@ -41,6 +41,7 @@
 pub mod catalogue;
 pub mod image;
 pub mod master;
+pub mod plc;
 pub mod prm;
 pub mod profile;
 pub mod registers;
@@ -93,6 +94,12 @@ pub struct Bk3000 {
     /// Diagnosis messages of terminal channels in error (English edition
     /// p. 50: terminal, channel, 3 reserved, status byte, 2 reserved).
     term_diag: Vec<[u8; 8]>,
+    /// The 2-byte PLC interface's state ([`plc`]).
+    plc: plc::PlcInterface,
+    /// Coupler table 0 (settings) and table 98 register 3.
+    table0: [u16; 256],
+    /// K-bus cycle time set for the cycle-time measurement (table 98 R3).
+    cycle_set: u16,
     events: EventQueue,
     inbox: InboxSchedule,
 }
@@ -126,6 +133,9 @@ impl Bk3000 {
             counter: 0,
             regs,
             term_diag: vec![],
+            plc: plc::PlcInterface::default(),
+            table0: [0; 256],
+            cycle_set: 0,
             events: EventQueue::with_limit(256),
             inbox: InboxSchedule::default(),
         }
@@ -751,6 +761,185 @@ impl Bk3000 {
     }
 }
 
+impl Bk3000 {
+    /// One step of the 2-byte PLC interface: a new toggle bit executes
+    /// the function of the control byte ([`plc`]).
+    fn plc_step(&mut self, control: u8, data: u8) {
+        let Some(req) = self.plc.step(control, data) else {
+            return;
+        };
+        let result = match req {
+            plc::Request::Read {
+                terminal,
+                table,
+                register,
+            } => self.plc_read(terminal, table, register),
+            plc::Request::Write {
+                terminal,
+                table,
+                register,
+                value,
+            } => self
+                .plc_write(terminal, table, register, value)
+                .map(|()| value),
+            plc::Request::StartKbus => {
+                if self.held {
+                    self.held = false;
+                    self.diag_changed = true;
+                    self.events.note(
+                        "control",
+                        "parameter mode left through the PLC interface: K-bus running".into(),
+                    );
+                }
+                Ok(0)
+            }
+        };
+        match result {
+            Ok(v) => self.plc.done(v),
+            Err(why) => {
+                self.events.note("plc", format!("PLC interface: {why}"));
+                self.plc.failed();
+            }
+        }
+    }
+
+    /// The terminals that count for the PLC interface and table 9: every
+    /// terminal with process data (1-based positions in the strip).
+    fn active_terminals(&self) -> Vec<usize> {
+        self.strip
+            .slots()
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.ty.class != Class::Passive)
+            .map(|(k, _)| k + 1)
+            .collect()
+    }
+
+    /// Table 9: 3000 in register 0, then one word per terminal: the type
+    /// number of a complex terminal, `0x8000 | bits << 8 | out << 1 | in`
+    /// of a digital one (Beckhoff's terminal composition, not from the
+    /// manual).
+    pub fn table9(&self) -> Vec<u16> {
+        let mut t = vec![3000];
+        for p in self.active_terminals() {
+            let ty = self.strip.slots()[p - 1].ty;
+            t.push(if ty.is_digital() {
+                let (i, o) = ty.digital_bits();
+                0x8000 | (u16::from(i.max(o)) << 8) | (u16::from(o > 0) << 1) | u16::from(i > 0)
+            } else {
+                ty.type_number()
+            });
+        }
+        t
+    }
+
+    /// The modelled K-bus cycle time in µs (table 98): 200 µs plus 5 µs
+    /// per digital bit and 30 µs per byte of complex data (our model; the
+    /// manual's table p. 23 is cut off in the summary).
+    pub fn kbus_cycle_us(&self) -> u16 {
+        let img = self.strip.default_image(image::Options::default());
+        let bits: usize = self
+            .strip
+            .slots()
+            .iter()
+            .map(|s| {
+                let (i, o) = s.ty.digital_bits();
+                (i + o) as usize
+            })
+            .sum();
+        let complex = img.in_len + img.out_len - img.digital.0 - img.digital.1;
+        (200 + 5 * bits + 30 * complex).min(u16::MAX as usize) as u16
+    }
+
+    fn plc_read(&self, terminal: u8, table: u8, register: u8) -> Result<u16, String> {
+        if terminal == 0 {
+            return match table {
+                0 => Ok(self.table0[register as usize]),
+                9 => Ok(self.table9().get(register as usize).copied().unwrap_or(0)),
+                70 => {
+                    let cfg = self.programmed.clone().unwrap_or_default();
+                    Ok(match register {
+                        0 => cfg.len() as u16,
+                        r => cfg.get(r as usize - 1).copied().unwrap_or(0).into(),
+                    })
+                }
+                98 => {
+                    let t = self.kbus_cycle_us();
+                    Ok(match register {
+                        0..=2 => t,
+                        3 => self.cycle_set,
+                        _ => 0,
+                    })
+                }
+                t => Err(format!("the coupler has no table {t} (0, 9, 70, 98)")),
+            };
+        }
+        let (pos, ch) = self.plc_channel(terminal, table)?;
+        Ok(self.regs[&(pos, ch)].read(register))
+    }
+
+    fn plc_write(
+        &mut self,
+        terminal: u8,
+        table: u8,
+        register: u8,
+        value: u16,
+    ) -> Result<(), String> {
+        if terminal == 0 {
+            return match table {
+                0 => {
+                    self.table0[register as usize] = value;
+                    Ok(())
+                }
+                9 => Err("table 9 (the terminal list) is read-only".into()),
+                70 => {
+                    let mut cfg = self.programmed.clone().unwrap_or_default();
+                    match register {
+                        0 => cfg.resize(value.min(244) as usize, 0),
+                        r => {
+                            let i = r as usize - 1;
+                            if cfg.len() <= i {
+                                cfg.resize(i + 1, 0);
+                            }
+                            cfg[i] = value as u8;
+                        }
+                    }
+                    self.events.note(
+                        "plc",
+                        format!("table 70 (programmed configuration): {}", hex(&cfg)),
+                    );
+                    self.programmed = Some(cfg);
+                    Ok(())
+                }
+                98 if register == 3 => {
+                    self.cycle_set = value;
+                    Ok(())
+                }
+                98 => Err("table 98 registers 0-2 are measured values".into()),
+                t => Err(format!("the coupler has no table {t} (0, 9, 70, 98)")),
+            };
+        }
+        let (pos, ch) = self.plc_channel(terminal, table)?;
+        let set = self.regs.get_mut(&(pos, ch)).expect("checked");
+        set.write(register, value)
+            .map_err(|e| format!("terminal {terminal}: {e}"))
+    }
+
+    /// Terminal `terminal` (counted without passive terminals) and its
+    /// table (channel - 1) as a register set.
+    fn plc_channel(&self, terminal: u8, table: u8) -> Result<(usize, u8), String> {
+        let pos = *self
+            .active_terminals()
+            .get(terminal as usize - 1)
+            .ok_or_else(|| format!("no terminal {terminal}"))?;
+        let ch = table + 1;
+        if !self.regs.contains_key(&(pos, ch)) {
+            return Err(format!("terminal {terminal} has no register table {table}"));
+        }
+        Ok((pos, ch))
+    }
+}
+
 impl Device for Bk3000 {
     fn ident_number(&self) -> u16 {
         IDENT
@@ -848,6 +1037,11 @@ impl Device for Bk3000 {
     }
 
     fn write_outputs(&mut self, _now: Instant, outputs: &[u8]) {
+        if self.prm.plc_interface && outputs.len() >= 2 {
+            // The PLC interface is the coupler's own: it works in
+            // parameter mode and with the K-bus stopped (p. 45).
+            self.plc_step(outputs[0], outputs[1]);
+        }
         if self.held || !self.kbus_ok() {
             return;
         }
@@ -866,18 +1060,17 @@ impl Device for Bk3000 {
                     }
                     (_, Some(&v)) => v,
                     (Owner::CycleCounter, None) => self.counter as i64,
-                    (Owner::PlcInterface, None) => match e.role {
-                        // The status byte acknowledges the control byte.
-                        Role::Status => self
-                            .image
-                            .find("plc.control", Some(Dir::Out))
-                            .map_or(0, |c| Image::get(c, &self.outputs)),
-                        _ => 0,
-                    },
+                    // Filled in below, also while the K-bus is held.
+                    (Owner::PlcInterface, None) => 0,
                     (Owner::Terminal(_), None) => self.simulate(e, now),
                 };
                 Image::put(e, inputs, v);
             }
+        }
+        if self.prm.plc_interface && inputs.len() >= 2 {
+            let (st, data) = self.plc.answer();
+            inputs[0] = st;
+            inputs[1] = data;
         }
         if self.inputs.len() == inputs.len() {
             self.inputs.copy_from_slice(inputs);

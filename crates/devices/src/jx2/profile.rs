@@ -11,7 +11,7 @@
 use super::script::Interpreter;
 use super::{Plc, ScriptedJx2, IDENT};
 use crate::channels::{ChannelMap, ChannelType, Direction};
-use crate::profile::{ControlInbox, Profile, ProfileError};
+use crate::profile::{ControlInbox, DeviceOptions, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
@@ -168,6 +168,36 @@ consistent_outputs, consistent_output_offset";
             }
         }
         names
+    }
+
+    /// The word counts and the consistent block of each direction, as
+    /// the configuration's identifiers give them (manual: 1x102/1x103
+    /// words, 1x124/1x125 consistent words at offsets 1x128/1x129); the
+    /// module number is not on the bus (default 2).
+    fn options_for_cfg(cfg: &[u8]) -> Vec<DeviceOptions> {
+        // (words, consistent words, their offset) per direction.
+        let mut dirs = [(0u16, 0u16, 0u16); 2];
+        for id in profibus_dp::pdu::cfg::identifiers(cfg) {
+            let Ok(id) = id else { return vec![] };
+            for (k, len) in [(0, id.input), (1, id.output)] {
+                let Some(len) = len else { continue };
+                let words = (len.bytes() / 2) as u16;
+                let d = &mut dirs[k];
+                if len.consistent && d.1 == 0 {
+                    (d.1, d.2) = (words, d.0);
+                }
+                d.0 += words;
+            }
+        }
+        let mut o = DeviceOptions::new();
+        for (k, (words, cw, off)) in ["input", "output"].into_iter().zip(dirs) {
+            o.set(&format!("{k}_words"), i64::from(words));
+            if cw > 0 {
+                o.set(&format!("consistent_{k}s"), i64::from(cw));
+                o.set(&format!("consistent_{k}_offset"), i64::from(off));
+            }
+        }
+        vec![o]
     }
 
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {

@@ -31,6 +31,8 @@
 //! sync = false
 //! freeze = false
 //! initial_outputs = [0, 0]               # optional
+//! alarms = ["diagnostic", "process"]     # DP-V1 alarms to enable (default: all the
+//!                                        # GSD declares; false: none)
 //!
 //! [mqtt]                 # optional: settings of `dpctl gateway`, kept raw
 //! prefix = "profibus"    # (see the `profibus-gateway` crate)
@@ -70,6 +72,8 @@
 use crate::config::gsd::{Gsd, ParseOptions, PrmValue};
 use crate::config::names::{field_names, DidYouMean};
 use crate::master::{MasterConfig, MasterOptions, SlaveParams};
+use crate::pdu::alarm::{AlarmEnable, AlarmMode};
+use crate::pdu::prm::Dpv1Status2;
 use profibus_fdl::timing::{Baud, BusParams};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -150,6 +154,7 @@ pub const SLAVE_KEYS: &[&str] = &[
     "freeze",
     "initial_outputs",
     "dpv1",
+    "alarms",
 ];
 
 /// The `[[slave]]` tables as plain tables, for the profile options.
@@ -175,6 +180,8 @@ struct RawSlave {
     freeze: Option<Spanned<bool>>,
     initial_outputs: Option<Spanned<Vec<u8>>>,
     dpv1: Option<bool>,
+    /// `alarms = ["diagnostic", …]`, `alarms = false` or `alarms = true`.
+    alarms: Option<Spanned<toml::Value>>,
 }
 
 /// A slave given as a device profile: `device = "NAME"` and the other
@@ -984,6 +991,7 @@ impl Ctx<'_> {
         p.freeze = flag(&s.freeze);
         p.user_prm_data = user_prm_data;
         p.dpv1 = s.dpv1.unwrap_or(gsd.dpv1_slave);
+        (p.alarms, p.alarm_mode) = self.alarms(rs, gsd, p.dpv1)?;
         p.fail_safe = gsd.fail_safe;
         p.min_slave_interval =
             Duration::from_micros(100 * gsd.min_slave_intervall.unwrap_or(0) as u64);
@@ -1011,6 +1019,93 @@ impl Ctx<'_> {
             ));
         }
         Ok(p)
+    }
+
+    /// The DP-V1 alarms Set_Prm enables (DPV1_Status_2) and the
+    /// Alarm_Mode (DPV1_Status_3): every alarm type the GSD declares
+    /// (`Diagnostic_Alarm_supp`, …) unless the slave's `alarms` key
+    /// names fewer (`alarms = ["diagnostic", …]`) or none (`alarms =
+    /// false`). A name that is no alarm type, or an alarm the GSD does
+    /// not declare, is an error at the name. The mode is sequence mode
+    /// with the most alarms `Alarm_Sequence_Mode_Count` allows, else
+    /// type mode (one per type).
+    fn alarms(
+        &self,
+        rs: &Spanned<RawSlave>,
+        gsd: &Gsd,
+        dpv1: bool,
+    ) -> Result<(Dpv1Status2, AlarmMode), BusFileError> {
+        let s = rs.get_ref();
+        let addr = *s.address.get_ref();
+        let declared = if dpv1 {
+            gsd.declared_alarms()
+        } else {
+            Dpv1Status2::empty()
+        };
+        let mode = gsd.alarm_mode();
+        let Some(raw) = &s.alarms else {
+            return Ok((declared, mode));
+        };
+        let span = raw.span();
+        let names: Vec<&str> = match raw.get_ref() {
+            toml::Value::Boolean(true) => return Ok((declared, mode)),
+            toml::Value::Boolean(false) => return Ok((Dpv1Status2::empty(), mode)),
+            toml::Value::Array(a) => a.iter().filter_map(|v| v.as_str()).collect(),
+            _ => vec![],
+        };
+        let list = matches!(raw.get_ref(), toml::Value::Array(a) if a.len() == names.len());
+        if !list {
+            return Err(self.err(
+                Some(span),
+                format!(
+                    "slave {addr}: `alarms` is a list of alarm types (diagnostic, process, \
+                     pull_plug, status, update, manufacturer), or false"
+                ),
+            ));
+        }
+        if names.is_empty() {
+            return Ok((Dpv1Status2::empty(), mode));
+        }
+        if !dpv1 {
+            return Err(self.err(
+                Some(span),
+                format!("slave {addr}: alarms need a DP-V1 slave, and the GSD says it is none"),
+            ));
+        }
+        // Where a name is: its quoted text inside the list.
+        let at = |name: &str| {
+            let inside = self.text.get(span.clone()).unwrap_or("");
+            let quoted = format!("\"{name}\"");
+            let i = inside.find(&quoted).or_else(|| inside.find(name));
+            Some(i.map_or(span.clone(), |i| span.start + i..span.end))
+        };
+        let valid = AlarmEnable::ALL.map(AlarmEnable::name);
+        let mut want = Dpv1Status2::empty();
+        for name in names {
+            let Some(e) = AlarmEnable::from_name(name) else {
+                return Err(self.err(
+                    at(name),
+                    format!(
+                        "slave {addr}: unknown alarm type `{name}`{}",
+                        key_hint(name, &valid)
+                    ),
+                ));
+            };
+            if !declared.contains(e.bit()) {
+                return Err(self.err(
+                    at(name),
+                    format!(
+                        "slave {addr}: {} does not declare {name} alarms (no {} = 1)",
+                        gsd.model_name
+                            .as_deref()
+                            .map_or("the GSD".to_string(), |m| format!("the GSD of {m}")),
+                        e.gsd_keyword()
+                    ),
+                ));
+            }
+            want |= e.bit();
+        }
+        Ok((want, mode))
     }
 
     /// Step 6, the `[bus]` table: the defaults of the baud rate with the
@@ -1271,6 +1366,55 @@ modules = ["no such module"]
         format!(
             "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 5\ngsd = \"DPCTL_GEN.GSD\"\n{modules}\n"
         )
+    }
+
+    #[test]
+    fn alarms_default_to_the_gsd_and_the_key_narrows_or_switches_them_off() {
+        use crate::pdu::prm::Dpv1Status2 as S2;
+        let bus = |line: &str| {
+            format!(
+                "[master]\naddress = 2\nbaud = \"1.5M\"\n[[slave]]\naddress = 9\n\
+                 gsd = \"../../cli/tests/data/DPCTL_ALM.GSD\"\nmodules = [\"1 byte in\"]\n{line}\n"
+            )
+        };
+        let params = |line: &str| {
+            load(&bus(line))
+                .unwrap_or_else(|e| panic!("{e}"))
+                .master
+                .slaves[0]
+                .clone()
+        };
+        let p = params("");
+        assert_eq!(
+            p.alarms,
+            S2::DIAGNOSTIC_ALARM | S2::PROCESS_ALARM | S2::PULL_PLUG_ALARM
+        );
+        assert_eq!(p.alarm_mode.0, 3, "Alarm_Sequence_Mode_Count=8: mode 3");
+        // DPV1_Enable, the enables, Alarm_Mode.
+        assert_eq!(&p.set_prm()[7..], &[0x80, 0xE0, 0x03]);
+        assert_eq!(params("alarms = [\"process\"]").alarms, S2::PROCESS_ALARM);
+        let off = params("alarms = false");
+        assert!(off.alarms.is_empty());
+        assert_eq!(&off.set_prm()[7..], &[0x80, 0x00, 0x00]);
+        let e = load(&bus("alarms = [\"prozess\"]")).unwrap_err();
+        assert_eq!((e.line, e.column), (8, 11), "{e}");
+        assert!(
+            e.message
+                .ends_with("unknown alarm type `prozess`; did you mean `process`?"),
+            "{e}"
+        );
+        let e = load(&bus("alarms = \"all\"")).unwrap_err();
+        assert!(e.message.contains("is a list of alarm types"), "{e}");
+        // DPCTL_GEN.GSD is DP-V1 without alarms.
+        let e = load(&gen_bus(
+            "modules = [\"1 byte in\"]\nalarms = [\"diagnostic\"]",
+        ))
+        .unwrap_err();
+        assert!(
+            e.message
+                .contains("does not declare diagnostic alarms (no Diagnostic_Alarm_supp = 1)"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -5,6 +5,10 @@
 //! - [`busfile`]: the TOML bus file of a master, built on GSD files.
 //! - [`discover`]: from a slave's Get_Cfg bytes back to the GSD modules
 //!   that give them (scan to bus file).
+//! - [`library`]: the GSD files a slave's file is found in by ident
+//!   number (folders, built-in files, the user library).
+//! - [`commission`]: from a scan's Slave_Diag and Get_Cfg answers to a
+//!   bus file (`dpctl scan --write-config`).
 //! - [`file`](mod@file): reading an input file (bus file, profile table, script)
 //!   with a size limit.
 //! - [`layout`]: a configured slave's modules with their byte spans and
@@ -13,8 +17,10 @@
 //!   mean …?") and the keys of a serde struct.
 
 pub mod busfile;
+pub mod commission;
 pub mod discover;
 pub mod file;
 pub mod gsd;
 pub mod layout;
+pub mod library;
 pub mod names;

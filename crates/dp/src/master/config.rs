@@ -1,7 +1,8 @@
 //! Configuration of a DP master and of each slave it polls.
 
+use crate::pdu::alarm::AlarmMode;
 use crate::pdu::cfg::{self, CfgError};
-use crate::pdu::prm::{PrmStationStatus, SetPrm};
+use crate::pdu::prm::{Dpv1Status2, PrmStationStatus, SetPrm};
 use profibus_fdl::timing::BusParams;
 use std::time::Duration;
 
@@ -40,6 +41,12 @@ pub struct SlaveParams {
     pub initial_outputs: Vec<u8>,
     /// Time a DP-V1 read/write may take (GSD C1_Response_Timeout).
     pub dpv1_timeout: Duration,
+    /// DP-V1 alarms Set_Prm enables (the alarm bits of DPV1_Status_2;
+    /// bus file `alarms`, default: those the GSD declares). Any alarm
+    /// also sets DPV1_Enable; none clears the alarm bits.
+    pub alarms: Dpv1Status2,
+    /// Alarm_Mode (DPV1_Status_3 b2-0) sent with alarms.
+    pub alarm_mode: AlarmMode,
 }
 
 impl SlaveParams {
@@ -62,6 +69,8 @@ impl SlaveParams {
             min_slave_interval: Duration::ZERO,
             initial_outputs: Vec::new(),
             dpv1_timeout: Duration::from_secs(1),
+            alarms: Dpv1Status2::empty(),
+            alarm_mode: AlarmMode(0),
         }
     }
 
@@ -113,6 +122,17 @@ impl SlaveParams {
                 user[0] |= crate::pdu::prm::Dpv1Status1::WD_BASE_1MS.bits();
             } else {
                 user[0] &= !crate::pdu::prm::Dpv1Status1::WD_BASE_1MS.bits();
+            }
+        }
+        if self.dpv1 && user.len() >= 3 {
+            // The alarm enables (DPV1_Status_2) and Alarm_Mode
+            // (DPV1_Status_3 b2-0) are the master's, whatever the GSD's
+            // constant User_Prm_Data says; alarms need DPV1_Enable.
+            let alarm_bits = Dpv1Status2::all().difference(Dpv1Status2::CHECK_CFG_MODE);
+            user[1] = (user[1] & !alarm_bits.bits()) | self.alarms.bits();
+            if !self.alarms.is_empty() {
+                user[0] |= crate::pdu::prm::Dpv1Status1::DPV1_ENABLE.bits();
+                user[2] = (user[2] & !0x07) | (self.alarm_mode.0 & 0x07);
             }
         }
         let prm = SetPrm {

@@ -54,6 +54,7 @@
 //! no locks and no allocation: the module docs of `profibus_io::driver`
 //! show that loop on a serial line.
 
+mod alarm;
 mod command;
 mod config;
 pub mod records;
@@ -62,12 +63,13 @@ mod stop;
 mod task;
 mod wait;
 
+pub use alarm::{AlarmNotice, ALARM_ACK_TRIES};
 pub use command::{CommandError, CommandOutcome, MasterCommand, Queue};
 pub use config::{
     MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
     DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST, STARTUP_RETRY_MAX,
 };
-pub use report::{CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
+pub use report::{AlarmReport, CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
@@ -407,6 +409,16 @@ pub enum MasterEvent {
         /// Station address.
         address: u8,
     },
+    /// A DP-V1 alarm of a slave was acknowledged (Alarm_Ack confirmed),
+    /// or given up after [`ALARM_ACK_TRIES`] attempts or because the
+    /// slave left Data_Exchange (`alarm.acknowledged` false, with the
+    /// problem in words). Reported once per alarm.
+    Alarm {
+        /// Station address.
+        address: u8,
+        /// The alarm.
+        alarm: AlarmNotice,
+    },
     /// A job ended; take its result with [`DpMaster::take_result`].
     JobDone(JobId),
     /// The token ring changed.
@@ -498,6 +510,8 @@ struct Slave {
     read_cfg: bool,
     /// The slave's answer to the last Get_Cfg.
     actual_cfg: Vec<u8>,
+    /// DP-V1 alarms waiting for their Alarm_Ack.
+    alarms: alarm::SlaveAlarms,
 }
 
 /// The next request of a poll cycle ([`DpMaster::next_cyclic`]).
@@ -512,6 +526,8 @@ enum Inflight {
     Slave(usize, Step),
     GlobalControl,
     Job,
+    /// Alarm_Ack of slave `.0`'s waiting alarm `.1`.
+    AlarmAck(usize, usize),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -605,6 +621,8 @@ pub struct DpMaster {
     live: [Option<StationType>; 128],
     zeros: [u8; 244],
     req: [u8; 248],
+    /// The slave whose alarm was acknowledged last.
+    alarm_cursor: usize,
 }
 
 const NO_SLAVE: u8 = 0xFF;
@@ -682,6 +700,7 @@ impl DpMaster {
                 ident_reported: None,
                 read_cfg: false,
                 actual_cfg: Vec::new(),
+                alarms: alarm::SlaveAlarms::default(),
             });
         }
         Ok(DpMaster {
@@ -709,6 +728,7 @@ impl DpMaster {
             live: [None; 128],
             zeros: [0; 244],
             req: [0; 248],
+            alarm_cursor: 0,
         })
     }
 
@@ -908,6 +928,10 @@ impl DpMaster {
         self.events_dropped
     }
 
+    fn events_push_alarm(&mut self, address: u8, alarm: AlarmNotice) {
+        self.emit(MasterEvent::Alarm { address, alarm });
+    }
+
     fn emit(&mut self, e: MasterEvent) {
         if self.events.len() >= EVENT_LIMIT {
             self.events.pop_front();
@@ -930,6 +954,18 @@ impl DpMaster {
             s.need_diag = false;
         }
         let address = s.p.address;
+        if from == SlaveState::DataExchange {
+            let why = format!("the slave left Data_Exchange ({})", to.name());
+            for alarm in s.alarms.abandon(&why) {
+                tracing::warn!(
+                    address,
+                    "DP-V1 alarm {}",
+                    alarm.problem.as_deref().unwrap_or("")
+                );
+                self.events_push_alarm(address, alarm);
+            }
+        }
+        let s = &mut self.slaves[i];
         tracing::debug!(address, from = from.name(), to = to.name(), "slave state");
         // The steps of a start-up retried after a failure are not
         // reported again: the fault (and its end) tells what happens.
@@ -1279,6 +1315,9 @@ impl DpMaster {
         }
         s.last_diag = now;
         s.need_diag = false;
+        if s.p.dpv1 && !s.p.alarms.is_empty() {
+            s.alarms.on_diag(&d);
+        }
         let changed = s.diag != data;
         if changed {
             s.diag.clear();
@@ -1514,6 +1553,74 @@ impl DpMaster {
         }
     }
 
+    /// A slave in Data_Exchange with an alarm waiting for its Alarm_Ack,
+    /// the one after the slave acknowledged last first (round robin).
+    fn alarm_due(&self) -> Option<usize> {
+        let n = self.slaves.len();
+        (1..=n).map(|k| (self.alarm_cursor + k) % n).find(|&i| {
+            let s = &self.slaves[i];
+            s.state == SlaveState::DataExchange && s.alarms.waiting()
+        })
+    }
+
+    /// The Alarm_Ack of slave `i`'s next alarm (in sequence-number
+    /// order): MSAC_C1 from SAP 51 to SAP 50, `5C slot type specifier`,
+    /// or an empty poll for the answer.
+    fn alarm_request(&mut self, i: usize) -> Request<'_> {
+        self.alarm_cursor = i;
+        let s = &self.slaves[i];
+        let k = s.alarms.next().unwrap_or(0);
+        let len = s.alarms.request(k, &mut self.req);
+        self.inflight = Some(Inflight::AlarmAck(i, k));
+        Request {
+            da: s.p.address,
+            service: Service::SrdHigh,
+            dsap: Some(sap::ALARM_ACK),
+            ssap: Some(sap::MSAC_C1),
+            data: &self.req[..len],
+            // The echo, or a 4-byte negative response.
+            max_reply_len: Some(4),
+        }
+    }
+
+    fn alarm_result(&mut self, i: usize, k: usize, now: Instant, r: &CycleResult<'_>) {
+        use alarm::AckOutcome;
+        let Some(s) = self.slaves.get_mut(i) else {
+            return;
+        };
+        let outcome = match r.outcome {
+            Outcome::NoResponse | Outcome::Sent => AckOutcome::Failed("no answer".into()),
+            Outcome::ShortAck => AckOutcome::Poll,
+            Outcome::Response { status, .. } if status.is_negative() => {
+                AckOutcome::Failed(format!("refused by the slave ({})", status.mnemonic()))
+            }
+            Outcome::Response { data, .. } => match Pdu::parse_response(data) {
+                Ok(Pdu::AlarmAck {
+                    slot,
+                    alarm_type,
+                    specifier,
+                }) if s.alarms.answers(k, slot, alarm_type, specifier) => AckOutcome::Confirmed,
+                Ok(Pdu::Error(e)) => AckOutcome::Failed(e.describe()),
+                _ => AckOutcome::Failed(format!(
+                    "the answer {} is not the Alarm_Ack's echo",
+                    profibus_fdl::wire::Hex(data)
+                )),
+            },
+        };
+        let address = s.p.address;
+        let timeout = s.p.dpv1_timeout;
+        if let Some(alarm) = s.alarms.outcome(k, outcome, now, timeout) {
+            if !alarm.acknowledged {
+                tracing::warn!(
+                    address,
+                    "DP-V1 alarm {}",
+                    alarm.problem.as_deref().unwrap_or("")
+                );
+            }
+            self.events_push_alarm(address, alarm);
+        }
+    }
+
     fn start_visit(&mut self, now: Instant) {
         self.job_sent_this_visit = false;
         self.visit_start = now;
@@ -1623,6 +1730,9 @@ impl MasterApp for DpMaster {
         // After the pass: at most one acyclic request per poll cycle.
         if !self.job_sent_this_visit {
             self.job_sent_this_visit = true;
+            if let Some(i) = self.alarm_due() {
+                return Some(self.alarm_request(i));
+            }
             if self.jobs_pending() {
                 return self.job_request();
             }
@@ -1652,6 +1762,7 @@ impl MasterApp for DpMaster {
         match self.inflight.take() {
             Some(Inflight::Slave(i, step)) => self.slave_result(i, step, now, r),
             Some(Inflight::Job) => self.job_result(now, r),
+            Some(Inflight::AlarmAck(i, k)) => self.alarm_result(i, k, now, r),
             Some(Inflight::GlobalControl) | None => {}
         }
     }

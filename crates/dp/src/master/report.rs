@@ -5,8 +5,8 @@
 //! JSON lines.
 
 use super::{
-    CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState, SlaveState,
-    SlaveStats,
+    AlarmNotice, CycleStats, DpMaster, FaultReason, JobResult, MasterEvent, OperatingState,
+    SlaveState, SlaveStats,
 };
 use crate::config::gsd::Gsd;
 use profibus_fdl::station::active::FdlEvent;
@@ -17,8 +17,8 @@ use std::fmt;
 /// A [`MasterEvent`] together with what it refers to: the diagnosis in
 /// words, a job's result. Built with [`MasterReport::new`] right after
 /// [`DpMaster::poll_event`]. Serialises with an `"event"` field (`state`,
-/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `job`, `ring`,
-/// `duplicate_address`) and the slave's address as `slave`.
+/// `diag`, `fault`, `fault_ended`, `cfg_mismatch`, `alarm`, `job`,
+/// `ring`, `duplicate_address`) and the slave's address as `slave`.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -80,6 +80,9 @@ pub enum MasterReport {
         /// The slave's answer to Get_Cfg.
         actual: Vec<CfgGroup>,
     },
+    /// A DP-V1 alarm, once acknowledged or given up
+    /// ([`MasterEvent::Alarm`]).
+    Alarm(AlarmReport),
     /// A job ended.
     Job {
         /// The job's number.
@@ -152,6 +155,9 @@ impl MasterReport {
                 ),
                 actual: CfgGroup::split(m.actual_cfg(address).unwrap_or(&[]), gsd),
             },
+            MasterEvent::Alarm { address, alarm } => {
+                MasterReport::Alarm(AlarmReport::new(address, &alarm, gsd))
+            }
             MasterEvent::JobDone(id) => {
                 let (data, result) = match m.take_result(id) {
                     Some(JobResult::Data(d)) => (Some(d), "ok".to_string()),
@@ -172,6 +178,83 @@ impl MasterReport {
     }
 }
 
+/// A DP-V1 alarm for people and JSON, as `dpctl master` and `dpctl
+/// monitor` report it: `{"event": "alarm", "slave", "type", "slot",
+/// "specifier", "seq", "data", "text", "acknowledged"}`, type and
+/// specifier in words, data in hex.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct AlarmReport {
+    /// Station address.
+    pub slave: u8,
+    /// Alarm_Type in one word (`diagnostic`, `process`, `pull`, `plug`,
+    /// `status`, `update`, `manufacturer`).
+    #[cfg_attr(feature = "serde", serde(rename = "type"))]
+    pub alarm_type: &'static str,
+    /// Slot_Number.
+    pub slot: u8,
+    /// `appears`, `disappears`, `disappears-still-faulty` (or `none`).
+    pub specifier: &'static str,
+    /// Sequence number (0..=31).
+    pub seq: u8,
+    /// Diagnostic_User_Data.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
+    /// The alarm in words, with the GSD's texts for its data where the
+    /// GSD has them ([`crate::pdu::diag::unit_diag_words`]), and why it
+    /// was not acknowledged.
+    pub text: String,
+    /// The slave confirmed the Alarm_Ack.
+    pub acknowledged: bool,
+}
+
+impl AlarmReport {
+    /// The report of `alarm` of slave `slave`, its text with the `gsd`'s
+    /// diagnosis texts for the alarm's data.
+    pub fn new(slave: u8, alarm: &AlarmNotice, gsd: Option<&Gsd>) -> AlarmReport {
+        let b = alarm.block();
+        let named = gsd.map_or_else(Vec::new, |g| {
+            let mut body = vec![b.alarm_type.code(), b.slot, b.specifier.byte()];
+            body.extend_from_slice(b.data);
+            crate::pdu::diag::unit_diag_words(g, &body, 24)
+        });
+        let mut text = if named.is_empty() {
+            b.describe()
+        } else {
+            let plain = AlarmNotice {
+                data: vec![],
+                ..alarm.clone()
+            };
+            format!("{}: {}", plain.block().describe(), named.join("; "))
+        };
+        if let Some(p) = &alarm.problem {
+            text = format!("{text} ({p})");
+        }
+        AlarmReport {
+            slave,
+            alarm_type: b.alarm_type.word(),
+            slot: b.slot,
+            specifier: b.specifier.change.word(),
+            seq: b.specifier.seq,
+            data: alarm.data.clone(),
+            text,
+            acknowledged: alarm.acknowledged,
+        }
+    }
+}
+
+/// `slave 9 alarm: diagnostic alarm slot 1, seq 0, appears: … [acknowledged]`.
+impl fmt::Display for AlarmReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ack = if self.acknowledged {
+            "acknowledged"
+        } else {
+            "NOT acknowledged"
+        };
+        write!(f, "slave {} alarm: {} [{ack}]", self.slave, self.text)
+    }
+}
+
 impl fmt::Display for MasterReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -182,6 +265,7 @@ impl fmt::Display for MasterReport {
                 write!(f, "slave {slave} diagnosis: {}", words.join("; "))
             }
             MasterReport::Fault { slave, reason } => write!(f, "slave {slave} fault: {reason}"),
+            MasterReport::Alarm(a) => a.fmt(f),
             MasterReport::FaultEnded {
                 slave,
                 reason,

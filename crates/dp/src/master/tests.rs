@@ -566,3 +566,139 @@ fn a_persistent_cfg_fault_backs_off_is_reported_once_and_shows_the_real_cfg() {
         .collect();
     assert_eq!(ended, vec![startups as u64]);
 }
+
+// ----- DP-V1 alarms ----------------------------------------------------
+
+/// A master with one DP-V1 slave with diagnostic and process alarms.
+fn alarm_master() -> DpMaster {
+    let mut s = SlaveParams::new(8, 0x1234, vec![0x11, 0x21]);
+    s.dpv1 = true;
+    s.user_prm_data = vec![0x00, 0x00, 0x00];
+    s.alarms = crate::pdu::prm::Dpv1Status2::DIAGNOSTIC_ALARM
+        | crate::pdu::prm::Dpv1Status2::PROCESS_ALARM;
+    s.alarm_mode = crate::pdu::alarm::AlarmMode(1);
+    DpMaster::new(&MasterConfig {
+        address: 2,
+        params: BusParams::defaults(Baud::B1500000),
+        slaves: vec![s],
+        options: MasterOptions {
+            global_control_interval: None,
+            ..MasterOptions::default()
+        },
+    })
+    .unwrap()
+}
+
+/// The acyclic request after the poll cycle of a visit, as (dsap, ssap,
+/// data).
+fn acyclic(m: &mut DpMaster, now: u64) -> Option<(Option<u8>, Option<u8>, Vec<u8>)> {
+    assert_eq!(next(m, now).unwrap().0, None, "Data_Exchange first");
+    answer(m, now, data_resp(ResponseStatus::Dl, &[0, 0]));
+    m.poll_request(&ctx(now, 1))
+        .map(|r| (r.dsap, r.ssap, r.data.to_vec()))
+}
+
+fn ack_resp(data: &[u8]) -> Outcome<'_> {
+    Outcome::Response {
+        status: ResponseStatus::Dl,
+        station: StationType::Passive,
+        dsap: Some(sap::MSAC_C1),
+        ssap: Some(sap::ALARM_ACK),
+        data,
+    }
+}
+
+fn alarms(m: &mut DpMaster) -> Vec<AlarmNotice> {
+    std::iter::from_fn(|| m.poll_event())
+        .filter_map(|e| match e {
+            MasterEvent::Alarm { alarm, .. } => Some(alarm),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Diagnosis of slave 8 in Data_Exchange with master 2, Ext_Diag, and
+/// two alarm blocks written from the layout of dpv1-c2-im-alarms.md §4.5
+/// (header = length, type, slot, specifier = seq << 3 | appears):
+/// a process alarm of slot 3 with seq 2, then a diagnostic alarm of slot
+/// 2 with seq 1 and 3 bytes of data.
+const TWO_ALARMS: [u8; 17] = [
+    0x08, 0x0C, 0x00, 0x02, 0x12, 0x34, // header
+    0x04, 0x02, 0x03, 0x11, // process, slot 3, seq 2, appears
+    0x07, 0x01, 0x02, 0x09, 0xAA, 0xBB, 0xCC, // diagnostic, slot 2, seq 1, appears
+];
+
+#[test]
+fn set_prm_enables_the_alarms_and_their_mode() {
+    let mut m = alarm_master();
+    assert_eq!(next(&mut m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 1, diag_resp(&FRESH));
+    let (_, prm) = next(&mut m, 2).unwrap();
+    // DPV1_Enable, diagnostic + process enables (0x20 | 0x40), mode 1.
+    assert_eq!(&prm[7..], &[0x80, 0x60, 0x01]);
+}
+
+#[test]
+fn alarms_are_acknowledged_in_sequence_order_while_data_exchange_runs() {
+    let mut m = alarm_master();
+    bring_up(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
+    assert_eq!(next(&mut m, 6).unwrap().0, Some(sap::SLAVE_DIAG));
+    answer(&mut m, 6, diag_resp(&TWO_ALARMS));
+    // Seq 1 first, though its block comes second: 5C slot type specifier,
+    // from SAP 51 to SAP 50.
+    let ack = acyclic(&mut m, 7).unwrap();
+    assert_eq!(
+        ack,
+        (
+            Some(sap::ALARM_ACK),
+            Some(sap::MSAC_C1),
+            vec![0x5C, 0x02, 0x01, 0x09]
+        )
+    );
+    answer(&mut m, 7, ack_resp(&[0x5C, 0x02, 0x01, 0x09]));
+    let done = alarms(&mut m);
+    assert_eq!(done.len(), 1);
+    assert!(done[0].acknowledged);
+    assert_eq!(
+        (done[0].specifier.seq, &done[0].data[..]),
+        (1, &[0xAA, 0xBB, 0xCC][..])
+    );
+    // Then seq 2; the acknowledged one is not acknowledged twice.
+    let (_, _, ack) = acyclic(&mut m, 8).unwrap();
+    assert_eq!(ack, vec![0x5C, 0x03, 0x02, 0x11]);
+    answer(&mut m, 8, ack_resp(&[0x5C, 0x03, 0x02, 0x11]));
+    let done = alarms(&mut m);
+    assert_eq!(done.len(), 1);
+    assert_eq!(done[0].specifier.seq, 2);
+    assert_eq!(acyclic(&mut m, 9), None, "nothing left to acknowledge");
+    assert_eq!(m.slave_stats(8).unwrap().data_exchanges, 4);
+}
+
+#[test]
+fn an_unacknowledged_alarm_is_retried_then_reported() {
+    let mut m = alarm_master();
+    bring_up(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
+    next(&mut m, 6).unwrap();
+    answer(&mut m, 6, diag_resp(&TWO_ALARMS[..10]));
+    // No answer, then a negative DP-V1 response, then RS.
+    let (_, _, ack) = acyclic(&mut m, 7).unwrap();
+    assert_eq!(ack, vec![0x5C, 0x03, 0x02, 0x11]);
+    answer(&mut m, 7, Outcome::NoResponse);
+    assert!(alarms(&mut m).is_empty(), "retried");
+    assert!(acyclic(&mut m, 8).is_some());
+    answer(&mut m, 8, ack_resp(&[0xDC, 0x80, 0xB5, 0x00]));
+    assert!(alarms(&mut m).is_empty(), "retried");
+    assert!(acyclic(&mut m, 9).is_some());
+    answer(&mut m, 9, data_resp(ResponseStatus::Rs, &[]));
+    let done = alarms(&mut m);
+    assert_eq!(done.len(), 1, "reported after {ALARM_ACK_TRIES} attempts");
+    assert!(!done[0].acknowledged);
+    let why = done[0].problem.as_deref().unwrap();
+    assert!(why.contains("after 3 attempts"), "{why}");
+    assert_eq!(acyclic(&mut m, 10), None, "given up");
+    assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+}

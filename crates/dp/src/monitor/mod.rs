@@ -69,9 +69,11 @@
 
 use crate::config::busfile::BusFile;
 use crate::config::layout::SlaveLayout;
-use crate::master::{OperatingState, SlaveState};
+use crate::master::{AlarmNotice, AlarmReport, OperatingState, SlaveState};
+use crate::pdu::alarm::{dpv1_blocks, AlarmBlock, AlarmSpecifier, AlarmType, DiagBlock};
 use crate::pdu::control::{ControlCommand, GlobalControl};
 use crate::pdu::diag::{self, SlaveDiag, StationStatus1, StationStatus2, NO_MASTER};
+use crate::pdu::dpv1::Pdu;
 use crate::pdu::sap;
 use profibus_fdl::codec::CodecStats;
 use profibus_fdl::line::tap::TapEvent;
@@ -258,6 +260,12 @@ pub enum MonitorEvent {
         )]
         reason: ErrorKind,
     },
+    /// A DP-V1 alarm: seen in a diagnosis (`acknowledged` false), then
+    /// again when the master's Alarm_Ack (SAP 50) was confirmed by the
+    /// slave (`acknowledged` true). The fields are those of `dpctl
+    /// master`'s alarm event.
+    #[cfg_attr(feature = "serde", serde(rename = "alarm"))]
+    Alarm(AlarmReport),
     /// A master's Global_Control announced an operating state.
     Operating {
         /// The master.
@@ -299,6 +307,7 @@ impl fmt::Display for MonitorEvent {
                 service,
                 reason,
             } => write!(f, "slave {address} fault: {service}: {reason}"),
+            MonitorEvent::Alarm(a) => a.fmt(f),
             MonitorEvent::Operating { master, state } => {
                 write!(f, "master {master}: operating state {}", state.as_str())
             }
@@ -534,6 +543,9 @@ struct SlaveTrack {
     /// When its master last addressed it.
     last_polled: Option<Instant>,
     failures: u32,
+    /// DP-V1 alarms seen in its diagnosis, and whether the master's
+    /// Alarm_Ack was confirmed.
+    alarms: Vec<(AlarmNotice, bool)>,
 }
 
 impl SlaveTrack {
@@ -552,6 +564,7 @@ impl SlaveTrack {
             last: None,
             last_polled: None,
             failures: 0,
+            alarms: vec![],
         }
     }
 }
@@ -845,7 +858,9 @@ impl Monitor {
         let dp = match d.dsap {
             None => d.ssap.is_none(),
             Some(s) => {
-                (sap::MSAC_C1..=sap::CHK_CFG).contains(&(s & 0x3F)) || s == sap::MSAC_C2_INITIATE
+                (sap::MSAC_C1..=sap::CHK_CFG).contains(&(s & 0x3F))
+                    || s == sap::ALARM_ACK
+                    || s == sap::MSAC_C2_INITIATE
             }
         };
         if !dp {
@@ -991,6 +1006,7 @@ impl Monitor {
                 self.set_state(p.slave, p.master, SlaveState::DataExchange);
             }
             Some(sap::SLAVE_DIAG) if response.is_some() => self.diag(p.slave, p.master, data),
+            Some(sap::ALARM_ACK) if response.is_some() => self.alarm_ack(p.slave, data),
             Some(sap::SET_PRM) => self.set_state(p.slave, p.master, SlaveState::ChkCfg),
             Some(sap::CHK_CFG) => self.set_state(p.slave, p.master, SlaveState::CheckDiag),
             _ => {}
@@ -1022,6 +1038,9 @@ impl Monitor {
         if !d.is_valid() {
             self.slave(address).counters.always_one_clear += 1;
         }
+        if self.slave(address).info.layout.dpv1 {
+            self.alarms_in(address, &d);
+        }
         let state = self.slave(address).state;
         let other = d.master_address != NO_MASTER && d.master_address != master;
         let to = if other && d.status1.contains(StationStatus1::MASTER_LOCK) {
@@ -1044,6 +1063,70 @@ impl Monitor {
             }
         };
         self.set_state(address, master, to);
+    }
+
+    /// The alarm blocks of a DP-V1 slave's diagnosis: new ones are
+    /// reported; acknowledged ones the slave no longer shows are
+    /// forgotten.
+    fn alarms_in(&mut self, address: u8, d: &SlaveDiag<'_>) {
+        let s = self.slave(address);
+        let blocks: Vec<_> = dpv1_blocks(d.ext_diag)
+            .filter_map(|b| match b {
+                DiagBlock::Alarm(a) => Some(a),
+                DiagBlock::Status(_) => None,
+            })
+            .collect();
+        s.alarms
+            .retain(|(a, acked)| !acked || blocks.iter().any(|b| a.same(b)));
+        let mut new = vec![];
+        for b in &blocks {
+            if !s.alarms.iter().any(|(a, _)| a.same(b)) && s.alarms.len() < 32 {
+                let a = AlarmNotice::new(b);
+                new.push(AlarmReport::new(address, &a, s.info.layout.gsd.as_ref()));
+                s.alarms.push((a, false));
+            }
+        }
+        for r in new {
+            self.push(MonitorEvent::Alarm(r));
+        }
+    }
+
+    /// A positive answer to an Alarm_Ack (the slave's echo `5C slot
+    /// type specifier`).
+    fn alarm_ack(&mut self, address: u8, data: &[u8]) {
+        let Ok(Pdu::AlarmAck {
+            slot,
+            alarm_type,
+            specifier,
+        }) = Pdu::parse_response(data)
+        else {
+            return;
+        };
+        let b = AlarmBlock {
+            alarm_type: AlarmType::from_code(alarm_type),
+            slot,
+            specifier: AlarmSpecifier::from_byte(specifier),
+            data: &[],
+        };
+        let s = self.slave(address);
+        let i = match s.alarms.iter().position(|(a, _)| a.same(&b)) {
+            Some(i) => i,
+            None => {
+                // Acknowledged before the monitor saw the diagnosis.
+                s.alarms.push((AlarmNotice::new(&b), false));
+                s.alarms.len() - 1
+            }
+        };
+        let (a, acked) = &mut s.alarms[i];
+        if std::mem::replace(acked, true) {
+            return;
+        }
+        let a = AlarmNotice {
+            acknowledged: true,
+            ..a.clone()
+        };
+        let r = AlarmReport::new(address, &a, s.info.layout.gsd.as_ref());
+        self.push(MonitorEvent::Alarm(r));
     }
 
     /// The whole picture now.

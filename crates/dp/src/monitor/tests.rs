@@ -536,3 +536,65 @@ fn slaves_leave_data_exchange_when_their_master_stops() {
     m.tick(Instant::from_nanos((t + 10) * 1_000_000));
     assert_eq!(m.slave_state(S), Some(SlaveState::DataExchange));
 }
+
+#[test]
+fn alarms_are_seen_in_the_diagnosis_and_their_acknowledgement_on_the_wire() {
+    let mut layout = info().remove(0).layout;
+    layout.dpv1 = true;
+    let mut m = Monitor::new(vec![SlaveInfo::from(layout)], MonitorOptions::default());
+    let mut t = feed(&mut m, 0, &startup());
+    events(&mut m);
+    // Diagnosis with a process alarm block (§4.5 layout: length 5, type
+    // 2, slot 1, seq 3 << 3 | appears = 0x19, one data byte).
+    let mut du = diag_du(0x08, 0, M);
+    du.extend([0x05, 0x02, 0x01, 0x19, 0x7F]);
+    t = feed(
+        &mut m,
+        t,
+        &[
+            req(S, Some(sap::SLAVE_DIAG), true, true, &[]),
+            resp(S, Some(sap::SLAVE_DIAG), &du),
+        ],
+    );
+    let alarms = |m: &mut Monitor| -> Vec<AlarmReport> {
+        events(m)
+            .into_iter()
+            .filter_map(|e| match e {
+                MonitorEvent::Alarm(a) => Some(a),
+                _ => None,
+            })
+            .collect()
+    };
+    let seen = alarms(&mut m);
+    assert_eq!(seen.len(), 1, "{seen:?}");
+    assert_eq!(
+        (seen[0].alarm_type, seen[0].seq, seen[0].acknowledged),
+        ("process", 3, false)
+    );
+    assert_eq!(seen[0].data, [0x7F]);
+    // The master's Alarm_Ack (SAP 51 → 50) and the slave's echo.
+    let fc = FunctionCode::Request {
+        kind: RequestKind::SrdHigh,
+        fcb: false,
+        fcv: true,
+    };
+    let ack = [0x5C, 0x01, 0x02, 0x19];
+    feed(
+        &mut m,
+        t,
+        &[
+            data(S, M, fc, Some((sap::ALARM_ACK, sap::MSAC_C1)), &ack),
+            data(
+                M,
+                S,
+                FunctionCode::slave_response(ResponseStatus::Dl),
+                Some((sap::MSAC_C1, sap::ALARM_ACK)),
+                &ack,
+            ),
+        ],
+    );
+    let acked = alarms(&mut m);
+    assert_eq!(acked.len(), 1, "{acked:?}");
+    assert!(acked[0].acknowledged);
+    assert_eq!((acked[0].slot, acked[0].data.clone()), (1, vec![0x7F]));
+}

@@ -541,6 +541,49 @@ fn has_unit_diag(g: &crate::config::gsd::Gsd) -> bool {
         || !g.unit_diag_areas.is_empty()
 }
 
+/// The GSD's texts (`Unit_Diag_Bit`, `Unit_Diag_Not_Bit`,
+/// `Unit_Diag_Area`) for the bits of a device-related block's `body` (the
+/// bytes after its header byte; bit 0 is bit 0 of its first byte), only
+/// for bits from `first_bit` on. A DP-V1 alarm block's
+/// Diagnostic_User_Data starts at bit 24, after Alarm_Type, Slot_Number
+/// and Alarm_Specifier (this stack's reading of the GSD specification,
+/// which counts from the byte after the header).
+pub fn unit_diag_words(g: &crate::config::gsd::Gsd, body: &[u8], first_bit: u32) -> Vec<String> {
+    let mut out = vec![];
+    let bit = |n: u32| {
+        body.get(n as usize / 8)
+            .is_some_and(|byte| byte & (1 << (n % 8)) != 0)
+    };
+    let total = body.len() as u32 * 8;
+    for n in first_bit..total {
+        let t = if bit(n) {
+            g.unit_diag_bit_text(n)
+        } else {
+            g.unit_diag_not_bit_text(n)
+        };
+        if let Some(t) = t {
+            out.push(t.to_string());
+        }
+    }
+    for area in &g.unit_diag_areas {
+        if area.first < first_bit
+            || area.last >= total
+            || area.first > area.last
+            || area.last - area.first > 31
+        {
+            continue;
+        }
+        let mut v = 0i64;
+        for n in (area.first..=area.last).rev() {
+            v = v << 1 | bit(n) as i64;
+        }
+        if let Some(t) = area.values.iter().find(|x| x.value == v) {
+            out.push(t.text.clone());
+        }
+    }
+    out
+}
+
 /// A whole Slave_Diag response in words: the station status bits, the
 /// parameterising master, the ident number and every extended diagnosis
 /// block. With the slave's GSD, bits of the device-related diagnosis are
@@ -565,39 +608,11 @@ pub fn describe(du: &[u8], gsd: Option<&crate::config::gsd::Gsd>, dpv1: bool) ->
             (ExtDiagBlock::Device { data }, Some(g))
                 if !(dpv1 && data.len() >= 3) && has_unit_diag(g) =>
             {
-                let bit = |n: u32| {
-                    data.get(n as usize / 8)
-                        .is_some_and(|byte| byte & (1 << (n % 8)) != 0)
-                };
-                let mut named = false;
-                let total = data.len() as u32 * 8;
-                for n in 0..total {
-                    if bit(n) {
-                        if let Some(t) = g.unit_diag_bit_text(n) {
-                            out.push(format!("device: {t}"));
-                            named = true;
-                        }
-                    } else if let Some(t) = g.unit_diag_not_bit_text(n) {
-                        out.push(format!("device: {t}"));
-                        named = true;
-                    }
-                }
-                for area in &g.unit_diag_areas {
-                    if area.last >= total || area.first > area.last || area.last - area.first > 31 {
-                        continue;
-                    }
-                    let mut v = 0i64;
-                    for n in (area.first..=area.last).rev() {
-                        v = v << 1 | bit(n) as i64;
-                    }
-                    if let Some(t) = area.values.iter().find(|x| x.value == v) {
-                        out.push(format!("device: {}", t.text));
-                        named = true;
-                    }
-                }
-                if !named {
+                let named = unit_diag_words(g, data, 0);
+                if named.is_empty() {
                     out.push(b.describe(dpv1));
                 }
+                out.extend(named.into_iter().map(|t| format!("device: {t}")));
             }
             _ => out.push(b.describe(dpv1)),
         }

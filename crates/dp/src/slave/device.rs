@@ -420,7 +420,9 @@ pub trait Device {
     }
 
     /// MSAC_C1 Alarm_Ack of the alarm `alarm_type` in `slot` with sequence
-    /// number `seq` (0..=31). Default: refused ("feature not supported").
+    /// number `seq` (0..=31) that is not one of the core's queue (see
+    /// [`Device::take_alarm`]): for a device that writes its own alarm
+    /// blocks. Default: refused ("feature not supported").
     fn alarm_ack(
         &mut self,
         _now: Instant,
@@ -433,6 +435,15 @@ pub trait Device {
             ERR_CLASS_APPLICATION,
             ERR_FEATURE_NOT_SUPPORTED,
         ))
+    }
+
+    /// An alarm the device raises: the core takes them (before each
+    /// request and after each timeout) into its alarm queue
+    /// ([`DpSlave::raise_alarm`](super::DpSlave::raise_alarm)), which
+    /// reports them in Slave_Diag until the master acknowledges them.
+    /// Default: none.
+    fn take_alarm(&mut self) -> Option<super::Alarm> {
+        None
     }
 
     /// Set_Slave_Add accepted by the core (supported, in Wait_Prm, ident
@@ -534,6 +545,9 @@ impl<D: Device + ?Sized> Device for Box<D> {
         seq: u8,
     ) -> Result<(), Dpv1Error> {
         (**self).alarm_ack(now, slot, alarm_type, seq)
+    }
+    fn take_alarm(&mut self) -> Option<super::Alarm> {
+        (**self).take_alarm()
     }
     fn set_address(
         &mut self,

@@ -78,9 +78,12 @@
 //!   answer comes as DL. MSAC_C1 and Alarm_Ack (SAP 50) are active only
 //!   in Data_Exch with DPV1_Enable, for the owning master.
 
+mod alarm;
 mod device;
 mod reason;
 mod state;
+
+pub use alarm::{AckError, Alarm, AlarmQueue, QueuedAlarm, RaiseError, ALARM_QUEUE_LEN};
 
 pub use device::Device;
 pub use device::{
@@ -90,8 +93,9 @@ pub use device::{
     ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
 };
 pub use reason::{Reason, Service};
-pub use state::{control_words, SlaveEvent, SlaveState};
+pub use state::{control_words, AlarmAction, AlarmEvent, SlaveEvent, SlaveState};
 
+use crate::pdu::alarm::{AlarmMode, AlarmType};
 use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::pdu::diag::{
     StationStatus1, StationStatus2, StationStatus3, DIAG_HEADER_LEN, MAX_DIAG_LEN, NO_MASTER,
@@ -192,6 +196,7 @@ pub struct DpSlave<D> {
     no_add_chg: bool,
     c1: C1Job,
     c1_buf: [u8; MAX_IO_LEN],
+    alarms: AlarmQueue,
     events: EventQueue,
     stats: SlaveStats,
 }
@@ -230,6 +235,7 @@ impl<D: Device> DpSlave<D> {
             no_add_chg: false,
             c1: C1Job::Idle,
             c1_buf: [0; MAX_IO_LEN],
+            alarms: AlarmQueue::new(),
             events: EventQueue::new(),
             stats: SlaveStats::default(),
         }
@@ -290,6 +296,54 @@ impl<D: Device> DpSlave<D> {
         self.stats
     }
 
+    /// The DP-V1 alarm queue (outstanding and waiting alarms).
+    pub fn alarms(&self) -> &AlarmQueue {
+        &self.alarms
+    }
+
+    /// Raise a DP-V1 alarm (what [`Device::take_alarm`] hands over): it
+    /// is queued with the next sequence number and goes into Slave_Diag,
+    /// announced with "data high", once the limit of outstanding alarms
+    /// allows. Refused outside Data_Exch, when the master did not enable
+    /// the type, when 32 alarms wait, or with more than 59 bytes of data.
+    pub fn raise_alarm(&mut self, alarm: Alarm) -> Result<QueuedAlarm, RaiseError> {
+        let raised = if self.state == SlaveState::DataExch {
+            self.alarms.raise(alarm.clone())
+        } else {
+            Err(RaiseError::Inactive)
+        };
+        match raised {
+            Ok((q, outstanding)) => {
+                if outstanding {
+                    self.diag_pending = true;
+                }
+                self.event(SlaveEvent::Alarm(AlarmEvent::new(
+                    AlarmAction::Raised,
+                    &q.alarm,
+                    Some(q.seq),
+                    None,
+                )));
+                Ok(q)
+            }
+            Err(e) => {
+                self.event(SlaveEvent::Alarm(AlarmEvent::new(
+                    AlarmAction::Refused,
+                    &alarm,
+                    None,
+                    Some(e.to_string()),
+                )));
+                Err(e)
+            }
+        }
+    }
+
+    /// Take the alarms the device raised.
+    fn take_device_alarms(&mut self) {
+        while let Some(a) = self.device.take_alarm() {
+            let _ = self.raise_alarm(a);
+        }
+    }
+
     /// The next event for the application (core events first, then the
     /// device's).
     pub fn poll_event(&mut self) -> Option<SlaveEvent> {
@@ -330,6 +384,7 @@ impl<D: Device> DpSlave<D> {
             self.clear_mode = false;
             self.last_gc = None;
             self.c1 = C1Job::Idle;
+            self.alarms.reset();
         }
         if to == SlaveState::WaitPrm {
             self.owner = None;
@@ -370,8 +425,11 @@ impl<D: Device> DpSlave<D> {
         }
         let (head, rest) = out.split_at_mut(DIAG_HEADER_LEN);
         let mut w = DiagWriter::new(&mut rest[..limit - DIAG_HEADER_LEN]);
+        // The outstanding DP-V1 alarms first (device-related blocks).
+        let disturbed = self.alarms.write(&mut w);
         self.device.diagnosis(now, &mut w);
         let (ext_len, ext_diag, stat_diag, overflow) = w.finish();
+        let ext_diag = ext_diag || disturbed;
         let mut s1 = StationStatus1::empty();
         s1.set(
             StationStatus1::STATION_NOT_READY,
@@ -528,11 +586,7 @@ impl<D: Device> DpSlave<D> {
             return Reply::ShortAck;
         }
         let dpv1 = self.features.dpv1;
-        let s1 = prm
-            .dpv1_status()
-            .filter(|_| dpv1)
-            .map(|(s1, _, _)| s1)
-            .unwrap_or_default();
+        let (s1, s2, s3) = prm.dpv1_status().filter(|_| dpv1).unwrap_or_default();
         self.stats.prm_accepted += 1;
         self.prm_fault = false;
         self.cfg_fault = false;
@@ -544,6 +598,11 @@ impl<D: Device> DpSlave<D> {
         self.wd_deadline = self.watchdog.map(|d| now + d);
         self.dpv1_enabled = s1.contains(Dpv1Status1::DPV1_ENABLE);
         self.fail_safe = s1.contains(Dpv1Status1::FAIL_SAFE);
+        if self.dpv1_enabled && self.features.alarms {
+            self.alarms.open(s2, AlarmMode::from_status_3(s3));
+        } else {
+            self.alarms.reset();
+        }
         self.event(SlaveEvent::PrmAccepted {
             master: from,
             locked: true,
@@ -936,17 +995,44 @@ impl<D: Device> DpSlave<D> {
                 slot,
                 alarm_type,
                 specifier,
-            }) => match self.device.alarm_ack(now, slot, alarm_type, specifier >> 3) {
-                Ok(()) => Pdu::AlarmAck {
+            }) => {
+                let echo = Pdu::AlarmAck {
                     slot,
                     alarm_type,
                     specifier,
-                },
-                Err(mut e) => {
-                    e.function = FN_ALARM_ACK | 0x80;
-                    Pdu::Error(e)
+                };
+                let t = AlarmType::from_code(alarm_type);
+                match self.alarms.ack(slot, t, specifier) {
+                    Ok(q) => {
+                        // The next alarm may be outstanding now.
+                        self.diag_pending = true;
+                        self.event(SlaveEvent::Alarm(AlarmEvent::new(
+                            AlarmAction::Acknowledged,
+                            &q.alarm,
+                            Some(q.seq),
+                            None,
+                        )));
+                        echo
+                    }
+                    Err(e @ AckError::OutOfOrder { .. }) => {
+                        self.refuse(from, Service::Sap(Sap::AlarmAck), Reason::AlarmAck(e));
+                        Pdu::Error(Dpv1Error::dpv1(
+                            FN_ALARM_ACK,
+                            ERR_CLASS_ACCESS,
+                            ERR_STATE_CONFLICT,
+                        ))
+                    }
+                    // Not one of the queue's: the device's own alarms.
+                    Err(e) => match self.device.alarm_ack(now, slot, alarm_type, specifier >> 3) {
+                        Ok(()) => echo,
+                        Err(mut d) => {
+                            self.refuse(from, Service::Sap(Sap::AlarmAck), Reason::AlarmAck(e));
+                            d.function = FN_ALARM_ACK | 0x80;
+                            Pdu::Error(d)
+                        }
+                    },
                 }
-            },
+            }
             _ => Pdu::Error(Dpv1Error::dpv1(FN_ALARM_ACK, ERR_CLASS_ACCESS, 8)),
         };
         let len = pdu.emit(out)?;
@@ -1002,6 +1088,7 @@ impl<D: Device> Responder for DpSlave<D> {
         if self.device.take_restart() {
             self.restart(now);
         }
+        self.take_device_alarms();
         if self.device.own_address() == OwnAddress::NoneYet {
             return Reply::Silence;
         }
@@ -1119,6 +1206,7 @@ impl<D: Device> Responder for DpSlave<D> {
         if self.device.poll_timeout().is_some_and(|t| t <= now) {
             self.device.handle_timeout(now);
         }
+        self.take_device_alarms();
     }
 }
 

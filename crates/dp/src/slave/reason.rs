@@ -192,6 +192,10 @@ pub enum Reason {
     /// Alarm_Ack outside its conditions.
     #[error("alarms are active only in Data_Exch with DPV1_Enable, for the owning master")]
     AlarmsInactive,
+    /// An Alarm_Ack that names no outstanding alarm, or not the oldest
+    /// one in sequence mode.
+    #[error("Alarm_Ack refused: {0}")]
+    AlarmAck(crate::slave::AckError),
 
     // ----- Set_Slave_Add ----------------------------------------------------
     /// The slave has no Set_Slave_Add.

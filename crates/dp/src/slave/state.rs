@@ -160,12 +160,101 @@ pub enum SlaveEvent {
         /// Why, in words.
         reason: Reason,
     },
+    /// A DP-V1 alarm was raised, refused or acknowledged.
+    #[cfg_attr(feature = "serde", serde(rename = "alarm"))]
+    Alarm(AlarmEvent),
     /// The device reported something.
     #[cfg_attr(feature = "serde", serde(rename = "device"))]
     Device(DeviceEvent),
     /// Events were dropped because nobody drained the queue.
     #[cfg_attr(feature = "serde", serde(rename = "lost"))]
     Lost(#[cfg_attr(feature = "serde", serde(serialize_with = "lost_count"))] u64),
+}
+
+/// What happened to a DP-V1 alarm of the slave's queue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize),
+    serde(rename_all = "snake_case")
+)]
+pub enum AlarmAction {
+    /// Queued (it is in Slave_Diag once the limit of outstanding alarms
+    /// allows).
+    Raised,
+    /// Not queued (see `reason`).
+    Refused,
+    /// The master acknowledged it (Alarm_Ack): it left Slave_Diag.
+    Acknowledged,
+}
+
+/// A DP-V1 alarm of the slave's queue ([`SlaveEvent::Alarm`]): type and
+/// specifier in words, data in hex, as the master's alarm event.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct AlarmEvent {
+    /// What happened.
+    pub action: AlarmAction,
+    /// The alarm type in words (`diagnostic`, `process`, …).
+    #[cfg_attr(feature = "serde", serde(rename = "type"))]
+    pub alarm_type: String,
+    /// Slot.
+    pub slot: u8,
+    /// `appears`, `disappears`, `disappears-still-faulty`.
+    pub specifier: String,
+    /// Sequence number (none when refused).
+    pub seq: Option<u8>,
+    /// Diagnostic_User_Data.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
+    /// Why it was refused.
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
+    pub reason: Option<String>,
+}
+
+impl AlarmEvent {
+    pub(crate) fn new(
+        action: AlarmAction,
+        a: &super::Alarm,
+        seq: Option<u8>,
+        reason: Option<String>,
+    ) -> AlarmEvent {
+        AlarmEvent {
+            action,
+            alarm_type: a.alarm_type.word().into(),
+            slot: a.slot,
+            specifier: a.change.word().into(),
+            seq,
+            data: a.data.clone(),
+            reason,
+        }
+    }
+}
+
+impl fmt::Display for AlarmEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let action = match self.action {
+            AlarmAction::Raised => "raised",
+            AlarmAction::Refused => "refused",
+            AlarmAction::Acknowledged => "acknowledged",
+        };
+        write!(
+            f,
+            "{} alarm slot {} {}",
+            self.alarm_type, self.slot, self.specifier
+        )?;
+        if let Some(seq) = self.seq {
+            write!(f, " seq {seq}")?;
+        }
+        if !self.data.is_empty() {
+            write!(f, " data {}", profibus_fdl::wire::Hex(&self.data))?;
+        }
+        write!(f, ": {action}")?;
+        if let Some(r) = &self.reason {
+            write!(f, " ({r})")?;
+        }
+        Ok(())
+    }
 }
 
 /// `Lost(n)` as `{"count": n}`.
@@ -206,6 +295,7 @@ impl SlaveEvent {
             SlaveEvent::AddressChanged { .. } => "address",
             SlaveEvent::GlobalControl { .. } => "global_control",
             SlaveEvent::Refused { .. } => "refused",
+            SlaveEvent::Alarm(_) => "alarm",
             SlaveEvent::Device(_) => "device",
             SlaveEvent::Lost(_) => "lost",
         }
@@ -316,6 +406,7 @@ impl fmt::Display for SlaveEvent {
                 service,
                 reason,
             } => write!(f, "{service} from master {master} refused: {reason}"),
+            SlaveEvent::Alarm(a) => a.fmt(f),
             SlaveEvent::Device(e) => write!(f, "{}: {}", e.kind, e.text),
             SlaveEvent::Lost(n) => write!(f, "{n} events lost (queue full)"),
         }

@@ -31,6 +31,8 @@ struct TestDevice {
     c1_polls: u32,
     record: Vec<u8>,
     acked: Vec<(u8, u8, u8)>,
+    /// The device writes and acknowledges alarms of its own.
+    own_alarms: bool,
     address_refused: bool,
     persisted: Option<(u8, bool)>,
 }
@@ -132,6 +134,13 @@ impl Device for TestDevice {
         alarm_type: u8,
         seq: u8,
     ) -> Result<(), Dpv1Error> {
+        if !self.own_alarms {
+            return Err(Dpv1Error::dpv1(
+                crate::pdu::dpv1::FN_ALARM_ACK,
+                ERR_CLASS_ACCESS,
+                ERR_STATE_CONFLICT,
+            ));
+        }
         self.acked.push((slot, alarm_type, seq));
         Ok(())
     }
@@ -880,7 +889,9 @@ fn dpv1_write_and_gating() {
 
 #[test]
 fn alarm_ack_reaches_the_device() {
-    let mut b = Bench::new(dpv1_device());
+    let mut dev = dpv1_device();
+    dev.own_alarms = true;
+    let mut b = Bench::new(dev);
     b.start(t(0), &dpv1_prm());
     let a = b.sap(t(1), MASTER, sap::ALARM_ACK, &[0x5C, 3, 1, 0x2D]);
     assert_eq!(
@@ -1265,4 +1276,142 @@ fn dpv1_lengths_are_checked_against_c1_max_data_len() {
     let req = [vec![0x5F, 1, 2, 32], vec![0x55; 32]].concat();
     assert_eq!(ask(&mut b, req), [0x5F, 1, 2, 32]);
     assert_eq!(ask(&mut b, vec![0x5E, 1, 2, 32])[..4], [0x5E, 1, 2, 32]);
+}
+
+// ----- DP-V1 alarm queue ------------------------------------------------
+
+fn alarm(t: crate::pdu::alarm::AlarmType, slot: u8, change: u8, data: &[u8]) -> Alarm {
+    Alarm {
+        alarm_type: t,
+        slot,
+        change: crate::pdu::alarm::AlarmChange::from_bits(change),
+        add_ack: false,
+        data: data.to_vec(),
+    }
+}
+
+/// DPV1_Enable, diagnostic and process alarms (0x20 | 0x40), `mode`.
+fn alarm_prm(mode: u8) -> Vec<u8> {
+    [prm(LOCK_WD), vec![0x80, 0x60, mode]].concat()
+}
+
+fn ack(b: &mut Bench, now: Instant, bytes: &[u8]) -> Vec<u8> {
+    b.sap(now, MASTER, sap::ALARM_ACK, bytes).data().to_vec()
+}
+
+#[test]
+fn alarms_wait_in_slave_diag_until_acknowledged_in_sequence() {
+    use crate::pdu::alarm::AlarmType::{Diagnostic, Process};
+    let mut b = Bench::new(dpv1_device());
+    b.start(t(0), &alarm_prm(1)); // sequence mode, 2 outstanding
+    b.events();
+    b.slave
+        .raise_alarm(alarm(Diagnostic, 2, 1, &[0xAA]))
+        .unwrap();
+    b.slave.raise_alarm(alarm(Process, 3, 1, &[])).unwrap();
+    b.slave.raise_alarm(alarm(Diagnostic, 2, 2, &[])).unwrap();
+    assert_eq!(
+        b.dx(t(1), MASTER, &[0, 0]).status(),
+        Some(ResponseStatus::Dh)
+    );
+    // Two outstanding blocks (dpv1-c2-im-alarms.md §4.5: length, type,
+    // slot, seq << 3 | appears, data); the third waits. Ext_Diag set.
+    let d = b.diag(t(2), MASTER);
+    assert_eq!(d[0] & 0x08, 0x08, "Ext_Diag");
+    assert_eq!(
+        &d[6..],
+        &[0x05, 0x01, 0x02, 0x01, 0xAA, 0x04, 0x02, 0x03, 0x09]
+    );
+    // Seq 1 before seq 0: refused, both stay.
+    assert_eq!(
+        ack(&mut b, t(3), &[0x5C, 3, 2, 0x09]),
+        [0xDC, 0x80, 0xB5, 0x00]
+    );
+    assert!(b.events().iter().any(|e| matches!(
+        e,
+        SlaveEvent::Refused {
+            reason: Reason::AlarmAck(AckError::OutOfOrder {
+                seq: 1,
+                expected: 0
+            }),
+            ..
+        }
+    )));
+    assert_eq!(b.diag(t(4), MASTER), d);
+    // Seq 0: echoed; the third alarm (seq 2, disappears) comes in.
+    assert_eq!(ack(&mut b, t(5), &[0x5C, 2, 1, 0x01]), [0x5C, 2, 1, 0x01]);
+    assert_eq!(
+        b.dx(t(6), MASTER, &[0, 0]).status(),
+        Some(ResponseStatus::Dh)
+    );
+    let d = b.diag(t(7), MASTER);
+    assert_eq!(&d[6..], &[0x04, 0x02, 0x03, 0x09, 0x04, 0x01, 0x02, 0x12]);
+    // An alarm that is not outstanding (seq 0 again): negative.
+    assert_eq!(ack(&mut b, t(8), &[0x5C, 2, 1, 0x01])[0], 0xDC);
+    assert_eq!(ack(&mut b, t(9), &[0x5C, 3, 2, 0x09]), [0x5C, 3, 2, 0x09]);
+    assert_eq!(ack(&mut b, t(10), &[0x5C, 2, 1, 0x12]), [0x5C, 2, 1, 0x12]);
+    let d = b.diag(t(11), MASTER);
+    assert_eq!(d.len(), 6, "all acknowledged: no blocks");
+    assert_eq!(d[0] & 0x08, 0, "no Ext_Diag");
+    let acked = b
+        .events()
+        .into_iter()
+        .filter(|e| matches!(e, SlaveEvent::Alarm(a) if a.action == AlarmAction::Acknowledged))
+        .count();
+    assert_eq!(acked, 3);
+}
+
+#[test]
+fn type_mode_keeps_one_alarm_per_type_outstanding() {
+    use crate::pdu::alarm::AlarmType::{Diagnostic, Process};
+    let mut b = Bench::new(dpv1_device());
+    b.start(t(0), &alarm_prm(0));
+    b.slave.raise_alarm(alarm(Diagnostic, 1, 1, &[])).unwrap();
+    b.slave.raise_alarm(alarm(Diagnostic, 1, 2, &[])).unwrap();
+    b.slave.raise_alarm(alarm(Process, 4, 1, &[])).unwrap();
+    let d = b.diag(t(1), MASTER);
+    // Diagnostic seq 0 and process seq 2; diagnostic seq 1 waits.
+    assert_eq!(&d[6..], &[0x04, 0x01, 0x01, 0x01, 0x04, 0x02, 0x04, 0x11]);
+    // Type mode: any outstanding alarm may be acknowledged first.
+    assert_eq!(ack(&mut b, t(2), &[0x5C, 4, 2, 0x11]), [0x5C, 4, 2, 0x11]);
+    assert_eq!(ack(&mut b, t(3), &[0x5C, 1, 1, 0x01]), [0x5C, 1, 1, 0x01]);
+    assert_eq!(&b.diag(t(4), MASTER)[6..], &[0x04, 0x01, 0x01, 0x0A]);
+}
+
+#[test]
+fn alarms_need_enables_fit_the_diagnosis_and_end_with_data_exchange() {
+    use crate::pdu::alarm::AlarmType::{Diagnostic, Update};
+    let mut dev = dpv1_device();
+    dev.features.max_diag_len = 6 + 6; // room for one 6-byte block
+    let mut b = Bench::new(dev);
+    assert_eq!(
+        b.slave.raise_alarm(alarm(Diagnostic, 1, 1, &[])),
+        Err(RaiseError::Inactive)
+    );
+    b.start(t(0), &alarm_prm(7));
+    assert_eq!(
+        b.slave.raise_alarm(alarm(Update, 1, 1, &[])),
+        Err(RaiseError::NotEnabled(Update))
+    );
+    assert_eq!(
+        b.slave.raise_alarm(alarm(Diagnostic, 1, 1, &[0; 60])),
+        Err(RaiseError::TooLong(60))
+    );
+    b.slave
+        .raise_alarm(alarm(Diagnostic, 1, 1, &[1, 2]))
+        .unwrap();
+    b.slave
+        .raise_alarm(alarm(Diagnostic, 2, 1, &[3, 4]))
+        .unwrap();
+    let d = b.diag(t(1), MASTER);
+    assert_eq!(
+        &d[6..],
+        &[0x06, 0x01, 0x01, 0x01, 1, 2],
+        "Max_Diag_Data_Len"
+    );
+    assert_eq!(d[2] & 0x80, 0, "no overflow: the second one waits");
+    // A new Set_Prm (leaving Data_Exch) empties the queue.
+    b.start(t(2), &alarm_prm(7));
+    assert_eq!(b.diag(t(3), MASTER).len(), 6);
+    assert_eq!(b.slave.alarms().queued().count(), 0);
 }

@@ -375,3 +375,89 @@ fn kbus_faults_raise_their_codes_and_init_bits() {
     b.slave.device_mut().control("pull 2").unwrap();
     assert_eq!(&b.diag()[16..24], &[0, 254, 0, 0x24, 4, 1, 0, 0]);
 }
+
+/// One PLC interface step: function `f` with `data`, the toggle flipped.
+fn plc(b: &mut Bench, toggle: &mut u8, f: u8, data: u8, out_len: usize) -> (u8, u8) {
+    *toggle ^= 0x80;
+    let mut out = vec![0u8; out_len];
+    out[0] = *toggle | f;
+    out[1] = data;
+    let i = b.dx(&out);
+    (i[0], i[1])
+}
+
+fn plc_read(b: &mut Bench, t: &mut u8, term: u8, table: u8, reg: u8, n: usize) -> u16 {
+    plc(b, t, 1, term, n);
+    plc(b, t, 2, table, n);
+    plc(b, t, 3, reg, n);
+    let (st, hi) = plc(b, t, 6, 0, n);
+    assert_eq!(st & 0x7F, 6, "read acknowledged without error");
+    let (_, lo) = plc(b, t, 7, 0, n);
+    u16::from_be_bytes([hi, lo])
+}
+
+fn plc_write(b: &mut Bench, t: &mut u8, term: u8, table: u8, reg: u8, v: u16, n: usize) -> u8 {
+    plc(b, t, 1, term, n);
+    plc(b, t, 2, table, n);
+    plc(b, t, 3, reg, n);
+    plc(b, t, 4, (v >> 8) as u8, n);
+    plc(b, t, 5, v as u8, n);
+    plc(b, t, 8, 0, n).0
+}
+
+#[test]
+fn plc_interface_reaches_the_coupler_tables_and_terminals_in_parameter_mode() {
+    // p. 45: parameter mode signals ready for data exchange, "nötig, wenn
+    // die Parametrierung über das 2-Byte-SPS-Interface erfolgen soll".
+    let list = "KL1104,KL9100,KL2134,KL3102:complete,KL9010";
+    let mut b = Bench::new(list);
+    let prm = UserPrm {
+        startup: StartupMode::Parameter,
+        plc_interface: true,
+        ..Default::default()
+    };
+    b.start(&prm.emit(), &[0xB1, 0xB2, 0xB2, 0x10, 0x20]);
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    let n = 2 + 6 + 1;
+    let mut t = 0u8;
+    // Table 9: the coupler, then the terminals with process data.
+    assert_eq!(plc_read(&mut b, &mut t, 0, 9, 0, n), 3000);
+    assert_eq!(
+        plc_read(&mut b, &mut t, 0, 9, 1, n),
+        0x8401,
+        "KL1104: digital, 4 bits in"
+    );
+    assert_eq!(
+        plc_read(&mut b, &mut t, 0, 9, 2, n),
+        0x8402,
+        "KL2134: 4 bits out"
+    );
+    assert_eq!(plc_read(&mut b, &mut t, 0, 9, 3, n), 3102);
+    // Terminal 3 (KL3102), table 1 (channel 2), R8.
+    assert_eq!(plc_read(&mut b, &mut t, 3, 1, 8, n), 3102);
+    // Code word and user gain through the interface.
+    assert_eq!(plc_write(&mut b, &mut t, 3, 0, 31, 0x1235, n) & 0x40, 0);
+    plc_write(&mut b, &mut t, 3, 0, 34, 0x0080, n);
+    assert_eq!(b.slave.device().register(4, 1, 34), Some(0x0080));
+    // A protected register: error bit 6.
+    assert_ne!(plc_write(&mut b, &mut t, 3, 1, 34, 1, n) & 0x40, 0);
+    // Table 0 (settings), table 98 (cycle time), no table 5.
+    plc_write(&mut b, &mut t, 0, 0, 16, 2, n);
+    assert_eq!(plc_read(&mut b, &mut t, 0, 0, 16, n), 2);
+    assert!(plc_read(&mut b, &mut t, 0, 98, 0, n) > 200);
+    plc(&mut b, &mut t, 2, 5, n);
+    assert_ne!(plc(&mut b, &mut t, 6, 0, n).0 & 0x40, 0);
+    // Table 70: a programmed configuration written register by register.
+    plc_write(&mut b, &mut t, 0, 70, 1, 0xB1, n);
+    plc_write(&mut b, &mut t, 0, 70, 2, 0x51, n);
+    plc_write(&mut b, &mut t, 0, 70, 3, 0x30, n);
+    assert_eq!(plc_read(&mut b, &mut t, 0, 70, 0, n), 3);
+    // The K-bus is still held; function 9 starts it.
+    b.slave.device_mut().control("set 1.1 1").unwrap();
+    let i = b.dx(&[t, 0, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(i[8], 0, "held");
+    plc(&mut b, &mut t, 9, 0, n);
+    let i = b.dx(&[t | 9, 0, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(i[8] & 1, 1, "K-bus running");
+    assert!(b.slave.device().status_text().contains("K-bus running"));
+}

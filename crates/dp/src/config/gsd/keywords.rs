@@ -65,8 +65,6 @@ const STATION: &[&str] = &[
     "c1_read_write_required",
     "c2_read_write_required",
     "extra_alarm_sap_supp",
-    "alarm_sequence_mode_count",
-    "alarm_type_mode_supp",
     "diagnostic_alarm_required",
     "process_alarm_required",
     "pull_plug_alarm_required",

@@ -419,6 +419,13 @@ pub struct Gsd {
     pub update_alarm_supp: bool,
     /// `Manufacturer_Specific_Alarm_supp`.
     pub manufacturer_specific_alarm_supp: bool,
+    /// `Alarm_Type_Mode_supp`: the slave keeps one alarm per type
+    /// outstanding (Alarm_Mode 0 in DPV1_Status_3).
+    pub alarm_type_mode_supp: bool,
+    /// `Alarm_Sequence_Mode_Count`: how many alarms the slave keeps
+    /// outstanding in sequence mode (2..=32; Alarm_Mode 1..=7 in
+    /// DPV1_Status_3).
+    pub alarm_sequence_mode_count: Option<u8>,
 
     // ---- modules ----
     /// `Module` blocks, in file order.

@@ -786,6 +786,8 @@ impl Parser {
             "status_alarm_supp" => flag!(status_alarm_supp),
             "update_alarm_supp" => flag!(update_alarm_supp),
             "manufacturer_specific_alarm_supp" => flag!(manufacturer_specific_alarm_supp),
+            "alarm_type_mode_supp" => flag!(alarm_type_mode_supp),
+            "alarm_sequence_mode_count" => int!(alarm_sequence_mode_count, u8),
             "slave_family" => {
                 self.no_index(word, index)?;
                 c.ws();

@@ -23,7 +23,9 @@
 
 use super::model::*;
 use crate::config::names::DidYouMean;
+use crate::pdu::alarm::{AlarmEnable, AlarmLimit, AlarmMode};
 use crate::pdu::cfg::{self, CfgError, CfgTotals};
+use crate::pdu::prm::Dpv1Status2;
 use profibus_fdl::timing::Baud;
 use std::str::FromStr;
 
@@ -372,6 +374,46 @@ impl Gsd {
     pub fn other_flag(&self, keyword: &str) -> Option<bool> {
         let v = self.other_value(keyword)?;
         parse_int(v).map(|n| n != 0)
+    }
+
+    /// The DP-V1 alarm types the file declares (`Diagnostic_Alarm_supp`,
+    /// `Process_Alarm_supp`, `Pull_Plug_Alarm_supp`, `Status_Alarm_supp`,
+    /// `Update_Alarm_supp`, `Manufacturer_Specific_Alarm_supp`) as their
+    /// enable bits of DPV1_Status_2; empty for a slave that is not
+    /// `DPV1_Slave`.
+    pub fn declared_alarms(&self) -> Dpv1Status2 {
+        if !self.dpv1_slave {
+            return Dpv1Status2::empty();
+        }
+        let mut bits = Dpv1Status2::empty();
+        for (supp, e) in [
+            (self.diagnostic_alarm_supp, AlarmEnable::Diagnostic),
+            (self.process_alarm_supp, AlarmEnable::Process),
+            (self.pull_plug_alarm_supp, AlarmEnable::PullPlug),
+            (self.status_alarm_supp, AlarmEnable::Status),
+            (self.update_alarm_supp, AlarmEnable::Update),
+            (
+                self.manufacturer_specific_alarm_supp,
+                AlarmEnable::Manufacturer,
+            ),
+        ] {
+            bits.set(e.bit(), supp);
+        }
+        bits
+    }
+
+    /// The Alarm_Mode a master asks for (DPV1_Status_3 b2-0): sequence
+    /// mode with the most outstanding alarms `Alarm_Sequence_Mode_Count`
+    /// allows (the largest of 2, 4, 8, 12, 16, 24, 32 not above it), else
+    /// type mode (0, one alarm per type), which every DP-V1 slave with
+    /// alarms supports.
+    pub fn alarm_mode(&self) -> AlarmMode {
+        let n = self.alarm_sequence_mode_count.unwrap_or(0);
+        (1..=7u8)
+            .rev()
+            .map(AlarmMode)
+            .find(|m| matches!(m.limit(), AlarmLimit::Total(t) if t <= n))
+            .unwrap_or(AlarmMode(0))
     }
 
     /// `MaxTsdr_<baud>` in bit times, if the file gives it.

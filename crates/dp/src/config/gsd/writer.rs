@@ -234,6 +234,8 @@ impl Gsd {
             "Manufacturer_Specific_Alarm_supp",
             g.manufacturer_specific_alarm_supp,
         );
+        o.flag("Alarm_Type_Mode_supp", g.alarm_type_mode_supp);
+        o.num("Alarm_Sequence_Mode_Count", g.alarm_sequence_mode_count);
         o.num("User_Prm_Data_Len", g.user_prm_data_len);
         if let Some(d) = g.user_prm_data.as_ref().filter(|d| !d.is_empty()) {
             o.line(format!("User_Prm_Data={}", byte_list(d)));
