@@ -19,13 +19,12 @@ use crate::common::{self, RtsArg};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::class2::{
-    Class2Config, Class2Error, Class2Master, Class2Run, Opened, RecordAnswer, RecordOp, RecordOps,
-    SingleOp,
+    Class2Config, Class2Error, Opened, RecordAnswer, RecordOp, RecordOps, SingleOp,
 };
 use profibus_dp::config::busfile::BusFile;
 use profibus_dp::master::records::C1Records;
 use profibus_dp::master::{RecordOutcome, RecordTask, TaskRun};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
+use profibus_fdl::station::active::{ActiveConfig, RingState};
 use profibus_fdl::{Baud, BusParams};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -221,36 +220,28 @@ impl Link {
             .map(Duration::from_millis)
             .or(gsd_timeout)
             .unwrap_or(cfg.response_timeout);
-        let mut run = Class2Run::new(self.slave, ops);
         let rt = common::runtime()?;
-        let (stop, station) = rt.block_on(async {
-            use profibus_io::driver::{self, Clock};
+        let done = rt.block_on(async {
             let mut port = self.rts.open(&self.port, params.baud)?;
             let mut acfg = ActiveConfig::new(addr, params);
             common::allow_for_port(&mut acfg, self.latency, &port)?;
-            let mut station = ActiveStation::new(acfg, Class2Master::new(cfg));
-            let stop = driver::run_with(
-                &mut station,
-                &mut port,
-                Clock::start(),
-                driver::Options::default(),
-                common::shutdown(),
-                |st, now| run.tick(st.app_mut(), now),
-            )
-            .await;
-            anyhow::Ok((stop, station))
+            let done =
+                profibus_io::class2::run(&mut port, acfg, cfg, self.slave, ops, common::shutdown())
+                    .await
+                    .with_context(|| format!("on {}", self.port))?;
+            anyhow::Ok(done)
         })?;
-        if stop.with_context(|| format!("on {}", self.port))? == profibus_io::driver::Stop::Shutdown
-        {
+        if done.stop == profibus_io::driver::Stop::Shutdown {
             bail!("interrupted");
         }
+        let run = done.run;
         let opened = run.opened().copied();
         Ok(match run.finish() {
             Ok(ops) => Ok((ops, opened)),
             Err((e, ops)) => {
                 let e = match e {
                     Class2Error::Timeout { op: "initiate", .. }
-                        if station.ring_state() == RingState::ListenToken =>
+                        if done.ring == RingState::ListenToken =>
                     {
                         tracing::warn!(%e, "no token");
                         return Err(anyhow::anyhow!(
@@ -305,12 +296,13 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
-/// `e` without its leading "slave N" (the outcome line names the slave
-/// already).
+/// `e` with its leading "slave N" as "the slave" (the outcome line names
+/// the slave already), "slave N: " dropped.
 fn without_slave(slave: u8, e: &str) -> String {
     let prefix = format!("slave {slave}");
     match e.strip_prefix(&prefix) {
-        Some(rest) => rest.trim_start_matches(':').trim_start().to_string(),
+        Some(rest) if rest.starts_with(':') => rest[1..].trim_start().to_string(),
+        Some(rest) => format!("the slave{rest}"),
         None => e.to_string(),
     }
 }

@@ -109,13 +109,22 @@ fn profile_words(id: u16) -> &'static str {
     }
 }
 
-/// PROFILE_SPECIFIC_TYPE in words (of the generic device profile).
-fn type_words(t: u16) -> &'static str {
+/// PROFILE_SPECIFIC_TYPE with its words where the reference has them.
+fn type_words(t: u16) -> String {
     match t {
-        3 => "I/O",
-        4 => "communication module",
-        5 => "interface module",
-        _ => "type",
+        3 => "type 3 (I/O)".into(),
+        4 => "type 4 (communication module)".into(),
+        5 => "type 5 (interface module)".into(),
+        t => format!("type {t}"),
+    }
+}
+
+/// A text field, "(blank)" when empty.
+fn or_blank(s: String) -> String {
+    if s.is_empty() {
+        "(blank)".into()
+    } else {
+        s
     }
 }
 
@@ -213,10 +222,16 @@ impl Report<'_> {
                     Ok(im) => writeln!(s, "slave {slave} I&M0 ({}):\n{}", self.via, im0_text(&im)),
                     Err(e) => writeln!(s, "slave {slave} I&M0: invalid: {e}"),
                 },
+                Some(ImRead::Record(b)) if n == 4 && b[10..].iter().all(|x| *x == 0) => {
+                    writeln!(s, "slave {slave} I&M4: signature none (zeros)")
+                }
                 Some(ImRead::Record(b)) => {
                     let fields: Vec<String> = record_fields(n, b)
                         .into_iter()
-                        .map(|(k, v)| format!("{} \"{v}\"", k.replace('_', " ")))
+                        .map(|(k, v)| match k {
+                            "signature" => format!("signature {v}"),
+                            k => format!("{} \"{v}\"", k.replace('_', " ")),
+                        })
                         .collect();
                     writeln!(s, "slave {slave} I&M{n}: {}", fields.join(", "))
                 }
@@ -232,18 +247,17 @@ fn im0_text(im: &Im0) -> String {
             "manufacturer",
             format!("0x{:04X} ({})", im.manufacturer_id, im.manufacturer_id),
         ),
-        ("order number", im.order_id()),
-        ("serial number", im.serial_number()),
+        ("order number", or_blank(im.order_id())),
+        ("serial number", or_blank(im.serial_number())),
         ("hardware revision", im.hardware_revision.to_string()),
         ("software revision", im.software_revision.to_string()),
         ("revision counter", im.revision_counter.to_string()),
         (
             "profile",
             format!(
-                "0x{:04X} ({}), type {} ({})",
+                "0x{:04X} ({}), {}",
                 im.profile_id,
                 profile_words(im.profile_id),
-                im.profile_specific_type,
                 type_words(im.profile_specific_type)
             ),
         ),

@@ -32,7 +32,9 @@ pub struct ProfileArgs {
     /// Device profile to emulate (see --list-devices).
     #[arg(long, value_name = "NAME")]
     pub device: Option<String>,
-    /// An option of the device profile, KEY=VALUE (repeatable).
+    /// An option of the device profile, KEY=VALUE (repeatable). Every
+    /// profile also takes ident=0x… (the ident number it reports) and
+    /// gsd=FILE (a vendor's GSD file: ident number, modules, parameters).
     #[arg(long = "device-opt", value_name = "KEY=VALUE", requires = "device")]
     pub device_opts: Vec<String>,
     /// List the device profiles and exit.

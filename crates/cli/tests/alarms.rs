@@ -187,3 +187,83 @@ fn bad_alarm_names_in_a_bus_file_are_refused_with_position_and_closest_name() {
         assert!(err.contains(want), "{line}: {err}");
     }
 }
+
+#[test]
+fn the_gateway_publishes_each_alarm_on_its_alarm_topic_not_retained() {
+    use common::mqtt;
+    let dir = TempDir::new("alarms-gateway");
+    let port = mqtt::free_port();
+    let _mosq = mqtt::broker(&dir, port);
+    let line = Bus::start(2, &[]);
+    let mut slave = Proc::spawn(
+        "dpctl slave 9",
+        Command::new(dpctl())
+            .args(["slave", "--port"])
+            .arg(line.link(1))
+            .args(["--addr", "9", "--baud", "1.5M", "--gsd"])
+            .arg(alarm_gsd())
+            .args(["--module", "2 words in/out", "--control", "-"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    let cfg = bus_file(&dir, "[mqtt]\nprefix = \"profibus\"\nbus = \"line\"");
+    let sub = ["-v", "-t", "profibus/line/#", "-t", "client/probe"];
+    let (_sub, mut lines) = mqtt::subscribe(port, &sub, &[], "client/probe");
+    let gw = Proc::spawn_captured({
+        let mut c = Command::new(dpctl());
+        c.arg("gateway")
+            .arg("--config")
+            .arg(&cfg)
+            .arg("--port")
+            .arg(line.link(0))
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
+        c
+    });
+    // The payload of the first message on `topic` that contains `needle`.
+    let on = |lines: &mut Lines, topic: &str, needle: &str| -> Value {
+        let want = format!("{topic} ");
+        let hit = |l: &String| l.starts_with(&want) && l.contains(needle);
+        let end = Instant::now() + WAIT;
+        loop {
+            if let Some(l) = lines.1.iter().find(|l| hit(l)) {
+                return serde_json::from_str(&l[want.len()..]).unwrap();
+            }
+            let left = end.saturating_duration_since(Instant::now());
+            assert!(
+                lines.next_line(left).is_some(),
+                "no {topic} with {needle}: {:#?}",
+                lines.1
+            );
+        }
+    };
+    on(&mut lines, "profibus/line/9/state", "data_exchange");
+    send(&mut slave, "alarm process 2 appears 7f");
+    let a = on(&mut lines, "profibus/line/9/alarm", "\"acknowledged\"");
+    assert_eq!(a["slave"], 9, "{a}");
+    assert_eq!(a["type"], "process", "{a}");
+    assert_eq!(a["slot"], 2, "{a}");
+    assert_eq!(a["specifier"], "appears", "{a}");
+    assert_eq!(a["seq"], 0, "{a}");
+    assert_eq!(a["data"], "7F", "{a}");
+    assert_eq!(a["acknowledged"], true, "{a}");
+    assert!(a["ts"].as_u64().is_some(), "{a}");
+    // A client that subscribes now gets the retained topics (the state)
+    // at once, before its probe comes back, but no alarm.
+    let late = ["-F", "%r %t", "-t", "profibus/line/#", "-t", "client/late"];
+    let (_late, late_lines) = mqtt::subscribe(port, &late, &[], "client/late");
+    assert!(
+        late_lines.1.iter().any(|l| l == "1 profibus/line/9/state"),
+        "{:#?}",
+        late_lines.1
+    );
+    assert!(
+        !late_lines.1.iter().any(|l| l.contains("/alarm")),
+        "the alarm is not retained: {:#?}",
+        late_lines.1
+    );
+    gw.signal(15);
+    let out = gw.finish(WAIT);
+    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+    slave.terminate(Duration::from_secs(5));
+}

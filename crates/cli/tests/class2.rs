@@ -93,7 +93,7 @@ fn a_slave_without_class_2_refuses_and_a_silent_one_times_out() {
     assert!(!out.status.success());
     assert_eq!(
         out.stderr.trim(),
-        "dpctl: slave 11 slot 0 index 0: refused class 2 (SAP 49, MSAC_C2 Initiate): \
+        "dpctl: slave 11 slot 0 index 0: the slave refused class 2 (SAP 49, MSAC_C2 Initiate): \
          SAP not activated (RS)"
     );
     // Nobody at 20: silent past Send_Timeout.

@@ -40,6 +40,8 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
                 "slave", "--device", "omega", "--addr", "25", "--json", "--port",
             ])
             .arg(&slave_end)
+            // The drive enables itself: no PLC enable sequence here.
+            .args(["--device-opt", "drive-enable=auto"])
             .stdout(Stdio::piped())
             .stdin(Stdio::null()),
     );
@@ -67,13 +69,14 @@ fn the_master_shows_and_sets_the_channels_of_a_profile_slave() {
         "{lines:?}"
     );
     // The last inputs received: the drive follows its setpoints (actual
-    // value i = setpoint i) and reports Remote in status word 1.
+    // value i = setpoint i) and reports Remote, operation enabled and
+    // setpoint reached in status word 1.
     let st = lines.iter().rev().find(|v| v["event"] == "status").unwrap();
     let ch = &st["slaves"][0]["channels"];
     assert_eq!(ch["outputs"]["setpoint1"], 1234, "{ch}");
     assert_eq!(ch["inputs"]["actual1"], 1234, "{ch}");
     assert_eq!(ch["inputs"]["actual2"], -5, "{ch}");
-    assert_eq!(ch["inputs"]["status1"], 0x0200, "{ch}");
+    assert_eq!(ch["inputs"]["status1"], 0x0637, "{ch}");
     // A wrong channel name is refused with the name, nothing written.
     assert!(
         lines

@@ -69,6 +69,7 @@ fn monitor_follows_a_master_and_its_slaves_to_data_exchange() {
         "dpctl slave (omega)",
         Command::new(dpctl())
             .args(["slave", "--device", "omega", "--addr", "25"])
+            .args(["--device-opt", "drive-enable=auto"])
             .args(["--baud", "1.5M", "--port"])
             .arg(line.link(2))
             .stdout(Stdio::null())

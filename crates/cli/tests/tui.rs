@@ -241,7 +241,17 @@ fn slave(port: &Path, args: &[&str]) -> Proc {
 fn master_shows_a_table_selects_details_writes_pauses_and_quits() {
     let bus = Bus::start(3, &[]);
     let _echo = echo_slave(&bus.link(1));
-    let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
+    let _drive = slave(
+        &bus.link(2),
+        &[
+            "--addr",
+            "25",
+            "--device",
+            "omega",
+            "--device-opt",
+            "drive-enable=auto",
+        ],
+    );
     let config = bus_file(&bus.dir().0);
     let t = tmux_master(&bus, &config, &[]);
     // Both slaves in Data_Exchange, in a table with its headings.
@@ -443,7 +453,17 @@ fn sniff_lists_telegrams_with_filters_and_station_statistics() {
 fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
     let bus = Bus::start(4, &[]);
     let _echo = echo_slave(&bus.link(1));
-    let _drive = slave(&bus.link(2), &["--addr", "25", "--device", "omega"]);
+    let _drive = slave(
+        &bus.link(2),
+        &[
+            "--addr",
+            "25",
+            "--device",
+            "omega",
+            "--device-opt",
+            "drive-enable=auto",
+        ],
+    );
     let config = bus_file(&bus.dir().0);
     let _master = json_master(&bus.link(0), &config);
     let port = bus.link_str(3);

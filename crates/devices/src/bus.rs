@@ -35,6 +35,10 @@ impl DeviceResolver for Registry {
         let p = crate::profile(&entry.name).map_err(DeviceError::new)?;
         let mut options = DeviceOptions::from_table(entry.options.clone());
         options.paths_relative_to(&entry.dir, p.path_options);
+        // A vendor's GSD next to `device` (crate::identity).
+        if !p.path_options.contains(&"gsd") {
+            options.paths_relative_to(&entry.dir, &["gsd"]);
+        }
         let profile = p.configure(&options, Some(address)).map_err(|e| {
             let message = format!("device `{}`: {e}", p.name);
             // A module the GSD lacks is about the option naming modules.
@@ -423,9 +427,16 @@ lenient = true
         let e = ProfiledBus::parse(&dir, &text.replace("omega.params", "params")).unwrap_err();
         assert_eq!(e.line, 9, "{e}");
         assert!(e.message.contains("`omega.params = …`"), "{e}");
-        let e = ProfiledBus::parse(&dir, &text.replace("generic.gsd", "gsd")).unwrap_err();
-        assert_eq!(e.line, 14, "{e}");
-        assert!(e.message.contains("`generic.gsd = …`"), "{e}");
+        // `gsd` next to `device` is the profile's `gsd` (for the generic
+        // profile its own GSD file; crate::identity for the others).
+        let bus = ProfiledBus::parse(&dir, &text.replace("generic.gsd", "gsd")).unwrap();
+        assert_eq!(bus.profile(7).unwrap().gsd().ident_number, 0x00D0);
+        let both = text.replace(
+            "generic.gsd = \"BNF_00D0.GSD\"\n",
+            "gsd = \"BNF_00D0.GSD\"\ngeneric.gsd = \"BNF_00D0.GSD\"\n",
+        );
+        let e = ProfiledBus::parse(&dir, &both).unwrap_err();
+        assert!(e.message.contains("both given"), "{e}");
     }
 }
 
@@ -519,5 +530,161 @@ mod defaults {
                 p.name
             );
         }
+    }
+}
+
+/// A master set up from a vendor's GSD file (another ident number, other
+/// module names, User_Prm_Data the emulation does not know) reaches
+/// Data_Exchange with the profile given that file (`gsd = "…"` next to
+/// `device`, crate::identity), and an `ident` alone changes the ident
+/// number both sides use.
+#[cfg(test)]
+mod vendor_identity {
+    use super::*;
+    use profibus_dp::master::{DpMaster, SlaveState};
+    use profibus_dp::slave::DpSlave;
+    use profibus_fdl::line::medium::MediumConfig;
+    use profibus_fdl::sim::SimBus;
+    use profibus_fdl::station::active::{ActiveConfig, ActiveStation};
+    use profibus_fdl::station::passive::PassiveStation;
+    use std::time::Duration;
+
+    /// The bus file `text` in `dir`: the master from it and the slave at
+    /// 7 as `dpctl slave --device NAME` runs it with the same options; the
+    /// slave's state after at most 2 s and the ident number the master
+    /// sent.
+    fn run(dir: &Path, text: &str) -> (Option<SlaveState>, u16) {
+        run_with(dir, text, None)
+    }
+
+    /// [`run`] with the slave configured from `slave` (name, options)
+    /// instead of the bus file's entry.
+    fn run_with(
+        dir: &Path,
+        text: &str,
+        slave: Option<(&str, DeviceOptions)>,
+    ) -> (Option<SlaveState>, u16) {
+        let bus = ProfiledBus::parse(&dir.join("bus.toml"), text).unwrap_or_else(|e| panic!("{e}"));
+        let cfg = &bus.file.master;
+        let params = cfg.params;
+        let mut sim = SimBus::new(MediumConfig::paced(params.baud));
+        let m = sim.add(ActiveStation::new(
+            ActiveConfig::new(cfg.address, params),
+            DpMaster::new(cfg).unwrap(),
+        ));
+        let (p, mut options) = match slave {
+            Some((name, o)) => (crate::profile(name).unwrap(), o),
+            None => {
+                let entry = bus.file.slaves[0].device.clone().unwrap();
+                let o = DeviceOptions::from_table(entry.options);
+                (crate::profile(&entry.name).unwrap(), o)
+            }
+        };
+        options.paths_relative_to(dir, &["gsd"]);
+        let slave = p
+            .configure(&options, Some(7))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let device = slave.device(None).unwrap();
+        sim.add(PassiveStation::new(DpSlave::new(device, 7), params));
+        let state = |sim: &SimBus| {
+            sim.station::<ActiveStation<DpMaster>>(m)
+                .app()
+                .slave_state(7)
+        };
+        for _ in 0..200 {
+            sim.run_for(Duration::from_millis(10));
+            if state(&sim) == Some(SlaveState::DataExchange) {
+                break;
+            }
+        }
+        (state(&sim), bus.file.slaves[0].params.ident_number)
+    }
+
+    const MASTER: &str = "[master]\naddress = 2\nbaud = \"1.5M\"\n\n";
+
+    #[test]
+    fn a_master_from_the_vendors_gsd_reaches_data_exchange() {
+        let dir = tempfile::tempdir().unwrap();
+        // "AEG's" file: its own ident number, module name and two bytes of
+        // User_Prm_Data the reader's manual does not describe.
+        let ours = String::from_utf8_lossy(crate::gsd_files::AEGI0DC4).to_string();
+        let vendor = ours
+            .replace("Ident_Number=0x0DC4", "Ident_Number=0x08AE")
+            .replace(
+                "User_Prm_Data_Len=0",
+                "User_Prm_Data_Len=2\nUser_Prm_Data=0x12,0x34",
+            );
+        let vendor = vendor.replacen("Module=\"", "Module=\"AEG ", 1);
+        assert_ne!(vendor, ours);
+        std::fs::write(dir.path().join("AEG.GSD"), &vendor).unwrap();
+        let text =
+            format!("{MASTER}[[slave]]\naddress = 7\ndevice = \"rfid\"\ngsd = \"AEG.GSD\"\n");
+        let bus = ProfiledBus::parse(&dir.path().join("bus.toml"), &text).unwrap();
+        let s = &bus.file.slaves[0];
+        assert_eq!(s.params.ident_number, 0x08AE, "the vendor's ident");
+        assert!(
+            s.modules.iter().all(|m| m.starts_with("AEG ")),
+            "{:?}",
+            s.modules
+        );
+        assert_eq!(
+            s.params.user_prm_data,
+            [0x12, 0x34],
+            "the vendor's parameters"
+        );
+        assert_eq!(
+            run(dir.path(), &text),
+            (Some(SlaveState::DataExchange), 0x08AE)
+        );
+        // Without the vendor's file the emulation refuses that master
+        // (Prm_Fault: another ident number).
+        let (state, _) = run_with(dir.path(), &text, Some(("rfid", DeviceOptions::new())));
+        assert_ne!(state, Some(SlaveState::DataExchange));
+        // Jetter's file for the JX2-PROFI1: another ident number and
+        // module names (the PLC program writes the station address).
+        let ours = String::from_utf8_lossy(crate::jx2::GSD).to_string();
+        let vendor = ours
+            .replace("Ident_Number=0x0DC3", "Ident_Number=0x0815")
+            .replace("Module=\"", "Module=\"Jetter ");
+        std::fs::write(dir.path().join("JETTER.GSD"), vendor).unwrap();
+        let script = dir.path().join("plc.txt");
+        std::fs::write(&script, "write 12107 7\n").unwrap();
+        let jx2 = format!(
+            "{MASTER}[[slave]]\naddress = 7\ndevice = \"jx2\"\ngsd = \"JETTER.GSD\"\nscript = {:?}\n",
+            script.display().to_string()
+        );
+        let bus = ProfiledBus::parse(&dir.path().join("bus.toml"), &jx2).unwrap();
+        assert!(bus.file.slaves[0]
+            .modules
+            .iter()
+            .all(|m| m.starts_with("Jetter ")));
+        assert_eq!(
+            run(dir.path(), &jx2),
+            (Some(SlaveState::DataExchange), 0x0815)
+        );
+        // With the vendor's file and `ident`: `ident` wins.
+        let both = format!("{text}ident = 0x0ABC\n");
+        assert_eq!(
+            run(dir.path(), &both),
+            (Some(SlaveState::DataExchange), 0x0ABC)
+        );
+    }
+
+    #[test]
+    fn ident_alone_changes_the_ident_number_of_every_profile() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, extra) in [("omega", ""), ("bm4", ""), ("rfid", ""), ("bk3000", "")] {
+            let text = format!(
+                "{MASTER}[[slave]]\naddress = 7\ndevice = \"{name}\"\nident = \"0x1234\"\n{extra}"
+            );
+            assert_eq!(
+                run(dir.path(), &text),
+                (Some(SlaveState::DataExchange), 0x1234),
+                "{name}"
+            );
+        }
+        let text = format!("{MASTER}[[slave]]\naddress = 7\ndevice = \"omega\"\nident = 0x10000\n");
+        let e = ProfiledBus::parse(&dir.path().join("bus.toml"), &text).unwrap_err();
+        assert!(e.message.contains("option `ident`"), "{e}");
     }
 }

@@ -99,6 +99,7 @@ pub mod channels;
 pub mod commission;
 pub mod generic;
 pub mod gsd_files;
+pub mod identity;
 pub mod jx2;
 mod kit;
 pub mod omega;

@@ -628,7 +628,15 @@ fn configure_boxed<P: Profile>(
     options: &DeviceOptions,
     address: Option<u8>,
 ) -> Result<Box<dyn Configured>, ProfileError> {
-    Ok(Box::new(P::configure(options.decode()?, address)?))
+    // `ident` and `gsd` (a vendor's GSD) for every profile:
+    // crate::identity.
+    let own = field_names::<P::Options>();
+    let (rest, ident, gsd) = crate::identity::take(options, own)?;
+    let p: Box<dyn Configured> = Box::new(P::configure(rest.decode()?, address)?);
+    if ident.is_none() && gsd.is_none() {
+        return Ok(p);
+    }
+    Ok(Box::new(crate::identity::Identified::new(p, ident, gsd)?))
 }
 
 impl ProfileEntry {

@@ -5,7 +5,7 @@
 
 use crate::outage::Outage;
 use crate::payload::{
-    hex, to_bytes, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout,
+    hex, to_bytes, AlarmPayload, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout,
     SlaveStatePayload, Status,
 };
 use crate::request::{parse_request, OutputWrite, ReplyTo, Request, RequestError, QUEUE_LIMIT};
@@ -18,7 +18,8 @@ use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, PKW_LEN};
 use profibus_devices::rfid::client::RfidClient;
 use profibus_dp::master::{
-    DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveHandle, SlaveState,
+    AlarmReport, DpMaster, Job, JobId, JobResult, MasterEvent, OperatingState, SlaveHandle,
+    SlaveState,
 };
 use profibus_fdl::Instant;
 use std::collections::VecDeque;
@@ -320,6 +321,19 @@ impl Gateway {
                         e.fault = Some(reason.to_string());
                         e.published.state = None;
                     }
+                }
+                MasterEvent::Alarm { address, alarm } => {
+                    let gsd = self
+                        .slaves
+                        .iter()
+                        .find(|e| e.info.layout.address == address)
+                        .and_then(|e| e.info.layout.gsd.as_ref());
+                    let payload = AlarmPayload {
+                        alarm: AlarmReport::new(address, &alarm, gsd),
+                        ts: ts_ms,
+                    };
+                    let topic = self.topics.slave(address, SlaveTopic::Alarm);
+                    self.push(topic, &payload, false);
                 }
                 MasterEvent::JobDone(id) => {
                     if let Some(i) = self.jobs.iter().position(|(j, _)| *j == id) {

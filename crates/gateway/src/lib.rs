@@ -54,7 +54,7 @@
 //! let bus = ProfiledBus::parse(
 //!     Path::new("line.toml"),
 //!     "[master]\naddress = 2\nbaud = \"1.5M\"\n\
-//!      [[slave]]\naddress = 25\ndevice = \"omega\"\n\
+//!      [[slave]]\naddress = 25\ndevice = \"omega\"\ndrive_enable = \"auto\"\n\
 //!      [mqtt]\nwritable = [25]\n",
 //! )?;
 //! let settings = MqttSettings::from_table(bus.file.mqtt.as_ref(), "line")?;

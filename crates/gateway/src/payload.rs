@@ -7,7 +7,7 @@
 
 use crate::settings::SafeState;
 use profibus_devices::channels::ChannelValues;
-use profibus_dp::master::{OperatingState, SlaveState};
+use profibus_dp::master::{AlarmReport, OperatingState, SlaveState};
 use profibus_dp::pdu::diag::SlaveDiag;
 use serde::{Serialize, Serializer};
 
@@ -193,6 +193,19 @@ impl<'a> DiagPayload<'a> {
             cycle,
         }
     }
+}
+
+/// `<addr>/alarm` (not retained): a DP-V1 alarm once the master
+/// acknowledged it or gave up, with the fields of `dpctl master`'s alarm
+/// event (`slave`, `type`, `slot`, `specifier`, `seq`, `data`, `text`,
+/// `acknowledged`; [`AlarmReport`]) and the time.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct AlarmPayload {
+    /// The alarm.
+    #[serde(flatten)]
+    pub alarm: AlarmReport,
+    /// Wall-clock time, ms since the Unix epoch.
+    pub ts: u64,
 }
 
 /// The result fields of a successful answer.

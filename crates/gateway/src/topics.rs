@@ -60,6 +60,9 @@ pub enum SlaveTopic {
     Outputs,
     /// `<addr>/diag`: the last diagnosis (retained).
     Diag,
+    /// `<addr>/alarm`: a DP-V1 alarm, once acknowledged or given up (not
+    /// retained: each alarm is an event).
+    Alarm,
     /// A request topic (subscribed).
     Request(Service),
     /// The default response topic of a service.
@@ -73,6 +76,7 @@ impl SlaveTopic {
             SlaveTopic::Inputs => "inputs",
             SlaveTopic::Outputs => "outputs",
             SlaveTopic::Diag => "diag",
+            SlaveTopic::Alarm => "alarm",
             SlaveTopic::Request(s) => s.request(),
             SlaveTopic::Response(s) => s.response(),
         }

@@ -16,6 +16,8 @@
 //! - [`driver`]: the thin tokio shell that runs any `profibus_fdl`
 //!   station (an active master or a passive slave) on a byte stream,
 //!   with its [`driver::Clock`].
+//! - [`class2`]: a class-2 master (MSAC_C2) on a port, next to the
+//!   running masters, for one connection's requests.
 //! - [`runner`]: a slave's station on a port with the baud-rate search,
 //!   searching again after silence or a lost master.
 //! - [`listen`]: the passive driver of bus monitors: reads a line (never
@@ -34,6 +36,7 @@
 //!   benchmarks that prove allocation-free steady states.
 
 pub mod alloc_count;
+pub mod class2;
 pub mod codec;
 pub mod control_io;
 pub mod driver;

@@ -343,7 +343,7 @@ fn own_slaves(bm4: ControlInbox) -> Result<crate::PlantBuilder, DemoError> {
             OMEGA_ADDRESS,
             "Omega Drive-Line II (omega)",
             "omega",
-            &[],
+            &["drive-enable=auto"],
             None,
         )?
         // Beckhoff BK3000 with a mixed terminal strip, from its rotary

@@ -709,3 +709,160 @@ pub fn check_cfg(strip: &Strip, opts: Options, cfg: &[u8]) -> Result<Image, CfgR
         ..img
     })
 }
+
+/// Where a programmed configuration puts one terminal (manual p. 51:
+/// "Mit dem Konfigurator können die Klemmen beliebig in das lokale
+/// Prozeßabbild gelegt werden"): the input and output address of its
+/// first byte (complex terminals) or first bit (digital terminals).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Placement {
+    /// Terminal position (1-based).
+    pub position: usize,
+    /// Input byte and bit, if placed.
+    pub input: Option<(usize, u8)>,
+    /// Output byte and bit, if placed.
+    pub output: Option<(usize, u8)>,
+}
+
+impl Placement {
+    /// Parse `POS@IN/OUT` entries separated by commas or `;`: `IN` and
+    /// `OUT` are `BYTE` or `BYTE.BIT`, `-` keeps the automatic address
+    /// (`1@0.0/-, 3@1/-`).
+    pub fn parse_list(text: &str) -> Result<Vec<Placement>, String> {
+        let addr = |s: &str, item: &str| -> Result<Option<(usize, u8)>, String> {
+            let s = s.trim();
+            if s == "-" {
+                return Ok(None);
+            }
+            let bad =
+                || format!("placement `{item}`: `{s}` is not BYTE or BYTE.BIT (bit 0-7) or -");
+            let (b, bit) = match s.split_once('.') {
+                Some((b, bit)) => (
+                    b,
+                    bit.parse::<u8>().ok().filter(|b| *b < 8).ok_or_else(bad)?,
+                ),
+                None => (s, 0),
+            };
+            Ok(Some((b.parse().map_err(|_| bad())?, bit)))
+        };
+        let mut out = vec![];
+        for item in text
+            .split([',', ';'])
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+        {
+            let (pos, rest) = item
+                .split_once('@')
+                .ok_or_else(|| format!("placement `{item}`: write POS@IN/OUT, e.g. 3@0/-"))?;
+            let position = pos
+                .trim()
+                .parse()
+                .map_err(|_| format!("placement `{item}`: `{pos}` is no terminal position"))?;
+            let (i, o) = rest
+                .split_once('/')
+                .ok_or_else(|| format!("placement `{item}`: write POS@IN/OUT, e.g. 3@0/-"))?;
+            out.push(Placement {
+                position,
+                input: addr(i, item)?,
+                output: addr(o, item)?,
+            });
+        }
+        Ok(out)
+    }
+}
+
+impl Image {
+    /// The image of a programmed configuration `cfg` with terminals
+    /// placed freely: the automatic image of `strip` (its mappings,
+    /// `opts`), each terminal of `places` moved to its addresses, the
+    /// lengths of `cfg`'s identifiers. Refused: a position that is not a
+    /// terminal with data in that direction, a digital terminal at a byte
+    /// boundary it cannot have, data beyond the lengths, overlapping data.
+    pub fn placed(
+        strip: &Strip,
+        opts: Options,
+        places: &[Placement],
+        cfg: &[u8],
+    ) -> Result<Image, String> {
+        let totals = profibus_dp::pdu::cfg::totals(cfg)
+            .map_err(|e| format!("programmed configuration: {e}"))?;
+        let mut img = strip.default_image(opts);
+        for p in places {
+            if p.position == 0 || p.position > strip.len() {
+                return Err(format!(
+                    "placement: terminal {} is not on the strip (1..={})",
+                    p.position,
+                    strip.len()
+                ));
+            }
+            for (dir, to) in [(Dir::In, p.input), (Dir::Out, p.output)] {
+                let Some((byte, bit)) = to else { continue };
+                let mine = |e: &Entry| e.owner == Owner::Terminal(p.position) && e.dir == dir;
+                let Some(first) = img.entries.iter().filter(|e| mine(e)).map(bit_addr).min() else {
+                    return Err(format!(
+                        "placement: terminal {} ({}) has no {} data",
+                        p.position,
+                        strip.slots()[p.position - 1].ty.name,
+                        if dir == Dir::In { "input" } else { "output" }
+                    ));
+                };
+                let digital = img.entries.iter().any(|e| mine(e) && e.bit.is_some());
+                if !digital && bit != 0 {
+                    return Err(format!(
+                        "placement: terminal {} is byte-oriented; give a byte, not a bit",
+                        p.position
+                    ));
+                }
+                let shift = (byte * 8 + bit as usize) as i64 - first as i64;
+                for e in img.entries.iter_mut().filter(|e| mine(e)) {
+                    let a = (bit_addr(e) as i64 + shift) as usize;
+                    e.byte = a / 8;
+                    if e.bit.is_some() {
+                        e.bit = Some((a % 8) as u8);
+                    }
+                }
+            }
+        }
+        let (mut used_in, mut used_out) = (
+            vec![false; totals.input_bytes * 8],
+            vec![false; totals.output_bytes * 8],
+        );
+        for e in &img.entries {
+            let used = if e.dir == Dir::In {
+                &mut used_in
+            } else {
+                &mut used_out
+            };
+            let start = bit_addr(e);
+            let len = if e.bit.is_some() {
+                1
+            } else {
+                e.bytes as usize * 8
+            };
+            if start + len > used.len() {
+                return Err(format!(
+                    "placement: {} lies beyond the {} bytes of the programmed configuration",
+                    e.name,
+                    used.len() / 8
+                ));
+            }
+            if let Some(k) = (start..start + len).find(|&k| used[k]) {
+                return Err(format!(
+                    "placement: {} overlaps other data at byte {}, bit {}",
+                    e.name,
+                    k / 8,
+                    k % 8
+                ));
+            }
+            used[start..start + len].fill(true);
+        }
+        img.in_len = totals.input_bytes;
+        img.out_len = totals.output_bytes;
+        img.cfg = cfg.to_vec();
+        Ok(img)
+    }
+}
+
+fn bit_addr(e: &Entry) -> usize {
+    e.byte * 8 + e.bit.unwrap_or(0) as usize
+}

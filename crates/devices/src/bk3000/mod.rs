@@ -80,6 +80,8 @@ pub struct Bk3000 {
     /// Terminals replaced while running (`swap N TYPE`).
     swapped: Vec<Option<&'static catalogue::TerminalType>>,
     programmed: Option<Vec<u8>>,
+    /// Free placement of the programmed configuration (p. 51).
+    placement: Vec<image::Placement>,
     prm: UserPrm,
     image: Image,
     diag: CouplerDiag,
@@ -122,6 +124,7 @@ impl Bk3000 {
             swapped: vec![None; strip.len()],
             strip,
             programmed: None,
+            placement: vec![],
             prm: UserPrm::default(),
             image,
             diag: CouplerDiag::default(),
@@ -170,6 +173,29 @@ impl Bk3000 {
             cfg,
             strip: self.strip.names().join(","),
         })
+    }
+
+    /// Store a programmed configuration (table 70) with terminals placed
+    /// freely in the process image (p. 51): `cfg` need only give the
+    /// lengths; `places` move terminals from their automatic addresses
+    /// ([`Image::placed`]).
+    pub fn with_placement(
+        mut self,
+        cfg: Vec<u8>,
+        places: Vec<image::Placement>,
+    ) -> Result<Bk3000, String> {
+        for plc_interface in [false, true] {
+            let opts = Options {
+                plc_interface,
+                cycle_counter: false,
+            };
+            if Image::placed(&self.strip, opts, &places, &cfg).is_ok() {
+                self.programmed = Some(cfg);
+                self.placement = places;
+                return Ok(self);
+            }
+        }
+        Image::placed(&self.strip, Options::default(), &places, &cfg).map(|_| self)
     }
 
     /// Read control commands from `inbox` ([`Bk3000::control`]).
@@ -1000,6 +1026,14 @@ impl Device for Bk3000 {
                     error: CfgError::FaultyByte(table.len()),
                     reason: format!("programmed configuration is {}", hex(&table)),
                 }),
+                None if !self.placement.is_empty() => {
+                    Image::placed(&self.strip, opts, &self.placement, cfg).map_err(|reason| {
+                        CfgReject {
+                            error: CfgError::FaultyByte(0),
+                            reason,
+                        }
+                    })
+                }
                 None => image::check_cfg(&self.strip, opts, cfg),
             }
         } else {

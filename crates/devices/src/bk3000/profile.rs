@@ -43,6 +43,10 @@ pub struct Options {
     pub switch_tens: Option<u8>,
     /// Table 70: the programmed configuration (hex bytes).
     pub programmed_cfg: Option<String>,
+    /// Free placement in the programmed configuration (p. 51):
+    /// `POS@IN/OUT, …` ([`image::Placement::parse_list`]); needs
+    /// `programmed_cfg`.
+    pub placement: Option<String>,
     /// Terminal types the catalogue lacks ([`super::user`]): a table of
     /// tables, `[slave.terminal_types.KL3404]` in a bus file.
     pub terminal_types: Option<toml::Table>,
@@ -56,6 +60,7 @@ pub struct Bk3000Profile {
     strip: Strip,
     address: Option<u8>,
     programmed: Option<Vec<u8>>,
+    placement: Vec<image::Placement>,
     gsd: Gsd,
 }
 
@@ -166,7 +171,7 @@ impl Profile for Bk3000Profile {
     const OPTIONS_HELP: &'static str = "--terminals KL1104,KL2134,KL3102:complete,...,KL9010 (plug order, end terminal last; \
 bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the manual's appendix example strip), \
 --switch-ones N --switch-tens N (rotary switches, instead of --addr), \
---device-opt programmed-cfg=HEX (table 70), \
+--device-opt programmed-cfg=HEX (table 70), --device-opt placement=POS@IN/OUT,... (free placement in it), \
 --device-opt terminal-types-file=FILE.toml (terminals the catalogue lacks; bus file: [slave.terminal_types.NAME]), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
     const PATH_OPTIONS: &'static [&'static str] = &["terminals_file", "terminal_types_file"];
@@ -180,15 +185,39 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
             .as_deref()
             .map(parse_hex)
             .transpose()?;
-        if let Some(p) = &programmed {
-            Bk3000::new(strip.clone())
-                .with_programmed_cfg(p.clone())
-                .map_err(invalid)?;
+        let placement = match &options.placement {
+            Some(text) => {
+                image::Placement::parse_list(text).map_err(|message| ProfileError::BadOption {
+                    key: "placement".into(),
+                    message,
+                })?
+            }
+            None => vec![],
+        };
+        match (&programmed, placement.is_empty()) {
+            (None, false) => {
+                return Err(invalid("placement needs programmed-cfg (table 70)"));
+            }
+            (Some(p), true) => {
+                Bk3000::new(strip.clone())
+                    .with_programmed_cfg(p.clone())
+                    .map_err(invalid)?;
+            }
+            (Some(p), false) => {
+                Bk3000::new(strip.clone())
+                    .with_placement(p.clone(), placement.clone())
+                    .map_err(|message| ProfileError::BadOption {
+                        key: "placement".into(),
+                        message,
+                    })?;
+            }
+            (None, true) => {}
         }
         Ok(Bk3000Profile {
             strip,
             address,
             programmed,
+            placement,
             gsd: crate::gsd_files::parse(crate::gsd_files::BK30BECF).expect("BK30BECF.GSD parses"),
         })
     }
@@ -211,8 +240,14 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
 
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
         let mut dev = Bk3000::new(self.strip.clone());
-        if let Some(p) = &self.programmed {
-            dev = dev.with_programmed_cfg(p.clone()).map_err(invalid)?;
+        match &self.programmed {
+            Some(p) if !self.placement.is_empty() => {
+                dev = dev
+                    .with_placement(p.clone(), self.placement.clone())
+                    .map_err(invalid)?;
+            }
+            Some(p) => dev = dev.with_programmed_cfg(p.clone()).map_err(invalid)?,
+            None => {}
         }
         if let Some(inbox) = control {
             dev = dev.with_inbox(inbox);

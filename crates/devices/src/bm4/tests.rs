@@ -194,6 +194,59 @@ fn pkw_arrays_of_the_default_table() {
 }
 
 #[test]
+fn a_job_starts_on_any_change_of_the_request_words() {
+    // The manual sets IND, PWE1, PWE2, then PKE (L1571-1581, L1611-1619)
+    // and never asks for PKE = 0 between jobs: a second array job that
+    // changes only IND, or a second write with a new value and the same
+    // PKE, is executed.
+    let mut d = Bm4::new(VarTable::default_table(), Addressing::fixed(6));
+    let l = d.check_cfg(&[0x73]).unwrap();
+    let mut out = vec![0u8; l.outputs];
+    let mut run = |d: &mut Bm4, req: Pkw| {
+        req.emit(&mut out);
+        Pkw::parse(&cycle(d, T0, &out, l.inputs))
+            .unwrap()
+            .to_string()
+    };
+    // d_RefValue0..7 (PNU 2): write element 3, then element 4 (IND only
+    // changes… and the value), then read 3 and 4 by IND alone.
+    assert_eq!(
+        run(&mut d, Pkw::new(8, 2, 3, 0x1111_1111)),
+        "5002 0003 1111 1111"
+    );
+    assert_eq!(
+        run(&mut d, Pkw::new(8, 2, 4, 0x1111_1111)),
+        "5002 0004 1111 1111"
+    );
+    assert_eq!(run(&mut d, Pkw::new(6, 2, 3, 0)), "5002 0003 1111 1111");
+    assert_eq!(
+        run(&mut d, Pkw::new(8, 2, 3, 0x2222_2222)),
+        "5002 0003 2222 2222"
+    );
+    assert_eq!(run(&mut d, Pkw::new(6, 2, 3, 0)), "5002 0003 2222 2222");
+    assert_eq!(run(&mut d, Pkw::new(6, 2, 4, 0)), "5002 0004 1111 1111");
+    // Example 2's write (L1609-1639), then a second value, same PKE 3002.
+    let mut d = example();
+    let l = d.check_cfg(&[0x73]).unwrap();
+    let mut out = vec![0u8; l.outputs];
+    let mut run = |d: &mut Bm4, req: Pkw| {
+        req.emit(&mut out);
+        Pkw::parse(&cycle(d, T0, &out, l.inputs))
+            .unwrap()
+            .to_string()
+    };
+    assert_eq!(
+        run(&mut d, Pkw::new(3, 2, 0, 0x1234_5678)),
+        "2002 0000 1234 5678"
+    );
+    assert_eq!(
+        run(&mut d, Pkw::new(3, 2, 0, 0x0000_0BB8)),
+        "2002 0000 0000 0BB8"
+    );
+    assert_eq!(run(&mut d, Pkw::new(1, 2, 0, 0)), "2002 0000 0000 0BB8");
+}
+
+#[test]
 fn sdiag_example_and_status_codes() {
     use profibus_dp::slave::DpSlave;
     let mut s = DpSlave::new(example(), 6);

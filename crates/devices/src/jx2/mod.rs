@@ -41,11 +41,13 @@
 //!   them. Command 16 copies the window of the next outputs received into
 //!   the consistent output registers and sets bit 9.
 //! - **Chk_Cfg** is accepted when the input and output word totals match
-//!   1x102/1x103 and each configured consistent window is exactly one
-//!   consistent identifier (at its word offset), no other identifier
-//!   being consistent (the manual gives no bytes, L969: this is the
-//!   reading of "the master must be configured to match"); otherwise
-//!   error 8 and Cfg_Fault. A refused Set_Prm (ident number, lock bits,
+//!   1x102/1x103 and each consistent window (1x124/1x128, 1x125/1x129)
+//!   lies inside **one** consistent module of the master's configuration
+//!   ("dass der konsistente Datenbereich innerhalb eines konsistenten
+//!   Eingangsmoduls liegt", L950, L969). Other modules may be consistent
+//!   too, and a consistent module without a window is accepted (more
+//!   consistency than asked for does no harm); otherwise error 8 and
+//!   Cfg_Fault. A refused Set_Prm (ident number, lock bits,
 //!   more User_Prm_Data than the 22 user bytes the registers mirror) is
 //!   error 7. Prm and Cfg bytes accepted are mirrored in 1x160… and
 //!   1x180….
@@ -1103,18 +1105,16 @@ impl Jx2 {
                 words: (l.in_words, l.out_words),
             });
         }
-        let window = |words: i32, offset: i32| {
-            if words > 0 {
-                vec![(2 * offset as usize, 2 * words as usize)]
-            } else {
-                vec![]
-            }
-        };
-        for (got, want, what) in [
-            (cin, window(l.cin_words, l.cin_offset), "input"),
-            (cout, window(l.cout_words, l.cout_offset), "output"),
+        for (got, words, offset, what) in [
+            (cin, l.cin_words, l.cin_offset, "input"),
+            (cout, l.cout_words, l.cout_offset, "output"),
         ] {
-            if got != want {
+            if words <= 0 {
+                continue;
+            }
+            let (start, len) = (2 * offset as usize, 2 * words as usize);
+            let want = vec![(start, len)];
+            if !got.iter().any(|&(o, n)| o <= start && start + len <= o + n) {
                 let show = |w: &[(usize, usize)]| match w {
                     [] => "none".to_string(),
                     _ => w
@@ -1155,8 +1155,8 @@ pub enum CfgMismatch {
         /// Registers 1x102 and 1x103 (input and output words).
         words: (i32, i32),
     },
-    /// The consistent identifiers are not the module's window.
-    #[error("consistent {what} identifiers: {got}, the module's window: {want}")]
+    /// No consistent module holds the module's window.
+    #[error("consistent {what} identifiers: {got}; the module's window ({want}) must lie inside one of them")]
     Consistent {
         /// `input` or `output`.
         what: &'static str,

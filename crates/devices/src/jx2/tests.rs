@@ -344,8 +344,8 @@ fn error_7_prm_and_error_8_cfg() {
     r.cfg(&[0xD3, 0x63]);
     assert_eq!(
         r.reg(12132),
-        0,
-        "consistent inputs without a window: refused"
+        2,
+        "consistent inputs without a window: more consistency, accepted (L950)"
     );
     r.prm(IDENT);
     r.cfg(&[0x53, 0x63]);
@@ -583,6 +583,33 @@ fn consistent_inputs_example() {
     assert_eq!(&inputs[16..24], &[0, 11, 0, 12, 0, 13, 0, 14]);
     let w = r.plc("wait-bit 12100 8 set 1s");
     assert!(ok(&w[0]));
+}
+
+/// "The consistent data area must lie inside **one** consistent module"
+/// (L950, L969): the manual's 16 input words with 4 consistent at word
+/// 8, configured as one consistent 16-word module, or 8 plain and one
+/// consistent 8-word module, are accepted; a window split over two
+/// consistent modules, or outside any, is error 8.
+#[test]
+fn consistent_window_inside_one_consistent_module() {
+    let setup = "write 12102 16\nwrite 12112 300\nwrite 12126 500\nwrite 12124 4\nwrite 12128 8";
+    for (cfg, ok) in [
+        (&[0xDF, 0x63][..], true),
+        (&[0x57, 0xD7, 0x63], true),
+        (&[0xD7, 0xD7, 0x63], true),
+        (&[0x57, 0xD3, 0x53, 0x63], true),
+        (&[0x59, 0xD1, 0xD3, 0x63], false),
+        (&[0x5F, 0x63], false),
+        (&[0xD3, 0x5B, 0x63], false),
+    ] {
+        let mut r = Rig::new();
+        online(&mut r, setup);
+        r.prm(IDENT);
+        r.cfg(cfg);
+        let exchanging = r.slave.state() == profibus_dp::slave::SlaveState::DataExch;
+        assert_eq!(exchanging, ok, "{cfg:02X?}");
+        assert_eq!(r.reg(12134), if ok { 0 } else { 8 }, "{cfg:02X?}");
+    }
 }
 
 /// The consistent-output example (L1327): 12 words, 8 consistent at 4.

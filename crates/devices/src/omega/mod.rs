@@ -74,6 +74,7 @@
 //! The board supports sync and freeze (GSD) and takes its address from
 //! the rotary switches S40/S41 (hex, L498-511): [`profile`].
 
+pub mod drivecom;
 pub mod params;
 pub mod profile;
 
@@ -81,6 +82,7 @@ use crate::kit::{EventQueue, InboxSchedule};
 use crate::pkw::{Command, Dialect, Pkw, PkwEngine, PkwServer, Reply, PKW_LEN};
 use crate::ControlError;
 use crate::ControlInbox;
+use drivecom::{DeviceControl, DriveState};
 use params::ParamTable;
 use profibus_dp::pdu::cfg::{identifiers, CfgError};
 use profibus_dp::pdu::prm::SetPrm;
@@ -145,6 +147,18 @@ pub const OMEGA_ARRAY_LEN: usize = 1048;
 
 /// Default t_TIMEOUT_PB_DP and t_TIMEOUT_CYCLIC.
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(1000);
+
+/// Default t_TIMEOUT_SD_DATA (L456).
+pub const DEFAULT_SD_TIMEOUT: Duration = Duration::from_millis(5000);
+
+/// b_ERR bit 3: service data access on the option board timeout.
+pub const B_ERR_SD_BOARD_TIMEOUT: u8 = 1 << 3;
+/// b_ERR bit 4: service data access on the V controller timeout.
+pub const B_ERR_SD_CONTROLLER_TIMEOUT: u8 = 1 << 4;
+
+/// P127 "M communication monitoring" value bit that activates process data
+/// communication monitoring (L1080-1083).
+const P127_MONITORING: i64 = 4;
 
 /// Default PKW processing delay.
 pub const DEFAULT_PKW_DELAY: Duration = Duration::from_millis(5);
@@ -355,6 +369,15 @@ struct Drive {
     values: Vec<i64>,
     array: Vec<u32>,
     actual1: Option<u32>,
+    /// x_EN of PB_COMM_SLAVE: the PLC's function blocks run.
+    running: bool,
+    /// 0x0084 / 0x0085 after a count mismatch (L920-921, L1298-1299).
+    count_error: Option<u16>,
+    /// V-controller parameters parameterised as cyclic setpoints or
+    /// actual values (BAPS): not reachable by service data (L1020, L1062).
+    cyclic: Vec<u16>,
+    /// The V controller does not answer within t_TIMEOUT_SD_DATA.
+    timed_out: bool,
 }
 
 const E_CANNOT_CHANGE: u16 = 0x0001;
@@ -363,6 +386,14 @@ const E_INDEX: u16 = 0x0003;
 const E_TYPE: u16 = 0x0005;
 const E_PNU: u16 = 0x0008;
 const E_UNINTERPRETABLE: u16 = 0x0080;
+const E_NOT_INITIALISED: u16 = 0x0081;
+const E_READ_ACTUAL: u16 = 0x0082;
+const E_WRITE_SETPOINT: u16 = 0x0083;
+/// PKW error: the master configured other actual values than
+/// si_NR_RD_VALUE.
+pub const E_ACTUAL_CONFIG: u16 = 0x0084;
+/// PKW error: the master configured other setpoints than si_NR_WR_VALUE.
+pub const E_SETPOINT_CONFIG: u16 = 0x0085;
 const E_NOT_IMPLEMENTED: u16 = 0x0102;
 const E_TOO_LARGE: u16 = 0x0103;
 const E_NO_INFO: u16 = 0x0104;
@@ -374,6 +405,28 @@ impl PkwServer for Drive {
     fn execute(&mut self, _now: Instant, pnu: u16, ind: u16, cmd: Command) -> Result<Reply, u16> {
         if matches!(cmd, Command::Unsupported(_)) {
             return Err(E_UNINTERPRETABLE);
+        }
+        // "Function blocks PB_COMM_SLAVE and / or BAPS_SD_CONTROL not run"
+        // (L1023, L1070): no initialisation performed.
+        if !self.running {
+            return Err(E_NOT_INITIALISED);
+        }
+        // "Errors are indicated … in the service data communication PWE
+        // area" after a configuration mismatch (L1298-1299, L1197).
+        if let Some(e) = self.count_error {
+            return Err(e);
+        }
+        // Reading goes to the controller as "actual value", writing as
+        // "setpoint" (L1045-1047, L1096-1097): a parameter that is mapped
+        // cyclically (L1020, L1067) or a controller that does not answer
+        // in time (t_TIMEOUT_SD_DATA, L1195) gives 0x0082 / 0x0083.
+        let write = matches!(cmd, Command::WriteWord(_) | Command::WriteDword(_));
+        if self.timed_out || (pnu < OMEGA_ARRAY_FIRST && self.cyclic.contains(&pnu)) {
+            return Err(if write {
+                E_WRITE_SETPOINT
+            } else {
+                E_READ_ACTUAL
+            });
         }
         let plain = !matches!(cmd, Command::Describe(_));
         if plain && ind != 0 {
@@ -443,10 +496,18 @@ pub struct Omega {
     engine: PkwEngine,
     control: [u16; 2],
     setpoints: [u32; MAX_VALUES],
+    actual: [u32; MAX_VALUES],
+    device_control: DeviceControl,
     b_message: i8,
     b_err: u8,
     t_pb_dp: Duration,
     t_cyclic: Duration,
+    t_sd: Duration,
+    pkw_delay: Duration,
+    /// A service data job the controller does not answer: when b_ERR
+    /// gets its timeout bit, and which bit.
+    sd_timeout: Option<(Instant, u8)>,
+    auto_enable: bool,
     last_exchange: Option<Instant>,
     events: EventQueue,
     inbox: InboxSchedule,
@@ -467,6 +528,10 @@ impl Omega {
                 values,
                 array: vec![0; OMEGA_ARRAY_LEN],
                 actual1: None,
+                running: true,
+                count_error: None,
+                cyclic: vec![],
+                timed_out: false,
             },
             counts: None,
             cfg: DEFAULT_CFG.to_vec(),
@@ -474,10 +539,16 @@ impl Omega {
             engine: PkwEngine::new(&PKW, DEFAULT_PKW_DELAY),
             control: [0; 2],
             setpoints: [0; MAX_VALUES],
+            actual: [0; MAX_VALUES],
+            device_control: DeviceControl::new(),
             b_message: 0,
             b_err: 0,
             t_pb_dp: DEFAULT_TIMEOUT,
             t_cyclic: DEFAULT_TIMEOUT,
+            t_sd: DEFAULT_SD_TIMEOUT,
+            pkw_delay: DEFAULT_PKW_DELAY,
+            sd_timeout: None,
+            auto_enable: false,
             last_exchange: None,
             events: EventQueue::default(),
             inbox: InboxSchedule::default(),
@@ -514,10 +585,64 @@ impl Omega {
         self
     }
 
-    /// Set the PKW processing delay.
+    /// Set the PKW processing delay: how long the V controller takes to
+    /// answer a service data job. Longer than t_TIMEOUT_SD_DATA, every
+    /// job times out ([`Omega::with_sd_timeout`]).
     pub fn with_pkw_delay(mut self, delay: Duration) -> Omega {
+        self.pkw_delay = delay;
         self.engine = PkwEngine::new(&PKW, delay);
         self
+    }
+
+    /// Set t_TIMEOUT_SD_DATA (default 5000 ms, zero: off; L456,
+    /// L1667-1673). A job the controller does not answer within it is
+    /// answered with 0x0082 (read) or 0x0083 (write) at the timeout, and
+    /// b_ERR bit 4 (V controller) or bit 3 (the Omega's array) is set.
+    pub fn with_sd_timeout(mut self, timeout: Duration) -> Omega {
+        self.t_sd = timeout;
+        self
+    }
+
+    /// Parameterise V-controller parameters `pnus` as cyclic setpoints or
+    /// actual values: service data on them answer 0x0082 / 0x0083.
+    pub fn with_cyclic_parameters(mut self, pnus: Vec<u16>) -> Omega {
+        self.drive.cyclic = pnus;
+        self
+    }
+
+    /// Let the Omega's own program enable the drive (shutdown, then
+    /// enable operation) instead of the master's control word 1; the
+    /// master's fault-reset bit still resets a fault. For plants that only
+    /// want a drive that follows its setpoints.
+    pub fn with_auto_enable(mut self) -> Omega {
+        self.auto_enable = true;
+        self
+    }
+
+    /// The drive's device control state.
+    pub fn drive_state(&self) -> DriveState {
+        self.device_control.state()
+    }
+
+    /// Status word 1 as sent.
+    pub fn status_word(&self) -> u16 {
+        let remote = if self.drive.running { STATUS_REMOTE } else { 0 };
+        self.device_control.status_word() | remote
+    }
+
+    /// A controller fault with error number `code` (16#0003: process
+    /// data timeout, 16#0004: service data timeout, L1195-1196; any other
+    /// from the control input).
+    pub fn fault(&mut self, code: u16) {
+        if let Some(s) = self.device_control.fault(code) {
+            self.events.note("drive", s.to_string());
+        }
+    }
+
+    /// x_EN of the PLC's PB_COMM_SLAVE: off, the remote bit is 0 (L1366)
+    /// and service data answer 0x0081.
+    pub fn set_plc_running(&mut self, on: bool) {
+        self.drive.running = on;
     }
 
     /// Read control commands from `inbox` (see [`Omega::control`]).
@@ -585,13 +710,33 @@ impl Omega {
             "b_MESSAGE {} ({m}), b_ERR 16#{:02X}",
             self.b_message, self.b_err
         );
-        if self.b_err & B_ERR_CYCLIC_TIMEOUT != 0 {
-            s.push_str(" (cyclic data transmission timeout)");
+        for (bit, text) in [
+            (
+                B_ERR_SD_BOARD_TIMEOUT,
+                "service data access on option board timeout",
+            ),
+            (
+                B_ERR_SD_CONTROLLER_TIMEOUT,
+                "service data access on V controller timeout",
+            ),
+            (B_ERR_CYCLIC_TIMEOUT, "cyclic data transmission timeout"),
+        ] {
+            if self.b_err & bit != 0 {
+                s.push_str(&format!(" ({text})"));
+            }
         }
+        s.push_str(&format!(
+            ", drive {}, status word 1 16#{:04X}",
+            self.drive_state(),
+            self.status_word()
+        ));
         s
     }
 
-    /// Execute a control command: `status`, `quit` (x_QUIT), `get P`.
+    /// Execute a control command: `status`, `quit` (x_QUIT), `get P`,
+    /// `fault [CODE]` (a controller fault, default 16#0001), `plc on|off`
+    /// (x_EN), `cyclic P… | none` (parameters mapped cyclically),
+    /// `sd-delay MS` (the controller's service data answer time).
     pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
         let arg = |m: String| ControlError::Argument(m);
         let mut w = line.split_whitespace();
@@ -600,6 +745,51 @@ impl Omega {
             "quit" => {
                 self.quit();
                 Ok(self.status_text())
+            }
+            "fault" => {
+                let code = match w.next() {
+                    None => 1,
+                    Some(c) => parse_code(c)
+                        .ok_or_else(|| arg(format!("fault code `{c}`: give 0..0xFFFF")))?,
+                };
+                self.fault(code);
+                Ok(self.status_text())
+            }
+            "plc" => {
+                match w.next() {
+                    Some("on") => self.set_plc_running(true),
+                    Some("off") => self.set_plc_running(false),
+                    _ => return Err(arg("plc on|off".into())),
+                }
+                Ok(self.status_text())
+            }
+            "cyclic" => {
+                let mut pnus = vec![];
+                for p in w {
+                    if p == "none" {
+                        continue;
+                    }
+                    pnus.push(
+                        p.trim_start_matches('P')
+                            .parse::<u16>()
+                            .ok()
+                            .filter(|p| *p < OMEGA_ARRAY_FIRST)
+                            .ok_or_else(|| {
+                                arg(format!("`{p}`: give V-controller parameters P0..P999"))
+                            })?,
+                    );
+                }
+                let t = format!("cyclic parameters: {pnus:?}");
+                self.drive.cyclic = pnus;
+                Ok(t)
+            }
+            "sd-delay" => {
+                let ms: u64 = w
+                    .next()
+                    .and_then(|m| m.parse().ok())
+                    .ok_or_else(|| arg("sd-delay MS".into()))?;
+                self.pkw_delay = Duration::from_millis(ms);
+                Ok(format!("service data answer time {ms} ms"))
             }
             "get" => {
                 let p: u16 = w
@@ -618,7 +808,7 @@ impl Omega {
             }
             other => Err(ControlError::Unknown {
                 command: other.into(),
-                known: "status, quit, get P",
+                known: "status, quit, get P, fault [CODE], plc on|off, cyclic P…|none, sd-delay MS",
             }),
         }
     }
@@ -643,6 +833,43 @@ impl Omega {
         let cyc = (!self.t_cyclic.is_zero() && self.b_err & B_ERR_CYCLIC_TIMEOUT == 0)
             .then(|| last + self.t_cyclic);
         (pb, cyc)
+    }
+
+    fn monitoring(&self) -> bool {
+        self.parameter(127)
+            .is_some_and(|v| v & P127_MONITORING != 0)
+    }
+
+    fn on_control_word(&mut self, cw: u16) {
+        let cws: &[u16] = if self.auto_enable && cw != 0 {
+            &[0x06 | (cw & 0x80), 0x0F | (cw & 0x80)]
+        } else if self.auto_enable {
+            &[0x06, 0x0F]
+        } else {
+            &[cw]
+        };
+        for &cw in cws {
+            if let Some(s) = self.device_control.on_control(cw) {
+                self.events.note("drive", s.to_string());
+            }
+        }
+    }
+}
+
+impl Omega {
+    /// Setpoints and actual values are exchanged: the PLC runs and the
+    /// configuration matches its counts.
+    fn transmits(&self) -> bool {
+        self.drive.running && self.drive.count_error.is_none()
+    }
+}
+
+/// `0x…`, `16#…` or decimal.
+fn parse_code(s: &str) -> Option<u16> {
+    if let Some(h) = s.strip_prefix("0x").or_else(|| s.strip_prefix("16#")) {
+        u16::from_str_radix(h, 16).ok()
+    } else {
+        s.parse().ok()
     }
 }
 
@@ -674,21 +901,35 @@ impl Device for Omega {
     }
 
     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
-        let checked = check_configuration(cfg).and_then(|l| match self.counts {
-            Some((sp, av)) if (sp, av) != (l.setpoints, l.actual_values) => {
-                Err(ConfigError::Counts {
-                    configured: (l.setpoints, l.actual_values),
-                    drive: (sp, av),
-                })
-            }
-            _ => Ok(l),
-        });
-        match checked {
+        // A configuration against the GSD rules is refused (the board's
+        // SPC3 and the GSD); one that only differs from the PLC's
+        // si_NR_WR_VALUE / si_NR_RD_VALUE is accepted on the bus, and then
+        // "setpoint / actual value transmission stops", b_MESSAGE is 3 and
+        // the PKW area answers 0x0084 / 0x0085 (L378, L920-921, L1197,
+        // L1298-1299).
+        match check_configuration(cfg) {
             Ok(l) => {
                 self.layout = Some(l);
                 self.cfg = cfg.to_vec();
                 self.engine.reset();
-                if self.b_message == 3 {
+                self.drive.count_error = match self.counts {
+                    Some((_, av)) if av != l.actual_values => Some(E_ACTUAL_CONFIG),
+                    Some((sp, _)) if sp != l.setpoints => Some(E_SETPOINT_CONFIG),
+                    _ => None,
+                };
+                if let (Some(code), Some(drive)) = (self.drive.count_error, self.counts) {
+                    let e = ConfigError::Counts {
+                        configured: (l.setpoints, l.actual_values),
+                        drive,
+                    };
+                    self.set_message(3);
+                    self.events.note(
+                        "status",
+                        format!(
+                            "{e}: no setpoint / actual value transmission, PKW error 16#{code:04X}"
+                        ),
+                    );
+                } else if self.b_message == 3 {
                     self.set_message(0);
                 }
                 Ok(IoLayout {
@@ -716,26 +957,56 @@ impl Device for Omega {
         let mut at = 0;
         if l.pkw {
             if let Some(req) = Pkw::parse(outputs) {
+                // The controller answers after `pkw_delay`; beyond
+                // t_TIMEOUT_SD_DATA the board gives up at the timeout.
+                let late = !self.t_sd.is_zero() && self.pkw_delay > self.t_sd;
+                self.drive.timed_out = late;
+                self.engine
+                    .set_delay(if late { self.t_sd } else { self.pkw_delay });
                 if let Some(job) = self.engine.on_request(now, req, &mut self.drive) {
                     self.events
                         .note("pkw", format!("PKW {} -> {}", job.request, job.response));
+                    if late && self.drive.running && self.drive.count_error.is_none() {
+                        let bit = if req.pnu() >= OMEGA_ARRAY_FIRST {
+                            B_ERR_SD_BOARD_TIMEOUT
+                        } else {
+                            B_ERR_SD_CONTROLLER_TIMEOUT
+                        };
+                        self.sd_timeout = Some((now + self.t_sd, bit));
+                    }
                 }
+                self.drive.timed_out = false;
             }
             at = PKW_LEN;
         }
         let Some(cw) = outputs.get(at..at + 4) else {
             return;
         };
+        if !self.transmits() {
+            return;
+        }
         self.control = [
             u16::from_be_bytes([cw[0], cw[1]]),
             u16::from_be_bytes([cw[2], cw[3]]),
         ];
+        self.on_control_word(self.control[0]);
         for i in 0..l.setpoints {
             if let Some(b) = outputs.get(at + 4 + 4 * i..at + 8 + 4 * i) {
                 self.setpoints[i] = be32(b);
             }
         }
-        self.drive.actual1 = (l.setpoints > 0).then_some(self.setpoints[0]);
+        // The actual values follow the setpoints only in "operation
+        // enabled"; elsewhere they keep their last value.
+        if self.device_control.operation_enabled() {
+            for i in 0..MAX_VALUES {
+                self.actual[i] = if i < l.setpoints {
+                    self.setpoints[i]
+                } else {
+                    0
+                };
+            }
+        }
+        self.drive.actual1 = Some(self.actual[0]);
     }
 
     fn read_inputs(&mut self, now: Instant, inputs: &mut [u8]) {
@@ -745,18 +1016,17 @@ impl Device for Omega {
             self.engine.response(now).emit(inputs);
             at = PKW_LEN;
         }
-        let status1 = STATUS_REMOTE;
+        if !self.transmits() {
+            return;
+        }
+        let status1 = self.status_word();
         let status2 = 0u16;
         if let Some(sw) = inputs.get_mut(at..at + 4) {
             sw[..2].copy_from_slice(&status1.to_be_bytes());
             sw[2..].copy_from_slice(&status2.to_be_bytes());
         }
         for i in 0..l.actual_values {
-            let v = if i < l.setpoints {
-                self.setpoints[i]
-            } else {
-                0
-            };
+            let v = self.actual[i];
             if let Some(b) = inputs.get_mut(at + 4 + 4 * i..at + 8 + 4 * i) {
                 b.copy_from_slice(&v.to_be_bytes());
             }
@@ -766,8 +1036,12 @@ impl Device for Omega {
     fn clear_outputs(&mut self, _now: Instant, _why: ClearReason) {
         self.control = [0; 2];
         self.setpoints = [0; MAX_VALUES];
-        self.drive.actual1 = None;
+        // Control word 0 is "disable voltage".
+        if let Some(s) = self.device_control.on_control(0) {
+            self.events.note("drive", s.to_string());
+        }
         self.engine.reset();
+        self.sd_timeout = None;
     }
 
     fn diagnosis(&mut self, _now: Instant, _diag: &mut DiagWriter<'_>) {
@@ -775,6 +1049,11 @@ impl Device for Omega {
         // a diagnosis read during data exchange is b_MESSAGE 4.
         if self.last_exchange.is_some() && self.layout.is_some() && self.b_message == 0 {
             self.set_message(4);
+            // "If communication monitoring is activated …, activation of
+            // this diagnostic function triggers an error response" (L1186).
+            if self.monitoring() {
+                self.fault(0x0003);
+            }
         }
     }
 
@@ -787,7 +1066,8 @@ impl Device for Omega {
         let inbox = self.inbox.deadline();
         // The PKW engine needs no wake-up: a held response is shown by the
         // first read_inputs after its time.
-        [pb, cyc, inbox].into_iter().flatten().min()
+        let sd = self.sd_timeout.map(|(t, _)| t);
+        [pb, cyc, inbox, sd].into_iter().flatten().min()
     }
 
     fn handle_timeout(&mut self, now: Instant) {
@@ -797,6 +1077,16 @@ impl Device for Omega {
         }
         if cyc.is_some_and(|t| now >= t) {
             self.b_err |= B_ERR_CYCLIC_TIMEOUT;
+            self.report();
+            // P127 = 4: the controller signals the process data timeout as
+            // error 16#0003 (L1080-1083, L1195).
+            if self.monitoring() {
+                self.fault(0x0003);
+            }
+        }
+        if let Some((_, bit)) = self.sd_timeout.filter(|(t, _)| now >= *t) {
+            self.sd_timeout = None;
+            self.b_err |= bit;
             self.report();
         }
         for line in self.inbox.due(now) {

@@ -33,6 +33,13 @@ pub struct Options {
     /// PKW processing delay in ms (default 5).
     #[serde(deserialize_with = "opt_int")]
     pub pkw_delay_ms: Option<u64>,
+    /// t_TIMEOUT_SD_DATA in ms (default 5000, 0: off).
+    #[serde(deserialize_with = "opt_int")]
+    pub sd_timeout_ms: Option<u64>,
+    /// Who enables the drive: `master` (control word 1 drives the device
+    /// control state machine; the default) or `auto` (the Omega's own
+    /// program enables it; the drive follows its setpoints at once).
+    pub drive_enable: Option<String>,
     /// Master side: configure the service data (PKW) module (default:
     /// true).
     pub pkw: Option<bool>,
@@ -53,7 +60,10 @@ impl Profile for OmegaProfile {
     const OPTIONS_HELP: &'static str = "--params FILE.toml (V-controller parameter set; default: the shipped table), \
 --setpoints N / --actual-values N (si_NR_WR_VALUE / si_NR_RD_VALUE, 1..8; default: any valid configuration), \
 --switch N (rotary switches S40/S41, hex allowed, instead of --addr), --device-opt pkw-delay-ms=MS (PKW processing delay, default 5), \
---control FILE|- (commands: status, quit, get P); bus file: setpoints, actual_values (default 2 each), pkw = true|false";
+--device-opt sd-timeout-ms=MS (t_TIMEOUT_SD_DATA, default 5000, 0 off), --device-opt drive-enable=master|auto (control word 1 drives the \
+DRIVECOM state machine, default; or the drive enables itself), \
+--control FILE|- (commands: status, quit, get P, fault [CODE], plc on|off, cyclic P…|none, sd-delay MS); \
+bus file: setpoints, actual_values (default 2 each), pkw = true|false, drive_enable, sd_timeout_ms";
     const IDENT: Option<u16> = Some(IDENT);
     const PATH_OPTIONS: &'static [&'static str] = &["params"];
     const PKW: Option<&'static Dialect> = Some(&PKW);
@@ -75,6 +85,16 @@ impl Profile for OmegaProfile {
                     "give both --setpoints and --actual-values, or neither".into(),
                 ))
             }
+        }
+        if let Some(e) = options
+            .drive_enable
+            .as_deref()
+            .filter(|e| !matches!(*e, "master" | "auto"))
+        {
+            return Err(ProfileError::BadOption {
+                key: "drive_enable".into(),
+                message: format!("`{e}`: give master or auto"),
+            });
         }
         if let Some(s) = options.switch.filter(|s| *s > 125) {
             return Err(ProfileError::Invalid(format!(
@@ -137,6 +157,12 @@ impl Profile for OmegaProfile {
         }
         if let Some(ms) = o.pkw_delay_ms {
             dev = dev.with_pkw_delay(Duration::from_millis(ms));
+        }
+        if let Some(ms) = o.sd_timeout_ms {
+            dev = dev.with_sd_timeout(Duration::from_millis(ms));
+        }
+        if o.drive_enable.as_deref() == Some("auto") {
+            dev = dev.with_auto_enable();
         }
         if let Some(inbox) = control {
             dev = dev.with_inbox(inbox);

@@ -75,9 +75,9 @@ fn configuration_rules() {
         let e = check_configuration(bad).unwrap_err();
         assert!(e.to_string().contains(why), "{bad:02X?}: {e}");
     }
-    // A fault sets b_MESSAGE 3; the drive's own counts are checked.
+    // A fault against the rules sets b_MESSAGE 3 and is refused.
     let mut d = Omega::with_defaults().with_counts(2, 2).unwrap();
-    assert!(d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).is_err());
+    assert!(d.check_cfg(&[0x73, 0x51, 0x61]).is_err());
     assert_eq!(d.b_message(), 3);
     assert!(d.check_cfg(&[0xF9]).is_ok());
     assert_eq!(d.b_message(), 0);
@@ -86,14 +86,95 @@ fn configuration_rules() {
 
 #[test]
 fn cyclic_data_high_word_first() {
-    let mut d = Omega::with_defaults();
+    let mut d = Omega::with_defaults().with_auto_enable();
     let l = d.check_cfg(&[0x71, 0x53, 0x61]).unwrap();
     assert_eq!((l.inputs, l.outputs), (12, 8));
     let i = cycle(&mut d, T0, &[0x04, 0x7F, 0, 1, 0x12, 0x34, 0x56, 0x78], 12);
     assert_eq!(d.control_words(), [0x047F, 0x0001]);
     assert_eq!(d.setpoint(0), Some(0x1234_5678));
-    // Status word 1 with Remote; AV1 follows SP1; AV2 has no setpoint.
-    assert_eq!(i, [0x02, 0x00, 0, 0, 0x12, 0x34, 0x56, 0x78, 0, 0, 0, 0]);
+    // Status word 1: Remote, setpoint reached, voltage, quick stop,
+    // operation enabled, switched on, ready; AV1 follows SP1; AV2 has no
+    // setpoint.
+    assert_eq!(i, [0x06, 0x37, 0, 0, 0x12, 0x34, 0x56, 0x78, 0, 0, 0, 0]);
+}
+
+/// Control word 1 and setpoint 1 on a board configured 0x71 0x51 0x61:
+/// status word 1 and actual value 1.
+fn drive(d: &mut Omega, now: Instant, cw: u16, sp: i32) -> (u16, i32) {
+    let mut out = [0u8; 8];
+    out[..2].copy_from_slice(&cw.to_be_bytes());
+    out[4..].copy_from_slice(&sp.to_be_bytes());
+    let i = cycle(d, now, &out, 8);
+    (
+        u16::from_be_bytes([i[0], i[1]]),
+        i32::from_be_bytes([i[4], i[5], i[6], i[7]]),
+    )
+}
+
+#[test]
+fn a_plcs_enable_sequence_reaches_operation_enabled_and_the_drive_follows() {
+    // Chapter 9.4 (L1333-1347) status bits, DRIVECOM control bits.
+    let mut d = Omega::with_defaults();
+    d.check_cfg(&[0x71, 0x51, 0x61]).unwrap();
+    // Power-on: switch-on disabled (bit 6) and Remote (bit 9); the
+    // setpoint is not followed.
+    assert_eq!(drive(&mut d, ms(0), 0x0000, 1500), (0x0240, 0));
+    assert_eq!(d.drive_state(), DriveState::SwitchOnDisabled);
+    // Enable operation without shutdown first: nothing happens.
+    assert_eq!(drive(&mut d, ms(1), 0x000F, 1500), (0x0250, 0));
+    // Shutdown: ready to switch on (bits 0, 4, 5).
+    assert_eq!(drive(&mut d, ms(2), 0x0006, 1500), (0x0231, 0));
+    // Switch on: switched on (bit 1).
+    assert_eq!(drive(&mut d, ms(3), 0x0007, 1500), (0x0233, 0));
+    // Enable operation: operation enabled (bit 2), setpoint reached
+    // (bit 10), and actual value 1 follows setpoint 1.
+    assert_eq!(drive(&mut d, ms(4), 0x000F, 1500), (0x0637, 1500));
+    assert_eq!(drive(&mut d, ms(5), 0x000F, -700), (0x0637, -700));
+    assert_eq!(d.drive_state(), DriveState::OperationEnabled);
+    // Disable operation: the actual value stays where it was.
+    assert_eq!(drive(&mut d, ms(6), 0x0007, 3000), (0x0233, -700));
+    // Quick stop from operation enabled: bit 5 goes to 0.
+    drive(&mut d, ms(7), 0x000F, 3000);
+    assert_eq!(drive(&mut d, ms(8), 0x000B, 3000).0, 0x0217);
+    // A fault from the control input, reset by the fault-reset bit's edge.
+    assert_eq!(drive(&mut d, ms(9), 0x0000, 0).0, 0x0240, "disable voltage");
+    drive(&mut d, ms(10), 0x0006, 0);
+    drive(&mut d, ms(10), 0x000F, 100);
+    assert!(d.control("fault 0x0003").unwrap().contains("fault 16#0003"));
+    assert_eq!(drive(&mut d, ms(11), 0x000F, 200), (0x0218, 100));
+    assert_eq!(drive(&mut d, ms(12), 0x008F, 200).0, 0x0240 | 0x10);
+    assert_eq!(d.drive_state(), DriveState::SwitchOnDisabled);
+    drive(&mut d, ms(13), 0x0006, 200);
+    assert_eq!(drive(&mut d, ms(14), 0x000F, 200), (0x0637, 200));
+    let states: Vec<String> = std::iter::from_fn(|| d.poll_event())
+        .filter(|e| e.kind == "drive")
+        .map(|e| e.text)
+        .collect();
+    assert!(
+        states.contains(&"operation enabled".to_string())
+            && states.contains(&"fault 16#0003".to_string()),
+        "{states:?}"
+    );
+    // The master leaves: control word 0 = disable voltage.
+    d.clear_outputs(ms(15), ClearReason::Watchdog);
+    assert_eq!(d.drive_state(), DriveState::SwitchOnDisabled);
+}
+
+#[test]
+fn process_data_monitoring_faults_the_drive_when_p127_says_so() {
+    // P127 = 4 activates monitoring (L1080-1083): the cyclic data timeout
+    // and a diagnosis read during data exchange (L1186) are error 16#0003.
+    let mut d = Omega::with_defaults();
+    assert_job(&mut d, Pkw::new(2, 127, 0, 4), "107F 0000 0000 0004");
+    drive(&mut d, ms(20), 0x0006, 0);
+    drive(&mut d, ms(21), 0x000F, 0);
+    d.handle_timeout(ms(1021));
+    assert_eq!(d.drive_state(), DriveState::Fault(3));
+    let mut d = Omega::with_defaults();
+    d.check_cfg(&[0x71, 0x51, 0x61]).unwrap();
+    drive(&mut d, ms(0), 0x0006, 0);
+    d.handle_timeout(ms(1000));
+    assert_eq!(d.drive_state(), DriveState::ReadyToSwitchOn, "P127 = 0");
 }
 
 #[test]
@@ -157,6 +238,69 @@ fn pkw_error_table() {
 }
 
 #[test]
+fn pkw_error_examples_of_the_manual() {
+    // L1045-1047: reading P218 when the actual value cannot be read →
+    // 70DA 0000 0000 0082 (here: P218 is parameterised as a cyclic actual
+    // value, L1020).
+    let mut d = Omega::with_defaults().with_cyclic_parameters(vec![218]);
+    assert_job(&mut d, Pkw::new(1, 218, 0, 0), "70DA 0000 0000 0082");
+    // L1096-1097: writing P127 := 4 when the setpoint cannot be written →
+    // 707F 0000 0000 0083 (P127 parameterised cyclically, L1067).
+    let mut d = Omega::with_defaults();
+    d.control("cyclic P127").unwrap();
+    assert_job(&mut d, Pkw::new(2, 127, 0, 4), "707F 0000 0000 0083");
+    assert_eq!(d.parameter(127), Some(0), "not written");
+    // 0x0081: the PLC's function blocks do not run (x_EN, L1023); the
+    // remote bit is 0 then (L1366).
+    let mut d = Omega::with_defaults();
+    d.control("plc off").unwrap();
+    assert_job(&mut d, Pkw::new(1, 3, 0, 0), "7003 0000 0000 0081");
+    assert_eq!(d.status_word() & STATUS_REMOTE, 0);
+    // 0x0084 / 0x0085: the master configured other counts than
+    // si_NR_RD_VALUE / si_NR_WR_VALUE: accepted on the bus, b_MESSAGE 3,
+    // no setpoint / actual value transmission (L378, L920-921, L1197,
+    // L1298-1299).
+    let mut d = Omega::with_defaults().with_counts(1, 2).unwrap();
+    assert_job(&mut d, Pkw::new(1, 3, 0, 0), "7003 0000 0000 0084");
+    assert_eq!(d.b_message(), 3);
+    let mut d = Omega::with_defaults().with_counts(2, 1).unwrap();
+    assert_job(&mut d, Pkw::new(1, 3, 0, 0), "7003 0000 0000 0085");
+}
+
+#[test]
+fn service_data_timeout_t_timeout_sd_data() {
+    // A controller slower than t_TIMEOUT_SD_DATA (L456, L1667-1673): the
+    // job fails at the timeout with 0x0082 / 0x0083 and b_ERR bit 4 (V
+    // controller) or bit 3 (the Omega's array, on the board) is set.
+    let mut d = Omega::with_defaults()
+        .with_pkw_delay(Duration::from_millis(200))
+        .with_sd_timeout(Duration::from_millis(50));
+    let l = d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).unwrap();
+    let mut out = vec![0u8; l.outputs];
+    Pkw::new(1, 3, 0, 0).emit(&mut out);
+    cycle(&mut d, ms(0), &out, l.inputs);
+    assert_eq!(d.poll_timeout(), Some(ms(50)));
+    let i = cycle(&mut d, ms(49), &out, l.inputs);
+    assert_eq!(Pkw::parse(&i), Some(Pkw::ZERO));
+    d.handle_timeout(ms(50));
+    assert_eq!(d.b_err(), B_ERR_SD_CONTROLLER_TIMEOUT);
+    let i = cycle(&mut d, ms(50), &out, l.inputs);
+    assert_eq!(Pkw::parse(&i).unwrap().to_string(), "7003 0000 0000 0082");
+    assert!(d.status_text().contains("V controller timeout"));
+    // Reset, then a write to the Omega's array: bit 3, 0x0083.
+    cycle(&mut d, ms(60), &vec![0u8; l.outputs], l.inputs);
+    Pkw::new(3, 1000, 0, 7).emit(&mut out);
+    cycle(&mut d, ms(70), &out, l.inputs);
+    d.handle_timeout(ms(120));
+    assert_eq!(d.b_err() & B_ERR_SD_BOARD_TIMEOUT, B_ERR_SD_BOARD_TIMEOUT);
+    let i = cycle(&mut d, ms(120), &out, l.inputs);
+    assert_eq!(Pkw::parse(&i).unwrap().to_string(), "73E8 0000 0000 0083");
+    // Within the timeout the job runs (default 5 ms vs 5000 ms).
+    let mut d = Omega::with_defaults();
+    assert_job(&mut d, Pkw::new(1, 3, 0, 0), "1003 0000 0000 0064");
+}
+
+#[test]
 fn a_new_command_needs_pke_zero_first() {
     let mut d = Omega::with_defaults();
     let l = d.check_cfg(&[0x73, 0x71, 0x51, 0x61]).unwrap();
@@ -190,7 +334,7 @@ fn monitoring_b_message_and_b_err() {
     assert_eq!(d.b_err(), B_ERR_CYCLIC_TIMEOUT, "kept until x_QUIT");
     assert_eq!(
         d.control("quit").unwrap(),
-        "b_MESSAGE 0 (no warning, no error), b_ERR 16#00"
+        "b_MESSAGE 0 (no warning, no error), b_ERR 16#00, drive switch-on disabled, status word 1 16#0240"
     );
     let mut w = [0u8; 16];
     d.diagnosis(ms(1101), &mut DiagWriter::new(&mut w));

@@ -32,10 +32,14 @@
 //! PWE) to 0; the slave then answers PKE = 0 ("no response"). Choices
 //! where the manuals leave it open:
 //!
-//! - A job starts when the request's PKE changes to a non-zero value; the
-//!   IND and PWE words of that same telegram are the job's (the master
-//!   wrote them first). Repeating the same PKE does not repeat the job:
-//!   a write is executed once.
+//! - A job starts when the request words change and PKE is not 0; the
+//!   IND and PWE words of that telegram are the job's (the master wrote
+//!   them first). Repeating the same words does not repeat the job: a
+//!   write is executed once. Without [`Dialect::reset_required`] (the
+//!   BM4, whose manual orders IND, PWE1, PWE2, then PKE, L1571-1581, but
+//!   never asks for PKE = 0 between jobs) a change of any word is a new
+//!   job: the next array element by a new IND alone, or a new value with
+//!   the same PKE. With it (the Omega) only a new PKE is.
 //! - The response stays in the input words until the master's PKE goes
 //!   back to 0, then the input PKW words become 0.
 //! - Dialects with [`Dialect::reset_required`] (the Omega board: "only
@@ -375,8 +379,8 @@ pub struct PkwJob {
 pub struct PkwEngine {
     dialect: &'static Dialect,
     delay: Duration,
-    /// PKE of the last request seen.
-    last_pke: u16,
+    /// The last request seen.
+    last: Pkw,
     /// The response in the input words.
     response: Pkw,
     /// A response to show from the given time on.
@@ -392,7 +396,7 @@ impl PkwEngine {
         PkwEngine {
             dialect,
             delay,
-            last_pke: 0,
+            last: Pkw::ZERO,
             response: Pkw::ZERO,
             pending: None,
             jobs: 0,
@@ -402,6 +406,11 @@ impl PkwEngine {
     /// The dialect.
     pub fn dialect(&self) -> &'static Dialect {
         self.dialect
+    }
+
+    /// Change the processing delay for the jobs that start from now on.
+    pub fn set_delay(&mut self, delay: Duration) {
+        self.delay = delay;
     }
 
     /// Jobs executed so far.
@@ -417,18 +426,23 @@ impl PkwEngine {
         req: Pkw,
         server: &mut S,
     ) -> Option<PkwJob> {
-        let previous = std::mem::replace(&mut self.last_pke, req.pke);
+        let previous = std::mem::replace(&mut self.last, req);
         if req.pke == 0 {
             self.response = Pkw::ZERO;
             self.pending = None;
             return None;
         }
-        if req.pke == previous {
+        let new_job = if self.dialect.reset_required {
+            req.pke != previous.pke
+        } else {
+            req != previous
+        };
+        if !new_job {
             return None;
         }
         self.jobs += 1;
         let (pnu, ind) = (req.pnu(), req.ind);
-        let response = if previous != 0 && self.dialect.reset_required {
+        let response = if previous.pke != 0 && self.dialect.reset_required {
             self.dialect.error(pnu, 0, self.dialect.not_reset_error)
         } else {
             let cmd = self.dialect.command(&req);
@@ -475,7 +489,7 @@ impl PkwEngine {
 
     /// Forget the channel's state (the slave left Data_Exchange).
     pub fn reset(&mut self) {
-        self.last_pke = 0;
+        self.last = Pkw::ZERO;
         self.response = Pkw::ZERO;
         self.pending = None;
     }
@@ -598,6 +612,25 @@ mod tests {
         let j = e.on_request(now, Pkw::new(1, 1, 0, 0), &mut t).unwrap();
         assert_eq!(j.response, Pkw::new(1, 1, 0, 9));
         assert_eq!(e.jobs(), 3);
+    }
+
+    #[test]
+    fn any_changed_word_is_a_new_job_without_the_reset_rule() {
+        // BM4 L1571-1581: IND, PWE1, PWE2, then PKE; no PKE = 0 between
+        // jobs. A second write with a new value and the same PKE runs.
+        let mut t = Table(0);
+        let mut e = PkwEngine::new(&ELEMENTS, Duration::ZERO);
+        let now = Instant::ZERO;
+        e.on_request(now, Pkw::new(2, 1, 0, 0x11), &mut t).unwrap();
+        let j = e.on_request(now, Pkw::new(2, 1, 0, 0x22), &mut t).unwrap();
+        assert_eq!(j.response, Pkw::new(1, 1, 0, 0x22));
+        assert_eq!(t.0, 0x22);
+        assert_eq!(e.on_request(now, Pkw::new(2, 1, 0, 0x22), &mut t), None);
+        // With the reset rule (Omega) a new value alone is no new job.
+        let mut e = PkwEngine::new(&DESCRIBE, Duration::ZERO);
+        e.on_request(now, Pkw::new(2, 1, 0, 0x33), &mut t).unwrap();
+        assert_eq!(e.on_request(now, Pkw::new(2, 1, 0, 0x44), &mut t), None);
+        assert_eq!(t.0, 0x33);
     }
 
     #[test]

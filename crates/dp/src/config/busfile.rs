@@ -50,9 +50,12 @@
 //! option named like a slave key (see [`SLAVE_KEYS`]: the `omega`
 //! profile's `params` file, the `generic` profile's `gsd` and `modules`)
 //! goes into the sub-table named after the profile, `omega.params =
-//! "params.toml"` (any option may); `params`, `gsd` or `modules` at the
-//! top of a `device` slave's table stay slave keys and are refused where a
-//! device slave cannot take them, naming where the option goes. This
+//! "params.toml"` (any option may); `params` or `modules` at the top of a
+//! `device` slave's table stay slave keys and are refused where a device
+//! slave cannot take them, naming where the option goes. `gsd` next to
+//! `device` is the GSD file the profile takes its identity from (a
+//! vendor's file: ident number, modules, parameters; for the generic
+//! profile its GSD), passed as the profile's option `gsd`. This
 //! crate knows no profile: [`BusFile::load_with`] takes a
 //! [`DeviceResolver`] (the `profibus-devices` registry is one) that turns
 //! the name and options into the profile's GSD and modules; from there
@@ -383,14 +386,28 @@ impl Ctx<'_> {
         let under = |key: &str| {
             format!("an option `{key}` of the `{name}` profile goes under `{name}.{key} = …`")
         };
-        if table.contains_key("gsd") {
-            return Err(self.err(
-                at("gsd"),
-                format!(
-                    "slave {addr}: give either `gsd` (with `modules`) or `device`; {}",
-                    under("gsd")
-                ),
-            ));
+        // `gsd` next to `device`: the GSD file the profile takes its
+        // identity from (a vendor's file; the generic profile's own GSD),
+        // passed as the profile's option `gsd`.
+        match table.get("gsd") {
+            Some(toml::Value::String(g)) => {
+                if let Some(toml::Value::Table(sub)) = table.get(name) {
+                    if sub.contains_key("gsd") {
+                        return Err(self.err(
+                            at("gsd"),
+                            format!("slave {addr}: `gsd` and `{name}.gsd` both given"),
+                        ));
+                    }
+                }
+                options.insert("gsd".into(), toml::Value::String(g.clone()));
+            }
+            Some(_) => {
+                return Err(self.err(
+                    at("gsd"),
+                    format!("slave {addr}: `gsd` is the path of a GSD file"),
+                ))
+            }
+            None => {}
         }
         if table.contains_key("modules") {
             return Err(self.err(
@@ -837,7 +854,7 @@ impl Ctx<'_> {
                     modules,
                 })
             }
-            (None, Some(d)) => {
+            (_, Some(d)) => {
                 if let Some(m) = s.modules.first() {
                     return Err(self.err(
                         Some(m.span()),
@@ -1326,7 +1343,7 @@ modules = ["no such module"]
                     entry.name
                 )));
             }
-            if let Some(k) = entry.options.keys().find(|k| *k != "pkw") {
+            if let Some(k) = entry.options.keys().find(|k| *k != "pkw" && *k != "gsd") {
                 return Err(DeviceError::at_option(
                     k.clone(),
                     format!("device `omega2`: unknown option `{k}`"),
@@ -1519,8 +1536,23 @@ modules = ["no such module"]
             .unwrap_err();
         assert_eq!(e.line, 8, "{e}");
         assert!(e.message.contains("unknown key `pkw`"), "{e}");
-        // Both, or neither.
-        let e = with_omega2(&text.replace("pkw = false", "gsd = \"BNF_00D0.GSD\"")).unwrap_err();
+        // `gsd` next to `device`: the profile's option `gsd` (a vendor's
+        // GSD file the profile takes its identity from).
+        let b = with_omega2(&text.replace("pkw = false", "gsd = \"VENDOR.GSD\"")).unwrap();
+        let d = b.slaves[0].device.as_ref().unwrap();
+        assert_eq!(
+            d.options.get("gsd").and_then(|v| v.as_str()),
+            Some("VENDOR.GSD")
+        );
+        let e = with_omega2(&text.replace("pkw = false", "gsd = 1")).unwrap_err();
+        assert!(e.message.contains("path of a GSD file"), "{e}");
+        // Neither.
+        let e = with_omega2(
+            OMEGA2_BUS
+                .replace("device = \"omega2\"", "name = \"x\"")
+                .as_str(),
+        )
+        .unwrap_err();
         assert!(e.message.contains("either"), "{e}");
     }
 
@@ -1544,7 +1576,6 @@ modules = ["no such module"]
                 "params = \"omega-params.toml\"",
                 "`params` is the slave's User_Prm_Data",
             ),
-            ("gsd = \"BNF_00D0.GSD\"", "either `gsd`"),
             ("modules = [\"x\"]", "chooses its modules"),
         ] {
             let e = with(line);

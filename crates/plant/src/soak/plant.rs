@@ -15,7 +15,7 @@ pub(super) use crate::{MasterStation, SlaveStation};
 const SLAVES: &[(&str, u8, &[&str])] = &[
     ("generic", 3, &[]),
     ("bm4", 4, &[]),
-    ("omega", 5, &[]),
+    ("omega", 5, &["drive-enable=auto"]),
     ("jx2", 6, &[]),
     ("rfid", 8, &[]),
     (

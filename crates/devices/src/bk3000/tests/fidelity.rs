@@ -461,3 +461,70 @@ fn plc_interface_reaches_the_coupler_tables_and_terminals_in_parameter_mode() {
     assert_eq!(i[8] & 1, 1, "K-bus running");
     assert!(b.slave.device().status_text().contains("K-bus running"));
 }
+
+#[test]
+fn programmed_configuration_places_terminals_freely() {
+    // p. 51: "Mit dem Konfigurator können die Klemmen beliebig in das
+    // lokale Prozeßabbild gelegt werden": the KL1104 first, the KL3102
+    // words after it, in a table 70 that is no automatic layout.
+    let s = strip("KL1104,KL2134,KL3102,KL9010");
+    let table = vec![0x10, 0x51, 0x20];
+    assert!(
+        Bk3000::new(s.clone())
+            .with_programmed_cfg(table.clone())
+            .is_err(),
+        "not the automatic layout"
+    );
+    let places = image::Placement::parse_list("1@0.0/-, 3@1/-").unwrap();
+    let dev = Bk3000::new(s.clone())
+        .with_placement(table.clone(), places)
+        .unwrap();
+    let mut b = Bench {
+        slave: DpSlave::new(dev, ADDR),
+    };
+    let mut u = [0u8; 10];
+    u[9] = 0x02;
+    b.start(&u, &table);
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    b.slave.device_mut().control("set 1.4 1").unwrap();
+    b.slave.device_mut().control("set 3.2 5").unwrap();
+    let i = b.dx(&[0x02]);
+    assert_eq!(i.len(), 5);
+    assert_eq!(i[0] & 0x08, 0x08, "KL1104 channel 4 in byte 0 bit 3");
+    assert_eq!(
+        i16::from_be_bytes([i[3], i[4]]),
+        16384,
+        "KL3102 channel 2 in bytes 3-4"
+    );
+    assert_eq!(b.slave.device().output_value("2.KL2134.2"), Some(1));
+    // Overlaps, data beyond the table and bits of byte terminals refused.
+    for (text, words) in [
+        ("1@1.0/-", "overlaps"),
+        ("3@2/-", "beyond"),
+        ("3@1.4/-", "byte-oriented"),
+        ("2@0/-", "has no input data"),
+        ("9@0/-", "not on the strip"),
+    ] {
+        let p = image::Placement::parse_list(text).unwrap();
+        let e = Bk3000::new(s.clone())
+            .with_placement(table.clone(), p)
+            .unwrap_err();
+        assert!(e.contains(words), "{text}: {e}");
+    }
+    assert!(image::Placement::parse_list("3:0")
+        .unwrap_err()
+        .contains("POS@IN/OUT"));
+    // The registry option.
+    let entry = crate::PROFILES.iter().find(|p| p.name == "bk3000").unwrap();
+    let mut o = crate::profile::DeviceOptions::new();
+    o.set_text("terminals", "KL1104,KL2134,KL3102,KL9010");
+    o.set_text("programmed-cfg", "10 51 20");
+    o.set_text("placement", "1@0.0/-, 3@1/-");
+    assert!(entry.configure(&o, Some(5)).unwrap().device(None).is_ok());
+    o.set_text("placement", "1@1.0/-");
+    let e = entry.configure(&o, Some(5)).unwrap_err().to_string();
+    assert!(
+        e.contains("option `placement`") && e.contains("overlaps"),
+        "{e}"
+    );
+}
