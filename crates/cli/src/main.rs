@@ -28,6 +28,7 @@ mod pkw;
 mod profile_args;
 mod rfid;
 mod scan;
+mod service;
 mod slave;
 mod sniff;
 mod soak;
@@ -101,6 +102,22 @@ enum Command {
     /// Fault soak on the simulated bus: a master and one slave of every
     /// device profile with dropped characters, bit errors and noise.
     Soak(soak::Args),
+    /// A slave's diagnosis in words, with its GSD's texts (works on a
+    /// slave another master owns).
+    Diag(service::DiagArgs),
+    /// A slave's configuration (Get_Cfg), decoded into its GSD's modules
+    /// (works on a slave another master owns).
+    GetCfg(service::GetCfgArgs),
+    /// Give a slave a new station address (Set_Slave_Add with the ident
+    /// number read from the slave; only a slave no master parameterised
+    /// takes it).
+    SetAddress(service::SetAddressArgs),
+    /// A slave's inputs and outputs (Rd_Inp, Rd_Outp; answered in
+    /// Data_Exchange, whichever master owns it).
+    ReadIo(service::ReadIoArgs),
+    /// Send one Global_Control (clear, operate, sync, unsync, freeze,
+    /// unfreeze) to every slave or to groups.
+    GlobalControl(service::GlobalControlArgs),
 }
 
 fn main() -> ExitCode {
@@ -130,6 +147,11 @@ fn main() -> ExitCode {
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),
         Command::Soak(a) => soak::run(a),
+        Command::Diag(a) => service::diag(a),
+        Command::GetCfg(a) => service::get_cfg(a),
+        Command::SetAddress(a) => service::set_address(a),
+        Command::ReadIo(a) => service::read_io(a),
+        Command::GlobalControl(a) => service::global_control(a),
         Command::Monitor(a) => monitor::run(a),
         Command::Doctor(a) => doctor::run(a),
     };

@@ -365,7 +365,7 @@ impl std::fmt::Display for ServiceAnswer {
             ServiceAnswer::Data(d) => write!(f, "{}", profibus_fdl::wire::Hex(d)),
             ServiceAnswer::Ack => f.write_str("acknowledged"),
             ServiceAnswer::Sent => f.write_str("sent (broadcast, not answered)"),
-            ServiceAnswer::Refused(st) => write!(f, "refused ({st:?})"),
+            ServiceAnswer::Refused(st) => write!(f, "refused ({})", st.mnemonic()),
             ServiceAnswer::NoAnswer => f.write_str("no answer"),
         }
     }
