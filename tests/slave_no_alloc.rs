@@ -1,6 +1,7 @@
 //! The slave handles Data_Exchange without allocating: a counting global
 //! allocator watches 1000 cycles through the passive station (receive,
-//! framing, the slave core, the device, the response) on this thread.
+//! framing, the slave core, the device, the response) on this thread;
+//! and the same for Read, poll and Idle on an open class-2 connection.
 
 use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{expect_cfg, Device, DpSlave, Features, IoLayout, Reason, SlaveState};
@@ -59,7 +60,11 @@ fn emit(buf: &mut [u8], da: u8, fc: FunctionCode, saps: Option<(u8, u8)>, data: 
     Telegram::Data(t).emit(buf).unwrap()
 }
 
-fn exchange(st: &mut PassiveStation<DpSlave<Echo>>, now: &mut Instant, req: &[u8]) -> usize {
+fn exchange<D: Device>(
+    st: &mut PassiveStation<DpSlave<D>>,
+    now: &mut Instant,
+    req: &[u8],
+) -> usize {
     st.handle_rx(*now, req);
     let mut n = 0;
     while let Some(t) = st.poll_timeout() {
@@ -152,4 +157,99 @@ fn data_exchange_does_not_allocate() {
     assert_eq!(st.app().stats().data_exchanges, 1000);
     assert_eq!(st.app().outputs(), &reqs[999].2[..]);
     assert_eq!(allocations, 0, "allocations while handling Data_Exchange");
+}
+
+/// A DP-V1 device with class 2: one 16-byte record, no process data.
+struct Records {
+    record: [u8; 16],
+}
+
+impl Device for Records {
+    fn ident_number(&self) -> u16 {
+        0x0B0C
+    }
+    fn real_cfg(&self) -> &[u8] {
+        &[]
+    }
+    fn features(&self) -> Features {
+        Features {
+            dpv1: true,
+            c2_read_write: true,
+            c2_max_count_channels: 1,
+            ..Features::default()
+        }
+    }
+    fn check_prm(&mut self, _: &SetPrm<'_>) -> Result<(), Reason> {
+        Ok(())
+    }
+    fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
+        expect_cfg(&[], cfg)
+    }
+    fn write_outputs(&mut self, _: Instant, _: &[u8]) {}
+    fn read_inputs(&mut self, _: Instant, _: &mut [u8]) {}
+    fn dpv1_read(
+        &mut self,
+        _: Instant,
+        _slot: u8,
+        _index: u8,
+        out: &mut [u8],
+    ) -> profibus_dp::slave::Dpv1Outcome {
+        let n = out.len().min(16);
+        out[..n].copy_from_slice(&self.record[..n]);
+        self.record[0] = self.record[0].wrapping_add(1);
+        profibus_dp::slave::Dpv1Outcome::Done(n)
+    }
+}
+
+#[test]
+fn class2_reads_and_idles_do_not_allocate() {
+    let mut st = PassiveStation::new(
+        DpSlave::new(Records { record: [7; 16] }, 8),
+        BusParams::defaults(Baud::B12000000),
+    );
+    let mut now = Instant::from_nanos(1_000_000);
+    let mut buf = [0u8; 300];
+    let mut fcb = false;
+    let mut srd = || {
+        fcb = !fcb;
+        FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb,
+            fcv: true,
+        }
+    };
+    // Initiate (Send_Timeout 1 s) and the poll for Initiate.res.
+    let initiate = [
+        0x57, 0, 0, 0, 0x00, 0x64, 0x01, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 0, 0, 0,
+    ];
+    let n = emit(&mut buf, 8, srd(), Some((49, 50)), &initiate);
+    assert_eq!(exchange(&mut st, &mut now, &buf[..n]), 11 + 4, "RM reply");
+    let n = emit(&mut buf, 8, srd(), Some((48, 50)), &[]);
+    assert_eq!(
+        exchange(&mut st, &mut now, &buf[..n]),
+        11 + 16,
+        "Initiate.res"
+    );
+    while st.app_mut().poll_event().is_some() {}
+
+    // Read, poll, Idle: 500 rounds, prepared up front.
+    let mut reqs = vec![];
+    for _ in 0..500 {
+        for data in [&[0x5E, 1, 2, 16][..], &[], &[0x48, 0x00]] {
+            let mut b = vec![0u8; 64];
+            let n = emit(&mut b, 8, srd(), Some((48, 50)), data);
+            b.truncate(n);
+            reqs.push(b);
+        }
+    }
+    let (lens, allocations) = alloc_count::on_this_thread(|| {
+        reqs.iter()
+            .map(|r| exchange(&mut st, &mut now, r))
+            .sum::<usize>()
+    });
+    // Per round (SD2 with SAPs: 11 bytes around the data unit): SC (1),
+    // the Read.res (11 + 4 + 16), Idle (11 + 2).
+    assert_eq!(lens, 500 * (1 + 31 + 13));
+    assert_eq!(st.app().c2_connections().count(), 1);
+    assert_eq!(allocations, 0, "allocations on a class-2 connection");
 }
