@@ -8,6 +8,7 @@
 //! timeout, or a slave that does not reach Data_Exchange.
 
 use crate::common;
+use crate::out::outln;
 use anyhow::{Context, Result};
 use profibus_devices::pkw_task::PkwTask;
 use profibus_dp::master::TaskRun;
@@ -15,9 +16,13 @@ use std::time::Duration;
 
 /// Read or write a parameter over the PKW channel of a slave.
 ///
-/// P is a parameter number (218, P218, 0x7E) or, for a BM4-O-PRO-01, the
-/// name of a variable module of its GSD (di_MyReadVar3); `P[i]` is array
-/// element i.
+/// P is a parameter number (218, P218, 0x7E) or a name: for a
+/// BM4-O-PRO-01 a variable module of its GSD (di_MyReadVar3), for an
+/// Omega Drive-Line II a parameter of the V-controller table
+/// (L_rev_actual_value; `_` or `-` for spaces). `P[i]` is array element
+/// i (BM4); on the Omega, which has no array commands, P1000[i] is
+/// parameter 1000+i of its DINT array. `list` shows the names (no bus
+/// traffic).
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -54,6 +59,8 @@ enum Op {
         #[arg(long)]
         dword: bool,
     },
+    /// List the parameters the slave's device names (no bus traffic).
+    List,
     /// Read an element of the parameter description (Omega: PBE).
     Describe {
         /// Parameter.
@@ -70,6 +77,23 @@ pub fn run(args: Args) -> Result<()> {
     let slave = args.link.slave_of(&bus)?;
     let timeout = Duration::from_millis(args.timeout);
     let task = match &args.op {
+        Op::List => {
+            let list = profibus_devices::pkw_parameters(slave.params.ident_number, &slave.gsd);
+            if list.is_empty() {
+                anyhow::bail!(
+                    "slave {}: its device names no PKW parameters (give numbers)",
+                    slave.params.address
+                );
+            }
+            for p in list {
+                if args.link.json {
+                    outln!("{}", common::json_line(&p))?;
+                } else {
+                    outln!("P{:<4} {:<40} {}", p.pnu, p.name, p.details)?;
+                }
+            }
+            return Ok(());
+        }
         Op::Read { param } => PkwTask::read(slave, param, timeout),
         Op::Describe { param, attr } => PkwTask::describe(slave, param, attr, timeout),
         Op::Write {

@@ -393,6 +393,18 @@ fn omega_pkw_examples_of_the_manual() {
     assert_eq!(v["response"], "23E8 0000 1234 5678");
     let (ok, v, _) = r.pkw(&bus, 25, &["read", "1000"]);
     assert!(ok && v["response"] == "23E8 0000 1234 5678", "{v}");
+    // By name from the V-controller table, and P[i] in the Omega's array
+    // (P1000[i] = PNU 1000 + i); `list` names the parameters.
+    let (ok, v, err) = r.pkw(&bus, 25, &["write", "M_communication_monitoring=0"]);
+    assert!(ok, "{err}");
+    assert_eq!(v["request"], "207F 0000 0000 0000");
+    let (ok, v, _) = r.pkw(&bus, 25, &["read", "P1000[0]"]);
+    assert!(ok && v["response"] == "23E8 0000 1234 5678", "{v}");
+    let (ok, v, err) = r.pkw(&bus, 25, &["list"]);
+    assert!(
+        ok && v["pnu"].is_u64() && v["name"].is_string(),
+        "{v} {err}"
+    );
     // Errors are decoded: impermissible parameter number.
     let (ok, v, err) = r.pkw(&bus, 25, &["read", "999"]);
     assert!(!ok && v["code"] == 8, "{v}");

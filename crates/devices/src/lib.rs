@@ -205,6 +205,16 @@ pub fn pkw_parameter(ident: u16, gsd: &profibus_dp::config::gsd::Gsd, name: &str
         .find_map(|p| p.pkw_parameter(gsd, name))
 }
 
+/// The PKW parameters a slave with ident number `ident` and GSD `gsd`
+/// names (`dpctl pkw list`), from the profile with that ident number.
+pub fn pkw_parameters(ident: u16, gsd: &profibus_dp::config::gsd::Gsd) -> Vec<pkw::PkwParameter> {
+    PROFILES
+        .iter()
+        .filter(|p| p.ident == Some(ident))
+        .flat_map(|p| p.pkw_parameters(gsd))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

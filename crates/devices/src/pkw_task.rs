@@ -27,6 +27,10 @@ pub enum PkwTaskError {
     /// `P[i]` with a bad index.
     #[error("bad array index in `{0}`")]
     Index(String),
+    /// `P[i]` outside the Omega's array (a dialect without array
+    /// element commands).
+    #[error("`{0}`: the {1} has no array element commands; `P[i]` is parameter P+i of the DINT array P1000..P2047")]
+    NoArray(String, &'static str),
     /// A parameter number above 2047.
     #[error("parameter number {0} is outside 0..=2047")]
     Pnu(i64),
@@ -171,6 +175,26 @@ impl PkwTask {
         })
     }
 
+    /// `P[i]` for a dialect without array element commands (the Omega):
+    /// element i of the Omega's DINT array from P, PNU P + i (manual
+    /// L404-420: a_ParValues[1000..2047], the index is the PNU).
+    fn flatten(&self, p: ParamRef, text: &str) -> Result<ParamRef, PkwTaskError> {
+        let d = self.client.dialect();
+        match p.index {
+            Some(i) if d.read_element.is_none() => {
+                let pnu = p.pnu as u32 + i as u32;
+                if p.pnu < 1000 || pnu > 2047 {
+                    return Err(PkwTaskError::NoArray(text.to_string(), d.name));
+                }
+                Ok(ParamRef {
+                    pnu: pnu as u16,
+                    index: None,
+                })
+            }
+            _ => Ok(p),
+        }
+    }
+
     fn with(mut self, param: ParamRef, steps: &[Step]) -> Self {
         self.param = param;
         self.what = param.to_string();
@@ -181,7 +205,7 @@ impl PkwTask {
     /// Read `param` (or its array element).
     pub fn read(slave: &BusSlave, param: &str, timeout: Duration) -> Result<Self, PkwTaskError> {
         let t = PkwTask::new(slave, "read", timeout)?;
-        let p = ParamRef::parse(param, slave)?;
+        let p = t.flatten(ParamRef::parse(param, slave)?, param)?;
         Ok(t.with(p, &[Step::Run(p.read())]))
     }
 
@@ -194,7 +218,7 @@ impl PkwTask {
         timeout: Duration,
     ) -> Result<Self, PkwTaskError> {
         let t = PkwTask::new(slave, "describe", timeout)?;
-        let p = ParamRef::parse(param, slave)?;
+        let p = t.flatten(ParamRef::parse(param, slave)?, param)?;
         let ind = match attr {
             "attribute" => 1,
             "info" => 2,
@@ -222,7 +246,7 @@ impl PkwTask {
     ) -> Result<Self, PkwTaskError> {
         let t = PkwTask::new(slave, "write", timeout)?;
         let (ps, vs) = assignment.split_once('=').ok_or(PkwTaskError::Assignment)?;
-        let p = ParamRef::parse(ps.trim(), slave)?;
+        let p = t.flatten(ParamRef::parse(ps.trim(), slave)?, ps.trim())?;
         let v = parse_num(vs).ok_or_else(|| PkwTaskError::Value(vs.to_string()))?;
         if !(-(1i64 << 31)..=0xFFFF_FFFF).contains(&v) {
             return Err(PkwTaskError::Range(v));
@@ -511,6 +535,34 @@ mod tests {
             e("speed"),
             "`speed` is neither a parameter number nor a variable module of the GSD of device `omega`"
         );
+    }
+
+    #[test]
+    fn omega_parameters_by_name_and_array_elements() {
+        let t = Duration::from_secs(1);
+        let omega = slave(crate::omega::IDENT, vec![0x73, 0x71, 0x53, 0x63]);
+        // Names of the V-controller table (L1028: P218 "L rev actual
+        // value", L1080: P127 "M communication monitoring").
+        for name in [
+            "L rev actual value",
+            "L_rev_actual_value",
+            "l-rev-actual-value",
+        ] {
+            assert_eq!(ParamRef::parse(name, &omega).unwrap().pnu, 218, "{name}");
+        }
+        let w = PkwTask::write(&omega, "M_communication_monitoring=4", None, t).unwrap();
+        assert_eq!(w.param.pnu, 127);
+        // P[i] on the Omega: the DINT array from P1000, PNU P + i.
+        let r = PkwTask::read(&omega, "P1000[5]", t).unwrap();
+        assert_eq!((r.param.pnu, r.param.index), (1005, None));
+        let e = PkwTask::read(&omega, "P218[1]", t).unwrap_err().to_string();
+        assert!(e.contains("no array element commands"), "{e}");
+        assert!(PkwTask::read(&omega, "P2047[1]", t).is_err());
+        let list = crate::pkw_parameters(crate::omega::IDENT, &omega.gsd);
+        assert!(list
+            .iter()
+            .any(|p| p.pnu == 218 && p.name == "L rev actual value"));
+        assert!(list.iter().any(|p| p.pnu == 1000));
     }
 
     #[test]

@@ -498,6 +498,13 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
         None
     }
 
+    /// The PKW parameters the product names, for `dpctl pkw list` (the
+    /// BM4-O-PRO-01's variable modules of `gsd`, the Omega's
+    /// V-controller parameter table). Default: none.
+    fn pkw_parameters(_gsd: &Gsd) -> Vec<crate::pkw::PkwParameter> {
+        vec![]
+    }
+
     /// Warnings found while configuring (e.g. GSD vendor quirks).
     fn warnings(&self) -> Vec<String> {
         vec![]
@@ -608,6 +615,7 @@ pub struct ProfileEntry {
     configure: ConfigureFn,
     pkw_dialect: fn(&[u8]) -> Option<&'static Dialect>,
     pkw_parameter: fn(&Gsd, &str) -> Option<u16>,
+    pkw_parameters: fn(&Gsd) -> Vec<crate::pkw::PkwParameter>,
     capabilities: fn(&[u8]) -> Capabilities,
     options_for_cfg: fn(&[u8]) -> Vec<DeviceOptions>,
 }
@@ -652,6 +660,7 @@ impl ProfileEntry {
             configure: configure_boxed::<P>,
             pkw_dialect: P::pkw_dialect,
             pkw_parameter: P::pkw_parameter,
+            pkw_parameters: P::pkw_parameters,
             capabilities: P::capabilities,
             options_for_cfg: P::options_for_cfg,
         }
@@ -680,6 +689,11 @@ impl ProfileEntry {
     /// See [`Profile::pkw_parameter`].
     pub fn pkw_parameter(&self, gsd: &Gsd, name: &str) -> Option<u16> {
         (self.pkw_parameter)(gsd, name)
+    }
+
+    /// See [`Profile::pkw_parameters`].
+    pub fn pkw_parameters(&self, gsd: &Gsd) -> Vec<crate::pkw::PkwParameter> {
+        (self.pkw_parameters)(gsd)
     }
 
     /// The options of this profile, among [`Profile::options_for_cfg`],

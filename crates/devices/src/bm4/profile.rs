@@ -177,6 +177,24 @@ pkw = true|false (default: true where the PKW module fits next to the variables,
         Some(m.cfg[3] as u16)
     }
 
+    fn pkw_parameters(gsd: &Gsd) -> Vec<crate::pkw::PkwParameter> {
+        (gsd.modules.iter())
+            .filter(|m| m.cfg.len() == 4)
+            .map(|m| crate::pkw::PkwParameter {
+                pnu: m.cfg[3] as u16,
+                name: m.name.clone(),
+                details: format!(
+                    "module {}",
+                    m.cfg
+                        .iter()
+                        .map(|b| format!("{b:02X}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                ),
+            })
+            .collect()
+    }
+
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {
         let l = CfgLayout::new(&self.table, cfg).map_err(|e| ProfileError::Config(e.0))?;
         let mut m = ChannelMap::new();

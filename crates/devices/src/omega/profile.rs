@@ -207,6 +207,39 @@ bus file: setpoints, actual_values (default 2 each), pkw = true|false, drive_ena
         Ok(m)
     }
 
+    /// A parameter of the shipped V-controller table by name: case and
+    /// `_` / `-` for spaces do not matter (`L_rev_actual_value` is P218).
+    fn pkw_parameter(_gsd: &Gsd, name: &str) -> Option<u16> {
+        let norm = |s: &str| s.to_lowercase().replace(['_', '-'], " ");
+        let want = norm(name);
+        (ParamTable::default_table().params.iter())
+            .find(|p| norm(&p.name) == want)
+            .map(|p| p.pnu)
+    }
+
+    fn pkw_parameters(_gsd: &Gsd) -> Vec<crate::pkw::PkwParameter> {
+        let mut v: Vec<crate::pkw::PkwParameter> = (ParamTable::default_table().params)
+            .into_iter()
+            .map(|p| crate::pkw::PkwParameter {
+                pnu: p.pnu,
+                details: format!(
+                    "{}, {}{}..{}",
+                    if p.dword { "dword" } else { "word" },
+                    if p.protected { "read only, " } else { "" },
+                    p.min,
+                    p.max
+                ),
+                name: p.name,
+            })
+            .collect();
+        v.push(crate::pkw::PkwParameter {
+            pnu: super::OMEGA_ARRAY_FIRST,
+            name: "Omega DINT array P1000..P2047 (P1000[i] = P1000+i)".into(),
+            details: "dword, read and write (commands 1 and 3)".into(),
+        });
+        v
+    }
+
     fn pkw_dialect(cfg: &[u8]) -> Option<&'static Dialect> {
         check_configuration(cfg)
             .is_ok_and(|l| l.pkw)

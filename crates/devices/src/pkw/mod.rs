@@ -75,6 +75,17 @@ pub fn channels(m: &mut ChannelMap) {
     }
 }
 
+/// A parameter a device names, as `dpctl pkw list` shows it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct PkwParameter {
+    /// Parameter number.
+    pub pnu: u16,
+    /// Its name.
+    pub name: String,
+    /// Format and access in words (`word, read only, 0..15`).
+    pub details: String,
+}
+
 /// The four PKW words.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
 pub struct Pkw {
