@@ -77,6 +77,10 @@
 //!   on the same SAPs) gets SC until the device has the answer, then the
 //!   answer comes as DL. MSAC_C1 and Alarm_Ack (SAP 50) are active only
 //!   in Data_Exch with DPV1_Enable, for the owning master.
+//! - **DP-V1 alarms** a device raises ([`Device::take_alarm`]) wait in
+//!   the core's [`AlarmQueue`]: numbered 0..=31, as many outstanding as
+//!   Alarm_Mode allows, their blocks in Slave_Diag until the master's
+//!   Alarm_Ack names them (in sequence order); see its module docs.
 
 mod alarm;
 mod device;
