@@ -35,7 +35,9 @@ pub struct ProfileArgs {
     /// An option of the device profile, KEY=VALUE (repeatable). Every
     /// profile also takes ident=0x… (the ident number it reports) and
     /// gsd=FILE (a vendor's GSD file: ident number, modules, parameters).
-    #[arg(long = "device-opt", value_name = "KEY=VALUE", requires = "device")]
+    /// With --gsd: an option of the generic device (I&M0: order_id,
+    /// serial_number, manufacturer_id).
+    #[arg(long = "device-opt", value_name = "KEY=VALUE")]
     pub device_opts: Vec<String>,
     /// List the device profiles and exit.
     #[arg(long)]
@@ -56,8 +58,10 @@ pub struct ProfileArgs {
     /// switches S40/S41 (hex allowed, e.g. 0x19 = 25) instead of --addr.
     #[arg(long, value_name = "N", requires = "device")]
     pub switch: Option<String>,
-    /// bm4: directory of the state file keeping a set-once address.
-    #[arg(long, value_name = "DIR", requires = "device")]
+    /// bm4: directory of the state file keeping a set-once address. With
+    /// --gsd (a DP-V1 device): directory of `im.toml`, which keeps the
+    /// I&M1..I&M4 records masters write across restarts.
+    #[arg(long, value_name = "DIR")]
     pub state_dir: Option<PathBuf>,
     /// bm4: write the GSD file of this configuration (generated from
     /// --vars, or BM4OPRO1.GSD) before starting.

@@ -435,3 +435,60 @@ fn sparkplug_on_a_line_ddeath_dbirth_and_clean_ndeath() {
     let out = gw.finish(T);
     assert!(out.status.success(), "gateway failed: {}", out.stderr);
 }
+
+/// A DP-V1 slave whose GSD declares diagnostic, process and pull/plug
+/// alarms: an `Alarms/…` metric per type in its DBIRTH (null), and the
+/// alarm the slave raises in a DDATA of its type's metric, as the JSON of
+/// the master's alarm event.
+#[test]
+fn sparkplug_alarm_metrics_per_alarm_type() {
+    let dir = TempDir::new("sparkplug-alarms");
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let line = common::Bus::start(2, &[]);
+    let gsd = common::repo().join("crates/cli/tests/data/DPCTL_ALM.GSD");
+    let mut slave = Proc::spawn(
+        "dpctl slave 9",
+        Command::new(dpctl())
+            .args(["slave", "--port"])
+            .arg(line.link(1))
+            .args(["--addr", "9", "--baud", "1.5M", "--gsd"])
+            .arg(&gsd)
+            .args(["--module", "2 words in/out", "--control", "-"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    let bus = dir.path("bus.toml");
+    std::fs::write(
+        &bus,
+        format!(
+            "[master]\naddress = 1\nbaud = \"1.5M\"\n[[slave]]\naddress = 9\ngsd = \"{}\"\n\
+             modules = [\"2 words in/out\"]\n[mqtt]\nsparkplug = \"G/E\"\n",
+            gsd.display()
+        ),
+    )
+    .unwrap();
+    let mut sub = Sub::start(port);
+    let gw = gateway(&bus, port, &["--port", &line.link_str(0)]);
+    let birth = sub.expect(&dev("DBIRTH", 9), |_| true);
+    for t in ["diagnostic", "process", "pull", "plug"] {
+        let m = birth.metric(&format!("Alarms/{t}"));
+        assert!(m.is_some(), "Alarms/{t} in {birth:#?}");
+        assert_eq!(m.unwrap().get("is_null").map(String::as_str), Some("true"));
+    }
+    assert!(birth.metric("Alarms/update").is_none(), "not declared");
+    common::send(&mut slave, "alarm plug 3 appears");
+    let data = sub.expect(&dev("DDATA", 9), |d| d.metric("Alarms/plug").is_some());
+    let json = data.get("Alarms/plug", "string_value").unwrap();
+    // protoc prints the string quoted, with `"` escaped.
+    let json: serde_json::Value =
+        serde_json::from_str(&json[1..json.len() - 1].replace("\\\"", "\"")).unwrap();
+    assert_eq!(json["type"], "plug", "{json}");
+    assert_eq!(json["slot"], 3, "{json}");
+    assert_eq!(json["acknowledged"], true, "{json}");
+    gw.signal(15);
+    let out = gw.finish(T);
+    assert!(out.status.success(), "gateway failed: {}", out.stderr);
+    slave.terminate(T);
+}

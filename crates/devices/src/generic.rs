@@ -12,6 +12,13 @@
 //!   record store; any slot/index can be written (up to 240 bytes,
 //!   [`MAX_RECORDS`] records) and read back; reading a record never
 //!   written is "invalid index".
+//! - Class 2 (when the description says `C2_Read_Write_supp`): the same
+//!   records over MSAC_C2 connections (`C2_Max_Data_Len`,
+//!   `C2_Max_Count_Channels`, `Max_Initiate_PDU_Length`); Data_Transport
+//!   writes the record and answers with it.
+//! - I&M (every DP-V1 device): I&M0 from the GSD ([`ImIdentity::im0_from_gsd`]),
+//!   I&M1..I&M4 writable, kept in the state file of `state_dir`
+//!   ([`crate::im`]).
 //! - Set_Slave_Add (when supported): accepted unless No_Add_Chg was
 //!   stored before ([`GenericDevice::with_stored_address`]); the program
 //!   running the slave keeps the address ([`crate::address`]).
@@ -22,7 +29,8 @@
 //!   master's Alarm_Ack.
 //!
 //! [`GenericProfile`] is the `generic` entry of the profile registry: the
-//! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`.
+//! options `gsd`, `modules`, `lenient`, `inputs`, `address_file`,
+//! `state_dir`, `order_id`, `serial_number`, `manufacturer_id`.
 
 use crate::kit::{EventQueue, InboxSchedule};
 use crate::profile::ControlError;
@@ -42,9 +50,11 @@ use std::path::PathBuf;
 
 use crate::address::StoredAddress;
 use crate::channels::{ChannelMap, ChannelType, Direction};
+use crate::im::{ImIdentity, ImStore, IM_STATE_FILE};
 use crate::profile::{ControlInbox, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::ParseOptions;
+use profibus_dp::pdu::dpv1::Dpv1Error;
 use serde::Deserialize;
 
 /// Most DP-V1 records the generic device stores.
@@ -138,6 +148,10 @@ pub struct GenericDevice {
     ext_diag_fault: bool,
     static_diag: bool,
     new_diag: bool,
+    /// I&M records (DP-V1 devices).
+    im: Option<ImStore>,
+    /// Report I&M changes as state events (a state file keeps them).
+    im_state_events: bool,
     events: EventQueue,
     inbox: InboxSchedule,
     /// Alarms raised, for the slave core to take.
@@ -181,6 +195,8 @@ impl GenericDevice {
             ext_diag_fault: false,
             static_diag: false,
             new_diag: false,
+            im: None,
+            im_state_events: false,
             events: EventQueue::default(),
             inbox: InboxSchedule::default(),
             alarms: VecDeque::new(),
@@ -233,6 +249,11 @@ impl GenericDevice {
             fail_safe: gsd.fail_safe,
             max_diag_len: gsd.max_diag_data_len.unwrap_or(244).clamp(6, 244),
             c1_max_data_len: gsd.c1_max_data_len.unwrap_or(240).clamp(1, 240),
+            c2_read_write: gsd.dpv1_slave && gsd.c2_read_write_supp,
+            c2_max_data_len: gsd.c2_max_data_len.unwrap_or(240).clamp(1, 240),
+            c2_max_count_channels: gsd.c2_max_count_channels.unwrap_or(1).clamp(1, 49),
+            max_initiate_pdu_length: gsd.max_initiate_pdu_length.unwrap_or(0),
+            im: gsd.dpv1_slave,
         };
         let name = gsd
             .model_name
@@ -248,7 +269,29 @@ impl GenericDevice {
         let mut dev = GenericDevice::new(name, gsd.ident_number, cfg, features)
             .with_user_prm(user_prm_len, checks);
         dev.max_slot = Some(modules.min(254) as u8);
+        if gsd.dpv1_slave {
+            let im0 = ImIdentity::default()
+                .im0_from_gsd(gsd)
+                .expect("GSD texts are cut to fit");
+            dev.im = Some(ImStore::new(&im0));
+        }
         Ok(dev)
+    }
+
+    /// Use `store` for I&M (a DP-V1 device only; others answer no I&M);
+    /// with `state_events`, each write of I&M1..I&M4 is reported as a
+    /// [`crate::STATE_EVENT`] with the new state file.
+    pub fn with_im(mut self, store: ImStore, state_events: bool) -> Self {
+        if self.features.dpv1 {
+            self.im = Some(store);
+            self.im_state_events = state_events;
+        }
+        self
+    }
+
+    /// The I&M records, for a DP-V1 device.
+    pub fn im(&self) -> Option<&ImStore> {
+        self.im.as_ref()
     }
 
     /// Require User_Prm_Data of exactly `len` bytes (for DP-V1 slaves
@@ -492,6 +535,45 @@ impl Device for GenericDevice {
         Dpv1Outcome::Done(data.len())
     }
 
+    fn dpv1_data_transport(
+        &mut self,
+        now: Instant,
+        slot: u8,
+        index: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Dpv1Outcome {
+        match self.dpv1_write(now, slot, index, data) {
+            Dpv1Outcome::Done(_) => {
+                let n = data.len().min(out.len());
+                out[..n].copy_from_slice(&data[..n]);
+                Dpv1Outcome::Done(n)
+            }
+            other => other,
+        }
+    }
+
+    fn im_read(&mut self, number: u8, out: &mut [u8; 64]) -> bool {
+        self.im.as_ref().is_some_and(|im| im.read(number, out))
+    }
+
+    fn im_write(&mut self, _now: Instant, number: u8, record: &[u8; 64]) -> Result<(), Dpv1Error> {
+        let Some(im) = self.im.as_mut() else {
+            return Err(Dpv1Error::dpv1(
+                profibus_dp::pdu::dpv1::FN_WRITE,
+                ERR_CLASS_ACCESS,
+                profibus_dp::slave::ERR_ACCESS_DENIED,
+            ));
+        };
+        im.write(number, record)?;
+        let text = im.state_text();
+        self.events.note("im", format!("I&M{number} written"));
+        if self.im_state_events {
+            self.events.note(crate::STATE_EVENT, text);
+        }
+        Ok(())
+    }
+
     fn set_address(
         &mut self,
         new_address: u8,
@@ -550,6 +632,18 @@ pub struct GenericOptions {
     /// by Set_Slave_Add; when it exists its address overrides the
     /// caller's.
     pub address_file: Option<PathBuf>,
+    /// Directory of the state file (`im.toml`) keeping the I&M1..I&M4
+    /// records masters write (DP-V1 devices); without it they are lost
+    /// at the end.
+    pub state_dir: Option<PathBuf>,
+    /// I&M0 ORDER_ID (at most 20 characters); default: the GSD's
+    /// `OrderNumber`.
+    pub order_id: Option<String>,
+    /// I&M0 SERIAL_NUMBER (at most 16 characters); default: blanks.
+    pub serial_number: Option<String>,
+    /// I&M0 MANUFACTURER_ID (PI manufacturer table); default 0.
+    #[serde(deserialize_with = "crate::profile::opt_int")]
+    pub manufacturer_id: Option<u16>,
 }
 
 /// The generic device a GSD file and module list describe, as a
@@ -560,6 +654,7 @@ pub struct GenericProfile {
     gsd: Gsd,
     pattern: InputPattern,
     stored: Option<StoredAddress>,
+    im: Option<ImStore>,
     warnings: Vec<String>,
 }
 
@@ -568,9 +663,10 @@ impl Profile for GenericProfile {
     const NAME: &'static str = "generic";
     const SUMMARY: &'static str = "any device a GSD file describes: --gsd FILE --module NAME ...";
     const OPTIONS_HELP: &'static str =
-        "--gsd FILE, --module NAME (repeat), --lenient, --inputs echo|counter, --address-file FILE";
+        "--gsd FILE, --module NAME (repeat), --lenient, --inputs echo|counter, --address-file FILE, \
+--state-dir DIR (keeps I&M1..4), --device-opt order_id=TEXT|serial_number=TEXT|manufacturer_id=N (I&M0)";
     const IDENT: Option<u16> = None;
-    const PATH_OPTIONS: &'static [&'static str] = &["gsd", "address_file"];
+    const PATH_OPTIONS: &'static [&'static str] = &["gsd", "address_file", "state_dir"];
 
     fn configure(options: GenericOptions, _address: Option<u8>) -> Result<Self, ProfileError> {
         let path = options.gsd.clone().ok_or_else(|| {
@@ -599,11 +695,26 @@ impl Profile for GenericProfile {
             Some(f) => StoredAddress::load(f)?,
             None => None,
         };
+        let im = if parsed.gsd.dpv1_slave {
+            let identity = ImIdentity {
+                manufacturer_id: options.manufacturer_id,
+                order_id: options.order_id.clone(),
+                serial_number: options.serial_number.clone(),
+            };
+            let store = ImStore::new(&identity.im0_from_gsd(&parsed.gsd)?);
+            Some(match &options.state_dir {
+                Some(dir) => store.load(&dir.join(IM_STATE_FILE))?,
+                None => store,
+            })
+        } else {
+            None
+        };
         Ok(GenericProfile {
             options,
             gsd: parsed.gsd,
             pattern,
             stored,
+            im,
             warnings,
         })
     }
@@ -631,6 +742,12 @@ impl Profile for GenericProfile {
         self.options.address_file.clone()
     }
 
+    /// `state_dir/im.toml` (I&M1..I&M4), for a DP-V1 device.
+    fn state_file(&self) -> Option<PathBuf> {
+        let dir = self.options.state_dir.as_ref()?;
+        self.im.as_ref().map(|_| dir.join(IM_STATE_FILE))
+    }
+
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
         let mut dev = GenericDevice::from_gsd(&self.gsd, &self.options.modules)
             .map_err(|e| ProfileError::Device(Box::new(e)))?
@@ -638,6 +755,9 @@ impl Profile for GenericProfile {
             .with_stored_address(self.stored);
         if let Some(inbox) = control {
             dev = dev.with_inbox(inbox);
+        }
+        if let Some(im) = &self.im {
+            dev = dev.with_im(im.clone(), self.options.state_dir.is_some());
         }
         Ok(Box::new(dev))
     }

@@ -318,6 +318,22 @@ impl Device for IdentityDevice {
     fn dpv1_poll(&mut self, now: Instant, out: &mut [u8]) -> Dpv1Outcome {
         self.inner.dpv1_poll(now, out)
     }
+    fn dpv1_data_transport(
+        &mut self,
+        now: Instant,
+        slot: u8,
+        index: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Dpv1Outcome {
+        self.inner.dpv1_data_transport(now, slot, index, data, out)
+    }
+    fn im_read(&mut self, number: u8, out: &mut [u8; 64]) -> bool {
+        self.inner.im_read(number, out)
+    }
+    fn im_write(&mut self, now: Instant, number: u8, record: &[u8; 64]) -> Result<(), Dpv1Error> {
+        self.inner.im_write(now, number, record)
+    }
     fn alarm_ack(
         &mut self,
         now: Instant,

@@ -100,6 +100,7 @@ pub mod commission;
 pub mod generic;
 pub mod gsd_files;
 pub mod identity;
+pub mod im;
 pub mod jx2;
 mod kit;
 pub mod omega;

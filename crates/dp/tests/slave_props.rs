@@ -39,6 +39,11 @@ impl Device for Dev {
             fail_safe: true,
             max_diag_len: 32,
             c1_max_data_len: 240,
+            c2_read_write: true,
+            c2_max_data_len: 240,
+            c2_max_count_channels: 2,
+            max_initiate_pdu_length: 0,
+            im: true,
         }
     }
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
@@ -83,6 +88,18 @@ impl Device for Dev {
     fn dpv1_write(&mut self, _: Instant, _: u8, _: u8, d: &[u8]) -> Dpv1Outcome {
         Dpv1Outcome::Done(d.len() * 3)
     }
+    fn im_read(&mut self, number: u8, out: &mut [u8; 64]) -> bool {
+        out.fill(number);
+        number <= 1
+    }
+    fn im_write(
+        &mut self,
+        _: Instant,
+        _: u8,
+        _: &[u8; 64],
+    ) -> Result<(), profibus_dp::pdu::dpv1::Dpv1Error> {
+        Ok(())
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -97,6 +114,22 @@ struct Req {
 
 fn good_prm() -> Vec<u8> {
     vec![0xB8, 20, 1, 11, 0x47, 0x11, 1, 0xC0, 0xFC, 0x00]
+}
+
+/// Class 2: Initiate (1 s), polls, requests, I&M calls, Idle, Abort.
+fn class2() -> impl Strategy<Value = (Option<(u8, Option<u8>)>, Vec<u8>)> {
+    let on = |data: Vec<u8>| (47u8..=48).prop_map(move |s| (Some((s, Some(50))), data.clone()));
+    prop_oneof![
+        2 => Just((Some((49u8, Some(50u8))), vec![
+            0x57, 0, 0, 0, 0x00, 0x64, 0x01, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 0, 0, 0
+        ])),
+        3 => on(vec![]),
+        1 => on(vec![0x5E, 0, 255, 68]),
+        1 => on(vec![0x5F, 0, 255, 4, 8, 0, 0xFD, 0xE8]),
+        1 => on(vec![0x51, 1, 2, 1, 7]),
+        1 => on(vec![0x48, 0]),
+        1 => on(vec![0x58, 0, 0x20, 0]),
+    ]
 }
 
 /// A request that a master could plausibly send (to reach every state).
@@ -116,6 +149,7 @@ fn plausible() -> impl Strategy<Value = Req> {
         1 => Just((Some((50, Some(51))), vec![0x5C, 1, 2, 0x0C])),
         1 => Just((Some((55, Some(62))), vec![9, 0x47, 0x11, 0])),
         1 => Just((Some((61, Some(62))), vec![0x40, 0, 0, 0, 0x47, 0x11, 0])),
+        1 => class2(),
     ];
     (
         prop_oneof![6 => Just(2u8), 1 => Just(3u8)],

@@ -413,7 +413,10 @@ impl SlaveShell {
                 (err, true)
             }
             (SlaveEvent::Device(d), _, Some(f)) if d.kind == STATE_EVENT => {
-                let e = match std::fs::write(f, &d.text) {
+                // The state directory is made on the first save.
+                let dir = f.parent().filter(|p| !p.as_os_str().is_empty());
+                let saved = dir.map_or(Ok(()), std::fs::create_dir_all);
+                let e = match saved.and_then(|()| std::fs::write(f, &d.text)) {
                     Ok(()) => ShellEvent::StateSaved {
                         text: format!("state saved to {}", f.display()),
                     },

@@ -102,8 +102,39 @@ pub struct Bk3000 {
     table0: [u16; 256],
     /// K-bus cycle time set for the cycle-time measurement (table 98 R3).
     cycle_set: u16,
+    /// In data exchange with the K-bus started (for the LEDs).
+    exchanging: bool,
+    /// The LEDs last reported.
+    leds: Option<Leds>,
     events: EventQueue,
     inbox: InboxSchedule,
+}
+
+/// The coupler's LEDs (p. 18-21): I/O RUN, I/O ERR (with its blink code)
+/// and BF (bus fault). Our reading of the cut-off table of p. 21: I/O
+/// RUN lights while the K-bus runs in data exchange and blinks while
+/// PROFIBUS is not yet configured; BF lights without data exchange;
+/// I/O ERR is off when the start-up found no error (p. 18).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Leds {
+    /// I/O RUN: 0 off, 1 on, 2 blinking.
+    pub io_run: u8,
+    /// I/O ERR: the blink code (pulses, argument), `None` when off.
+    pub io_err: Option<(u8, u8)>,
+    /// BF: bus fault.
+    pub bf: bool,
+}
+
+impl std::fmt::Display for Leds {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let run = ["off", "on", "blinking"][self.io_run.min(2) as usize];
+        write!(f, "I/O RUN {run}, ")?;
+        match self.io_err {
+            None => write!(f, "I/O ERR off, ")?,
+            Some((p, n)) => write!(f, "I/O ERR {p} pulses then {n}, ")?,
+        }
+        write!(f, "BF {}", if self.bf { "on" } else { "off" })
+    }
 }
 
 impl Bk3000 {
@@ -139,8 +170,46 @@ impl Bk3000 {
             plc: plc::PlcInterface::default(),
             table0: [0; 256],
             cycle_set: 0,
+            exchanging: false,
+            leds: None,
             events: EventQueue::with_limit(256),
             inbox: InboxSchedule::default(),
+        }
+    }
+
+    /// The LEDs now.
+    pub fn leds(&self) -> Leds {
+        let io_err = if self.diag.kbus != 0 || self.diag.init != 0 {
+            Some(self.diag.kbus_code)
+        } else if self.diag.cfg.0 != 0 {
+            let e = if self.diag.cfg.0 == 1 {
+                CfgError::TooFew
+            } else {
+                CfgError::FaultyByte(self.diag.cfg.1 as usize)
+            };
+            Some(e.blink())
+        } else {
+            None
+        };
+        Leds {
+            io_run: if self.exchanging && !self.held && self.kbus_ok() {
+                1
+            } else if self.exchanging {
+                0
+            } else {
+                2
+            },
+            io_err,
+            bf: !self.exchanging,
+        }
+    }
+
+    /// Report the LEDs as a `led` event when they changed.
+    fn note_leds(&mut self) {
+        let now = self.leds();
+        if self.leds != Some(now) {
+            self.leds = Some(now);
+            self.events.note("led", now.to_string());
         }
     }
 
@@ -527,6 +596,7 @@ impl Bk3000 {
         if !pulled.is_empty() {
             s += &format!("; pulled: {}", pulled.join(","));
         }
+        s += &format!("; LEDs: {}", self.leds());
         for l in self.diag.describe() {
             s += "; ";
             s += &l;
@@ -771,6 +841,7 @@ impl Bk3000 {
         self.image = img;
         self.outputs = vec![0; layout.outputs];
         self.inputs = vec![0; layout.inputs];
+        self.exchanging = true;
         Ok(layout)
     }
 
@@ -985,6 +1056,7 @@ impl Device for Bk3000 {
     }
 
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        self.exchanging = false;
         match UserPrm::parse(prm.user_prm_data, self.programmed.is_some()) {
             Ok(p) => {
                 if self.diag.prm != (0, 0) {
@@ -1061,6 +1133,7 @@ impl Device for Bk3000 {
                 self.image = img;
                 self.outputs = vec![0; layout.outputs];
                 self.inputs = vec![0; layout.inputs];
+                self.exchanging = true;
                 Ok(layout)
             }
             Err(rej) if self.prm.run_on_cfg_fault && !self.prm.programmed => {
@@ -1114,6 +1187,9 @@ impl Device for Bk3000 {
     }
 
     fn clear_outputs(&mut self, _now: Instant, why: ClearReason) {
+        if matches!(why, ClearReason::Watchdog | ClearReason::LeftDataExchange) {
+            self.exchanging = false;
+        }
         let zero = vec![0; self.outputs.len()];
         if self.outputs != zero {
             self.outputs = zero;
@@ -1153,6 +1229,18 @@ impl Device for Bk3000 {
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {
+        if self.leds.is_none() {
+            // p. 11, 15: self-test, then the terminal test finds the strip.
+            self.events.note(
+                "self-test",
+                format!(
+                    "self-test passed; terminal test found {} terminals: {}",
+                    self.strip.len(),
+                    self.strip.names().join(",")
+                ),
+            );
+        }
+        self.note_leds();
         self.events.pop()
     }
 

@@ -15,8 +15,11 @@
 //!
 //! 1. **Initiate**: SRD to the slave's resource manager (DSAP 49) from
 //!    SSAP 50 with Initiate.req (Send_Timeout, features, profile,
-//!    address parameters). The RM answers at once with `56 SAP PollTO`:
-//!    the connection SAP (0..=48).
+//!    address parameters). The RM answers with `56 SAP PollTO`, the
+//!    connection SAP (0..=48): at once ([BAL]), or after a short
+//!    acknowledge on an empty poll of SAP 49 (Felser's manual: "a poll
+//!    cycle at SAP 49 with response data"); the master polls SAP 49
+//!    until it comes and never repeats Initiate.req.
 //! 2. The master polls that SAP with empty SRDs until the slave answers
 //!    with Initiate.res: the connection is open ([`Class2Event::Opened`]).
 //!    A short acknowledge, or a reply without data, means "not ready".
@@ -314,6 +317,12 @@ fn status_words(s: ResponseStatus) -> &'static str {
 enum Phase {
     /// Initiate.req to the RM is due.
     Initiate,
+    /// Initiate.req acknowledged without data: polling the RM (SAP 49)
+    /// with empty SRDs for its reply. Felser's PROFIBUS manual has the
+    /// RM reply come on "a poll cycle at SAP 49"; the [BAL] narrative has
+    /// it in the answer to Initiate.req itself. Both are taken; a second
+    /// Initiate.req would ask the RM for a second connection.
+    AwaitRm,
     /// Polling the connection SAP for Initiate.res.
     Opening,
     /// Open; the current op (if any) is not sent yet.
@@ -429,7 +438,7 @@ impl Class2Master {
     /// [`Class2Event::Closed`] without error.
     pub fn close(&mut self, conn: ConnId) {
         let Some(i) = self.index(conn) else { return };
-        if self.conns[i].phase == Phase::Initiate {
+        if matches!(self.conns[i].phase, Phase::Initiate | Phase::AwaitRm) {
             self.finish(i, None, None);
         } else if self.conns[i].abort.is_none() {
             self.abort(i, Abort::user(0), None);
@@ -489,7 +498,7 @@ impl Class2Master {
             return;
         }
         let waiting = match c.phase {
-            Phase::Initiate | Phase::Opening => Some("initiate"),
+            Phase::Initiate | Phase::AwaitRm | Phase::Opening => Some("initiate"),
             Phase::Open | Phase::Polling => c.current.as_ref().map(RecordOp::name),
             Phase::Idling | Phase::Aborting => None,
         };
@@ -500,7 +509,7 @@ impl Class2Master {
                     op,
                     after: response_timeout,
                 };
-                if c.phase == Phase::Initiate {
+                if matches!(c.phase, Phase::Initiate | Phase::AwaitRm) {
                     self.finish(i, Some(e), None);
                 } else {
                     self.abort(i, Abort::msac_c2(AbortReason::Timeout), Some(e));
@@ -558,7 +567,7 @@ impl Class2Master {
                 });
                 (Sent::Initiate, pdu_len(pdu, &mut self.req))
             }
-            Phase::Opening | Phase::Polling | Phase::Idling => (Sent::Poll, 0),
+            Phase::AwaitRm | Phase::Opening | Phase::Polling | Phase::Idling => (Sent::Poll, 0),
             Phase::Aborting => {
                 let abort = c.abort.as_ref()?.0;
                 (Sent::Abort, pdu_len(C2Pdu::Abort(abort), &mut self.req))
@@ -619,10 +628,13 @@ impl Class2Master {
             c.phase = Phase::Polling;
         }
         if data.is_empty() {
-            // Not ready: poll on (Initiate: ask the RM again). An Idle
-            // acknowledged at FDL level has reached the slave.
+            // Not ready: poll on (Initiate: poll the RM for its reply).
+            // An Idle acknowledged at FDL level has reached the slave.
             if sent == Sent::Idle {
                 c.phase = Phase::Open;
+            }
+            if sent == Sent::Initiate {
+                c.phase = Phase::AwaitRm;
             }
             return;
         }
@@ -635,12 +647,14 @@ impl Class2Master {
             return self.finish(i, Some(error), None);
         }
         match (c.phase, pdu) {
-            (Phase::Initiate, C2Pdu::Rm(rm)) if rm.sap <= crate::pdu::c2::MAX_CONNECTION_SAP => {
+            (Phase::Initiate | Phase::AwaitRm, C2Pdu::Rm(rm))
+                if rm.sap <= crate::pdu::c2::MAX_CONNECTION_SAP =>
+            {
                 c.sap = rm.sap;
                 c.poll_timeout = rm.poll_timeout;
                 c.phase = Phase::Opening;
             }
-            (Phase::Initiate | Phase::Opening, C2Pdu::Error(error)) => {
+            (Phase::Initiate | Phase::AwaitRm | Phase::Opening, C2Pdu::Error(error)) => {
                 let error = Class2Error::InitiateRefused { slave, error };
                 self.finish(i, Some(error), None);
             }
@@ -709,7 +723,7 @@ impl Class2Master {
     fn bad_response(&mut self, i: usize, what: String) {
         let c = &self.conns[i];
         let op = match c.phase {
-            Phase::Initiate | Phase::Opening => "initiate",
+            Phase::Initiate | Phase::AwaitRm | Phase::Opening => "initiate",
             _ => c.current.as_ref().map_or("idle", RecordOp::name),
         };
         let e = Class2Error::BadResponse {
@@ -717,7 +731,7 @@ impl Class2Master {
             op,
             what,
         };
-        if c.phase == Phase::Initiate {
+        if matches!(c.phase, Phase::Initiate | Phase::AwaitRm) {
             // No connection SAP yet: nothing to abort.
             return self.finish(i, Some(e), None);
         }

@@ -483,3 +483,35 @@ fn a_run_opens_sends_its_request_and_closes() {
     let ops = run.finish().unwrap();
     assert_eq!(ops.answer, Some(RecordAnswer::Read(vec![0xCA, 0xFE])));
 }
+
+/// A resource manager that acknowledges Initiate.req without data and
+/// gives its reply on a poll of SAP 49 (Felser's manual; the scripted
+/// slave tests/interop/raw_c2_slave.py by default): the master polls SAP
+/// 49 with empty SRDs, never sends Initiate.req a second time (that would
+/// ask for a second connection), then polls the assigned SAP.
+#[test]
+fn rm_reply_on_a_poll_of_sap_49_after_a_short_acknowledge() {
+    let mut m = master();
+    let conn = m.connect(8, t(0));
+    let (_, dsap, _, data, _) = visit(&mut m, t(0)).unwrap();
+    assert_eq!((dsap, data), (49, INITIATE_REQ.to_vec()));
+    answer(&mut m, t(0), 8, Outcome::ShortAck);
+    for k in 1..=2 {
+        let (_, dsap, ssap, data, _) = visit(&mut m, t(k)).unwrap();
+        assert_eq!((dsap, ssap, data.len()), (49, 50, 0), "poll {k} of SAP 49");
+        if k == 1 {
+            answer(&mut m, t(k), 8, Outcome::ShortAck);
+        } else {
+            answer(&mut m, t(k), 8, dl(&[0x56, 0x30, 0x00, 0x64]));
+        }
+    }
+    let (_, dsap, _, data, _) = visit(&mut m, t(3)).unwrap();
+    assert_eq!(
+        (dsap, data.len()),
+        (0x30, 0),
+        "polls SAP 48 for Initiate.res"
+    );
+    answer(&mut m, t(3), 8, dl(&INITIATE_RES));
+    assert!(matches!(m.poll_event(), Some(Class2Event::Opened { .. })));
+    assert!(m.is_open(conn));
+}

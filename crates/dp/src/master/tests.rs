@@ -702,3 +702,33 @@ fn an_unacknowledged_alarm_is_retried_then_reported() {
     assert_eq!(acyclic(&mut m, 10), None, "given up");
     assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
 }
+
+#[test]
+fn waiting_alarms_are_reported_unacknowledged_when_the_slave_leaves_data_exchange() {
+    let mut m = alarm_master();
+    bring_up(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
+    next(&mut m, 6).unwrap();
+    answer(&mut m, 6, diag_resp(&TWO_ALARMS));
+    // The slave restarts (RS to Data_Exchange) before any Alarm_Ack.
+    assert_eq!(next(&mut m, 7).unwrap().0, None);
+    answer(&mut m, 7, data_resp(ResponseStatus::Rs, &[]));
+    let done = alarms(&mut m);
+    assert_eq!(done.len(), 2);
+    assert!(done.iter().all(|a| !a.acknowledged));
+    let why = done[0].problem.as_deref().unwrap();
+    assert!(why.contains("left Data_Exchange"), "{why}");
+}
+
+#[test]
+fn without_enabled_alarms_blocks_are_not_acknowledged() {
+    let mut m = master(); // DP-V0 slave, no alarms enabled
+    bring_up(&mut m);
+    next(&mut m, 5).unwrap();
+    answer(&mut m, 5, data_resp(ResponseStatus::Dh, &[0, 0]));
+    next(&mut m, 6).unwrap();
+    answer(&mut m, 6, diag_resp(&TWO_ALARMS));
+    assert_eq!(acyclic(&mut m, 7), None);
+    assert!(alarms(&mut m).is_empty());
+}

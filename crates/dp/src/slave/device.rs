@@ -42,6 +42,22 @@ pub struct Features {
     /// 1..=240). The core answers a Read of 0 or more bytes, and a Write of
     /// 0 or more bytes, with a DP-V1 error before the device sees it.
     pub c1_max_data_len: u8,
+    /// MSAC_C2 class-2 connections (`C2_Read_Write_supp`); needs `dpv1`.
+    /// Without it the resource manager's SAP 49 stays deactivated (RS).
+    pub c2_read_write: bool,
+    /// Longest data block of a class-2 Read, Write or Data_Transport
+    /// (`C2_Max_Data_Len`, 1..=240).
+    pub c2_max_data_len: u8,
+    /// Class-2 connections open at once (`C2_Max_Count_Channels`,
+    /// 1..=49).
+    pub c2_max_count_channels: u8,
+    /// Longest Initiate.req accepted (`Max_Initiate_PDU_Length`); 0: only
+    /// the 20-byte Initiate.req without network/MAC address extensions.
+    pub max_initiate_pdu_length: u8,
+    /// I&M identification: I&M0..I&M4 on slot 0, index 255 through the
+    /// call header (`08 00 FI_Index`), answered by the core from
+    /// [`Device::im_read`] / [`Device::im_write`]; needs `dpv1`.
+    pub im: bool,
 }
 
 impl Default for Features {
@@ -57,6 +73,11 @@ impl Default for Features {
             fail_safe: false,
             max_diag_len: 244,
             c1_max_data_len: 240,
+            c2_read_write: false,
+            c2_max_data_len: 240,
+            c2_max_count_channels: 1,
+            max_initiate_pdu_length: 0,
+            im: false,
         }
     }
 }
@@ -147,6 +168,10 @@ pub const ERR_INVALID_SLOT: u8 = AccessError::InvalidSlot.code();
 pub const ERR_STATE_CONFLICT: u8 = AccessError::StateConflict.code();
 /// Access error code "invalid range".
 pub const ERR_INVALID_RANGE: u8 = AccessError::InvalidRange.code();
+/// Access error code "access denied".
+pub const ERR_ACCESS_DENIED: u8 = AccessError::AccessDenied.code();
+/// Access error code "invalid parameter".
+pub const ERR_INVALID_PARAMETER: u8 = AccessError::InvalidParameter.code();
 
 /// Where the slave's station address comes from (see
 /// [`Device::own_address`]).
@@ -399,16 +424,59 @@ pub trait Device {
         false
     }
 
-    /// MSAC_C1 Read of `out.len()` bytes (the requested length, at most
-    /// 240) from `slot`/`index`. Default: "feature not supported".
+    /// DP-V1 Read of `out.len()` bytes (the requested length, at most
+    /// 240) from `slot`/`index`, from a class-1 master (MSAC_C1) or over a
+    /// class-2 connection (MSAC_C2): the records are the same. Default: "feature not supported".
     fn dpv1_read(&mut self, _now: Instant, _slot: u8, _index: u8, _out: &mut [u8]) -> Dpv1Outcome {
         Dpv1Outcome::read_error(ERR_CLASS_APPLICATION, ERR_FEATURE_NOT_SUPPORTED)
     }
 
-    /// MSAC_C1 Write of `data` to `slot`/`index`. Default: "feature not
+    /// DP-V1 Write of `data` to `slot`/`index` (class 1 or class 2). Default: "feature not
     /// supported".
     fn dpv1_write(&mut self, _now: Instant, _slot: u8, _index: u8, _data: &[u8]) -> Dpv1Outcome {
         Dpv1Outcome::write_error(ERR_CLASS_APPLICATION, ERR_FEATURE_NOT_SUPPORTED)
+    }
+
+    /// MSAC_C2 Data_Transport of `data` to `slot`/`index` (class 2 only):
+    /// write the answer into `out` (at most C2_Max_Data_Len bytes) and
+    /// return [`Dpv1Outcome::Done`] with its length. Default: "feature not
+    /// supported".
+    fn dpv1_data_transport(
+        &mut self,
+        _now: Instant,
+        _slot: u8,
+        _index: u8,
+        _data: &[u8],
+        _out: &mut [u8],
+    ) -> Dpv1Outcome {
+        Dpv1Outcome::Error(Dpv1Error::dpv1(
+            crate::pdu::c2::FN_DATA_TRANSPORT,
+            ERR_CLASS_APPLICATION,
+            ERR_FEATURE_NOT_SUPPORTED,
+        ))
+    }
+
+    /// The I&M record I&M`number` (0..=4): fill `out` with its 64 bytes
+    /// and return true, or false when the device has no such record.
+    /// Asked only when [`Features::im`] is set. Default: none.
+    fn im_read(&mut self, _number: u8, _out: &mut [u8; 64]) -> bool {
+        false
+    }
+
+    /// A master writes I&M`number` (1..=4; the core refuses writes of
+    /// I&M0). Keep it (and persist it where the device keeps state), or
+    /// refuse. Default: "access denied".
+    fn im_write(
+        &mut self,
+        _now: Instant,
+        _number: u8,
+        _record: &[u8; 64],
+    ) -> Result<(), Dpv1Error> {
+        Err(Dpv1Error::dpv1(
+            FN_WRITE,
+            ERR_CLASS_ACCESS,
+            ERR_ACCESS_DENIED,
+        ))
     }
 
     /// Called for each poll of the master while a read or write answered
@@ -536,6 +604,22 @@ impl<D: Device + ?Sized> Device for Box<D> {
     }
     fn dpv1_poll(&mut self, now: Instant, out: &mut [u8]) -> Dpv1Outcome {
         (**self).dpv1_poll(now, out)
+    }
+    fn dpv1_data_transport(
+        &mut self,
+        now: Instant,
+        slot: u8,
+        index: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Dpv1Outcome {
+        (**self).dpv1_data_transport(now, slot, index, data, out)
+    }
+    fn im_read(&mut self, number: u8, out: &mut [u8; 64]) -> bool {
+        (**self).im_read(number, out)
+    }
+    fn im_write(&mut self, now: Instant, number: u8, record: &[u8; 64]) -> Result<(), Dpv1Error> {
+        (**self).im_write(now, number, record)
     }
     fn alarm_ack(
         &mut self,

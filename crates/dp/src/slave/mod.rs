@@ -77,20 +77,27 @@
 //!   on the same SAPs) gets SC until the device has the answer, then the
 //!   answer comes as DL. MSAC_C1 and Alarm_Ack (SAP 50) are active only
 //!   in Data_Exch with DPV1_Enable, for the owning master.
+//! - **DP-V1 alarms** a device raises ([`Device::take_alarm`]) wait in
+//!   the core's [`AlarmQueue`]: numbered 0..=31, as many outstanding as
+//!   Alarm_Mode allows, their blocks in Slave_Diag until the master's
+//!   Alarm_Ack names them (in sequence order); see its module docs.
 
 mod alarm;
+mod c2;
 mod device;
+mod im;
 mod reason;
 mod state;
 
 pub use alarm::{AckError, Alarm, AlarmQueue, QueuedAlarm, RaiseError, ALARM_QUEUE_LEN};
+pub use c2::{min_send_timeout, MAX_C2_CHANNELS};
 
 pub use device::Device;
 pub use device::{
     expect_cfg, expect_user_prm_len, layout_of, ClearReason, DeviceEvent, DiagWriter, Dpv1Outcome,
-    Features, IoLayout, OwnAddress, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION, ERR_CLASS_RESOURCE,
-    ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_RANGE, ERR_INVALID_SLOT,
-    ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
+    Features, IoLayout, OwnAddress, ERR_ACCESS_DENIED, ERR_CLASS_ACCESS, ERR_CLASS_APPLICATION,
+    ERR_CLASS_RESOURCE, ERR_FEATURE_NOT_SUPPORTED, ERR_INVALID_INDEX, ERR_INVALID_PARAMETER,
+    ERR_INVALID_RANGE, ERR_INVALID_SLOT, ERR_STATE_CONFLICT, ERR_WRITE_LENGTH,
 };
 pub use reason::{Reason, Service};
 pub use state::{control_words, AlarmAction, AlarmEvent, SlaveEvent, SlaveState};
@@ -106,7 +113,7 @@ use crate::pdu::sap::{self, Sap};
 use profibus_fdl::station::earliest;
 use profibus_fdl::station::passive::{Reply, Responder};
 use profibus_fdl::wire::consts::BROADCAST;
-use profibus_fdl::{DataTelegram, FunctionCode, Instant, RequestKind, ResponseStatus};
+use profibus_fdl::{Baud, DataTelegram, FunctionCode, Instant, RequestKind, ResponseStatus};
 use state::EventQueue;
 use std::time::Duration;
 
@@ -144,6 +151,9 @@ pub struct SlaveStats {
 enum C1Job {
     /// Nothing pending.
     Idle,
+    /// The request (in `c1_req[..len]`) waits while a class-2 request is
+    /// pending in the device.
+    Queued { len: usize },
     /// The device is preparing the answer.
     Pending {
         function: u8,
@@ -196,6 +206,12 @@ pub struct DpSlave<D> {
     no_add_chg: bool,
     c1: C1Job,
     c1_buf: [u8; MAX_IO_LEN],
+    c1_req: [u8; MAX_IO_LEN],
+    /// The I&M record the class-1 master selected.
+    c1_im: im::Selection,
+    /// The rate the station runs at (minimum Send_Timeout of class 2).
+    baud: Option<Baud>,
+    c2: c2::C2State,
     alarms: AlarmQueue,
     events: EventQueue,
     stats: SlaveStats,
@@ -235,6 +251,14 @@ impl<D: Device> DpSlave<D> {
             no_add_chg: false,
             c1: C1Job::Idle,
             c1_buf: [0; MAX_IO_LEN],
+            c1_req: [0; MAX_IO_LEN],
+            c1_im: None,
+            baud: None,
+            c2: c2::C2State::new(if features.dpv1 && features.c2_read_write {
+                features.c2_max_count_channels
+            } else {
+                0
+            }),
             alarms: AlarmQueue::new(),
             events: EventQueue::new(),
             stats: SlaveStats::default(),
@@ -384,6 +408,7 @@ impl<D: Device> DpSlave<D> {
             self.clear_mode = false;
             self.last_gc = None;
             self.c1 = C1Job::Idle;
+            self.c1_im = None;
             self.alarms.reset();
         }
         if to == SlaveState::WaitPrm {
@@ -412,6 +437,8 @@ impl<D: Device> DpSlave<D> {
         self.stat_diag = false;
         self.layout = IoLayout::default();
         self.c1 = C1Job::Idle;
+        self.c1_im = None;
+        self.c2_reset();
     }
 
     /// Build the Slave_Diag data unit into `out` (needs at least 6 bytes);
@@ -864,10 +891,21 @@ impl<D: Device> DpSlave<D> {
             return None;
         }
         if !du.is_empty() {
-            self.c1_start(now, du);
+            if self.c2.device_busy() {
+                self.c1_req[..du.len()].copy_from_slice(du);
+                self.c1 = C1Job::Queued { len: du.len() };
+            } else {
+                self.c1_start(now, du);
+            }
             return Some(Reply::ShortAck);
         }
         // A poll.
+        if let C1Job::Queued { len } = self.c1 {
+            if !self.c2.device_busy() {
+                let req = self.c1_req;
+                self.c1_start(now, &req[..len]);
+            }
+        }
         if let C1Job::Pending {
             function,
             slot,
@@ -925,13 +963,20 @@ impl<D: Device> DpSlave<D> {
                 length,
             }) => {
                 let n = (length as usize).min(MAX_DATA_LEN);
-                let outcome = self
-                    .device
-                    .dpv1_read(now, slot, index, &mut self.c1_buf[4..4 + n]);
+                let out = &mut self.c1_buf[4..4 + n];
+                let outcome = if im::is_call(self.features.im, slot, index) {
+                    im::read(&mut self.device, self.c1_im, out)
+                } else {
+                    self.device.dpv1_read(now, slot, index, out)
+                };
                 self.c1_finish(FN_READ, slot, index, n as u8, outcome);
             }
             Ok(Pdu::WriteReq { slot, index, data }) => {
-                let outcome = self.device.dpv1_write(now, slot, index, data);
+                let outcome = if im::is_call(self.features.im, slot, index) {
+                    im::write(&mut self.device, now, &mut self.c1_im, data)
+                } else {
+                    self.device.dpv1_write(now, slot, index, data)
+                };
                 self.c1_finish(FN_WRITE, slot, index, data.len() as u8, outcome);
             }
             Ok(_) => self.c1_error(Dpv1Error::dpv1(function, ERR_CLASS_APPLICATION, 9)),
@@ -1178,6 +1223,8 @@ impl<D: Device> Responder for DpSlave<D> {
                 sap::SET_SLAVE_ADD => self.set_slave_add(from, req.data),
                 sap::MSAC_C1 => self.msac_c1(now, req, out).unwrap_or_else(|| rs(req)),
                 sap::ALARM_ACK => self.alarm_ack(now, req, out).unwrap_or_else(|| rs(req)),
+                sap::MSAC_C2_INITIATE => self.c2_resource_manager(now, req, out),
+                0..=crate::pdu::c2::MAX_CONNECTION_SAP => self.c2_connection(now, req, out),
                 _ => {
                     self.stats.refused += 1;
                     rs(req)
@@ -1191,8 +1238,15 @@ impl<D: Device> Responder for DpSlave<D> {
         }
     }
 
+    fn set_baud(&mut self, baud: Baud) {
+        self.baud = Some(baud);
+    }
+
     fn poll_timeout(&self) -> Option<Instant> {
-        earliest(self.wd_deadline, self.device.poll_timeout())
+        earliest(
+            earliest(self.wd_deadline, self.device.poll_timeout()),
+            self.c2.deadline(),
+        )
     }
 
     fn handle_timeout(&mut self, now: Instant) {
@@ -1205,6 +1259,9 @@ impl<D: Device> Responder for DpSlave<D> {
         }
         if self.device.poll_timeout().is_some_and(|t| t <= now) {
             self.device.handle_timeout(now);
+        }
+        if self.c2.deadline().is_some_and(|t| t <= now) {
+            self.c2_expire(now);
         }
         self.take_device_alarms();
     }

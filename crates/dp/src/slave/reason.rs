@@ -197,6 +197,26 @@ pub enum Reason {
     #[error("Alarm_Ack refused: {0}")]
     AlarmAck(crate::slave::AckError),
 
+    // ----- MSAC_C2 ------------------------------------------------------------
+    /// A class-2 request to a slave that offers no class-2 connections.
+    #[error("the slave offers no class-2 connections (C2_Read_Write_supp)")]
+    C2Unsupported,
+    /// The resource manager refused an Initiate.req with an Abort.
+    #[error("Initiate refused, {abort}")]
+    C2InitiateRefused {
+        /// The abort in words.
+        abort: String,
+    },
+    /// A request on a connection SAP that has no open connection.
+    #[error("no class-2 connection is open on this SAP")]
+    C2NoConnection,
+    /// A request on another master's class-2 connection.
+    #[error("the class-2 connection on this SAP belongs to master {owner}")]
+    C2OtherMaster {
+        /// The master that opened the connection.
+        owner: u8,
+    },
+
     // ----- Set_Slave_Add ----------------------------------------------------
     /// The slave has no Set_Slave_Add.
     #[error("the slave does not support Set_Slave_Add")]

@@ -2,6 +2,7 @@
 
 use super::device::{ClearReason, DeviceEvent};
 use super::reason::{Reason, Service};
+use crate::pdu::c2::Abort;
 use crate::pdu::control::ControlCommand;
 use std::collections::VecDeque;
 use std::fmt;
@@ -160,6 +161,37 @@ pub enum SlaveEvent {
         /// Why, in words.
         reason: Reason,
     },
+    /// A class-2 master opened an MSAC_C2 connection (Initiate).
+    #[cfg_attr(feature = "serde", serde(rename = "c2_open"))]
+    C2Opened {
+        /// The class-2 master.
+        master: u8,
+        /// The connection SAP the resource manager assigned (0..=48).
+        sap: u8,
+        /// Send_Timeout of the connection.
+        #[cfg_attr(
+            feature = "serde",
+            serde(
+                rename = "send_timeout_ms",
+                serialize_with = "profibus_fdl::ser::millis"
+            )
+        )]
+        send_timeout: Duration,
+    },
+    /// A class-2 connection closed: the master aborted it, or the slave
+    /// did (Send_Timeout expired, a sequence error, an invalid PDU).
+    #[cfg_attr(feature = "serde", serde(rename = "c2_closed"))]
+    C2Closed {
+        /// The class-2 master.
+        master: u8,
+        /// The connection SAP.
+        sap: u8,
+        /// The master sent the Abort (else the slave aborted).
+        by_master: bool,
+        /// The Abort (instance and reason), serialised in words.
+        #[cfg_attr(feature = "serde", serde(serialize_with = "abort_words"))]
+        abort: Abort,
+    },
     /// A DP-V1 alarm was raised, refused or acknowledged.
     #[cfg_attr(feature = "serde", serde(rename = "alarm"))]
     Alarm(AlarmEvent),
@@ -266,6 +298,12 @@ fn lost_count<S: serde::Serializer>(n: &u64, s: S) -> Result<S::Ok, S::Error> {
     st.end()
 }
 
+/// An Abort in words ([`Abort::describe`]).
+#[cfg(feature = "serde")]
+fn abort_words<S: serde::Serializer>(a: &Abort, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&a.describe())
+}
+
 /// A Control_Command as [`control_words`].
 #[cfg(feature = "serde")]
 fn command_words<S: serde::Serializer>(c: &ControlCommand, s: S) -> Result<S::Ok, S::Error> {
@@ -295,6 +333,8 @@ impl SlaveEvent {
             SlaveEvent::AddressChanged { .. } => "address",
             SlaveEvent::GlobalControl { .. } => "global_control",
             SlaveEvent::Refused { .. } => "refused",
+            SlaveEvent::C2Opened { .. } => "c2_open",
+            SlaveEvent::C2Closed { .. } => "c2_closed",
             SlaveEvent::Alarm(_) => "alarm",
             SlaveEvent::Device(_) => "device",
             SlaveEvent::Lost(_) => "lost",
@@ -406,6 +446,26 @@ impl fmt::Display for SlaveEvent {
                 service,
                 reason,
             } => write!(f, "{service} from master {master} refused: {reason}"),
+            SlaveEvent::C2Opened {
+                master,
+                sap,
+                send_timeout,
+            } => write!(
+                f,
+                "class-2 connection of master {master} opened on SAP {sap} (Send_Timeout {} ms)",
+                send_timeout.as_millis()
+            ),
+            SlaveEvent::C2Closed {
+                master,
+                sap,
+                by_master,
+                abort,
+            } => write!(
+                f,
+                "class-2 connection of master {master} on SAP {sap} closed by the {}: {}",
+                if *by_master { "master" } else { "slave" },
+                abort.describe()
+            ),
             SlaveEvent::Alarm(a) => a.fmt(f),
             SlaveEvent::Device(e) => write!(f, "{}: {}", e.kind, e.text),
             SlaveEvent::Lost(n) => write!(f, "{n} events lost (queue full)"),

@@ -1016,7 +1016,7 @@ fn wire_request(da: u8, sa: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> 
 }
 
 /// The passive station plus the slave, at the byte level.
-fn wire(st: &mut PassiveStation<DpSlave<TestDevice>>, now: Instant, bytes: &[u8]) -> Vec<u8> {
+fn wire<R: Responder>(st: &mut PassiveStation<R>, now: Instant, bytes: &[u8]) -> Vec<u8> {
     st.handle_rx(now, bytes);
     let mut at = now;
     for _ in 0..4 {
@@ -1415,3 +1415,5 @@ fn alarms_need_enables_fit_the_diagnosis_and_end_with_data_exchange() {
     assert_eq!(b.diag(t(3), MASTER).len(), 6);
     assert_eq!(b.slave.alarms().queued().count(), 0);
 }
+
+mod c2;

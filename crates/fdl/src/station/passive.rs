@@ -75,6 +75,10 @@ pub trait Responder {
         0
     }
 
+    /// The station runs at `baud` (told when the station is built, e.g.
+    /// again after a baud-rate search). Default: nothing.
+    fn set_baud(&mut self, _baud: crate::timing::Baud) {}
+
     /// A request addressed to this station, or broadcast. Write the data
     /// unit of the response into `out` (up to 246 bytes) and say what to
     /// send. Called once per request; FCB repeats do not reach it.
@@ -134,6 +138,8 @@ impl<R: Responder> PassiveStation<R> {
         params: BusParams,
         allowance: core::time::Duration,
     ) -> Self {
+        let mut app = app;
+        app.set_baud(params.baud);
         let slack = params.slot_duration() + allowance;
         PassiveStation {
             app,

@@ -5,6 +5,8 @@ use super::proto::{DataType, Metric, MetricValue};
 use crate::slave::SlaveInfo;
 use profibus_devices::channels::{Channel, ChannelMap, ChannelType, Direction, Value};
 use profibus_dp::master::SlaveView;
+use profibus_dp::pdu::alarm::AlarmType;
+use profibus_dp::pdu::prm::Dpv1Status2;
 
 /// Metric name of the whole input image (Bytes).
 pub const INPUT_IMAGE: &str = "Image/Inputs";
@@ -15,6 +17,12 @@ pub const DIAG_BYTES: &str = "Diagnosis/Bytes";
 /// Metric name of the last diagnosis, decoded (String, one line per
 /// finding).
 pub const DIAG_TEXT: &str = "Diagnosis/Text";
+/// Folder of the alarm metrics: `Alarms/diagnostic`, `Alarms/process`,
+/// `Alarms/pull`, `Alarms/plug`, `Alarms/status`, `Alarms/update`,
+/// `Alarms/manufacturer` (String): one per DP-V1 alarm type the slave's
+/// GSD declares, the last alarm of that type as the JSON of `dpctl
+/// master`'s alarm event (null until the first).
+pub const ALARMS: &str = "Alarms";
 /// Metric name of the station address (UInt8).
 pub const ADDRESS: &str = "Properties/Address";
 /// Metric name of the bus file's name of the slave (String).
@@ -110,6 +118,8 @@ enum Source {
     Channel(usize),
     DiagBytes,
     DiagText,
+    /// The last alarm of a type (its word).
+    Alarm(&'static str),
 }
 
 /// One metric of a device.
@@ -131,6 +141,8 @@ pub struct Device {
     pub channels: ChannelMap,
     /// Its metrics.
     pub metrics: Vec<MetricDef>,
+    /// The last alarm of each type (by [`AlarmType::word`]), as JSON.
+    pub alarms: std::collections::BTreeMap<&'static str, String>,
 }
 
 /// Why a DCMD was refused.
@@ -236,10 +248,33 @@ impl Device {
             datatype: DataType::String,
             source: Source::DiagText,
         });
+        let declared = match &info.layout.gsd {
+            Some(g) if info.layout.dpv1 => g.declared_alarms(),
+            _ => Dpv1Status2::empty(),
+        };
+        let types = [
+            AlarmType::Diagnostic,
+            AlarmType::Process,
+            AlarmType::Pull,
+            AlarmType::Plug,
+            AlarmType::Status,
+            AlarmType::Update,
+            AlarmType::from_code(32),
+        ];
+        for t in types {
+            if t.enable().is_some_and(|e| declared.contains(e.bit())) {
+                metrics.push(MetricDef {
+                    name: format!("{ALARMS}/{}", t.word()),
+                    datatype: DataType::String,
+                    source: Source::Alarm(t.word()),
+                });
+            }
+        }
         Device {
             info,
             channels,
             metrics,
+            alarms: Default::default(),
         }
     }
 
@@ -281,6 +316,10 @@ impl Device {
                     )
                     .join("\n")
                 })),
+                Source::Alarm(word) => self
+                    .alarms
+                    .get(word)
+                    .map(|a| MetricValue::StringValue(a.clone())),
             })
             .collect()
     }

@@ -21,7 +21,7 @@ use crate::settings::MqttSettings;
 use crate::slave::{slave_infos, SlaveInfo, SlaveInfoError};
 use metrics::{CommandError, Device, OutputWrite};
 use profibus_devices::bus::ProfiledBus;
-use profibus_dp::master::{DpMaster, MasterEvent, SlaveState};
+use profibus_dp::master::{AlarmReport, DpMaster, MasterEvent, SlaveState};
 use profibus_fdl::Instant;
 use prost::Message;
 use proto::{DataType, Metric, MetricValue, Payload};
@@ -379,8 +379,25 @@ impl Session for EdgeNode {
     /// deaths and data.
     fn step(&mut self, m: &mut DpMaster, _now: Instant, ts_ms: u64) {
         while let Some(ev) = m.poll_event() {
-            if let MasterEvent::Fault { address, reason } = ev {
-                tracing::warn!(address, %reason, "slave fault");
+            match ev {
+                MasterEvent::Fault { address, reason } => {
+                    tracing::warn!(address, %reason, "slave fault");
+                }
+                MasterEvent::Alarm { address, alarm } => {
+                    // The metric of its type: sent with the next DDATA.
+                    let Some(e) = self
+                        .devices
+                        .iter_mut()
+                        .find(|e| e.device.info.layout.address == address)
+                    else {
+                        continue;
+                    };
+                    let d = &mut e.device;
+                    let report = AlarmReport::new(address, &alarm, d.info.layout.gsd.as_ref());
+                    let json = serde_json::to_string(&report).expect("alarms serialise");
+                    d.alarms.insert(alarm.alarm_type.word(), json);
+                }
+                _ => {}
             }
         }
         for p in std::mem::take(&mut self.pending) {

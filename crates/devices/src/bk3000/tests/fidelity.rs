@@ -528,3 +528,42 @@ fn programmed_configuration_places_terminals_freely() {
         "{e}"
     );
 }
+
+#[test]
+fn self_test_and_leds_follow_the_start_up() {
+    let mut b = Bench::new("KL1104,KL2134,KL9010");
+    let ev: Vec<_> = std::iter::from_fn(|| b.slave.device_mut().poll_event()).collect();
+    assert!(
+        ev.iter()
+            .any(|e| e.kind == "self-test" && e.text.contains("found 3 terminals")),
+        "{ev:?}"
+    );
+    let leds = b.slave.device().leds();
+    assert_eq!(
+        (leds.io_run, leds.io_err, leds.bf),
+        (2, None, true),
+        "not configured yet"
+    );
+    // Too few configuration data: I/O ERR blinks 6 then 0, BF stays on.
+    b.start(&[0; 10], &[0x20]);
+    assert_eq!(b.slave.device().leds().io_err, Some((6, 0)));
+    assert!(b.slave.device().leds().bf);
+    // Data exchange: I/O RUN on, I/O ERR off (p. 18), BF off.
+    b.start(&[0; 10], &[0x10, 0x20]);
+    let leds = b.slave.device().leds();
+    assert_eq!((leds.io_run, leds.io_err, leds.bf), (1, None, false));
+    let ev: Vec<_> = std::iter::from_fn(|| b.slave.device_mut().poll_event()).collect();
+    assert!(
+        ev.iter()
+            .any(|e| e.kind == "led" && e.text == "I/O RUN on, I/O ERR off, BF off"),
+        "{ev:?}"
+    );
+    b.slave.device_mut().control("pull 2").unwrap();
+    assert_eq!(b.slave.device().leds().io_err, Some((4, 1)));
+    assert!(b
+        .slave
+        .device_mut()
+        .control("status")
+        .unwrap()
+        .contains("LEDs: I/O RUN off, I/O ERR 4 pulses then 1, BF off"));
+}
