@@ -567,3 +567,18 @@ fn self_test_and_leds_follow_the_start_up() {
         .unwrap()
         .contains("LEDs: I/O RUN off, I/O ERR 4 pulses then 1, BF off"));
 }
+
+#[test]
+fn ident_can_be_overridden_and_the_gsd_keeps_to_its_rates() {
+    // p. 28: the PNO ident is in the type files (value not printed).
+    let entry = crate::PROFILES.iter().find(|p| p.name == "bk3000").unwrap();
+    let mut o = crate::profile::DeviceOptions::new();
+    o.set_text("ident", "0x1234");
+    let p = entry.configure(&o, Some(5)).unwrap();
+    assert_eq!(p.gsd().ident_number, 0x1234);
+    // p. 24: up to 1.5 Mbit/s; the search keeps to these rates.
+    let g = crate::gsd_files::parse(crate::gsd_files::BK30BECF).unwrap();
+    let rates: profibus_fdl::station::autobaud::BaudSet = g.supported_bauds().into_iter().collect();
+    assert_eq!(rates.fastest(), profibus_fdl::timing::Baud::B1500000);
+    assert!(!rates.contains(profibus_fdl::timing::Baud::B3000000));
+}
