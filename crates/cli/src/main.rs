@@ -79,6 +79,11 @@ enum Command {
     Pkw(pkw::Args),
     /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
     /// 16-byte handshake.
+    ///
+    /// Only VER is from the reader's PROFIBUS manual; GT, RD, WD, TOR and
+    /// the answers NAK #nn and XXXXXXXX are modelled by the emulator (an
+    /// emulated reader takes its own command set with --device-opt
+    /// commands=FILE.toml, see docs/devices/rfid.md).
     Rfid(rfid::Args),
     /// Read or write a DP-V1 data record (slot, index) of a slave, as the
     /// bus file's class-1 master or as a class-2 master (--class2).

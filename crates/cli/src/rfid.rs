@@ -16,8 +16,8 @@ use profibus_devices::rfid::jobs::CommandRun;
 use profibus_dp::master::TaskRun;
 use std::time::Duration;
 
-/// Run reader commands (VER, GT, RD b [e], WD b DATA, TOR [n]) on an RFID
-/// reader and print the answers.
+/// Run reader commands on an RFID reader and print the answers (see the
+/// subcommand's help: only VER is from the manual).
 #[derive(clap::Args)]
 pub struct Args {
     /// The line, the bus file, the slave.
@@ -26,7 +26,9 @@ pub struct Args {
     /// Milliseconds to wait for the whole answer of each command.
     #[arg(long, value_name = "MS", default_value_t = 5000)]
     timeout: u64,
-    /// The commands, in order (CR is appended), e.g. "VER" "RD 0 3".
+    /// The commands, in order (CR is appended), e.g. "VER" "RD 0 3": sent
+    /// as given; VER from the manual, GT, RD b [e], WD b DATA, TOR [n]
+    /// modelled.
     #[arg(value_name = "COMMAND", required = true)]
     commands: Vec<String>,
 }

@@ -361,3 +361,106 @@ fn dpctl_dpv1_class2_reports_the_scripted_slaves_abort_and_silence_in_words() {
     let e = v["error"].as_str().unwrap();
     assert!(e.contains("answer"), "{e}");
 }
+
+/// `dpctl slave` emulating tests/data/C2PEER.GSD (DP-V1 with class 2, two
+/// channels).
+fn dpctl_c2_slave(port: &Path) -> (Proc, Lines) {
+    let gsd = repo().join("crates/cli/tests/data/C2PEER.GSD");
+    let mut p = Proc::spawn(
+        "dpctl slave",
+        Command::new(common::dpctl())
+            .args(["slave", "--port"])
+            .arg(port)
+            .args(["--addr", "8", "--gsd"])
+            .arg(&gsd)
+            .args(["--module", "2 words in/out", "--json"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit()),
+    );
+    let lines = common::started(&mut p, Duration::from_secs(20));
+    (p, lines)
+}
+
+/// The independent client against `dpctl slave`: I&M0 from the GSD
+/// (OrderNumber, Hardware_Release, Software_Release), a record written
+/// and read back over class 2, Idles across more than half of
+/// Send_Timeout, Abort, the SAP refused afterwards. Send_Timeout 8 s: the
+/// slave's minimum below 500 kbit/s is 4 s (reference §4.4, [VPC3]).
+#[test]
+fn raw_client_reads_im0_and_a_record_of_dpctl_slave() {
+    let dir = TempDir::new("c2-dpctl-slave");
+    let (a, b) = (dir.path("client"), dir.path("slave"));
+    let _socat = pty_pair(&a, &b);
+    let (_slave, mut out) = dpctl_c2_slave(&b);
+    let run = client(
+        &a,
+        &[
+            "--send-timeout",
+            "800",
+            "--slot",
+            "1",
+            "--index",
+            "3",
+            "--data",
+            "11 22 33 44 55",
+            "--idle-for",
+            "1",
+        ],
+    );
+    assert!(run.ok, "{}\n{:?}", run.stderr, run.steps);
+    assert!(run.step("initiate")["sap"].as_u64().unwrap() <= 48);
+    let im0 = run.step("im0");
+    assert_eq!(im0["order_id"], "DPCTL-C2-PEER", "{im0}");
+    assert_eq!(im0["hardware_revision"], 3, "{im0}");
+    assert_eq!(im0["software_revision"], "V1.2.3", "{im0}");
+    assert_eq!(run.step("read")["data"], "11 22 33 44 55");
+    run.step("abort");
+    run.step("closed");
+    run.step("done");
+    assert!(
+        out.wait_for("closed by the master", Duration::from_secs(10)),
+        "{:?}",
+        out.1
+    );
+}
+
+/// `dpctl slave`'s Send_Timeout supervision seen from the independent
+/// client: after silence longer than Send_Timeout (4 s, the slave's
+/// minimum at 19.2 kbit/s) the next Idle is refused.
+#[test]
+fn dpctl_slave_drops_a_class2_connection_whose_master_falls_silent() {
+    let dir = TempDir::new("c2-dpctl-silent");
+    let (a, b) = (dir.path("client"), dir.path("slave"));
+    let _socat = pty_pair(&a, &b);
+    let (_slave, mut out) = dpctl_c2_slave(&b);
+    let run = client(
+        &a,
+        &["--send-timeout", "400", "--no-im", "--silent-for", "4.8"],
+    );
+    assert!(run.ok, "{}\n{:?}", run.stderr, run.steps);
+    let refused = run.step("silent")["refused"].as_str().unwrap().to_string();
+    assert!(refused.contains("TO"), "{refused}");
+    assert!(
+        out.wait_for("connection timeout (TO)", Duration::from_secs(10)),
+        "{:?}",
+        out.1
+    );
+}
+
+/// A Send_Timeout below the slave's minimum is refused with Abort STO,
+/// and the independent client says so.
+#[test]
+fn dpctl_slave_refuses_a_send_timeout_below_its_minimum() {
+    let dir = TempDir::new("c2-dpctl-sto");
+    let (a, b) = (dir.path("client"), dir.path("slave"));
+    let _socat = pty_pair(&a, &b);
+    let (_slave, _out) = dpctl_c2_slave(&b);
+    let run = client(&a, &["--send-timeout", "300"]);
+    assert!(!run.ok);
+    assert!(
+        run.stderr
+            .contains("initiate: the slave aborted: Abort by MSAC_C2: STO"),
+        "{}",
+        run.stderr
+    );
+}

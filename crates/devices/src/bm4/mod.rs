@@ -272,8 +272,18 @@ pub enum Led {
     DataExchange,
     /// H2 red: bus error or watchdog expired.
     BusError,
-    /// H2 and H4 red: the master's configuration does not fit.
+    /// H2 and H4 red: the b maXX PLC did not configure the module (no
+    /// "bmaXX_Variables" worksheet from the PROFIBUS-PLC-Slave
+    /// configurator, L2057-2059), not a master's configuration.
     ConfigurationError,
+    /// All four LEDs on: the module no longer works; switch the b maXX
+    /// 4400 off and on (L2046, L2061-2065).
+    SoftwareWatchdog,
+    /// H2 and H4 blink together N times, then a pause (L2047-2049,
+    /// L2071-2075): 1 hardware defect or no PROFIBUS hardware, 2 no
+    /// PROFIBUS slave software, 3 newer PROFIBUS software needed, 4
+    /// hardware error of the b maXX base unit.
+    Blink(u8),
 }
 
 impl Led {
@@ -284,7 +294,18 @@ impl Led {
             Led::DataExchange => "data exchange (H1 green)",
             Led::BusError => "bus error / watchdog (H2 red)",
             Led::ConfigurationError => "configuration error (H2 and H4 red)",
+            Led::SoftwareWatchdog => "software watchdog (H1 H2 H3 H4 on)",
+            Led::Blink(1) => "H2/H4 blink 1x: hardware defect or no PROFIBUS hardware",
+            Led::Blink(2) => "H2/H4 blink 2x: no PROFIBUS slave software",
+            Led::Blink(3) => "H2/H4 blink 3x: newer PROFIBUS software needed",
+            Led::Blink(_) => "H2/H4 blink 4x: hardware error of the b maXX base unit",
         }
+    }
+
+    /// The module cannot work in this state (software watchdog, a
+    /// blink code): it refuses Set_Prm and Chk_Cfg.
+    pub fn is_fatal(self) -> bool {
+        matches!(self, Led::SoftwareWatchdog | Led::Blink(_))
     }
 }
 
@@ -629,6 +650,10 @@ pub struct Bm4 {
     sdiag: Option<Sdiag>,
     new_diag: bool,
     led: Led,
+    /// The b maXX PLC configured the module (its variables exist).
+    plc_configured: bool,
+    /// Leave data exchange (a module fault).
+    restart: bool,
     events: EventQueue,
     inbox: InboxSchedule,
 }
@@ -663,6 +688,8 @@ impl Bm4 {
             sdiag: None,
             new_diag: false,
             led: Led::ParameteriseConfigure,
+            plc_configured: true,
+            restart: false,
             events: EventQueue::default(),
             inbox: InboxSchedule::default(),
         }
@@ -881,9 +908,48 @@ impl Bm4 {
                 }
             }
             "status" => Ok(self.led.as_str().to_string()),
+            // The PLC side: `plc unconfigured` (the configurator's
+            // variables are missing), `plc configured`.
+            "plc" => {
+                match rest.first().copied() {
+                    Some("unconfigured") => {
+                        self.plc_configured = false;
+                        self.set_led(Led::ConfigurationError);
+                    }
+                    Some("configured") => {
+                        self.plc_configured = true;
+                        if self.led == Led::ConfigurationError {
+                            self.set_led(Led::ParameteriseConfigure);
+                        }
+                    }
+                    _ => return Err(arg("plc configured|unconfigured".into())),
+                }
+                Ok(self.led.as_str().to_string())
+            }
+            // Module faults: `fault software-watchdog`, `fault blink N`
+            // (1..4), `fault none` (the b maXX switched off and on).
+            "fault" => {
+                let led = match rest.as_slice() {
+                    ["software-watchdog"] => Led::SoftwareWatchdog,
+                    ["blink", n] => match n.parse::<u8>() {
+                        Ok(n @ 1..=4) => Led::Blink(n),
+                        _ => return Err(arg(format!("blink `{n}`: give 1..4"))),
+                    },
+                    ["none"] => {
+                        if self.led.is_fatal() {
+                            self.set_led(Led::ParameteriseConfigure);
+                        }
+                        return Ok(self.led.as_str().to_string());
+                    }
+                    _ => return Err(arg("fault software-watchdog | blink 1..4 | none".into())),
+                };
+                self.set_led(led);
+                self.restart = true;
+                Ok(led.as_str().to_string())
+            }
             _ => Err(ControlError::Unknown {
                 command: cmd.into(),
-                known: "sdiag, sdiag-clear, set, get, status",
+                known: "sdiag, sdiag-clear, set, get, status, plc, fault",
             }),
         }
     }
@@ -922,6 +988,9 @@ impl Device for Bm4 {
     }
 
     fn check_prm(&mut self, prm: &SetPrm<'_>) -> Result<(), Reason> {
+        if self.led.is_fatal() {
+            return Err(format!("the module does not work: {}", self.led.as_str()).into());
+        }
         expect_user_prm_len(prm, USER_PRM_LEN)?;
         if self.led != Led::ConfigurationError {
             self.set_led(Led::ParameteriseConfigure);
@@ -930,13 +999,18 @@ impl Device for Bm4 {
     }
 
     fn check_cfg(&mut self, cfg: &[u8]) -> Result<IoLayout, Reason> {
-        let l = match CfgLayout::new(&self.vars.table, cfg) {
-            Ok(l) => l,
-            Err(e) => {
-                self.set_led(Led::ConfigurationError);
-                return Err(e.0.into());
-            }
-        };
+        if self.led.is_fatal() {
+            return Err(format!("the module does not work: {}", self.led.as_str()).into());
+        }
+        // "Configuration error" is the PLC's (L2057-2059): without its
+        // variables the module has no configuration to check against.
+        if !self.plc_configured {
+            return Err("configuration error: the b maXX PLC did not configure the module (no bmaXX_Variables)".into());
+        }
+        // A master's configuration that does not fit: Cfg_Fault, and
+        // the module stays in parameterise / configure mode (the manual
+        // gives no LED for it).
+        let l = CfgLayout::new(&self.vars.table, cfg).map_err(|e| Reason::from(e.0))?;
         self.vars.cyclic.iter_mut().for_each(|c| *c = false);
         for &v in &l.used {
             self.vars.cyclic[v] = true;
@@ -946,7 +1020,9 @@ impl Device for Bm4 {
         self.outputs = l.outputs;
         self.cfg = Some(cfg.to_vec());
         self.engine.reset();
-        self.set_led(Led::ParameteriseConfigure);
+        if self.led != Led::ConfigurationError {
+            self.set_led(Led::ParameteriseConfigure);
+        }
         Ok(IoLayout {
             inputs: l.input_len,
             outputs: l.output_len,
@@ -954,6 +1030,9 @@ impl Device for Bm4 {
     }
 
     fn write_outputs(&mut self, now: Instant, outputs: &[u8]) {
+        if self.led.is_fatal() {
+            return;
+        }
         self.set_led(Led::DataExchange);
         if self.pkw {
             if let Some(req) = Pkw::parse(outputs) {
@@ -988,6 +1067,7 @@ impl Device for Bm4 {
         // channel starts afresh.
         self.engine.reset();
         match why {
+            _ if self.led.is_fatal() => {}
             ClearReason::Watchdog => self.set_led(Led::BusError),
             ClearReason::LeftDataExchange => {
                 if self.led == Led::DataExchange {
@@ -1049,6 +1129,10 @@ impl Device for Bm4 {
                 Ok(())
             }
         }
+    }
+
+    fn take_restart(&mut self) -> bool {
+        std::mem::take(&mut self.restart)
     }
 
     fn poll_event(&mut self) -> Option<DeviceEvent> {

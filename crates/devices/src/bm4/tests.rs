@@ -100,7 +100,8 @@ fn chk_cfg_takes_table_modules_only() {
     ] {
         let e = d.check_cfg(&bad).unwrap_err();
         assert!(e.to_string().contains(why), "{bad:02X?}: {e}");
-        assert_eq!(d.led(), Led::ConfigurationError);
+        // A master's mismatch is no "configuration error" (L2057-2059).
+        assert_eq!(d.led(), Led::ParameteriseConfigure);
     }
     // Default table: the "all modules" module, alone or after PKW.
     let mut def = Bm4::new(VarTable::default_table(), Addressing::fixed(6));
@@ -343,6 +344,55 @@ fn led_states_follow_the_bus() {
     assert_eq!(
         texts,
         ["data exchange (H1 green)", "bus error / watchdog (H2 red)"]
+    );
+}
+
+#[test]
+fn configuration_error_software_watchdog_and_blink_codes() {
+    // "Konfigurationsfehler": the b maXX PLC did not configure the module
+    // (L2057-2059): H2 and H4 red, and no configuration is accepted.
+    let mut d = example();
+    assert!(d
+        .control("plc unconfigured")
+        .unwrap()
+        .contains("configuration error"));
+    assert_eq!(d.led(), Led::ConfigurationError);
+    let e = d.check_cfg(&full_cfg()).unwrap_err().to_string();
+    assert!(e.contains("did not configure the module"), "{e}");
+    d.control("plc configured").unwrap();
+    assert_eq!(d.led(), Led::ParameteriseConfigure);
+    d.check_cfg(&full_cfg()).unwrap();
+    cycle(&mut d, T0, &[0; 14], 20);
+    assert_eq!(d.led(), Led::DataExchange);
+    // Software watchdog (L2046, L2061-2065): all LEDs on, the module
+    // leaves data exchange and refuses until switched off and on.
+    assert!(d
+        .control("fault software-watchdog")
+        .unwrap()
+        .contains("H1 H2 H3 H4"));
+    assert!(d.take_restart());
+    assert!(d.check_cfg(&full_cfg()).is_err());
+    d.control("fault none").unwrap();
+    assert_eq!(d.led(), Led::ParameteriseConfigure);
+    // Blink codes 1..4 (L2071-2075).
+    for n in 1..=4u8 {
+        d.control(&format!("fault blink {n}")).unwrap();
+        assert_eq!(d.led(), Led::Blink(n));
+    }
+    assert!(d.control("fault blink 5").is_err());
+    let texts: Vec<String> = std::iter::from_fn(|| d.poll_event())
+        .filter(|e| e.kind == "led")
+        .map(|e| e.text)
+        .collect();
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.contains("blink 2x: no PROFIBUS slave software")),
+        "{texts:?}"
+    );
+    assert!(
+        texts.iter().any(|t| t.starts_with("software watchdog")),
+        "{texts:?}"
     );
 }
 

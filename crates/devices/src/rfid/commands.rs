@@ -224,6 +224,9 @@ pub struct Reader {
     op: Option<Operation>,
     events: VecDeque<String>,
     changed: bool,
+    custom: Option<super::custom::CommandSet>,
+    /// A user command's answer and when it is due.
+    custom_answer: Option<(Instant, Vec<u8>)>,
 }
 
 impl Reader {
@@ -234,7 +237,15 @@ impl Reader {
             op: None,
             events: VecDeque::new(),
             changed: false,
+            custom: None,
+            custom_answer: None,
         }
+    }
+
+    /// Answer the commands of a user's command set
+    /// ([`super::custom`]).
+    pub fn set_commands(&mut self, set: super::custom::CommandSet) {
+        self.custom = Some(set);
     }
 
     /// The antenna field.
@@ -244,7 +255,7 @@ impl Reader {
 
     /// A command is executing.
     pub fn busy(&self) -> bool {
-        self.op.is_some()
+        self.op.is_some() || self.custom_answer.is_some()
     }
 
     /// Whether the field changed (a write, a tag entering or leaving)
@@ -261,6 +272,7 @@ impl Reader {
     /// Drop the running command (a new start-up of the interface).
     pub fn abort(&mut self) {
         self.op = None;
+        self.custom_answer = None;
     }
 
     /// Start a command line (must not be [`Reader::busy`]). Returns the
@@ -268,6 +280,31 @@ impl Reader {
     /// [`Reader::step`] returns it later.
     pub fn start(&mut self, now: Instant, line: &[u8]) -> Option<Vec<u8>> {
         let text = String::from_utf8_lossy(line);
+        if let Some(set) = &self.custom {
+            if let Some(c) = set.find(line) {
+                self.events
+                    .push_back(format!("command `{text}` (user command set)"));
+                if c.delay.is_zero() {
+                    return Some(c.answer.clone());
+                }
+                self.custom_answer = Some((now + c.delay, c.answer.clone()));
+                return None;
+            }
+            let known = match parse(line) {
+                Ok(Command::Version | Command::Blank) => true,
+                Err(Nak::UnknownCommand) => false,
+                Ok(_) | Err(_) => set.builtin,
+            };
+            if !known {
+                self.events
+                    .push_back(format!("command `{text}`: not in the user command set"));
+                return Some(
+                    set.unknown
+                        .clone()
+                        .unwrap_or_else(|| Nak::UnknownCommand.answer()),
+                );
+            }
+        }
         let cmd = match parse(line) {
             Ok(c) => c,
             Err(nak) => {
@@ -313,6 +350,12 @@ impl Reader {
     /// Advance the running command to `now`; returns its answer when it
     /// is done.
     pub fn step(&mut self, now: Instant) -> Option<Vec<u8>> {
+        if let Some((at, _)) = &self.custom_answer {
+            if now >= *at {
+                return self.custom_answer.take().map(|(_, a)| a);
+            }
+            return None;
+        }
         loop {
             let op = self.op.as_ref()?;
             let present = self.field.in_field().map(|t| t.uid.clone());
@@ -405,6 +448,9 @@ impl Reader {
 
     /// When [`Reader::step`] next has something to do.
     pub fn next_wake(&self) -> Option<Instant> {
+        if let Some((at, _)) = &self.custom_answer {
+            return Some(*at);
+        }
         let op = self.op.as_ref()?;
         Some(match &op.transfer {
             Some((_, until)) => *until,

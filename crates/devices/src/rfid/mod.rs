@@ -45,6 +45,7 @@
 
 pub mod client;
 pub mod commands;
+pub mod custom;
 pub mod demo;
 pub mod jobs;
 pub mod link;
@@ -133,6 +134,13 @@ impl Rfid {
     /// text, for the program that keeps the file.
     pub fn with_state_events(mut self, on: bool) -> Rfid {
         self.state_events = on;
+        self
+    }
+
+    /// Answer a user's command set besides (or instead of) the modelled
+    /// commands ([`custom`]).
+    pub fn with_commands(mut self, set: custom::CommandSet) -> Rfid {
+        self.reader.set_commands(set);
         self
     }
 

@@ -20,12 +20,17 @@ pub struct Options {
     /// it when the field changes ([`Profile::state_file`]). Default: no
     /// tags, default timing, nothing kept.
     pub tags: Option<PathBuf>,
+    /// The reader's own command set (TOML, [`super::custom`]): commands,
+    /// answers, delays. Default: `VER` (the manual's) and the modelled
+    /// GT, RD, WD, TOR.
+    pub commands: Option<PathBuf>,
 }
 
 /// The reader with its antenna field.
 #[derive(Debug)]
 pub struct RfidProfile {
     options: Options,
+    commands: Option<super::custom::CommandSet>,
     field: TagField,
     gsd: Gsd,
 }
@@ -40,7 +45,7 @@ impl RfidProfile {
 impl Profile for RfidProfile {
     type Options = Options;
     const NAME: &'static str = "rfid";
-    const SUMMARY: &'static str = "AEG ID RFID reader ARE I2 / K1 PFB (ident 0x0DC4): 16-byte handshake carrying reader commands (VER, GT, RD, WD, TOR)";
+    const SUMMARY: &'static str = "AEG ID RFID reader ARE I2 / K1 PFB (ident 0x0DC4, ours): 16-byte handshake carrying reader commands (VER from the manual; GT, RD, WD, TOR modelled)";
 
     /// The reader's 16-byte command handshake.
     fn capabilities(_cfg: &[u8]) -> Capabilities {
@@ -48,8 +53,9 @@ impl Profile for RfidProfile {
     }
     const OPTIONS_HELP: &'static str = "--tags FILE.toml (tags with UID and memory, which one is in the field, \
 the reader's timing; rewritten when a tag's memory changes or a tag enters or leaves; default: no tags), \
---control SOCKET|FILE|- (commands: enter UID, leave, tags, status); bus file: tags";
-    const PATH_OPTIONS: &'static [&'static str] = &["tags"];
+--device-opt commands=FILE.toml (the reader's own command set: commands, answers, delays), \
+--control SOCKET|FILE|- (commands: enter UID, leave, tags, status); bus file: tags, commands";
+    const PATH_OPTIONS: &'static [&'static str] = &["tags", "commands"];
     const IDENT: Option<u16> = Some(IDENT);
 
     fn configure(options: Options, _address: Option<u8>) -> Result<Self, ProfileError> {
@@ -63,8 +69,16 @@ the reader's timing; rewritten when a tag's memory changes or a tag enters or le
             }
             None => TagField::new(),
         };
+        let commands = match &options.commands {
+            Some(path) => Some(crate::profile::read_table(
+                path,
+                super::custom::CommandSet::parse,
+            )?),
+            None => None,
+        };
         Ok(RfidProfile {
             options,
+            commands,
             field,
             gsd: crate::gsd_files::parse(super::GSD).expect("AEGI0DC4.GSD parses"),
         })
@@ -93,6 +107,9 @@ the reader's timing; rewritten when a tag's memory changes or a tag enters or le
 
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
         let mut dev = Rfid::new(self.field.clone()).with_state_events(self.options.tags.is_some());
+        if let Some(set) = &self.commands {
+            dev = dev.with_commands(set.clone());
+        }
         if let Some(inbox) = control {
             dev = dev.with_inbox(inbox);
         }

@@ -346,3 +346,32 @@ fn a_restart_of_the_reader_mid_command_sends_the_command_again() {
     assert_eq!(result.unwrap().unwrap(), b"AABBCCDD0102030405060708\r");
     assert_eq!(b.d.reader().field().tags[0].blocks[3], [1, 2, 3, 4]);
 }
+
+#[test]
+fn a_users_command_set_with_answers_and_delays() {
+    // Only VER is from the manual (L97); a user loads their reader's
+    // commands: answers and delays, the modelled ones dropped.
+    let set = crate::rfid::custom::CommandSet::parse(
+        "builtin = false\n[[command]]\ncommand = \"SN\"\nanswer = \"A9-0042\\r\"\ndelay_ms = 40\n",
+    )
+    .unwrap();
+    let mut b = Bench::new(reader_with_tag().with_commands(set));
+    let c0 = b.cycle;
+    assert_eq!(b.run(b"sn").unwrap(), b"A9-0042\r");
+    assert!(b.cycle - c0 >= 40, "{} cycles: the delay", b.cycle - c0);
+    assert_eq!(b.run(b"VER").unwrap(), crate::rfid::commands::VERSION);
+    assert_eq!(
+        b.run(b"GT").unwrap(),
+        b"NAK #00\r",
+        "GT is modelled, not kept"
+    );
+    // With the modelled commands kept, GT still reads the tag.
+    let set = crate::rfid::custom::CommandSet::parse(
+        "unknown = \"?\\r\"\n[[command]]\ncommand = \"SN\"\nanswer = \"1\\r\"\n",
+    )
+    .unwrap();
+    let mut b = Bench::new(reader_with_tag().with_commands(set));
+    assert_eq!(b.run(b"SN").unwrap(), b"1\r");
+    assert_ne!(b.run(b"GT").unwrap(), b"?\r");
+    assert_eq!(b.run(b"XYZ").unwrap(), b"?\r");
+}
