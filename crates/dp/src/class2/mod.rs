@@ -16,7 +16,7 @@
 //! 1. **Initiate**: SRD to the slave's resource manager (DSAP 49) from
 //!    SSAP 50 with Initiate.req (Send_Timeout, features, profile,
 //!    address parameters). The RM answers with `56 SAP PollTO`, the
-//!    connection SAP (0..=48): at once ([BAL]), or after a short
+//!    connection SAP (0..=48): at once (\[BAL\]), or after a short
 //!    acknowledge on an empty poll of SAP 49 (Felser's manual: "a poll
 //!    cycle at SAP 49 with response data"); the master polls SAP 49
 //!    until it comes and never repeats Initiate.req.
@@ -319,7 +319,7 @@ enum Phase {
     Initiate,
     /// Initiate.req acknowledged without data: polling the RM (SAP 49)
     /// with empty SRDs for its reply. Felser's PROFIBUS manual has the
-    /// RM reply come on "a poll cycle at SAP 49"; the [BAL] narrative has
+    /// RM reply come on "a poll cycle at SAP 49"; the \[BAL\] narrative has
     /// it in the answer to Initiate.req itself. Both are taken; a second
     /// Initiate.req would ask the RM for a second connection.
     AwaitRm,

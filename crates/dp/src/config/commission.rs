@@ -3,7 +3,7 @@
 //! accepts unchanged (`dpctl scan --write-config`).
 //!
 //! For each slave: the GSD files of its ident number in the
-//! [`GsdLibrary`](crate::config::library::GsdLibrary), in library order;
+//! [`GsdLibrary`], in library order;
 //! the first whose modules give exactly the Get_Cfg bytes
 //! ([`modules_for_cfg`]) configures it, the simplest fit first, the
 //! others listed as comments. A slave whose ident number a device profile

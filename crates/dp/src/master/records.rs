@@ -5,7 +5,7 @@
 //! connection. [`ImReader`] reads I&M0..I&M4 (and writes I&M1) that way:
 //! a Write of the call header `08 00 FI_Index` on index 255 selects the
 //! record, the Read that follows returns the call header and its 64 bytes
-//! (`shared/reference/dpv1-c2-im-alarms.md` §4.6, [ABB] and [IFM]).
+//! (`shared/reference/dpv1-c2-im-alarms.md` §4.6, \[ABB\] and \[IFM\]).
 
 use super::{DpMaster, Job, JobId, JobResult, SlaveTask, StartupTimeout};
 use crate::pdu::dpv1::{Dpv1Error, MAX_DATA_LEN};

@@ -3,8 +3,8 @@
 //! acknowledges each with Alarm_Ack (SAP 50).
 //!
 //! - **Sequence numbers** count 0..=31 over all alarm types and wrap
-//!   (Alarm_Specifier bits 7..3; dpv1-c2-im-alarms.md §4.4, [CP5613],
-//!   [VPC3]). The queue holds at most 32 alarms, so no two alarms in it
+//!   (Alarm_Specifier bits 7..3; dpv1-c2-im-alarms.md §4.4, \[CP5613\],
+//!   \[VPC3\]). The queue holds at most 32 alarms, so no two alarms in it
 //!   share a number.
 //! - **Outstanding alarms**: Alarm_Mode in DPV1_Status_3 (bits 2..0) limits
 //!   how many alarms may wait for their acknowledgement (§4.5): 0 = type

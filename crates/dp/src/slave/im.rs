@@ -1,6 +1,6 @@
 //! I&M (identification and maintenance) in the slave core: the "Call"
 //! on slot 0, index 255 (`shared/reference/dpv1-c2-im-alarms.md` §4.6,
-//! [ABB], [IFM], [SCH]; the data units in [`crate::pdu::im`]).
+//! \[ABB\], \[IFM\], \[SCH\]; the data units in [`crate::pdu::im`]).
 //!
 //! A master selects a record with a Write of the 4-byte call header
 //! `08 00 FI_Index` (65000 = I&M0 … 65004 = I&M4); a Write of the call
