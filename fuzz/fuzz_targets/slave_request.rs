@@ -35,6 +35,13 @@ fn device(sel: u8) -> GenericDevice {
         fail_safe: sel & 4 != 0,
         max_diag_len: 6 + (sel >> 3),
         c1_max_data_len: if sel & 0x20 != 0 { 16 } else { 240 },
+        // Class 2 and I&M with DP-V1, so requests on SAPs 0..=49 and
+        // index 255 reach the resource manager and the I&M store.
+        c2_read_write: sel & 2 != 0,
+        c2_max_data_len: if sel & 0x20 != 0 { 16 } else { 240 },
+        c2_max_count_channels: 2,
+        max_initiate_pdu_length: 52,
+        im: sel & 2 != 0,
     };
     let pattern = if sel & 0x80 != 0 {
         InputPattern::Counter
