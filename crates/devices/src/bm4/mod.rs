@@ -71,7 +71,7 @@ use profibus_dp::pdu::prm::SetPrm;
 use profibus_dp::slave::{
     expect_user_prm_len, ClearReason, Device, DeviceEvent, DiagWriter, Features, IoLayout, Reason,
 };
-use profibus_fdl::Instant;
+use profibus_fdl::{Baud, Instant};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use vars::{IecType, VarModule, VarTable, Variable};
@@ -352,6 +352,12 @@ pub enum SdiagError {
     /// 16#84 01 02: i_LEN > 60.
     #[error("i_LEN above 60 (d_STATUS 16#{:08X})", self.d_status())]
     TooLong,
+    /// 16#80 B7 00: internal error, a parameter out of its range (L1977).
+    #[error("internal error: parameter out of range (d_STATUS 16#{:08X})", self.d_status())]
+    OutOfRange,
+    /// 16#80 C3 02: internal error, the stack has no memory (L1978).
+    #[error("internal error: the stack has no memory (d_STATUS 16#{:08X})", self.d_status())]
+    NoMemory,
 }
 
 impl SdiagError {
@@ -364,6 +370,8 @@ impl SdiagError {
             SdiagError::EdFlag => (0x82, 0x01, 0x01),
             SdiagError::TooShort => (0x84, 0x01, 0x01),
             SdiagError::TooLong => (0x84, 0x01, 0x02),
+            SdiagError::OutOfRange => (0x80, 0xB7, 0x00),
+            SdiagError::NoMemory => (0x80, 0xC3, 0x02),
         };
         u32::from_le_bytes([0x00, decode, c1, c2])
     }
@@ -648,8 +656,15 @@ pub struct Bm4 {
     engine: PkwEngine,
     addressing: Addressing,
     sdiag: Option<Sdiag>,
+    /// The module's internal error the next SDIAG fails with
+    /// (`sdiag-fail`, B44).
+    sdiag_fail: Option<SdiagError>,
     new_diag: bool,
     led: Led,
+    /// u_LOCAL_NODE_ID: the station address in use (L1399-1411).
+    node_id: u8,
+    /// u_BAUDRATE: the rate the auto-baud found (L691), once known.
+    baud: Option<Baud>,
     /// The b maXX PLC configured the module (its variables exist).
     plc_configured: bool,
     /// Leave data exchange (a module fault).
@@ -670,6 +685,7 @@ impl Bm4 {
         } else {
             table.gsd(&default)
         };
+        let node_id = addressing.address;
         let mut full_cfg = vec![PKW_MODULE];
         for i in 0..table.vars.len() {
             full_cfg.extend_from_slice(&table.identifier(i));
@@ -686,7 +702,10 @@ impl Bm4 {
             engine: PkwEngine::new(&PKW, Duration::ZERO),
             addressing,
             sdiag: None,
+            sdiag_fail: None,
             new_diag: false,
+            node_id,
+            baud: None,
             led: Led::ParameteriseConfigure,
             plc_configured: true,
             restart: false,
@@ -812,6 +831,9 @@ impl Bm4 {
         if self.sdiag.as_ref().is_some_and(|s| !s.fetched) {
             return Err(SdiagError::Busy);
         }
+        if let Some(e) = self.sdiag_fail.take() {
+            return Err(e);
+        }
         self.sdiag = Some(Sdiag {
             data: data.to_vec(),
             overflow,
@@ -819,6 +841,34 @@ impl Bm4 {
         });
         self.new_diag = true;
         Ok(())
+    }
+
+    /// Make the next SDIAG fail with the module's internal error `error`
+    /// ([`SdiagError::OutOfRange`] or [`SdiagError::NoMemory`]). The
+    /// manual lists these d_STATUS codes (L1977-1978) without saying
+    /// when the module raises them, so the emulation raises them on
+    /// demand, once, to test a PLC program's error handling.
+    pub fn sdiag_fail_next(&mut self, error: SdiagError) {
+        self.sdiag_fail = Some(error);
+    }
+
+    /// u_LOCAL_NODE_ID (L1399-1411): the station address in use, the
+    /// one a master set by Set_Slave_Add included (126 while a set-once
+    /// or every-start module waits for it).
+    pub fn local_node_id(&self) -> u8 {
+        self.node_id
+    }
+
+    /// u_BAUDRATE (L691): the rate the module's auto-baud found; `None`
+    /// until the program running the slave reports it with
+    /// [`Bm4::set_baud`].
+    pub fn baud(&self) -> Option<Baud> {
+        self.baud
+    }
+
+    /// Enter the rate the auto-baud found into u_BAUDRATE.
+    pub fn set_baud(&mut self, baud: Baud) {
+        self.baud = Some(baud);
     }
 
     /// x_OK of the last SDIAG: a master fetched it.
@@ -843,7 +893,11 @@ impl Bm4 {
     /// - `set NAME[INDEX] VALUE` / `set NAME VALUE`: the PLC writes a
     ///   variable.
     /// - `get NAME[INDEX]` / `get NAME`: a variable's value.
-    /// - `status`: the LED state.
+    /// - `sdiag-fail range|no-memory`: the next SDIAG fails with the
+    ///   module's internal error 16#80 B7 00 or 16#80 C3 02.
+    /// - `status`: the LED state, then u_LOCAL_NODE_ID and u_BAUDRATE,
+    ///   e.g. `data exchange (H1 green); u_LOCAL_NODE_ID 6; u_BAUDRATE
+    ///   1500000` (`u_BAUDRATE auto` while no rate was found).
     pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
         let arg = |m: String| ControlError::Argument(m);
         let mut words = line.split_whitespace();
@@ -907,7 +961,28 @@ impl Bm4 {
                     Ok(format!("{name}[{index}] = {v}"))
                 }
             }
-            "status" => Ok(self.led.as_str().to_string()),
+            "sdiag-fail" => {
+                let e = match rest.as_slice() {
+                    ["range"] => SdiagError::OutOfRange,
+                    ["no-memory"] => SdiagError::NoMemory,
+                    _ => return Err(arg("sdiag-fail range|no-memory".into())),
+                };
+                self.sdiag_fail_next(e);
+                Ok(format!(
+                    "the next SDIAG fails with d_STATUS 16#{:08X}",
+                    e.d_status()
+                ))
+            }
+            "status" => {
+                let baud = self
+                    .baud
+                    .map_or_else(|| "auto".to_string(), |b| b.bps().to_string());
+                Ok(format!(
+                    "{}; u_LOCAL_NODE_ID {}; u_BAUDRATE {baud}",
+                    self.led.as_str(),
+                    self.node_id
+                ))
+            }
             // The PLC side: `plc unconfigured` (the configurator's
             // variables are missing), `plc configured`.
             "plc" => {
@@ -949,7 +1024,7 @@ impl Bm4 {
             }
             _ => Err(ControlError::Unknown {
                 command: cmd.into(),
-                known: "sdiag, sdiag-clear, set, get, status, plc, fault",
+                known: "sdiag, sdiag-clear, sdiag-fail, set, get, status, plc, fault",
             }),
         }
     }
@@ -1119,6 +1194,7 @@ impl Device for Bm4 {
                 };
                 self.events.note("address", text);
                 self.addressing.stored = true;
+                self.node_id = new_address;
                 Ok(())
             }
             AddressMode::EveryStart => {
@@ -1126,6 +1202,7 @@ impl Device for Bm4 {
                     "address",
                     format!("address {new_address} set for this start (not stored)"),
                 );
+                self.node_id = new_address;
                 Ok(())
             }
         }

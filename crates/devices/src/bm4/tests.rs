@@ -405,3 +405,55 @@ fn pkw_dialect_codes() {
     assert_eq!(D.request(1, Command::Describe(1)), None);
     assert!(D.error_text(0x0B).starts_with("variable does not exist"));
 }
+
+/// B44: the two internal SDIAG errors with their d_STATUS bytes
+/// (L1977-1978), raised once on demand; the next SDIAG works again.
+#[test]
+fn sdiag_internal_errors_give_the_manuals_d_status() {
+    let mut d = example();
+    assert_eq!(
+        d.control("sdiag-fail range").unwrap(),
+        "the next SDIAG fails with d_STATUS 16#00B78000"
+    );
+    let e = d.control("sdiag 01 02 03").unwrap_err().to_string();
+    assert!(e.contains("parameter out of range"), "{e}");
+    // Bytes 0..3: Function_Num 00, Error_Decode 80, codes B7 00.
+    assert_eq!(
+        SdiagError::OutOfRange.d_status().to_le_bytes(),
+        [0x00, 0x80, 0xB7, 0x00]
+    );
+    d.sdiag_fail_next(SdiagError::NoMemory);
+    assert_eq!(d.sdiag(&[1, 2, 3], true, false), Err(SdiagError::NoMemory));
+    assert_eq!(
+        SdiagError::NoMemory.d_status().to_le_bytes(),
+        [0x00, 0x80, 0xC3, 0x02]
+    );
+    assert!(!d.take_new_diag(), "a refused SDIAG announces nothing");
+    d.sdiag(&[1, 2, 3], true, false).unwrap();
+    assert!(d.take_new_diag());
+    assert!(d.control("sdiag-fail full").is_err());
+}
+
+/// B59: u_LOCAL_NODE_ID and u_BAUDRATE read back (L691, L1399-1411).
+#[test]
+fn status_reads_back_node_id_and_baudrate() {
+    let mut d = example();
+    assert_eq!(
+        d.control("status").unwrap(),
+        "parameterise / configure (H3 green); u_LOCAL_NODE_ID 6; u_BAUDRATE auto"
+    );
+    d.set_baud(profibus_fdl::Baud::B1500000);
+    assert!(d
+        .control("status")
+        .unwrap()
+        .ends_with("u_LOCAL_NODE_ID 6; u_BAUDRATE 1500000"));
+    // Every-start address: 126 until the master sets one.
+    let mut d = Bm4::new(
+        VarTable::example(),
+        Addressing::from_us_device(127, None, None).unwrap(),
+    );
+    assert_eq!(d.local_node_id(), 126);
+    d.set_address(9, false, &[]).unwrap();
+    assert_eq!(d.local_node_id(), 9);
+    assert!(d.control("status").unwrap().contains("u_LOCAL_NODE_ID 9;"));
+}

@@ -151,6 +151,10 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(1000);
 /// Default t_TIMEOUT_SD_DATA (L456).
 pub const DEFAULT_SD_TIMEOUT: Duration = Duration::from_millis(5000);
 
+/// b_ERR bit 1: no access to the option board (function block not
+/// processing data, L1914).
+pub const B_ERR_BOARD_ACCESS: u8 = 1 << 1;
+
 /// b_ERR bit 3: service data access on the option board timeout.
 pub const B_ERR_SD_BOARD_TIMEOUT: u8 = 1 << 3;
 /// b_ERR bit 4: service data access on the V controller timeout.
@@ -499,6 +503,10 @@ pub struct Omega {
     actual: [u32; MAX_VALUES],
     device_control: DeviceControl,
     b_message: i8,
+    /// A warning b_MESSAGE −1 or −2 set by control `warn` (0: none).
+    warning: i8,
+    /// The PLC has no access to the option board (control `board off`).
+    board_lost: bool,
     b_err: u8,
     t_pb_dp: Duration,
     t_cyclic: Duration,
@@ -542,6 +550,8 @@ impl Omega {
             actual: [0; MAX_VALUES],
             device_control: DeviceControl::new(),
             b_message: 0,
+            warning: 0,
+            board_lost: false,
             b_err: 0,
             t_pb_dp: DEFAULT_TIMEOUT,
             t_cyclic: DEFAULT_TIMEOUT,
@@ -690,9 +700,59 @@ impl Omega {
 
     /// x_QUIT: acknowledge b_ERR bits whose cause is gone.
     pub fn quit(&mut self) {
-        if self.b_err != 0 {
-            self.b_err = 0;
+        let kept = if self.board_lost {
+            B_ERR_BOARD_ACCESS
+        } else {
+            0
+        };
+        if self.b_err != kept {
+            self.b_err = kept;
             self.report();
+        }
+        self.refresh_message();
+    }
+
+    /// The PLC loses (`false`) or regains (`true`) access to the option
+    /// board: b_ERR bit 1 (L1914) and b_MESSAGE 1; x_QUIT clears the bit
+    /// once access is back.
+    pub fn set_board_access(&mut self, ok: bool) {
+        self.board_lost = !ok;
+        if !ok && self.b_err & B_ERR_BOARD_ACCESS == 0 {
+            self.b_err |= B_ERR_BOARD_ACCESS;
+            self.report();
+        }
+        self.refresh_message();
+    }
+
+    /// Set the warning b_MESSAGE −1 (general) or −2 (wire breakage), or
+    /// none (0). The manual lists them (L1776-1777) without a cause, so
+    /// they are set on demand; errors (1..4) take precedence.
+    pub fn set_warning(&mut self, warning: i8) {
+        self.warning = warning;
+        self.refresh_message();
+    }
+
+    /// b_MESSAGE when no event-driven message (2, 3, 4) stands: 1
+    /// (general error) while b_ERR bit 0 or 1 says the function block
+    /// processes no data; else a warning set by [`Omega::set_warning`];
+    /// else −3 (timeout warning) while a service data timeout (b_ERR bit 3
+    /// or 4) is not acknowledged, since cyclic data go on; else 0
+    /// (L1769-1779, L1912-1919; the pairing is this project's reading).
+    fn idle_message(&self) -> i8 {
+        if self.b_err & 0b11 != 0 {
+            1
+        } else if self.warning != 0 {
+            self.warning
+        } else if self.b_err & (B_ERR_SD_BOARD_TIMEOUT | B_ERR_SD_CONTROLLER_TIMEOUT) != 0 {
+            -3
+        } else {
+            0
+        }
+    }
+
+    fn refresh_message(&mut self) {
+        if !matches!(self.b_message, 2..=4) {
+            self.set_message(self.idle_message());
         }
     }
 
@@ -704,6 +764,9 @@ impl Omega {
             2 => "field bus error",
             3 => "setpoint / actual value configuration error",
             4 => "diagnostic function active",
+            -1 => "general warning",
+            -2 => "wire breakage warning",
+            -3 => "timeout warning",
             _ => "reserved",
         };
         let mut s = format!(
@@ -711,6 +774,7 @@ impl Omega {
             self.b_message, self.b_err
         );
         for (bit, text) in [
+            (B_ERR_BOARD_ACCESS, "no access to option board"),
             (
                 B_ERR_SD_BOARD_TIMEOUT,
                 "service data access on option board timeout",
@@ -736,7 +800,9 @@ impl Omega {
     /// Execute a control command: `status`, `quit` (x_QUIT), `get P`,
     /// `fault [CODE]` (a controller fault, default 16#0001), `plc on|off`
     /// (x_EN), `cyclic P… | none` (parameters mapped cyclically),
-    /// `sd-delay MS` (the controller's service data answer time).
+    /// `sd-delay MS` (the controller's service data answer time),
+    /// `board on|off` (the PLC's access to the option board, b_ERR bit 1),
+    /// `warn general|wire-break|none` (b_MESSAGE −1 / −2).
     pub fn control(&mut self, line: &str) -> Result<String, ControlError> {
         let arg = |m: String| ControlError::Argument(m);
         let mut w = line.split_whitespace();
@@ -783,6 +849,24 @@ impl Omega {
                 self.drive.cyclic = pnus;
                 Ok(t)
             }
+            "board" => {
+                match w.next() {
+                    Some("on") => self.set_board_access(true),
+                    Some("off") => self.set_board_access(false),
+                    _ => return Err(arg("board on|off".into())),
+                }
+                Ok(self.status_text())
+            }
+            "warn" => {
+                let m = match w.next() {
+                    Some("general") => -1,
+                    Some("wire-break") => -2,
+                    Some("none") => 0,
+                    _ => return Err(arg("warn general|wire-break|none".into())),
+                };
+                self.set_warning(m);
+                Ok(self.status_text())
+            }
             "sd-delay" => {
                 let ms: u64 = w
                     .next()
@@ -808,7 +892,7 @@ impl Omega {
             }
             other => Err(ControlError::Unknown {
                 command: other.into(),
-                known: "status, quit, get P, fault [CODE], plc on|off, cyclic P…|none, sd-delay MS",
+                known: "status, quit, get P, fault [CODE], plc on|off, cyclic P…|none, sd-delay MS, board on|off, warn general|wire-break|none",
             }),
         }
     }
@@ -930,7 +1014,7 @@ impl Device for Omega {
                         ),
                     );
                 } else if self.b_message == 3 {
-                    self.set_message(0);
+                    self.set_message(self.idle_message());
                 }
                 Ok(IoLayout {
                     inputs: l.input_bytes(),
@@ -952,7 +1036,7 @@ impl Device for Omega {
         let Some(l) = self.layout else { return };
         self.last_exchange = Some(now);
         if matches!(self.b_message, 2 | 4) {
-            self.set_message(0);
+            self.set_message(self.idle_message());
         }
         let mut at = 0;
         if l.pkw {
@@ -1047,7 +1131,7 @@ impl Device for Omega {
     fn diagnosis(&mut self, _now: Instant, _diag: &mut DiagWriter<'_>) {
         // "Process data communication is halted for this function" (L1182):
         // a diagnosis read during data exchange is b_MESSAGE 4.
-        if self.last_exchange.is_some() && self.layout.is_some() && self.b_message == 0 {
+        if self.last_exchange.is_some() && self.layout.is_some() && self.b_message <= 0 {
             self.set_message(4);
             // "If communication monitoring is activated …, activation of
             // this diagnostic function triggers an error response" (L1186).
@@ -1088,6 +1172,7 @@ impl Device for Omega {
             self.sd_timeout = None;
             self.b_err |= bit;
             self.report();
+            self.refresh_message();
         }
         for line in self.inbox.due(now) {
             match self.control(&line) {

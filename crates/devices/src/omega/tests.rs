@@ -295,6 +295,14 @@ fn service_data_timeout_t_timeout_sd_data() {
     assert_eq!(d.b_err() & B_ERR_SD_BOARD_TIMEOUT, B_ERR_SD_BOARD_TIMEOUT);
     let i = cycle(&mut d, ms(120), &out, l.inputs);
     assert_eq!(Pkw::parse(&i).unwrap().to_string(), "73E8 0000 0000 0083");
+    // O46: the FB goes on with cyclic data, so a service data timeout
+    // is b_MESSAGE −3 (timeout warning) until x_QUIT.
+    assert_eq!(d.b_message(), -3);
+    assert!(d
+        .status_text()
+        .starts_with("b_MESSAGE -3 (timeout warning)"));
+    d.quit();
+    assert_eq!(d.b_message(), 0);
     // Within the timeout the job runs (default 5 ms vs 5000 ms).
     let mut d = Omega::with_defaults();
     assert_job(&mut d, Pkw::new(1, 3, 0, 0), "1003 0000 0000 0064");
@@ -359,4 +367,45 @@ fn pkw_dialect_codes() {
         Some(Err(0x82))
     );
     assert_eq!(PKW.error_text(0x82), "error reading actual value");
+}
+
+/// O46: b_MESSAGE 1 (general error) with b_ERR bit 1 and the warnings
+/// −1, −2 (L1769-1779, L1914); errors win over warnings, 4 over both.
+#[test]
+fn b_message_general_error_and_warnings() {
+    let mut d = Omega::with_defaults();
+    d.check_cfg(&[0x71, 0x51, 0x61]).unwrap();
+    cycle(&mut d, ms(0), &[0; 8], 8);
+    assert!(d
+        .control("warn wire-break")
+        .unwrap()
+        .starts_with("b_MESSAGE -2 (wire breakage warning), b_ERR 16#00"));
+    d.control("warn general").unwrap();
+    assert_eq!(d.b_message(), -1);
+    assert!(d
+        .control("board off")
+        .unwrap()
+        .starts_with("b_MESSAGE 1 (general error), b_ERR 16#02 (no access to option board)"));
+    d.quit();
+    assert_eq!(
+        (d.b_message(), d.b_err()),
+        (1, B_ERR_BOARD_ACCESS),
+        "cause still there"
+    );
+    d.control("board on").unwrap();
+    assert_eq!(d.b_err(), B_ERR_BOARD_ACCESS, "kept until x_QUIT");
+    d.quit();
+    assert_eq!((d.b_message(), d.b_err()), (-1, 0), "the warning again");
+    let mut w = [0u8; 16];
+    d.diagnosis(ms(1), &mut DiagWriter::new(&mut w));
+    assert_eq!(d.b_message(), 4, "diagnosis read wins over a warning");
+    cycle(&mut d, ms(2), &[0; 8], 8);
+    assert_eq!(d.b_message(), -1);
+    d.control("warn none").unwrap();
+    assert_eq!(d.b_message(), 0);
+    assert!(d.control("warn loud").is_err());
+    let kinds: Vec<&str> = std::iter::from_fn(|| d.poll_event())
+        .map(|e| e.kind)
+        .collect();
+    assert!(kinds.contains(&"status"), "changes are status events");
 }
