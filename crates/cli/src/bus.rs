@@ -37,6 +37,12 @@ pub struct Args {
     /// kept, flagged (CRC-error flag; the dissector's `pbdl.fcs.good == 0`).
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
+    /// With --baud: a station whose port is set to another rate receives
+    /// garbage and sends garbage, as on a real line (without it the rate
+    /// a station sets on its pty only sets its timing). For testing
+    /// `--baud auto` and slaves with auto-baud.
+    #[arg(long, requires = "baud")]
+    pub check_rates: bool,
 }
 
 /// A usage error found after parsing: one line, exit status 2.
@@ -68,6 +74,7 @@ pub fn run(args: Args) -> Result<()> {
         Err(e @ HubError::NotASymlink(_)) => usage(e),
         Err(e) => return Err(e.into()),
     };
+    hub.check_rates(args.check_rates);
     if let Some(path) = &args.pcap {
         let f = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
         let epoch = std::time::SystemTime::now()

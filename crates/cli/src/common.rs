@@ -16,9 +16,9 @@ pub struct LineArgs {
     #[arg(long, value_name = "PATH")]
     pub port: String,
     /// Baud rate: 9600 … 12000000, or 1.5M, 187.5k, … (on a pty the rate
-    /// only sets the bus timing).
+    /// only sets the bus timing); `auto` (dpctl scan only) finds it.
     #[arg(long, default_value = "19200", value_name = "B")]
-    pub baud: Baud,
+    pub baud: BaudArg,
     /// Extra milliseconds added to the slot time and token timeouts for the
     /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
     #[arg(long, value_name = "MS")]
@@ -171,9 +171,138 @@ impl SlaveArgs {
 }
 
 impl LineArgs {
-    /// Open the port.
+    /// Open the port (at 19.2 kbit/s for `--baud auto`: [`find_baud`]
+    /// sets the rate).
     pub fn open(&self) -> Result<Port> {
-        self.rts.open(&self.port, self.baud)
+        let baud = match self.baud {
+            BaudArg::Fixed(b) => b,
+            BaudArg::Auto => Baud::B19200,
+        };
+        self.rts.open(&self.port, baud)
+    }
+}
+
+/// A `--baud` value: a rate, or `auto` (dpctl scan, sniff and monitor:
+/// [`find_baud`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BaudArg {
+    /// This rate.
+    Fixed(Baud),
+    /// Find the rate on the line.
+    Auto,
+}
+
+impl std::str::FromStr for BaudArg {
+    type Err = profibus_fdl::timing::UnknownBaud;
+    fn from_str(s: &str) -> std::result::Result<BaudArg, Self::Err> {
+        if s.trim().eq_ignore_ascii_case("auto") {
+            return Ok(BaudArg::Auto);
+        }
+        s.parse().map(BaudArg::Fixed)
+    }
+}
+
+impl BaudArg {
+    /// The rate, for a command without a rate search: `auto` is refused
+    /// in one line naming the commands that have one.
+    pub fn fixed(self) -> Result<Baud> {
+        match self {
+            BaudArg::Fixed(b) => Ok(b),
+            BaudArg::Auto => anyhow::bail!(
+                "--baud auto is only for dpctl scan, sniff and monitor; give the line's rate (e.g. --baud 1.5M, as `dpctl scan --baud auto` prints it)"
+            ),
+        }
+    }
+}
+
+/// How [`find_baud`] found the rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BaudFound {
+    /// A valid telegram decoded at the rate.
+    Heard(Baud),
+    /// The line was silent; this station answered an FDL Status request
+    /// at the rate.
+    Answered(Baud, u8),
+}
+
+impl BaudFound {
+    /// The rate.
+    pub fn baud(self) -> Baud {
+        match self {
+            BaudFound::Heard(b) | BaudFound::Answered(b, _) => b,
+        }
+    }
+
+    /// The finding as one JSON line (`event` `baud_found`).
+    pub fn json(self) -> serde_json::Value {
+        match self {
+            BaudFound::Heard(b) => serde_json::json!({
+                "event": "baud_found", "baud": b.bps(), "how": "heard",
+            }),
+            BaudFound::Answered(b, st) => serde_json::json!({
+                "event": "baud_found", "baud": b.bps(), "how": "answered", "station": st,
+            }),
+        }
+    }
+}
+
+impl std::fmt::Display for BaudFound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BaudFound::Heard(b) => write!(f, "baud rate {b} found (traffic heard)"),
+            BaudFound::Answered(b, st) => {
+                write!(f, "baud rate {b} found (station {st} answered)")
+            }
+        }
+    }
+}
+
+/// `--baud auto`: listen at each rate (fastest first) for a valid
+/// telegram. A command that may send (`probe`: its own address and the
+/// transport's latency allowance) listens one round and, on a silent
+/// line, sends FDL Status requests at each rate until a station answers;
+/// a listener keeps listening until Ctrl-C. The port is left at the rate
+/// found.
+pub async fn find_baud(port: &mut Port, probe: Option<(u8, Duration)>) -> Result<BaudFound> {
+    use profibus_fdl::station::autobaud::BaudSet;
+    use profibus_io::baud::{listen_for_baud, listen_round, probe_baud};
+    let clock = profibus_io::driver::Clock::start();
+    let name = port.name().to_string();
+    if port.is_tcp() {
+        anyhow::bail!("--baud auto cannot work on {name}: the serial device server sets the rate; give --baud");
+    }
+    let Some((own, latency)) = probe else {
+        return match listen_for_baud(port, &clock, BaudSet::ALL, shutdown())
+            .await
+            .with_context(|| format!("searching the rate on {name}"))?
+        {
+            Some(b) => Ok(BaudFound::Heard(b)),
+            None => anyhow::bail!("interrupted before a telegram was heard at any rate"),
+        };
+    };
+    let round = tokio::time::sleep(listen_round(BaudSet::ALL));
+    let stop = async {
+        tokio::select! {
+            _ = shutdown() => {}
+            _ = round => {}
+        }
+    };
+    if let Some(b) = listen_for_baud(port, &clock, BaudSet::ALL, stop)
+        .await
+        .with_context(|| format!("searching the rate on {name}"))?
+    {
+        return Ok(BaudFound::Heard(b));
+    }
+    tracing::info!(port = %name, "silent line: asking at each rate");
+    let found = tokio::select! {
+        r = probe_baud(port, own, latency, BaudSet::ALL) => r.with_context(|| format!("asking on {name}"))?,
+        _ = shutdown() => anyhow::bail!("interrupted"),
+    };
+    match found {
+        Some(p) => Ok(BaudFound::Answered(p.baud, p.station)),
+        None => {
+            anyhow::bail!("no traffic and no station answered FDL Status at any rate on {name}")
+        }
     }
 }
 

@@ -44,6 +44,11 @@ pub struct Args {
     /// has left the ring.
     #[arg(long, default_value_t = 1000, value_name = "MS")]
     master_timeout: u64,
+    /// The line's rate instead of the bus file's (9600 … 12M), or `auto`:
+    /// listen at each rate until a valid telegram decodes (printed first:
+    /// a line, or a JSON object with `"event":"baud_found"`).
+    #[arg(long, value_name = "B")]
+    baud: Option<common::BaudArg>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -55,11 +60,23 @@ pub fn run(args: Args) -> Result<()> {
     };
     let mut monitor = Monitor::new(monitor_slaves(&info), options);
     let rt = common::runtime()?;
-    let baud = bus.file.master.params.baud;
+    let mut baud = match args.baud {
+        Some(common::BaudArg::Fixed(b)) => b,
+        _ => bus.file.master.params.baud,
+    };
     let mut port = {
         let _guard = rt.enter();
         Port::open(&args.port, baud)?
     };
+    if args.baud == Some(common::BaudArg::Auto) {
+        let found = rt.block_on(common::find_baud(&mut port, None))?;
+        if args.json {
+            crate::out::outln!("{}", common::json_line(&found.json()))?;
+        } else {
+            crate::out::outln!("{found}")?;
+        }
+        baud = found.baud();
+    }
     let mut listen_opts = ListenOptions::for_port(&port);
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     if !args.json && !args.plain && std::io::stdout().is_terminal() {

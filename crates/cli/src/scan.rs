@@ -2,7 +2,7 @@
 //! `--write-config` a bus file from what the slaves report
 //! (docs/commissioning.md).
 
-use crate::common::{self, LineArgs};
+use crate::common::{self, BaudArg, LineArgs};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::config::commission::{self, ScannedSlave, SlavePlan, WriteOptions};
@@ -65,8 +65,21 @@ async fn scan(args: Args) -> Result<()> {
         }
         None
     };
-    let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(args.line.baud));
     let mut port = args.line.open()?;
+    let baud = match args.line.baud {
+        BaudArg::Fixed(b) => b,
+        BaudArg::Auto => {
+            let latency = common::latency(args.line.latency, &port)?;
+            let found = common::find_baud(&mut port, Some((args.addr, latency))).await?;
+            if args.json {
+                crate::out::outln!("{}", common::json_line(&found.json()))?;
+            } else {
+                crate::out::outln!("{found}")?;
+            }
+            found.baud()
+        }
+    };
+    let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(baud));
     common::allow_for_port(&mut cfg, args.line.latency, &port)?;
     let app = match library {
         Some(_) => LiveListScan::with_config(args.addr),
@@ -106,7 +119,7 @@ async fn scan(args: Args) -> Result<()> {
     }
     let app = station.app();
     if let (Some(lib), Some(path)) = (library, &args.write_config) {
-        return write_config(&args, app, &lib, path);
+        return write_config(&args, baud, app, &lib, path);
     }
     let mut rows: Vec<LiveRow> = vec![LiveRow::scanner(args.addr)];
     rows.extend(app.stations().iter().map(|&s| LiveRow::from(s)));
@@ -136,7 +149,13 @@ pub fn library(dirs: &[PathBuf]) -> Result<GsdLibrary> {
     Ok(lib)
 }
 
-fn write_config(args: &Args, app: &LiveListScan, lib: &GsdLibrary, path: &Path) -> Result<()> {
+fn write_config(
+    args: &Args,
+    baud: profibus_fdl::Baud,
+    app: &LiveListScan,
+    lib: &GsdLibrary,
+    path: &Path,
+) -> Result<()> {
     let mut stations: Vec<_> = app
         .stations()
         .iter()
@@ -164,7 +183,7 @@ fn write_config(args: &Args, app: &LiveListScan, lib: &GsdLibrary, path: &Path) 
         .with_context(|| format!("folder of {}", path.display()))?;
     let o = WriteOptions {
         master: args.addr,
-        baud: args.line.baud,
+        baud,
         dir: dir.clone(),
         built_in_dir: PathBuf::from("gsd"),
     };

@@ -135,7 +135,7 @@ pub enum Control {
 
 /// Run `requests` as a station of the ring; their answers in order.
 async fn exchange(s: &StationArgs, requests: Vec<ServiceRequest>) -> Result<Vec<ServiceAnswer>> {
-    let mut cfg = ActiveConfig::new(s.addr, BusParams::defaults(s.line.baud));
+    let mut cfg = ActiveConfig::new(s.addr, BusParams::defaults(s.line.baud.fixed()?));
     let mut port = s.line.open()?;
     common::allow_for_port(&mut cfg, s.line.latency, &port)?;
     let mut station = ActiveStation::new(cfg, ServiceRequests::new(requests));

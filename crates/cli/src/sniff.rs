@@ -40,9 +40,11 @@ pub struct Args {
     /// link), or tcp://HOST:PORT (serial device server, raw TCP).
     #[arg(long, value_name = "PATH")]
     pub port: String,
-    /// Baud rate of the line (9600 … 12M); irrelevant on a pty.
+    /// Baud rate of the line (9600 … 12M; irrelevant on a pty), or
+    /// `auto`: listen at each rate until a valid telegram decodes (printed
+    /// first: a line, or a JSON object with `"event":"baud_found"`).
     #[arg(long, value_name = "B", default_value = "19200")]
-    pub baud: Baud,
+    pub baud: common::BaudArg,
     /// Print one JSON object per line; DP telegrams carry their decoded
     /// DP layer in `"dp"` (`service`, and the data unit's fields).
     #[arg(long)]
@@ -155,7 +157,19 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 async fn sniff(args: Args) -> Result<()> {
-    let port = Port::open(&args.port, args.baud)?;
+    let at = match args.baud {
+        common::BaudArg::Fixed(b) => b,
+        common::BaudArg::Auto => Baud::B19200,
+    };
+    let mut port = Port::open(&args.port, at)?;
+    if args.baud == common::BaudArg::Auto {
+        let found = common::find_baud(&mut port, None).await?;
+        if args.json {
+            crate::out::outln!("{}", common::json_line(&found.json()))?;
+        } else {
+            crate::out::outln!("{found}")?;
+        }
+    }
     let mut options = ListenOptions::for_port(&port);
     // The live list redraws every 50 ms.
     options.tick = Duration::from_millis(50);
@@ -187,7 +201,6 @@ async fn sniff(args: Args) -> Result<()> {
         pcap,
         exchanges: Exchanges::default(),
     };
-    let mut port = port;
     let mut failure = None;
     let heard = listen(&mut port, options, common::shutdown(), |heard| {
         let r = match heard {

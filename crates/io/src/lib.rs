@@ -36,6 +36,7 @@
 //!   benchmarks that prove allocation-free steady states.
 
 pub mod alloc_count;
+pub mod baud;
 pub mod class2;
 pub mod codec;
 pub mod control_io;

@@ -11,7 +11,7 @@
 
 use crate::driver::{self, Clock, Stop};
 use crate::transport::{Port, TransportError};
-use profibus_fdl::station::autobaud::{AutoBaud, BaudSet, Relisten, RELISTEN_AFTER};
+use profibus_fdl::station::autobaud::{BaudSet, Relisten, RELISTEN_AFTER};
 use profibus_fdl::station::passive::{PassiveStation, Responder};
 use profibus_fdl::timing::{Baud, BusParams};
 use profibus_fdl::Instant;
@@ -19,7 +19,6 @@ use std::cell::{Cell, RefCell};
 use std::future::Future;
 use std::ops::ControlFlow;
 use std::time::Duration;
-use tokio::io::AsyncReadExt;
 
 /// What the application's `tick` wants next.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,7 +122,9 @@ impl PassiveRunner {
         tokio::pin!(shutdown);
         loop {
             let baud = if self.search {
-                match search(port, &clock, self.rates, shutdown.as_mut()).await? {
+                match crate::baud::listen_for_baud(port, &clock, self.rates, shutdown.as_mut())
+                    .await?
+                {
                     Some(b) => {
                         on_event(clock.now(), RunnerEvent::BaudLocked { baud: b });
                         b
@@ -196,52 +197,13 @@ impl PassiveRunner {
     }
 }
 
-/// Listen at each rate until a valid telegram decodes; `None` when
-/// `shutdown` completed first.
-async fn search<F: Future<Output = ()>>(
-    port: &mut Port,
-    clock: &Clock,
-    rates: BaudSet,
-    mut shutdown: std::pin::Pin<&mut F>,
-) -> Result<Option<Baud>, RunnerError> {
-    let mut ab = AutoBaud::new(clock.now()).with_rates(rates);
-    port.set_baud(ab.baud())?;
-    let mut buf = [0u8; 512];
-    loop {
-        let Some(due) = ab.poll_timeout() else {
-            return Ok(ab.locked());
-        };
-        let wait = due.saturating_duration_since(clock.now());
-        tokio::select! {
-            _ = shutdown.as_mut() => return Ok(None),
-            r = port.read(&mut buf) => {
-                let n = r?;
-                if n == 0 {
-                    return Err(std::io::Error::new(
-                        std::io::ErrorKind::UnexpectedEof,
-                        format!("{}: port closed", port.name()),
-                    )
-                    .into());
-                }
-                if let Some(b) = ab.handle_rx(clock.now(), &buf[..n]) {
-                    return Ok(Some(b));
-                }
-            }
-            _ = tokio::time::sleep(wait) => {
-                if let Some(b) = ab.handle_timeout(clock.now()) {
-                    port.set_baud(b)?;
-                }
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::testing::fdl_status;
     use profibus_fdl::station::passive::Reply;
     use profibus_fdl::wire::{DataTelegram, ResponseStatus};
+    use tokio::io::AsyncReadExt;
 
     /// The error and its sources as `{:#}` of anyhow prints them.
     fn chain(e: &dyn std::error::Error) -> String {

@@ -52,6 +52,9 @@ pub struct Options {
     pub terminal_types: Option<toml::Table>,
     /// The same from a TOML file (`--device-opt terminal-types-file=FILE`).
     pub terminal_types_file: Option<PathBuf>,
+    /// Delay the process data by the modelled K-bus cycle time (manual
+    /// p. 23; [`Bk3000::with_kbus_timing`]).
+    pub kbus_timing: bool,
 }
 
 /// A BK3000 with its strip.
@@ -61,6 +64,7 @@ pub struct Bk3000Profile {
     address: Option<u8>,
     programmed: Option<Vec<u8>>,
     placement: Vec<image::Placement>,
+    kbus_timing: bool,
     gsd: Gsd,
 }
 
@@ -173,6 +177,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
 --switch-ones N --switch-tens N (rotary switches, instead of --addr), \
 --device-opt programmed-cfg=HEX (table 70), --device-opt placement=POS@IN/OUT,... (free placement in it), \
 --device-opt terminal-types-file=FILE.toml (terminals the catalogue lacks; bus file: [slave.terminal_types.NAME]), \
+--device-opt kbus-timing=true (process data delayed by the K-bus cycle time), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
     const PATH_OPTIONS: &'static [&'static str] = &["terminals_file", "terminal_types_file"];
     const IDENT: Option<u16> = Some(IDENT);
@@ -218,6 +223,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
             address,
             programmed,
             placement,
+            kbus_timing: options.kbus_timing,
             gsd: crate::gsd_files::parse(crate::gsd_files::BK30BECF).expect("BK30BECF.GSD parses"),
         })
     }
@@ -239,7 +245,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
     }
 
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
-        let mut dev = Bk3000::new(self.strip.clone());
+        let mut dev = Bk3000::new(self.strip.clone()).with_kbus_timing(self.kbus_timing);
         match &self.programmed {
             Some(p) if !self.placement.is_empty() => {
                 dev = dev

@@ -302,12 +302,15 @@ fn set_prm(user: &[u8]) -> Vec<u8> {
 
 struct Bench {
     slave: DpSlave<Bk3000>,
+    /// The time of the next request.
+    now: Instant,
 }
 
 impl Bench {
     fn new(list: &str) -> Bench {
         Bench {
             slave: DpSlave::new(Bk3000::new(strip(list)), ADDR),
+            now: T0,
         }
     }
 
@@ -325,7 +328,7 @@ impl Bench {
         let req =
             DataTelegram::new(ADDR, MASTER, fc, data).with_saps(dsap, dsap.map(|_| sap::MASTER));
         let mut out = [0u8; 246];
-        let r = self.slave.on_request(T0, &req, &mut out);
+        let r = self.slave.on_request(self.now, &req, &mut out);
         let len = match r {
             Reply::Data { len, .. } => len,
             _ => 0,
@@ -345,6 +348,104 @@ impl Bench {
     fn dx(&mut self, out: &[u8]) -> Vec<u8> {
         self.req(None, out).1
     }
+}
+
+/// K51: the modelled K-bus cycle time against the reaction-time table
+/// of p. 23 ("Laufzeit auf dem K-Bus", measured values; digital OUT, IN,
+/// analog terminals → T_Zyklus in µs): every row within 15 µs.
+#[test]
+fn kbus_cycle_time_follows_the_reaction_time_table() {
+    let table: [(usize, usize, usize, u16); 26] = [
+        (4, 0, 0, 150),
+        (8, 0, 0, 170),
+        (12, 0, 0, 170),
+        (16, 0, 0, 200),
+        (20, 0, 0, 200),
+        (24, 0, 0, 220),
+        (28, 0, 0, 220),
+        (32, 0, 0, 245),
+        (0, 4, 0, 150),
+        (0, 8, 0, 180),
+        (0, 12, 0, 180),
+        (0, 16, 0, 200),
+        (0, 20, 0, 200),
+        (0, 24, 0, 230),
+        (0, 28, 0, 230),
+        (0, 32, 0, 250),
+        (4, 4, 0, 170),
+        (8, 8, 0, 195),
+        (12, 12, 0, 220),
+        (16, 16, 0, 250),
+        (20, 20, 0, 275),
+        (24, 24, 0, 300),
+        (28, 28, 0, 325),
+        (32, 32, 0, 350),
+        (4, 4, 1, 630),
+        (4, 4, 2, 700),
+    ];
+    for (dout, din, analog, want) in table {
+        let mut names = vec!["KL2134"; dout / 4];
+        names.extend(vec!["KL1104"; din / 4]);
+        names.extend(vec!["KL3202"; analog]);
+        names.push("KL9010");
+        let d = Bk3000::new(strip(&names.join(",")));
+        let got = d.kbus_cycle_us();
+        assert!(
+            got.abs_diff(want) <= 15,
+            "{dout} DO, {din} DI, {analog} KL3202: {got} µs, the table {want} µs"
+        );
+    }
+}
+
+/// K51: with `kbus_timing` the outputs reach the terminals one K-bus
+/// cycle after the Data_Exchange, and a new input value reaches the
+/// master one cycle after it changed.
+#[test]
+fn process_data_are_delayed_by_the_kbus_cycle() {
+    let list = "KL1104,KL2134,KL9010";
+    let mut b = Bench {
+        slave: DpSlave::new(Bk3000::new(strip(list)).with_kbus_timing(true), ADDR),
+        now: T0,
+    };
+    let m = Bk3000Master::from_names(&list.split(',').collect::<Vec<_>>()).unwrap();
+    b.start(&m.user_prm_data(), m.chk_cfg());
+    assert_eq!(b.slave.state(), SlaveState::DataExch);
+    let cycle = Duration::from_micros(166); // 140 + 8 bits × 3.3 µs
+    assert_eq!(b.slave.device().kbus_cycle_us(), 166);
+    let t1 = T0 + Duration::from_millis(1);
+    b.now = t1;
+    let mut out = vec![0u8; m.image().out_len];
+    m.encode("2.KL2134.3", 1.0, &mut out).unwrap();
+    b.dx(&out);
+    let dev = b.slave.device_mut();
+    assert_eq!(
+        dev.output_value("2.KL2134.3"),
+        Some(0),
+        "still on the K-bus"
+    );
+    assert_eq!(dev.poll_timeout(), Some(t1 + cycle));
+    dev.handle_timeout(t1 + (cycle - Duration::from_micros(1)));
+    assert_eq!(dev.output_value("2.KL2134.3"), Some(0));
+    dev.handle_timeout(t1 + cycle);
+    assert_eq!(
+        dev.output_value("2.KL2134.3"),
+        Some(1),
+        "one K-bus cycle later"
+    );
+    // An input set at t2 shows from t2 + T on.
+    let t2 = T0 + Duration::from_millis(2);
+    b.now = t2;
+    b.dx(&out);
+    b.slave.device_mut().control("set 1.KL1104.2 1").unwrap();
+    let bit = |b: &mut Bench, at: Instant| {
+        b.now = at;
+        let i = b.dx(&out);
+        let view = m.decode(Dir::In, &i);
+        view.iter().find(|c| c.name == "1.KL1104.2").unwrap().raw
+    };
+    assert_eq!(bit(&mut b, t2 + (cycle - Duration::from_micros(1))), 0);
+    assert_eq!(bit(&mut b, t2 + cycle), 1);
+    assert_eq!(bit(&mut b, t2 + cycle * 2), 1);
 }
 
 #[test]
@@ -516,6 +617,7 @@ fn programmed_configuration_is_compared_byte_for_byte() {
         .unwrap();
     let mut b = Bench {
         slave: DpSlave::new(dev, ADDR),
+        now: T0,
     };
     let mut u = [0u8; 10];
     u[9] = 0x02;
@@ -577,6 +679,12 @@ fn profile_options_modules_and_channels() {
     o.set_text("switch-tens", "2");
     let p = entry.configure(&o, Some(9)).unwrap();
     assert_eq!(p.address(), Some(27));
+    // K51's option exists under its name and takes a boolean.
+    let mut k = o.clone();
+    k.set_pair("kbus-timing=true").unwrap();
+    entry.configure(&k, None).unwrap().device(None).unwrap();
+    k.set_pair("kbus-timing=3").unwrap();
+    assert!(entry.configure(&k, None).is_err());
     assert_eq!(
         p.chk_cfg().unwrap(),
         [0x50, 0x50, 0x60, 0x60, 0xB4, 0x10, 0x20]

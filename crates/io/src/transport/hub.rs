@@ -176,6 +176,7 @@ pub struct Hub {
     last_delivery: Instant,
     buf: Box<[u8; 4096]>,
     slack_set: bool,
+    check_rates: bool,
 }
 
 impl fmt::Debug for Hub {
@@ -248,6 +249,7 @@ impl Hub {
             last_delivery: Instant::ZERO,
             buf: Box::new([0; 4096]),
             slack_set: false,
+            check_rates: false,
         })
     }
 
@@ -391,12 +393,34 @@ impl Hub {
 
     /// Read everything station `i` wrote; the medium gets each chunk as it
     /// came.
+    /// Check each station's rate on a paced line, as a UART does: a
+    /// station whose port is set to another rate than the line's
+    /// ([`MediumConfig::baud`]) receives every character as garbage
+    /// (0xFF, never a start delimiter), and what it sends reaches the
+    /// others as garbage. Off by default (on a pty the rate otherwise
+    /// only sets the bus timing); `dpctl bus --check-rates`.
+    pub fn check_rates(&mut self, on: bool) {
+        self.check_rates = on;
+    }
+
+    /// Whether station `i` runs at another rate than the paced line.
+    fn off_rate(&self, i: usize) -> bool {
+        match (self.check_rates, self.medium.config().baud) {
+            (true, Some(line)) => pty_rate(&self.stations[i].master)
+                .is_some_and(|bps| bps.abs_diff(line.bps()) * 50 > line.bps()),
+            _ => false,
+        }
+    }
+
     fn read_station(&mut self, i: usize) -> Result<(), HubError> {
         loop {
             match nix::unistd::read(&self.stations[i].master, &mut self.buf[..]) {
                 Ok(0) => return Ok(()),
                 Ok(len) => {
                     let now = self.now();
+                    if self.off_rate(i) {
+                        self.buf[..len].fill(0xFF);
+                    }
                     self.medium.transmit(now, i, &self.buf[..len]);
                     // Unpaced: hand it on at once.
                     self.deliver_due(now)?;
@@ -423,9 +447,12 @@ impl Hub {
     fn deliver_due(&mut self, now: Instant) -> Result<(), HubError> {
         while let Some(d) = self.medium.poll_delivery(now) {
             self.last_delivery = d.at;
+            let off: Vec<bool> = (0..self.stations.len()).map(|j| self.off_rate(j)).collect();
+            let garbage = vec![0xFF; d.bytes.len()];
             for (j, s) in self.stations.iter_mut().enumerate() {
                 if d.reaches(j) && s.connected {
-                    deliver(s, &d.bytes, &mut self.stats);
+                    let bytes: &[u8] = if off[j] { &garbage } else { &d.bytes };
+                    deliver(s, bytes, &mut self.stats);
                 }
             }
             if self.pcap.is_some() {
@@ -490,6 +517,23 @@ fn remove_links(stations: &[Station]) {
             let _ = std::fs::remove_file(&s.link);
         }
     }
+}
+
+/// The rate a pty's station set on its end (the master end shares the
+/// termios; `termios2` carries any rate), if it can be read.
+#[cfg(target_os = "linux")]
+fn pty_rate(master: &OwnedFd) -> Option<u32> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: TCGETS2 fills a `termios2` the pointer points to and reads
+    // nothing else; the fd is open for the call.
+    let mut t: nix::libc::termios2 = unsafe { std::mem::zeroed() };
+    let r = unsafe { nix::libc::ioctl(master.as_raw_fd(), nix::libc::TCGETS2, &mut t) };
+    (r == 0).then_some(t.c_ospeed)
+}
+
+#[cfg(not(target_os = "linux"))]
+fn pty_rate(_master: &OwnedFd) -> Option<u32> {
+    None
 }
 
 fn pty_err(e: Errno) -> HubError {

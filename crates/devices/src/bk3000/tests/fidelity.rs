@@ -481,6 +481,7 @@ fn programmed_configuration_places_terminals_freely() {
         .unwrap();
     let mut b = Bench {
         slave: DpSlave::new(dev, ADDR),
+        now: T0,
     };
     let mut u = [0u8; 10];
     u[9] = 0x02;
