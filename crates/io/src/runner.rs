@@ -1,6 +1,6 @@
 //! A passive station (a slave) on a port, with the baud-rate search of a
 //! slave with `Auto_Baud_supp`: the thin tokio part around the sans-IO
-//! [`AutoBaud`] search and [`Relisten`] policy, next to [`crate::driver`].
+//! [`AutoBaud`](profibus_fdl::station::autobaud::AutoBaud) search and [`Relisten`] policy, next to [`crate::driver`].
 //!
 //! [`PassiveRunner::run`] listens for the rate (when searching), builds a
 //! [`PassiveStation`] at the rate found, runs it with the driver, and when
@@ -75,7 +75,7 @@ pub enum RunnerError {
 /// How a passive station runs on a port; see the module docs.
 #[derive(Debug, Clone, Copy)]
 pub struct PassiveRunner {
-    /// Search the rate ([`AutoBaud`]) instead of using the port's.
+    /// Search the rate ([`AutoBaud`](profibus_fdl::station::autobaud::AutoBaud)) instead of using the port's.
     pub search: bool,
     /// With `search`: search again after this long without a valid
     /// telegram.
