@@ -27,14 +27,19 @@ fn dpctl_in(dir: &Path, args: &[&str]) -> (std::process::ExitStatus, String) {
 /// resolve as from the repository's root, as the docs' commands run.
 /// The built-in GSD files are there too: a doc that copies one next to
 /// its bus file (`cp crates/devices/gsd/DPCTL_GEN.GSD /tmp/gw/`, before
-/// the here-document) names it without a directory.
+/// the here-document) names it without a directory, and a bus file that
+/// `dpctl scan --write-config` wrote names it in `gsd/`, where the scan
+/// copies the built-in files it used (docs/commissioning.md).
 fn workdir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     std::os::unix::fs::symlink(repo().join("crates"), dir.path().join("crates")).unwrap();
+    std::fs::create_dir(dir.path().join("gsd")).unwrap();
     for e in std::fs::read_dir(repo().join("crates/devices/gsd")).unwrap() {
         let p = e.unwrap().path();
         if profibus::dp::config::gsd::is_gsd_file_name(&p) {
-            std::os::unix::fs::symlink(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+            let name = p.file_name().unwrap();
+            std::os::unix::fs::symlink(&p, dir.path().join(name)).unwrap();
+            std::os::unix::fs::symlink(&p, dir.path().join("gsd").join(name)).unwrap();
         }
     }
     dir
