@@ -37,6 +37,9 @@
 //! [mqtt]                 # optional: settings of `dpctl gateway`, kept raw
 //! prefix = "profibus"    # (see the `profibus-gateway` crate)
 //!
+//! [opcua]                # optional: the OPC UA server of `dpctl gateway`,
+//! endpoint = "opc.tcp://0.0.0.0:4840"  # kept raw (see `profibus-opcua`)
+//!
 //! [[slave]]
 //! address = 25
 //! device = "omega"                       # a device profile instead of gsd/modules
@@ -99,6 +102,9 @@ struct RawFile {
     /// The gateway's settings, kept raw: `profibus-gateway` reads them.
     #[serde(default)]
     mqtt: Option<toml::Table>,
+    /// The OPC UA server's settings, kept raw: `profibus-opcua` reads them.
+    #[serde(default)]
+    opcua: Option<toml::Table>,
 }
 
 #[derive(Deserialize)]
@@ -296,6 +302,9 @@ pub struct BusFile {
     /// The `[mqtt]` table as written, for the gateway (`profibus-gateway`
     /// parses and checks it; this crate only carries it).
     pub mqtt: Option<toml::Table>,
+    /// The `[opcua]` table as written, for the OPC UA server
+    /// (`profibus-opcua` parses and checks it; this crate only carries it).
+    pub opcua: Option<toml::Table>,
 }
 
 /// What is wrong with a bus file, with its position.
@@ -515,7 +524,7 @@ impl Ctx<'_> {
                     }
                     continue;
                 }
-                "mqtt" => continue,
+                "mqtt" | "opcua" => continue,
                 other => {
                     return Err(self.err(
                         key_at(root, other),
@@ -665,6 +674,7 @@ impl BusFile {
             slaves,
             warnings,
             mqtt: raw.mqtt,
+            opcua: raw.opcua,
         })
     }
 }
