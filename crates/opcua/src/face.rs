@@ -1,0 +1,193 @@
+//! The OPC UA face of the gateway core: [`Face`], a [`Session`] around
+//! the plain JSON [`Gateway`] that also samples the master for the
+//! address space and carries OPC UA writes and method calls into the
+//! core as requests, so that they pass exactly the checks and
+//! permissions of MQTT requests (`[mqtt] writable`, queue limits, job
+//! timeouts) and are applied at a cycle boundary.
+//!
+//! With `--mqtt` too, the same core talks to the broker: the face hands
+//! the core's publishes to the MQTT link and keeps only the answers to
+//! its own requests. Alone, it drops the publishes.
+
+use crate::space::{Sampler, Update};
+use profibus_dp::master::DpMaster;
+use profibus_fdl::Instant;
+use profibus_gateway::topics::Service;
+use profibus_gateway::{Gateway, LinkSetup, MqttSettings, Publish, Session};
+use std::collections::{HashMap, VecDeque};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+
+/// The topic prefix of the answers to the face's own requests; never
+/// sent to a broker.
+const REPLY_PREFIX: &str = "dpctl-opcua/reply/";
+
+/// A request from an OPC UA session waiting for the next cycle boundary.
+struct Job {
+    address: u8,
+    service: Service,
+    body: serde_json::Map<String, serde_json::Value>,
+    answer: mpsc::Sender<serde_json::Value>,
+}
+
+/// Where the server's callbacks leave requests for the core: shared by
+/// the server's sessions and the bus thread.
+#[derive(Default)]
+pub struct Requests {
+    queue: Mutex<VecDeque<Job>>,
+}
+
+impl Requests {
+    /// Queue a request of `service` on slave `address` with JSON `body`
+    /// (the MQTT request payload without `id` and `reply_to`); the
+    /// receiver gets the core's answer, `{"ok": …}`.
+    pub fn submit(
+        &self,
+        address: u8,
+        service: Service,
+        body: serde_json::Map<String, serde_json::Value>,
+    ) -> mpsc::Receiver<serde_json::Value> {
+        let (tx, rx) = mpsc::channel();
+        let job = Job {
+            address,
+            service,
+            body,
+            answer: tx,
+        };
+        self.queue
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push_back(job);
+        rx
+    }
+
+    fn take(&self) -> Vec<Job> {
+        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        q.drain(..).collect()
+    }
+}
+
+/// The gateway core with its OPC UA face (see the module documentation).
+pub struct Face {
+    core: Gateway,
+    requests: Arc<Requests>,
+    sampler: Sampler,
+    updates: tokio::sync::mpsc::UnboundedSender<Vec<Update>>,
+    waiting: HashMap<u64, mpsc::Sender<serde_json::Value>>,
+    next: u64,
+    mqtt: bool,
+    started: bool,
+    out: VecDeque<Publish>,
+}
+
+impl Face {
+    /// The face of `core`: requests from `requests`, value updates to
+    /// `updates`; `mqtt`: whether a broker link also uses the core.
+    pub fn new(
+        core: Gateway,
+        sampler: Sampler,
+        requests: Arc<Requests>,
+        updates: tokio::sync::mpsc::UnboundedSender<Vec<Update>>,
+        mqtt: bool,
+    ) -> Face {
+        Face {
+            core,
+            requests,
+            sampler,
+            updates,
+            waiting: HashMap::new(),
+            next: 0,
+            mqtt,
+            started: false,
+            out: VecDeque::new(),
+        }
+    }
+
+    /// Move the core's publishes on: answers to our requests to their
+    /// waiters, the rest to the broker (or nowhere without one).
+    fn route(&mut self) {
+        while let Some(p) = self.core.poll_publish() {
+            if let Some(n) = p.topic.strip_prefix(REPLY_PREFIX) {
+                let n = n.parse::<u64>().ok();
+                if let Some(tx) = n.and_then(|n| self.waiting.remove(&n)) {
+                    let v = serde_json::from_slice(&p.payload).unwrap_or_default();
+                    // The caller may have given up waiting.
+                    let _ = tx.send(v);
+                }
+            } else if self.mqtt {
+                self.out.push_back(p);
+            }
+        }
+    }
+
+    fn take_requests(&mut self, ts_ms: u64) {
+        for job in self.requests.take() {
+            let n = self.next;
+            self.next += 1;
+            let mut body = job.body;
+            body.insert("reply_to".into(), format!("{REPLY_PREFIX}{n}").into());
+            let s = self.core.settings();
+            let topic = format!(
+                "{}/{}/{}/{}",
+                s.prefix,
+                s.bus,
+                job.address,
+                job.service.request()
+            );
+            self.waiting.insert(n, job.answer);
+            let payload = serde_json::Value::Object(body).to_string();
+            self.core.handle_message(&topic, payload.as_bytes(), ts_ms);
+            self.route();
+        }
+    }
+}
+
+impl Session for Face {
+    fn settings(&self) -> &MqttSettings {
+        self.core.settings()
+    }
+
+    fn link_setup(&self) -> LinkSetup {
+        Session::link_setup(&self.core)
+    }
+
+    fn connected(&mut self, ts_ms: u64) {
+        self.core.connected(ts_ms);
+    }
+
+    fn disconnected(&mut self, ts_ms: u64) {
+        self.core.disconnected(ts_ms);
+    }
+
+    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        self.core.handle_message(topic, payload, ts_ms);
+        self.route();
+    }
+
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
+        if !self.started {
+            self.started = true;
+            if !self.mqtt {
+                // No broker: the core answers at once, never "offline".
+                self.core.connected(ts_ms);
+            }
+        }
+        self.take_requests(ts_ms);
+        self.core.step(m, now, ts_ms);
+        self.route();
+        let updates = self.sampler.sample(m, ts_ms);
+        if !updates.is_empty() {
+            // The server may be gone while the bus stops.
+            let _ = self.updates.send(updates);
+        }
+    }
+
+    fn poll_publish(&mut self) -> Option<Publish> {
+        self.route();
+        self.out.pop_front()
+    }
+
+    fn last_will(&self) -> Publish {
+        self.core.last_will()
+    }
+}
