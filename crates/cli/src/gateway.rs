@@ -75,9 +75,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     let url = args.mqtt.clone().or_else(|| settings.broker.clone());
     let Some(opcua) = opcua else {
-        let url = url.context(
-            "no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker",
-        )?;
+        let url =
+            url.context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
         let conn = Connection::from_settings(&settings, &url)?;
         return match args.sparkplug.clone().or(settings.sparkplug.clone()) {
             Some(id) => {

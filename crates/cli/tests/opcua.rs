@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::mqtt::{free_port, write_bus, GATEWAY_SLAVES};
+use common::mqtt::{free_port, write_bus};
 use common::{dpctl, need, repo, Proc, TempDir};
 use std::path::PathBuf;
 use std::process::Command;
@@ -13,8 +13,32 @@ use std::time::Duration;
 
 const T: Duration = Duration::from_secs(120);
 
-/// A BK3000 strip beside [`GATEWAY_SLAVES`] (echo 3, locked 4, Omega 25).
-const COUPLER: &str = r#"
+/// Two generic GSD slaves (3 DP-V1 echo and writable, 4 not writable),
+/// an Omega drive that follows its setpoint (25, only `setpoint1`
+/// writable) and a BK3000 strip (15).
+const SLAVES: &str = r#"[master]
+address = 1
+baud = "1.5M"
+
+[[slave]]
+address = 3
+name = "echo"
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[[slave]]
+address = 4
+name = "locked"
+gsd = "DPCTL_GEN.GSD"
+modules = ["2 words in/out"]
+
+[[slave]]
+address = 25
+device = "omega"
+setpoints = 1
+actual_values = 1
+drive_enable = "auto"
+
 [[slave]]
 address = 15
 name = "coupler"
@@ -48,7 +72,7 @@ fn script() -> PathBuf {
 /// `dpctl gateway --sim --opcua` on a free port with `extra` arguments;
 /// returns once the port takes connections.
 fn gateway(dir: &TempDir, table: &str, extra: &[&str]) -> (Proc, String) {
-    let bus = write_bus(dir, &format!("{GATEWAY_SLAVES}{COUPLER}{MQTT}{table}"));
+    let bus = write_bus(dir, &format!("{SLAVES}{MQTT}{table}"));
     let port = free_port();
     let url = format!("opc.tcp://127.0.0.1:{port}");
     let mut cmd = Command::new(dpctl());
@@ -94,7 +118,10 @@ fn opcua_client_browses_reads_subscribes_writes_and_calls() {
         .map(|s| s.as_str().unwrap())
         .collect();
     assert_eq!(slaves.len(), 4, "{v}");
-    assert!(slaves.contains(&"3 echo") && slaves.contains(&"15 coupler"), "{v}");
+    assert!(
+        slaves.contains(&"3 echo") && slaves.contains(&"15 coupler"),
+        "{v}"
+    );
     assert_eq!(v["master"], "operate");
     assert_eq!(v["bk3000_state"], "data_exchange");
     // A scaled BK3000 channel: Double, with its unit as EUInformation.
@@ -143,7 +170,11 @@ fn opcua_survives_a_client_killed_mid_subscription_and_50_clients() {
     holder.wait(T);
     let rss = |pid: u32| {
         let s = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
-        let l = s.lines().find(|l| l.starts_with("VmRSS:")).unwrap().to_string();
+        let l = s
+            .lines()
+            .find(|l| l.starts_with("VmRSS:"))
+            .unwrap()
+            .to_string();
         l.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap()
     };
     let cpu = |pid: u32| {
@@ -213,7 +244,9 @@ fn opcua_default_security_takes_users_and_refuses_anonymous_and_none() {
     assert_ne!(v["no_security"], "accepted", "{v}");
     // The certificate made on first start, where docs/opcua.md says.
     assert!(dir.path("xdg/dpctl/opcua/pki/own/cert.der").is_file());
-    assert!(dir.path("xdg/dpctl/opcua/pki/private/private.pem").is_file());
+    assert!(dir
+        .path("xdg/dpctl/opcua/pki/private/private.pem")
+        .is_file());
     drop(gw);
 }
 
@@ -237,9 +270,11 @@ fn opcua_refuses_bad_settings_with_one_line() {
             "OPC UA endpoint `http://x:1` is not opc.tcp://HOST[:PORT]",
         ),
     ] {
-        let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}{MQTT}{table}"));
+        let bus = write_bus(&dir, &format!("{SLAVES}{MQTT}{table}"));
         let mut cmd = Command::new(dpctl());
-        cmd.args(["gateway", "--sim", "--config"]).arg(&bus).args(&args);
+        cmd.args(["gateway", "--sim", "--config"])
+            .arg(&bus)
+            .args(&args);
         let out = Proc::spawn_captured(cmd).finish(T);
         assert!(!out.status.success());
         assert!(out.stderr.contains(want), "{want}\n{}", out.stderr);

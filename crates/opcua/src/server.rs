@@ -109,9 +109,13 @@ impl OpcuaServer {
                     if length == 0 || length > 240 {
                         return Err(StatusCode::BadOutOfRange);
                     }
-                    let body = json!({"op": "read", "slot": slot, "index": index, "length": length});
+                    let body =
+                        json!({"op": "read", "slot": slot, "index": index, "length": length});
                     let answer = call(&rq, a, Service::Dpv1, obj(body), wait)?;
-                    let data = answer["hex"].as_str().and_then(unhex).ok_or(StatusCode::BadUnexpectedError)?;
+                    let data = answer["hex"]
+                        .as_str()
+                        .and_then(unhex)
+                        .ok_or(StatusCode::BadUnexpectedError)?;
                     Ok(vec![Variant::ByteString(ByteString::from(data))])
                 });
             }
@@ -136,7 +140,9 @@ impl OpcuaServer {
                     let index = u16_arg(args, 1)?;
                     let body = json!({"op": "read", "pnu": pnu, "index": index});
                     let answer = call(&rq, a, Service::Pkw, obj(body), wait)?;
-                    let v = answer["value"].as_i64().ok_or(StatusCode::BadUnexpectedError)?;
+                    let v = answer["value"]
+                        .as_i64()
+                        .ok_or(StatusCode::BadUnexpectedError)?;
                     Ok(vec![Variant::Int64(v)])
                 });
             }
@@ -212,6 +218,10 @@ impl Drop for OpcuaServer {
     }
 }
 
+/// Sessions at once (the library's default is 20; a session a client
+/// dropped without closing it counts until it times out).
+pub const MAX_SESSIONS: usize = 100;
+
 /// The server's configuration from the settings.
 fn builder(s: &OpcuaSettings) -> ServerBuilder {
     let mut ids: Vec<String> = s.users.iter().map(|u| format!("user:{}", u.name)).collect();
@@ -232,6 +242,7 @@ fn builder(s: &OpcuaSettings) -> ServerBuilder {
         .host(s.host.clone())
         .port(s.port)
         .discovery_urls(vec![path.clone()])
+        .max_sessions(MAX_SESSIONS)
         .with_node_manager(simple_node_manager(
             NamespaceMetadata {
                 namespace_uri: NAMESPACE_URI.to_string(),

@@ -134,7 +134,11 @@ pub fn parse_endpoint(url: &str) -> Result<(String, u16, String), SettingsError>
         None => DEFAULT_PORT,
         Some(p) => p.parse::<u16>().ok().filter(|p| *p > 0).ok_or_else(err)?,
     };
-    Ok((host.to_string(), port, path.trim_end_matches('/').to_string()))
+    Ok((
+        host.to_string(),
+        port,
+        path.trim_end_matches('/').to_string(),
+    ))
 }
 
 /// Where the server keeps its certificate when `pki_dir` is not given:
@@ -324,7 +328,12 @@ mod tests {
             parse_endpoint("opc.tcp://[::1]:5000/dp/").unwrap(),
             ("::1".into(), 5000, "dp".into())
         );
-        for bad in ["http://x:1", "opc.tcp://:1", "opc.tcp://x:0", "opc.tcp://x:y"] {
+        for bad in [
+            "http://x:1",
+            "opc.tcp://:1",
+            "opc.tcp://x:0",
+            "opc.tcp://x:y",
+        ] {
             assert_eq!(
                 parse_endpoint(bad).unwrap_err().to_string(),
                 format!("OPC UA endpoint `{bad}` is not opc.tcp://HOST[:PORT]")
@@ -372,7 +381,11 @@ mod tests {
     #[test]
     fn users_file() {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("users"), "# operators\nanna:s3cret\n\nbob:pw:with:colons\n").unwrap();
+        std::fs::write(
+            dir.path().join("users"),
+            "# operators\nanna:s3cret\n\nbob:pw:with:colons\n",
+        )
+        .unwrap();
         let t = table("users_file = \"users\"");
         let s = OpcuaSettings::new(Some(&t), None, false, dir.path()).unwrap();
         assert_eq!(s.users.len(), 2);

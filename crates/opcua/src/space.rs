@@ -9,7 +9,7 @@
 use opcua::server::address_space::{AddressSpace, MethodBuilder, ObjectBuilder, VariableBuilder};
 use opcua::types::{
     Argument, ByteString, DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId,
-    ObjectId, ObjectTypeId, QualifiedName, StatusCode, UAString, Variant, VariableTypeId,
+    ObjectId, ObjectTypeId, QualifiedName, StatusCode, UAString, VariableTypeId, Variant,
 };
 use profibus_devices::channels::{Channel, ChannelType, Direction, Value};
 use profibus_dp::master::{DpMaster, SlaveState};
@@ -265,10 +265,42 @@ impl Space {
             .organized_by(root)
             .insert(sp);
         let s = &space;
-        s.variable(sp, &s.id("MasterState"), "MasterState", &bus_id, DataTypeId::String, "", false);
-        s.variable(sp, &s.id("Cycles"), "Cycles", &bus_id, DataTypeId::UInt64, 0u64, false);
-        s.variable(sp, &s.id("CycleTimeAvg"), "CycleTimeAvg", &bus_id, DataTypeId::Double, 0.0, false);
-        s.variable(sp, &s.id("CycleTimeMax"), "CycleTimeMax", &bus_id, DataTypeId::Double, 0.0, false);
+        s.variable(
+            sp,
+            &s.id("MasterState"),
+            "MasterState",
+            &bus_id,
+            DataTypeId::String,
+            "",
+            false,
+        );
+        s.variable(
+            sp,
+            &s.id("Cycles"),
+            "Cycles",
+            &bus_id,
+            DataTypeId::UInt64,
+            0u64,
+            false,
+        );
+        s.variable(
+            sp,
+            &s.id("CycleTimeAvg"),
+            "CycleTimeAvg",
+            &bus_id,
+            DataTypeId::Double,
+            0.0,
+            false,
+        );
+        s.variable(
+            sp,
+            &s.id("CycleTimeMax"),
+            "CycleTimeMax",
+            &bus_id,
+            DataTypeId::Double,
+            0.0,
+            false,
+        );
         for u in ["CycleTimeAvg", "CycleTimeMax"] {
             s.property(
                 sp,
@@ -307,26 +339,77 @@ impl Space {
         // properties (OPC 10000-100, 5.5.2) in this namespace.
         let gsd = l.gsd.as_ref();
         let text = |f: Option<&String>| f.cloned().unwrap_or_default();
-        self.property(sp, &p("IdentNumber"), "IdentNumber", &obj, DataTypeId::UInt16, l.ident_number);
+        self.property(
+            sp,
+            &p("IdentNumber"),
+            "IdentNumber",
+            &obj,
+            DataTypeId::UInt16,
+            l.ident_number,
+        );
         let props: [(&str, String); 5] = [
-            ("Manufacturer", text(gsd.and_then(|g| g.vendor_name.as_ref()))),
+            (
+                "Manufacturer",
+                text(gsd.and_then(|g| g.vendor_name.as_ref())),
+            ),
             ("Model", text(gsd.and_then(|g| g.model_name.as_ref()))),
-            ("DeviceRevision", text(gsd.and_then(|g| g.revision.as_ref()))),
-            ("HardwareRevision", text(gsd.and_then(|g| g.hardware_release.as_ref()))),
-            ("SoftwareRevision", text(gsd.and_then(|g| g.software_release.as_ref()))),
+            (
+                "DeviceRevision",
+                text(gsd.and_then(|g| g.revision.as_ref())),
+            ),
+            (
+                "HardwareRevision",
+                text(gsd.and_then(|g| g.hardware_release.as_ref())),
+            ),
+            (
+                "SoftwareRevision",
+                text(gsd.and_then(|g| g.software_release.as_ref())),
+            ),
         ];
         for (n, v) in props {
             self.property(sp, &p(n), n, &obj, DataTypeId::String, v);
         }
-        self.variable(sp, &p("State"), "State", &obj, DataTypeId::String, "", false);
+        self.variable(
+            sp,
+            &p("State"),
+            "State",
+            &obj,
+            DataTypeId::String,
+            "",
+            false,
+        );
         let diag = p("Diagnosis");
         self.object(sp, &diag, "Diagnosis", &obj);
-        self.variable(sp, &p("Diagnosis.Text"), "Text", &diag, DataTypeId::String, "", false);
-        self.variable(sp, &p("Diagnosis.Raw"), "Raw", &diag, DataTypeId::ByteString, ByteString::null(), false);
+        self.variable(
+            sp,
+            &p("Diagnosis.Text"),
+            "Text",
+            &diag,
+            DataTypeId::String,
+            "",
+            false,
+        );
+        self.variable(
+            sp,
+            &p("Diagnosis.Raw"),
+            "Raw",
+            &diag,
+            DataTypeId::ByteString,
+            ByteString::null(),
+            false,
+        );
         let stats = p("Statistics");
         self.object(sp, &stats, "Statistics", &obj);
         for n in STATS {
-            self.variable(sp, &p(&format!("Statistics.{n}")), n, &stats, DataTypeId::UInt64, 0u64, false);
+            self.variable(
+                sp,
+                &p(&format!("Statistics.{n}")),
+                n,
+                &stats,
+                DataTypeId::UInt64,
+                0u64,
+                false,
+            );
         }
         let access = writable.iter().find(|w| w.address == a);
         let mut writable_outputs = vec![];
@@ -337,17 +420,31 @@ impl Space {
             for ch in map.of(dir) {
                 let id = p(&format!("{folder}.{}", ch.name));
                 let can_write = dir == Direction::Output
-                    && access.is_some_and(|w| {
-                        w.channels.as_ref().is_none_or(|c| c.contains(&ch.name))
-                    });
-                self.variable(sp, &id, &ch.name, &f, data_type(ch), variant(ch, Value::Int(0)), can_write);
+                    && access
+                        .is_some_and(|w| w.channels.as_ref().is_none_or(|c| c.contains(&ch.name)));
+                self.variable(
+                    sp,
+                    &id,
+                    &ch.name,
+                    &f,
+                    data_type(ch),
+                    variant(ch, Value::Int(0)),
+                    can_write,
+                );
                 if can_write {
                     writable_outputs.push((id.clone(), ch.name.clone()));
                 }
                 if let Some(scale) = &ch.scale {
                     self.property(
                         sp,
-                        &NodeId::new(self.ns, format!("{}.{folder}.{}.EngineeringUnits", self.bus_slave(a), ch.name)),
+                        &NodeId::new(
+                            self.ns,
+                            format!(
+                                "{}.{folder}.{}.EngineeringUnits",
+                                self.bus_slave(a),
+                                ch.name
+                            ),
+                        ),
                         "EngineeringUnits",
                         &id,
                         DataTypeId::EUInformation,
@@ -363,7 +460,15 @@ impl Space {
                 let mo = p(&format!("Modules.{slot}"));
                 self.object(sp, &mo, &format!("{slot} {}", m.name), &mf);
                 for n in ["InputBytes", "OutputBytes"] {
-                    self.variable(sp, &p(&format!("Modules.{slot}.{n}")), n, &mo, DataTypeId::ByteString, ByteString::null(), false);
+                    self.variable(
+                        sp,
+                        &p(&format!("Modules.{slot}.{n}")),
+                        n,
+                        &mo,
+                        DataTypeId::ByteString,
+                        ByteString::null(),
+                        false,
+                    );
                 }
             }
         }
@@ -391,13 +496,21 @@ impl Space {
             nodes.read_record = Some(method(
                 sp,
                 "ReadRecord",
-                &[arg("Slot", DataTypeId::Byte), arg("Index", DataTypeId::Byte), arg("Length", DataTypeId::Byte)],
+                &[
+                    arg("Slot", DataTypeId::Byte),
+                    arg("Index", DataTypeId::Byte),
+                    arg("Length", DataTypeId::Byte),
+                ],
                 &[arg("Data", DataTypeId::ByteString)],
             ));
             nodes.write_record = Some(method(
                 sp,
                 "WriteRecord",
-                &[arg("Slot", DataTypeId::Byte), arg("Index", DataTypeId::Byte), arg("Data", DataTypeId::ByteString)],
+                &[
+                    arg("Slot", DataTypeId::Byte),
+                    arg("Index", DataTypeId::Byte),
+                    arg("Data", DataTypeId::ByteString),
+                ],
                 &[],
             ));
         }
@@ -405,13 +518,20 @@ impl Space {
             nodes.pkw_read = Some(method(
                 sp,
                 "PkwRead",
-                &[arg("Parameter", DataTypeId::UInt16), arg("Index", DataTypeId::UInt16)],
+                &[
+                    arg("Parameter", DataTypeId::UInt16),
+                    arg("Index", DataTypeId::UInt16),
+                ],
                 &[arg("Value", DataTypeId::Int64)],
             ));
             nodes.pkw_write = Some(method(
                 sp,
                 "PkwWrite",
-                &[arg("Parameter", DataTypeId::UInt16), arg("Index", DataTypeId::UInt16), arg("Value", DataTypeId::Int64)],
+                &[
+                    arg("Parameter", DataTypeId::UInt16),
+                    arg("Index", DataTypeId::UInt16),
+                    arg("Value", DataTypeId::Int64),
+                ],
                 &[],
             ));
         }
@@ -424,7 +544,13 @@ impl Space {
 }
 
 /// The counters under `Statistics`, from the master's slave statistics.
-const STATS: [&str; 5] = ["DataExchanges", "Retries", "Errors", "Restarts", "DiagReads"];
+const STATS: [&str; 5] = [
+    "DataExchanges",
+    "Retries",
+    "Errors",
+    "Restarts",
+    "DiagReads",
+];
 
 /// What a slave's nodes showed last.
 #[derive(Default)]
@@ -489,7 +615,10 @@ impl Sampler {
         let state = m.operating_state().as_str();
         if self.master != Some(state) {
             self.master = Some(state);
-            out.push((self.id("MasterState".into()), dv(state.into(), StatusCode::Good)));
+            out.push((
+                self.id("MasterState".into()),
+                dv(state.into(), StatusCode::Good),
+            ));
         }
         let counters = self
             .last_counters_ms
@@ -498,12 +627,18 @@ impl Sampler {
             self.last_counters_ms = Some(ts_ms);
             let c = m.cycle_stats();
             let ms = |ns: u64| ns as f64 / 1e6;
-            out.push((self.id("Cycles".into()), dv(c.cycles.into(), StatusCode::Good)));
+            out.push((
+                self.id("Cycles".into()),
+                dv(c.cycles.into(), StatusCode::Good),
+            ));
             out.push((
                 self.id("CycleTimeAvg".into()),
                 dv(ms(c.avg().as_nanos() as u64).into(), StatusCode::Good),
             ));
-            out.push((self.id("CycleTimeMax".into()), dv(ms(c.max_ns).into(), StatusCode::Good)));
+            out.push((
+                self.id("CycleTimeMax".into()),
+                dv(ms(c.max_ns).into(), StatusCode::Good),
+            ));
         }
         for (info, shown) in self.slaves.iter().zip(self.shown.iter_mut()) {
             let a = info.layout.address;
@@ -531,7 +666,10 @@ impl Sampler {
                 if let Some(map) = &info.channels {
                     for ch in map.of(dir) {
                         let Some(val) = ch.read(img) else { continue };
-                        out.push((id(&format!("{folder}.{}", ch.name)), dv(variant(ch, val), status)));
+                        out.push((
+                            id(&format!("{folder}.{}", ch.name)),
+                            dv(variant(ch, val), status),
+                        ));
                     }
                 }
                 for (slot, module) in info.layout.modules.iter().enumerate() {
@@ -539,7 +677,9 @@ impl Sampler {
                         Direction::Input => (module.inputs, "InputBytes"),
                         Direction::Output => (module.outputs, "OutputBytes"),
                     };
-                    let bytes = img.get(span.offset..(span.offset + span.len).min(img.len())).unwrap_or(&[]);
+                    let bytes = img
+                        .get(span.offset..(span.offset + span.len).min(img.len()))
+                        .unwrap_or(&[]);
                     out.push((
                         id(&format!("Modules.{slot}.{n}")),
                         dv(ByteString::from(bytes.to_vec()).into(), status),
@@ -551,9 +691,16 @@ impl Sampler {
                 let text = if v.diag.is_empty() {
                     vec![]
                 } else {
-                    profibus_dp::pdu::diag::describe(v.diag, info.layout.gsd.as_ref(), info.layout.dpv1)
+                    profibus_dp::pdu::diag::describe(
+                        v.diag,
+                        info.layout.gsd.as_ref(),
+                        info.layout.dpv1,
+                    )
                 };
-                out.push((id("Diagnosis.Text"), dv(text.join("\n").into(), StatusCode::Good)));
+                out.push((
+                    id("Diagnosis.Text"),
+                    dv(text.join("\n").into(), StatusCode::Good),
+                ));
                 out.push((
                     id("Diagnosis.Raw"),
                     dv(ByteString::from(v.diag.to_vec()).into(), StatusCode::Good),
@@ -561,10 +708,19 @@ impl Sampler {
             }
             if counters {
                 let s = v.stats;
-                let now = [s.data_exchanges, s.retries, s.errors, s.restarts, s.diag_reads];
+                let now = [
+                    s.data_exchanges,
+                    s.retries,
+                    s.errors,
+                    s.restarts,
+                    s.diag_reads,
+                ];
                 for (i, n) in STATS.iter().enumerate() {
                     if shown.stats.is_none_or(|old| old[i] != now[i]) {
-                        out.push((id(&format!("Statistics.{n}")), dv(now[i].into(), StatusCode::Good)));
+                        out.push((
+                            id(&format!("Statistics.{n}")),
+                            dv(now[i].into(), StatusCode::Good),
+                        ));
                     }
                 }
                 shown.stats = Some(now);

@@ -78,7 +78,7 @@ async def check(url):
         names = [(await c.read_browse_name()).Name for c in await inputs.get_children()]
         out["bk3000_inputs"] = names
         analog = next(n for n in names if "KL3102" in n)
-        a = await inputs.get_child(f"{ns}:{analog}")
+        a = await inputs.get_child([ua.QualifiedName(analog, ns)])
         await wait_value(a, lambda v: True, "the BK3000 analog input")
         dv = await a.read_data_value()
         out["bk3000_analog"] = {"name": analog, "value": dv.Value.Value,
