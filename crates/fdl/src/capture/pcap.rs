@@ -682,7 +682,7 @@ mod tests {
         // EPB 32 + 11 + 1 pad + comment (4 + 12) + flags 8 + end 4; then
         // EPB 32 + 1 + 3 pad + comment (4 + 1 + 3 pad) + end 4.
         assert_eq!(file.len(), 60 + 72 + 48);
-        let at = 60 + 32 + 12;
+        let at = 60 + 28 + 12;
         assert_eq!(&file[at..at + 4], &[1, 0, 12, 0]);
         assert_eq!(&file[at + 4..at + 16], b"trigger: fcs");
         let packets: Vec<PcapPacket> = PcapReader::new(&file[..])
