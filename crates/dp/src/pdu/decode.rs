@@ -42,7 +42,7 @@ use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::pdu::diag::{self, SlaveDiag, NO_MASTER};
 use crate::pdu::dpv1::{self, Pdu};
 use crate::pdu::im::{self, CallHeader, Im0};
-use crate::pdu::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
+use crate::pdu::prm::{Dpv1Status1, Dpv1Status2, PrmStationStatus, SetPrm};
 use crate::pdu::sap;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
 use std::collections::{BTreeMap, BTreeSet};
@@ -150,6 +150,12 @@ pub enum Detail {
         ident_number: u16,
         /// Groups of Group_Ident (1..=8).
         groups: Vec<u8>,
+        /// The bits set in DPV1_Status_1 and DPV1_Status_2, the first two
+        /// User_Prm_Data bytes, when DPV1_Enable is set (`DPV1_Enable`,
+        /// `WD_Base_1ms`, `Diagnostic_Alarm`, …; empty: a DP-V0
+        /// Set_Prm, whose User_Prm_Data is the device's own).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        dpv1_status: Vec<&'static str>,
         /// User_Prm_Data (for DP-V1 slaves starting with DPV1_Status_1..3).
         #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         user_prm_data: Vec<u8>,
@@ -250,6 +256,171 @@ pub struct DpTelegram {
     /// negative response).
     #[cfg_attr(feature = "serde", serde(flatten))]
     pub detail: Option<Detail>,
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn list(words: &[impl AsRef<str>], none: &str) -> String {
+    if words.is_empty() {
+        none.to_string()
+    } else {
+        words
+            .iter()
+            .map(AsRef::as_ref)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+fn group_list(g: &[u8]) -> String {
+    g.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
+}
+
+impl fmt::Display for DpTelegram {
+    /// The DP layer in words, as `dpctl sniff` prints it after the
+    /// telegram: `Set_Prm request: WD_On; watchdog 5000 ms; …`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {}", self.service, self.direction)?;
+        let Some(d) = &self.detail else {
+            return Ok(());
+        };
+        f.write_str(": ")?;
+        match d {
+            Detail::SlaveDiag {
+                status,
+                master_address,
+                ident_number,
+                ext_diag,
+                alarms,
+                ..
+            } => {
+                write!(f, "{}; ident 0x{ident_number:04X}", list(status, "OK"))?;
+                match master_address {
+                    Some(m) => write!(f, "; master {m}")?,
+                    None => f.write_str("; no master")?,
+                }
+                for e in ext_diag {
+                    write!(f, "; {e}")?;
+                }
+                for a in alarms {
+                    write!(f, "; {} alarm slot {} {} seq {}", a.alarm_type, a.slot, a.specifier, a.seq)?;
+                }
+                Ok(())
+            }
+            Detail::SetPrm {
+                station_status,
+                dpv1_status,
+                watchdog_ms,
+                min_tsdr,
+                ident_number,
+                groups,
+                user_prm_data,
+            } => {
+                f.write_str(&list(station_status, "no status bits"))?;
+                match watchdog_ms {
+                    Some(w) => write!(f, "; watchdog {w} ms")?,
+                    None => f.write_str("; watchdog off")?,
+                }
+                write!(f, "; min TSDR {min_tsdr}; ident 0x{ident_number:04X}")?;
+                if !groups.is_empty() {
+                    write!(f, "; groups {}", group_list(groups))?;
+                }
+                if !dpv1_status.is_empty() {
+                    write!(f, "; DPV1 {}", list(dpv1_status, ""))?;
+                }
+                if !user_prm_data.is_empty() {
+                    write!(f, "; user prm {}", hex(user_prm_data))?;
+                }
+                Ok(())
+            }
+            Detail::Cfg {
+                identifiers,
+                input_bytes,
+                output_bytes,
+                error,
+            } => {
+                let texts: Vec<String> = identifiers
+                    .iter()
+                    .map(|i| format!("{} ({})", i.text, hex(&i.raw)))
+                    .collect();
+                let n = |b: usize| if b == 1 { "1 byte".into() } else { format!("{b} bytes") };
+                write!(
+                    f,
+                    "{}; {} in, {} out",
+                    list(&texts, "no modules"),
+                    n(*input_bytes),
+                    n(*output_bytes)
+                )?;
+                if let Some(e) = error {
+                    write!(f, "; {e}")?;
+                }
+                Ok(())
+            }
+            Detail::Outputs { outputs } => write!(f, "outputs {}", hex(outputs)),
+            Detail::Inputs { inputs, new_diag } => {
+                write!(f, "inputs {}", hex(inputs))?;
+                if *new_diag {
+                    f.write_str(" (new diagnosis)")?;
+                }
+                Ok(())
+            }
+            Detail::GlobalControl { command, groups } => {
+                f.write_str(&list(command, "no command"))?;
+                if groups.is_empty() {
+                    f.write_str("; all groups")
+                } else {
+                    write!(f, "; groups {}", group_list(groups))
+                }
+            }
+            Detail::SetSlaveAdd {
+                new_address,
+                ident_number,
+                no_add_chg,
+            } => {
+                write!(f, "new address {new_address}; ident 0x{ident_number:04X}")?;
+                if *no_add_chg {
+                    f.write_str("; No_Add_Chg")?;
+                }
+                Ok(())
+            }
+            Detail::Dpv1 {
+                pdu,
+                slot,
+                index,
+                length,
+                data,
+                error,
+                text,
+            } => {
+                f.write_str(pdu)?;
+                if let Some(s) = slot {
+                    write!(f, " slot {s}")?;
+                }
+                if let Some(i) = index {
+                    write!(f, " index {i}")?;
+                }
+                if let Some(l) = length {
+                    write!(f, " length {l}")?;
+                }
+                if let Some(d) = data.as_ref().filter(|d| !d.is_empty()) {
+                    write!(f, " data {}", hex(d))?;
+                }
+                if let Some(e) = error {
+                    write!(f, "; {e}")?;
+                }
+                if let Some(t) = text {
+                    write!(f, "; {t}")?;
+                }
+                Ok(())
+            }
+            Detail::Malformed { error } => write!(f, "malformed: {error}"),
+        }
+    }
 }
 
 /// The DP layer of `telegram`; `answers` is the request a response (or
@@ -429,14 +600,44 @@ fn set_prm(du: &[u8]) -> Detail {
     .filter(|(f, _)| p.station_status.contains(*f))
     .map(|(_, n)| n)
     .collect();
+    let dpv1_status = match p.dpv1_status() {
+        Some((s1, s2, _)) if dpv1 => dpv1_names(s1, s2),
+        _ => vec![],
+    };
     Detail::SetPrm {
         station_status,
+        dpv1_status,
         watchdog_ms: p.watchdog(dpv1).map(|w| w.as_millis() as u64),
         min_tsdr: p.min_tsdr,
         ident_number: p.ident_number,
         groups: groups(p.group_ident),
         user_prm_data: p.user_prm_data.to_vec(),
     }
+}
+
+/// The bits set in DPV1_Status_1 and _2 by their names (IEC 61158-6-3,
+/// Set_Prm DPV1_Status; reference dpv1-c2-im-alarms.md).
+fn dpv1_names(s1: Dpv1Status1, s2: Dpv1Status2) -> Vec<&'static str> {
+    let one = [
+        (Dpv1Status1::DPV1_ENABLE, "DPV1_Enable"),
+        (Dpv1Status1::FAIL_SAFE, "Fail_Safe"),
+        (Dpv1Status1::PUBLISHER_ENABLE, "Publisher_Enable"),
+        (Dpv1Status1::WD_BASE_1MS, "WD_Base_1ms"),
+        (Dpv1Status1::DIS_STOP_CONTROL, "Dis_Stop_Control"),
+        (Dpv1Status1::DIS_START_CONTROL, "Dis_Start_Control"),
+    ];
+    let two = [
+        (Dpv1Status2::PULL_PLUG_ALARM, "Pull_Plug_Alarm"),
+        (Dpv1Status2::PROCESS_ALARM, "Process_Alarm"),
+        (Dpv1Status2::DIAGNOSTIC_ALARM, "Diagnostic_Alarm"),
+        (Dpv1Status2::MANUFACTURER_ALARM, "Manufacturer_Alarm"),
+        (Dpv1Status2::STATUS_ALARM, "Status_Alarm"),
+        (Dpv1Status2::UPDATE_ALARM, "Update_Alarm"),
+        (Dpv1Status2::CHECK_CFG_MODE, "Check_Cfg_Mode"),
+    ];
+    let a = one.into_iter().filter(|(f, _)| s1.contains(*f)).map(|(_, n)| n);
+    let b = two.into_iter().filter(|(f, _)| s2.contains(*f)).map(|(_, n)| n);
+    a.chain(b).collect()
 }
 
 fn config(du: &[u8]) -> Detail {

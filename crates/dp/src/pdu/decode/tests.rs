@@ -135,6 +135,7 @@ fn set_prm_of_the_standard_example() {
             "request",
             Some(Detail::SetPrm {
                 station_status: vec!["Lock_Req", "Sync_Req", "Freeze_Req", "WD_On"],
+                dpv1_status: vec![],
                 watchdog_ms: Some(300),
                 min_tsdr: 0,
                 ident_number: 0x0A35,
@@ -145,16 +146,26 @@ fn set_prm_of_the_standard_example() {
     );
     // Its short acknowledge is the Set_Prm's response.
     assert_eq!(detail(&mut ex, &SC), ("Set_Prm", "response", None));
+    let dp = ex.decode(&Telegram::parse(&PRM_DPV1).unwrap().0).unwrap();
     let Some(Detail::SetPrm {
         watchdog_ms,
         min_tsdr,
-        groups,
+        ref groups,
+        ref dpv1_status,
         ..
-    }) = detail(&mut ex, &PRM_DPV1).2
+    }) = dp.detail
     else {
         panic!()
     };
-    assert_eq!((watchdog_ms, min_tsdr, groups), (Some(100), 11, vec![]));
+    assert_eq!((watchdog_ms, min_tsdr, groups.clone()), (Some(100), 11, vec![]));
+    assert!(dpv1_status.starts_with(&["DPV1_Enable"]), "{dpv1_status:?}");
+    // In words, as `dpctl sniff` prints it.
+    let words = dp.to_string();
+    assert!(
+        words.starts_with("Set_Prm request: WD_On; watchdog 100 ms; min TSDR 11; ident 0x"),
+        "{words}"
+    );
+    assert!(words.contains("; DPV1 DPV1_Enable"), "{words}");
 }
 
 #[test]
