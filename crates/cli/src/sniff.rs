@@ -19,6 +19,7 @@
 
 use crate::common;
 use anyhow::{Context, Result};
+use profibus_dp::config::layout::SlaveLayout;
 use profibus_dp::monitor::trigger::{Output, Recorder, Trigger, Watch};
 use profibus_dp::pdu::decode::{DpTelegram, Exchanges};
 use profibus_dp::pdu::describe::TelegramSummary;
@@ -79,6 +80,16 @@ pub struct Args {
     /// FILE-2.pcapng, … (the number before FILE's extension).
     #[arg(long, requires = "trigger")]
     pub split: bool,
+    /// Bus file of the segment: its slaves' modules split Data_Exchange
+    /// data by module, their GSD files name diagnosis bits. Without it
+    /// the modules come from the Chk_Cfg seen on the wire.
+    #[arg(long, value_name = "BUS.toml")]
+    pub config: Option<PathBuf>,
+    /// A folder of GSD files to name diagnosis bits with, found by the
+    /// ident number in each diagnosis (also the built-in files and the
+    /// user library). Repeatable.
+    #[arg(long, value_name = "DIR")]
+    pub gsd_dir: Vec<PathBuf>,
     /// Quiet time in ms after which an incomplete telegram is given up
     /// (default: 5 on a pty; on a serial line twice TSYN, at least 2).
     #[arg(long, value_name = "MS")]
@@ -408,12 +419,24 @@ async fn sniff(args: Args) -> Result<()> {
     let live = (!args.json && !args.plain && std::io::stdout().is_terminal())
         .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
         .transpose()?;
+    let mut exchanges = Exchanges::default();
+    if let Some(path) = &args.config {
+        let bus = profibus_devices::bus::ProfiledBus::load(path)?;
+        for s in SlaveLayout::of_bus(&bus.file) {
+            exchanges.set_slave(s.address, s.gsd, s.modules);
+        }
+    }
+    if !args.gsd_dir.is_empty() {
+        for e in crate::scan::library(&args.gsd_dir)?.entries() {
+            exchanges.add_gsd(e.gsd.clone());
+        }
+    }
     let mut printer = Printer {
         json: args.json,
         live,
         out: BufWriter::new(crate::out::stdout()),
         pcap,
-        exchanges: Exchanges::default(),
+        exchanges,
         triggered,
     };
     let mut failure = None;

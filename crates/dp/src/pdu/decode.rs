@@ -35,6 +35,8 @@
 //! assert_eq!(ident_number, 0x0ED0);
 //! ```
 
+use crate::config::gsd::Gsd;
+use crate::config::layout::{ModuleLayout, Span};
 use crate::pdu::alarm::{self, DiagBlock};
 use crate::pdu::c2::{C2Pdu, InitiateRes};
 use crate::pdu::cfg;
@@ -86,6 +88,20 @@ pub struct CfgIdentifier {
     pub input_bytes: usize,
     /// Output bytes.
     pub output_bytes: usize,
+}
+
+/// One module's share of a process image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct ModuleSlice {
+    /// Slot, counted from 1 in configuration order.
+    pub slot: usize,
+    /// The module: its GSD name (bus file) or its identifier in words
+    /// (learned from a Chk_Cfg).
+    pub name: String,
+    /// Its bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
 }
 
 /// A DP-V1 alarm block of a Slave_Diag response, with the field names of
@@ -177,6 +193,10 @@ pub enum Detail {
         /// The output bytes.
         #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         outputs: Vec<u8>,
+        /// The bytes split by module, when [`Exchanges`] knows the
+        /// slave's modules (a bus file, or the Chk_Cfg seen on the wire).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        modules: Vec<ModuleSlice>,
     },
     /// Inputs: a Data_Exchange or Rd_Inp response.
     Inputs {
@@ -185,6 +205,9 @@ pub enum Detail {
         inputs: Vec<u8>,
         /// The slave has new diagnosis (response status DH or RDH).
         new_diag: bool,
+        /// The bytes split by module (see [`Detail::Outputs`]).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        modules: Vec<ModuleSlice>,
     },
     /// A Global_Control broadcast.
     GlobalControl {
@@ -281,6 +304,13 @@ fn group_list(g: &[u8]) -> String {
     g.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
 }
 
+fn show_modules(f: &mut fmt::Formatter<'_>, modules: &[ModuleSlice]) -> fmt::Result {
+    for m in modules {
+        write!(f, "; {} {}: {}", m.slot, m.name, hex(&m.data))?;
+    }
+    Ok(())
+}
+
 impl fmt::Display for DpTelegram {
     /// The DP layer in words, as `dpctl sniff` prints it after the
     /// telegram: `Set_Prm request: WD_On; watchdog 5000 ms; …`.
@@ -361,13 +391,20 @@ impl fmt::Display for DpTelegram {
                 }
                 Ok(())
             }
-            Detail::Outputs { outputs } => write!(f, "outputs {}", hex(outputs)),
-            Detail::Inputs { inputs, new_diag } => {
+            Detail::Outputs { outputs, modules } => {
+                write!(f, "outputs {}", hex(outputs))?;
+                show_modules(f, modules)
+            }
+            Detail::Inputs {
+                inputs,
+                new_diag,
+                modules,
+            } => {
                 write!(f, "inputs {}", hex(inputs))?;
                 if *new_diag {
                     f.write_str(" (new diagnosis)")?;
                 }
-                Ok(())
+                show_modules(f, modules)
             }
             Detail::GlobalControl { command, groups } => {
                 f.write_str(&list(command, "no command"))?;
@@ -476,6 +513,7 @@ fn request(d: &DataTelegram<'_>, kind: RequestKind) -> Option<DpTelegram> {
     let detail = match dsap {
         None => Some(Detail::Outputs {
             outputs: du.to_vec(),
+            modules: vec![],
         }),
         Some(sap::SET_PRM) => Some(set_prm(du)),
         Some(sap::CHK_CFG) => Some(config(du)),
@@ -531,15 +569,18 @@ fn response(
             None => Some(Detail::Inputs {
                 inputs: du.to_vec(),
                 new_diag: matches!(status, ResponseStatus::Dh | ResponseStatus::Rdh),
+                modules: vec![],
             }),
             Some(sap::SLAVE_DIAG) => Some(slave_diag(du, dpv1)),
             Some(sap::GET_CFG) => Some(config(du)),
             Some(sap::RD_INP) => Some(Detail::Inputs {
                 inputs: du.to_vec(),
                 new_diag: false,
+                modules: vec![],
             }),
             Some(sap::RD_OUTP) => Some(Detail::Outputs {
                 outputs: du.to_vec(),
+                modules: vec![],
             }),
             Some(s) if s <= sap::MSAC_C2_INITIATE && !du.is_empty() => Some(c2_pdu(du, false)),
             Some(s) if s <= sap::MSAC_C1 && !du.is_empty() => Some(dpv1_pdu(du, false)),
@@ -928,11 +969,111 @@ pub struct Exchanges {
     /// Slaves last parameterised with DPV1_Enable (their device-related
     /// diagnosis blocks are alarm and status blocks).
     dpv1: BTreeSet<u8>,
+    /// GSD files by slave address (a bus file).
+    gsd_of: BTreeMap<u8, Gsd>,
+    /// GSD files by ident number (a GSD library).
+    gsd_by_ident: BTreeMap<u16, Gsd>,
+    /// Module layouts by slave address, and whether configured (a bus
+    /// file: kept) or learned from the last Chk_Cfg.
+    layouts: BTreeMap<u8, (Vec<ModuleLayout>, bool)>,
 }
 
 impl Exchanges {
-    /// The DP layer of the next telegram of the stream.
+    /// Knows the slave at `address` from a bus file: its GSD (diagnosis
+    /// texts) and its modules (Data_Exchange data split by module).
+    pub fn set_slave(&mut self, address: u8, gsd: Option<Gsd>, modules: Vec<ModuleLayout>) {
+        if let Some(g) = gsd {
+            self.gsd_of.insert(address, g);
+        }
+        if !modules.is_empty() {
+            self.layouts.insert(address, (modules, true));
+        }
+    }
+
+    /// Knows `gsd`: a slave with its ident number gets its diagnosis
+    /// texts (unless a bus file gave the slave another GSD).
+    pub fn add_gsd(&mut self, gsd: Gsd) {
+        self.gsd_by_ident.entry(gsd.ident_number).or_insert(gsd);
+    }
+
+    /// The DP layer of the next telegram of the stream, with what is
+    /// known of the slave: module names, GSD diagnosis texts.
     pub fn decode(&mut self, telegram: &Telegram<'_>) -> Option<DpTelegram> {
+        let mut dp = self.decode_plain(telegram)?;
+        let Telegram::Data(d) = telegram else {
+            return Some(dp);
+        };
+        let slave = if d.fc.is_request() { d.da } else { d.sa };
+        match &mut dp.detail {
+            Some(Detail::Cfg { identifiers, .. })
+                if dp.service == "Chk_Cfg" && dp.direction == "request" =>
+            {
+                if !self.layouts.get(&slave).is_some_and(|l| l.1) {
+                    let (mut i, mut o) = (0, 0);
+                    let learned = identifiers
+                        .iter()
+                        .map(|id| {
+                            let m = ModuleLayout {
+                                name: id.text.clone(),
+                                inputs: Span {
+                                    offset: i,
+                                    len: id.input_bytes,
+                                },
+                                outputs: Span {
+                                    offset: o,
+                                    len: id.output_bytes,
+                                },
+                            };
+                            i += id.input_bytes;
+                            o += id.output_bytes;
+                            m
+                        })
+                        .collect();
+                    self.layouts.insert(slave, (learned, false));
+                }
+            }
+            Some(Detail::Outputs { outputs, modules }) => {
+                *modules = self.split(slave, outputs, |m| m.outputs);
+            }
+            Some(Detail::Inputs {
+                inputs, modules, ..
+            }) => {
+                *modules = self.split(slave, inputs, |m| m.inputs);
+            }
+            Some(Detail::SlaveDiag {
+                ext_diag,
+                ident_number,
+                ..
+            }) => {
+                let gsd = (self.gsd_of.get(&slave)).or_else(|| self.gsd_by_ident.get(ident_number));
+                if let (Some(g), Ok(diag)) = (gsd, SlaveDiag::parse(d.data)) {
+                    *ext_diag = diag::ext_words(diag.ext_diag, Some(g), self.dpv1.contains(&slave));
+                }
+            }
+            _ => {}
+        }
+        Some(dp)
+    }
+
+    /// `image` split by the modules known of `slave` (`span` picks the
+    /// image's span); empty when none are known.
+    fn split(&self, slave: u8, image: &[u8], span: impl Fn(&ModuleLayout) -> Span) -> Vec<ModuleSlice> {
+        let Some((modules, _)) = self.layouts.get(&slave) else {
+            return vec![];
+        };
+        modules
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| span(m).len > 0)
+            .map(|(n, m)| ModuleSlice {
+                slot: n + 1,
+                name: m.name.clone(),
+                data: span(m).of(image).to_vec(),
+            })
+            .collect()
+    }
+
+    fn decode_plain(&mut self, telegram: &Telegram<'_>) -> Option<DpTelegram> {
         match telegram {
             Telegram::Token { .. } => {
                 self.pending = None;
