@@ -90,7 +90,10 @@ fn triggers(p: &Proc, n: usize, after: usize) -> Vec<Value> {
     while fired.len() < n || since < after {
         let left = end.saturating_duration_since(Instant::now());
         let Some(l) = p.stdout_line(left) else {
-            panic!("{} of {n} triggers fired; last lines: {tail:#?}", fired.len());
+            panic!(
+                "{} of {n} triggers fired; last lines: {tail:#?}",
+                fired.len()
+            );
         };
         let v: Value = serde_json::from_str(&l).unwrap_or_else(|e| panic!("{e}: {l}"));
         since += 1;
@@ -119,7 +122,15 @@ fn a_cfg_fault_trigger_records_the_fault_with_its_context() {
     let all = {
         let mut cmd = Command::new(dpctl());
         cmd.args(["sniff", "--json", "--port", &bus.link_str(2)])
-            .args(["--trigger", "cfg_fault", "--pre", "12", "--post", "3", "--pcap"])
+            .args([
+                "--trigger",
+                "cfg_fault",
+                "--pre",
+                "12",
+                "--post",
+                "3",
+                "--pcap",
+            ])
             .arg(&one);
         Proc::spawn_captured(cmd)
     };
@@ -141,7 +152,10 @@ fn a_cfg_fault_trigger_records_the_fault_with_its_context() {
     // Plain lines carry the DP layer in words after ` | `.
     let mut want: Vec<(&str, &str)> = vec![
         ("| Set_Prm request: ", "; watchdog "),
-        ("| Chk_Cfg request: 1 byte in (10)", "; 1 byte in, 0 bytes out"),
+        (
+            "| Chk_Cfg request: 1 byte in (10)",
+            "; 1 byte in, 0 bytes out",
+        ),
         ("| Slave_Diag response: ", "Cfg_Fault"),
     ];
     let end = Instant::now() + WAIT;
@@ -185,7 +199,10 @@ fn a_cfg_fault_trigger_records_the_fault_with_its_context() {
         .unwrap_or_else(|| panic!("no trigger comment: {rows:#?}"));
     // The firing record is the diagnosis with Cfg_Fault …
     assert_eq!(rows[fault][1], "Slave_Diag", "{rows:#?}");
-    assert!(["1", "True"].contains(&rows[fault][4].as_str()), "{rows:#?}");
+    assert!(
+        ["1", "True"].contains(&rows[fault][4].as_str()),
+        "{rows:#?}"
+    );
     // … after the Chk_Cfg with the master's wrong identifier (0x10,
     // one byte in) and its Set_Prm.
     let chk = (rows[..fault].iter())
@@ -225,7 +242,15 @@ fn flipped_bits_are_recorded_and_flagged() {
     let sniffer = {
         let mut cmd = Command::new(dpctl());
         cmd.args(["sniff", "--json", "--port", &bus.link_str(2)])
-            .args(["--trigger", "corrupt", "--pre", "2", "--post", "2", "--pcap"])
+            .args([
+                "--trigger",
+                "corrupt",
+                "--pre",
+                "2",
+                "--post",
+                "2",
+                "--pcap",
+            ])
             .arg(&file);
         Proc::spawn_captured(cmd)
     };
@@ -239,9 +264,16 @@ fn flipped_bits_are_recorded_and_flagged() {
     assert_eq!(fired[0]["trigger"], "corrupt");
     let rows = tshark(
         &file,
-        &["frame.comment", "frame.packet_flags_crc_error", "pbdl.fcs.good"],
+        &[
+            "frame.comment",
+            "frame.packet_flags_crc_error",
+            "pbdl.fcs.good",
+        ],
     );
-    let flagged: Vec<&Vec<String>> = rows.iter().filter(|r| r[0].contains("trigger: corrupt")).collect();
+    let flagged: Vec<&Vec<String>> = rows
+        .iter()
+        .filter(|r| r[0].contains("trigger: corrupt"))
+        .collect();
     assert!(flagged.len() >= 3, "{rows:#?}");
     for r in flagged {
         // pcapng marks the record, and the dissector says so.

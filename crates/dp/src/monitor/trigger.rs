@@ -521,7 +521,10 @@ impl Parser<'_> {
                     }
                     Some(c) => Err(self.error_at(
                         c.column,
-                        format!("expected `)` to close column {}, found `{}`", t.column, c.text),
+                        format!(
+                            "expected `)` to close column {}, found `{}`",
+                            t.column, c.text
+                        ),
                     )),
                     None => Err(self.error_at(
                         self.end,
@@ -536,12 +539,11 @@ impl Parser<'_> {
             Tok::Word if t.text.eq_ignore_ascii_case("not") => {
                 Ok(Expr::Not(Box::new(self.factor()?)))
             }
-            Tok::Word if ["and", "or"].iter().any(|k| t.text.eq_ignore_ascii_case(k)) => {
-                Err(self.error_at(
+            Tok::Word if ["and", "or"].iter().any(|k| t.text.eq_ignore_ascii_case(k)) => Err(self
+                .error_at(
                     t.column,
                     format!("expected a name or `(` before `{}`", t.text),
-                ))
-            }
+                )),
             Tok::Word => self.atom(&t),
         }
     }
@@ -552,7 +554,9 @@ impl Parser<'_> {
             if let Some(op) = self.peek().filter(|o| matches!(o.kind, Tok::Op(_))) {
                 return Err(self.error_at(
                     op.column,
-                    format!("`{name}` is a flag, true or false on its own; it compares with nothing"),
+                    format!(
+                        "`{name}` is a flag, true or false on its own; it compares with nothing"
+                    ),
                 ));
             }
             return Ok(Expr::Flag(name, flag));
@@ -569,7 +573,10 @@ impl Parser<'_> {
             Some(o) => {
                 return Err(self.error_at(
                     o.column,
-                    format!("expected a comparison (== != < <= > >=) after `{name}`, found `{}`", o.text),
+                    format!(
+                        "expected a comparison (== != < <= > >=) after `{name}`, found `{}`",
+                        o.text
+                    ),
                 ))
             }
             None => {
@@ -582,7 +589,10 @@ impl Parser<'_> {
         self.pos += 1;
         let Some(v) = self.peek().cloned().filter(|v| v.kind == Tok::Word) else {
             let column = self.peek().map_or(self.end, |v| v.column);
-            return Err(self.error_at(column, format!("expected a value after `{name} {}`", op.text())));
+            return Err(self.error_at(
+                column,
+                format!("expected a value after `{name} {}`", op.text()),
+            ));
         };
         self.pos += 1;
         let value = self.value(field, name, op, &v)?;
@@ -622,16 +632,17 @@ impl Parser<'_> {
             }
             Field::Fc if !v.text.starts_with(|c: char| c.is_ascii_digit()) => {
                 let n = named("function code", &mut FUNCTIONS.iter().map(|f| f.0))?;
-                let &(n, code, request) = FUNCTIONS
-                    .iter()
-                    .find(|f| f.0 == n)
-                    .unwrap_or(&FUNCTIONS[0]);
+                let &(n, code, request) =
+                    FUNCTIONS.iter().find(|f| f.0 == n).unwrap_or(&FUNCTIONS[0]);
                 Ok(Value::Function(n, code, request))
             }
             Field::T => parse_time(&v.text).map(Value::Time).ok_or_else(|| {
                 self.error_at(
                     v.column,
-                    format!("`{}` is no time; write a number with s, ms or us (`10s`, `250ms`)", v.text),
+                    format!(
+                        "`{}` is no time; write a number with s, ms or us (`10s`, `250ms`)",
+                        v.text
+                    ),
                 )
             }),
             _ => {
@@ -986,7 +997,11 @@ impl<R> Recorder<R> {
         match self.left {
             Some(left) => {
                 out(Output::Record { record, fired });
-                let left = if fired { self.post } else { left.saturating_sub(1) };
+                let left = if fired {
+                    self.post
+                } else {
+                    left.saturating_sub(1)
+                };
                 self.left = Some(left);
                 if left == 0 {
                     self.left = None;

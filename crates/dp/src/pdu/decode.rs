@@ -338,7 +338,11 @@ impl fmt::Display for DpTelegram {
                     write!(f, "; {e}")?;
                 }
                 for a in alarms {
-                    write!(f, "; {} alarm slot {} {} seq {}", a.alarm_type, a.slot, a.specifier, a.seq)?;
+                    write!(
+                        f,
+                        "; {} alarm slot {} {} seq {}",
+                        a.alarm_type, a.slot, a.specifier, a.seq
+                    )?;
                 }
                 Ok(())
             }
@@ -378,7 +382,13 @@ impl fmt::Display for DpTelegram {
                     .iter()
                     .map(|i| format!("{} ({})", i.text, hex(&i.raw)))
                     .collect();
-                let n = |b: usize| if b == 1 { "1 byte".into() } else { format!("{b} bytes") };
+                let n = |b: usize| {
+                    if b == 1 {
+                        "1 byte".into()
+                    } else {
+                        format!("{b} bytes")
+                    }
+                };
                 write!(
                     f,
                     "{}; {} in, {} out",
@@ -676,8 +686,14 @@ fn dpv1_names(s1: Dpv1Status1, s2: Dpv1Status2) -> Vec<&'static str> {
         (Dpv1Status2::UPDATE_ALARM, "Update_Alarm"),
         (Dpv1Status2::CHECK_CFG_MODE, "Check_Cfg_Mode"),
     ];
-    let a = one.into_iter().filter(|(f, _)| s1.contains(*f)).map(|(_, n)| n);
-    let b = two.into_iter().filter(|(f, _)| s2.contains(*f)).map(|(_, n)| n);
+    let a = one
+        .into_iter()
+        .filter(|(f, _)| s1.contains(*f))
+        .map(|(_, n)| n);
+    let b = two
+        .into_iter()
+        .filter(|(f, _)| s2.contains(*f))
+        .map(|(_, n)| n);
     a.chain(b).collect()
 }
 
@@ -1057,7 +1073,12 @@ impl Exchanges {
 
     /// `image` split by the modules known of `slave` (`span` picks the
     /// image's span); empty when none are known.
-    fn split(&self, slave: u8, image: &[u8], span: impl Fn(&ModuleLayout) -> Span) -> Vec<ModuleSlice> {
+    fn split(
+        &self,
+        slave: u8,
+        image: &[u8],
+        span: impl Fn(&ModuleLayout) -> Span,
+    ) -> Vec<ModuleSlice> {
         let Some((modules, _)) = self.layouts.get(&slave) else {
             return vec![];
         };

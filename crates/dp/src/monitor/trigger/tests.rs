@@ -41,7 +41,10 @@ fn parses_and_prints_in_canonical_form() {
     );
     assert_eq!(parse("t >= 1.5s").to_string(), "t >= 1.5s");
     assert_eq!(parse("fc == SRD_high").to_string(), "fc == srd_high");
-    assert_eq!(parse("state == data_exchange").to_string(), "state == data_exchange");
+    assert_eq!(
+        parse("state == data_exchange").to_string(),
+        "state == data_exchange"
+    );
 }
 
 #[test]
@@ -54,17 +57,32 @@ fn errors_name_the_column_and_the_closest_name() {
         err("service == set_pram"),
         "column 12: unknown service `set_pram`; did you mean `set_prm`?"
     );
-    assert_eq!(err("adr == 5"), "column 1: unknown name `adr`; did you mean `addr`?");
-    assert_eq!(err("addr == 300"), "column 9: `addr` takes a number 0..=127, not `300`");
+    assert_eq!(
+        err("adr == 5"),
+        "column 1: unknown name `adr`; did you mean `addr`?"
+    );
+    assert_eq!(
+        err("addr == 300"),
+        "column 9: `addr` takes a number 0..=127, not `300`"
+    );
     assert_eq!(
         err("t > 10"),
         "column 5: `10` is no time; write a number with s, ms or us (`10s`, `250ms`)"
     );
-    assert_eq!(err("(fcs or retry"), "column 14: `(` at column 1 is never closed");
+    assert_eq!(
+        err("(fcs or retry"),
+        "column 14: `(` at column 1 is never closed"
+    );
     assert_eq!(err("fcs retry"), "column 5: unexpected `retry`");
     assert_eq!(err(""), "column 1: expected a name or `(` at the end");
-    assert_eq!(err("fcs and"), "column 8: expected a name or `(` at the end");
-    assert_eq!(err("addr = 5"), "column 6: `=` compares nothing; write `==`");
+    assert_eq!(
+        err("fcs and"),
+        "column 8: expected a name or `(` at the end"
+    );
+    assert_eq!(
+        err("addr = 5"),
+        "column 6: `=` compares nothing; write `==`"
+    );
     assert_eq!(
         err("cfg_fault == 1"),
         "column 11: `cfg_fault` is a flag, true or false on its own; it compares with nothing"
@@ -77,7 +95,10 @@ fn errors_name_the_column_and_the_closest_name() {
         err("addr 5"),
         "column 6: expected a comparison (== != < <= > >=) after `addr`, found `5`"
     );
-    assert_eq!(err("state == runing").split(';').next(), Some("column 10: unknown state `runing`"));
+    assert_eq!(
+        err("state == runing").split(';').next(),
+        Some("column 10: unknown state `runing`")
+    );
     assert!(err(&"(".repeat(100)).contains("nested deeper than 64 levels"));
 }
 
@@ -215,14 +236,28 @@ fn watch_sees_retries_missing_answers_corrupt_bytes_and_restarts() {
     let o = watch(
         &mut w,
         0,
-        &[dx(true), ans.clone(), dx(false), token.clone(), dx(false), ans.clone()],
+        &[
+            dx(true),
+            ans.clone(),
+            dx(false),
+            token.clone(),
+            dx(false),
+            ans.clone(),
+        ],
     );
     // The token after an unanswered request reveals it; the request
     // repeated with the same FCB is a retry.
     let flags: Vec<(bool, bool)> = o.iter().map(|o| (o.no_answer, o.retry)).collect();
     assert_eq!(
         flags,
-        [(false, false), (false, false), (false, false), (true, false), (false, true), (false, false)]
+        [
+            (false, false),
+            (false, false),
+            (false, false),
+            (true, false),
+            (false, true),
+            (false, false)
+        ]
     );
     let skipped = w
         .hear(&TapEvent::Skipped {
@@ -321,7 +356,13 @@ fn recorder_keeps_pre_and_post_records_and_merges_overlaps() {
     let mut r = Recorder::new(5, 1);
     assert_eq!(
         run(&mut r, &[(1, false), (2, true), (3, false), (4, false)]),
-        [Start { segment: 1 }, rec(1, false), rec(2, true), rec(3, false), End { segment: 1 }]
+        [
+            Start { segment: 1 },
+            rec(1, false),
+            rec(2, true),
+            rec(3, false),
+            End { segment: 1 }
+        ]
     );
 }
 

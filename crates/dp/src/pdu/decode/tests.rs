@@ -157,7 +157,10 @@ fn set_prm_of_the_standard_example() {
     else {
         panic!()
     };
-    assert_eq!((watchdog_ms, min_tsdr, groups.clone()), (Some(100), 11, vec![]));
+    assert_eq!(
+        (watchdog_ms, min_tsdr, groups.clone()),
+        (Some(100), 11, vec![])
+    );
     assert!(dpv1_status.starts_with(&["DPV1_Enable"]), "{dpv1_status:?}");
     // In words, as `dpctl sniff` prints it.
     let words = dp.to_string();
@@ -512,12 +515,22 @@ fn alarm_blocks_of_a_dpv1_slave() {
 fn tel(request: bool, sap: Option<u8>, du: &[u8]) -> Vec<u8> {
     use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
     let (da, sa, fc) = if request {
-        let fc = FunctionCode::Request { kind: RequestKind::SrdHigh, fcb: true, fcv: true };
+        let fc = FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb: true,
+            fcv: true,
+        };
         (8, 2, fc)
     } else {
         (2, 8, FunctionCode::slave_response(ResponseStatus::Dl))
     };
-    let saps = sap.map(|s| if request { (s, sap::MASTER) } else { (sap::MASTER, s) });
+    let saps = sap.map(|s| {
+        if request {
+            (s, sap::MASTER)
+        } else {
+            (sap::MASTER, s)
+        }
+    });
     let (dsap, ssap) = saps.unzip();
     Telegram::Data(DataTelegram::new(da, sa, fc, du).with_saps(dsap, ssap))
         .to_vec()
@@ -530,12 +543,24 @@ fn data_exchange_split_by_the_modules_of_the_chk_cfg_seen() {
     // Chk_Cfg: 1 byte in (0x10), 2 words in+out (0x71), 1 byte out (0x20).
     detail(&mut ex, &tel(true, Some(sap::CHK_CFG), &[0x10, 0x71, 0x20]));
     let (_, _, out) = detail(&mut ex, &tel(true, None, &[1, 2, 3, 4, 5]));
-    let Some(Detail::Outputs { modules, .. }) = out else { panic!("{out:?}") };
-    let got: Vec<(usize, &str, &[u8])> =
-        modules.iter().map(|m| (m.slot, m.name.as_str(), m.data.as_slice())).collect();
-    assert_eq!(got, [(2, "2 words in+out", &[1, 2, 3, 4][..]), (3, "1 byte out", &[5][..])]);
+    let Some(Detail::Outputs { modules, .. }) = out else {
+        panic!("{out:?}")
+    };
+    let got: Vec<(usize, &str, &[u8])> = modules
+        .iter()
+        .map(|m| (m.slot, m.name.as_str(), m.data.as_slice()))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            (2, "2 words in+out", &[1, 2, 3, 4][..]),
+            (3, "1 byte out", &[5][..])
+        ]
+    );
     let dp = ex.decode(&tg(&tel(false, None, &[9, 8, 7, 6, 5]))).unwrap();
-    let Some(Detail::Inputs { modules, .. }) = &dp.detail else { panic!("{dp:?}") };
+    let Some(Detail::Inputs { modules, .. }) = &dp.detail else {
+        panic!("{dp:?}")
+    };
     assert_eq!(modules.len(), 2);
     assert_eq!((modules[0].slot, modules[0].data.as_slice()), (1, &[9][..]));
     assert_eq!(dp.to_string(), "Data_Exchange response: inputs 09 08 07 06 05; 1 1 byte in: 09; 2 2 words in+out: 08 07 06 05");
@@ -549,26 +574,38 @@ fn data_exchange_split_by_the_modules_of_the_chk_cfg_seen() {
     ex.set_slave(8, None, layout);
     detail(&mut ex, &tel(true, Some(sap::CHK_CFG), &[0x10]));
     let (_, _, out) = detail(&mut ex, &tel(true, None, &[1, 2]));
-    let Some(Detail::Outputs { modules, .. }) = out else { panic!() };
+    let Some(Detail::Outputs { modules, .. }) = out else {
+        panic!()
+    };
     assert_eq!(modules[0].name, "valve");
 }
 
 #[test]
 fn diagnosis_words_from_the_gsd_found_by_ident() {
     use crate::config::gsd::ParseOptions;
-    let text = "#Profibus_DP\nGSD_Revision=1\nIdent_Number=0x1234\nProtocol_Ident=0\nStation_Type=0\n\
+    let text =
+        "#Profibus_DP\nGSD_Revision=1\nIdent_Number=0x1234\nProtocol_Ident=0\nStation_Type=0\n\
         Unit_Diag_Bit(0)=\"Sensor missing\"\n";
-    let g = Gsd::parse(text, ParseOptions { lenient: true }).unwrap().gsd;
+    let g = Gsd::parse(text, ParseOptions { lenient: true })
+        .unwrap()
+        .gsd;
     // Ext_Diag with a device block: header 02, bit 0 set.
     let du = [0x08, 0x04, 0x00, 2, 0x12, 0x34, 0x02, 0x01];
     let mut ex = Exchanges::default();
     detail(&mut ex, &tel(true, Some(sap::SLAVE_DIAG), &[]));
     let plain = detail(&mut ex, &tel(false, Some(sap::SLAVE_DIAG), &du)).2;
-    let Some(Detail::SlaveDiag { ext_diag, .. }) = plain else { panic!() };
-    assert!(!ext_diag.iter().any(|w| w.contains("Sensor missing")), "{ext_diag:?}");
+    let Some(Detail::SlaveDiag { ext_diag, .. }) = plain else {
+        panic!()
+    };
+    assert!(
+        !ext_diag.iter().any(|w| w.contains("Sensor missing")),
+        "{ext_diag:?}"
+    );
     ex.add_gsd(g);
     detail(&mut ex, &tel(true, Some(sap::SLAVE_DIAG), &[]));
     let named = detail(&mut ex, &tel(false, Some(sap::SLAVE_DIAG), &du)).2;
-    let Some(Detail::SlaveDiag { ext_diag, .. }) = named else { panic!() };
+    let Some(Detail::SlaveDiag { ext_diag, .. }) = named else {
+        panic!()
+    };
     assert_eq!(ext_diag, ["device: Sensor missing"]);
 }
