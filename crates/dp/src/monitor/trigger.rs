@@ -686,7 +686,9 @@ fn parse_time(s: &str) -> Option<Duration> {
     };
     let v: f64 = num.parse().ok()?;
     let secs = v * scale;
-    (secs.is_finite() && secs >= 0.0 && secs < 1e12).then(|| Duration::from_secs_f64(secs))
+    (0.0..1e12)
+        .contains(&secs)
+        .then(|| Duration::from_secs_f64(secs))
 }
 
 fn eval(e: &Expr, o: &Observation) -> bool {

@@ -1022,31 +1022,31 @@ impl Exchanges {
         let slave = if d.fc.is_request() { d.da } else { d.sa };
         match &mut dp.detail {
             Some(Detail::Cfg { identifiers, .. })
-                if dp.service == "Chk_Cfg" && dp.direction == "request" =>
+                if dp.service == "Chk_Cfg"
+                    && dp.direction == "request"
+                    && !self.layouts.get(&slave).is_some_and(|l| l.1) =>
             {
-                if !self.layouts.get(&slave).is_some_and(|l| l.1) {
-                    let (mut i, mut o) = (0, 0);
-                    let learned = identifiers
-                        .iter()
-                        .map(|id| {
-                            let m = ModuleLayout {
-                                name: id.text.clone(),
-                                inputs: Span {
-                                    offset: i,
-                                    len: id.input_bytes,
-                                },
-                                outputs: Span {
-                                    offset: o,
-                                    len: id.output_bytes,
-                                },
-                            };
-                            i += id.input_bytes;
-                            o += id.output_bytes;
-                            m
-                        })
-                        .collect();
-                    self.layouts.insert(slave, (learned, false));
-                }
+                let (mut i, mut o) = (0, 0);
+                let learned = identifiers
+                    .iter()
+                    .map(|id| {
+                        let m = ModuleLayout {
+                            name: id.text.clone(),
+                            inputs: Span {
+                                offset: i,
+                                len: id.input_bytes,
+                            },
+                            outputs: Span {
+                                offset: o,
+                                len: id.output_bytes,
+                            },
+                        };
+                        i += id.input_bytes;
+                        o += id.output_bytes;
+                        m
+                    })
+                    .collect();
+                self.layouts.insert(slave, (learned, false));
             }
             Some(Detail::Outputs { outputs, modules }) => {
                 *modules = self.split(slave, outputs, |m| m.outputs);

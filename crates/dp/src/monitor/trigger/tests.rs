@@ -196,7 +196,7 @@ fn watch(w: &mut Watch, t0: u64, telegrams: &[Vec<u8>]) -> Vec<Observation> {
             let at = Instant::from_nanos((t0 + i as u64) * 1_000_000);
             w.hear(&TapEvent::Telegram {
                 at,
-                bytes: b.clone().into(),
+                bytes: b.clone(),
             })
             .0
         })
@@ -262,7 +262,7 @@ fn watch_sees_retries_missing_answers_corrupt_bytes_and_restarts() {
     let skipped = w
         .hear(&TapEvent::Skipped {
             at: Instant::from_nanos(7_000_000),
-            bytes: vec![0x68, 0x01].into(),
+            bytes: vec![0x68, 0x01],
             errors: CodecStats {
                 bad_fcs: 1,
                 ..CodecStats::default()
