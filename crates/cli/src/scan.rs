@@ -91,7 +91,7 @@ async fn scan(args: Args) -> Result<()> {
     };
     let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(baud));
     common::allow_for_port(&mut cfg, args.line.latency, &port)?;
-    let station_cfg = cfg.clone();
+    let station_cfg = cfg;
     let app = match library {
         Some(_) => LiveListScan::with_config(args.addr),
         None => LiveListScan::new(args.addr),
