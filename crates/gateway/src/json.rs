@@ -709,9 +709,10 @@ mod tests {
         ch.push("speed", Direction::Output, 0, ChannelType::I16);
         ch.push("torque", Direction::Output, 2, ChannelType::I16);
         ch.push("actual", Direction::Input, 0, ChannelType::I16);
-        let t: toml::Table =
-            toml::from_str("writable = [3, { address = 5, channels = [\"speed\"] }]\nmin_interval_ms = 0")
-                .unwrap();
+        let t: toml::Table = toml::from_str(
+            "writable = [3, { address = 5, channels = [\"speed\"] }]\nmin_interval_ms = 0",
+        )
+        .unwrap();
         let settings = crate::MqttSettings::from_table(Some(&t), "l1").unwrap();
         let info = |address, channels| SlaveInfo {
             layout: SlaveLayout {

@@ -526,8 +526,10 @@ impl MqttSettings {
         let deadband = match t.deadband.given() {
             None => Deadband::DEFAULT,
             Some(Ok(v)) => deadband(&v, "deadband", "")?,
-            Some(Err(())) => return Err(deadband(&toml::Value::Boolean(false), "deadband", "")
-                .expect_err("not a deadband")),
+            Some(Err(())) => {
+                return Err(deadband(&toml::Value::Boolean(false), "deadband", "")
+                    .expect_err("not a deadband"))
+            }
         };
         let slave_traffic: Vec<SlaveTraffic> = match t.slave.given() {
             None => vec![],

@@ -120,7 +120,10 @@ pub fn check(s: &MqttSettings, infos: &[SlaveInfo]) -> Result<(), SettingsError>
         let Some(info) = infos.iter().find(|i| i.layout.address == t.address) else {
             return Err(SettingsError::Bad {
                 key: "slave",
-                problem: format!("names slave {}, which the bus file does not have", t.address),
+                problem: format!(
+                    "names slave {}, which the bus file does not have",
+                    t.address
+                ),
             });
         };
         let channels: Vec<&Channel> = info.channels.iter().flat_map(|m| &m.channels).collect();
@@ -201,8 +204,7 @@ impl ImageFilter {
             return false;
         }
         // Settled: the same image as the step before, for the interval.
-        let settled =
-            !changed_now && ts_ms.saturating_sub(self.changed_ms) >= self.min_interval_ms;
+        let settled = !changed_now && ts_ms.saturating_sub(self.changed_ms) >= self.min_interval_ms;
         settled || self.significant(last, img)
     }
 

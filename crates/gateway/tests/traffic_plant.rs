@@ -85,9 +85,7 @@ fn a_noisy_analog_slave_is_a_few_messages_per_second_by_default() {
     assert!(spaced(&slow, 1000), "{slow:?}");
     assert!(rate(&slow, MS) <= 1.0);
     // A per-channel deadband of 2 V: fewer.
-    let (b, mut g) = json(
-        "min_interval_ms = 0\n[[mqtt.slave]]\naddress = 40\ndeadband = 2.0",
-    );
+    let (b, mut g) = json("min_interval_ms = 0\n[[mqtt.slave]]\naddress = 40\ndeadband = 2.0");
     let coarse = rate(&run(&b, &mut g, topic, MS), MS);
     assert!(coarse < d * 2.0 && coarse > 0.0, "{coarse}/s with 2 V");
 }
