@@ -77,7 +77,7 @@ fn a_noisy_analog_slave_is_a_few_messages_per_second_by_default() {
     let (d, e) = (rate(&default, MS), rate(&every, MS));
     eprintln!("JSON inputs of a BK3000 with 4 analog inputs: {d:.1}/s by default, {e:.1}/s with deadband 0 and min_interval_ms 0");
     assert!(e > 300.0, "every change is a message without them: {e}/s");
-    assert!(d <= 4.0 && d >= 1.0, "{d}/s by default");
+    assert!((1.0..=4.0).contains(&d), "{d}/s by default");
     assert!(spaced(&default, 250), "{default:?}");
     // A longer interval per slave.
     let (b, mut g) = json("[[mqtt.slave]]\naddress = 40\nmin_interval_ms = 1000");
@@ -101,6 +101,6 @@ fn sparkplug_ddata_is_bounded_the_same_way() {
     let (d, e) = (rate(&default, MS), rate(&every, MS));
     eprintln!("Sparkplug DDATA of the same slave: {d:.1}/s by default, {e:.1}/s with deadband 0 and min_interval_ms 0");
     assert!(e > 300.0, "{e}/s");
-    assert!(d <= 4.0 && d >= 1.0, "{d}/s by default");
+    assert!((1.0..=4.0).contains(&d), "{d}/s by default");
     assert!(spaced(&default, 250), "{default:?}");
 }
