@@ -358,7 +358,9 @@ fn write_atomically(path: &std::path::Path, health: &Health) -> std::io::Result<
 }
 
 /// `[mqtt]` keys a running gateway cannot take: its connection (broker,
-/// identity, credentials), its topics and subscriptions, its mode.
+/// identity, credentials), its topics and subscriptions, its mode, and
+/// what the core builds its per-slave state from at the start (the
+/// report-by-exception filters).
 pub const RESTART_KEYS: &[&str] = &[
     "broker",
     "client_id",
@@ -373,6 +375,9 @@ pub const RESTART_KEYS: &[&str] = &[
     "job_timeout_ms",
     "version",
     "primary_host",
+    "min_interval_ms",
+    "deadband",
+    "slave",
 ];
 
 /// The keys of two `[mqtt]` tables that differ, as `key: old → new`
