@@ -4,6 +4,7 @@
 //! as an OPC UA server (`--opcua`, the `profibus-opcua` crate).
 
 use crate::common;
+use crate::ops::{self, Operated, ReloadSender, Stopping};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::DpMaster;
@@ -12,7 +13,7 @@ use profibus_gateway::{
     link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
 };
 use profibus_io::driver::{self, Clock};
-use profibus_opcua::{OpcuaServer, OpcuaSettings};
+use profibus_opcua::{Face, OpcuaServer, OpcuaSettings};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 
@@ -41,6 +42,11 @@ pub struct Args {
     /// (with --port).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    /// Keep the gateway's health in this file (JSON, rewritten every
+    /// second: state, healthy, bus, slaves, data_exchange,
+    /// broker_connected, last_cycle_age_ms) for a supervisor to check.
+    #[arg(long, value_name = "PATH")]
+    health_file: Option<PathBuf>,
     /// OPC UA server endpoint, opc.tcp://HOST[:PORT] (default: `[opcua]
     /// endpoint`; with an `[opcua]` table the server runs without it too),
     /// alone or beside --mqtt.
@@ -59,45 +65,76 @@ pub fn run(args: Args) -> Result<()> {
     }
     let settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
         .with_context(|| args.config.display().to_string())?;
-    let opcua = match (&args.opcua, &profiled.file.opcua) {
-        (None, None) => None,
-        (endpoint, table) => {
-            let dir = args.config.parent().unwrap_or(std::path::Path::new("."));
-            let s = OpcuaSettings::new(
-                table.as_ref(),
-                endpoint.as_deref(),
-                args.opcua_insecure,
-                dir,
-            )
-            .with_context(|| args.config.display().to_string())?;
-            Some(s)
+    if args.opcua.is_some() || profiled.file.opcua.is_some() {
+        return with_opcua(args, profiled, settings);
+    }
+    let url = args
+        .mqtt
+        .clone()
+        .or_else(|| settings.broker.clone())
+        .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
+    profibus_gateway::traffic::check(&settings, &slave_infos(&profiled)?)
+        .with_context(|| args.config.display().to_string())?;
+    let conn = Connection::from_settings(&settings, &url)?;
+    let sparkplug = args.sparkplug.clone().or(settings.sparkplug.clone());
+    tracing::info!(
+        target: ops::TARGET,
+        "dpctl gateway {} (git {}) starting: bus file {}, {}, broker {url}, {}",
+        env!("CARGO_PKG_VERSION"),
+        env!("DPCTL_GIT_REV"),
+        args.config.display(),
+        match &args.port {
+            Some(p) => format!("port {p}"),
+            None => "simulated bus".to_string(),
+        },
+        match &sparkplug {
+            Some(id) => format!("Sparkplug B {id}"),
+            None => format!("JSON topics {}/{}", settings.prefix, settings.bus),
+        },
+    );
+    match sparkplug {
+        Some(id) => {
+            let node = EdgeNode::new(settings, id, sparkplug::devices(&profiled)?);
+            serve(args, profiled, node, conn)
         }
-    };
-    let url = args.mqtt.clone().or_else(|| settings.broker.clone());
-    let Some(opcua) = opcua else {
-        let url =
-            url.context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
-        let conn = Connection::from_settings(&settings, &url)?;
-        return match args.sparkplug.clone().or(settings.sparkplug.clone()) {
-            Some(id) => {
-                let node = EdgeNode::new(settings, id, sparkplug::devices(&profiled)?);
-                serve(args, profiled, node, Some(conn))
-            }
-            None => {
-                let gateway = Gateway::new(settings, slave_infos(&profiled)?);
-                serve(args, profiled, gateway, Some(conn))
-            }
-        };
-    };
+        None => {
+            let gateway = Gateway::new(settings, slave_infos(&profiled)?);
+            serve(args, profiled, gateway, conn)
+        }
+    }
+}
+
+/// `dpctl gateway --opcua`: the OPC UA server, with MQTT when a broker
+/// is given.
+fn with_opcua(args: Args, profiled: ProfiledBus, settings: MqttSettings) -> Result<()> {
+    let dir = args.config.parent().unwrap_or(std::path::Path::new("."));
+    let opcua = OpcuaSettings::new(
+        profiled.file.opcua.as_ref(),
+        args.opcua.as_deref(),
+        args.opcua_insecure,
+        dir,
+    )
+    .with_context(|| args.config.display().to_string())?;
     if args.sparkplug.is_some() || settings.sparkplug.is_some() {
         anyhow::bail!("--opcua goes with plain JSON topics, not with Sparkplug B");
     }
-    let conn = url
+    let infos = slave_infos(&profiled)?;
+    profibus_gateway::traffic::check(&settings, &infos)
+        .with_context(|| args.config.display().to_string())?;
+    let conn = (args.mqtt.clone().or_else(|| settings.broker.clone()))
         .map(|u| Connection::from_settings(&settings, &u))
         .transpose()?;
-    let infos = slave_infos(&profiled)?;
     let (server, face) = OpcuaServer::start(&opcua, settings, infos, conn.is_some())?;
-    let result = match (&args.port, conn) {
+    tracing::info!(
+        target: ops::TARGET,
+        "dpctl gateway {} (git {}) starting: bus file {}, OPC UA {}",
+        env!("CARGO_PKG_VERSION"),
+        env!("DPCTL_GIT_REV"),
+        args.config.display(),
+        opcua.url(),
+    );
+    let result = match (conn, &args.port) {
+        (Some(conn), _) => serve(args, profiled, face, conn),
         (None, None) => common::runtime()?
             .block_on(profibus_opcua::sim::serve(
                 profiled,
@@ -105,29 +142,137 @@ pub fn run(args: Args) -> Result<()> {
                 common::shutdown(),
             ))
             .map_err(Into::into),
-        (_, conn) => serve(args, profiled, face, conn),
+        (None, Some(port)) => {
+            let port = port.clone();
+            common::runtime()?.block_on(on_line_opcua(&args, &port, &profiled, face))
+        }
     };
     server.stop();
     result
+}
+
+/// [`on_line`] without a broker: the OPC UA face stepped alone.
+async fn on_line_opcua(
+    args: &Args,
+    port: &str,
+    profiled: &ProfiledBus,
+    mut face: Face,
+) -> Result<()> {
+    let bus = &profiled.file;
+    let dp = DpMaster::new(&bus.master)?;
+    let (mut station, mut line) =
+        common::master_station(port, bus, dp, args.latency, Default::default())?;
+    let options = common::driver_options(&line, 0, false)?;
+    driver::run_with(
+        &mut station,
+        &mut line,
+        Clock::start(),
+        options,
+        common::shutdown(),
+        |st, now| {
+            face.step(st.app_mut(), now, link::wall_ms());
+            ControlFlow::<()>::Continue(())
+        },
+    )
+    .await
+    .with_context(|| format!("on {port}"))?;
+    Ok(())
 }
 
 fn serve<S: Session + Send + 'static>(
     args: Args,
     profiled: ProfiledBus,
     gw: S,
-    conn: Option<Connection>,
+    conn: Connection,
 ) -> Result<()> {
-    common::runtime()?.block_on(async move {
-        let link = conn.map(|c| MqttLink::connect(&c, &gw));
-        match (&args.port, link) {
-            (Some(p), link) => on_line(&args, p, &profiled, gw, link).await,
-            (None, Some(link)) => {
-                let shutdown = common::shutdown();
-                Ok(profibus_gateway::sim::serve(profiled, gw, link, shutdown).await?)
-            }
-            (None, None) => anyhow::bail!("no broker and no --port"),
+    let (mut gw, reloads, stopping) = Operated::new(gw, profiled.file.slaves.len());
+    if let Some(path) = &args.health_file {
+        gw.health_file(path.clone());
+    }
+    let shared = gw.stopped_handle();
+    let rt = common::runtime()?;
+    let result = rt.block_on(async move {
+        reload_on_sighup(&args.config, &profiled, reloads)?;
+        let link = MqttLink::connect(&conn, &gw);
+        let shutdown = stop(stopping);
+        match &args.port {
+            Some(p) => on_line(&args, p, &profiled, gw, link, shutdown).await,
+            None => Ok(profibus_gateway::sim::serve(profiled, gw, link, shutdown).await?),
         }
-    })
+    });
+    shared();
+    match &result {
+        Ok(()) => tracing::info!(target: ops::TARGET, "dpctl gateway stopped"),
+        Err(e) => tracing::error!(target: ops::TARGET, "dpctl gateway stopped: {e:#}"),
+    }
+    result
+}
+
+/// Completes on SIGTERM or SIGINT once the offline health is handed to
+/// the link (at most 500 ms later): the core keeps running until then.
+async fn stop(stopping: Stopping) {
+    common::shutdown().await;
+    tracing::info!(target: ops::TARGET, "stopping");
+    stopping.begin();
+    let _ = tokio::time::timeout(std::time::Duration::from_millis(500), stopping.sent()).await;
+}
+
+/// On every SIGHUP: read the bus file again and hand its `[mqtt]` table
+/// to the running core (through `reloads`), or log why not; the bus
+/// keeps running either way.
+fn reload_on_sighup(
+    path: &std::path::Path,
+    profiled: &ProfiledBus,
+    reloads: ReloadSender,
+) -> Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut hup = signal(SignalKind::hangup()).context("installing the SIGHUP handler")?;
+    let path = path.to_path_buf();
+    let mut running = profiled.file.mqtt.clone();
+    tokio::spawn(async move {
+        while hup.recv().await.is_some() {
+            match reload(&path, running.as_ref()) {
+                Ok((table, r)) => {
+                    running = table;
+                    if reloads.send(r).is_err() {
+                        return;
+                    }
+                }
+                Err(e) => tracing::error!(
+                    target: ops::TARGET,
+                    "SIGHUP: not reloaded, the running settings stay: {e:#}"
+                ),
+            }
+        }
+    });
+    Ok(())
+}
+
+/// The `[mqtt]` table of the bus file at `path` and the reload of it
+/// over `running`, or why it cannot be taken while running.
+fn reload(
+    path: &std::path::Path,
+    running: Option<&toml::Table>,
+) -> Result<(Option<toml::Table>, ops::Reload)> {
+    let file = ProfiledBus::load(path)?;
+    let table = file.file.mqtt;
+    let settings = MqttSettings::for_bus_file(table.as_ref(), path)
+        .with_context(|| path.display().to_string())?;
+    let changes = ops::changes(running, table.as_ref());
+    let fixed: Vec<&str> = changes
+        .iter()
+        .filter(|(k, _)| ops::RESTART_KEYS.contains(&k.as_str()))
+        .map(|(_, c)| c.as_str())
+        .collect();
+    if !fixed.is_empty() {
+        anyhow::bail!(
+            "{}: {} only change with a restart",
+            path.display(),
+            fixed.join(", ")
+        );
+    }
+    let changes = changes.into_iter().map(|(_, c)| c).collect();
+    Ok((table, ops::Reload { settings, changes }))
 }
 
 async fn on_line(
@@ -135,32 +280,35 @@ async fn on_line(
     port: &str,
     profiled: &ProfiledBus,
     mut gw: impl Session,
-    mut link: Option<MqttLink>,
+    mut link: MqttLink,
+    shutdown: impl std::future::Future<Output = ()>,
 ) -> Result<()> {
     let bus = &profiled.file;
     let dp = DpMaster::new(&bus.master)?;
     let (mut station, mut line) =
         common::master_station(port, bus, dp, args.latency, Default::default())?;
     let options = common::driver_options(&line, 0, false)?;
+    tracing::info!(
+        target: ops::TARGET,
+        "bus: master {} on {port} at {} baud, {} slaves",
+        bus.master.address,
+        bus.master.params.baud,
+        bus.slaves.len()
+    );
     let result = driver::run_with(
         &mut station,
         &mut line,
         Clock::start(),
         options,
-        common::shutdown(),
+        shutdown,
         |st, now| {
-            match &mut link {
-                Some(l) => link::step(l, &mut gw, st.app_mut(), now),
-                None => gw.step(st.app_mut(), now, link::wall_ms()),
-            }
+            link::step(&mut link, &mut gw, st.app_mut(), now);
             ControlFlow::<()>::Continue(())
         },
     )
     .await;
-    if let Some(link) = link {
-        let last = gw.last_will();
-        link.close(last).await;
-    }
+    let last = gw.last_will();
+    link.close(last).await;
     result.with_context(|| format!("on {port}"))?;
     Ok(())
 }

@@ -147,6 +147,10 @@ impl Session for Face {
         self.core.settings()
     }
 
+    fn settings_mut(&mut self) -> &mut MqttSettings {
+        Session::settings_mut(&mut self.core)
+    }
+
     fn link_setup(&self) -> LinkSetup {
         Session::link_setup(&self.core)
     }

@@ -132,6 +132,18 @@ pub struct MetricDef {
     source: Source,
 }
 
+impl MetricDef {
+    /// The process image the metric's value comes from (`channels`: the
+    /// device's), if any: the image metrics and the channels.
+    pub fn image(&self, channels: &ChannelMap) -> Option<Direction> {
+        match &self.source {
+            Source::Image(d) => Some(*d),
+            Source::Channel(i) => channels.channels.get(*i).map(|c| c.direction),
+            _ => None,
+        }
+    }
+}
+
 /// A slave as a Sparkplug device: its metrics, in birth order.
 #[derive(Debug, Clone)]
 pub struct Device {
@@ -151,8 +163,8 @@ pub enum CommandError {
     /// Not a Sparkplug payload.
     #[error("DCMD payload is not a Sparkplug B payload: {0}")]
     Decode(String),
-    /// A metric without a name (this gateway births no aliases).
-    #[error("DCMD metric without a name")]
+    /// A metric with neither a name nor an alias of this device.
+    #[error("DCMD metric without a name or a known alias")]
     NoName,
     /// A metric the device does not have, or one that cannot be written.
     #[error(
