@@ -366,7 +366,7 @@ fn u16_arg(args: &[Variant], i: usize) -> Result<u16, StatusCode> {
 }
 
 fn unhex(s: &str) -> Option<Vec<u8>> {
-    if s.len() % 2 != 0 {
+    if !s.len().is_multiple_of(2) {
         return None;
     }
     (0..s.len())
