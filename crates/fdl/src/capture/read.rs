@@ -9,7 +9,7 @@
 //! stamps) and pcapng (one section; the first interface's `if_tsresol`;
 //! enhanced and simple packet blocks, other blocks passed over; the
 //! `epb_flags` option, where our writer marks corrupt telegrams with
-//! [`EPB_FLAG_CRC_ERROR`](super::pcap::EPB_FLAG_CRC_ERROR)). Every error
+//! [`EPB_FLAG_CRC_ERROR`]). Every error
 //! is a [`ReadError`]: what is wrong, in words, at which byte of the file;
 //! no input panics (fuzzed: `fuzz/fuzz_targets/pcap_read.rs`).
 
