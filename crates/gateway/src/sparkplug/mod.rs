@@ -570,6 +570,9 @@ impl Session for EdgeNode {
     fn settings(&self) -> &MqttSettings {
         &self.settings
     }
+    fn settings_mut(&mut self) -> &mut MqttSettings {
+        &mut self.settings
+    }
 
     /// QoS 0 for everything but the will (QoS 1); subscribed to NCMD and
     /// DCMD; the will is the NDEATH with the bdSeq of each attempt.
