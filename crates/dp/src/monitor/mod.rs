@@ -87,6 +87,7 @@ use std::time::Duration;
 
 #[cfg(test)]
 mod tests;
+pub mod trigger;
 
 /// Which process image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

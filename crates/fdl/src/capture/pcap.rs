@@ -42,6 +42,8 @@ const PCAPNG_IDB: u32 = 1;
 const PCAPNG_SPB: u32 = 3;
 const PCAPNG_EPB: u32 = 6;
 const PCAPNG_BYTE_ORDER: u32 = 0x1A2B_3C4D;
+/// Option code of `opt_comment` (any block).
+const OPT_COMMENT: u16 = 1;
 /// Option code of `epb_flags` in an enhanced packet block.
 const EPB_FLAGS: u16 = 2;
 /// `epb_flags` bit 24, a link-layer error: "CRC error" (pcapng
@@ -172,6 +174,35 @@ impl<W: Write> PcapWriter<W> {
         data: &[u8],
         flags: u32,
     ) -> io::Result<()> {
+        self.write_packet_with(ts, data, flags, None)
+    }
+
+    /// Record bytes seen at `at` (driver time), a telegram or, when
+    /// `corrupt`, bytes that are none ([`PcapWriter::write_corrupt`]),
+    /// with a comment (pcapng `opt_comment`; Wireshark shows it as
+    /// `frame.comment` and in the packet list's expert info). The
+    /// triggered recorder names the segment and its trigger this way.
+    pub fn write_record(
+        &mut self,
+        at: Instant,
+        bytes: &[u8],
+        corrupt: bool,
+        comment: Option<&str>,
+    ) -> io::Result<()> {
+        let ts = self.epoch + Duration::from_nanos(at.as_nanos());
+        let flags = if corrupt { EPB_FLAG_CRC_ERROR } else { 0 };
+        self.write_packet_with(ts, bytes, flags, comment)
+    }
+
+    /// Record one packet with `epb_flags` (0: none) and a comment
+    /// (pcapng only; the classic format has no place for either).
+    pub fn write_packet_with(
+        &mut self,
+        ts: Duration,
+        data: &[u8],
+        flags: u32,
+        comment: Option<&str>,
+    ) -> io::Result<()> {
         let len = u32::try_from(data.len())
             .ok()
             .filter(|&l| l <= SNAPLEN)
@@ -194,8 +225,17 @@ impl<W: Write> PcapWriter<W> {
                     io::Error::new(io::ErrorKind::InvalidInput, "time stamp beyond 2554")
                 })?;
                 let pad = pad4(data.len());
-                // Options: epb_flags (code 2, 4 bytes), then opt_endofopt.
-                let opts = if flags != 0 { 12 } else { 0 };
+                // Options: opt_comment (code 1, UTF-8), epb_flags (code
+                // 2, 4 bytes), then opt_endofopt.
+                let comment = comment.map(str::as_bytes).filter(|c| !c.is_empty());
+                let comment = comment.map(|c| &c[..c.len().min(u16::MAX as usize - 3)]);
+                let comment_len = comment.map_or(0, |c| 4 + c.len() + pad4(c.len()));
+                let flags_len = if flags != 0 { 8 } else { 0 };
+                let opts = if comment_len + flags_len > 0 {
+                    comment_len + flags_len + 4
+                } else {
+                    0
+                };
                 let total = (32 + data.len() + pad + opts) as u32;
                 let mut h = [0u8; 28];
                 h[0..4].copy_from_slice(&PCAPNG_EPB.to_le_bytes());
@@ -208,12 +248,22 @@ impl<W: Write> PcapWriter<W> {
                 self.sink.write_all(&h)?;
                 self.sink.write_all(data)?;
                 self.sink.write_all(&[0u8; 3][..pad])?;
+                if let Some(c) = comment {
+                    self.sink.write_all(&OPT_COMMENT.to_le_bytes())?;
+                    self.sink.write_all(&(c.len() as u16).to_le_bytes())?;
+                    self.sink.write_all(c)?;
+                    self.sink.write_all(&[0u8; 3][..pad4(c.len())])?;
+                }
                 if flags != 0 {
-                    let mut o = [0u8; 12];
+                    let mut o = [0u8; 8];
                     o[0..2].copy_from_slice(&EPB_FLAGS.to_le_bytes());
                     o[2..4].copy_from_slice(&4u16.to_le_bytes());
                     o[4..8].copy_from_slice(&flags.to_le_bytes());
                     self.sink.write_all(&o)?;
+                }
+                if opts > 0 {
+                    // opt_endofopt.
+                    self.sink.write_all(&[0u8; 4])?;
                 }
                 self.sink.write_all(&total.to_le_bytes())?;
             }
@@ -618,6 +668,30 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_eq!((p.data.as_slice(), p.flags), (&bad[..], 0));
+    }
+
+    #[test]
+    fn records_carry_comments_before_their_flags() {
+        let bad = [0x68, 5, 5, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x00, 0x16];
+        let mut w = PcapWriter::new(Vec::new(), Duration::ZERO).unwrap();
+        w.write_record(Instant::from_nanos(1), &bad, true, Some("trigger: fcs"))
+            .unwrap();
+        w.write_record(Instant::from_nanos(2), &[0xE5], false, Some("x"))
+            .unwrap();
+        let file = w.into_inner().unwrap();
+        // EPB 32 + 11 + 1 pad + comment (4 + 12) + flags 8 + end 4; then
+        // EPB 32 + 1 + 3 pad + comment (4 + 1 + 3 pad) + end 4.
+        assert_eq!(file.len(), 60 + 72 + 48);
+        let at = 60 + 28 + 12;
+        assert_eq!(&file[at..at + 4], &[1, 0, 12, 0]);
+        assert_eq!(&file[at + 4..at + 16], b"trigger: fcs");
+        let packets: Vec<PcapPacket> = PcapReader::new(&file[..])
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        assert!(packets[0].is_corrupt());
+        assert_eq!(packets[1].data, [0xE5]);
+        assert!(!packets[1].is_corrupt());
     }
 
     #[test]
