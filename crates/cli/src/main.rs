@@ -13,6 +13,7 @@
 mod bus;
 mod common;
 mod completions;
+mod control;
 mod decode;
 mod demo;
 mod doctor;
@@ -35,6 +36,7 @@ mod service;
 mod slave;
 mod sniff;
 mod soak;
+mod via;
 mod view;
 
 use clap::{Parser, Subcommand};

@@ -366,6 +366,7 @@ async fn sniff(args: Args) -> Result<()> {
         common::BaudArg::Fixed(b) => b,
         common::BaudArg::Auto => Baud::B19200,
     };
+    common::lock_port(&args.port)?;
     let mut port = Port::open(&args.port, at)?;
     if args.baud == common::BaudArg::Auto {
         let found = common::find_baud(&mut port, None).await?;
