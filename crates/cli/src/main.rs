@@ -32,6 +32,7 @@ mod service;
 mod slave;
 mod sniff;
 mod soak;
+mod stats_args;
 mod view;
 
 use clap::{Parser, Subcommand};

@@ -12,7 +12,10 @@
 //! Definitions (docs/analyser.md has them for users):
 //!
 //! - **requests**: telegrams with a request function code addressed to
-//!   the station (FDL status and ident polls included; broadcasts not);
+//!   the station (not broadcasts, and not the FDL status, ident and LSAP
+//!   status polls of the GAP and live-list scans, to which absent
+//!   stations stay silent by design: a station they find counts from its
+//!   answer);
 //!   **answers**: responses and short acknowledges it sent.
 //! - **retries**: a request repeated with the same FCB. IEC 61158-4-3
 //!   frame count bit rules: the initiator toggles FCB after each
@@ -31,9 +34,14 @@
 //! - **diag_requests** / **diag_answers** / **ext_diag**: Slave_Diag
 //!   requests, their answers, and answers with Ext_Diag set.
 //! - **set_prm**, **chk_cfg**: Set_Prm and Chk_Cfg requests;
-//!   **restarts**: a slave starting over — a Set_Prm after it was in
-//!   Data_Exchange, or a Slave_Diag answer with Station_Not_Ready or
-//!   Prm_Req after Data_Exchange.
+//!   **restarts**: a slave starting over after it reached Data_Exchange —
+//!   the first of a Set_Prm to it, a Slave_Diag answer with
+//!   Station_Not_Ready or Prm_Req, or a Data_Exchange refused with RS
+//!   (SAP not activated: not parameterised).
+//! - **role**: master when it sent a request or passed the token twice (a
+//!   token telegram has no FCS: line noise can forge one), slave when it
+//!   answered; **dp_state**: as its master has it, `offline` after three
+//!   requests in a row without an answer.
 //! - **response_time**: from the end of the request (its first byte's
 //!   time plus its length at the line's rate, 11 bit per character) to
 //!   the first byte of the answer.
@@ -239,8 +247,9 @@ mod ser {
 ///
 /// `100 − 1000·(no_answer + illegal)/requests − 500·retries/requests
 ///  − 20·restarts − 10·[ext_diag > 0] − 50·over_ttr/rotations`,
-/// clamped to 0 … 100; the ratios are taken over the requests addressed
-/// to the station (at least 1). A slave its master has `offline` is 0.
+/// clamped to 0 … 100; the ratios are taken over the telegrams the
+/// station took part in: requests to it, requests it sent and tokens it
+/// passed (at least 1). A slave its master has `offline` is 0.
 /// So 1 % lost or corrupt answers cost 10 points, 1 % retries 5, each
 /// restart 20, a pending extended diagnosis 10, and a master whose every
 /// rotation overran the TTR 50.
@@ -248,7 +257,7 @@ pub fn health(s: &StationStats) -> u8 {
     if s.dp_state == Some(SlaveState::Offline) {
         return 0;
     }
-    let req = s.requests.max(1) as f64;
+    let req = (s.requests + s.requests_sent + s.tokens).max(1) as f64;
     let bad = (s.no_answer + s.illegal) as f64 / req;
     let retries = s.retries as f64 / req;
     let mut h = 100.0 - 1000.0 * bad - 500.0 * retries - 20.0 * s.restarts as f64;
@@ -418,10 +427,18 @@ struct Track {
     sends_as_master: bool,
     answers: bool,
     dp_state: Option<SlaveState>,
+    /// Reached Data_Exchange since its last start-up.
+    in_dx: bool,
+    /// Requests in a row without an answer.
+    failures: u32,
+    tokens: u64,
     last: Option<LastRequest>,
     last_token: Option<Instant>,
     last_dx: Option<Instant>,
 }
+
+/// Requests in a row without an answer after which a slave is `offline`.
+const OFFLINE_AFTER: u32 = 3;
 
 /// The statistics core; see the module docs.
 #[derive(Debug, Default)]
@@ -544,7 +561,10 @@ impl Stats {
             let ttr = self.options.ttr;
             let last = {
                 let t = self.track(sa);
-                t.sends_as_master = true;
+                // A token telegram has no FCS: a corrupt telegram can
+                // look like one. A master passes the token again.
+                t.tokens += 1;
+                t.sends_as_master |= t.tokens >= 2;
                 t.last_token.replace(at)
             };
             let rotation = last.filter(|&l| at > l).map(|l| at - l);
@@ -558,10 +578,6 @@ impl Stats {
                 }
             });
         }
-        if da <= 126 && da != sa {
-            self.track(da).sends_as_master = true;
-            self.both(da, |_| {});
-        }
     }
 
     /// The request before got no answer before the next request or token.
@@ -569,6 +585,11 @@ impl Stats {
         if let Some(p) = self.pending.take() {
             if p.expects_reply {
                 self.both(p.responder, |s| s.no_answer += 1);
+                let t = self.track(p.responder);
+                t.failures = t.failures.saturating_add(1);
+                if t.failures >= OFFLINE_AFTER && t.dp_state.is_some() {
+                    t.dp_state = Some(SlaveState::Offline);
+                }
             }
         }
     }
@@ -597,6 +618,21 @@ impl Stats {
         }
         let slave = d.da;
         let dsap = d.dsap.map(|s| s & 0x3F);
+        if matches!(
+            kind,
+            RequestKind::FdlStatus | RequestKind::Ident | RequestKind::LsapStatus
+        ) {
+            // GAP polling and live lists: absent stations are normal; a
+            // station counts from its answer.
+            self.pending = Some(Pending {
+                initiator: master,
+                responder: slave,
+                dsap,
+                end,
+                expects_reply: false,
+            });
+            return;
+        }
         let expects_reply = kind.expects_reply();
         self.pending = Some(Pending {
             initiator: master,
@@ -633,7 +669,9 @@ impl Stats {
             (true, Some(sap::CHK_CFG)) => (0, 0, 1),
             _ => (0, 0, 0),
         };
-        let data_exchange = dsap.is_none() && d.ssap.is_none() && kind.expects_reply();
+        let data_exchange = dsap.is_none()
+            && d.ssap.is_none()
+            && matches!(kind, RequestKind::SrdLow | RequestKind::SrdHigh);
         let mut cycle = None;
         let mut restart = false;
         {
@@ -643,7 +681,7 @@ impl Stats {
                 t.last_dx = Some(at);
             }
             if set_prm == 1 && !retry {
-                restart = t.dp_state == Some(SlaveState::DataExchange);
+                restart = std::mem::take(&mut t.in_dx);
                 t.dp_state = Some(SlaveState::ChkCfg);
                 t.last_dx = None;
             }
@@ -707,16 +745,21 @@ impl Stats {
         {
             let t = self.track(p.responder);
             t.answers = true;
+            t.failures = 0;
             if let Some(l) = t.last.as_mut() {
                 l.answered = true;
             }
             if p.dsap.is_none() && !negative {
                 t.dp_state = Some(SlaveState::DataExchange);
+                t.in_dx = true;
             } else if p.dsap.is_none() && status == Some(profibus_fdl::wire::ResponseStatus::Rs) {
+                // Data_Exchange refused: the slave is not parameterised
+                // (it restarted).
+                restart = std::mem::take(&mut t.in_dx);
                 t.dp_state = Some(SlaveState::Diag);
             }
             if diag_answer == 1 && not_ready {
-                restart = t.dp_state == Some(SlaveState::DataExchange);
+                restart |= std::mem::take(&mut t.in_dx);
                 t.dp_state = Some(SlaveState::SetPrm);
                 t.last_dx = None;
             } else if diag_answer == 1 && t.dp_state.is_none() {
@@ -989,6 +1032,34 @@ mod tests {
         let s = l.station(S);
         assert_eq!((s.restarts, s.set_prm, s.chk_cfg), (2, 2, 1));
         assert_eq!(s.health, 60);
+    }
+
+    #[test]
+    fn a_killed_slave_goes_offline_and_restarts_once_when_refusing_data_exchange() {
+        let mut l = Line::new();
+        l.dx(0, true);
+        // The slave is gone: three Data_Exchange requests unanswered.
+        for (i, at) in [1000, 2000, 3000, 4000].into_iter().enumerate() {
+            l.data(at, S, M, req(i % 2 == 1, true), None, &[0x55]);
+        }
+        l.send(4500, Telegram::Token { da: M, sa: M });
+        let s = l.station(S);
+        assert_eq!((s.no_answer, s.dp_state), (4, Some(SlaveState::Offline)));
+        assert_eq!(s.health, 0);
+        // Back, not parameterised: Data_Exchange refused (RS), then the
+        // master's start-up (Slave_Diag with Prm_Req, Set_Prm): one
+        // restart, not three.
+        l.data(5000, S, M, req(false, true), None, &[0x55]);
+        let rs = FunctionCode::slave_response(ResponseStatus::Rs);
+        l.send(5100, Telegram::Data(DataTelegram::new(M, S, rs, &[])));
+        l.diag(6000, true, 0x02, 0x01);
+        l.data(7000, S, M, req(false, true), Some(sap::SET_PRM), &[0x88]);
+        let s = l.station(S);
+        assert_eq!(s.restarts, 1);
+        assert_eq!(s.dp_state, Some(SlaveState::ChkCfg));
+        // A single token telegram (no FCS: noise can forge one) makes no
+        // master; master 2 passed it once only, but sent requests.
+        assert_eq!(l.station(M).role, Some(Role::Master));
     }
 
     #[test]
