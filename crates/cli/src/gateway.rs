@@ -53,6 +53,8 @@ pub fn run(args: Args) -> Result<()> {
         .clone()
         .or_else(|| settings.broker.clone())
         .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
+    profibus_gateway::traffic::check(&settings, &slave_infos(&profiled)?)
+        .with_context(|| args.config.display().to_string())?;
     let conn = Connection::from_settings(&settings, &url)?;
     match args.sparkplug.clone().or(settings.sparkplug.clone()) {
         Some(id) => {

@@ -144,7 +144,8 @@ fn record_fields(n: usize, bytes: &[u8; 64]) -> Vec<(&'static str, String)> {
     }
 }
 
-fn im0_json(im: &Im0) -> Value {
+/// I&M0 as `dpctl im --json` (and `dpctl scan --json`) writes it.
+pub(crate) fn im0_json(im: &Im0) -> Value {
     let sup = im.im_supported;
     json!({
         "manufacturer_id": im.manufacturer_id,

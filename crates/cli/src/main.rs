@@ -26,6 +26,7 @@ mod monitor;
 mod out;
 mod pkw;
 mod profile_args;
+mod report;
 mod rfid;
 mod scan;
 mod service;
@@ -76,6 +77,9 @@ enum Command {
     Bus(bus::Args),
     /// Listen passively on a line and print every telegram.
     Sniff(sniff::Args),
+    /// Turn a capture into an HTML report (or JSON): live list,
+    /// per-station statistics, plots, diagnoses in words.
+    Report(report::Args),
     /// Read or write a parameter over a slave's PKW channel.
     Pkw(pkw::Args),
     /// Run commands on an RFID reader (AEG ID ARE I2 / K1 PFB) over its
@@ -145,6 +149,7 @@ fn main() -> ExitCode {
         Command::Slave(a) => slave::run(*a),
         Command::Bus(a) => bus::run(a),
         Command::Sniff(a) => sniff::run(a),
+        Command::Report(a) => report::run(a),
         Command::Pkw(a) => pkw::run(a),
         Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),

@@ -5,13 +5,17 @@
 use crate::common::{self, BaudArg, LineArgs};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::ProfiledBus;
-use profibus_dp::config::commission::{self, ScannedSlave, SlavePlan, WriteOptions};
+use profibus_dp::class2::{Class2Config, Class2Master, Class2Run};
+use profibus_dp::config::commission::{self, Im0Scan, ScannedSlave, SlavePlan, WriteOptions};
 use profibus_dp::config::library::GsdLibrary;
+use profibus_dp::master::records::{ImRead, ImReader, RecordAnswer, RecordOp, RecordOps};
 use profibus_dp::scan::{LiveListScan, LiveRow};
-use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
+use profibus_fdl::station::active::{ActiveConfig, ActiveStation, MasterApp, RingState};
 use profibus_fdl::wire::StationType;
 use profibus_fdl::BusParams;
-use profibus_io::driver::{self, Clock, Stop};
+use profibus_io::driver::{self, Clock};
+use profibus_io::transport::Port;
+use std::collections::VecDeque;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -49,6 +53,12 @@ pub struct Args {
     /// Built-in GSD files used are written to a `gsd/` folder beside it.
     #[arg(long, value_name = "BUS.toml")]
     write_config: Option<PathBuf>,
+    /// With --write-config: do not read the slaves' I&M0 (by default
+    /// read through a class-2 connection from each slave whose GSD has
+    /// `DPV1_Slave=1` and `C2_Read_Write_supp=1`, or that has no GSD in
+    /// the library; written as a comment and in the JSON).
+    #[arg(long)]
+    no_im: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -81,35 +91,15 @@ async fn scan(args: Args) -> Result<()> {
     };
     let mut cfg = ActiveConfig::new(args.addr, BusParams::defaults(baud));
     common::allow_for_port(&mut cfg, args.line.latency, &port)?;
+    let station_cfg = cfg;
     let app = match library {
         Some(_) => LiveListScan::with_config(args.addr),
         None => LiveListScan::new(args.addr),
     };
     let mut station = ActiveStation::new(cfg, app);
     let limit = Duration::from_secs_f64(args.timeout.max(0.0));
-    let deadline = tokio::time::sleep(limit);
-    let stop = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        async {
-            tokio::select! {
-                _ = common::shutdown() => {}
-                _ = deadline => {}
-            }
-        },
-        |st, _| {
-            if st.app().is_done() {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
-            }
-        },
-    )
-    .await?;
-    if stop == Stop::Shutdown && !station.app().is_done() {
-        if station.ring_state() == RingState::ListenToken {
+    if let Some(ring) = run_until(&mut station, &mut port, limit, |a| a.is_done()).await? {
+        if ring == RingState::ListenToken {
             bail!(
                 "no token within {:.0} s: not invited into the ring",
                 limit.as_secs_f64()
@@ -119,7 +109,11 @@ async fn scan(args: Args) -> Result<()> {
     }
     let app = station.app();
     if let (Some(lib), Some(path)) = (library, &args.write_config) {
-        return write_config(&args, baud, app, &lib, path);
+        let mut scanned = scanned(app);
+        if !args.no_im {
+            read_im0(&mut port, station_cfg, &mut scanned, &lib, limit).await?;
+        }
+        return write_config(&args, baud, scanned, &lib, path);
     }
     let mut rows: Vec<LiveRow> = vec![LiveRow::scanner(args.addr)];
     rows.extend(app.stations().iter().map(|&s| LiveRow::from(s)));
@@ -132,6 +126,41 @@ async fn scan(args: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Run `station` on `port` until `done` says its application has
+/// finished, `limit` has passed or the process is asked to stop (the
+/// one station loop of `dpctl scan` and the service commands). `None`
+/// when done; else where the station was in the ring, for the caller's
+/// words ([`RingState::ListenToken`]: never invited into the ring).
+pub async fn run_until<A: MasterApp>(
+    station: &mut ActiveStation<A>,
+    port: &mut Port,
+    limit: Duration,
+    done: impl Fn(&A) -> bool,
+) -> Result<Option<RingState>> {
+    let deadline = tokio::time::sleep(limit);
+    driver::run_with(
+        station,
+        port,
+        Clock::start(),
+        driver::Options::default(),
+        async {
+            tokio::select! {
+                _ = common::shutdown() => {}
+                _ = deadline => {}
+            }
+        },
+        |st, _| {
+            if done(st.app()) {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        },
+    )
+    .await?;
+    Ok((!done(station.app())).then(|| station.ring_state()))
 }
 
 /// The GSD library of `--gsd-dir` folders, the built-in files and the
@@ -149,20 +178,15 @@ pub fn library(dirs: &[PathBuf]) -> Result<GsdLibrary> {
     Ok(lib)
 }
 
-fn write_config(
-    args: &Args,
-    baud: profibus_fdl::Baud,
-    app: &LiveListScan,
-    lib: &GsdLibrary,
-    path: &Path,
-) -> Result<()> {
+/// What the scan read of each DP slave, by address.
+fn scanned(app: &LiveListScan) -> Vec<ScannedSlave> {
     let mut stations: Vec<_> = app
         .stations()
         .iter()
         .filter(|s| s.station == StationType::Passive)
         .collect();
     stations.sort_by_key(|s| s.address);
-    let scanned: Vec<ScannedSlave> = stations
+    stations
         .iter()
         .map(|s| {
             let data = app.slave_data(s.address).cloned().unwrap_or_default();
@@ -170,9 +194,154 @@ fn write_config(
                 address: s.address,
                 diag: data.diag,
                 cfg: data.cfg,
+                im0: None,
             }
         })
+        .collect()
+}
+
+/// [`ImReader`] stopped after I&M0.
+struct Im0Only(ImReader);
+
+impl RecordOps for Im0Only {
+    fn next_op(&mut self) -> Option<RecordOp> {
+        if self.0.records[0].is_some() {
+            return None;
+        }
+        self.0.next_op()
+    }
+
+    fn answered(&mut self, op: &RecordOp, answer: &RecordAnswer) {
+        self.0.answered(op, answer);
+    }
+}
+
+/// Whether to ask `slave` for I&M0: `Err(why not)` when every GSD file
+/// of its ident in the library says it has no class-2 services; a slave
+/// without a file is asked (it answers or refuses). `Ok` with the
+/// longest `C2_Response_Timeout` its files give.
+fn offers_im(slave: &ScannedSlave, lib: &GsdLibrary) -> Result<Option<Duration>, String> {
+    let Some(ident) = slave.ident() else {
+        return Err("no Slave_Diag".into());
+    };
+    let entries = lib.find(ident);
+    if entries.is_empty() {
+        return Ok(None);
+    }
+    let c2: Vec<_> = entries
+        .iter()
+        .filter(|e| e.gsd.dpv1_slave && e.gsd.c2_read_write_supp)
         .collect();
+    if c2.is_empty() {
+        return Err(format!(
+            "{} has no class-2 services (DPV1_Slave, C2_Read_Write_supp)",
+            entries[0].source
+        ));
+    }
+    Ok(c2
+        .iter()
+        .filter_map(|e| e.gsd.c2_response_timeout)
+        .max()
+        .map(|t| Duration::from_millis(10 * u64::from(t.max(1)))))
+}
+
+/// Read the I&M0 of every slave that offers it, one class-2 connection
+/// after the other, as a station of the ring at the scan's address;
+/// each slave's [`Im0Scan`] into `slaves`. A slave that refuses or does
+/// not answer is noted, never an error.
+async fn read_im0(
+    port: &mut Port,
+    station: ActiveConfig,
+    slaves: &mut [ScannedSlave],
+    lib: &GsdLibrary,
+    limit: Duration,
+) -> Result<()> {
+    let mut queue = VecDeque::new();
+    // At least 3 s for the set-up and each answer (the GSD's
+    // C2_Response_Timeout is the slave's own figure, without the token's
+    // rotation through other masters; the class-2 default of 10 s would
+    // hold up the scan at a silent slave).
+    let mut response = Duration::from_secs(3);
+    for s in slaves.iter_mut() {
+        match offers_im(s, lib) {
+            Ok(t) => {
+                response = response.max(t.unwrap_or_default());
+                queue.push_back((
+                    s.address,
+                    Class2Run::new(s.address, Im0Only(ImReader::new(0, None))),
+                ));
+            }
+            Err(why) => s.im0 = Some(Im0Scan::Skipped(why)),
+        }
+    }
+    if queue.is_empty() {
+        return Ok(());
+    }
+    let mut cfg = Class2Config::for_baud(station.params.baud);
+    cfg.response_timeout = response;
+    let mut st = ActiveStation::new(station, Class2Master::new(cfg));
+    let mut done: Vec<(u8, Class2Run<Im0Only>)> = vec![];
+    let deadline = tokio::time::sleep(limit);
+    driver::run_with(
+        &mut st,
+        port,
+        Clock::start(),
+        driver::Options::default(),
+        async {
+            tokio::select! {
+                _ = common::shutdown() => {}
+                _ = deadline => {}
+            }
+        },
+        |st, now| loop {
+            // The response timeout runs from the connect: not before
+            // this station is in the ring (it has held the token).
+            if st.stats().tokens == 0 {
+                return ControlFlow::Continue(());
+            }
+            let Some((_, run)) = queue.front_mut() else {
+                return ControlFlow::Break(());
+            };
+            if run.tick(st.app_mut(), now).is_continue() {
+                return ControlFlow::Continue(());
+            }
+            done.extend(queue.pop_front());
+        },
+    )
+    .await?;
+    let unfinished = format!("no end within {:.0} s", limit.as_secs_f64());
+    for ((address, run), finished) in done
+        .into_iter()
+        .map(|r| (r, true))
+        .chain(queue.into_iter().map(|r| (r, false)))
+    {
+        let result = match run.finish() {
+            _ if !finished => Im0Scan::Failed(unfinished.clone()),
+            Err((e, _)) => Im0Scan::Failed(e.to_string()),
+            Ok(Im0Only(r)) => match (&r.records[0], r.im0()) {
+                (_, Some(im)) => Im0Scan::Read(im),
+                (Some(ImRead::Refused(e)), _) => {
+                    Im0Scan::Failed(format!("refused: {}", e.describe()))
+                }
+                (Some(ImRead::Invalid(why)), _) => Im0Scan::Failed(format!("not valid: {why}")),
+                (Some(ImRead::Record(_)), None) => Im0Scan::Failed("not valid".into()),
+                (None, _) => Im0Scan::Failed("not read".into()),
+            },
+        };
+        if let Some(s) = slaves.iter_mut().find(|s| s.address == address) {
+            s.im0 = Some(result);
+        }
+    }
+    Ok(())
+}
+
+fn write_config(
+    args: &Args,
+    baud: profibus_fdl::Baud,
+    scanned: Vec<ScannedSlave>,
+    lib: &GsdLibrary,
+    path: &Path,
+) -> Result<()> {
     let plans = commission::plan(&scanned, lib, &profibus_devices::commission::Registry);
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -230,7 +399,17 @@ fn write_config(
 fn print_plans(plans: &[SlavePlan], dir: &Path, json: bool) -> Result<()> {
     for p in plans {
         if json {
-            crate::out::outln!("{}", common::json_line(p))?;
+            // I&M0 with the keys of `dpctl im --json`.
+            let mut v = serde_json::to_value(p)?;
+            if let (Some(o), Some(im)) = (v.as_object_mut(), &p.scanned.im0) {
+                let im = match im {
+                    Im0Scan::Read(im) => crate::im::im0_json(im),
+                    Im0Scan::Failed(why) => serde_json::json!({ "error": why }),
+                    Im0Scan::Skipped(why) => serde_json::json!({ "skipped": why }),
+                };
+                o.insert("im0".into(), im);
+            }
+            crate::out::outln!("{}", common::json_line(&v))?;
         } else {
             crate::out::outln!("{}", commission::describe(p, dir))?;
         }

@@ -19,9 +19,7 @@ use profibus_dp::scan::{ServiceAnswer, ServiceRequest, ServiceRequests};
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
 use profibus_fdl::wire::{Hex, ResponseStatus};
 use profibus_fdl::BusParams;
-use profibus_io::driver::{self, Clock, Stop};
 use serde_json::json;
-use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -140,29 +138,10 @@ async fn exchange(s: &StationArgs, requests: Vec<ServiceRequest>) -> Result<Vec<
     common::allow_for_port(&mut cfg, s.line.latency, &port)?;
     let mut station = ActiveStation::new(cfg, ServiceRequests::new(requests));
     let limit = Duration::from_secs_f64(s.timeout.max(0.0));
-    let deadline = tokio::time::sleep(limit);
-    let stop = driver::run_with(
-        &mut station,
-        &mut port,
-        Clock::start(),
-        driver::Options::default(),
-        async {
-            tokio::select! {
-                _ = common::shutdown() => {}
-                _ = deadline => {}
-            }
-        },
-        |st, _| {
-            if st.app().is_done() {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
-            }
-        },
-    )
-    .await?;
-    if stop == Stop::Shutdown && !station.app().is_done() {
-        if station.ring_state() == RingState::ListenToken {
+    if let Some(ring) =
+        crate::scan::run_until(&mut station, &mut port, limit, ServiceRequests::is_done).await?
+    {
+        if ring == RingState::ListenToken {
             bail!(
                 "no token within {:.0} s: not invited into the ring (is --addr {} free and below the masters' HSA?)",
                 limit.as_secs_f64(),

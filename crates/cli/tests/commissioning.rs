@@ -354,3 +354,119 @@ fn scan_writes_a_bus_file_the_master_runs_unchanged() {
     }
     master.terminate(Duration::from_secs(5));
 }
+
+/// I&M0 and a device profile's options from the live bus: a DP-V1 slave
+/// with class-2 services (C2PEER.GSD) gives its I&M0 to the scan (JSON
+/// with the keys of `dpctl im --json`, and a comment in the bus file); a
+/// BK3000 with a strip other than the default is written as `device =
+/// "bk3000"` with a strip of the same configuration, which the coupler
+/// takes from `dpctl master --config` unchanged; `--no-im` skips I&M0.
+#[test]
+fn scan_reads_im0_and_a_bk3000_strip() {
+    let dir = TempDir::new("commissioning-im");
+    let bus = Bus::start(4, &[]);
+    let gsd_dir = dir.path("library");
+    std::fs::create_dir(&gsd_dir).unwrap();
+    let c2 = repo().join("crates/cli/tests/data/C2PEER.GSD");
+    std::fs::copy(&c2, gsd_dir.join("C2PEER.GSD")).unwrap();
+    let data = dir.path("data");
+    let _c2 = slave(&bus, 1, 8, &c2, &["2 words in/out"]);
+    let strip = "KL1104,KL2134,KL3102,KL4002,KL9010";
+    let _bk = Proc::spawn(
+        "dpctl slave 9 (bk3000)",
+        Command::new(dpctl())
+            .args(["slave", "--port", &bus.link_str(2)])
+            .args(["--addr", "9", "--device", "bk3000", "--terminals", strip])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null()),
+    );
+    bus.wait_connected(2);
+    let bus_toml = dir.path("bus.toml");
+    let mut found = vec![];
+    for _ in 0..3 {
+        found = rows(&scan(&bus, 0, 1, &gsd_dir, &bus_toml, &data));
+        if found.len() == 2 {
+            break;
+        }
+    }
+    assert_eq!(found.len(), 2, "{found:#?}");
+    let s8 = row(&found, 8);
+    assert_eq!(s8["configured"], true, "{s8}");
+    assert_eq!(s8["im0"]["order_id"], "DPCTL-C2-PEER", "{s8}");
+    assert_eq!(s8["im0"]["software_revision"], "V1.2.3", "{s8}");
+    assert_eq!(s8["im0"]["hardware_revision"], 3, "{s8}");
+    let s9 = row(&found, 9);
+    assert_eq!(s9["device"], "bk3000", "{s9}");
+    // The coupler's configuration: KL3102 and KL4002 compact, one byte
+    // of digital inputs and one of outputs.
+    assert_eq!(s9["cfg"], "50 50 60 60 10 20", "{s9}");
+    assert_eq!(
+        s9["options"]["terminals"],
+        serde_json::json!(["KL3002", "KL4002", "KL1408", "KL2408", "KL9010"]),
+        "{s9}"
+    );
+    assert!(
+        s9["im0"]["skipped"]
+            .as_str()
+            .is_some_and(|w| w.contains("has no class-2 services")),
+        "{s9}"
+    );
+    let text = std::fs::read_to_string(&bus_toml).unwrap();
+    assert!(
+        text.contains("# I&M0: order DPCTL-C2-PEER, serial "),
+        "{text}"
+    );
+    assert!(
+        text.contains(", V1.2.3 (hardware revision 3, manufacturer 0x"),
+        "{text}"
+    );
+    assert!(
+        text.contains("device = \"bk3000\"\nterminals = [\"KL3002\", \"KL4002\", \"KL1408\", \"KL2408\", \"KL9010\"]"),
+        "{text}"
+    );
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("# terminal 1 (KL3002): ") && l.contains("KL3102")),
+        "{text}"
+    );
+    // The written file, unchanged, takes both to Data_Exchange: the
+    // coupler with the strip it was started with accepts its Chk_Cfg.
+    let mut master = Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--json", "--interval", "100", "--latency", "50"])
+            .args(["--port", &bus.link_str(3), "--config"])
+            .arg(&bus_toml)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null()),
+    );
+    let mut lines = Lines::from(&mut master);
+    wait_status(&mut lines, 0, "both written slaves in Data_Exchange", |v| {
+        all_dx(v) && v["slaves"].as_array().unwrap().len() == 2
+    });
+    // While the master holds them: I&M0 through class 2 all the same;
+    // with --no-im none is asked.
+    let second = dir.path("second.toml");
+    let found = rows(&scan(&bus, 0, 3, &gsd_dir, &second, &data));
+    let s8 = row(&found, 8);
+    assert_eq!(s8["im0"]["order_id"], "DPCTL-C2-PEER", "{s8}");
+    assert_eq!(row(&found, 8)["owner"], 1);
+    let mut cmd = Command::new(dpctl());
+    cmd.args([
+        "scan",
+        "--json",
+        "--latency",
+        "50",
+        "--addr",
+        "3",
+        "--no-im",
+    ])
+    .args(["--port", &bus.link_str(0), "--gsd-dir"])
+    .arg(&gsd_dir)
+    .arg("--write-config")
+    .arg(dir.path("third.toml"))
+    .env("XDG_DATA_HOME", &data);
+    let found = rows(&Proc::spawn_captured(cmd).finish(GUARD));
+    assert!(row(&found, 8).get("im0").is_none(), "{found:#?}");
+    master.terminate(Duration::from_secs(5));
+}

@@ -27,6 +27,7 @@ impl ProfileMatcher for Registry {
             if let Some(o) = p.options_giving(cfg, Some(address)) {
                 return Ok(Some(DeviceMatch {
                     name: p.name.to_string(),
+                    notes: p.commission_notes(cfg, &o),
                     options: o.table().clone(),
                 }));
             }

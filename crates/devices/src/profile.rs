@@ -520,6 +520,14 @@ pub trait Profile: std::fmt::Debug + Sized + Send + Sync + 'static {
     fn options_for_cfg(_cfg: &[u8]) -> Vec<DeviceOptions> {
         vec![DeviceOptions::new()]
     }
+
+    /// Commissioning: what the configuration `cfg` does not tell about
+    /// the options found for it (e.g. terminals that send the same
+    /// bytes), one line each, for the written bus file's comments.
+    /// Default: nothing.
+    fn commission_notes(_cfg: &[u8], _options: &DeviceOptions) -> Vec<String> {
+        vec![]
+    }
 }
 
 /// A configured profile, object-safe: what programs hold
@@ -618,6 +626,7 @@ pub struct ProfileEntry {
     pkw_parameters: fn(&Gsd) -> Vec<crate::pkw::PkwParameter>,
     capabilities: fn(&[u8]) -> Capabilities,
     options_for_cfg: fn(&[u8]) -> Vec<DeviceOptions>,
+    commission_notes: fn(&[u8], &DeviceOptions) -> Vec<String>,
 }
 
 impl std::fmt::Display for ProfileEntry {
@@ -663,6 +672,7 @@ impl ProfileEntry {
             pkw_parameters: P::pkw_parameters,
             capabilities: P::capabilities,
             options_for_cfg: P::options_for_cfg,
+            commission_notes: P::commission_notes,
         }
     }
 
@@ -694,6 +704,11 @@ impl ProfileEntry {
     /// See [`Profile::pkw_parameters`].
     pub fn pkw_parameters(&self, gsd: &Gsd) -> Vec<crate::pkw::PkwParameter> {
         (self.pkw_parameters)(gsd)
+    }
+
+    /// See [`Profile::commission_notes`].
+    pub fn commission_notes(&self, cfg: &[u8], options: &DeviceOptions) -> Vec<String> {
+        (self.commission_notes)(cfg, options)
     }
 
     /// The options of this profile, among [`Profile::options_for_cfg`],

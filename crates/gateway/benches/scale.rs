@@ -55,7 +55,8 @@ fn bus_file(m: usize, mode: &str, g: usize) -> String {
     s += &format!("[mqtt]\nbus = \"seg{g}\"\nprefix = \"scale\"\nclient_id = \"scale-{g}\"\n");
     match mode.strip_prefix("interval:") {
         Some(ms) => s += &format!("publish = \"interval\"\ninterval_ms = {ms}\n"),
-        None => s += "publish = \"change\"\n",
+        // Every change (the rate the bench sets): no minimum interval.
+        None => s += "publish = \"change\"\nmin_interval_ms = 0\n",
     }
     s
 }

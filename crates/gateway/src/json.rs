@@ -13,6 +13,7 @@ use crate::session::{LinkSetup, Publish, Session};
 use crate::settings::{MqttSettings, PublishMode};
 use crate::slave::SlaveInfo;
 use crate::topics::{Service, SlaveTopic, Topics};
+use crate::traffic::{ImageFilter, Traffic};
 use profibus_devices::channels::{Direction, OutputWriteError};
 use profibus_devices::pkw::client::PkwClient;
 use profibus_devices::pkw::{self, PKW_LEN};
@@ -61,6 +62,8 @@ struct Entry {
     rfid: Option<RfidClient>,
     /// The job the client runs.
     running: Option<Target>,
+    /// Report by exception of the input and output images.
+    filters: [ImageFilter; 2],
 }
 
 /// An answer's body: the result's fields on success, the error otherwise.
@@ -96,10 +99,16 @@ impl Gateway {
         let timeout = settings.job_timeout;
         Gateway {
             topics: Topics::new(&settings.prefix, &settings.bus),
-            settings,
             slaves: slaves
                 .into_iter()
                 .map(|info| Entry {
+                    filters: {
+                        let t = Traffic::of(&settings, &info);
+                        [
+                            t.filter(&info, Direction::Input),
+                            t.filter(&info, Direction::Output),
+                        ]
+                    },
                     pkw: info.pkw.map(|d| PkwClient::new(d, timeout)),
                     rfid: info.rfid().then(|| RfidClient::new(timeout)),
                     info,
@@ -110,6 +119,7 @@ impl Gateway {
                     running: None,
                 })
                 .collect(),
+            settings,
             jobs: vec![],
             out: VecDeque::new(),
             next_interval_ms: 0,
@@ -147,6 +157,7 @@ impl Gateway {
         self.status_master = None;
         for e in &mut self.slaves {
             e.published = Published::default();
+            e.filters.iter_mut().for_each(ImageFilter::reset);
         }
     }
 
@@ -473,22 +484,27 @@ impl Gateway {
                 };
                 msgs.push((SlaveTopic::State, to_bytes(&p)));
             }
-            for (t, dir, img, last) in [
+            let [fin, fout] = &mut e.filters;
+            for (t, dir, img, last, filter) in [
                 (
                     SlaveTopic::Inputs,
                     Direction::Input,
                     v.inputs,
                     &mut e.published.inputs,
+                    fin,
                 ),
                 (
                     SlaveTopic::Outputs,
                     Direction::Output,
                     v.outputs,
                     &mut e.published.outputs,
+                    fout,
                 ),
             ] {
-                let changed = last.as_deref() != Some(img);
-                if (on_change && changed) || interval_due || last.is_none() {
+                // Report by exception: deadbands and the minimum interval.
+                let changed = on_change && filter.due(img, ts_ms);
+                if changed || interval_due || last.is_none() {
+                    filter.published(img, ts_ms);
                     *last = Some(img.to_vec());
                     // The library's decoded image: `{"name": value}`.
                     let values = e.info.channels.as_ref().map(|map| match dir {
@@ -693,8 +709,10 @@ mod tests {
         ch.push("speed", Direction::Output, 0, ChannelType::I16);
         ch.push("torque", Direction::Output, 2, ChannelType::I16);
         ch.push("actual", Direction::Input, 0, ChannelType::I16);
-        let t: toml::Table =
-            toml::from_str("writable = [3, { address = 5, channels = [\"speed\"] }]").unwrap();
+        let t: toml::Table = toml::from_str(
+            "writable = [3, { address = 5, channels = [\"speed\"] }]\nmin_interval_ms = 0",
+        )
+        .unwrap();
         let settings = crate::MqttSettings::from_table(Some(&t), "l1").unwrap();
         let info = |address, channels| SlaveInfo {
             layout: SlaveLayout {

@@ -24,14 +24,15 @@
 //! 2. [`topics`]: the topic names, plain and Sparkplug B.
 //! 3. [`slave`]: what the gateway knows of a configured slave.
 //! 4. [`settings`]: the `[mqtt]` table.
-//! 5. [`request`]: requests from clients, parsed from their payloads.
-//! 6. [`payload`]: the JSON payloads the plain mode publishes.
-//! 7. [`session`]: the [`Session`] interface of the cores, [`Publish`].
-//! 8. [`outage`]: the outputs while the broker is away.
-//! 9. [`json`]: the plain JSON core, [`Gateway`].
-//! 10. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
-//! 11. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
-//! 12. [`sim`]: the simulated plant of `dpctl gateway --sim`.
+//! 5. [`traffic`]: report by exception (deadbands, minimum interval).
+//! 6. [`request`]: requests from clients, parsed from their payloads.
+//! 7. [`payload`]: the JSON payloads the plain mode publishes.
+//! 8. [`session`]: the [`Session`] interface of the cores, [`Publish`].
+//! 9. [`outage`]: the outputs while the broker is away.
+//! 10. [`json`]: the plain JSON core, [`Gateway`].
+//! 11. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
+//! 12. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
+//! 13. [`sim`]: the simulated plant of `dpctl gateway --sim`.
 //!
 //! # Example
 //!
@@ -97,22 +98,27 @@ pub mod sim;
 pub mod slave;
 pub mod sparkplug;
 pub mod topics;
+pub mod traffic;
 
 pub use json::Gateway;
 pub use link::{Connection, ConnectionError, LinkEvent, MqttLink};
 pub use session::{LinkSetup, Publish, Session};
-pub use settings::{Broker, MqttSettings, PublishMode, SafeState, SettingsError, WriteAccess};
+pub use settings::{
+    Broker, Deadband, MqttSettings, PublishMode, SafeState, SettingsError, SlaveTraffic,
+    WriteAccess,
+};
 pub use slave::{slave_infos, SlaveInfo, SlaveInfoError};
 pub use sparkplug::EdgeNode;
 pub use topics::{Service, SparkplugId, Topics};
 
 /// The module order of the crate documentation's layers.
 #[cfg(test)]
-const LAYERS: [&str; 12] = [
+const LAYERS: [&str; 13] = [
     "field",
     "topics",
     "slave",
     "settings",
+    "traffic",
     "request",
     "payload",
     "session",

@@ -99,7 +99,49 @@ pub struct MqttSettings {
     /// Sparkplug B mode with this group and edge node id (`None`: plain
     /// JSON topics).
     pub sparkplug: Option<SparkplugId>,
+    /// Report by exception: the least time between two publishes of a
+    /// slave's image (`[mqtt] min_interval_ms`; zero: no limit).
+    pub min_interval: Duration,
+    /// Report by exception: the deadband of the analog channels
+    /// (`[mqtt] deadband`).
+    pub deadband: Deadband,
+    /// Per-slave overrides of `min_interval` and `deadband`
+    /// (`[[mqtt.slave]]`).
+    pub slave_traffic: Vec<SlaveTraffic>,
 }
+
+/// How far an analog channel must move from the value last published
+/// before its image is published again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Deadband {
+    /// In the channel's unit (`deadband = 0.05`); `0`: every change.
+    Absolute(f64),
+    /// In percent of the channel's range (`deadband = "1%"`); only for
+    /// channels whose range the gateway knows (those in engineering
+    /// units); other channels are compared exactly.
+    Percent(f64),
+}
+
+impl Deadband {
+    /// The default: 1 % of the range.
+    pub const DEFAULT: Deadband = Deadband::Percent(1.0);
+}
+
+/// The traffic settings of one slave (`[[mqtt.slave]]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlaveTraffic {
+    /// Station address.
+    pub address: u8,
+    /// Overrides `[mqtt] min_interval_ms`.
+    pub min_interval: Option<Duration>,
+    /// Overrides `[mqtt] deadband` for the slave's analog channels.
+    pub deadband: Option<Deadband>,
+    /// Deadbands of single channels, by name.
+    pub channels: Vec<(String, Deadband)>,
+}
+
+/// The default of `[mqtt] min_interval_ms`.
+pub const DEFAULT_MIN_INTERVAL: Duration = Duration::from_millis(250);
 
 /// Where the MQTT password comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -139,8 +181,9 @@ impl MqttSettings {
 /// A bad `[mqtt]` setting.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SettingsError {
-    /// A key this version does not know.
-    #[error("[mqtt]: unknown key `{0}`")]
+    /// A key this version does not know (the message names the closest
+    /// keys).
+    #[error("[mqtt]: unknown key `{0}`{hint}", hint = did_you_mean(.0, KEYS.iter().copied()))]
     UnknownKey(String),
     /// A key with a value of the wrong type or range.
     #[error("[mqtt]: `{key}` {problem}")]
@@ -175,6 +218,140 @@ struct RawSettings {
     password_env: Field<String>,
     ca_file: Field<String>,
     sparkplug: Field<String>,
+    min_interval_ms: Field<u64>,
+    deadband: Field<toml::Value>,
+    slave: Field<Vec<toml::Table>>,
+}
+
+/// The keys of the `[mqtt]` table (closest names of an unknown one).
+const KEYS: &[&str] = &[
+    "broker",
+    "client_id",
+    "prefix",
+    "bus",
+    "qos",
+    "publish",
+    "interval_ms",
+    "writable",
+    "outputs_timeout_ms",
+    "safe_state",
+    "job_timeout_ms",
+    "username",
+    "password_file",
+    "password_env",
+    "ca_file",
+    "sparkplug",
+    "min_interval_ms",
+    "deadband",
+    "slave",
+];
+
+/// The keys of a `[[mqtt.slave]]` entry.
+const SLAVE_KEYS: &[&str] = &["address", "min_interval_ms", "deadband", "channels"];
+
+/// `; did you mean `a` or `b`?` for the names closest to `name`, or
+/// nothing.
+fn did_you_mean<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> String {
+    let close = profibus_dp::config::names::closest(name, candidates);
+    match close.split_last() {
+        None => String::new(),
+        Some((last, [])) => format!("; did you mean `{last}`?"),
+        Some((last, rest)) => {
+            let rest: Vec<String> = rest.iter().map(|n| format!("`{n}`")).collect();
+            format!("; did you mean {} or `{last}`?", rest.join(", "))
+        }
+    }
+}
+
+/// A deadband as written: a number ≥ 0 (absolute) or `"N%"` (0..=100).
+fn deadband(v: &toml::Value, key: &'static str, what: &str) -> Result<Deadband, SettingsError> {
+    let problem = || {
+        bad(
+            key,
+            format!(
+                "{what}must be a number >= 0 (in the channel's unit) or a percentage of its range like \"1%\""
+            ),
+        )
+    };
+    let number = |x: f64| (x.is_finite() && x >= 0.0).then_some(x);
+    match v {
+        toml::Value::Integer(i) => number(*i as f64).map(Deadband::Absolute),
+        toml::Value::Float(x) => number(*x).map(Deadband::Absolute),
+        toml::Value::String(s) => s
+            .strip_suffix('%')
+            .and_then(|n| n.trim().parse::<f64>().ok())
+            .and_then(number)
+            .filter(|p| *p <= 100.0)
+            .map(Deadband::Percent),
+        _ => None,
+    }
+    .ok_or_else(problem)
+}
+
+/// A minimum interval in ms: 0 (no limit) to a day.
+fn min_interval(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, SettingsError> {
+    match v.given() {
+        None => Ok(None),
+        Some(Ok(ms @ 0..=86_400_000)) => Ok(Some(Duration::from_millis(ms))),
+        Some(_) => Err(bad(key, "must be 0..=86400000")),
+    }
+}
+
+/// One `[[mqtt.slave]]` entry (the `i`th, from 1).
+fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError> {
+    let at = format!("entry {i}: ");
+    if let Some(k) = t.keys().find(|k| !SLAVE_KEYS.contains(&k.as_str())) {
+        let hint = did_you_mean(k, SLAVE_KEYS.iter().copied());
+        return Err(bad("slave", format!("{at}unknown key `{k}`{hint}")));
+    }
+    let address = match t.get("address") {
+        Some(toml::Value::Integer(a @ 0..=125)) => *a as u8,
+        _ => {
+            return Err(bad(
+                "slave",
+                format!("{at}needs `address`, a station address 0..=125"),
+            ))
+        }
+    };
+    let min_interval = match t.get("min_interval_ms") {
+        None => None,
+        Some(toml::Value::Integer(ms @ 0..=86_400_000)) => Some(Duration::from_millis(*ms as u64)),
+        Some(_) => {
+            return Err(bad(
+                "slave",
+                format!("{at}`min_interval_ms` must be 0..=86400000"),
+            ))
+        }
+    };
+    let deadband_of = |v: &toml::Value, what: String| deadband(v, "slave", &what);
+    let deadband = t
+        .get("deadband")
+        .map(|v| deadband_of(v, format!("{at}`deadband` ")))
+        .transpose()?;
+    let channels = match t.get("channels") {
+        None => vec![],
+        Some(toml::Value::Table(c)) => c
+            .iter()
+            .map(|(name, v)| {
+                Ok((
+                    name.clone(),
+                    deadband_of(v, format!("{at}channel `{name}` "))?,
+                ))
+            })
+            .collect::<Result<_, SettingsError>>()?,
+        Some(_) => {
+            return Err(bad(
+                "slave",
+                format!("{at}`channels` must be a table of deadbands by channel name"),
+            ))
+        }
+    };
+    Ok(SlaveTraffic {
+        address,
+        min_interval,
+        deadband,
+        channels,
+    })
 }
 
 /// One entry of `writable` as written: `3` or `{ address = 3, channels = ["a"] }`.
@@ -344,6 +521,37 @@ impl MqttSettings {
             .map(|s| SparkplugId::parse(&s).map_err(|e| bad("sparkplug", e.to_string())))
             .transpose()?;
         let client_id = string(t.client_id, "client_id")?;
+        let min_interval =
+            min_interval(t.min_interval_ms, "min_interval_ms")?.unwrap_or(DEFAULT_MIN_INTERVAL);
+        let deadband = match t.deadband.given() {
+            None => Deadband::DEFAULT,
+            Some(Ok(v)) => deadband(&v, "deadband", "")?,
+            Some(Err(())) => {
+                return Err(deadband(&toml::Value::Boolean(false), "deadband", "")
+                    .expect_err("not a deadband"))
+            }
+        };
+        let slave_traffic: Vec<SlaveTraffic> = match t.slave.given() {
+            None => vec![],
+            Some(Ok(v)) => v
+                .into_iter()
+                .enumerate()
+                .map(|(i, t)| slave_traffic(i + 1, t))
+                .collect::<Result<_, _>>()?,
+            Some(Err(())) => {
+                return Err(bad(
+                    "slave",
+                    "must be tables `[[mqtt.slave]]` with `address`",
+                ))
+            }
+        };
+        if let Some(s) = slave_traffic
+            .iter()
+            .enumerate()
+            .find(|(i, s)| slave_traffic[..*i].iter().any(|o| o.address == s.address))
+        {
+            return Err(bad("slave", format!("lists slave {} twice", s.1.address)));
+        }
         Ok(MqttSettings {
             broker,
             client_id: client_id.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -360,6 +568,9 @@ impl MqttSettings {
             password,
             ca_file,
             sparkplug,
+            min_interval,
+            deadband,
+            slave_traffic,
         })
     }
 
@@ -490,6 +701,35 @@ mod tests {
     }
 
     #[test]
+    fn traffic_keys() {
+        let s = MqttSettings::from_table(None, "l").unwrap();
+        assert_eq!(
+            (s.min_interval, s.deadband),
+            (DEFAULT_MIN_INTERVAL, Deadband::Percent(1.0))
+        );
+        let s = parse(
+            "min_interval_ms = 0\ndeadband = 0.5\n[[slave]]\naddress = 7\nmin_interval_ms = 1000\ndeadband = \"2.5%\"\nchannels = { \"1.KL3102.1\" = 0.01, speed = 3 }",
+        )
+        .unwrap();
+        assert_eq!(
+            (s.min_interval, s.deadband),
+            (Duration::ZERO, Deadband::Absolute(0.5))
+        );
+        assert_eq!(
+            s.slave_traffic,
+            [SlaveTraffic {
+                address: 7,
+                min_interval: Some(Duration::from_secs(1)),
+                deadband: Some(Deadband::Percent(2.5)),
+                channels: vec![
+                    ("1.KL3102.1".into(), Deadband::Absolute(0.01)),
+                    ("speed".into(), Deadband::Absolute(3.0)),
+                ],
+            }]
+        );
+    }
+
+    #[test]
     fn bad_settings_are_refused() {
         assert_eq!(
             parse("qos = 3").unwrap_err().to_string(),
@@ -562,6 +802,45 @@ mod tests {
             (
                 "broker = \"http://x\"",
                 "broker URL `http://x` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]",
+            ),
+            ("retian = true", "[mqtt]: unknown key `retian`"),
+            (
+                "qso = 1",
+                "[mqtt]: unknown key `qso`; did you mean `qos`?",
+            ),
+            ("min_interval_ms = -1", "[mqtt]: `min_interval_ms` must be 0..=86400000"),
+            (
+                "deadband = \"1\"",
+                "[mqtt]: `deadband` must be a number >= 0 (in the channel's unit) or a percentage of its range like \"1%\"",
+            ),
+            (
+                "deadband = -0.5",
+                "[mqtt]: `deadband` must be a number >= 0 (in the channel's unit) or a percentage of its range like \"1%\"",
+            ),
+            (
+                "deadband = \"101%\"",
+                "[mqtt]: `deadband` must be a number >= 0 (in the channel's unit) or a percentage of its range like \"1%\"",
+            ),
+            ("slave = 3", "[mqtt]: `slave` must be tables `[[mqtt.slave]]` with `address`"),
+            (
+                "[[slave]]\naddres = 3",
+                "[mqtt]: `slave` entry 1: unknown key `addres`; did you mean `address`?",
+            ),
+            (
+                "[[slave]]\nmin_interval_ms = 3",
+                "[mqtt]: `slave` entry 1: needs `address`, a station address 0..=125",
+            ),
+            (
+                "[[slave]]\naddress = 3\n[[slave]]\naddress = 4\nchannels = { ai = \"x\" }",
+                "[mqtt]: `slave` entry 2: channel `ai` must be a number >= 0 (in the channel's unit) or a percentage of its range like \"1%\"",
+            ),
+            (
+                "[[slave]]\naddress = 3\nchannels = [1]",
+                "[mqtt]: `slave` entry 1: `channels` must be a table of deadbands by channel name",
+            ),
+            (
+                "[[slave]]\naddress = 3\n[[slave]]\naddress = 3",
+                "[mqtt]: `slave` lists slave 3 twice",
             ),
             (
                 "sparkplug = \"g\"",

@@ -283,7 +283,8 @@ fn seqs_of_writes(r: &mut Rig, n: usize) -> Vec<u64> {
 
 #[test]
 fn seq_wraps_after_255() {
-    let mut r = Rig::new();
+    // A DDATA at every tick: no minimum interval.
+    let mut r = Rig::with(|s| s.min_interval = std::time::Duration::ZERO);
     r.node.connected(0);
     r.until("spBv1.0/G/DBIRTH/E/4");
     // The births had 0..=2; the DDATAs count on to 200.

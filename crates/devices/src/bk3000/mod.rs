@@ -39,6 +39,7 @@
 //!   until the terminal is plugged again.
 
 pub mod catalogue;
+pub mod commission;
 pub mod image;
 pub mod master;
 pub mod plc;

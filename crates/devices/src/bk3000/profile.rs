@@ -7,7 +7,7 @@ use super::catalogue::TerminalType;
 use super::image::{self, CfgReject, Dir, Image, Options as ImageOptions, Owner, Strip};
 use super::{user, Bk3000, IDENT};
 use crate::channels::{Channel, ChannelMap, ChannelType, Direction, Scale};
-use crate::profile::{opt_int, ControlInbox, Profile, ProfileError};
+use crate::profile::{opt_int, ControlInbox, DeviceOptions, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
@@ -259,6 +259,31 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
             dev = dev.with_inbox(inbox);
         }
         Ok(Box::new(dev))
+    }
+
+    /// The strips of [`super::commission::strips_for_cfg`].
+    fn options_for_cfg(cfg: &[u8]) -> Vec<DeviceOptions> {
+        super::commission::strips_for_cfg(cfg)
+            .into_iter()
+            .map(|strip| {
+                let mut o = DeviceOptions::new();
+                o.set("terminals", strip);
+                o
+            })
+            .collect()
+    }
+
+    fn commission_notes(_cfg: &[u8], options: &DeviceOptions) -> Vec<String> {
+        let names: Vec<String> = options
+            .get("terminals")
+            .and_then(|v| v.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|t| t.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default();
+        super::commission::notes(&names)
     }
 
     fn channels(&self, cfg: &[u8]) -> Result<ChannelMap, ProfileError> {

@@ -5,7 +5,7 @@ use super::vars::{IecType, VarModule, VarTable};
 use super::{Addressing, Bm4, CfgLayout, IDENT, PKW};
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::pkw::{Dialect, PKW_MODULE};
-use crate::profile::{opt_int, read_table, ControlInbox, Profile, ProfileError};
+use crate::profile::{opt_int, read_table, ControlInbox, DeviceOptions, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
@@ -66,6 +66,31 @@ pkw = true|false (default: true where the PKW module fits next to the variables,
     const IDENT: Option<u16> = Some(IDENT);
     const PATH_OPTIONS: &'static [&'static str] = &["vars", "state_dir", "write_gsd"];
     const PKW: Option<&'static Dialect> = Some(&PKW);
+
+    /// The variables and the PKW module from the identifiers: the
+    /// default table's GSD modules (BM4OPRO1.GSD) that give them, the PKW
+    /// module first where configured.
+    fn options_for_cfg(cfg: &[u8]) -> Vec<DeviceOptions> {
+        use profibus_dp::config::discover::{modules_for_cfg, CfgMatch};
+        let mut out = vec![DeviceOptions::new()];
+        let Ok(gsd) = crate::gsd_files::parse(crate::gsd_files::BM4OPRO1) else {
+            return out;
+        };
+        if let CfgMatch::Found { best, .. } = modules_for_cfg(&gsd, cfg) {
+            let pkw = cfg.first() == Some(&crate::pkw::PKW_MODULE);
+            let names: Vec<String> = best
+                .names(&gsd)
+                .into_iter()
+                .skip(usize::from(pkw))
+                .map(str::to_string)
+                .collect();
+            let mut o = DeviceOptions::new();
+            o.set("pkw", pkw);
+            o.set("variables", names);
+            out.push(o);
+        }
+        out
+    }
 
     fn configure(options: Options, address: Option<u8>) -> Result<Self, ProfileError> {
         let table = match &options.vars {

@@ -5,7 +5,7 @@ use super::params::ParamTable;
 use super::{check_configuration, Omega, IDENT, MAX_VALUES, PKW};
 use crate::channels::{ChannelMap, ChannelType, Direction};
 use crate::pkw::{Dialect, PKW_LEN};
-use crate::profile::{opt_int, read_table, ControlInbox, Profile, ProfileError};
+use crate::profile::{opt_int, read_table, ControlInbox, DeviceOptions, Profile, ProfileError};
 use crate::BoxedDevice;
 use profibus_dp::config::gsd::Gsd;
 use serde::Deserialize;
@@ -209,6 +209,33 @@ bus file: setpoints, actual_values (default 2 each), pkw = true|false, drive_ena
 
     /// A parameter of the shipped V-controller table by name: case and
     /// `_` / `-` for spaces do not matter (`L_rev_actual_value` is P218).
+    /// The counts and the PKW module from the identifiers (BNF_00D0.GSD
+    /// L1462-1547): `0x73` (service data) first where configured, `0x71`,
+    /// then actual values `0x51 + 2 (n - 1)` and setpoints `0x61 + 2 (n -
+    /// 1)`.
+    fn options_for_cfg(cfg: &[u8]) -> Vec<DeviceOptions> {
+        let (pkw, rest) = match cfg.split_first() {
+            Some((0x73, rest)) => (true, rest),
+            _ => (false, cfg),
+        };
+        let count = |b: u8, high: u8| {
+            (b & 0xF0 == high && b & 1 == 1).then_some(i64::from(b & 0x0F) / 2 + 1)
+        };
+        let [0x71, av, sp] = rest else {
+            return vec![DeviceOptions::new()];
+        };
+        let (Some(av), Some(sp)) = (count(*av, 0x50), count(*sp, 0x60)) else {
+            return vec![DeviceOptions::new()];
+        };
+        let mut o = DeviceOptions::new();
+        o.set("setpoints", sp);
+        o.set("actual_values", av);
+        if !pkw {
+            o.set("pkw", false);
+        }
+        vec![o]
+    }
+
     fn pkw_parameter(_gsd: &Gsd, name: &str) -> Option<u16> {
         let norm = |s: &str| s.to_lowercase().replace(['_', '-'], " ");
         let want = norm(name);

@@ -17,6 +17,7 @@ use crate::config::discover::{modules_for_cfg, CfgMatch, Fit};
 use crate::config::gsd::Gsd;
 use crate::config::library::{GsdLibrary, GsdSource, LibraryEntry};
 use crate::pdu::diag::{SlaveDiag, NO_MASTER};
+use crate::pdu::im::Im0;
 use profibus_fdl::timing::Baud;
 use profibus_fdl::wire::Hex;
 use std::fmt::Write as _;
@@ -31,6 +32,45 @@ pub struct ScannedSlave {
     pub diag: Option<Vec<u8>>,
     /// Its Get_Cfg answer, if any.
     pub cfg: Option<Vec<u8>>,
+    /// Its I&M0 over a class-2 connection; `None`: not asked (`--no-im`).
+    pub im0: Option<Im0Scan>,
+}
+
+/// What the scan made of a slave's I&M0 (read through a class-2
+/// connection: the call on index 255 of slot 0,
+/// [`crate::master::records::ImReader`]). Never a reason to leave a
+/// slave out.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Im0Scan {
+    /// Not asked, and why (its GSD offers no class-2 services).
+    Skipped(String),
+    /// Read.
+    Read(Im0),
+    /// Asked and not read: why (refused, no answer, not valid).
+    Failed(String),
+}
+
+impl Im0Scan {
+    /// One line for the bus file's comments and the scan's words:
+    /// `I&M0: order 6ES7 …, serial …, V1.2.3 (hardware revision 3,
+    /// manufacturer 0x001A)`, or why it is not there.
+    pub fn describe(&self) -> String {
+        match self {
+            Im0Scan::Read(im) => {
+                let or_blank = |s: String| if s.is_empty() { "(blank)".into() } else { s };
+                format!(
+                    "I&M0: order {}, serial {}, {} (hardware revision {}, manufacturer 0x{:04X})",
+                    or_blank(im.order_id()),
+                    or_blank(im.serial_number()),
+                    im.software_revision,
+                    im.hardware_revision,
+                    im.manufacturer_id
+                )
+            }
+            Im0Scan::Skipped(why) => format!("I&M0 not asked: {why}"),
+            Im0Scan::Failed(why) => format!("I&M0 not read: {why}"),
+        }
+    }
 }
 
 impl ScannedSlave {
@@ -59,6 +99,9 @@ pub struct DeviceMatch {
     pub name: String,
     /// The options to write next to it.
     pub options: toml::Table,
+    /// What the configuration does not tell (e.g. terminals that send
+    /// the same bytes), written as comments.
+    pub notes: Vec<String>,
 }
 
 /// Finds the device profile of a slave from its ident number and its
@@ -431,12 +474,18 @@ pub fn bus_file_text(plans: &[SlavePlan], o: &WriteOptions) -> String {
             owner_words(s),
             Hex(cfg)
         );
+        if let Some(im) = &s.im0 {
+            let _ = writeln!(t, "# {}", im.describe());
+        }
         let _ = writeln!(t, "address = {}", s.address);
         if let Some(m) = &p.model {
             let _ = writeln!(t, "name = {}", quote(m.trim()));
         }
         match c {
             Configuration::Device(d) => {
+                for n in &d.notes {
+                    let _ = writeln!(t, "# {n}");
+                }
                 let _ = writeln!(t, "device = {}", quote(&d.name));
                 for (k, v) in &d.options {
                     if crate::config::busfile::SLAVE_KEYS.contains(&k.as_str()) {
@@ -547,8 +596,12 @@ pub fn describe(p: &SlavePlan, dir: &Path) -> String {
         }
         Err(why) => format!("not configured: {why}"),
     };
+    let im = match &s.im0 {
+        Some(i @ Im0Scan::Read(_)) => format!("; {}", i.describe()),
+        _ => String::new(),
+    };
     format!(
-        "{:3}  {ident}{model}, {}: {what}",
+        "{:3}  {ident}{model}, {}: {what}{im}",
         s.address,
         owner_words(s)
     )
@@ -619,6 +672,7 @@ mod tests {
             address,
             diag: Some(vec![0x02, 0x05, 0, 255, id[0], id[1]]),
             cfg: cfg.map(<[u8]>::to_vec),
+            im0: None,
         }
     }
 
@@ -703,6 +757,7 @@ mod tests {
                 Ok((ident == 0xD0).then(|| DeviceMatch {
                     name: "omega".into(),
                     options,
+                    notes: vec!["setpoints from the bytes".into()],
                 }))
             }
         }
@@ -715,7 +770,9 @@ mod tests {
         };
         let text = bus_file_text(&plans, &o);
         assert!(
-            text.contains("device = \"omega\"\nomega.params = \"p.toml\"\nsetpoints = 2\n"),
+            text.contains(
+                "# setpoints from the bytes\ndevice = \"omega\"\nomega.params = \"p.toml\"\nsetpoints = 2\n"
+            ),
             "{text}"
         );
     }

@@ -132,6 +132,18 @@ pub struct MetricDef {
     source: Source,
 }
 
+impl MetricDef {
+    /// The process image the metric's value comes from (`channels`: the
+    /// device's), if any: the image metrics and the channels.
+    pub fn image(&self, channels: &ChannelMap) -> Option<Direction> {
+        match &self.source {
+            Source::Image(d) => Some(*d),
+            Source::Channel(i) => channels.channels.get(*i).map(|c| c.direction),
+            _ => None,
+        }
+    }
+}
+
 /// A slave as a Sparkplug device: its metrics, in birth order.
 #[derive(Debug, Clone)]
 pub struct Device {

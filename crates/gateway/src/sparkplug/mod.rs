@@ -19,8 +19,10 @@ use crate::outage::Outage;
 use crate::session::{LinkSetup, Publish, Session};
 use crate::settings::MqttSettings;
 use crate::slave::{slave_infos, SlaveInfo, SlaveInfoError};
+use crate::traffic::{ImageFilter, Traffic};
 use metrics::{CommandError, Device, OutputWrite};
 use profibus_devices::bus::ProfiledBus;
+use profibus_devices::channels::Direction;
 use profibus_dp::master::{AlarmReport, DpMaster, MasterEvent, SlaveState};
 use profibus_fdl::Instant;
 use prost::Message;
@@ -47,6 +49,8 @@ struct Entry {
     device: Device,
     /// Born (DBIRTH sent, no DDEATH since), with the values last sent.
     born: Option<Vec<Option<MetricValue>>>,
+    /// Report by exception of the input and output images.
+    filters: [ImageFilter; 2],
 }
 
 /// A checked DCMD waiting for the next cycle boundary.
@@ -104,12 +108,22 @@ impl EdgeNode {
     /// An edge node `id` for these devices.
     pub fn new(settings: MqttSettings, id: SparkplugId, devices: Vec<Device>) -> EdgeNode {
         EdgeNode {
-            settings,
             id,
             devices: devices
                 .into_iter()
-                .map(|device| Entry { device, born: None })
+                .map(|device| {
+                    let t = Traffic::of(&settings, &device.info);
+                    Entry {
+                        filters: [
+                            t.filter(&device.info, Direction::Input),
+                            t.filter(&device.info, Direction::Output),
+                        ],
+                        device,
+                        born: None,
+                    }
+                })
                 .collect(),
+            settings,
             pending: vec![],
             out: VecDeque::new(),
             online: false,
@@ -272,6 +286,12 @@ impl EdgeNode {
             let Some(h) = m.handle(addr) else { continue };
             let v = m.slave(h);
             let exchanging = v.state == SlaveState::DataExchange;
+            // Report by exception: whether each image is due (the image
+            // metrics of a DDATA wait for it).
+            let due = {
+                let f = &mut self.devices[i].filters;
+                [f[0].due(v.inputs, ts), f[1].due(v.outputs, ts)]
+            };
             let dev = &self.devices[i].device;
             let topic = |t| self.id.device_topic(t, &dev.id());
             match (&self.devices[i].born, exchanging) {
@@ -285,7 +305,10 @@ impl EdgeNode {
                         .collect();
                     let t = topic(MessageType::DBirth);
                     self.push(t, metrics, ts);
-                    self.devices[i].born = Some(values);
+                    let e = &mut self.devices[i];
+                    e.born = Some(values);
+                    e.filters[0].published(v.inputs, ts);
+                    e.filters[1].published(v.outputs, ts);
                 }
                 (Some(_), false) => {
                     let t = topic(MessageType::DDeath);
@@ -293,7 +316,17 @@ impl EdgeNode {
                     self.devices[i].born = None;
                 }
                 (Some(last), true) => {
-                    let values = dev.values(&v);
+                    let mut values = dev.values(&v);
+                    for (k, d) in dev.metrics.iter().enumerate() {
+                        let held = match d.image(&dev.channels) {
+                            Some(Direction::Input) => !due[0],
+                            Some(Direction::Output) => !due[1],
+                            None => false,
+                        };
+                        if held {
+                            values[k] = last[k].clone();
+                        }
+                    }
                     let changed: Vec<Metric> = dev
                         .metrics
                         .iter()
@@ -305,8 +338,15 @@ impl EdgeNode {
                             ..metric(&d.name, d.datatype, now.clone(), ts)
                         })
                         .collect();
+                    let t = topic(MessageType::DData);
+                    let e = &mut self.devices[i];
+                    if due[0] {
+                        e.filters[0].published(v.inputs, ts);
+                    }
+                    if due[1] {
+                        e.filters[1].published(v.outputs, ts);
+                    }
                     if !changed.is_empty() {
-                        let t = topic(MessageType::DData);
                         self.push(t, changed, ts);
                         self.devices[i].born = Some(values);
                     }
