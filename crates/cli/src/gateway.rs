@@ -3,6 +3,7 @@
 //! simulated bus with the bus file's slaves emulated (`--sim`).
 
 use crate::common;
+use crate::ops::{self, Operated, ReloadSender, Stopping};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::DpMaster;
@@ -39,6 +40,11 @@ pub struct Args {
     /// (with --port).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    /// Keep the gateway's health in this file (JSON, rewritten every
+    /// second: state, healthy, bus, slaves, data_exchange,
+    /// broker_connected, last_cycle_age_ms) for a supervisor to check.
+    #[arg(long, value_name = "PATH")]
+    health_file: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -56,7 +62,23 @@ pub fn run(args: Args) -> Result<()> {
     profibus_gateway::traffic::check(&settings, &slave_infos(&profiled)?)
         .with_context(|| args.config.display().to_string())?;
     let conn = Connection::from_settings(&settings, &url)?;
-    match args.sparkplug.clone().or(settings.sparkplug.clone()) {
+    let sparkplug = args.sparkplug.clone().or(settings.sparkplug.clone());
+    tracing::info!(
+        target: ops::TARGET,
+        "dpctl gateway {} (git {}) starting: bus file {}, {}, broker {url}, {}",
+        env!("CARGO_PKG_VERSION"),
+        env!("DPCTL_GIT_REV"),
+        args.config.display(),
+        match &args.port {
+            Some(p) => format!("port {p}"),
+            None => "simulated bus".to_string(),
+        },
+        match &sparkplug {
+            Some(id) => format!("Sparkplug B {id}"),
+            None => format!("JSON topics {}/{}", settings.prefix, settings.bus),
+        },
+    );
+    match sparkplug {
         Some(id) => {
             let node = EdgeNode::new(settings, id, sparkplug::devices(&profiled)?);
             serve(args, profiled, node, conn)
@@ -74,16 +96,94 @@ fn serve<S: Session + Send + 'static>(
     gw: S,
     conn: Connection,
 ) -> Result<()> {
-    common::runtime()?.block_on(async move {
+    let (mut gw, reloads, stopping) = Operated::new(gw, profiled.file.slaves.len());
+    if let Some(path) = &args.health_file {
+        gw.health_file(path.clone());
+    }
+    let shared = gw.stopped_handle();
+    let rt = common::runtime()?;
+    let result = rt.block_on(async move {
+        reload_on_sighup(&args.config, &profiled, reloads)?;
         let link = MqttLink::connect(&conn, &gw);
+        let shutdown = stop(stopping);
         match &args.port {
-            Some(p) => on_line(&args, p, &profiled, gw, link).await,
-            None => {
-                let shutdown = common::shutdown();
-                Ok(profibus_gateway::sim::serve(profiled, gw, link, shutdown).await?)
+            Some(p) => on_line(&args, p, &profiled, gw, link, shutdown).await,
+            None => Ok(profibus_gateway::sim::serve(profiled, gw, link, shutdown).await?),
+        }
+    });
+    shared();
+    match &result {
+        Ok(()) => tracing::info!(target: ops::TARGET, "dpctl gateway stopped"),
+        Err(e) => tracing::error!(target: ops::TARGET, "dpctl gateway stopped: {e:#}"),
+    }
+    result
+}
+
+/// Completes on SIGTERM or SIGINT once the offline health is handed to
+/// the link (at most 500 ms later): the core keeps running until then.
+async fn stop(stopping: Stopping) {
+    common::shutdown().await;
+    tracing::info!(target: ops::TARGET, "stopping");
+    stopping.begin();
+    let _ = tokio::time::timeout(std::time::Duration::from_millis(500), stopping.sent()).await;
+}
+
+/// On every SIGHUP: read the bus file again and hand its `[mqtt]` table
+/// to the running core (through `reloads`), or log why not; the bus
+/// keeps running either way.
+fn reload_on_sighup(
+    path: &std::path::Path,
+    profiled: &ProfiledBus,
+    reloads: ReloadSender,
+) -> Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut hup = signal(SignalKind::hangup()).context("installing the SIGHUP handler")?;
+    let path = path.to_path_buf();
+    let mut running = profiled.file.mqtt.clone();
+    tokio::spawn(async move {
+        while hup.recv().await.is_some() {
+            match reload(&path, running.as_ref()) {
+                Ok((table, r)) => {
+                    running = table;
+                    if reloads.send(r).is_err() {
+                        return;
+                    }
+                }
+                Err(e) => tracing::error!(
+                    target: ops::TARGET,
+                    "SIGHUP: not reloaded, the running settings stay: {e:#}"
+                ),
             }
         }
-    })
+    });
+    Ok(())
+}
+
+/// The `[mqtt]` table of the bus file at `path` and the reload of it
+/// over `running`, or why it cannot be taken while running.
+fn reload(
+    path: &std::path::Path,
+    running: Option<&toml::Table>,
+) -> Result<(Option<toml::Table>, ops::Reload)> {
+    let file = ProfiledBus::load(path)?;
+    let table = file.file.mqtt;
+    let settings = MqttSettings::for_bus_file(table.as_ref(), path)
+        .with_context(|| path.display().to_string())?;
+    let changes = ops::changes(running, table.as_ref());
+    let fixed: Vec<&str> = changes
+        .iter()
+        .filter(|(k, _)| ops::RESTART_KEYS.contains(&k.as_str()))
+        .map(|(_, c)| c.as_str())
+        .collect();
+    if !fixed.is_empty() {
+        anyhow::bail!(
+            "{}: {} only change with a restart",
+            path.display(),
+            fixed.join(", ")
+        );
+    }
+    let changes = changes.into_iter().map(|(_, c)| c).collect();
+    Ok((table, ops::Reload { settings, changes }))
 }
 
 async fn on_line(
@@ -92,18 +192,26 @@ async fn on_line(
     profiled: &ProfiledBus,
     mut gw: impl Session,
     mut link: MqttLink,
+    shutdown: impl std::future::Future<Output = ()>,
 ) -> Result<()> {
     let bus = &profiled.file;
     let dp = DpMaster::new(&bus.master)?;
     let (mut station, mut line) =
         common::master_station(port, bus, dp, args.latency, Default::default())?;
     let options = common::driver_options(&line, 0, false)?;
+    tracing::info!(
+        target: ops::TARGET,
+        "bus: master {} on {port} at {} baud, {} slaves",
+        bus.master.address,
+        bus.master.params.baud,
+        bus.slaves.len()
+    );
     let result = driver::run_with(
         &mut station,
         &mut line,
         Clock::start(),
         options,
-        common::shutdown(),
+        shutdown,
         |st, now| {
             link::step(&mut link, &mut gw, st.app_mut(), now);
             ControlFlow::<()>::Continue(())

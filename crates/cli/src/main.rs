@@ -20,9 +20,11 @@ mod dpv1;
 mod gateway;
 mod gsd;
 mod im;
+mod logs;
 mod master;
 mod medium_args;
 mod monitor;
+mod ops;
 mod out;
 mod pkw;
 mod profile_args;
@@ -54,6 +56,11 @@ pub(crate) struct Cli {
     /// CAP_SYS_NICE or `ulimit -r`.
     #[arg(long, global = true, value_name = "PRIO")]
     rt_priority: Option<u8>,
+    /// Log lines on stderr: `text` (colours only on a terminal, no time
+    /// under systemd) or `json` (one object a line: time, level, target,
+    /// message, fields). Filter with DPCTL_LOG (e.g. `info`).
+    #[arg(long, global = true, value_name = "FORMAT", default_value = "text")]
+    log_format: logs::LogFormat,
     #[command(subcommand)]
     command: Command,
 }
@@ -132,7 +139,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    logging();
+    logs::init(cli.log_format);
     // Before any runtime starts a thread: its threads inherit the policy.
     if let Some(p) = cli.rt_priority {
         if let Err(e) = profibus_io::transport::realtime::set_fifo_priority(p) {
@@ -174,47 +181,5 @@ fn main() -> ExitCode {
             crate::out::errln!("dpctl: {e:#}");
             ExitCode::from(1)
         }
-    }
-}
-
-/// Logs to stderr, filtered by `DPCTL_LOG` (default: warnings, and the
-/// MQTT gateway's connection lines). Colours only on a terminal, and
-/// never with `NO_COLOR` set to anything but the empty string
-/// (<https://no-color.org>).
-fn logging() {
-    use std::io::IsTerminal;
-    let filter = tracing_subscriber::EnvFilter::try_from_env("DPCTL_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(colour(
-            std::io::stderr().is_terminal(),
-            std::env::var_os("NO_COLOR").as_deref(),
-        ))
-        .with_writer(std::io::stderr)
-        .init();
-}
-
-/// The log filter without `DPCTL_LOG`: warnings, and the gateway link's
-/// start-up, connected and reconnected lines.
-const DEFAULT_LOG: &str = "warn,profibus_gateway::link=info";
-
-/// Whether logs get ANSI colours: on a terminal, unless `NO_COLOR` is set
-/// and not empty.
-fn colour(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
-    terminal && no_color.is_none_or(|v| v.is_empty())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::colour;
-    use std::ffi::OsStr;
-
-    #[test]
-    fn colours_only_on_a_terminal_without_no_color() {
-        assert!(colour(true, None));
-        assert!(colour(true, Some(OsStr::new(""))));
-        assert!(!colour(true, Some(OsStr::new("1"))));
-        assert!(!colour(false, None));
     }
 }

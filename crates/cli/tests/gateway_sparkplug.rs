@@ -103,6 +103,8 @@ struct Sub {
     seen: Vec<(String, Decoded)>,
     /// Messages of `seen` that [`Sub::expect`] went past.
     next: usize,
+    /// Metric names (quoted) by alias, from the births.
+    names: HashMap<String, String>,
 }
 
 const PROBE: &str = "spBv1.0/probe";
@@ -119,6 +121,7 @@ impl Sub {
             decoded: 0,
             seen: vec![],
             next: 0,
+            names: HashMap::new(),
         }
     }
 
@@ -136,7 +139,23 @@ impl Sub {
             let bytes: Vec<u8> = (0..hex.len() / 2)
                 .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
                 .collect();
-            self.seen.push((t.to_string(), Decoded::parse(&bytes)));
+            let mut d = Decoded::parse(&bytes);
+            // Births carry name and alias; data messages the alias only
+            // (named here from the births).
+            for m in &mut d.metrics {
+                match (m.get("name"), m.get("alias")) {
+                    (Some(n), Some(a)) if t.contains("BIRTH/") => {
+                        self.names.insert(a.clone(), n.clone());
+                    }
+                    (None, Some(a)) if t.contains("DATA/") => {
+                        let name = self.names.get(a).expect("an alias from a birth").clone();
+                        m.insert("name".into(), name);
+                    }
+                    (n, _) if t.contains("DATA/") => panic!("a data metric named {n:?}"),
+                    _ => {}
+                }
+            }
+            self.seen.push((t.to_string(), d));
         }
     }
 

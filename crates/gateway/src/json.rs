@@ -649,6 +649,9 @@ impl Session for Gateway {
     fn settings(&self) -> &MqttSettings {
         Gateway::settings(self)
     }
+    fn settings_mut(&mut self) -> &mut MqttSettings {
+        &mut self.settings
+    }
     fn link_setup(&self) -> LinkSetup {
         let will = Gateway::last_will(self);
         LinkSetup {

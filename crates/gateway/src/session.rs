@@ -25,6 +25,11 @@ pub struct Publish {
 pub trait Session {
     /// The settings (client id, QoS, …).
     fn settings(&self) -> &MqttSettings;
+    /// The settings, to change while running (`dpctl gateway` on
+    /// SIGHUP). Only keys the core reads as it runs take effect (what is
+    /// published when, `writable`, the outage settings); the connection's
+    /// (broker, client id, topics, QoS) need a new core.
+    fn settings_mut(&mut self) -> &mut MqttSettings;
     /// What the connection needs of this core: subscriptions and wills.
     fn link_setup(&self) -> LinkSetup;
     /// The broker accepted the connection.

@@ -108,6 +108,9 @@ pub struct MqttSettings {
     /// Per-slave overrides of `min_interval` and `deadband`
     /// (`[[mqtt.slave]]`).
     pub slave_traffic: Vec<SlaveTraffic>,
+    /// Sparkplug B: the host id of the primary host application whose
+    /// `spBv1.0/STATE/<id>` the edge node follows (`None`: none).
+    pub primary_host: Option<String>,
 }
 
 /// How far an analog channel must move from the value last published
@@ -221,6 +224,7 @@ struct RawSettings {
     min_interval_ms: Field<u64>,
     deadband: Field<toml::Value>,
     slave: Field<Vec<toml::Table>>,
+    primary_host: Field<String>,
 }
 
 /// The keys of the `[mqtt]` table (closest names of an unknown one).
@@ -244,6 +248,7 @@ const KEYS: &[&str] = &[
     "min_interval_ms",
     "deadband",
     "slave",
+    "primary_host",
 ];
 
 /// The keys of a `[[mqtt.slave]]` entry.
@@ -552,6 +557,10 @@ impl MqttSettings {
         {
             return Err(bad("slave", format!("lists slave {} twice", s.1.address)));
         }
+        let primary_host = string(t.primary_host, "primary_host")?;
+        if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
+            return Err(bad("primary_host", format!("`{h}` is not one topic level")));
+        }
         Ok(MqttSettings {
             broker,
             client_id: client_id.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -571,6 +580,7 @@ impl MqttSettings {
             min_interval,
             deadband,
             slave_traffic,
+            primary_host,
         })
     }
 

@@ -191,6 +191,8 @@ pub enum MessageType {
     NBirth,
     /// Edge node death (the last will).
     NDeath,
+    /// Edge node data (the node's own metrics).
+    NData,
     /// Device birth.
     DBirth,
     /// Device death.
@@ -209,6 +211,7 @@ impl MessageType {
         match self {
             MessageType::NBirth => "NBIRTH",
             MessageType::NDeath => "NDEATH",
+            MessageType::NData => "NDATA",
             MessageType::DBirth => "DBIRTH",
             MessageType::DDeath => "DDEATH",
             MessageType::DData => "DDATA",

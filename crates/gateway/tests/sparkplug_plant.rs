@@ -17,6 +17,8 @@ struct Rig {
     plant: Plant,
     node: EdgeNode,
     t: u64,
+    /// The metric names by alias, from the births.
+    names: std::collections::HashMap<u64, String>,
 }
 
 impl Rig {
@@ -39,6 +41,7 @@ impl Rig {
             plant: Plant::from_bus(&bus).unwrap(),
             node,
             t: 0,
+            names: Default::default(),
         }
     }
 
@@ -49,10 +52,27 @@ impl Rig {
             .run_until(Instant::from_nanos(self.t * 1_000_000));
         let now = self.plant.now();
         self.node.step(self.plant.master(), now, 1000 + self.t);
-        std::iter::from_fn(|| self.node.poll_publish())
+        let msgs: Vec<_> = std::iter::from_fn(|| self.node.poll_publish())
             .map(|p| {
                 assert!(!p.retain);
                 (p.topic, Payload::decode(p.payload.as_slice()).unwrap())
+            })
+            .collect();
+        // Births name and alias every metric (but bdSeq); data messages
+        // carry the alias only: named here from the births.
+        msgs.into_iter()
+            .map(|(t, mut p)| {
+                let birth = t.contains("BIRTH/");
+                for m in &mut p.metrics {
+                    if birth && m.name.as_deref() != Some(BD_SEQ) {
+                        let alias = m.alias.expect("every born metric has an alias");
+                        self.names.insert(alias, m.name.clone().unwrap());
+                    } else if t.contains("DATA/") {
+                        assert_eq!(m.name, None, "data by alias only");
+                        m.name = Some(self.names[&m.alias.unwrap()].clone());
+                    }
+                }
+                (t, p)
             })
             .collect()
     }
@@ -334,4 +354,134 @@ fn outputs_go_to_the_safe_state_without_a_broker() {
         r.tick();
     }
     assert_eq!(r.plant.master().outputs(3).unwrap(), [0; 4]);
+}
+
+/// Aliases unique in the node; the node's own metrics in NBIRTH and
+/// NDATA; commands by alias.
+#[test]
+fn aliases_node_metrics_and_commands_by_alias() {
+    use profibus_gateway::sparkplug::{device_alias, BUS_STATE, CYCLE_TIME, IN_DATA_EXCHANGE};
+    let mut r = Rig::new();
+    r.node.connected(0);
+    let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
+    let mut aliases: Vec<u64> = msgs
+        .iter()
+        .flat_map(|(_, p)| p.metrics.iter().filter_map(|m| m.alias))
+        .collect();
+    let n = aliases.len();
+    aliases.sort();
+    aliases.dedup();
+    assert_eq!(aliases.len(), n, "aliases unique in the edge node");
+    let nbirth = find(&msgs, "spBv1.0/G/NBIRTH/E");
+    assert_eq!(
+        value(nbirth, BUS_STATE),
+        Some(&MetricValue::StringValue("operate".into()))
+    );
+    // The node metrics change: an NDATA within interval_ms (1 s).
+    let msgs = r.until("spBv1.0/G/NDATA/E");
+    let nd = find(&msgs, "spBv1.0/G/NDATA/E");
+    assert!(
+        matches!(value(nd, CYCLE_TIME), Some(MetricValue::DoubleValue(ms)) if *ms > 0.0 && *ms < 10.0),
+        "{nd:?}"
+    );
+    assert_eq!(value(nd, IN_DATA_EXCHANGE), Some(&MetricValue::IntValue(2)));
+    // The master goes to Clear: an NDATA at once.
+    r.plant
+        .master()
+        .set_operating_state(profibus_dp::master::OperatingState::Clear);
+    let nd = r.tick();
+    assert_eq!(
+        value(find(&nd, "spBv1.0/G/NDATA/E"), BUS_STATE),
+        Some(&MetricValue::StringValue("clear".into()))
+    );
+    r.plant
+        .master()
+        .set_operating_state(profibus_dp::master::OperatingState::Operate);
+    // A DCMD by alias: `Image/Outputs` of slave 3 is its metric 4 (after
+    // address, name, ident, inputs).
+    let alias = *r
+        .names
+        .iter()
+        .find(|(a, n)| **a >> 16 == 4 && *n == metrics::OUTPUT_IMAGE)
+        .unwrap()
+        .0;
+    assert_eq!(alias, device_alias(3, 4));
+    r.node.handle_message(
+        "spBv1.0/G/DCMD/E/3",
+        &cmd(vec![Metric {
+            alias: Some(alias),
+            value: Some(MetricValue::BytesValue(vec![5, 6, 7, 8])),
+            ..Default::default()
+        }]),
+        0,
+    );
+    r.tick();
+    assert_eq!(r.plant.master().outputs(3).unwrap(), [5, 6, 7, 8]);
+    // A rebirth by the alias of `Node Control/Rebirth` (0).
+    r.node.handle_message(
+        "spBv1.0/G/NCMD/E",
+        &cmd(vec![Metric {
+            alias: Some(0),
+            value: Some(MetricValue::BooleanValue(true)),
+            ..Default::default()
+        }]),
+        0,
+    );
+    let t: Vec<String> = r.tick().into_iter().map(|m| m.0).collect();
+    assert_eq!(
+        t[..3],
+        [
+            "spBv1.0/G/NBIRTH/E",
+            "spBv1.0/G/DBIRTH/E/3",
+            "spBv1.0/G/DBIRTH/E/4"
+        ]
+    );
+}
+
+/// With `primary_host`: no NBIRTH before its STATE says online; data
+/// held while it is offline; a rebirth when it is back; an older STATE
+/// ignored.
+#[test]
+fn primary_host_state_holds_data_and_rebirths() {
+    let state = |online: bool, ts: u64| format!(r#"{{"online": {online}, "timestamp": {ts}}}"#);
+    let mut r = Rig::with(|s| s.primary_host = Some("scada".into()));
+    let filters = r.node.link_setup().filters;
+    assert_eq!(filters[2], "spBv1.0/STATE/scada");
+    r.node.connected(0);
+    for _ in 0..200 {
+        assert!(r.tick().is_empty(), "nothing before the host is online");
+    }
+    r.node
+        .handle_message("spBv1.0/STATE/scada", state(true, 10).as_bytes(), 0);
+    r.until("spBv1.0/G/DBIRTH/E/4");
+    // Offline: nothing, whatever changes.
+    r.node
+        .handle_message("spBv1.0/STATE/scada", state(false, 20).as_bytes(), 0);
+    r.node.handle_message(
+        "spBv1.0/G/DCMD/E/3",
+        &cmd(vec![write(
+            metrics::OUTPUT_IMAGE,
+            MetricValue::BytesValue(vec![9, 9, 9, 9]),
+        )]),
+        0,
+    );
+    for _ in 0..600 {
+        assert!(r.tick().is_empty(), "held while the host is offline");
+    }
+    assert_eq!(r.plant.master().outputs(3).unwrap(), [9, 9, 9, 9]);
+    // An older online STATE (a stale retained one) changes nothing.
+    r.node
+        .handle_message("spBv1.0/STATE/scada", state(true, 15).as_bytes(), 0);
+    assert!(r.tick().is_empty());
+    // Online again: NBIRTH (seq 0) and every DBIRTH, with the values now.
+    r.node
+        .handle_message("spBv1.0/STATE/scada", state(true, 30).as_bytes(), 0);
+    let msgs = r.tick();
+    assert_eq!(msgs[0].0, "spBv1.0/G/NBIRTH/E");
+    assert_eq!(msgs[0].1.seq, Some(0));
+    let b3 = find(&msgs, "spBv1.0/G/DBIRTH/E/3");
+    assert_eq!(
+        value(b3, metrics::INPUT_IMAGE),
+        Some(&MetricValue::BytesValue(vec![9, 9, 9, 9]))
+    );
 }

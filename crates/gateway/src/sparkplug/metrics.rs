@@ -163,8 +163,8 @@ pub enum CommandError {
     /// Not a Sparkplug payload.
     #[error("DCMD payload is not a Sparkplug B payload: {0}")]
     Decode(String),
-    /// A metric without a name (this gateway births no aliases).
-    #[error("DCMD metric without a name")]
+    /// A metric with neither a name nor an alias of this device.
+    #[error("DCMD metric without a name or a known alias")]
     NoName,
     /// A metric the device does not have, or one that cannot be written.
     #[error(

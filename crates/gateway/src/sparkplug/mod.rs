@@ -33,6 +33,44 @@ use std::collections::VecDeque;
 pub const REBIRTH: &str = "Node Control/Rebirth";
 /// The birth/death sequence metric.
 pub const BD_SEQ: &str = "bdSeq";
+/// Node metric: the master's operating state (`operate`, `clear`,
+/// `stop`), String.
+pub const BUS_STATE: &str = "Bus/State";
+/// Node metric: the mean poll cycle time since the last report, in ms,
+/// Double.
+pub const CYCLE_TIME: &str = "Bus/Cycle Time";
+/// Node metric: the slaves in Data_Exchange, UInt8.
+pub const IN_DATA_EXCHANGE: &str = "Bus/Slaves In Data Exchange";
+/// Node metric: layer-2 request repetitions of all slaves, UInt64.
+pub const RETRIES: &str = "Bus/Retries";
+/// Node metric: requests without an answer, all slaves, UInt64.
+pub const ERRORS: &str = "Bus/Errors";
+/// Node metric: start-ups begun again, all slaves, UInt64.
+pub const RESTARTS: &str = "Bus/Restarts";
+
+/// The node metrics after `bdSeq`, in birth order, with their datatypes;
+/// each one's alias is its index.
+const NODE_METRICS: [(&str, DataType); 7] = [
+    (REBIRTH, DataType::Boolean),
+    (BUS_STATE, DataType::String),
+    (CYCLE_TIME, DataType::Double),
+    (IN_DATA_EXCHANGE, DataType::UInt8),
+    (RETRIES, DataType::UInt64),
+    (ERRORS, DataType::UInt64),
+    (RESTARTS, DataType::UInt64),
+];
+
+/// The alias of metric `index` of the device of slave `address`: unique
+/// in the edge node (the node's metrics are 0..=6).
+pub fn device_alias(address: u8, index: usize) -> u64 {
+    ((address as u64 + 1) << 16) | index as u64
+}
+
+/// The topic of a primary host application's state,
+/// `spBv1.0/STATE/<host id>` (Sparkplug 3.0).
+pub fn state_topic(host: &str) -> String {
+    format!("{NAMESPACE}/STATE/{host}")
+}
 
 /// The devices of a bus file's slaves: channels from the device
 /// profiles, or one byte per GSD module.
@@ -77,6 +115,27 @@ pub struct EdgeNode {
     seq: u8,
     /// The broker outage and the outputs' safe state.
     outage: Outage,
+    /// The primary host application is online (always, without one).
+    host_online: bool,
+    /// The timestamp of the last STATE message taken.
+    host_ts: u64,
+    /// The node metrics last sent (`None`: no NBIRTH yet).
+    node_sent: Option<Vec<Option<MetricValue>>>,
+    /// When the next NDATA may go out (ms).
+    next_ndata_ms: u64,
+    /// Cycles and their summed time at the last node report.
+    cycles_at: (u64, u64),
+}
+
+/// A metric of a data message: its alias only, no name, no datatype (the
+/// birth has them).
+fn data_metric(alias: u64, datatype: DataType, value: Option<MetricValue>, ts: u64) -> Metric {
+    Metric {
+        name: None,
+        alias: Some(alias),
+        datatype: None,
+        ..metric("", datatype, value, ts)
+    }
 }
 
 fn metric(name: &str, datatype: DataType, value: Option<MetricValue>, ts: u64) -> Metric {
@@ -131,6 +190,126 @@ impl EdgeNode {
             bd_seq: 0,
             seq: 0,
             outage: Outage::default(),
+            host_online: false,
+            host_ts: 0,
+            node_sent: None,
+            next_ndata_ms: 0,
+            cycles_at: (0, 0),
+        }
+    }
+
+    /// The primary host application's STATE (Sparkplug 3.0: JSON
+    /// `{"online": bool, "timestamp": ms}`, retained). One older than
+    /// the last taken is ignored. Offline: births and data are held (no
+    /// device is born any more); online again: a rebirth (NBIRTH, every
+    /// DBIRTH).
+    fn host_state(&mut self, payload: &[u8]) {
+        #[derive(serde::Deserialize)]
+        struct State {
+            online: bool,
+            timestamp: Option<u64>,
+        }
+        let s: State = match serde_json::from_slice(payload) {
+            Ok(s) => s,
+            Err(e) => {
+                return tracing::warn!(error = %e, "primary host STATE is not {{\"online\", \"timestamp\"}}")
+            }
+        };
+        let ts = s.timestamp.unwrap_or(0);
+        if ts < self.host_ts {
+            return tracing::debug!(ts, "an older primary host STATE ignored");
+        }
+        self.host_ts = ts;
+        match (s.online, self.host_online) {
+            (true, false) => {
+                tracing::info!("primary host application online: rebirth");
+                self.host_online = true;
+                self.birth_due = true;
+            }
+            (false, true) => {
+                tracing::warn!("primary host application offline: data held");
+                self.host_online = false;
+                self.node_sent = None;
+                for e in &mut self.devices {
+                    e.born = None;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Whether births and data may go out: no primary host configured,
+    /// or it is online.
+    fn may_publish(&self) -> bool {
+        self.settings.primary_host.is_none() || self.host_online
+    }
+
+    /// The values of the node metrics ([`NODE_METRICS`]) now; the cycle
+    /// time since the last call.
+    fn node_values(&mut self, m: &DpMaster) -> Vec<Option<MetricValue>> {
+        let c = m.cycle_stats();
+        let (cycles, sum) = (
+            c.cycles.saturating_sub(self.cycles_at.0),
+            c.sum_ns.saturating_sub(self.cycles_at.1),
+        );
+        self.cycles_at = (c.cycles, c.sum_ns);
+        let cycle_ms = match (cycles, &self.node_sent) {
+            (0, Some(last)) => last[2].clone(),
+            (0, None) => None,
+            _ => Some(MetricValue::DoubleValue(
+                (sum as f64 / cycles as f64 / 1e4).round() / 100.0,
+            )),
+        };
+        let (mut exchanging, mut stats) = (0u32, [0u64; 3]);
+        for e in &self.devices {
+            let a = e.device.info.layout.address;
+            if let Some(h) = m.handle(a) {
+                exchanging += (m.slave(h).state == SlaveState::DataExchange) as u32;
+            }
+            if let Some(s) = m.slave_stats(a) {
+                stats[0] += s.retries;
+                stats[1] += s.errors;
+                stats[2] += s.restarts;
+            }
+        }
+        vec![
+            Some(MetricValue::BooleanValue(false)),
+            Some(MetricValue::StringValue(
+                m.operating_state().as_str().into(),
+            )),
+            cycle_ms,
+            Some(MetricValue::IntValue(exchanging)),
+            Some(MetricValue::LongValue(stats[0])),
+            Some(MetricValue::LongValue(stats[1])),
+            Some(MetricValue::LongValue(stats[2])),
+        ]
+    }
+
+    /// An NDATA with the node metrics that changed: at once for the
+    /// master's state, else at most every `interval_ms`.
+    fn ndata(&mut self, m: &DpMaster, ts: u64) {
+        let Some(last) = self.node_sent.clone() else {
+            return;
+        };
+        let state_changed = last[1].as_ref()
+            != Some(&MetricValue::StringValue(
+                m.operating_state().as_str().into(),
+            ));
+        if !state_changed && ts < self.next_ndata_ms {
+            return;
+        }
+        self.next_ndata_ms = ts + self.settings.interval.as_millis() as u64;
+        let values = self.node_values(m);
+        let changed: Vec<Metric> = NODE_METRICS
+            .iter()
+            .zip(values.iter().zip(&last))
+            .enumerate()
+            .filter(|(_, (_, (now, before)))| now != before)
+            .map(|(i, ((_, dt), (now, _)))| data_metric(i as u64, *dt, now.clone(), ts))
+            .collect();
+        if !changed.is_empty() {
+            self.push(self.id.node_topic(MessageType::NData), changed, ts);
+            self.node_sent = Some(values);
         }
     }
 
@@ -171,22 +350,23 @@ impl EdgeNode {
         });
     }
 
-    fn nbirth(&mut self, ts: u64) {
+    fn nbirth(&mut self, m: &DpMaster, ts: u64) {
         self.seq = 0;
-        let metrics = vec![
-            metric(
-                BD_SEQ,
-                DataType::Int64,
-                Some(MetricValue::LongValue(self.bd_seq as u64)),
-                ts,
-            ),
-            metric(
-                REBIRTH,
-                DataType::Boolean,
-                Some(MetricValue::BooleanValue(false)),
-                ts,
-            ),
-        ];
+        let mut metrics = vec![metric(
+            BD_SEQ,
+            DataType::Int64,
+            Some(MetricValue::LongValue(self.bd_seq as u64)),
+            ts,
+        )];
+        let values = self.node_values(m);
+        for (i, ((name, dt), v)) in NODE_METRICS.iter().zip(&values).enumerate() {
+            metrics.push(Metric {
+                alias: Some(i as u64),
+                ..metric(name, *dt, v.clone(), ts)
+            });
+        }
+        self.node_sent = Some(values);
+        self.next_ndata_ms = ts + self.settings.interval.as_millis() as u64;
         self.push(self.id.node_topic(MessageType::NBirth), metrics, ts);
         for e in &mut self.devices {
             e.born = None;
@@ -201,7 +381,12 @@ impl EdgeNode {
         let p = Payload::decode(payload).map_err(|e| CommandError::Decode(e.to_string()))?;
         if topic == ncmd {
             for m in &p.metrics {
-                match (m.name.as_deref(), &m.value) {
+                // By name, or by its alias from the NBIRTH (0).
+                let name = m
+                    .name
+                    .as_deref()
+                    .or((m.alias == Some(0)).then_some(REBIRTH));
+                match (name, &m.value) {
                     (Some(REBIRTH), Some(MetricValue::BooleanValue(true))) => {
                         tracing::info!("Sparkplug rebirth requested");
                         self.birth_due = true;
@@ -225,7 +410,23 @@ impl EdgeNode {
             .settings
             .access(address)
             .ok_or(CommandError::Unauthorised(address))?;
-        let write = e.device.check_command(&p.metrics)?;
+        // Metrics by alias: named as in the DBIRTH.
+        let named: Vec<Metric> = p
+            .metrics
+            .iter()
+            .map(|m| match (&m.name, m.alias) {
+                (None, Some(alias)) if alias >> 16 == address as u64 + 1 => Metric {
+                    name: e
+                        .device
+                        .metrics
+                        .get((alias & 0xFFFF) as usize)
+                        .map(|d| d.name.clone()),
+                    ..m.clone()
+                },
+                _ => m.clone(),
+            })
+            .collect();
+        let write = e.device.check_command(&named)?;
         if let Some(allowed) = &access.channels {
             let refused = match &write.image {
                 Some(_) => Some(metrics::OUTPUT_IMAGE.to_string()),
@@ -277,10 +478,15 @@ impl EdgeNode {
     /// on entering Data_Exchange, a DDEATH on leaving it, a DDATA with
     /// the metrics that changed.
     fn publish_changes(&mut self, m: &DpMaster, ts: u64) {
+        if !self.may_publish() {
+            // Held while the primary host application is offline.
+            return;
+        }
         if self.birth_due {
             self.birth_due = false;
-            self.nbirth(ts);
+            self.nbirth(m, ts);
         }
+        self.ndata(m, ts);
         for i in 0..self.devices.len() {
             let addr = self.devices[i].device.info.layout.address;
             let Some(h) = m.handle(addr) else { continue };
@@ -301,7 +507,11 @@ impl EdgeNode {
                         .metrics
                         .iter()
                         .zip(&values)
-                        .map(|(d, val)| metric(&d.name, d.datatype, val.clone(), ts))
+                        .enumerate()
+                        .map(|(k, (d, val))| Metric {
+                            alias: Some(device_alias(addr, k)),
+                            ..metric(&d.name, d.datatype, val.clone(), ts)
+                        })
                         .collect();
                     let t = topic(MessageType::DBirth);
                     self.push(t, metrics, ts);
@@ -331,11 +541,10 @@ impl EdgeNode {
                         .metrics
                         .iter()
                         .zip(values.iter().zip(last))
-                        .filter(|(_, (now, before))| now != before)
-                        .map(|(d, (now, _))| Metric {
-                            // No datatype in data messages (the birth has it).
-                            datatype: None,
-                            ..metric(&d.name, d.datatype, now.clone(), ts)
+                        .enumerate()
+                        .filter(|(_, (_, (now, before)))| now != before)
+                        .map(|(k, (d, (now, _)))| {
+                            data_metric(device_alias(addr, k), d.datatype, now.clone(), ts)
                         })
                         .collect();
                     let t = topic(MessageType::DData);
@@ -361,6 +570,9 @@ impl Session for EdgeNode {
     fn settings(&self) -> &MqttSettings {
         &self.settings
     }
+    fn settings_mut(&mut self) -> &mut MqttSettings {
+        &mut self.settings
+    }
 
     /// QoS 0 for everything but the will (QoS 1); subscribed to NCMD and
     /// DCMD; the will is the NDEATH with the bdSeq of each attempt.
@@ -369,10 +581,13 @@ impl Session for EdgeNode {
         LinkSetup {
             qos: 0,
             will_qos: 1,
-            filters: vec![
+            filters: [
                 self.id.node_topic(MessageType::NCmd),
                 self.id.device_topic(MessageType::DCmd, "+"),
-            ],
+            ]
+            .into_iter()
+            .chain(self.settings.primary_host.as_deref().map(state_topic))
+            .collect(),
             will: Box::new({
                 let topic = self.id.node_topic(MessageType::NDeath);
                 move || {
@@ -388,10 +603,13 @@ impl Session for EdgeNode {
         }
     }
 
+    /// The NBIRTH is due; with a primary host application it waits for
+    /// its STATE (retained: the broker sends it on subscribing).
     fn connected(&mut self, _ts_ms: u64) {
         self.outage.connected();
         self.online = true;
         self.birth_due = true;
+        self.host_online = false;
     }
 
     /// Every lost connection or failed attempt: the next CONNECT carries
@@ -402,12 +620,19 @@ impl Session for EdgeNode {
         self.birth_due = false;
         self.out.clear();
         self.bd_seq = self.bd_seq.wrapping_add(1);
+        self.node_sent = None;
         for e in &mut self.devices {
             e.born = None;
         }
     }
 
+    /// NCMD and DCMD; with a primary host application its STATE.
     fn handle_message(&mut self, topic: &str, payload: &[u8], _ts_ms: u64) {
+        if let Some(host) = &self.settings.primary_host {
+            if topic == state_topic(host) {
+                return self.host_state(payload);
+            }
+        }
         if let Err(e) = self.command(topic, payload) {
             tracing::warn!(topic, error = %e, "Sparkplug command refused");
         }
