@@ -19,6 +19,16 @@
 -- Slave_Diag station status bits, Global_Control, Set_Slave_Add,
 -- DP-V1 MSAC_C1 read / write / errors, Data_Exchange outputs and inputs.
 --
+-- Every packet also shows (generated fields): `pbdl.src` / `pbdl.dst`,
+-- the station addresses, which also fill the Source and Destination
+-- columns (`pbdl.addr` matches either); `pbdl.delta_us`, the time since
+-- the previous record's first byte; and `pbdl.idle_us`, the line's idle
+-- time before this telegram: the delta minus the previous record's
+-- transmission time (11 bits per character at the baud rate of the
+-- preference "Baud rate", Edit > Preferences > Protocols > PBDL; 0
+-- leaves it out). Time stamps are those of each record's first byte.
+-- Records flagged corrupt carry the expert info `pbdl.corrupt`.
+--
 -- The meanings are those of IEC 61158-4-3 / -6-3 (EN 50170 volume 2) as
 -- the crates profibus-fdl and profibus-dp implement them.
 --
@@ -89,6 +99,14 @@ f.fcs_status = ProtoField.string("pbdl.fcs.status", "FCS status")
 f.fcs_good = ProtoField.bool("pbdl.fcs.good", "FCS good (false: corrupted telegram)")
 f.ed = ProtoField.uint8("pbdl.ed", "End delimiter", base.HEX)
 f.token = ProtoField.bool("pbdl.token", "Token")
+f.src = ProtoField.uint8("pbdl.src", "Source station", base.DEC)
+f.dst = ProtoField.uint8("pbdl.dst", "Destination station", base.DEC)
+f.addr = ProtoField.uint8("pbdl.addr", "Station (source or destination)", base.DEC)
+f.delta = ProtoField.double("pbdl.delta_us", "Delta since the previous record (µs)")
+f.idle = ProtoField.double("pbdl.idle_us", "Line idle before this telegram (µs)")
+
+pbdl.prefs.baud = Pref.uint("Baud rate", 1500000,
+  "Baud rate of the recorded line, for the idle time before each telegram (0: unknown)")
 
 local e_fcs = ProtoExpert.new("pbdl.fcs.bad", "FCS wrong", expert.group.CHECKSUM, expert.severity.ERROR)
 local e_len = ProtoExpert.new("pbdl.malformed", "Malformed telegram", expert.group.MALFORMED, expert.severity.ERROR)
@@ -103,6 +121,54 @@ if not ok_flag then crc_flag = nil end
 -- whether the recorder flagged it.
 local marked_bad = false
 local flagged = false
+
+-- Per frame number: delta and idle time, computed on the first pass (in
+-- file order) from the previous record's start and length.
+local timing = {}
+local prev_ts, prev_len = nil, nil
+-- The last request's {sa, da} on the first pass: a short acknowledge
+-- carries no addresses; it comes from the station that request asked.
+local last_request = nil
+
+function pbdl.init()
+  timing = {}
+  prev_ts, prev_len = nil, nil
+  last_request = nil
+end
+
+-- Adds the delta and idle times of this record.
+local function add_timing(tvb, pinfo, tree)
+  local t = timing[pinfo.number]
+  if t == nil and not pinfo.visited then
+    t = {}
+    local ts = pinfo.rel_ts
+    if prev_ts ~= nil then
+      t.delta = (ts - prev_ts) * 1e6
+      local baud = pbdl.prefs.baud
+      if baud and baud > 0 then
+        t.idle = t.delta - prev_len * 11 * 1e6 / baud
+      end
+    end
+    prev_ts, prev_len = ts, tvb:len()
+    timing[pinfo.number] = t
+  end
+  if t and t.delta then
+    tree:add(f.delta, t.delta):set_generated()
+    if t.idle then tree:add(f.idle, t.idle):set_generated() end
+  end
+end
+
+-- Shows the station addresses (fields and the Source / Destination
+-- columns).
+local function add_stations(tree, pinfo, sa, da)
+  sa, da = bit.band(sa, 0x7F), bit.band(da, 0x7F)
+  tree:add(f.src, sa):set_generated()
+  tree:add(f.dst, da):set_generated()
+  tree:add(f.addr, sa):set_generated()
+  tree:add(f.addr, da):set_generated()
+  pinfo.cols.src = tostring(sa)
+  pinfo.cols.dst = tostring(da)
+end
 
 -- Marks the packet corrupt: FCS status Bad, `pbdl.fcs.good` false, and an
 -- expert info saying why.
@@ -525,9 +591,13 @@ local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
   dt:add(f.da_ext, tvb(pos, 1)); dt:add(f.da_addr, tvb(pos, 1))
   local st = tree:add(f.sa, tvb(pos + 1, 1))
   st:add(f.sa_ext, tvb(pos + 1, 1)); st:add(f.sa_addr, tvb(pos + 1, 1))
+  add_stations(tree, pinfo, sa, da)
 
   local request = bit.band(fc, 0x40) ~= 0
   local code = bit.band(fc, 0x0F)
+  if not pinfo.visited then
+    last_request = request and { sa, da } or nil
+  end
   local fname
   local ft = tree:add(f.fc, tvb(pos + 2, 1))
   ft:add(f.fc_req, tvb(pos + 2, 1))
@@ -604,6 +674,15 @@ local function dissect_telegram(tvb, pinfo, tree, root)
   tree:append_text(", " .. sdname)
 
   if sd == 0xE5 then
+    local t = timing[pinfo.number]
+    if t and not pinfo.visited then
+      t.answers = last_request
+      last_request = nil
+    end
+    if t and t.answers then
+      -- From the station asked to the one that asked.
+      add_stations(tree, pinfo, t.answers[2], t.answers[1])
+    end
     pinfo.cols.info = "SC short acknowledge"
     return 1
   elseif sd == 0xDC then
@@ -613,6 +692,7 @@ local function dissect_telegram(tvb, pinfo, tree, root)
     local dt = tree:add(f.da, tvb(1, 1)); dt:add(f.da_addr, tvb(1, 1))
     local st = tree:add(f.sa, tvb(2, 1)); st:add(f.sa_addr, tvb(2, 1))
     tree:add(f.token, true):set_generated()
+    add_stations(tree, pinfo, tvb(2, 1):uint(), tvb(1, 1):uint())
     pinfo.cols.info = string.format("SD4 token %d → %d", bit.band(tvb(2, 1):uint(), 0x7F),
       bit.band(tvb(1, 1):uint(), 0x7F))
     return 3
@@ -648,6 +728,7 @@ end
 function pbdl.dissector(tvb, pinfo, root)
   if tvb:len() < 1 then return 0 end
   local tree = root:add(pbdl, tvb(), "PROFIBUS DL")
+  add_timing(tvb, pinfo, tree)
   marked_bad = false
   local flag = crc_flag and crc_flag()
   flagged = flag ~= nil and flag.value == true

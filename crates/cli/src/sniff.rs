@@ -1,21 +1,26 @@
 //! `dpctl sniff`: a passive bus monitor.
 //!
 //! Reads a serial line or pty (never writes), frames what it sees and
-//! prints one line per telegram: the time in µs since the start and the
-//! telegram as `dpctl decode` describes it. Bytes the framer had to skip
+//! prints one line per telegram: the time in µs since the start, the
+//! telegram as `dpctl decode` describes it and, after ` | `, its DP layer
+//! in words (`Set_Prm request: WD_On; watchdog 5000 ms; …`). Bytes the framer had to skip
 //! (garbage, a bad FCS, a broken length) are printed on lines starting
 //! with `!! `, with their hex and the errors they raised. `--json` prints
 //! the same as JSON lines (`"error"` marks the skipped bytes), with the
 //! DP layer of each DP telegram in a `"dp"` object
 //! (`profibus_dp::pdu::decode`: service and decoded data unit; a response is
 //! read by the request it answers); `--pcap` records the telegrams, and
-//! the skipped bytes flagged as corrupt. On Ctrl-C / SIGTERM it prints a summary line
+//! the skipped bytes flagged as corrupt; with `--trigger` only the
+//! telegrams around each firing of a trigger expression
+//! ([`profibus_dp::monitor::trigger`]), in segments. On Ctrl-C / SIGTERM it prints a summary line
 //! with the codec counters and stops. On a terminal (without `--json` or
 //! `--plain`) it shows the telegrams as a live list with filters and
 //! per-station statistics instead (`profibus_tui::sniff`).
 
 use crate::common;
 use anyhow::{Context, Result};
+use profibus_dp::config::layout::SlaveLayout;
+use profibus_dp::monitor::trigger::{Output, Recorder, Trigger, Watch};
 use profibus_dp::pdu::decode::{DpTelegram, Exchanges};
 use profibus_dp::pdu::describe::TelegramSummary;
 use profibus_fdl::capture::pcap::PcapWriter;
@@ -30,7 +35,7 @@ use profibus_tui::term::LiveSniff;
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Listen passively on a line and print every telegram.
@@ -54,15 +59,180 @@ pub struct Args {
     /// by address, `s` by service, `e` errors only, `c` clear filters.
     #[arg(long, conflicts_with = "json")]
     pub plain: bool,
-    /// Record the telegrams to FILE (pcapng, link type 257 PROFIBUS DL).
+    /// Record the telegrams to FILE (pcapng, link type 257 PROFIBUS DL;
+    /// bytes that are no telegram are kept, flagged as corrupt).
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
+    /// Record only around the telegrams that fire EXPR (repeatable; any
+    /// one fires): `--pre` telegrams before, `--post` after, one segment
+    /// each (overlapping windows merge), each record annotated. Syntax:
+    /// docs/analyser.md, e.g. `cfg_fault`, `addr == 5 and service ==
+    /// set_prm`, `fcs or no_answer or retry`, `restart and t > 10s`.
+    #[arg(long, value_name = "EXPR", requires = "pcap", value_parser = parse_trigger)]
+    pub trigger: Vec<Trigger>,
+    /// Telegrams kept before each firing of a trigger.
+    #[arg(long, value_name = "N", default_value_t = 100, requires = "trigger")]
+    pub pre: usize,
+    /// Telegrams kept after each firing of a trigger.
+    #[arg(long, value_name = "N", default_value_t = 100, requires = "trigger")]
+    pub post: usize,
+    /// One file per segment instead of all in FILE: FILE-1.pcapng,
+    /// FILE-2.pcapng, … (the number before FILE's extension).
+    #[arg(long, requires = "trigger")]
+    pub split: bool,
+    /// Bus file of the segment: its slaves' modules split Data_Exchange
+    /// data by module, their GSD files name diagnosis bits. Without it
+    /// the modules come from the Chk_Cfg seen on the wire.
+    #[arg(long, value_name = "BUS.toml")]
+    pub config: Option<PathBuf>,
+    /// A folder of GSD files to name diagnosis bits with, found by the
+    /// ident number in each diagnosis (also the built-in files and the
+    /// user library). Repeatable.
+    #[arg(long, value_name = "DIR")]
+    pub gsd_dir: Vec<PathBuf>,
     /// Quiet time in ms after which an incomplete telegram is given up
     /// (default: 5 on a pty; on a serial line twice TSYN, at least 2).
     #[arg(long, value_name = "MS")]
     pub idle_ms: Option<f64>,
     #[command(flatten)]
     pub stats: crate::stats_args::StatsArgs,
+}
+
+fn parse_trigger(s: &str) -> Result<Trigger, String> {
+    Trigger::parse(s).map_err(|e| e.to_string())
+}
+
+/// The file of segment `n` with `--split`: `cap.pcapng` → `cap-1.pcapng`.
+fn split_path(path: &Path, n: u32) -> PathBuf {
+    let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-{n}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{n}"),
+    };
+    path.with_file_name(name)
+}
+
+/// One record the triggered recorder keeps.
+struct Rec {
+    at: profibus_fdl::Instant,
+    bytes: Vec<u8>,
+    corrupt: bool,
+    /// The triggers it fired.
+    fired: Vec<String>,
+}
+
+/// `--trigger`: the triggers, what they watch and the segments written.
+struct Triggered {
+    triggers: Vec<Trigger>,
+    watch: Watch,
+    recorder: Recorder<Rec>,
+    path: PathBuf,
+    split: bool,
+    epoch: Duration,
+    /// The file being written (all segments, or the open one with
+    /// `--split`).
+    writer: Option<PcapWriter<BufWriter<File>>>,
+    /// The note on the first record of a segment.
+    note: Option<String>,
+}
+
+/// The `--json` line of a trigger firing.
+#[derive(serde::Serialize)]
+struct Fired<'a> {
+    event: &'static str,
+    t_us: u64,
+    trigger: String,
+    segment: u32,
+    file: &'a Path,
+}
+
+impl Triggered {
+    fn open(&mut self, path: &Path) -> Result<()> {
+        let w = PcapWriter::create(path, self.epoch)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        self.writer = Some(w);
+        Ok(())
+    }
+
+    /// The file segment `n` goes to.
+    fn file(&self, n: u32) -> PathBuf {
+        if self.split {
+            split_path(&self.path, n)
+        } else {
+            self.path.clone()
+        }
+    }
+
+    fn output(&mut self, o: Output<Rec>) -> Result<()> {
+        match o {
+            Output::Start { segment } => {
+                if self.split {
+                    self.open(&split_path(&self.path, segment))?;
+                }
+                self.note = Some(format!("segment {segment}"));
+            }
+            Output::Record { record, .. } => {
+                let mut parts: Vec<String> = self.note.take().into_iter().collect();
+                parts.extend(record.fired.iter().map(|t| format!("trigger: {t}")));
+                let comment = (!parts.is_empty()).then(|| parts.join("; "));
+                if let Some(w) = self.writer.as_mut() {
+                    w.write_record(record.at, &record.bytes, record.corrupt, comment.as_deref())
+                        .context("writing the pcap file")?;
+                }
+            }
+            Output::End { .. } => {
+                if self.split {
+                    if let Some(w) = self.writer.take() {
+                        w.into_inner().context("writing the pcap file")?;
+                    }
+                } else if let Some(w) = self.writer.as_mut() {
+                    w.flush().context("writing the pcap file")?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Hear `ev`; the triggers it fired, with the segment they go to.
+    fn hear(&mut self, ev: &TapEvent) -> Result<(Vec<String>, u32)> {
+        let (o, _) = self.watch.hear(ev);
+        let fired: Vec<String> = (self.triggers.iter())
+            .filter(|t| t.matches(&o))
+            .map(|t| t.to_string())
+            .collect();
+        let segment = self
+            .recorder
+            .open_segment()
+            .unwrap_or(self.recorder.segments() + 1);
+        let (at, bytes, corrupt) = match ev {
+            TapEvent::Telegram { at, bytes } => (*at, bytes.to_vec(), false),
+            TapEvent::Skipped { at, bytes, .. } => (*at, bytes.to_vec(), true),
+        };
+        let rec = Rec {
+            at,
+            bytes,
+            corrupt,
+            fired: fired.clone(),
+        };
+        let mut outs = vec![];
+        self.recorder.push(rec, !fired.is_empty(), |o| outs.push(o));
+        for o in outs {
+            self.output(o)?;
+        }
+        Ok((fired, segment))
+    }
+
+    fn finish(mut self) -> Result<()> {
+        let mut outs = vec![];
+        self.recorder.finish(|o| outs.push(o));
+        for o in outs {
+            self.output(o)?;
+        }
+        if let Some(w) = self.writer.take() {
+            w.into_inner().context("writing the pcap file")?;
+        }
+        Ok(())
+    }
 }
 
 /// A line of `--json`: what was seen, and when (µs since the start).
@@ -84,6 +254,8 @@ struct Printer {
     pcap: Option<PcapWriter<BufWriter<File>>>,
     /// Pairs responses with their requests for the `"dp"` object.
     exchanges: Exchanges,
+    /// `--trigger`.
+    triggered: Option<Triggered>,
     /// `--stats` / `--alert` (`crate::stats_args`).
     stats: Option<crate::stats_args::StatsRun>,
 }
@@ -92,6 +264,35 @@ impl Printer {
     fn event(&mut self, ev: TapEvent) -> Result<()> {
         if let Some(s) = self.stats.as_mut() {
             s.hear(&ev);
+        }
+        if let Some(tr) = self.triggered.as_mut() {
+            let (fired, segment) = tr.hear(&ev)?;
+            let at = match &ev {
+                TapEvent::Telegram { at, .. } | TapEvent::Skipped { at, .. } => *at,
+            };
+            let t_us = at.as_nanos() / 1000;
+            for trigger in fired {
+                let file = tr.file(segment);
+                if self.live.is_some() {
+                    continue;
+                }
+                if self.json {
+                    let f = Fired {
+                        event: "trigger",
+                        t_us,
+                        trigger,
+                        segment,
+                        file: &file,
+                    };
+                    writeln!(self.out, "{}", common::json_line(&f))?;
+                } else {
+                    writeln!(
+                        self.out,
+                        ">> {t_us:>9} trigger `{trigger}` fired: segment {segment} in {}",
+                        file.display()
+                    )?;
+                }
+            }
         }
         match ev {
             TapEvent::Telegram { at, bytes } => {
@@ -108,7 +309,11 @@ impl Printer {
                     let seen = Seen { t_us, what, dp };
                     writeln!(self.out, "{}", common::json_line(&seen))?;
                 } else {
-                    writeln!(self.out, "{t_us:>12} {what}")?;
+                    // The DP layer in words after the telegram.
+                    match self.exchanges.decode(&t) {
+                        Some(dp) => writeln!(self.out, "{t_us:>12} {what} | {dp}")?,
+                        None => writeln!(self.out, "{t_us:>12} {what}")?,
+                    }
                 }
                 if let Some(p) = self.pcap.as_mut() {
                     p.write_telegram(at, &bytes)
@@ -209,7 +414,27 @@ async fn sniff(args: Args) -> Result<()> {
     let epoch = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap_or_default();
+    let triggered = match (&args.pcap, args.trigger.is_empty()) {
+        (Some(path), false) => {
+            let mut t = Triggered {
+                triggers: args.trigger.clone(),
+                watch: Watch::default(),
+                recorder: Recorder::new(args.pre, args.post),
+                path: path.clone(),
+                split: args.split,
+                epoch,
+                writer: None,
+                note: None,
+            };
+            if !args.split {
+                t.open(path)?;
+            }
+            Some(t)
+        }
+        _ => None,
+    };
     let pcap = (args.pcap.as_deref())
+        .filter(|_| triggered.is_none())
         .map(|p| {
             PcapWriter::create(p, epoch).with_context(|| format!("cannot create {}", p.display()))
         })
@@ -217,12 +442,25 @@ async fn sniff(args: Args) -> Result<()> {
     let live = (!args.json && !args.plain && std::io::stdout().is_terminal())
         .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
         .transpose()?;
+    let mut exchanges = Exchanges::default();
+    if let Some(path) = &args.config {
+        let bus = profibus_devices::bus::ProfiledBus::load(path)?;
+        for s in SlaveLayout::of_bus(&bus.file) {
+            exchanges.set_slave(s.address, s.gsd, s.modules);
+        }
+    }
+    if !args.gsd_dir.is_empty() {
+        for e in crate::scan::library(&args.gsd_dir)?.entries() {
+            exchanges.add_gsd(e.gsd.clone());
+        }
+    }
     let mut printer = Printer {
         json: args.json,
         live,
         out: BufWriter::new(crate::out::stdout()),
         pcap,
-        exchanges: Exchanges::default(),
+        exchanges,
+        triggered,
         stats: crate::stats_args::StatsRun::new(
             &args.stats,
             profibus_dp::monitor::stats::StatsOptions {
@@ -266,6 +504,9 @@ async fn sniff(args: Args) -> Result<()> {
     };
     if let Some(p) = printer.pcap.take() {
         p.into_inner().context("writing the pcap file")?;
+    }
+    if let Some(t) = printer.triggered.take() {
+        t.finish()?;
     }
     summary?;
     heard

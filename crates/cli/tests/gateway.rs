@@ -600,3 +600,66 @@ fn gateway_logs_its_connections_and_stops_promptly_on_sigterm() {
         lines.join("\n")
     );
 }
+
+/// The `ts` of every message on `topic` in `lines` so far, once there
+/// are `n` of them.
+fn wait_ts(lines: &mut Lines, topic: &str, n: usize) -> Vec<u64> {
+    let ts = |lines: &Lines| -> Vec<u64> {
+        (lines.1.iter())
+            .filter_map(|l| l.split_once(' ').filter(|(t, _)| *t == topic))
+            .map(|(_, p)| {
+                serde_json::from_str::<serde_json::Value>(p).unwrap()["ts"]
+                    .as_u64()
+                    .unwrap()
+            })
+            .collect()
+    };
+    let end = std::time::Instant::now() + T;
+    while ts(lines).len() < n {
+        if lines
+            .next_line(end.saturating_duration_since(std::time::Instant::now()))
+            .is_none()
+        {
+            panic!("only {} messages on {topic}", ts(lines).len());
+        }
+    }
+    ts(lines)
+}
+
+/// A BK3000 with four analog inputs (the simulation's sine waves change
+/// in every cycle) through a real broker: with the defaults its inputs
+/// come at most every 250 ms (4/s, not 1 000/s); with `[[mqtt.slave]]
+/// min_interval_ms = 600` at most every 600 ms.
+#[test]
+fn gateway_bounds_the_messages_of_a_noisy_analog_slave() {
+    for (extra, min) in [
+        ("", 250),
+        ("[[mqtt.slave]]\naddress = 40\nmin_interval_ms = 600\n", 600),
+    ] {
+        let dir = TempDir::new("gateway-traffic");
+        let bus = write_bus(
+            &dir,
+            &format!(
+                "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 40\ndevice = \"bk3000\"\n\
+                 terminals = [\"KL3102\", \"KL3102\", \"KL9010\"]\n\n[mqtt]\nbus = \"line\"\n{extra}"
+            ),
+        );
+        let port = free_port();
+        let _mosq = broker(&dir, port);
+        let (_sub, mut lines) = subscribe(port);
+        let mut c = Command::new(dpctl());
+        c.args(["gateway", "--sim", "--config"])
+            .arg(&bus)
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
+        let _gw = Proc::spawn_captured(c);
+        let topic = "profibus/line/40/inputs";
+        let ts = wait_ts(&mut lines, topic, 6);
+        // After the first (the slave's start-up image), never closer than
+        // the minimum interval: the payload's `ts` is the publish time.
+        let gaps: Vec<u64> = ts.windows(2).skip(1).map(|w| w[1] - w[0]).collect();
+        assert!(gaps.iter().all(|g| *g >= min), "{min} ms: {gaps:?}");
+        // ... and the values keep coming: the sine moves more than the
+        // deadband (0.2 V) in every interval.
+        assert!(gaps.iter().all(|g| *g < 4 * min), "{min} ms: {gaps:?}");
+    }
+}

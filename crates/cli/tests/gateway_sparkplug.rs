@@ -136,6 +136,15 @@ impl Sub {
             if t == PROBE || !t.starts_with("spBv1.0/") {
                 continue;
             }
+            // A primary host's STATE is JSON: kept (for the order) undecoded.
+            if t.starts_with("spBv1.0/STATE/") {
+                let d = Decoded {
+                    fields: HashMap::new(),
+                    metrics: vec![],
+                };
+                self.seen.push((t.to_string(), d));
+                continue;
+            }
             let bytes: Vec<u8> = (0..hex.len() / 2)
                 .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
                 .collect();
@@ -510,4 +519,91 @@ fn sparkplug_alarm_metrics_per_alarm_type() {
     let out = gw.finish(T);
     assert!(out.status.success(), "gateway failed: {}", out.stderr);
     slave.terminate(T);
+}
+
+/// A primary host application's STATE (Sparkplug 3.0), retained.
+fn host_state(port: u16, online: bool, ts: u64) {
+    let ok = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-q", "1", "-r"])
+        .args(["-t", "spBv1.0/STATE/scada"])
+        .args([
+            "-m",
+            &format!(r#"{{"online": {online}, "timestamp": {ts}}}"#),
+        ])
+        .status()
+        .expect("mosquitto_pub")
+        .success();
+    assert!(ok, "mosquitto_pub of the STATE failed");
+}
+
+/// With `primary_host`: the edge node waits for the host's STATE online
+/// before its NBIRTH, holds births and data while the host is offline
+/// (a DCMD taken meanwhile is applied, its echo not published), and is
+/// reborn (NBIRTH seq 0, every DBIRTH, the echo in it) when the host is
+/// back.
+#[test]
+fn sparkplug_primary_host_state_holds_and_rebirths() {
+    let dir = TempDir::new("sparkplug-state");
+    let mqtt = "[mqtt]\nbus = \"line\"\nwritable = [3]\nprimary_host = \"scada\"\n";
+    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}pkw = false\n\n{mqtt}"));
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let mut sub = Sub::start(port);
+    let mut c = Command::new(dpctl());
+    c.env("DPCTL_LOG", "warn,profibus_gateway=info")
+        .arg("gateway")
+        .arg("--config")
+        .arg(&bus)
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+        .args(["--sim", "--sparkplug", "G/E"]);
+    let gw = Proc::spawn_captured(c);
+    let log = |what: &str| {
+        let end = Instant::now() + T;
+        while let Some(l) = gw.stderr_line(end.saturating_duration_since(Instant::now())) {
+            if l.contains(what) {
+                return;
+            }
+        }
+        panic!("no `{what}` in the gateway's log");
+    };
+    log("connected to the MQTT broker");
+    host_state(port, true, 1);
+    births(&mut sub);
+    let at = |sub: &Sub, topic: &str, from: usize| {
+        (sub.seen.iter().skip(from))
+            .position(|(t, _)| t == topic)
+            .map(|i| i + from)
+    };
+    let state = "spBv1.0/STATE/scada";
+    assert!(
+        at(&sub, state, 0) < at(&sub, NBIRTH, 0),
+        "no NBIRTH before the host is online"
+    );
+    // The host goes offline; a write meanwhile is applied, not published.
+    host_state(port, false, 2);
+    log("primary host application offline");
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 1 metrics { name: "Image/Outputs" bytes_value: "\x11\x22\x33\x44" }"#,
+    );
+    log("Sparkplug DCMD applied");
+    host_state(port, true, 3);
+    let echoed = |d: &Decoded| d.get("Image/Inputs", "bytes_value") == Some(r#""\021\"3D""#);
+    let nb = sub.expect(NBIRTH, |_| true);
+    assert_eq!(nb.seq(), Some(0));
+    sub.expect(&dev("DBIRTH", 3), echoed);
+    // Between the offline and the online STATE: not a message with the
+    // write's echo.
+    let off = (sub.seen.iter())
+        .enumerate()
+        .filter(|(_, (t, _))| t == state)
+        .map(|(i, _)| i)
+        .collect::<Vec<_>>();
+    assert!(off.len() >= 3, "three STATEs seen");
+    assert!(
+        sub.seen[off[1]..off[2]].iter().all(|(_, d)| !echoed(d)),
+        "nothing published while the host is offline"
+    );
+    drop(gw);
 }

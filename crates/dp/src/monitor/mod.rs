@@ -89,6 +89,7 @@ pub mod alert;
 pub mod stats;
 #[cfg(test)]
 mod tests;
+pub mod trigger;
 
 /// Which process image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -35,6 +35,8 @@
 //! assert_eq!(ident_number, 0x0ED0);
 //! ```
 
+use crate::config::gsd::Gsd;
+use crate::config::layout::{ModuleLayout, Span};
 use crate::pdu::alarm::{self, DiagBlock};
 use crate::pdu::c2::{C2Pdu, InitiateRes};
 use crate::pdu::cfg;
@@ -42,7 +44,7 @@ use crate::pdu::control::{ControlCommand, GlobalControl, SetSlaveAdd};
 use crate::pdu::diag::{self, SlaveDiag, NO_MASTER};
 use crate::pdu::dpv1::{self, Pdu};
 use crate::pdu::im::{self, CallHeader, Im0};
-use crate::pdu::prm::{Dpv1Status1, PrmStationStatus, SetPrm};
+use crate::pdu::prm::{Dpv1Status1, Dpv1Status2, PrmStationStatus, SetPrm};
 use crate::pdu::sap;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
 use std::collections::{BTreeMap, BTreeSet};
@@ -86,6 +88,20 @@ pub struct CfgIdentifier {
     pub input_bytes: usize,
     /// Output bytes.
     pub output_bytes: usize,
+}
+
+/// One module's share of a process image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct ModuleSlice {
+    /// Slot, counted from 1 in configuration order.
+    pub slot: usize,
+    /// The module: its GSD name (bus file) or its identifier in words
+    /// (learned from a Chk_Cfg).
+    pub name: String,
+    /// Its bytes.
+    #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
+    pub data: Vec<u8>,
 }
 
 /// A DP-V1 alarm block of a Slave_Diag response, with the field names of
@@ -150,6 +166,12 @@ pub enum Detail {
         ident_number: u16,
         /// Groups of Group_Ident (1..=8).
         groups: Vec<u8>,
+        /// The bits set in DPV1_Status_1 and DPV1_Status_2, the first two
+        /// User_Prm_Data bytes, when DPV1_Enable is set (`DPV1_Enable`,
+        /// `WD_Base_1ms`, `Diagnostic_Alarm`, …; empty: a DP-V0
+        /// Set_Prm, whose User_Prm_Data is the device's own).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        dpv1_status: Vec<&'static str>,
         /// User_Prm_Data (for DP-V1 slaves starting with DPV1_Status_1..3).
         #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         user_prm_data: Vec<u8>,
@@ -171,6 +193,10 @@ pub enum Detail {
         /// The output bytes.
         #[cfg_attr(feature = "serde", serde(serialize_with = "profibus_fdl::ser::hex"))]
         outputs: Vec<u8>,
+        /// The bytes split by module, when [`Exchanges`] knows the
+        /// slave's modules (a bus file, or the Chk_Cfg seen on the wire).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        modules: Vec<ModuleSlice>,
     },
     /// Inputs: a Data_Exchange or Rd_Inp response.
     Inputs {
@@ -179,6 +205,9 @@ pub enum Detail {
         inputs: Vec<u8>,
         /// The slave has new diagnosis (response status DH or RDH).
         new_diag: bool,
+        /// The bytes split by module (see [`Detail::Outputs`]).
+        #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+        modules: Vec<ModuleSlice>,
     },
     /// A Global_Control broadcast.
     GlobalControl {
@@ -252,6 +281,195 @@ pub struct DpTelegram {
     pub detail: Option<Detail>,
 }
 
+fn hex(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn list(words: &[impl AsRef<str>], none: &str) -> String {
+    if words.is_empty() {
+        none.to_string()
+    } else {
+        words
+            .iter()
+            .map(AsRef::as_ref)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+fn group_list(g: &[u8]) -> String {
+    g.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
+}
+
+fn show_modules(f: &mut fmt::Formatter<'_>, modules: &[ModuleSlice]) -> fmt::Result {
+    for m in modules {
+        write!(f, "; {} {}: {}", m.slot, m.name, hex(&m.data))?;
+    }
+    Ok(())
+}
+
+impl fmt::Display for DpTelegram {
+    /// The DP layer in words, as `dpctl sniff` prints it after the
+    /// telegram: `Set_Prm request: WD_On; watchdog 5000 ms; …`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {}", self.service, self.direction)?;
+        let Some(d) = &self.detail else {
+            return Ok(());
+        };
+        f.write_str(": ")?;
+        match d {
+            Detail::SlaveDiag {
+                status,
+                master_address,
+                ident_number,
+                ext_diag,
+                alarms,
+                ..
+            } => {
+                write!(f, "{}; ident 0x{ident_number:04X}", list(status, "OK"))?;
+                match master_address {
+                    Some(m) => write!(f, "; master {m}")?,
+                    None => f.write_str("; no master")?,
+                }
+                for e in ext_diag {
+                    write!(f, "; {e}")?;
+                }
+                for a in alarms {
+                    write!(
+                        f,
+                        "; {} alarm slot {} {} seq {}",
+                        a.alarm_type, a.slot, a.specifier, a.seq
+                    )?;
+                }
+                Ok(())
+            }
+            Detail::SetPrm {
+                station_status,
+                dpv1_status,
+                watchdog_ms,
+                min_tsdr,
+                ident_number,
+                groups,
+                user_prm_data,
+            } => {
+                f.write_str(&list(station_status, "no status bits"))?;
+                match watchdog_ms {
+                    Some(w) => write!(f, "; watchdog {w} ms")?,
+                    None => f.write_str("; watchdog off")?,
+                }
+                write!(f, "; min TSDR {min_tsdr}; ident 0x{ident_number:04X}")?;
+                if !groups.is_empty() {
+                    write!(f, "; groups {}", group_list(groups))?;
+                }
+                if !dpv1_status.is_empty() {
+                    write!(f, "; DPV1 {}", list(dpv1_status, ""))?;
+                }
+                if !user_prm_data.is_empty() {
+                    write!(f, "; user prm {}", hex(user_prm_data))?;
+                }
+                Ok(())
+            }
+            Detail::Cfg {
+                identifiers,
+                input_bytes,
+                output_bytes,
+                error,
+            } => {
+                let texts: Vec<String> = identifiers
+                    .iter()
+                    .map(|i| format!("{} ({})", i.text, hex(&i.raw)))
+                    .collect();
+                let n = |b: usize| {
+                    if b == 1 {
+                        "1 byte".into()
+                    } else {
+                        format!("{b} bytes")
+                    }
+                };
+                write!(
+                    f,
+                    "{}; {} in, {} out",
+                    list(&texts, "no modules"),
+                    n(*input_bytes),
+                    n(*output_bytes)
+                )?;
+                if let Some(e) = error {
+                    write!(f, "; {e}")?;
+                }
+                Ok(())
+            }
+            Detail::Outputs { outputs, modules } => {
+                write!(f, "outputs {}", hex(outputs))?;
+                show_modules(f, modules)
+            }
+            Detail::Inputs {
+                inputs,
+                new_diag,
+                modules,
+            } => {
+                write!(f, "inputs {}", hex(inputs))?;
+                if *new_diag {
+                    f.write_str(" (new diagnosis)")?;
+                }
+                show_modules(f, modules)
+            }
+            Detail::GlobalControl { command, groups } => {
+                f.write_str(&list(command, "no command"))?;
+                if groups.is_empty() {
+                    f.write_str("; all groups")
+                } else {
+                    write!(f, "; groups {}", group_list(groups))
+                }
+            }
+            Detail::SetSlaveAdd {
+                new_address,
+                ident_number,
+                no_add_chg,
+            } => {
+                write!(f, "new address {new_address}; ident 0x{ident_number:04X}")?;
+                if *no_add_chg {
+                    f.write_str("; No_Add_Chg")?;
+                }
+                Ok(())
+            }
+            Detail::Dpv1 {
+                pdu,
+                slot,
+                index,
+                length,
+                data,
+                error,
+                text,
+            } => {
+                f.write_str(pdu)?;
+                if let Some(s) = slot {
+                    write!(f, " slot {s}")?;
+                }
+                if let Some(i) = index {
+                    write!(f, " index {i}")?;
+                }
+                if let Some(l) = length {
+                    write!(f, " length {l}")?;
+                }
+                if let Some(d) = data.as_ref().filter(|d| !d.is_empty()) {
+                    write!(f, " data {}", hex(d))?;
+                }
+                if let Some(e) = error {
+                    write!(f, "; {e}")?;
+                }
+                if let Some(t) = text {
+                    write!(f, "; {t}")?;
+                }
+                Ok(())
+            }
+            Detail::Malformed { error } => write!(f, "malformed: {error}"),
+        }
+    }
+}
+
 /// The DP layer of `telegram`; `answers` is the request a response (or
 /// short acknowledge) answers, when known. `None`: no DP telegram (a
 /// token, FDL status and ident requests, other SAPs).
@@ -305,6 +523,7 @@ fn request(d: &DataTelegram<'_>, kind: RequestKind) -> Option<DpTelegram> {
     let detail = match dsap {
         None => Some(Detail::Outputs {
             outputs: du.to_vec(),
+            modules: vec![],
         }),
         Some(sap::SET_PRM) => Some(set_prm(du)),
         Some(sap::CHK_CFG) => Some(config(du)),
@@ -360,15 +579,18 @@ fn response(
             None => Some(Detail::Inputs {
                 inputs: du.to_vec(),
                 new_diag: matches!(status, ResponseStatus::Dh | ResponseStatus::Rdh),
+                modules: vec![],
             }),
             Some(sap::SLAVE_DIAG) => Some(slave_diag(du, dpv1)),
             Some(sap::GET_CFG) => Some(config(du)),
             Some(sap::RD_INP) => Some(Detail::Inputs {
                 inputs: du.to_vec(),
                 new_diag: false,
+                modules: vec![],
             }),
             Some(sap::RD_OUTP) => Some(Detail::Outputs {
                 outputs: du.to_vec(),
+                modules: vec![],
             }),
             Some(s) if s <= sap::MSAC_C2_INITIATE && !du.is_empty() => Some(c2_pdu(du, false)),
             Some(s) if s <= sap::MSAC_C1 && !du.is_empty() => Some(dpv1_pdu(du, false)),
@@ -429,14 +651,50 @@ fn set_prm(du: &[u8]) -> Detail {
     .filter(|(f, _)| p.station_status.contains(*f))
     .map(|(_, n)| n)
     .collect();
+    let dpv1_status = match p.dpv1_status() {
+        Some((s1, s2, _)) if dpv1 => dpv1_names(s1, s2),
+        _ => vec![],
+    };
     Detail::SetPrm {
         station_status,
+        dpv1_status,
         watchdog_ms: p.watchdog(dpv1).map(|w| w.as_millis() as u64),
         min_tsdr: p.min_tsdr,
         ident_number: p.ident_number,
         groups: groups(p.group_ident),
         user_prm_data: p.user_prm_data.to_vec(),
     }
+}
+
+/// The bits set in DPV1_Status_1 and _2 by their names (IEC 61158-6-3,
+/// Set_Prm DPV1_Status; reference dpv1-c2-im-alarms.md).
+fn dpv1_names(s1: Dpv1Status1, s2: Dpv1Status2) -> Vec<&'static str> {
+    let one = [
+        (Dpv1Status1::DPV1_ENABLE, "DPV1_Enable"),
+        (Dpv1Status1::FAIL_SAFE, "Fail_Safe"),
+        (Dpv1Status1::PUBLISHER_ENABLE, "Publisher_Enable"),
+        (Dpv1Status1::WD_BASE_1MS, "WD_Base_1ms"),
+        (Dpv1Status1::DIS_STOP_CONTROL, "Dis_Stop_Control"),
+        (Dpv1Status1::DIS_START_CONTROL, "Dis_Start_Control"),
+    ];
+    let two = [
+        (Dpv1Status2::PULL_PLUG_ALARM, "Pull_Plug_Alarm"),
+        (Dpv1Status2::PROCESS_ALARM, "Process_Alarm"),
+        (Dpv1Status2::DIAGNOSTIC_ALARM, "Diagnostic_Alarm"),
+        (Dpv1Status2::MANUFACTURER_ALARM, "Manufacturer_Alarm"),
+        (Dpv1Status2::STATUS_ALARM, "Status_Alarm"),
+        (Dpv1Status2::UPDATE_ALARM, "Update_Alarm"),
+        (Dpv1Status2::CHECK_CFG_MODE, "Check_Cfg_Mode"),
+    ];
+    let a = one
+        .into_iter()
+        .filter(|(f, _)| s1.contains(*f))
+        .map(|(_, n)| n);
+    let b = two
+        .into_iter()
+        .filter(|(f, _)| s2.contains(*f))
+        .map(|(_, n)| n);
+    a.chain(b).collect()
 }
 
 fn config(du: &[u8]) -> Detail {
@@ -727,11 +985,116 @@ pub struct Exchanges {
     /// Slaves last parameterised with DPV1_Enable (their device-related
     /// diagnosis blocks are alarm and status blocks).
     dpv1: BTreeSet<u8>,
+    /// GSD files by slave address (a bus file).
+    gsd_of: BTreeMap<u8, Gsd>,
+    /// GSD files by ident number (a GSD library).
+    gsd_by_ident: BTreeMap<u16, Gsd>,
+    /// Module layouts by slave address, and whether configured (a bus
+    /// file: kept) or learned from the last Chk_Cfg.
+    layouts: BTreeMap<u8, (Vec<ModuleLayout>, bool)>,
 }
 
 impl Exchanges {
-    /// The DP layer of the next telegram of the stream.
+    /// Knows the slave at `address` from a bus file: its GSD (diagnosis
+    /// texts) and its modules (Data_Exchange data split by module).
+    pub fn set_slave(&mut self, address: u8, gsd: Option<Gsd>, modules: Vec<ModuleLayout>) {
+        if let Some(g) = gsd {
+            self.gsd_of.insert(address, g);
+        }
+        if !modules.is_empty() {
+            self.layouts.insert(address, (modules, true));
+        }
+    }
+
+    /// Knows `gsd`: a slave with its ident number gets its diagnosis
+    /// texts (unless a bus file gave the slave another GSD).
+    pub fn add_gsd(&mut self, gsd: Gsd) {
+        self.gsd_by_ident.entry(gsd.ident_number).or_insert(gsd);
+    }
+
+    /// The DP layer of the next telegram of the stream, with what is
+    /// known of the slave: module names, GSD diagnosis texts.
     pub fn decode(&mut self, telegram: &Telegram<'_>) -> Option<DpTelegram> {
+        let mut dp = self.decode_plain(telegram)?;
+        let Telegram::Data(d) = telegram else {
+            return Some(dp);
+        };
+        let slave = if d.fc.is_request() { d.da } else { d.sa };
+        match &mut dp.detail {
+            Some(Detail::Cfg { identifiers, .. })
+                if dp.service == "Chk_Cfg"
+                    && dp.direction == "request"
+                    && !self.layouts.get(&slave).is_some_and(|l| l.1) =>
+            {
+                let (mut i, mut o) = (0, 0);
+                let learned = identifiers
+                    .iter()
+                    .map(|id| {
+                        let m = ModuleLayout {
+                            name: id.text.clone(),
+                            inputs: Span {
+                                offset: i,
+                                len: id.input_bytes,
+                            },
+                            outputs: Span {
+                                offset: o,
+                                len: id.output_bytes,
+                            },
+                        };
+                        i += id.input_bytes;
+                        o += id.output_bytes;
+                        m
+                    })
+                    .collect();
+                self.layouts.insert(slave, (learned, false));
+            }
+            Some(Detail::Outputs { outputs, modules }) => {
+                *modules = self.split(slave, outputs, |m| m.outputs);
+            }
+            Some(Detail::Inputs {
+                inputs, modules, ..
+            }) => {
+                *modules = self.split(slave, inputs, |m| m.inputs);
+            }
+            Some(Detail::SlaveDiag {
+                ext_diag,
+                ident_number,
+                ..
+            }) => {
+                let gsd = (self.gsd_of.get(&slave)).or_else(|| self.gsd_by_ident.get(ident_number));
+                if let (Some(g), Ok(diag)) = (gsd, SlaveDiag::parse(d.data)) {
+                    *ext_diag = diag::ext_words(diag.ext_diag, Some(g), self.dpv1.contains(&slave));
+                }
+            }
+            _ => {}
+        }
+        Some(dp)
+    }
+
+    /// `image` split by the modules known of `slave` (`span` picks the
+    /// image's span); empty when none are known.
+    fn split(
+        &self,
+        slave: u8,
+        image: &[u8],
+        span: impl Fn(&ModuleLayout) -> Span,
+    ) -> Vec<ModuleSlice> {
+        let Some((modules, _)) = self.layouts.get(&slave) else {
+            return vec![];
+        };
+        modules
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| span(m).len > 0)
+            .map(|(n, m)| ModuleSlice {
+                slot: n + 1,
+                name: m.name.clone(),
+                data: span(m).of(image).to_vec(),
+            })
+            .collect()
+    }
+
+    fn decode_plain(&mut self, telegram: &Telegram<'_>) -> Option<DpTelegram> {
         match telegram {
             Telegram::Token { .. } => {
                 self.pending = None;

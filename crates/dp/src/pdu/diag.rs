@@ -584,6 +584,29 @@ pub fn unit_diag_words(g: &crate::config::gsd::Gsd, body: &[u8], first_bit: u32)
     out
 }
 
+/// The extended diagnosis blocks of `ext` (the bytes after the six-byte
+/// header) in words, one or more per block; with the slave's GSD the bits
+/// of a device-related block are named by its `Unit_Diag_*` texts
+/// (`device: TEXT`), see [`describe`].
+pub fn ext_words(ext: &[u8], gsd: Option<&crate::config::gsd::Gsd>, dpv1: bool) -> Vec<String> {
+    let mut out = vec![];
+    for b in ext_blocks(ext) {
+        match (b, gsd) {
+            (ExtDiagBlock::Device { data }, Some(g))
+                if !(dpv1 && data.len() >= 3) && has_unit_diag(g) =>
+            {
+                let named = unit_diag_words(g, data, 0);
+                if named.is_empty() {
+                    out.push(b.describe(dpv1));
+                }
+                out.extend(named.into_iter().map(|t| format!("device: {t}")));
+            }
+            _ => out.push(b.describe(dpv1)),
+        }
+    }
+    out
+}
+
 /// A whole Slave_Diag response in words: the station status bits, the
 /// parameterising master, the ident number and every extended diagnosis
 /// block. With the slave's GSD, bits of the device-related diagnosis are
@@ -603,20 +626,7 @@ pub fn describe(du: &[u8], gsd: Option<&crate::config::gsd::Gsd>, dpv1: bool) ->
         m => format!("parameterised by master {m}"),
     });
     out.push(format!("ident number 0x{:04X}", d.ident_number));
-    for b in ext_blocks(d.ext_diag) {
-        match (b, gsd) {
-            (ExtDiagBlock::Device { data }, Some(g))
-                if !(dpv1 && data.len() >= 3) && has_unit_diag(g) =>
-            {
-                let named = unit_diag_words(g, data, 0);
-                if named.is_empty() {
-                    out.push(b.describe(dpv1));
-                }
-                out.extend(named.into_iter().map(|t| format!("device: {t}")));
-            }
-            _ => out.push(b.describe(dpv1)),
-        }
-    }
+    out.extend(ext_words(d.ext_diag, gsd, dpv1));
     if d.status3.contains(StationStatus3::EXT_DIAG_OVERFLOW) {
         out.push("more diagnosis than fits into one telegram (Ext_Diag_Overflow)".into());
     }

@@ -26,6 +26,7 @@
 //! `pcap-file` 3.0 line is still a release candidate). Switch when a
 //! well-kept crate is shown to produce the same bytes.
 
+use super::read::{CaptureDecoder, Header, ReadError, Record};
 use crate::time::Instant;
 use std::io::{self, Read, Write};
 use std::time::Duration;
@@ -38,12 +39,16 @@ pub const MAGIC_NANOS: u32 = 0xA1B2_3C4D;
 pub const MAGIC_MICROS: u32 = 0xA1B2_C3D4;
 /// pcapng block type of the section header (also its magic number).
 pub const PCAPNG_SHB: u32 = 0x0A0D_0D0A;
-const PCAPNG_IDB: u32 = 1;
-const PCAPNG_SPB: u32 = 3;
-const PCAPNG_EPB: u32 = 6;
-const PCAPNG_BYTE_ORDER: u32 = 0x1A2B_3C4D;
+/// pcapng block type of an interface description.
+pub(crate) const PCAPNG_IDB: u32 = 1;
+/// pcapng block type of an enhanced packet block.
+pub(crate) const PCAPNG_EPB: u32 = 6;
+/// pcapng byte-order magic.
+pub(crate) const PCAPNG_BYTE_ORDER: u32 = 0x1A2B_3C4D;
+/// Option code of `opt_comment` (any block).
+const OPT_COMMENT: u16 = 1;
 /// Option code of `epb_flags` in an enhanced packet block.
-const EPB_FLAGS: u16 = 2;
+pub(crate) const EPB_FLAGS: u16 = 2;
 /// `epb_flags` bit 24, a link-layer error: "CRC error" (pcapng
 /// specification, enhanced packet block flags word). For PROFIBUS: the
 /// bytes are no valid telegram (bad FCS, length or delimiter, garbage).
@@ -172,6 +177,35 @@ impl<W: Write> PcapWriter<W> {
         data: &[u8],
         flags: u32,
     ) -> io::Result<()> {
+        self.write_packet_with(ts, data, flags, None)
+    }
+
+    /// Record bytes seen at `at` (driver time), a telegram or, when
+    /// `corrupt`, bytes that are none ([`PcapWriter::write_corrupt`]),
+    /// with a comment (pcapng `opt_comment`; Wireshark shows it as
+    /// `frame.comment` and in the packet list's expert info). The
+    /// triggered recorder names the segment and its trigger this way.
+    pub fn write_record(
+        &mut self,
+        at: Instant,
+        bytes: &[u8],
+        corrupt: bool,
+        comment: Option<&str>,
+    ) -> io::Result<()> {
+        let ts = self.epoch + Duration::from_nanos(at.as_nanos());
+        let flags = if corrupt { EPB_FLAG_CRC_ERROR } else { 0 };
+        self.write_packet_with(ts, bytes, flags, comment)
+    }
+
+    /// Record one packet with `epb_flags` (0: none) and a comment
+    /// (pcapng only; the classic format has no place for either).
+    pub fn write_packet_with(
+        &mut self,
+        ts: Duration,
+        data: &[u8],
+        flags: u32,
+        comment: Option<&str>,
+    ) -> io::Result<()> {
         let len = u32::try_from(data.len())
             .ok()
             .filter(|&l| l <= SNAPLEN)
@@ -194,8 +228,17 @@ impl<W: Write> PcapWriter<W> {
                     io::Error::new(io::ErrorKind::InvalidInput, "time stamp beyond 2554")
                 })?;
                 let pad = pad4(data.len());
-                // Options: epb_flags (code 2, 4 bytes), then opt_endofopt.
-                let opts = if flags != 0 { 12 } else { 0 };
+                // Options: opt_comment (code 1, UTF-8), epb_flags (code
+                // 2, 4 bytes), then opt_endofopt.
+                let comment = comment.map(str::as_bytes).filter(|c| !c.is_empty());
+                let comment = comment.map(|c| &c[..c.len().min(u16::MAX as usize - 3)]);
+                let comment_len = comment.map_or(0, |c| 4 + c.len() + pad4(c.len()));
+                let flags_len = if flags != 0 { 8 } else { 0 };
+                let opts = if comment_len + flags_len > 0 {
+                    comment_len + flags_len + 4
+                } else {
+                    0
+                };
                 let total = (32 + data.len() + pad + opts) as u32;
                 let mut h = [0u8; 28];
                 h[0..4].copy_from_slice(&PCAPNG_EPB.to_le_bytes());
@@ -208,12 +251,22 @@ impl<W: Write> PcapWriter<W> {
                 self.sink.write_all(&h)?;
                 self.sink.write_all(data)?;
                 self.sink.write_all(&[0u8; 3][..pad])?;
+                if let Some(c) = comment {
+                    self.sink.write_all(&OPT_COMMENT.to_le_bytes())?;
+                    self.sink.write_all(&(c.len() as u16).to_le_bytes())?;
+                    self.sink.write_all(c)?;
+                    self.sink.write_all(&[0u8; 3][..pad4(c.len())])?;
+                }
                 if flags != 0 {
-                    let mut o = [0u8; 12];
+                    let mut o = [0u8; 8];
                     o[0..2].copy_from_slice(&EPB_FLAGS.to_le_bytes());
                     o[2..4].copy_from_slice(&4u16.to_le_bytes());
                     o[4..8].copy_from_slice(&flags.to_le_bytes());
                     self.sink.write_all(&o)?;
+                }
+                if opts > 0 {
+                    // opt_endofopt.
+                    self.sink.write_all(&[0u8; 4])?;
                 }
                 self.sink.write_all(&total.to_le_bytes())?;
             }
@@ -239,284 +292,121 @@ impl<W: Write> PcapWriter<W> {
     }
 }
 
-/// One packet read from a capture file.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PcapPacket {
-    /// Time stamp since the Unix epoch.
-    pub ts: Duration,
-    /// Length of the packet on the wire.
-    pub orig_len: u32,
-    /// The captured bytes.
-    pub data: Vec<u8>,
-    /// pcapng `epb_flags` (0 when absent, and in classic files).
-    pub flags: u32,
-}
-
-impl PcapPacket {
-    /// Flagged as corrupt (the CRC-error bit of `epb_flags`).
-    pub fn is_corrupt(&self) -> bool {
-        self.flags & EPB_FLAG_CRC_ERROR != 0
-    }
-}
+/// One packet read from a capture file (with its offset in the file).
+pub type PcapPacket = Record;
 
 /// Reads classic pcap (both byte orders, micro- and nanosecond stamps)
-/// and pcapng files (one section; enhanced and simple packet blocks).
+/// and pcapng files (one section; enhanced and simple packet blocks)
+/// from any [`Read`]: the sans-IO [`CaptureDecoder`] fed in pieces.
+/// Errors in the file are [`io::ErrorKind::InvalidData`] carrying the
+/// decoder's [`ReadError`] (what, at which byte); a file that ends
+/// inside a record is one too.
 #[derive(Debug)]
 pub struct PcapReader<R: Read> {
     source: R,
-    format: PcapFormat,
-    swapped: bool,
-    /// Classic: nanosecond stamps. pcapng: time units per second of the
-    /// first interface.
-    units_per_s: u64,
-    linktype: u32,
+    decoder: CaptureDecoder,
+    header: Header,
+    /// A record decoded with the header.
+    first: Option<Record>,
+    eof: bool,
 }
 
-fn invalid(msg: String) -> io::Error {
-    io::Error::new(io::ErrorKind::InvalidData, msg)
+/// Bytes read from the source at a time.
+const CHUNK: usize = 64 * 1024;
+
+fn invalid(e: ReadError) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidData, e)
 }
 
 impl<R: Read> PcapReader<R> {
     /// Read and check the file header (for pcapng, up to the first
     /// interface description).
-    pub fn new(mut source: R) -> io::Result<Self> {
-        let mut m = [0u8; 4];
-        source.read_exact(&mut m)?;
-        let magic = u32::from_le_bytes(m);
-        let mut r = PcapReader {
+    pub fn new(source: R) -> io::Result<Self> {
+        let mut decoder = CaptureDecoder::new();
+        let mut first = None;
+        let mut source = source;
+        let header = loop {
+            if let Some(r) = decoder.next_record().map_err(invalid)? {
+                first = Some(r);
+            }
+            if let Some(h) = decoder.header() {
+                break h;
+            }
+            if !fill(&mut source, &mut decoder)? {
+                decoder.finish().map_err(invalid)?;
+                // Whole blocks, but no interface description.
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "at the end of the file: no interface block",
+                ));
+            }
+        };
+        Ok(PcapReader {
             source,
-            format: PcapFormat::Pcap,
-            swapped: false,
-            units_per_s: 1_000_000,
-            linktype: 0,
-        };
-        if magic == PCAPNG_SHB {
-            r.format = PcapFormat::Pcapng;
-            let mut h = [0u8; 20];
-            r.source.read_exact(&mut h)?;
-            let bom = u32::from_le_bytes(h[4..8].try_into().expect("4 bytes"));
-            r.swapped = match bom {
-                PCAPNG_BYTE_ORDER => false,
-                b if b.swap_bytes() == PCAPNG_BYTE_ORDER => true,
-                b => return Err(invalid(format!("bad pcapng byte-order magic 0x{b:08X}"))),
-            };
-            let len = r.u32_at(&h, 0) as usize;
-            r.skip_rest(len, 24)?;
-            // Blocks up to the interface description.
-            loop {
-                let (kind, body) = r.block()?.ok_or_else(|| invalid("no interface".into()))?;
-                if kind == PCAPNG_IDB {
-                    if body.len() < 8 {
-                        return Err(invalid(format!("interface block of {} bytes", body.len())));
-                    }
-                    r.linktype = r.u16_at(&body, 0) as u32;
-                    r.units_per_s = r.tsresol(&body[8..])?;
-                    return Ok(r);
-                }
-            }
-        }
-        let mut h = [0u8; 20];
-        r.source.read_exact(&mut h)?;
-        (r.swapped, r.units_per_s) = match magic {
-            MAGIC_MICROS => (false, 1_000_000),
-            MAGIC_NANOS => (false, 1_000_000_000),
-            m if m.swap_bytes() == MAGIC_MICROS => (true, 1_000_000),
-            m if m.swap_bytes() == MAGIC_NANOS => (true, 1_000_000_000),
-            m => return Err(invalid(format!("not a pcap file (magic 0x{m:08X})"))),
-        };
-        r.linktype = r.u32_at(&h, 16);
-        Ok(r)
-    }
-
-    fn u32_at(&self, b: &[u8], at: usize) -> u32 {
-        let v = u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"));
-        if self.swapped {
-            v.swap_bytes()
-        } else {
-            v
-        }
-    }
-
-    fn u16_at(&self, b: &[u8], at: usize) -> u16 {
-        let v = u16::from_le_bytes(b[at..at + 2].try_into().expect("2 bytes"));
-        if self.swapped {
-            v.swap_bytes()
-        } else {
-            v
-        }
-    }
-
-    fn skip_rest(&mut self, total: usize, read: usize) -> io::Result<()> {
-        let rest = total
-            .checked_sub(read)
-            .ok_or_else(|| invalid(format!("block length {total}")))?;
-        io::copy(&mut (&mut self.source).take(rest as u64), &mut io::sink()).and_then(|n| {
-            if n as usize == rest {
-                Ok(())
-            } else {
-                Err(io::ErrorKind::UnexpectedEof.into())
-            }
+            decoder,
+            header,
+            first,
+            eof: false,
         })
-    }
-
-    /// The next pcapng block: type and body (without the trailing
-    /// length); `None` at the end of the file.
-    fn block(&mut self) -> io::Result<Option<(u32, Vec<u8>)>> {
-        let mut h = [0u8; 8];
-        if !read_or_eof(&mut self.source, &mut h)? {
-            return Ok(None);
-        }
-        let kind = self.u32_at(&h, 0);
-        let len = self.u32_at(&h, 4) as usize;
-        if !(12..=1 << 20).contains(&len) || len & 3 != 0 {
-            return Err(invalid(format!("pcapng block of {len} bytes")));
-        }
-        let mut body = vec![0u8; len - 8];
-        self.source.read_exact(&mut body)?;
-        body.truncate(len - 12);
-        Ok(Some((kind, body)))
-    }
-
-    /// Time units per second from the options of an interface block.
-    fn tsresol(&self, mut opts: &[u8]) -> io::Result<u64> {
-        while opts.len() >= 4 {
-            let code = self.u16_at(opts, 0);
-            let len = self.u16_at(opts, 2) as usize;
-            let val = opts
-                .get(4..4 + len)
-                .ok_or_else(|| invalid("bad option".into()))?;
-            if code == 0 {
-                break;
-            }
-            if code == 9 && len == 1 {
-                let r = val[0];
-                let units = if r & 0x80 == 0 {
-                    10u64.checked_pow(r as u32)
-                } else {
-                    1u64.checked_shl((r & 0x7F) as u32)
-                };
-                return units.ok_or_else(|| invalid(format!("if_tsresol {r}")));
-            }
-            opts = &opts[(4 + len + pad4(len)).min(opts.len())..];
-        }
-        Ok(1_000_000)
     }
 
     /// The container format of the file.
     pub fn format(&self) -> PcapFormat {
-        self.format
+        self.header.format
     }
 
     /// The link type of the file (of its first interface for pcapng).
     pub fn linktype(&self) -> u32 {
-        self.linktype
-    }
-
-    fn stamp(&self, units: u64) -> Duration {
-        let per = self.units_per_s;
-        let secs = units / per;
-        let nanos = ((units % per) as u128 * 1_000_000_000 / per as u128) as u64;
-        Duration::from_secs(secs) + Duration::from_nanos(nanos)
-    }
-
-    /// The `epb_flags` option among the options `opts` of an enhanced
-    /// packet block (0 when absent).
-    fn epb_flags(&self, mut opts: &[u8]) -> u32 {
-        while opts.len() >= 4 {
-            let code = self.u16_at(opts, 0);
-            let len = self.u16_at(opts, 2) as usize;
-            if code == 0 {
-                break;
-            }
-            if code == EPB_FLAGS && len == 4 && opts.len() >= 8 {
-                return self.u32_at(opts, 4);
-            }
-            opts = opts.get(4 + len + pad4(len)..).unwrap_or(&[]);
-        }
-        0
+        self.header.linktype
     }
 
     /// The next packet, or `None` at the end of the file.
     pub fn next_packet(&mut self) -> io::Result<Option<PcapPacket>> {
-        if self.format == PcapFormat::Pcapng {
-            loop {
-                let Some((kind, body)) = self.block()? else {
-                    return Ok(None);
-                };
-                match kind {
-                    PCAPNG_EPB if body.len() >= 20 => {
-                        let units =
-                            (self.u32_at(&body, 4) as u64) << 32 | self.u32_at(&body, 8) as u64;
-                        let incl = self.u32_at(&body, 12) as usize;
-                        let orig_len = self.u32_at(&body, 16);
-                        let data = body
-                            .get(20..20 + incl)
-                            .ok_or_else(|| invalid(format!("packet of {incl} bytes")))?
-                            .to_vec();
-                        let opts = body.get(20 + incl + pad4(incl)..).unwrap_or(&[]);
-                        return Ok(Some(PcapPacket {
-                            ts: self.stamp(units),
-                            orig_len,
-                            data,
-                            flags: self.epb_flags(opts),
-                        }));
-                    }
-                    PCAPNG_SPB if body.len() >= 4 => {
-                        let orig_len = self.u32_at(&body, 0);
-                        let n = (orig_len as usize).min(body.len() - 4);
-                        return Ok(Some(PcapPacket {
-                            ts: Duration::ZERO,
-                            orig_len,
-                            data: body[4..4 + n].to_vec(),
-                            flags: 0,
-                        }));
-                    }
-                    PCAPNG_SHB => return Err(invalid("second pcapng section".into())),
-                    _ => continue,
-                }
+        if let Some(r) = self.first.take() {
+            return Ok(Some(r));
+        }
+        loop {
+            if let Some(r) = self.decoder.next_record().map_err(invalid)? {
+                return Ok(Some(r));
+            }
+            if self.eof {
+                return Ok(None);
+            }
+            if !fill(&mut self.source, &mut self.decoder)? {
+                self.eof = true;
+                self.decoder.finish().map_err(invalid)?;
             }
         }
-        let mut h = [0u8; 16];
-        if !read_or_eof(&mut self.source, &mut h)? {
-            return Ok(None);
-        }
-        let secs = self.u32_at(&h, 0) as u64;
-        let frac = self.u32_at(&h, 4) as u64;
-        let incl = self.u32_at(&h, 8);
-        let orig_len = self.u32_at(&h, 12);
-        if incl > 262_144 {
-            return Err(invalid(format!("packet of {incl} bytes")));
-        }
-        let mut data = vec![0u8; incl as usize];
-        self.source.read_exact(&mut data)?;
-        Ok(Some(PcapPacket {
-            ts: Duration::from_secs(secs) + self.stamp(frac),
-            orig_len,
-            data,
-            flags: 0,
-        }))
     }
 }
 
-/// Fill `buf`; `false` at a clean end of file before the first byte.
-fn read_or_eof(r: &mut impl Read, buf: &mut [u8]) -> io::Result<bool> {
-    let mut got = 0;
-    while got < buf.len() {
-        match r.read(&mut buf[got..]) {
-            Ok(0) if got == 0 => return Ok(false),
-            Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
-            Ok(n) => got += n,
+/// Feed the decoder the next piece of `source`; `false` at its end.
+fn fill(source: &mut impl Read, decoder: &mut CaptureDecoder) -> io::Result<bool> {
+    let mut buf = [0u8; CHUNK];
+    loop {
+        match source.read(&mut buf) {
+            Ok(0) => return Ok(false),
+            Ok(n) => {
+                decoder.push(&buf[..n]);
+                return Ok(true);
+            }
             Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
         }
     }
-    Ok(true)
 }
 
 impl<R: Read> Iterator for PcapReader<R> {
     type Item = io::Result<PcapPacket>;
     fn next(&mut self) -> Option<Self::Item> {
-        self.next_packet().transpose()
+        match self.next_packet() {
+            Ok(p) => p.map(Ok),
+            Err(e) => {
+                // Nothing follows an error in the file.
+                self.eof = true;
+                Some(Err(e))
+            }
+        }
     }
 }
 
@@ -618,6 +508,30 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_eq!((p.data.as_slice(), p.flags), (&bad[..], 0));
+    }
+
+    #[test]
+    fn records_carry_comments_before_their_flags() {
+        let bad = [0x68, 5, 5, 0x68, 0x88, 0x82, 0x6D, 0x3C, 0x3E, 0x00, 0x16];
+        let mut w = PcapWriter::new(Vec::new(), Duration::ZERO).unwrap();
+        w.write_record(Instant::from_nanos(1), &bad, true, Some("trigger: fcs"))
+            .unwrap();
+        w.write_record(Instant::from_nanos(2), &[0xE5], false, Some("x"))
+            .unwrap();
+        let file = w.into_inner().unwrap();
+        // EPB 32 + 11 + 1 pad + comment (4 + 12) + flags 8 + end 4; then
+        // EPB 32 + 1 + 3 pad + comment (4 + 1 + 3 pad) + end 4.
+        assert_eq!(file.len(), 60 + 72 + 48);
+        let at = 60 + 28 + 12;
+        assert_eq!(&file[at..at + 4], &[1, 0, 12, 0]);
+        assert_eq!(&file[at + 4..at + 16], b"trigger: fcs");
+        let packets: Vec<PcapPacket> = PcapReader::new(&file[..])
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        assert!(packets[0].is_corrupt());
+        assert_eq!(packets[1].data, [0xE5]);
+        assert!(!packets[1].is_corrupt());
     }
 
     #[test]

@@ -135,6 +135,7 @@ fn set_prm_of_the_standard_example() {
             "request",
             Some(Detail::SetPrm {
                 station_status: vec!["Lock_Req", "Sync_Req", "Freeze_Req", "WD_On"],
+                dpv1_status: vec![],
                 watchdog_ms: Some(300),
                 min_tsdr: 0,
                 ident_number: 0x0A35,
@@ -145,16 +146,29 @@ fn set_prm_of_the_standard_example() {
     );
     // Its short acknowledge is the Set_Prm's response.
     assert_eq!(detail(&mut ex, &SC), ("Set_Prm", "response", None));
+    let dp = ex.decode(&Telegram::parse(&PRM_DPV1).unwrap().0).unwrap();
     let Some(Detail::SetPrm {
         watchdog_ms,
         min_tsdr,
-        groups,
+        ref groups,
+        ref dpv1_status,
         ..
-    }) = detail(&mut ex, &PRM_DPV1).2
+    }) = dp.detail
     else {
         panic!()
     };
-    assert_eq!((watchdog_ms, min_tsdr, groups), (Some(100), 11, vec![]));
+    assert_eq!(
+        (watchdog_ms, min_tsdr, groups.clone()),
+        (Some(100), 11, vec![])
+    );
+    assert!(dpv1_status.starts_with(&["DPV1_Enable"]), "{dpv1_status:?}");
+    // In words, as `dpctl sniff` prints it.
+    let words = dp.to_string();
+    assert!(
+        words.starts_with("Set_Prm request: WD_On; watchdog 100 ms; min TSDR 11; ident 0x"),
+        "{words}"
+    );
+    assert!(words.contains("; DPV1 DPV1_Enable"), "{words}");
 }
 
 #[test]
@@ -219,7 +233,8 @@ fn data_exchange_global_control_and_set_slave_add() {
             "Data_Exchange",
             "request",
             Some(Detail::Outputs {
-                outputs: vec![0xAA, 0xBB]
+                outputs: vec![0xAA, 0xBB],
+                modules: vec![],
             })
         )
     );
@@ -230,7 +245,8 @@ fn data_exchange_global_control_and_set_slave_add() {
             "response",
             Some(Detail::Inputs {
                 inputs: vec![0x42],
-                new_diag: true
+                new_diag: true,
+                modules: vec![],
             })
         )
     );
@@ -493,4 +509,103 @@ fn alarm_blocks_of_a_dpv1_slave() {
     // An Alarm_Ack to SAP 50 from SAP 51.
     let (pdu, _, _) = text_of(&mut ex, &sd2(8, 2, 0x6D, 50, 51, &[0x5C, 2, 1, 0x09]));
     assert_eq!(pdu, "Alarm_Ack");
+}
+
+/// Bytes of a data telegram master 2 → slave 8 (request) or back.
+fn tel(request: bool, sap: Option<u8>, du: &[u8]) -> Vec<u8> {
+    use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
+    let (da, sa, fc) = if request {
+        let fc = FunctionCode::Request {
+            kind: RequestKind::SrdHigh,
+            fcb: true,
+            fcv: true,
+        };
+        (8, 2, fc)
+    } else {
+        (2, 8, FunctionCode::slave_response(ResponseStatus::Dl))
+    };
+    let saps = sap.map(|s| {
+        if request {
+            (s, sap::MASTER)
+        } else {
+            (sap::MASTER, s)
+        }
+    });
+    let (dsap, ssap) = saps.unzip();
+    Telegram::Data(DataTelegram::new(da, sa, fc, du).with_saps(dsap, ssap))
+        .to_vec()
+        .unwrap()
+}
+
+#[test]
+fn data_exchange_split_by_the_modules_of_the_chk_cfg_seen() {
+    let mut ex = Exchanges::default();
+    // Chk_Cfg: 1 byte in (0x10), 2 words in+out (0x71), 1 byte out (0x20).
+    detail(&mut ex, &tel(true, Some(sap::CHK_CFG), &[0x10, 0x71, 0x20]));
+    let (_, _, out) = detail(&mut ex, &tel(true, None, &[1, 2, 3, 4, 5]));
+    let Some(Detail::Outputs { modules, .. }) = out else {
+        panic!("{out:?}")
+    };
+    let got: Vec<(usize, &str, &[u8])> = modules
+        .iter()
+        .map(|m| (m.slot, m.name.as_str(), m.data.as_slice()))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            (2, "2 words in+out", &[1, 2, 3, 4][..]),
+            (3, "1 byte out", &[5][..])
+        ]
+    );
+    let dp = ex.decode(&tg(&tel(false, None, &[9, 8, 7, 6, 5]))).unwrap();
+    let Some(Detail::Inputs { modules, .. }) = &dp.detail else {
+        panic!("{dp:?}")
+    };
+    assert_eq!(modules.len(), 2);
+    assert_eq!((modules[0].slot, modules[0].data.as_slice()), (1, &[9][..]));
+    assert_eq!(dp.to_string(), "Data_Exchange response: inputs 09 08 07 06 05; 1 1 byte in: 09; 2 2 words in+out: 08 07 06 05");
+    // A bus file's modules win over what the wire says.
+    let mut ex = Exchanges::default();
+    let layout = vec![ModuleLayout {
+        name: "valve".into(),
+        inputs: Span::default(),
+        outputs: Span { offset: 0, len: 2 },
+    }];
+    ex.set_slave(8, None, layout);
+    detail(&mut ex, &tel(true, Some(sap::CHK_CFG), &[0x10]));
+    let (_, _, out) = detail(&mut ex, &tel(true, None, &[1, 2]));
+    let Some(Detail::Outputs { modules, .. }) = out else {
+        panic!()
+    };
+    assert_eq!(modules[0].name, "valve");
+}
+
+#[test]
+fn diagnosis_words_from_the_gsd_found_by_ident() {
+    use crate::config::gsd::ParseOptions;
+    let text =
+        "#Profibus_DP\nGSD_Revision=1\nIdent_Number=0x1234\nProtocol_Ident=0\nStation_Type=0\n\
+        Unit_Diag_Bit(0)=\"Sensor missing\"\n";
+    let g = Gsd::parse(text, ParseOptions { lenient: true })
+        .unwrap()
+        .gsd;
+    // Ext_Diag with a device block: header 02, bit 0 set.
+    let du = [0x08, 0x04, 0x00, 2, 0x12, 0x34, 0x02, 0x01];
+    let mut ex = Exchanges::default();
+    detail(&mut ex, &tel(true, Some(sap::SLAVE_DIAG), &[]));
+    let plain = detail(&mut ex, &tel(false, Some(sap::SLAVE_DIAG), &du)).2;
+    let Some(Detail::SlaveDiag { ext_diag, .. }) = plain else {
+        panic!()
+    };
+    assert!(
+        !ext_diag.iter().any(|w| w.contains("Sensor missing")),
+        "{ext_diag:?}"
+    );
+    ex.add_gsd(g);
+    detail(&mut ex, &tel(true, Some(sap::SLAVE_DIAG), &[]));
+    let named = detail(&mut ex, &tel(false, Some(sap::SLAVE_DIAG), &du)).2;
+    let Some(Detail::SlaveDiag { ext_diag, .. }) = named else {
+        panic!()
+    };
+    assert_eq!(ext_diag, ["device: Sensor missing"]);
 }
