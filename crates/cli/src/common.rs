@@ -55,8 +55,10 @@ impl RtsArg {
         }
     }
 
-    /// Open `path` at `baud` with this RTS control.
+    /// Open `path` at `baud` with this RTS control (after taking its
+    /// lock: [`lock_port`]).
     pub fn open(self, path: &str, baud: Baud) -> Result<Port> {
+        lock_port(path)?;
         let rts = self.control();
         match Port::open_with(path, PortOptions { baud, rts }) {
             Err(TransportError::Rts { error: source, .. }) => anyhow::bail!(
@@ -71,17 +73,55 @@ impl RtsArg {
     }
 }
 
+/// The control socket of this process (`--control`), written into the
+/// lock of each port it opens.
+static CONTROL_PATH: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+
+/// The ports this process holds, by canonical path; held until it exits.
+static HELD_PORTS: std::sync::Mutex<Vec<profibus_io::port_lock::PortLock>> =
+    std::sync::Mutex::new(Vec::new());
+
+/// Name `path` as this process's control socket in the port locks it
+/// takes from now on (call before opening the port).
+pub fn set_control_path(path: &std::path::Path) {
+    let _ = CONTROL_PATH.set(std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf()));
+}
+
+/// Take the advisory lock of `port` for the rest of this process
+/// (`profibus_io::port_lock`): a port another dpctl process holds is an
+/// error naming that process and suggesting `--via`. Taking a port this
+/// process holds already is a no-op.
+pub fn lock_port(port: &str) -> Result<()> {
+    use profibus_io::port_lock::{canonical, Holder, PortLock};
+    let mut held = HELD_PORTS.lock().unwrap_or_else(|e| e.into_inner());
+    let key = canonical(port);
+    if held.iter().any(|l| l.key() == key) {
+        return Ok(());
+    }
+    let holder = Holder::this_process(CONTROL_PATH.get().map(|p| p.as_path()));
+    if let Some(lock) = PortLock::take(port, &holder)? {
+        held.push(lock);
+    }
+    Ok(())
+}
+
 /// What every one-shot command on one slave takes (`dpctl pkw`, `dpv1`,
 /// `rfid`): the line, the bus file, the slave, and how long it may take
 /// the slave to reach Data_Exchange.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SlaveArgs {
     /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
-    #[arg(long, value_name = "PATH")]
-    pub port: String,
+    #[arg(long, value_name = "PATH", required_unless_present = "via")]
+    pub port: Option<String>,
+    /// Run the job through the running `dpctl master` or `dpctl gateway`
+    /// whose control socket (`--control PATH`) this is, instead of opening
+    /// the port: its slaves stay in Data_Exchange.
+    #[arg(long, value_name = "PATH", conflicts_with_all = ["port", "latency"])]
+    pub via: Option<std::path::PathBuf>,
     /// Bus file (TOML) with the slave (GSD modules, or `device = "…"`).
-    #[arg(long, value_name = "BUS.toml")]
-    pub config: std::path::PathBuf,
+    /// With --via: the master's own bus file is used.
+    #[arg(long, value_name = "BUS.toml", required_unless_present = "via")]
+    pub config: Option<std::path::PathBuf>,
     /// Station address of the slave.
     #[arg(long, value_name = "ADDR")]
     pub slave: u8,
@@ -128,7 +168,21 @@ impl SlaveArgs {
         bus.slaves
             .iter()
             .find(|s| s.params.address == self.slave)
-            .with_context(|| format!("slave {} is not in {}", self.slave, self.config.display()))
+            .with_context(|| format!("slave {} is not in {}", self.slave, bus.path.display()))
+    }
+
+    /// The bus file (`--config`; needed without `--via`).
+    pub fn config(&self) -> Result<&std::path::Path> {
+        self.config
+            .as_deref()
+            .context("--config BUS.toml is needed (or --via PATH)")
+    }
+
+    /// The port (`--port`; needed without `--via`).
+    pub fn port(&self) -> Result<&str> {
+        self.port
+            .as_deref()
+            .context("--port PATH is needed (or --via PATH)")
     }
 
     /// Waiting for the slave with the start-up timeout.
@@ -149,7 +203,8 @@ impl SlaveArgs {
     ) -> Result<()> {
         use profibus_io::driver::{self, Clock, Stop};
         let dp = profibus_dp::master::DpMaster::new(&bus.master)?;
-        let (mut station, mut port) = master_station(&self.port, bus, dp, self.latency, self.rts)?;
+        let port_path = self.port()?;
+        let (mut station, mut port) = master_station(port_path, bus, dp, self.latency, self.rts)?;
         let stop = driver::run_with(
             &mut station,
             &mut port,
@@ -163,7 +218,7 @@ impl SlaveArgs {
             },
         )
         .await;
-        match stop.with_context(|| format!("on {}", self.port))? {
+        match stop.with_context(|| format!("on {port_path}"))? {
             Stop::Shutdown => anyhow::bail!("interrupted"),
             Stop::Done => Ok(()),
         }

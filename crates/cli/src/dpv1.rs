@@ -75,8 +75,13 @@ enum Op {
 #[derive(clap::Args, Debug, Clone)]
 pub struct Link {
     /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
-    #[arg(long, value_name = "PATH")]
-    pub port: String,
+    #[arg(long, value_name = "PATH", required_unless_present = "via")]
+    pub port: Option<String>,
+    /// Run the requests as MSAC_C1 jobs of the running `dpctl master` or
+    /// `dpctl gateway` whose control socket (`--control PATH`) this is,
+    /// instead of opening the port: its slaves stay in Data_Exchange.
+    #[arg(long, value_name = "PATH", conflicts_with_all = ["port", "config", "latency"])]
+    pub via: Option<PathBuf>,
     /// Bus file (TOML) with the slave. Class 1: needed (its master runs).
     /// Class 2: optional; gives the baud rate, the bus parameters and the
     /// slave's C2_Response_Timeout.
@@ -132,7 +137,8 @@ fn class1(link: &Link) -> Result<(common::SlaveArgs, BusFile)> {
     };
     let args = common::SlaveArgs {
         port: link.port.clone(),
-        config,
+        via: None,
+        config: Some(config),
         slave: link.slave,
         startup_timeout: link.startup_timeout,
         latency: link.latency,
@@ -141,7 +147,7 @@ fn class1(link: &Link) -> Result<(common::SlaveArgs, BusFile)> {
     };
     // Like every command taking --config: `device = …` slaves resolved
     // by the profile registry.
-    let bus = ProfiledBus::load(&args.config)?.file;
+    let bus = ProfiledBus::load(args.config()?)?.file;
     if !args.slave_of(&bus)?.params.dpv1 {
         bail!(
             "slave {} is not a DP-V1 slave in the bus file (its GSD has no DPV1_Slave=1)",
@@ -160,8 +166,9 @@ impl Link {
         E: serde::Serialize + std::fmt::Display,
     {
         common::SlaveArgs {
-            port: String::new(),
-            config: PathBuf::new(),
+            port: None,
+            via: None,
+            config: None,
             slave: self.slave,
             startup_timeout: 0,
             latency: None,
@@ -171,8 +178,15 @@ impl Link {
         .print(outcome)
     }
 
-    /// Run `ops` as MSAC_C1 jobs of the bus file's master.
+    /// Run `ops` as MSAC_C1 jobs of the bus file's master (with `--via`,
+    /// of the master behind the control socket).
     pub fn run_class1<O: RecordOps>(&self, ops: O) -> Result<O> {
+        if let Some(via) = &self.via {
+            return match crate::via::Via::connect(via)?.records(self.slave, ops)? {
+                Ok(ops) => Ok(ops),
+                Err((f, _)) => Err(crate::via::record_failure(self.slave, &f)),
+            };
+        }
         let (args, bus) = class1(self)?;
         let mut run = TaskRun::new(C1Records::new(self.slave, ops), args.wait());
         common::runtime()?.block_on(args.run_master(&bus, |m, now| run.tick(m, now)))?;
@@ -220,15 +234,16 @@ impl Link {
             .map(Duration::from_millis)
             .or(gsd_timeout)
             .unwrap_or(cfg.response_timeout);
+        let path = self.port.as_deref().context("--port PATH is needed")?;
         let rt = common::runtime()?;
         let done = rt.block_on(async {
-            let mut port = self.rts.open(&self.port, params.baud)?;
+            let mut port = self.rts.open(path, params.baud)?;
             let mut acfg = ActiveConfig::new(addr, params);
             common::allow_for_port(&mut acfg, self.latency, &port)?;
             let done =
                 profibus_io::class2::run(&mut port, acfg, cfg, self.slave, ops, common::shutdown())
                     .await
-                    .with_context(|| format!("on {}", self.port))?;
+                    .with_context(|| format!("on {path}"))?;
             anyhow::Ok(done)
         })?;
         if done.stop == profibus_io::driver::Stop::Shutdown {
@@ -279,6 +294,12 @@ pub fn run(args: Args) -> Result<()> {
     };
     op.check()?;
     let link = &args.link;
+    if let Some(via) = &link.via {
+        if link.class2 {
+            return Err(crate::via::no_class2(via));
+        }
+        return run_via(link, via, op);
+    }
     if !link.class2 {
         return run_class1(link, op);
     }
@@ -342,6 +363,32 @@ fn outcome<'a>(
         None => {}
     }
     o
+}
+
+/// The class-1 path through a running master's control socket: its
+/// MSAC_C1 job, printed as [`run_class1`] prints it.
+fn run_via(link: &Link, via: &std::path::Path, op: RecordOp) -> Result<()> {
+    if let RecordOp::Transport { .. } = op {
+        bail!("Data_Transport is a class-2 service (MSAC_C2): add --class2 (without --via)")
+    }
+    if let RecordOp::Write { data, .. } = &op {
+        if data.is_empty() || data.len() > 240 {
+            return Err(profibus_dp::master::RecordError::Length(data.len()).into());
+        }
+    }
+    let single = SingleOp::new(op.clone());
+    match crate::via::Via::connect(via)?.records(link.slave, single)? {
+        Ok(single) => {
+            let o = outcome(link.slave, &op, single.answer.as_ref(), None);
+            link.print(if o.ok { Ok(o.clone()) } else { Err(o) })
+        }
+        Err((f, _)) => link.print(Err::<RecordOutcome, _>(outcome(
+            link.slave,
+            &op,
+            None,
+            Some(f.why),
+        ))),
+    }
 }
 
 /// The class-1 path as `dpctl dpv1` always ran it.

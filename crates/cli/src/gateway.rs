@@ -40,6 +40,8 @@ pub struct Args {
     /// (with --port).
     #[arg(long, value_name = "MS")]
     latency: Option<f64>,
+    #[command(flatten)]
+    control: crate::control::ControlArgs,
     /// Keep the gateway's health in this file (JSON, rewritten every
     /// second: state, healthy, bus, slaves, data_exchange,
     /// broker_connected, last_cycle_age_ms) for a supervisor to check.
@@ -48,6 +50,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.sim && args.control.control.is_some() {
+        anyhow::bail!("--control shares a line's master: give --port, not --sim");
+    }
     let profiled = ProfiledBus::load(&args.config)?;
     for w in &profiled.file.warnings {
         crate::out::errln!("dpctl gateway: warning: {w}");
@@ -196,8 +201,15 @@ async fn on_line(
 ) -> Result<()> {
     let bus = &profiled.file;
     let dp = DpMaster::new(&bus.master)?;
+    args.control.announce();
     let (mut station, mut line) =
         common::master_station(port, bus, dp, args.latency, Default::default())?;
+    let mut control = args.control.open(profiled)?;
+    let info = match control {
+        Some(_) => crate::view::SlaveInfo::of_bus(profiled)?,
+        None => vec![],
+    };
+    let baud = bus.master.params.baud;
     let options = common::driver_options(&line, 0, false)?;
     tracing::info!(
         target: ops::TARGET,
@@ -213,6 +225,9 @@ async fn on_line(
         options,
         shutdown,
         |st, now| {
+            if let Some(c) = &mut control {
+                c.tick(st.app_mut(), now, profiled, &info, baud);
+            }
             link::step(&mut link, &mut gw, st.app_mut(), now);
             ControlFlow::<()>::Continue(())
         },

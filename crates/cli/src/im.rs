@@ -40,6 +40,9 @@ pub fn run(args: Args) -> Result<()> {
         _ => None,
     };
     let link = &args.link;
+    if let (Some(path), true) = (&link.via, link.class2) {
+        return Err(crate::via::no_class2(path));
+    }
     let (reader, via, failed) = if link.class2 {
         match link.run_class2(ImReader::new(0, write))? {
             Ok((r, opened)) => {

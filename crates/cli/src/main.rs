@@ -13,6 +13,7 @@
 mod bus;
 mod common;
 mod completions;
+mod control;
 mod decode;
 mod demo;
 mod doctor;
@@ -36,6 +37,7 @@ mod slave;
 mod sniff;
 mod soak;
 mod stats_args;
+mod via;
 mod view;
 
 use clap::{Parser, Subcommand};

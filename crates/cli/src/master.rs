@@ -1,7 +1,7 @@
 //! `dpctl master`: run a DP master from a bus file.
 
 use crate::common;
-use crate::view::{bus_view, drain_events, SlaveInfo, View};
+use crate::view::{bus_view, drain_events, drain_events_except, SlaveInfo, View};
 use anyhow::{bail, Context, Result};
 use profibus_devices::bus::{execute_input, ProfiledBus};
 use profibus_dp::master::{DpMaster, OperatingState, StopReason, StopWhen};
@@ -63,6 +63,8 @@ pub struct Args {
     /// Read commands (JSON lines) from this file, or `-` for stdin.
     #[arg(long, value_name = "FILE")]
     input: Option<String>,
+    #[command(flatten)]
+    control: crate::control::ControlArgs,
     /// Milliseconds between status prints (JSON/non-terminal output).
     #[arg(long, default_value_t = 1000, value_name = "MS")]
     interval: u64,
@@ -106,6 +108,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     if args.clear {
         dp.set_operating_state(OperatingState::Clear);
     }
+    args.control.announce();
     let (mut station, mut port) =
         common::master_station(&args.port, bus, dp, args.latency, args.rts)?;
     let options = driver::Options {
@@ -120,6 +123,7 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
         None => None,
     };
 
+    let mut control = args.control.open(&profiled)?;
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     let info = SlaveInfo::of_bus(&profiled)?;
     let baud = bus.master.params.baud;
@@ -163,7 +167,13 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
             for e in rfid.step(m, now) {
                 view.event(&e);
             }
-            drain_events(m, &info, &mut view);
+            match &mut control {
+                Some(c) => {
+                    c.tick(m, now, &profiled, &info, baud);
+                    drain_events_except(m, &info, &mut view, |e| c.owns(e));
+                }
+                None => drain_events(m, &info, &mut view),
+            }
             view.status(m, &info, baud, now, false);
             view.tick(m, now)?;
             match stop_when.check(m, now) {

@@ -66,6 +66,7 @@ pub fn run(args: Args) -> Result<()> {
         Some(common::BaudArg::Fixed(b)) => b,
         _ => bus.file.master.params.baud,
     };
+    common::lock_port(&args.port)?;
     let mut port = {
         let _guard = rt.enter();
         Port::open(&args.port, baud)?

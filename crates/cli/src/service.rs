@@ -55,11 +55,104 @@ pub struct SlaveArgs {
     gsd_dir: Vec<PathBuf>,
 }
 
+/// The station of `dpctl diag` and `get-cfg`: a station of their own on
+/// the line, or (`--via`) the running master behind a control socket.
+#[derive(clap::Args)]
+pub struct ViaStationArgs {
+    /// Serial device or pty path (e.g. /dev/ttyUSB0, a `dpctl bus` link:
+    /// waited for up to 10 s if not made yet), or tcp://HOST:PORT (RS-485
+    /// serial device server in raw TCP mode).
+    #[arg(long, value_name = "PATH", required_unless_present = "via")]
+    port: Option<String>,
+    /// Baud rate: 9600 … 12000000, or 1.5M, 187.5k, … (on a pty the rate
+    /// only sets the bus timing).
+    #[arg(long, default_value = "19200", value_name = "B")]
+    baud: common::BaudArg,
+    /// Extra milliseconds added to the slot time and token timeouts for the
+    /// transport's latency (default: 5 on a pty, 20 on a serial adapter).
+    #[arg(long, value_name = "MS")]
+    latency: Option<f64>,
+    #[command(flatten)]
+    rts: common::RtsArg,
+    /// This station's address in the token ring (not the address of a
+    /// running master).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(0..=125))]
+    addr: u8,
+    /// Give up after this many seconds.
+    #[arg(long, default_value_t = 10.0, value_name = "SECS")]
+    timeout: f64,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Ask through the running `dpctl master` or `dpctl gateway` whose
+    /// control socket (`--control PATH`) this is, instead of joining the
+    /// ring as a station of its own.
+    #[arg(long, value_name = "PATH", conflicts_with_all = ["port", "latency"])]
+    via: Option<PathBuf>,
+}
+
+impl ViaStationArgs {
+    /// The station of its own (without `--via`).
+    fn station(&self) -> Result<StationArgs> {
+        Ok(StationArgs {
+            line: LineArgs {
+                port: self
+                    .port
+                    .clone()
+                    .context("--port PATH is needed (or --via PATH)")?,
+                baud: self.baud,
+                latency: self.latency,
+                rts: self.rts,
+            },
+            addr: self.addr,
+            timeout: self.timeout,
+            json: self.json,
+        })
+    }
+
+    /// Run `requests` (Slave_Diag, Get_Cfg) and return their data, on
+    /// the line or through the master (`read_diag`, `get_cfg` jobs).
+    fn data(&self, slave: u8, requests: &[ServiceRequest]) -> Result<Vec<Vec<u8>>> {
+        let name = |r: &ServiceRequest| match r {
+            ServiceRequest::GetCfg(_) => "Get_Cfg",
+            _ => "Slave_Diag",
+        };
+        if let Some(path) = &self.via {
+            let mut via = crate::via::Via::connect(path)?;
+            return requests
+                .iter()
+                .map(|r| {
+                    let key = match r {
+                        ServiceRequest::GetCfg(_) => "get_cfg",
+                        _ => "read_diag",
+                    };
+                    match via.job(&json!({ key: slave }))? {
+                        Ok(a) => a.bytes(),
+                        Err(crate::via::JobFailure::Other(why)) => {
+                            bail!("slave {slave}: {}: {why}", name(r))
+                        }
+                        Err(crate::via::JobFailure::Dpv1(e)) => {
+                            bail!("slave {slave}: {}: {}", name(r), e.describe())
+                        }
+                    }
+                })
+                .collect();
+        }
+        let station = self.station()?;
+        let answers = run_async_value(exchange(&station, requests.to_vec()))?;
+        requests
+            .iter()
+            .zip(&answers)
+            .map(|(r, a)| data(a, slave, name(r)))
+            .collect()
+    }
+}
+
 /// `dpctl diag`: a slave's diagnosis in words.
 #[derive(clap::Args)]
 pub struct DiagArgs {
     #[command(flatten)]
-    station: StationArgs,
+    station: ViaStationArgs,
     #[command(flatten)]
     slave: SlaveArgs,
 }
@@ -68,7 +161,7 @@ pub struct DiagArgs {
 #[derive(clap::Args)]
 pub struct GetCfgArgs {
     #[command(flatten)]
-    station: StationArgs,
+    station: ViaStationArgs,
     #[command(flatten)]
     slave: SlaveArgs,
 }
@@ -157,6 +250,10 @@ fn run_async(f: impl std::future::Future<Output = Result<()>>) -> Result<()> {
     common::runtime()?.block_on(f)
 }
 
+fn run_async_value<T>(f: impl std::future::Future<Output = Result<T>>) -> Result<T> {
+    common::runtime()?.block_on(f)
+}
+
 /// The data of a positive answer, or the error in words.
 fn data(answer: &ServiceAnswer, slave: u8, service: &str) -> Result<Vec<u8>> {
     match answer {
@@ -195,112 +292,109 @@ fn owner(d: &SlaveDiag<'_>) -> Option<u8> {
 }
 
 pub fn diag(a: DiagArgs) -> Result<()> {
-    run_async(async move {
-        let n = a.slave.slave;
-        let answers = exchange(&a.station, vec![ServiceRequest::SlaveDiag(n)]).await?;
-        let du = data(&answers[0], n, "Slave_Diag")?;
-        let d = SlaveDiag::parse(&du).with_context(|| format!("slave {n}"))?;
-        let gsd = find_gsd(&a.slave, d.ident_number)?;
-        let dpv1 = gsd.as_ref().is_some_and(|(_, g)| g.dpv1_slave);
-        let lines = diag::describe(&du, gsd.as_ref().map(|(_, g)| g), dpv1);
-        if a.station.json {
-            let v = json!({
-                "address": n,
-                "ident": format!("0x{:04X}", d.ident_number),
-                "owner": owner(&d),
-                "status": d.status_words(),
-                "diag": Hex(&du).to_string(),
-                "gsd": gsd.as_ref().map(|(f, _)| f),
-                "lines": lines,
-            });
-            crate::out::outln!("{}", common::json_line(&v))?;
-        } else {
-            crate::out::outln!("slave {n}: Slave_Diag {}", Hex(&du))?;
-            for l in lines {
-                crate::out::outln!("  {l}")?;
-            }
+    let n = a.slave.slave;
+    let du = a
+        .station
+        .data(n, &[ServiceRequest::SlaveDiag(n)])?
+        .remove(0);
+    let d = SlaveDiag::parse(&du).with_context(|| format!("slave {n}"))?;
+    let gsd = find_gsd(&a.slave, d.ident_number)?;
+    let dpv1 = gsd.as_ref().is_some_and(|(_, g)| g.dpv1_slave);
+    let lines = diag::describe(&du, gsd.as_ref().map(|(_, g)| g), dpv1);
+    if a.station.json {
+        let v = json!({
+            "address": n,
+            "ident": format!("0x{:04X}", d.ident_number),
+            "owner": owner(&d),
+            "status": d.status_words(),
+            "diag": Hex(&du).to_string(),
+            "gsd": gsd.as_ref().map(|(f, _)| f),
+            "lines": lines,
+        });
+        crate::out::outln!("{}", common::json_line(&v))?;
+    } else {
+        crate::out::outln!("slave {n}: Slave_Diag {}", Hex(&du))?;
+        for l in lines {
+            crate::out::outln!("  {l}")?;
         }
-        Ok(())
-    })
+    }
+    Ok(())
 }
 
 pub fn get_cfg(a: GetCfgArgs) -> Result<()> {
-    run_async(async move {
-        let n = a.slave.slave;
-        let answers = exchange(
-            &a.station,
-            vec![ServiceRequest::SlaveDiag(n), ServiceRequest::GetCfg(n)],
-        )
-        .await?;
-        let du = data(&answers[0], n, "Slave_Diag")?;
-        let d = SlaveDiag::parse(&du).with_context(|| format!("slave {n}"))?;
-        let bytes = data(&answers[1], n, "Get_Cfg")?;
-        let ids: Vec<String> = cfg::identifiers(&bytes)
-            .map(|id| match id {
-                Ok(id) => format!("{}: {id}", Hex(id.raw)),
-                Err(e) => e.to_string(),
-            })
-            .collect();
-        let gsd = find_gsd(&a.slave, d.ident_number)?;
-        let (mut modules, mut others, mut nearest) = (None, vec![], None);
-        if let Some((_, g)) = &gsd {
-            match modules_for_cfg(g, &bytes) {
-                CfgMatch::Found { best, others: o } => {
-                    let names = |f: &profibus_dp::config::discover::Fit| {
-                        f.names(g)
-                            .into_iter()
-                            .map(|s| s.trim().to_string())
-                            .collect::<Vec<_>>()
-                    };
-                    modules = Some(names(&best));
-                    others = o.iter().map(names).collect();
-                }
-                CfgMatch::NoFit(near) => nearest = Some(near.describe(g)),
+    let n = a.slave.slave;
+    let mut got = a.station.data(
+        n,
+        &[ServiceRequest::SlaveDiag(n), ServiceRequest::GetCfg(n)],
+    )?;
+    let bytes = got.remove(1);
+    let du = got.remove(0);
+    let d = SlaveDiag::parse(&du).with_context(|| format!("slave {n}"))?;
+    let ids: Vec<String> = cfg::identifiers(&bytes)
+        .map(|id| match id {
+            Ok(id) => format!("{}: {id}", Hex(id.raw)),
+            Err(e) => e.to_string(),
+        })
+        .collect();
+    let gsd = find_gsd(&a.slave, d.ident_number)?;
+    let (mut modules, mut others, mut nearest) = (None, vec![], None);
+    if let Some((_, g)) = &gsd {
+        match modules_for_cfg(g, &bytes) {
+            CfgMatch::Found { best, others: o } => {
+                let names = |f: &profibus_dp::config::discover::Fit| {
+                    f.names(g)
+                        .into_iter()
+                        .map(|s| s.trim().to_string())
+                        .collect::<Vec<_>>()
+                };
+                modules = Some(names(&best));
+                others = o.iter().map(names).collect();
+            }
+            CfgMatch::NoFit(near) => nearest = Some(near.describe(g)),
+        }
+    }
+    if a.station.json {
+        let v = json!({
+            "address": n,
+            "ident": format!("0x{:04X}", d.ident_number),
+            "owner": owner(&d),
+            "cfg": Hex(&bytes).to_string(),
+            "identifiers": ids,
+            "gsd": gsd.as_ref().map(|(f, _)| f),
+            "modules": modules,
+            "others": others,
+            "nearest": nearest,
+        });
+        crate::out::outln!("{}", common::json_line(&v))?;
+        return Ok(());
+    }
+    crate::out::outln!(
+        "slave {n} (ident 0x{:04X}): Get_Cfg {}",
+        d.ident_number,
+        Hex(&bytes)
+    )?;
+    for id in &ids {
+        crate::out::outln!("  {id}")?;
+    }
+    match (&gsd, modules) {
+        (None, _) => crate::out::outln!(
+            "no GSD for ident 0x{:04X}: give --gsd or --gsd-dir",
+            d.ident_number
+        )?,
+        (Some((f, _)), Some(m)) => {
+            let list: Vec<String> = m.iter().map(|x| format!("\"{x}\"")).collect();
+            crate::out::outln!("modules of {f}: {}", list.join(", "))?;
+            for o in others {
+                let list: Vec<String> = o.iter().map(|x| format!("\"{x}\"")).collect();
+                crate::out::outln!("  also fits: {}", list.join(", "))?;
             }
         }
-        if a.station.json {
-            let v = json!({
-                "address": n,
-                "ident": format!("0x{:04X}", d.ident_number),
-                "owner": owner(&d),
-                "cfg": Hex(&bytes).to_string(),
-                "identifiers": ids,
-                "gsd": gsd.as_ref().map(|(f, _)| f),
-                "modules": modules,
-                "others": others,
-                "nearest": nearest,
-            });
-            crate::out::outln!("{}", common::json_line(&v))?;
-            return Ok(());
-        }
-        crate::out::outln!(
-            "slave {n} (ident 0x{:04X}): Get_Cfg {}",
-            d.ident_number,
-            Hex(&bytes)
-        )?;
-        for id in &ids {
-            crate::out::outln!("  {id}")?;
-        }
-        match (&gsd, modules) {
-            (None, _) => crate::out::outln!(
-                "no GSD for ident 0x{:04X}: give --gsd or --gsd-dir",
-                d.ident_number
-            )?,
-            (Some((f, _)), Some(m)) => {
-                let list: Vec<String> = m.iter().map(|x| format!("\"{x}\"")).collect();
-                crate::out::outln!("modules of {f}: {}", list.join(", "))?;
-                for o in others {
-                    let list: Vec<String> = o.iter().map(|x| format!("\"{x}\"")).collect();
-                    crate::out::outln!("  also fits: {}", list.join(", "))?;
-                }
-            }
-            (Some((f, _)), None) => crate::out::outln!(
-                "no module combination of {f} gives these bytes: {}",
-                nearest.unwrap_or_default()
-            )?,
-        }
-        Ok(())
-    })
+        (Some((f, _)), None) => crate::out::outln!(
+            "no module combination of {f} gives these bytes: {}",
+            nearest.unwrap_or_default()
+        )?,
+    }
+    Ok(())
 }
 
 pub fn set_address(a: SetAddressArgs) -> Result<()> {

@@ -387,6 +387,7 @@ async fn sniff(args: Args) -> Result<()> {
         common::BaudArg::Fixed(b) => b,
         common::BaudArg::Auto => Baud::B19200,
     };
+    common::lock_port(&args.port)?;
     let mut port = Port::open(&args.port, at)?;
     let mut port_baud = at;
     if args.baud == common::BaudArg::Auto {

@@ -129,7 +129,21 @@ impl View {
 
 /// Show the master's events.
 pub fn drain_events(m: &mut DpMaster, slaves_info: &[SlaveInfo], view: &mut View) {
+    drain_events_except(m, slaves_info, view, |_| false);
+}
+
+/// Show the master's events but those `skip` takes (the ends of jobs a
+/// control socket answered).
+pub fn drain_events_except(
+    m: &mut DpMaster,
+    slaves_info: &[SlaveInfo],
+    view: &mut View,
+    mut skip: impl FnMut(&profibus_dp::master::MasterEvent) -> bool,
+) {
     while let Some(e) = m.poll_event() {
+        if skip(&e) {
+            continue;
+        }
         let gsd = match &e {
             profibus_dp::master::MasterEvent::Diag { address }
             | profibus_dp::master::MasterEvent::Alarm { address, .. }

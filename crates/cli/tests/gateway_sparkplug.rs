@@ -105,6 +105,8 @@ struct Sub {
     next: usize,
     /// Metric names (quoted) by alias, from the births.
     names: HashMap<String, String>,
+    /// The payload of each message of `seen`, as received.
+    raw: Vec<Vec<u8>>,
 }
 
 const PROBE: &str = "spBv1.0/probe";
@@ -122,6 +124,7 @@ impl Sub {
             seen: vec![],
             next: 0,
             names: HashMap::new(),
+            raw: vec![],
         }
     }
 
@@ -143,6 +146,7 @@ impl Sub {
                     metrics: vec![],
                 };
                 self.seen.push((t.to_string(), d));
+                self.raw.push(vec![]);
                 continue;
             }
             let bytes: Vec<u8> = (0..hex.len() / 2)
@@ -165,6 +169,7 @@ impl Sub {
                 }
             }
             self.seen.push((t.to_string(), d));
+            self.raw.push(bytes);
         }
     }
 
@@ -606,4 +611,119 @@ fn sparkplug_primary_host_state_holds_and_rebirths() {
         "nothing published while the host is offline"
     );
     drop(gw);
+}
+
+/// Decodes `TYPE HEX` lines with pysparkplug (PyPI; an independent
+/// Sparkplug B implementation): births through its message classes (which
+/// check datatypes and values), data messages, whose metrics carry no
+/// datatype, through its protobuf module with the datatype of the alias
+/// from the birth. Prints one JSON line per message.
+const PYSPARKPLUG: &str = r#"
+import sys, json
+import pysparkplug as spb
+from pysparkplug._protobuf import sparkplug_b_pb2 as pb
+types = {}
+def show(v):
+    return v.hex() if isinstance(v, (bytes, bytearray)) else v
+for line in sys.stdin:
+    kind, data = line.split()
+    raw = bytes.fromhex(data)
+    if kind in ("NBIRTH", "DBIRTH"):
+        msg = (spb.NBirth if kind == "NBIRTH" else spb.DBirth).decode(raw)
+        ms = [{"name": m.name, "alias": m.alias, "value": show(m.value)} for m in msg.metrics]
+        for m in msg.metrics:
+            if m.alias is not None:
+                types[m.alias] = m.datatype
+        print(json.dumps({"type": kind, "seq": msg.seq, "metrics": ms}))
+    else:
+        p = pb.Payload()
+        p.ParseFromString(raw)
+        ms = []
+        for m in p.metrics:
+            dt = types[m.alias]
+            v = dt.decode(getattr(m, m.WhichOneof("value")))
+            ms.append({"name": m.name if m.HasField("name") else None, "alias": m.alias, "value": show(v)})
+        print(json.dumps({"type": kind, "seq": p.seq, "metrics": ms}))
+"#;
+
+/// NBIRTH, DBIRTH and DDATA as pysparkplug reads them: names, aliases
+/// and values agree with what the gateway meant.
+#[test]
+fn sparkplug_payloads_decode_with_pysparkplug() {
+    let py = common::python();
+    let ok = Command::new(&py)
+        .args(["-c", "import pysparkplug"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        common::need("pysparkplug in .venv (scripts/setup-test-env)");
+    }
+    let dir = TempDir::new("sparkplug-py");
+    let mqtt = "[mqtt]\nbus = \"line\"\nwritable = [3]\n";
+    let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}pkw = false\n\n{mqtt}"));
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let mut sub = Sub::start(port);
+    let _gw = gateway(&bus, port, &["--sim", "--sparkplug", "G/E"]);
+    births(&mut sub);
+    command(
+        port,
+        &dev("DCMD", 3),
+        r#"timestamp: 1 metrics { name: "Image/Outputs" bytes_value: "\x11\x22\x33\x44" }"#,
+    );
+    sub.expect(&dev("DDATA", 3), |d| {
+        d.get("Image/Inputs", "bytes_value") == Some(r#""\021\"3D""#)
+    });
+    let mut input = String::new();
+    for ((t, _), raw) in sub.seen.iter().zip(&sub.raw) {
+        let kind = t.split('/').nth(2).unwrap();
+        if ["NBIRTH", "DBIRTH", "DDATA"].contains(&kind) && (kind == "NBIRTH" || t.ends_with("/3"))
+        {
+            let hex: String = raw.iter().map(|b| format!("{b:02x}")).collect();
+            input += &format!("{kind} {hex}\n");
+        }
+    }
+    let mut p = Command::new(&py)
+        .args(["-c", PYSPARKPLUG])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    p.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let out = p.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "pysparkplug: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let msgs = common::json_lines(String::from_utf8(out.stdout).unwrap().lines());
+    let metric = |m: &serde_json::Value, name: &str| {
+        m["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["name"] == name)
+            .cloned()
+    };
+    let nbirth = &msgs[0];
+    assert_eq!(
+        (nbirth["type"].as_str(), nbirth["seq"].as_u64()),
+        (Some("NBIRTH"), Some(0))
+    );
+    assert_eq!(metric(nbirth, "Node Control/Rebirth").unwrap()["alias"], 0);
+    assert_eq!(metric(nbirth, "Bus/State").unwrap()["value"], "operate");
+    let dbirth = msgs.iter().find(|m| m["type"] == "DBIRTH").unwrap();
+    assert_eq!(metric(dbirth, "Properties/Name").unwrap()["value"], "echo");
+    let inputs = metric(dbirth, "Image/Inputs").unwrap()["alias"].clone();
+    assert!(inputs.as_u64().is_some());
+    // The DDATA: by alias, no name, the echoed image.
+    let echoed =
+        msgs.iter().any(|m| {
+            m["type"] == "DDATA"
+                && m["metrics"].as_array().unwrap().iter().any(|x| {
+                    x["alias"] == inputs && x["name"].is_null() && x["value"] == "11223344"
+                })
+        });
+    assert!(echoed, "{msgs:#?}");
 }

@@ -1,6 +1,8 @@
 //! Feeding a [`ControlInbox`] from outside the program: command lines
 //! from a file, stdin, or a Unix socket whose connections each send lines
-//! (`dpctl slave --control`). Needs a tokio runtime (feature `tokio`).
+//! (`dpctl slave --control`); and a [`ControlServer`], the control socket
+//! of `dpctl master --control` and `dpctl gateway --control`, where each
+//! request line gets exactly one answer line. Needs a tokio runtime.
 
 use profibus_devices::ControlInbox;
 use std::io;
@@ -29,6 +31,18 @@ pub enum ControlSourceError {
         path: PathBuf,
         /// Why.
         error: io::Error,
+    },
+    /// Another live process listens on the socket.
+    #[error("{} is the control socket of a running process (another dpctl?): give another path, or stop that process", path.display())]
+    Live {
+        /// The socket.
+        path: PathBuf,
+    },
+    /// The path exists and is no socket.
+    #[error("{} exists and is not a socket: give another path", path.display())]
+    NotASocket {
+        /// The path.
+        path: PathBuf,
     },
     /// The socket cannot be created.
     #[error("cannot listen on {}: {error}", path.display())]
@@ -126,6 +140,121 @@ pub fn lines_on_a_thread(
     Ok(rx)
 }
 
+/// A request line from a client of a [`ControlServer`], and where its
+/// answer goes.
+#[derive(Debug)]
+pub struct ControlRequest {
+    /// The line as sent (without its newline).
+    pub line: String,
+    reply: tokio::sync::oneshot::Sender<String>,
+}
+
+impl ControlRequest {
+    /// Send the answer line (one line of JSON, no newline). A client that
+    /// went away is no error: the answer is dropped.
+    pub fn answer(self, answer: String) {
+        let _ = self.reply.send(answer);
+    }
+
+    /// Whether the client still waits for the answer.
+    pub fn is_waiting(&self) -> bool {
+        !self.reply.is_closed()
+    }
+}
+
+/// A control socket: a Unix socket at a path, created with mode 0600
+/// (owner only) and removed when the server is dropped. Any number of
+/// clients; each sends request lines and gets exactly one answer line per
+/// request, in order (a client's next line is read once its last one is
+/// answered). A client that disconnects while its request runs harms
+/// nothing: the answer is dropped. A socket file left by a dead process
+/// is replaced; one that a live process listens on is an error.
+#[derive(Debug)]
+pub struct ControlServer {
+    path: PathBuf,
+    requests: tokio::sync::mpsc::Receiver<ControlRequest>,
+}
+
+/// Requests waiting for the program to take them, over all clients.
+const REQUEST_QUEUE: usize = 64;
+
+impl ControlServer {
+    /// Listen at `path`. Must be called inside a runtime.
+    pub fn bind(path: &Path) -> Result<ControlServer, ControlSourceError> {
+        use std::os::unix::fs::PermissionsExt;
+        let path = path.to_path_buf();
+        if std::fs::symlink_metadata(&path).is_ok() {
+            if !is_socket(&path) {
+                return Err(ControlSourceError::NotASocket { path });
+            }
+            match std::os::unix::net::UnixStream::connect(&path) {
+                Ok(_) => return Err(ControlSourceError::Live { path }),
+                // Nobody listens: left over from a process that died.
+                Err(_) => {
+                    let _ = std::fs::remove_file(&path);
+                }
+            }
+        }
+        let listen = |error| ControlSourceError::Listen {
+            path: path.clone(),
+            error,
+        };
+        let listener = tokio::net::UnixListener::bind(&path).map_err(listen)?;
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).map_err(listen)?;
+        let (tx, requests) = tokio::sync::mpsc::channel(REQUEST_QUEUE);
+        tokio::spawn(async move {
+            while let Ok((conn, _)) = listener.accept().await {
+                tokio::spawn(serve_client(conn, tx.clone()));
+            }
+        });
+        Ok(ControlServer { path, requests })
+    }
+
+    /// The next request, if one waits.
+    pub fn try_next(&mut self) -> Option<ControlRequest> {
+        self.requests.try_recv().ok()
+    }
+
+    /// The socket's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for ControlServer {
+    fn drop(&mut self) {
+        if is_socket(&self.path) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+/// One client: its lines become requests, each answer a line back.
+async fn serve_client(
+    conn: tokio::net::UnixStream,
+    requests: tokio::sync::mpsc::Sender<ControlRequest>,
+) {
+    use tokio::io::AsyncWriteExt;
+    let (r, mut w) = conn.into_split();
+    let mut lines = BufReader::new(r).lines();
+    while let Ok(Some(line)) = lines.next_line().await {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        if requests.send(ControlRequest { line, reply }).await.is_err() {
+            return;
+        }
+        let Ok(mut answer) = answer.await else {
+            return;
+        };
+        answer.push('\n');
+        if w.write_all(answer.as_bytes()).await.is_err() {
+            return;
+        }
+    }
+}
+
 /// Lines from `r` into `inbox`, in a task.
 fn feed(r: impl AsyncRead + Unpin + Send + 'static, inbox: ControlInbox) {
     tokio::spawn(async move {
@@ -187,5 +316,53 @@ mod tests {
         let missing = ControlSource::File(dir.join("missing"));
         let err = missing.spawn(inbox).unwrap_err().to_string();
         assert!(err.starts_with("cannot open "), "{err}");
+    }
+
+    #[tokio::test]
+    async fn a_control_server_answers_each_line_once_and_replaces_a_stale_socket() {
+        use std::os::unix::fs::PermissionsExt;
+        use tokio::io::AsyncBufReadExt;
+        let tmp = tempfile::tempdir().unwrap();
+        let sock = tmp.path().join("ctl.sock");
+        // A stale socket: bound, then its process "died".
+        drop(std::os::unix::net::UnixListener::bind(&sock).unwrap());
+        let mut server = ControlServer::bind(&sock).unwrap();
+        let mode = std::fs::metadata(&sock).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+        // A live one is refused.
+        let e = ControlServer::bind(&sock).unwrap_err().to_string();
+        assert!(e.contains("control socket of a running process"), "{e}");
+        // A client that goes away mid-request harms nothing.
+        let mut gone = tokio::net::UnixStream::connect(&sock).await.unwrap();
+        gone.write_all(b"first\n").await.unwrap();
+        drop(gone);
+        let c = tokio::net::UnixStream::connect(&sock).await.unwrap();
+        let (r, mut w) = c.into_split();
+        w.write_all(b"a\n\nb\n").await.unwrap();
+        let mut answers = tokio::io::BufReader::new(r).lines();
+        let mut seen = vec![];
+        while seen.len() < 3 {
+            match server.try_next() {
+                Some(req) => {
+                    seen.push(req.line.clone());
+                    let answer = format!("{{\"echo\":\"{}\"}}", req.line);
+                    req.answer(answer);
+                }
+                None => tokio::task::yield_now().await,
+            }
+        }
+        // Two clients: their lines in any order, each client's in its own.
+        seen.retain(|l| l != "first");
+        assert_eq!(seen, ["a", "b"]);
+        assert_eq!(
+            answers.next_line().await.unwrap().unwrap(),
+            r#"{"echo":"a"}"#
+        );
+        assert_eq!(
+            answers.next_line().await.unwrap().unwrap(),
+            r#"{"echo":"b"}"#
+        );
+        drop(server);
+        assert!(!sock.exists(), "removed on exit");
     }
 }

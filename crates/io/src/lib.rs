@@ -45,6 +45,7 @@ pub mod emulation;
 pub mod jx2;
 pub mod listen;
 pub mod pace;
+pub mod port_lock;
 pub mod runner;
 #[cfg(test)]
 mod testing;

@@ -12,9 +12,10 @@
 //! ```
 //!
 //! Every field is range-checked while it is read (station addresses
-//! 0..=126, DP-V1 slot and index 0..=254, a read length 1..=240, at most
-//! 244 output bytes, …); a bad command is refused as a whole with an error
-//! that names the field, and nothing of it is executed. Outputs by channel
+//! 0..=126, DP-V1 slot 0..=254 and index 0..=255 (255: the I&M call), a
+//! read length 1..=240, at most 244 output bytes, …); a bad command is
+//! refused as a whole with an error that names the field, and nothing of
+//! it is executed. Outputs by channel
 //! name (`{"slave": 8, "set": {…}}`) belong to the device profiles, which
 //! know the channels; [`MasterCommand::from_json`] leaves them to the
 //! caller ([`CommandError::Channels`]).
@@ -255,7 +256,7 @@ struct Raw {
     dpv1_write: Option<u8>,
     #[serde(default, deserialize_with = "slot_index")]
     slot: Option<u8>,
-    #[serde(default, deserialize_with = "slot_index")]
+    #[serde(default, deserialize_with = "record_index")]
     index: Option<u8>,
     #[serde(default, deserialize_with = "read_length")]
     length: Option<u8>,
@@ -404,6 +405,11 @@ fn flag<'de, D: Deserializer<'de>>(d: D) -> Result<Option<bool>, D::Error> {
 
 fn slot_index<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u8>, D::Error> {
     number_in(d, "a DP-V1 slot or index", 0..=254)
+}
+
+/// Index 255 too: the I&M call (`crate::pdu::im::CALL_INDEX`).
+fn record_index<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u8>, D::Error> {
+    number_in(d, "a DP-V1 index", 0..=255)
 }
 
 fn read_length<'de, D: Deserializer<'de>>(d: D) -> Result<Option<u8>, D::Error> {
@@ -641,6 +647,13 @@ mod tests {
                 .contains("`length` (bytes of a DP-V1 read) must be 1..=240, not 0")
         );
         assert!(err(r#"{"dpv1_read": 10, "slot": 1, "index": 1}"#).contains("needs `length`"));
+        // Index 255 is the I&M call (select a record, then read it).
+        assert!(matches!(
+            MasterCommand::from_json(
+                r#"{"dpv1_write": 10, "slot": 0, "index": 255, "data": "08 00 FD E8"}"#
+            ),
+            Ok(MasterCommand::Job(Job::Dpv1Write { index: 255, .. }))
+        ));
         assert!(err(r#"{"read_diag": 127}"#).contains("station address must be 0..=126"));
         assert!(err(r#"{"slave": 8, "outputs": [1, 256]}"#).contains("0..=255, not 256"));
         assert!(err(r#"{"slave": 8, "outputs": "0g"}"#).contains("not hex bytes"));
