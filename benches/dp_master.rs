@@ -11,6 +11,10 @@
 //! (a') CPU cost of the master core per Data_Exchange in process (an FDL
 //!      active station with the DP master against a canned responder),
 //!      next to pyprofibus's master on its in-process dummy PHY.
+//! (b)  4 and 32 slaves on an unpaced `dpctl bus`: all exchanges per
+//!      second against the line-timing floors, by default (the token
+//!      held alone) and with `alone_hold_bits = 0` (the token after
+//!      every poll cycle).
 //! (c)  Resident memory of `dpctl master` with 125 configured slaves.
 //!
 //! Run: `cargo bench --bench dp_master` (needs socat and the .venv of
@@ -249,6 +253,102 @@ fn dpctl_rate(
     Rate {
         per_s: (last.1 - first.1) / (last.0 - first.0),
         cpu_per_10k: cpu / last.1 * 10_000.0,
+    }
+}
+
+/// `dpctl master` with `n` slaves (addresses 8..) on an unpaced `dpctl
+/// bus` of n + 1 links: Data_Exchange transactions per second of all
+/// slaves together in the steady state (every slave in Data_Exchange).
+fn dpctl_rate_n(dpctl: &Path, dir: &Path, n: u8, secs: f64, options: &str) -> f64 {
+    let prefix = dir.join(format!("n{n}h"));
+    for i in 0..=n {
+        let _ = std::fs::remove_file(format!("{}{i}", prefix.display()));
+    }
+    let _hub = Kill(
+        Command::new(dpctl)
+            .args(["bus", "--stations", &(n + 1).to_string(), "--link"])
+            .arg(&prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let link = |i: u8| PathBuf::from(format!("{}{i}", prefix.display()));
+    let end = std::time::Instant::now() + Duration::from_secs(10);
+    while !(0..=n).all(|i| link(i).exists()) {
+        assert!(std::time::Instant::now() < end, "no bus links");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
+    let _slaves: Vec<Kill> = (0..n)
+        .map(|k| {
+            Kill(
+                Command::new(dpctl)
+                    .args(["slave", "--baud", "1.5M", "--addr", &(8 + k).to_string()])
+                    .arg("--port")
+                    .arg(link(k + 1))
+                    .arg("--gsd")
+                    .arg(&gsd)
+                    .args(["--module", "2 words in/out"])
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            )
+        })
+        .collect();
+    let mut text = format!(
+        "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n[options]\n{options}\n"
+    );
+    for k in 0..n {
+        text.push_str(&format!(
+            "[[slave]]\naddress = {}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
+            8 + k,
+            gsd.display()
+        ));
+    }
+    let cfg = dir.join(format!("bus{n}.toml"));
+    std::fs::write(&cfg, text).unwrap();
+    let mut child = Kill(
+        Command::new(dpctl)
+            .args(["master", "--json", "--interval", "100", "--port"])
+            .arg(link(0))
+            .arg("--config")
+            .arg(&cfg)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let out = child.0.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        use std::io::BufRead;
+        std::io::BufReader::new(out)
+            .lines()
+            .map_while(Result::ok)
+            .filter(|l| l.contains("\"status\""))
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(&l).ok())
+            .filter(|v| {
+                v["slaves"]
+                    .as_array()
+                    .is_some_and(|a| a.iter().all(|s| s["state"] == "data_exchange"))
+            })
+            .map(|v| {
+                let sum: f64 = v["slaves"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|s| s["data_exchanges"].as_f64().unwrap_or(0.0))
+                    .sum();
+                (v["t"].as_f64().unwrap(), sum)
+            })
+            .collect::<Vec<_>>()
+    });
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    drop(child);
+    let rows = reader.join().unwrap();
+    match (rows.first(), rows.last()) {
+        (Some(first), Some(last)) if last.0 > first.0 => (last.1 - first.1) / (last.0 - first.0),
+        _ => 0.0,
     }
 }
 
@@ -521,8 +621,10 @@ fn main() {
             + Baud::B1500000.chars_to_duration(3).as_secs_f64();
         let token_floor = 1.0 / (1.0 / raw + token_gaps);
         println!("(a) Data_Exchange over {name}, 1 slave, medians of {rounds} rounds");
-        println!("| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 |");
-        println!("|---|---|---|---|---|");
+        println!(
+            "| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 | vs floor |"
+        );
+        println!("|---|---|---|---|---|---|");
         println!("| raw round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | | |");
         println!(
             "| line-timing floor (raw + min TSDR + TID1 = {:.1} µs) | {floor:.0} | {:.0} % | {:.2}× | |",
@@ -545,15 +647,45 @@ fn main() {
             (4, "pyprofibus 1.13 master"),
         ] {
             let r = median(i, false);
+            // Each row against the floor of several cycles per token
+            // visit (a lone master holds the token by default).
             println!(
-                "| {label} | {r:.0} | {:.0} % | {:.2}× | {:.2} |",
+                "| {label} | {r:.0} | {:.0} % | {:.2}× | {:.2} | {:.0} % |",
                 100.0 * r / raw,
                 r / py,
-                median(i, true)
+                median(i, true),
+                100.0 * r / floor
             );
         }
         println!();
     }
+
+    // (b) More slaves on dpctl bus: the token's share of a poll cycle
+    // shrinks. Floors per exchange as above; with the token to itself
+    // after every poll cycle of n slaves, one token and TID1 per n
+    // exchanges.
+    let p = BusParams::defaults(Baud::B1500000);
+    let gaps = p.bits((p.min_tsdr + p.tid1()) as u64).as_secs_f64();
+    let token =
+        p.bits(p.tid1() as u64).as_secs_f64() + Baud::B1500000.chars_to_duration(3).as_secs_f64();
+    println!("(b) Data_Exchange over dpctl bus (unpaced), n slaves, all together");
+    println!("| slaves | raw | floor | floor, token every cycle | dpctl master | vs floor | alone_hold_bits = 0 | vs its floor |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for n in [4u8, 32] {
+        let raw = raw_echo_rate(&dpctl, &dir, &Line::Hub, 3000);
+        let floor = 1.0 / (1.0 / raw + gaps);
+        let per_cycle = n as f64 * (1.0 / raw + gaps) + token;
+        let token_floor = n as f64 / per_cycle;
+        let secs = if n > 8 { 6.0 } else { 3.0 };
+        let ours = dpctl_rate_n(&dpctl, &dir, n, secs, "");
+        let each = dpctl_rate_n(&dpctl, &dir, n, secs, "alone_hold_bits = 0");
+        println!(
+            "| {n} | {raw:.0} | {floor:.0} | {token_floor:.0} | {ours:.0} | {:.0} % | {each:.0} | {:.0} % |",
+            100.0 * ours / floor,
+            100.0 * each / token_floor
+        );
+    }
+    println!();
 
     let ours_cpu = core_cost(2_000_000);
     let py_cpu = pyprofibus_cost(20_000);

@@ -5,7 +5,7 @@
 
 use profibus::devices::generic::{GenericDevice, InputPattern};
 use profibus::dp::master::{
-    DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
+    join_bound, DpMaster, MasterConfig, MasterEvent, MasterOptions, SlaveParams, SlaveState,
     ALONE_HOLD_BITS_FAST,
 };
 use profibus::dp::slave::{DpSlave, Features};
@@ -222,7 +222,7 @@ fn steady_state(p: &mut Plant, window: Duration) -> (u64, u64, u64, Duration) {
 fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
     let window = Duration::from_millis(500);
     let fast = MasterOptions {
-        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        alone_hold_bits: Some(ALONE_HOLD_BITS_FAST),
         ..MasterOptions::default()
     };
     let mut hold = plant_with(&[(10, &CFG), (11, &CFG)], fast.clone());
@@ -248,7 +248,11 @@ fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
         .bits(share + 2 * hold.params.slot_time as u64 + 500);
     assert!(rotation < longest, "rotation {rotation:?}");
 
-    let mut each = plant(&[(10, &CFG), (11, &CFG)]);
+    let every_cycle = MasterOptions {
+        alone_hold_bits: Some(0),
+        ..MasterOptions::default()
+    };
+    let mut each = plant_with(&[(10, &CFG), (11, &CFG)], every_cycle);
     let (cycles_each, passes_each, _, _) = steady_state(&mut each, window);
     // One token pass (to itself) per poll cycle, and so fewer cycles.
     assert!(
@@ -264,7 +268,7 @@ fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
 #[test]
 fn a_second_master_joins_a_master_that_holds_the_token_alone() {
     let fast = MasterOptions {
-        alone_hold_bits: ALONE_HOLD_BITS_FAST,
+        alone_hold_bits: Some(ALONE_HOLD_BITS_FAST),
         ..MasterOptions::default()
     };
     let mut p = plant_with(&[(10, &CFG)], fast);
@@ -297,6 +301,62 @@ fn a_second_master_joins_a_master_that_holds_the_token_alone() {
     let c0 = p.m().cycle_stats().cycles;
     p.bus.run_for(Duration::from_millis(100));
     // No longer alone: the token passes after every poll cycle.
+    let passes = p.bus.station::<Master>(p.master).stats().token_passes - passes;
+    let cycles = p.m().cycle_stats().cycles - c0;
+    assert!(
+        cycles > 20 && passes + 2 >= cycles,
+        "{cycles} cycles, {passes} passes"
+    );
+    assert_eq!(p.m().slave_state(10), Some(SlaveState::DataExchange));
+}
+
+/// The default token use of a lone master (issue 34): the FDL rule, the
+/// token held for the token hold time (TTR minus the real rotation), so
+/// many poll cycles per token visit; a second master switched on joins
+/// within [`join_bound`] (measured here, event-driven on virtual time),
+/// and from then on the token passes after every poll cycle.
+#[test]
+fn by_default_a_lone_master_holds_the_token_and_a_second_master_joins_in_bounded_time() {
+    let mut p = plant(&[(10, &CFG)]);
+    let params = p.params;
+    let m2 = p.bus.add(ActiveStation::new(
+        ActiveConfig::new(5, params),
+        DpMaster::new(&master_cfg(5, params, &[20])).unwrap(),
+    ));
+    let s20 = p.bus.add(slave(20, params, &CFG));
+    p.bus.set_online(m2, false);
+    p.bus.set_online(s20, false);
+    let (cycles, passes, gaps, _) = steady_state(&mut p, Duration::from_millis(500));
+    // Visits of ALONE_VISIT_MAX (10 ms) of cycles: far more than one
+    // cycle per token pass, and a GAP poll in each (but the G after a
+    // sweep).
+    assert!(
+        cycles > 20 * passes,
+        "{cycles} cycles, {passes} token passes"
+    );
+    let g = params.gap_factor as u64;
+    assert!(
+        gaps + g + 2 >= passes && gaps > 0,
+        "{gaps} GAP polls, {passes} token passes"
+    );
+    let now = p.bus.now();
+    p.bus.station_mut::<Master>(m2).restart(now);
+    p.bus.set_online(m2, true);
+    p.bus.set_online(s20, true);
+    let bound = join_bound(&params);
+    assert!(
+        p.bus
+            .run_while(bound, |b| b.station::<Master>(m2).stats().tokens > 0),
+        "the second master did not get the token within {bound:?}"
+    );
+    let joined = p.bus.now() - now;
+    eprintln!("joined after {joined:?} (bound {bound:?})");
+    assert!(p.bus.run_while(Duration::from_secs(2), |b| {
+        b.station::<Master>(m2).app().slave_state(20) == Some(SlaveState::DataExchange)
+    }));
+    let passes = p.bus.station::<Master>(p.master).stats().token_passes;
+    let c0 = p.m().cycle_stats().cycles;
+    p.bus.run_for(Duration::from_millis(100));
     let passes = p.bus.station::<Master>(p.master).stats().token_passes - passes;
     let cycles = p.m().cycle_stats().cycles - c0;
     assert!(

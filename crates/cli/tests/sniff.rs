@@ -48,6 +48,12 @@ const CHECKS: &[Check] = &[
     ("Data_Exchange request", |v| {
         dp(v, "Data_Exchange", "request") && v["dp"]["outputs"] == "01 02 03 04"
     }),
+    // Split by the module of the Chk_Cfg the sniffer saw.
+    ("Data_Exchange request by module", |v| {
+        dp(v, "Data_Exchange", "request")
+            && v["dp"]["modules"]
+                == json!([{"slot": 1, "name": "2 words in+out", "data": "01 02 03 04"}])
+    }),
     ("Data_Exchange response", |v| {
         dp(v, "Data_Exchange", "response") && v["dp"]["inputs"] == "01 02 03 04"
     }),

@@ -16,9 +16,9 @@
 //! reprobe_ms = 100       # how often a lost slave is probed
 //! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
 //! global_control_ms = 100  # repeat operate/clear Global_Control (default 100; 0 = only on change)
-//! alone_hold_bits = 0     # alone in the ring: poll cycles per token visit for up to this
-//!                         # many bit times (default 0: the token to itself after every
-//!                         # cycle; 3000 about doubles the polls of a single small slave)
+//! alone_hold_bits = 3000  # alone in the ring: poll cycles per token visit for at most
+//!                         # this many bit times, within the token hold time (default:
+//!                         # 10 ms; 0: the token to itself after every cycle)
 //!
 //! [[slave]]
 //! address = 8
@@ -1207,7 +1207,7 @@ fn master_options(o: RawOptions) -> MasterOptions {
             Some(v) => ms(Some(v)),
         },
         not_ready_limit: d.not_ready_limit,
-        alone_hold_bits: o.alone_hold_bits.unwrap_or(d.alone_hold_bits),
+        alone_hold_bits: o.alone_hold_bits.or(d.alone_hold_bits),
     }
 }
 

@@ -169,19 +169,48 @@ pub struct MasterOptions {
     /// Cycles a slave may stay Station_Not_Ready after Chk_Cfg before it
     /// is parameterised again.
     pub not_ready_limit: u16,
-    /// Alone in the ring (no other master), a token visit may start
-    /// further poll cycles until it has lasted this many bit times (and
-    /// within the token hold time, TTR minus the last rotation) instead of
-    /// passing the token to itself after every poll cycle. Both follow the
-    /// FDL's token rules (IEC 61158-4-3: requests may be sent while the
-    /// token hold time remains); the token to itself with its idle times
-    /// (about 70 bit) and the visit's GAP poll (up to a slot time) are
-    /// then spent once per visit instead of once per poll cycle, while the
-    /// GAP sweep (how a new master joins, and the live list) slows down by
-    /// about the same factor. 0 (the default, [`DEFAULT_ALONE_HOLD_BITS`])
-    /// passes the token after every poll cycle, as most masters do;
-    /// [`ALONE_HOLD_BITS_FAST`] is a good value for speed.
-    pub alone_hold_bits: u32,
+    /// Alone in the ring (no other master), a token visit starts further
+    /// poll cycles while one more cycle as long as the last ends within
+    /// the token hold time TTH (TTR minus the real rotation time,
+    /// IEC 61158-4-3: requests may be sent while TTH remains) instead of
+    /// passing the token to itself after every poll cycle; the token to
+    /// itself with its idle times (about 70 bit) and the visit's GAP poll
+    /// (up to a slot time) are then spent once per visit. `None` (the
+    /// default, [`DEFAULT_ALONE_HOLD_BITS`]): TTH bounds the visit, and
+    /// so that the GAP sweep (one address per visit: the live list, and
+    /// how a new master joins) keeps its pace at any TTR and rate, so
+    /// does [`ALONE_VISIT_MAX`]; a new master joins within
+    /// [`join_bound`]. `Some(n)`: the override, a visit ends once it has
+    /// lasted `n` bit times (or TTH is used); `Some(0)` passes the token
+    /// after every poll cycle, as masters that ignore TTH do. With other
+    /// masters in the ring the token passes after every poll cycle
+    /// whatever this says (their rotation is kept).
+    pub alone_hold_bits: Option<u32>,
+}
+
+/// The longest token visit of a lone master by default
+/// ([`MasterOptions::alone_hold_bits`] `None`): 10 ms, within which TTH
+/// also bounds it. At 1.5 Mbit/s about 60 poll cycles of a small slave
+/// on a pty, so the token to itself costs under 2 % of the line; at
+/// 19.2 kbit/s shorter than one poll cycle (the token after every cycle,
+/// as before); the GAP sweep of 126 addresses then takes about 1.3 s.
+pub const ALONE_VISIT_MAX: Duration = Duration::from_millis(10);
+
+/// How long a master switched on beside a lone master with the default
+/// token use waits at most until it is in the ring: its own
+/// Listen_Token (two rotations) and the holder's whole GAP sweep, one
+/// address per visit, up to HSA, plus the G rotations the GAP factor
+/// waits after a sweep, each rotation at most two visits (a long one of
+/// at most [`ALONE_VISIT_MAX`] or TTR, its GAP poll of a slot time and
+/// the token; and a short one of a single cycle when the long one used
+/// TTH): `(HSA + G + 4) × 2 × (min(TTR, ALONE_VISIT_MAX) + 2 TSL)`. At
+/// 1.5 Mbit/s with the defaults (HSA 126, G 10) 2.9 s; at 19.2 kbit/s
+/// (TTR 1.7 s) 5.7 s. The test on the simulator
+/// (tests/sim_master_slave.rs) measures a join against it.
+pub fn join_bound(params: &profibus_fdl::BusParams) -> Duration {
+    let visit = params.bits(u64::from(params.ttr)).min(ALONE_VISIT_MAX)
+        + params.bits(2 * u64::from(params.slot_time));
+    visit * (2 * (u32::from(params.hsa) + u32::from(params.gap_factor) + 4))
 }
 
 /// The default period of the cyclic operate/clear Global_Control: 100 ms,
@@ -202,12 +231,12 @@ pub const STARTUP_RETRY_FIRST: Duration = Duration::from_millis(10);
 /// The longest back-off between two start-ups of a faulty slave: 1 s.
 pub const STARTUP_RETRY_MAX: Duration = Duration::from_secs(1);
 
-/// The default of [`MasterOptions::alone_hold_bits`]: 0, the token after
-/// every poll cycle, as most masters do.
-pub const DEFAULT_ALONE_HOLD_BITS: u32 = 0;
+/// The default of [`MasterOptions::alone_hold_bits`]: `None`, the token
+/// hold time alone bounds a lone master's token visit (the FDL rule).
+pub const DEFAULT_ALONE_HOLD_BITS: Option<u32> = None;
 
-/// A good [`MasterOptions::alone_hold_bits`] for a master that is alone
-/// and wants its slaves polled as often as the line allows: 3000 bit
+/// A [`MasterOptions::alone_hold_bits`] override for a master that is
+/// alone, wants its slaves polled often and a quick GAP sweep: 3000 bit
 /// times (2 ms at 1.5 Mbit/s, 156 ms at 19.2 kbit/s). A poll cycle of one
 /// slave with 2 bytes each way costs about 290 bit, its token to itself
 /// and GAP poll up to 370 more: with 3000 that slave is polled about twice

@@ -66,8 +66,9 @@ mod wait;
 pub use alarm::{AlarmNotice, ALARM_ACK_TRIES};
 pub use command::{CommandError, CommandOutcome, MasterCommand, Queue};
 pub use config::{
-    MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, DEFAULT_ALONE_HOLD_BITS,
-    DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST, STARTUP_RETRY_MAX,
+    join_bound, MasterConfig, MasterOptions, SlaveParams, ALONE_HOLD_BITS_FAST, ALONE_VISIT_MAX,
+    DEFAULT_ALONE_HOLD_BITS, DEFAULT_GLOBAL_CONTROL_INTERVAL, STARTUP_RETRY_FIRST,
+    STARTUP_RETRY_MAX,
 };
 pub use report::{AlarmReport, CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
 pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
@@ -616,7 +617,8 @@ pub struct DpMaster {
     job_sent_this_visit: bool,
     /// Start of the current token visit.
     visit_start: Instant,
-    /// [`MasterOptions::alone_hold_bits`] as a duration.
+    /// [`MasterOptions::alone_hold_bits`] as a duration
+    /// ([`ALONE_VISIT_MAX`] without it).
     alone_hold: Duration,
     live: [Option<StationType>; 128],
     zeros: [u8; 244],
@@ -724,7 +726,10 @@ impl DpMaster {
             events_dropped: 0,
             job_sent_this_visit: false,
             visit_start: Instant::ZERO,
-            alone_hold: cfg.params.bits(cfg.options.alone_hold_bits as u64),
+            alone_hold: match cfg.options.alone_hold_bits {
+                Some(b) => cfg.params.bits(u64::from(b)),
+                None => ALONE_VISIT_MAX,
+            },
             live: [None; 128],
             zeros: [0; 244],
             req: [0; 248],
@@ -1740,8 +1745,8 @@ impl MasterApp for DpMaster {
         // Alone in the ring the token only comes back here: rather than
         // pass it to itself after every poll cycle, start the next cycle
         // at once when one more cycle as long as the last ends within the
-        // visit's share (alone_hold_bits) and the token hold time, and a
-        // slave is due. The visit still ends with time left, so its GAP
+        // token hold time and the visit's share (alone_hold_bits, by
+        // default ALONE_VISIT_MAX), and a slave is due. The visit still ends with time left, so its GAP
         // poll (how a new master joins) is made.
         let fits = self.cycle_start.is_some_and(|start| {
             let end = now + (now - start);

@@ -39,6 +39,13 @@ pub(super) fn stations(cfg: &SoakConfig) -> Result<Stations, SoakError> {
         .baud(cfg.baud)
         .medium(cfg.medium())
         .master(MASTER_ADDRESS)
+        // The token to itself after every poll cycle: the soak puts the
+        // token path (SD4 telegrams without FCS, forged by bit errors)
+        // under load, which a lone master holding the token would spare.
+        .options(profibus_dp::master::MasterOptions {
+            alone_hold_bits: Some(0),
+            ..Default::default()
+        })
         .watchdog(cfg.watchdog);
     for entry in PROFILES {
         let name = entry.name;
