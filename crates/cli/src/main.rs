@@ -36,6 +36,7 @@ mod service;
 mod slave;
 mod sniff;
 mod soak;
+mod stats_args;
 mod via;
 mod view;
 

@@ -14,7 +14,7 @@ use profibus_io::listen::{listen, Heard, ListenOptions};
 use profibus_io::transport::Port;
 use profibus_tui::lines::monitor_slaves;
 use profibus_tui::term::LiveBus;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write as _};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -49,6 +49,8 @@ pub struct Args {
     /// a line, or a JSON object with `"event":"baud_found"`).
     #[arg(long, value_name = "B")]
     baud: Option<common::BaudArg>,
+    #[command(flatten)]
+    stats: crate::stats_args::StatsArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -79,28 +81,64 @@ pub fn run(args: Args) -> Result<()> {
         baud = found.baud();
     }
     let mut listen_opts = ListenOptions::for_port(&port);
+    // The target rotation time is not on the wire: the bus file's.
+    let params = &bus.file.master.params;
+    let ttr = params.baud.bits_to_duration(params.ttr as u64);
+    let mut analysis = crate::stats_args::StatsRun::new(
+        &args.stats,
+        profibus_dp::monitor::stats::StatsOptions {
+            baud: Some(baud),
+            ttr: Some(ttr),
+        },
+    );
+    let live = !args.json && !args.plain && std::io::stdout().is_terminal();
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
-    if !args.json && !args.plain && std::io::stdout().is_terminal() {
+    if live {
         view.open_terminal(bus_view("dpctl monitor", baud, &info).listen_only())?;
         listen_opts.tick = LiveBus::KEYS;
     }
     let on_heard = |heard| {
         let now = match heard {
-            Heard::Event(e) => monitor.hear(&e),
+            Heard::Event(e) => {
+                if let Some(s) = analysis.as_mut() {
+                    s.hear(&e);
+                }
+                monitor.hear(&e)
+            }
             Heard::Tick(at) => {
                 monitor.tick(at);
                 at
             }
         };
         show(&mut monitor, &mut view, now, false);
+        if let Some(due) = analysis.as_mut().and_then(|s| s.due(now)) {
+            print_stats(&due, args.json, live);
+        }
         view.tick(&mut monitor, now)
     };
     let stats = rt.block_on(listen(&mut port, listen_opts, common::shutdown(), on_heard));
     view.close();
     let stats = stats.with_context(|| format!("reading {}", args.port))?;
     show(&mut monitor, &mut view, profibus_fdl::Instant::ZERO, true);
+    if let Some(due) = analysis
+        .as_mut()
+        .and_then(|s| s.last(profibus_fdl::Instant::ZERO))
+    {
+        print_stats(&due, args.json, false);
+    }
     tracing::info!(?stats, "line counters");
     Ok(())
+}
+
+/// `--stats` and `--alert` lines (not over the live table).
+fn print_stats(due: &crate::stats_args::Due, json: bool, live: bool) {
+    if live {
+        return;
+    }
+    let mut out = crate::out::stdout();
+    if let Err(e) = due.print(json, &mut out).and_then(|()| out.flush()) {
+        tracing::debug!(%e, "printing statistics");
+    }
 }
 
 /// The monitor's events, and its status when due.

@@ -94,6 +94,8 @@ pub struct Args {
     /// (default: 5 on a pty; on a serial line twice TSYN, at least 2).
     #[arg(long, value_name = "MS")]
     pub idle_ms: Option<f64>,
+    #[command(flatten)]
+    pub stats: crate::stats_args::StatsArgs,
 }
 
 fn parse_trigger(s: &str) -> Result<Trigger, String> {
@@ -254,10 +256,15 @@ struct Printer {
     exchanges: Exchanges,
     /// `--trigger`.
     triggered: Option<Triggered>,
+    /// `--stats` / `--alert` (`crate::stats_args`).
+    stats: Option<crate::stats_args::StatsRun>,
 }
 
 impl Printer {
     fn event(&mut self, ev: TapEvent) -> Result<()> {
+        if let Some(s) = self.stats.as_mut() {
+            s.hear(&ev);
+        }
         if let Some(tr) = self.triggered.as_mut() {
             let (fired, segment) = tr.hear(&ev)?;
             let at = match &ev {
@@ -341,6 +348,20 @@ impl Printer {
         Ok(())
     }
 
+    /// The statistics and alerts of an interval ended by `now` (`last`:
+    /// the interval up to the end).
+    fn stats_due(&mut self, now: profibus_fdl::Instant, last: bool) -> Result<()> {
+        let Some(s) = self.stats.as_mut() else {
+            return Ok(());
+        };
+        let due = if last { s.last(now) } else { s.due(now) };
+        if let (Some(due), None) = (due, &self.live) {
+            due.print(self.json, &mut self.out)?;
+            self.out.flush()?;
+        }
+        Ok(())
+    }
+
     fn summary(&mut self, s: &CodecStats) -> Result<()> {
         if self.json {
             #[derive(serde::Serialize)]
@@ -368,8 +389,10 @@ async fn sniff(args: Args) -> Result<()> {
     };
     common::lock_port(&args.port)?;
     let mut port = Port::open(&args.port, at)?;
+    let mut port_baud = at;
     if args.baud == common::BaudArg::Auto {
         let found = common::find_baud(&mut port, None).await?;
+        port_baud = found.baud();
         if args.json {
             crate::out::outln!("{}", common::json_line(&found.json()))?;
         } else {
@@ -439,17 +462,24 @@ async fn sniff(args: Args) -> Result<()> {
         pcap,
         exchanges,
         triggered,
+        stats: crate::stats_args::StatsRun::new(
+            &args.stats,
+            profibus_dp::monitor::stats::StatsOptions {
+                baud: Some(port_baud),
+                ttr: None,
+            },
+        ),
     };
     let mut failure = None;
     let heard = listen(&mut port, options, common::shutdown(), |heard| {
         let r = match heard {
             Heard::Event(ev) => printer.event(ev),
-            Heard::Tick(_) => {
+            Heard::Tick(at) => {
                 let live = printer.live.as_mut();
                 if live.is_some_and(|l| !l.tick().unwrap_or(false)) {
                     return ControlFlow::Break(());
                 }
-                Ok(())
+                printer.stats_due(at, false)
             }
         };
         match r {
@@ -470,7 +500,8 @@ async fn sniff(args: Args) -> Result<()> {
     // output, `crate::out::Closed`, ends the sniffer quietly).
     let summary = match failure {
         Some(e) => Err(e),
-        None => printer.summary(&stats),
+        None => (printer.stats_due(profibus_fdl::Instant::ZERO, true))
+            .and_then(|()| printer.summary(&stats)),
     };
     if let Some(p) = printer.pcap.take() {
         p.into_inner().context("writing the pcap file")?;

@@ -15,8 +15,14 @@
 //! | `e` | show only errors (skipped bytes, negative acknowledges, requests without an answer) |
 //! | `c` | clear the filters |
 //! | ↑ / ↓, PgUp / PgDn | scroll; ↓ at the end follows new telegrams again |
+//!
+//! The stations table shows each station's role, DP state and a health
+//! bar from the analyser's statistics core
+//! ([`profibus_dp::monitor::stats`], docs/analyser.md).
 
 use crate::{fit, hex, Key};
+use profibus_dp::monitor::stats::{Stats, StatsOptions};
+use profibus_fdl::codec::CodecStats;
 use profibus_fdl::wire::{FunctionCode, RequestKind, Telegram};
 use profibus_fdl::Instant;
 use ratatui::layout::{Constraint, Layout, Rect};
@@ -74,6 +80,8 @@ pub struct SniffView {
     title: String,
     entries: VecDeque<Entry>,
     stations: BTreeMap<u8, StationStats>,
+    /// Role, DP state and health per station.
+    analysis: Stats,
     telegrams: u64,
     errors: u64,
     /// A request waiting for its answer: (master, slave).
@@ -98,6 +106,7 @@ impl SniffView {
             title: title.into(),
             entries: VecDeque::new(),
             stations: BTreeMap::new(),
+            analysis: Stats::new(StatsOptions::default()),
             telegrams: 0,
             errors: 0,
             awaiting: None,
@@ -116,6 +125,12 @@ impl SniffView {
         self.stations.get(&address).copied()
     }
 
+    /// The statistics core the stations table shows role, DP state and
+    /// health from.
+    pub fn analysis(&self) -> &Stats {
+        &self.analysis
+    }
+
     /// Whether the list is paused.
     pub fn paused(&self) -> bool {
         self.paused
@@ -130,6 +145,7 @@ impl SniffView {
             return;
         };
         self.telegrams += 1;
+        self.analysis.observe(at, &t, bytes.len());
         let (sa, da, service, error) = match &t {
             Telegram::ShortAck => {
                 self.awaiting = None;
@@ -198,6 +214,7 @@ impl SniffView {
     /// Bytes the framer skipped at `at`, described by `text`.
     pub fn skipped(&mut self, at: Instant, text: impl Into<String>) {
         self.errors += 1;
+        self.analysis.observe_skipped(at, 0, &CodecStats::default());
         self.push(Entry {
             at_us: at.as_nanos() / 1000,
             sa: None,
@@ -301,7 +318,7 @@ impl SniffView {
         ])
         .areas(area);
         let [list, stats] =
-            Layout::horizontal([Constraint::Min(40), Constraint::Length(52)]).areas(body);
+            Layout::horizontal([Constraint::Min(40), Constraint::Length(80)]).areas(body);
         let mut spans = vec![
             Span::styled(
                 self.title.clone(),
@@ -363,34 +380,54 @@ impl SniffView {
             list,
         );
 
+        let live: BTreeMap<u8, _> = (self.analysis.live().into_iter())
+            .map(|l| (l.address, l))
+            .collect();
         let rows = self
             .stations
             .iter()
             .filter(|(_, s)| s.on_the_line())
             .map(|(a, s)| {
+                let l = live.get(a);
+                let health = l.map_or(100, |l| l.health);
+                let style = match health {
+                    90.. => Style::default().fg(Color::Green),
+                    60..=89 => Style::default().fg(Color::Yellow),
+                    _ => Style::default().fg(Color::Red),
+                };
                 Row::new(vec![
-                    format!("{a:>3}"),
-                    format!("{:>7}", s.requests),
-                    format!("{:>7}", s.responses),
-                    format!("{:>6}", s.tokens),
-                    format!("{:>6}", s.no_answer),
-                    format!("{:>5}", s.negative),
+                    ratatui::widgets::Cell::from(format!("{a:>3}")),
+                    ratatui::widgets::Cell::from(l.and_then(|l| l.role).map_or("-", |r| r.name())),
+                    ratatui::widgets::Cell::from(
+                        l.and_then(|l| l.dp_state).map_or("-", |s| s.name()),
+                    ),
+                    ratatui::widgets::Cell::from(health_bar(health)).style(style),
+                    ratatui::widgets::Cell::from(format!("{:>6}", s.requests)),
+                    ratatui::widgets::Cell::from(format!("{:>6}", s.responses)),
+                    ratatui::widgets::Cell::from(format!("{:>5}", s.tokens)),
+                    ratatui::widgets::Cell::from(format!("{:>5}", s.no_answer)),
+                    ratatui::widgets::Cell::from(format!("{:>3}", s.negative)),
                 ])
             });
         let table = Table::new(
             rows,
             [
                 Constraint::Length(4),
-                Constraint::Length(8),
-                Constraint::Length(8),
+                Constraint::Length(7),
+                Constraint::Length(14),
+                Constraint::Length(15),
                 Constraint::Length(7),
                 Constraint::Length(7),
                 Constraint::Length(6),
+                Constraint::Length(6),
+                Constraint::Length(4),
             ],
         )
         .header(
-            Row::new(["Addr", "Req", "Resp", "Token", "NoAns", "Neg"])
-                .style(Style::default().add_modifier(Modifier::BOLD)),
+            Row::new([
+                "Addr", "Role", "DP state", "Health", "Req", "Resp", "Token", "NoAns", "Neg",
+            ])
+            .style(Style::default().add_modifier(Modifier::BOLD)),
         )
         .block(Block::default().borders(Borders::ALL).title(" stations "));
         f.render_widget(table, stats);
@@ -415,6 +452,13 @@ impl SniffView {
         };
         f.render_widget(Paragraph::new(footer), foot);
     }
+}
+
+/// A health score 0 … 100 as a bar of ten cells and the number, e.g.
+/// `████████░░  80`.
+pub fn health_bar(health: u8) -> String {
+    let full = (health.min(100) as usize + 5) / 10;
+    format!("{}{} {health:>3}", "█".repeat(full), "░".repeat(10 - full))
 }
 
 /// Skipped bytes in words for the list, e.g. `bad FCS: 3 bytes skipped: 68 01 02`.
@@ -469,7 +513,7 @@ mod tests {
     }
 
     fn screen(v: &SniffView) -> String {
-        let mut t = Terminal::new(TestBackend::new(140, 20)).unwrap();
+        let mut t = Terminal::new(TestBackend::new(160, 20)).unwrap();
         t.draw(|f| v.render(f, f.area())).unwrap();
         screen_text(t.backend().buffer())
     }
@@ -513,6 +557,26 @@ mod tests {
         assert!(s.contains("!! bad FCS: 2 bytes skipped: 68 01"), "{s}");
         let row9 = s.lines().find(|l| l.contains("│  9 ")).expect(&s);
         assert!(row9.contains("      1"), "{row9}");
+    }
+
+    #[test]
+    fn stations_show_role_dp_state_and_a_health_bar() {
+        let mut v = SniffView::new("dpctl sniff");
+        feed(&mut v);
+        let s = screen(&v);
+        assert!(
+            s.contains("Role") && s.contains("DP state") && s.contains("Health"),
+            "{s}"
+        );
+        // Slave 8 answered a diagnosis, then refused Data_Exchange (RS):
+        // back to `diag`, healthy. 9 never answered its one request, and
+        // the corrupt bytes came while master 2 held the token: both 0.
+        let flat = s.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(flat.contains("│ 8 slave diag ██████████ 100 0 2"), "{s}");
+        assert!(flat.contains("│ 2 master - ░░░░░░░░░░ 0 3 0"), "{s}");
+        assert!(flat.contains("│ 9 - - ░░░░░░░░░░ 0 0 0"), "{s}");
+        assert_eq!(health_bar(80), "████████░░  80");
+        assert_eq!(health_bar(100), "██████████ 100");
     }
 
     #[test]

@@ -85,6 +85,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::time::Duration;
 
+pub mod alert;
+pub mod stats;
 #[cfg(test)]
 mod tests;
 pub mod trigger;
