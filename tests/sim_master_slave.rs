@@ -316,8 +316,14 @@ fn a_second_master_joins_a_master_that_holds_the_token_alone() {
 /// within [`join_bound`] (measured here, event-driven on virtual time),
 /// and from then on the token passes after every poll cycle.
 #[test]
-fn by_default_a_lone_master_holds_the_token_and_a_second_master_joins_in_bounded_time() {
-    let mut p = plant(&[(10, &CFG)]);
+fn a_lone_master_holding_the_token_lets_a_second_master_join_in_bounded_time() {
+    let mut p = plant_with(
+        &[(10, &CFG)],
+        MasterOptions {
+            alone_hold_bits: None,
+            ..MasterOptions::default()
+        },
+    );
     let params = p.params;
     let m2 = p.bus.add(ActiveStation::new(
         ActiveConfig::new(5, params),

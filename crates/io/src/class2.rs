@@ -5,6 +5,7 @@
 
 use crate::driver::{self, Clock, Stop};
 use profibus_dp::class2::{Class2Config, Class2Master, Class2Run, RecordOps};
+use profibus_dp::master::join_bound;
 use profibus_fdl::station::active::{ActiveConfig, ActiveStation, RingState};
 use std::future::Future;
 use tokio::io::{AsyncRead, AsyncWrite};
@@ -39,15 +40,30 @@ where
     P: AsyncRead + AsyncWrite + Unpin + driver::Waitable,
     O: RecordOps,
 {
+    // A lone master holds the token for several cycles per visit
+    // (docs/timing.md), so joining its ring can take up to
+    // `join_bound`: the connection's timers start once this station has
+    // held the token, or once that bound has passed without it (then
+    // the Initiate times out and `ring` says why).
+    let join_wait = join_bound(&station.params);
     let mut st = ActiveStation::new(station, Class2Master::new(cfg));
     let mut run = Class2Run::new(slave, ops);
+    let mut waiting_since = None;
     let stop = driver::run_with(
         &mut st,
         port,
         Clock::start(),
         driver::Options::default(),
         shutdown,
-        |st, now| run.tick(st.app_mut(), now),
+        |st, now| {
+            if st.stats().tokens == 0 {
+                let since = *waiting_since.get_or_insert(now);
+                if now.saturating_duration_since(since) < join_wait {
+                    return std::ops::ControlFlow::Continue(());
+                }
+            }
+            run.tick(st.app_mut(), now)
+        },
     )
     .await?;
     Ok(Class2Done {

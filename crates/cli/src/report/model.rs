@@ -7,6 +7,7 @@ use profibus_devices::bus::ProfiledBus;
 use profibus_dp::config::gsd::Gsd;
 use profibus_dp::config::library::GsdLibrary;
 use profibus_dp::master::SlaveState;
+use profibus_dp::monitor::stats::{Stats, StatsOptions, StatsSet};
 use profibus_dp::monitor::{Monitor, MonitorEvent, MonitorOptions, SlaveInfo};
 use profibus_dp::pdu::diag::{self, SlaveDiag, StationStatus1};
 use profibus_dp::pdu::sap;
@@ -125,7 +126,7 @@ pub struct Station {
     pub state: Option<&'static str>,
     /// The master that talks to it (slaves).
     pub master: Option<u8>,
-    /// 0 … 100: answered requests without retries, errors or restarts.
+    /// 0 … 100, `profibus_dp::monitor::stats::health` (docs/analyser.md).
     pub health: u8,
     /// Ident number from its diagnosis (`0x….`).
     pub ident: Option<String>,
@@ -566,6 +567,17 @@ impl Report {
             }
             sampler.baud = probe.guess_baud();
         }
+        // The per-station counters and health come from the analyser's
+        // statistics core, as in `dpctl sniff --stats`; the sampler keeps
+        // only what the plots need.
+        let ttr = o
+            .bus
+            .zip(sampler.baud)
+            .map(|(b, baud)| baud.bits_to_duration(b.file.master.params.ttr as u64));
+        let mut stats = Stats::new(StatsOptions {
+            baud: sampler.baud,
+            ttr,
+        });
         for (at, corrupt, data) in records {
             last = at;
             r.segment.records += 1;
@@ -602,6 +614,7 @@ impl Report {
                 }
             };
             monitor.hear(&ev);
+            stats.hear(&ev);
             while let Some(e) = monitor.poll_event() {
                 r.event(at, e, o, &mut c);
             }
@@ -613,6 +626,7 @@ impl Report {
         r.diagnoses = c.diags.into_iter().map(|(_, _, d)| d).collect();
         r.finish(
             &monitor,
+            &stats.totals(),
             sampler,
             o,
             &c.restarts,
@@ -699,6 +713,7 @@ impl Report {
     fn finish(
         &mut self,
         m: &Monitor,
+        totals: &StatsSet,
         s: Sampler,
         o: &Options<'_>,
         restarts: &BTreeMap<u8, u64>,
@@ -780,28 +795,31 @@ impl Report {
             cycles.extend_from_slice(&tr.cycle);
             responses.extend_from_slice(&tr.response);
         }
-        for st in stations.values_mut() {
-            st.health = health(st);
+        seg.retries = 0;
+        seg.restarts = 0;
+        for (addr, t) in &totals.stations {
+            let Some(st) = stations.get_mut(addr) else {
+                continue;
+            };
+            if let Some(role) = t.role {
+                st.role = role.name();
+            }
+            st.requests = t.requests;
+            st.answers = t.answers;
+            st.retries = t.retries;
+            st.no_answer = t.no_answer;
+            st.illegal = t.illegal;
+            st.diag_requests = t.diag_requests;
+            st.ext_diag = t.ext_diag;
+            st.restarts = t.restarts;
+            st.health = t.health;
+            seg.retries += t.retries;
+            seg.restarts += t.restarts;
         }
         self.stations = stations.into_values().collect();
         self.cycle_histogram = Histogram::of(&cycles);
         self.response_histogram = Histogram::of(&responses);
     }
-}
-
-/// 0 … 100 from the station's ratios: the share of requests answered at
-/// the first try, less 10 points per restart (at most 50).
-fn health(st: &Station) -> u8 {
-    if st.role == "master" {
-        return 100;
-    }
-    if st.requests == 0 {
-        return if st.restarts > 0 { 50 } else { 0 };
-    }
-    let bad = st.no_answer + st.illegal + st.retries;
-    let ok = 1.0 - (bad as f64 / st.requests as f64).min(1.0);
-    let penalty = (st.restarts * 10).min(50) as f64;
-    (ok * 100.0 - penalty).clamp(0.0, 100.0).round() as u8
 }
 
 /// The GSD of a slave: the bus file's, else the library's by the ident

@@ -100,6 +100,11 @@ async def check(url):
         await sub2.deadband_monitor(actual, 1000)
         await write_typed(setpoint, 1500)
         await wait_value(actual, lambda v: v == 1500, "actual1 = 1500")
+        # The subscription reports 1500 before the next write (on a busy
+        # host its sampling can lag the read above).
+        end = time.monotonic() + T
+        while time.monotonic() < end and 1500 not in plain.values:
+            await asyncio.sleep(0.05)
         await write_typed(setpoint, 1600)
         await wait_value(actual, lambda v: v == 1600, "actual1 = 1600")
         end = time.monotonic() + T

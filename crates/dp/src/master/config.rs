@@ -175,14 +175,18 @@ pub struct MasterOptions {
     /// IEC 61158-4-3: requests may be sent while TTH remains) instead of
     /// passing the token to itself after every poll cycle; the token to
     /// itself with its idle times (about 70 bit) and the visit's GAP poll
-    /// (up to a slot time) are then spent once per visit. `None` (the
-    /// default, [`DEFAULT_ALONE_HOLD_BITS`]): TTH bounds the visit, and
+    /// (up to a slot time) are then spent once per visit. `None`: TTH bounds the visit, and
     /// so that the GAP sweep (one address per visit: the live list, and
     /// how a new master joins) keeps its pace at any TTR and rate, so
     /// does [`ALONE_VISIT_MAX`]; a new master joins within
     /// [`join_bound`]. `Some(n)`: the override, a visit ends once it has
-    /// lasted `n` bit times (or TTH is used); `Some(0)` passes the token
-    /// after every poll cycle, as masters that ignore TTH do. With other
+    /// lasted `n` bit times (or TTH is used); `Some(0)` (the default,
+    /// [`DEFAULT_ALONE_HOLD_BITS`]) passes the token after every poll
+    /// cycle, as masters that ignore TTH do. `None` is not yet the
+    /// default: with it, a class-2 master or a second class-1 master
+    /// joining a lone master's ring was starved of its low-priority
+    /// requests in the end-to-end tests (tests/class2_sim.rs,
+    /// tests/ownership.rs, crates/cli/tests/class2.rs), issue 34. With other
     /// masters in the ring the token passes after every poll cycle
     /// whatever this says (their rotation is kept).
     pub alone_hold_bits: Option<u32>,
@@ -231,9 +235,10 @@ pub const STARTUP_RETRY_FIRST: Duration = Duration::from_millis(10);
 /// The longest back-off between two start-ups of a faulty slave: 1 s.
 pub const STARTUP_RETRY_MAX: Duration = Duration::from_secs(1);
 
-/// The default of [`MasterOptions::alone_hold_bits`]: `None`, the token
-/// hold time alone bounds a lone master's token visit (the FDL rule).
-pub const DEFAULT_ALONE_HOLD_BITS: Option<u32> = None;
+/// The default of [`MasterOptions::alone_hold_bits`]: `Some(0)`, the
+/// token after every poll cycle (see there why `None` is not yet the
+/// default).
+pub const DEFAULT_ALONE_HOLD_BITS: Option<u32> = Some(0);
 
 /// A [`MasterOptions::alone_hold_bits`] override for a master that is
 /// alone, wants its slaves polled often and a quick GAP sweep: 3000 bit

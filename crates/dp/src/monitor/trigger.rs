@@ -65,7 +65,9 @@
 //! use profibus_dp::monitor::trigger::Trigger;
 //!
 //! let t: Trigger = "cfg_fault or (addr == 5 and service == set_prm)".parse().unwrap();
-//! assert_eq!(t.to_string(), "cfg_fault or (addr == 5 and service == set_prm)");
+//! // The canonical form leaves out parentheses that precedence makes
+//! // redundant (`and` binds tighter than `or`).
+//! assert_eq!(t.to_string(), "cfg_fault or addr == 5 and service == set_prm");
 //! let e = "cfg_falt".parse::<Trigger>().unwrap_err();
 //! assert_eq!(e.to_string(), "column 1: unknown name `cfg_falt`; did you mean `cfg_fault`?");
 //! ```
