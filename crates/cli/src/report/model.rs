@@ -629,7 +629,6 @@ impl Report {
             &stats.totals(),
             sampler,
             o,
-            &c.restarts,
             (first.unwrap_or_default(), last),
             given,
         );
@@ -716,7 +715,6 @@ impl Report {
         totals: &StatsSet,
         s: Sampler,
         o: &Options<'_>,
-        restarts: &BTreeMap<u8, u64>,
         (first, last): (Duration, Instant),
         given: bool,
     ) {
@@ -750,9 +748,6 @@ impl Report {
             st.state = sl.state.map(|s| s.name());
             st.master = sl.master;
             st.retries = sl.counters.retries;
-            st.restarts = restarts.get(&sl.address).copied().unwrap_or(0);
-            seg.retries += sl.counters.retries;
-            seg.restarts += st.restarts;
         }
         for (addr, tr) in &s.tracks {
             let is_master = tr.tokens > 0
@@ -795,8 +790,6 @@ impl Report {
             cycles.extend_from_slice(&tr.cycle);
             responses.extend_from_slice(&tr.response);
         }
-        seg.retries = 0;
-        seg.restarts = 0;
         for (addr, t) in &totals.stations {
             let Some(st) = stations.get_mut(addr) else {
                 continue;
