@@ -224,56 +224,18 @@ impl Control {
                 Ok(r) => r,
                 Err(e) => return req.answer(error(e)),
             };
-            let access = match r.writes() {
-                true => Access::Write(vec![r.pkw]),
-                false => Access::Read,
-            };
-            if let Err(e) = self.allowed(&access, bus) {
-                return req.answer(error(e));
-            }
-            let task = bus
-                .file
-                .slaves
-                .iter()
-                .find(|s| s.params.address == r.pkw)
-                .with_context(|| format!("slave {} is not in {}", r.pkw, bus.file.path.display()))
-                .and_then(|s| r.task(s));
-            return match task {
-                Ok(t) => self.tasks.push(Running {
-                    slave: r.pkw,
-                    task: Task::Pkw(TaskRun::new(t, r.wait())),
-                    request: req,
-                }),
-                Err(e) => req.answer(crate::via::json_value(&Printed::failed(&e)).to_string()),
-            };
+            return self.start_job(req, bus, r.pkw, r.writes(), |s| {
+                Ok(Task::Pkw(TaskRun::new(r.task(s)?, r.wait())))
+            });
         }
         if v.get("rfid").is_some() {
             let r: crate::rfid::RfidRequest = match serde_json::from_value(v) {
                 Ok(r) => r,
                 Err(e) => return req.answer(error(e)),
             };
-            let access = match r.writes() {
-                true => Access::Write(vec![r.rfid]),
-                false => Access::Read,
-            };
-            if let Err(e) = self.allowed(&access, bus) {
-                return req.answer(error(e));
-            }
-            let task = bus
-                .file
-                .slaves
-                .iter()
-                .find(|s| s.params.address == r.rfid)
-                .with_context(|| format!("slave {} is not in {}", r.rfid, bus.file.path.display()))
-                .and_then(|s| r.task(s));
-            return match task {
-                Ok(t) => self.tasks.push(Running {
-                    slave: r.rfid,
-                    task: Task::Rfid(TaskRun::new(t, r.wait())),
-                    request: req,
-                }),
-                Err(e) => req.answer(crate::via::json_value(&Printed::failed(&e)).to_string()),
-            };
+            return self.start_job(req, bus, r.rfid, r.writes(), |s| {
+                Ok(Task::Rfid(TaskRun::new(r.task(s)?, r.wait())))
+            });
         }
         if let Some(c) = SetChannels::from_json(&line) {
             let c = match c {
@@ -318,6 +280,41 @@ impl Control {
     }
 
     /// Whether `access` is allowed on this socket.
+    /// Start a PKW or RFID job on `slave` (its bus-file entry made into
+    /// a task by `task`) once the socket's permissions allow it; a
+    /// refusal, or a job that cannot start, is the request's answer.
+    fn start_job(
+        &mut self,
+        req: ControlRequest,
+        bus: &ProfiledBus,
+        slave: u8,
+        writes: bool,
+        task: impl FnOnce(&profibus_dp::config::busfile::BusSlave) -> Result<Task>,
+    ) {
+        let access = match writes {
+            true => Access::Write(vec![slave]),
+            false => Access::Read,
+        };
+        if let Err(e) = self.allowed(&access, bus) {
+            return req.answer(error(e));
+        }
+        let task = bus
+            .file
+            .slaves
+            .iter()
+            .find(|s| s.params.address == slave)
+            .with_context(|| format!("slave {slave} is not in {}", bus.file.path.display()))
+            .and_then(task);
+        match task {
+            Ok(task) => self.tasks.push(Running {
+                slave,
+                task,
+                request: req,
+            }),
+            Err(e) => req.answer(crate::via::json_value(&Printed::failed(&e)).to_string()),
+        }
+    }
+
     fn allowed(&self, access: &Access, bus: &ProfiledBus) -> Result<()> {
         let slaves = match access {
             Access::Read => return Ok(()),
