@@ -926,7 +926,10 @@ impl FmsPdu {
 }
 
 fn hex(data: &[u8]) -> String {
-    data.iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+    data.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 impl fmt::Display for FmsPdu {
@@ -969,12 +972,9 @@ impl fmt::Display for FmsPdu {
             } => {
                 write!(f, "FMS {}.res id {invoke_id}", response.service().name())?;
                 match response {
-                    Response::Status(s) => write!(
-                        f,
-                        ": {}, {}",
-                        s.logical_text(),
-                        s.physical_text()
-                    ),
+                    Response::Status(s) => {
+                        write!(f, ": {}, {}", s.logical_text(), s.physical_text())
+                    }
                     Response::Identify(i) => {
                         write!(f, ": {} {} {}", i.vendor, i.model, i.revision)
                     }
@@ -1179,7 +1179,10 @@ mod tests {
     #[test]
     fn bad_pdus_name_their_fault() {
         assert_eq!(FmsPdu::parse(&[]), Err(FmsParseError::Empty));
-        assert_eq!(FmsPdu::parse(&[0x99]), Err(FmsParseError::UnknownType(0x99)));
+        assert_eq!(
+            FmsPdu::parse(&[0x99]),
+            Err(FmsParseError::UnknownType(0x99))
+        );
         let e = FmsPdu::parse(&[1, 1, 2, 0x07]).unwrap_err();
         assert_eq!(e.to_string(), "FMS Read request is 4 bytes long, needs 5");
         let e = FmsPdu::parse(&[1, 1, 9]).unwrap_err();
