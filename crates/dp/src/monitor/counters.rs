@@ -107,9 +107,9 @@ impl MasterCounters {
             self.cycles = CycleStats::default();
         }
         let n = c.cycles - self.cycles.cycles;
-        if n > 0 {
-            let sum = c.sum_ns.saturating_sub(self.cycles.sum_ns);
-            self.bus_cycle.add_many(Duration::from_nanos(sum / n), n);
+        let sum = c.sum_ns.saturating_sub(self.cycles.sum_ns);
+        if let Some(mean) = sum.checked_div(n) {
+            self.bus_cycle.add_many(Duration::from_nanos(mean), n);
         }
         self.cycles = c;
         for a in m.slave_addresses() {
