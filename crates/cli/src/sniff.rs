@@ -48,8 +48,9 @@ pub struct Args {
     /// Baud rate of the line (9600 … 12M; irrelevant on a pty), or
     /// `auto`: listen at each rate until a valid telegram decodes (printed
     /// first: a line, or a JSON object with `"event":"baud_found"`).
-    #[arg(long, value_name = "B", default_value = "19200")]
-    pub baud: common::BaudArg,
+    /// Default: the bus file's (`--config`), else 19200.
+    #[arg(long, value_name = "B")]
+    pub baud: Option<common::BaudArg>,
     /// Print one JSON object per line; DP telegrams carry their decoded
     /// DP layer in `"dp"` (`service`, and the data unit's fields).
     #[arg(long)]
@@ -81,8 +82,10 @@ pub struct Args {
     #[arg(long, requires = "trigger")]
     pub split: bool,
     /// Bus file of the segment: its slaves' modules split Data_Exchange
-    /// data by module, their GSD files name diagnosis bits. Without it
-    /// the modules come from the Chk_Cfg seen on the wire.
+    /// data by module, their GSD files name diagnosis bits; its master's
+    /// bus parameters give the rate (unless --baud) and the TTR the
+    /// token rotations are measured against. Without it the modules come
+    /// from the Chk_Cfg seen on the wire.
     #[arg(long, value_name = "BUS.toml")]
     pub config: Option<PathBuf>,
     /// A folder of GSD files to name diagnosis bits with, found by the
@@ -383,14 +386,22 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 async fn sniff(args: Args) -> Result<()> {
-    let at = match args.baud {
+    // The bus file first: its bus parameters are the line's.
+    let bus = (args.config.as_ref())
+        .map(profibus_devices::bus::ProfiledBus::load)
+        .transpose()?;
+    let params = bus.as_ref().map(|b| b.file.master.params);
+    let baud = (args.baud)
+        .or(params.map(|p| common::BaudArg::Fixed(p.baud)))
+        .unwrap_or(common::BaudArg::Fixed(Baud::B19200));
+    let at = match baud {
         common::BaudArg::Fixed(b) => b,
         common::BaudArg::Auto => Baud::B19200,
     };
     common::lock_port(&args.port)?;
     let mut port = Port::open(&args.port, at)?;
     let mut port_baud = at;
-    if args.baud == common::BaudArg::Auto {
+    if baud == common::BaudArg::Auto {
         let found = common::find_baud(&mut port, None).await?;
         port_baud = found.baud();
         if args.json {
@@ -444,8 +455,7 @@ async fn sniff(args: Args) -> Result<()> {
         .then(|| LiveSniff::open(SniffView::new(format!("dpctl sniff {}", args.port))))
         .transpose()?;
     let mut exchanges = Exchanges::default();
-    if let Some(path) = &args.config {
-        let bus = profibus_devices::bus::ProfiledBus::load(path)?;
+    if let Some(bus) = &bus {
         for s in SlaveLayout::of_bus(&bus.file) {
             exchanges.set_slave(s.address, s.gsd, s.modules);
         }
@@ -466,7 +476,9 @@ async fn sniff(args: Args) -> Result<()> {
             &args.stats,
             profibus_dp::monitor::stats::StatsOptions {
                 baud: Some(port_baud),
-                ttr: None,
+                // TTR is not on the wire: the bus file's, in bit times
+                // of the line's rate.
+                ttr: params.map(|p| port_baud.bits_to_duration(p.ttr as u64)),
             },
         ),
     };
