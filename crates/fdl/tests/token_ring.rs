@@ -598,9 +598,7 @@ fn a_master_answering_not_ready_is_polled_again_and_joins_within_a_few_rotations
     ));
     bus.add(PassiveStation::new(Echo::new(10), params));
     let visit = params.bits(u64::from(params.ttr));
-    let joined = bus.run_while(visit * 10, |b| {
-        b.station::<Master>(m3).stats().tokens > 0
-    });
+    let joined = bus.run_while(visit * 10, |b| b.station::<Master>(m3).stats().tokens > 0);
     let holder = bus.station::<Master>(m2);
     let gap: Vec<_> = holder
         .app()
