@@ -1040,4 +1040,21 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn the_fms_device_option_names_its_modes() {
+        use super::super::profile::{Bk3000Profile, Options};
+        use crate::profile::Profile;
+        let o = Options {
+            fms: Some("both".into()),
+            ..Default::default()
+        };
+        let e = Bk3000Profile::configure(o, None).unwrap_err().to_string();
+        assert!(e.contains("use dp, mixed or fms"), "{e}");
+        let o = Options {
+            fms: Some("mixed".into()),
+            ..Default::default()
+        };
+        assert!(Bk3000Profile::configure(o, None).is_ok());
+    }
 }
