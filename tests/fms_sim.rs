@@ -135,7 +135,7 @@ fn fms_reads_and_writes_channel_objects_while_data_exchange_goes_on() {
         Ok(Response::Read(v)) => {
             assert_eq!(v.len(), 3, "status byte and a word: {v:02X?}");
             assert!(
-                carried.contains(&v[1..].to_vec()),
+                carried.contains(&v[1..]),
                 "{v:02X?} not among the values Data_Exchange carried: {carried:02X?}"
             );
         }
