@@ -269,7 +269,9 @@ impl Client {
     }
 }
 
-/// The event loop of either protocol version.
+/// The event loop of either protocol version (one per link, never moved
+/// once its task runs: the size of the variants does not matter).
+#[allow(clippy::large_enum_variant)]
 enum EventLoop {
     V4(rumqttc::EventLoop),
     V5(rumqttc::v5::EventLoop),
