@@ -8,6 +8,7 @@ use crate::ops::{self, Operated, ReloadSender, Stopping};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::DpMaster;
+use profibus_dp::monitor::alert::AlertRule;
 use profibus_gateway::sim::slave_infos;
 use profibus_gateway::{
     link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, MqttVersion, Session,
@@ -64,6 +65,14 @@ pub struct Args {
     /// Basic256Sha256 Sign and SignAndEncrypt.
     #[arg(long)]
     opcua_insecure: bool,
+    /// Publish an alert when RULE holds for a slave over an interval
+    /// (`[mqtt] alert_interval_ms`, default 1 s), on
+    /// `<prefix>/<bus>/alert` (Sparkplug B: node metric `Bus/Alert`);
+    /// repeatable, added to `[mqtt] alerts`. RULE as in `dpctl sniff
+    /// --alert`: `[ADDR:]STATISTIC [OP VALUE[%|ms|us|s]]` on the master's
+    /// counters, e.g. `no_answer>0`, `retries>1%`, `restart`, `health<80`.
+    #[arg(long, value_name = "RULE", value_parser = AlertRule::parse)]
+    alert: Vec<AlertRule>,
 }
 
 /// `--mqtt-version`: 4 or 5.
@@ -83,7 +92,8 @@ pub fn run(args: Args) -> Result<()> {
         crate::out::errln!("dpctl gateway: warning: {w}");
     }
     let mut settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
+    settings.alerts.extend(args.alert.iter().cloned());
     if let Some(v) = args.mqtt_version {
         settings.version = v;
     }
@@ -101,7 +111,7 @@ pub fn run(args: Args) -> Result<()> {
         .or_else(|| settings.broker.clone())
         .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
     profibus_gateway::traffic::check(&settings, &slave_infos(&profiled)?)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
     let conn = Connection::from_settings(&settings, &url)?;
     let sparkplug = args.sparkplug.clone().or(settings.sparkplug.clone());
     tracing::info!(
@@ -141,13 +151,16 @@ fn with_opcua(args: Args, profiled: ProfiledBus, settings: MqttSettings) -> Resu
         args.opcua_insecure,
         dir,
     )
-    .with_context(|| args.config.display().to_string())?;
+    .map_err(|e| match e.key_path() {
+        Some(key) => anyhow::Error::new(profiled.file.error_at(&key, e.to_string())),
+        None => anyhow::Error::new(e).context(args.config.display().to_string()),
+    })?;
     if args.sparkplug.is_some() || settings.sparkplug.is_some() {
         anyhow::bail!("--opcua goes with plain JSON topics, not with Sparkplug B");
     }
     let infos = slave_infos(&profiled)?;
     profibus_gateway::traffic::check(&settings, &infos)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
     let conn = (args.mqtt.clone().or_else(|| settings.broker.clone()))
         .map(|u| Connection::from_settings(&settings, &u))
         .transpose()?;
@@ -219,7 +232,7 @@ fn serve<S: Session + Send + 'static>(
     let shared = gw.stopped_handle();
     let rt = common::runtime()?;
     let result = rt.block_on(async move {
-        reload_on_sighup(&args.config, &profiled, reloads)?;
+        reload_on_sighup(&args.config, &args.alert, &profiled, reloads)?;
         let link = MqttLink::connect(&conn, &gw);
         let shutdown = stop(stopping);
         match &args.port {
@@ -249,17 +262,20 @@ async fn stop(stopping: Stopping) {
 /// keeps running either way.
 fn reload_on_sighup(
     path: &std::path::Path,
+    alerts: &[AlertRule],
     profiled: &ProfiledBus,
     reloads: ReloadSender,
 ) -> Result<()> {
     use tokio::signal::unix::{signal, SignalKind};
     let mut hup = signal(SignalKind::hangup()).context("installing the SIGHUP handler")?;
     let path = path.to_path_buf();
+    let alerts = alerts.to_vec();
     let mut running = profiled.file.mqtt.clone();
     tokio::spawn(async move {
         while hup.recv().await.is_some() {
             match reload(&path, running.as_ref()) {
-                Ok((table, r)) => {
+                Ok((table, mut r)) => {
+                    r.settings.alerts.extend(alerts.iter().cloned());
                     running = table;
                     if reloads.send(r).is_err() {
                         return;
@@ -282,9 +298,11 @@ fn reload(
     running: Option<&toml::Table>,
 ) -> Result<(Option<toml::Table>, ops::Reload)> {
     let file = ProfiledBus::load(path)?;
-    let table = file.file.mqtt;
-    let settings = MqttSettings::for_bus_file(table.as_ref(), path)
-        .with_context(|| path.display().to_string())?;
+    let table = file.file.mqtt.clone();
+    let settings =
+        MqttSettings::for_bus_file(table.as_ref(), path).map_err(|e| e.in_bus_file(&file.file))?;
+    profibus_gateway::traffic::check(&settings, &slave_infos(&file)?)
+        .map_err(|e| e.in_bus_file(&file.file))?;
     let changes = ops::changes(running, table.as_ref());
     let fixed: Vec<&str> = changes
         .iter()

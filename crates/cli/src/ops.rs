@@ -253,9 +253,9 @@ impl<S: Session> Operated<S> {
     fn take_reloads(&mut self) {
         while let Ok(r) = self.reloads.try_recv() {
             // The connection's version (maybe from --mqtt-version) stays.
-            let version = self.inner.settings().version;
-            *self.inner.settings_mut() = r.settings;
-            self.inner.settings_mut().version = version;
+            let mut settings = r.settings;
+            settings.version = self.inner.settings().version;
+            self.inner.reload(settings);
             match r.changes.is_empty() {
                 true => tracing::info!(target: TARGET, "reloaded [mqtt]: nothing changed"),
                 false => tracing::info!(
@@ -309,6 +309,9 @@ impl<S: Session> Session for Operated<S> {
     fn settings_mut(&mut self) -> &mut MqttSettings {
         self.inner.settings_mut()
     }
+    fn reload(&mut self, settings: MqttSettings) {
+        self.inner.reload(settings)
+    }
     fn link_setup(&self) -> LinkSetup {
         self.inner.link_setup()
     }
@@ -357,9 +360,9 @@ fn write_atomically(path: &std::path::Path, health: &Health) -> std::io::Result<
 }
 
 /// `[mqtt]` keys a running gateway cannot take: its connection (broker,
-/// identity, credentials), its topics and subscriptions, its mode, and
-/// what the core builds its per-slave state from at the start (the
-/// report-by-exception filters).
+/// identity, credentials), its topics and subscriptions, its mode. The
+/// report-by-exception keys (`min_interval_ms`, `deadband`,
+/// `[[mqtt.slave]]`) are taken ([`Session::reload`]).
 pub const RESTART_KEYS: &[&str] = &[
     "broker",
     "client_id",
@@ -374,9 +377,6 @@ pub const RESTART_KEYS: &[&str] = &[
     "job_timeout_ms",
     "version",
     "primary_host",
-    "min_interval_ms",
-    "deadband",
-    "slave",
 ];
 
 /// The keys of two `[mqtt]` tables that differ, as `key: old → new`

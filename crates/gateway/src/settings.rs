@@ -5,6 +5,8 @@
 
 use crate::field::Field;
 use crate::topics::SparkplugId;
+use profibus_dp::config::busfile::BusFileError;
+use profibus_dp::monitor::alert::AlertRule;
 use serde::de::IgnoredAny;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -159,6 +161,13 @@ pub struct MqttSettings {
     /// Whether the images (`inputs`, `outputs`) are retained
     /// (`[mqtt] retain_values`, default true).
     pub retain_values: bool,
+    /// Alert rules on the master's per-slave statistics (`[mqtt] alerts`
+    /// and `dpctl gateway --alert`), the syntax of
+    /// [`profibus_dp::monitor::alert`].
+    pub alerts: Vec<AlertRule>,
+    /// The interval the alert rules are checked over (`[mqtt]
+    /// alert_interval_ms`, default 1 s).
+    pub alert_interval: Duration,
 }
 
 /// How far an analog channel must move from the value last published
@@ -252,6 +261,44 @@ pub enum SettingsError {
     /// A broker URL that is not `mqtt://HOST[:PORT]` or `mqtts://HOST[:PORT]`.
     #[error("broker URL `{0}` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")]
     BadUrl(String),
+    /// `error` inside the table, at the dotted `path` (an entry of an
+    /// array by its 1-based number: `mqtt.slave.2.channels.ai1`); the
+    /// message is `error`'s.
+    #[error("{error}")]
+    At {
+        /// Where, from the bus file's root.
+        path: String,
+        /// What is wrong.
+        error: Box<SettingsError>,
+    },
+}
+
+impl SettingsError {
+    /// `self` at the dotted `path` (see [`SettingsError::At`]).
+    pub fn at(self, path: impl Into<String>) -> SettingsError {
+        SettingsError::At {
+            path: path.into(),
+            error: Box::new(self),
+        }
+    }
+
+    /// The dotted path of the key this error is about (`mqtt.qos`), for
+    /// its position in the bus file.
+    pub fn key_path(&self) -> String {
+        match self {
+            SettingsError::UnknownKey(k) => format!("mqtt.{k}"),
+            SettingsError::Bad { key, .. } => format!("mqtt.{key}"),
+            SettingsError::BadUrl(_) => "mqtt.broker".into(),
+            SettingsError::SparkplugNeedsV311 => "mqtt.version".into(),
+            SettingsError::At { path, .. } => path.clone(),
+        }
+    }
+
+    /// This error as a bus-file error of `file`: `FILE:LINE:COL: …` at
+    /// the key it is about.
+    pub fn in_bus_file(&self, file: &profibus_dp::config::busfile::BusFile) -> BusFileError {
+        file.error_at(&self.key_path(), self.to_string())
+    }
 }
 
 /// The `[mqtt]` table as written.
@@ -281,6 +328,8 @@ struct RawSettings {
     version: Field<toml::Value>,
     message_expiry_s: Field<u64>,
     retain_values: Field<bool>,
+    alerts: Field<Vec<String>>,
+    alert_interval_ms: Field<u64>,
 }
 
 /// The keys of the `[mqtt]` table (closest names of an unknown one).
@@ -308,6 +357,8 @@ const KEYS: &[&str] = &[
     "version",
     "message_expiry_s",
     "retain_values",
+    "alerts",
+    "alert_interval_ms",
 ];
 
 /// The keys of a `[[mqtt.slave]]` entry.
@@ -361,18 +412,21 @@ fn min_interval(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, Se
     }
 }
 
-/// One `[[mqtt.slave]]` entry (the `i`th, from 1).
+/// One `[[mqtt.slave]]` entry (the `i`th, from 1); its errors are at
+/// `mqtt.slave.I.KEY`.
 fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError> {
     let at = format!("entry {i}: ");
+    let err =
+        |key: &str, problem: String| bad("slave", problem).at(format!("mqtt.slave.{i}.{key}"));
     if let Some(k) = t.keys().find(|k| !SLAVE_KEYS.contains(&k.as_str())) {
         let hint = did_you_mean(k, SLAVE_KEYS.iter().copied());
-        return Err(bad("slave", format!("{at}unknown key `{k}`{hint}")));
+        return Err(err(k, format!("{at}unknown key `{k}`{hint}")));
     }
     let address = match t.get("address") {
         Some(toml::Value::Integer(a @ 0..=125)) => *a as u8,
         _ => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "address",
                 format!("{at}needs `address`, a station address 0..=125"),
             ))
         }
@@ -381,16 +435,18 @@ fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError
         None => None,
         Some(toml::Value::Integer(ms @ 0..=86_400_000)) => Some(Duration::from_millis(*ms as u64)),
         Some(_) => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "min_interval_ms",
                 format!("{at}`min_interval_ms` must be 0..=86400000"),
             ))
         }
     };
-    let deadband_of = |v: &toml::Value, what: String| deadband(v, "slave", &what);
+    let deadband_of = |v: &toml::Value, what: String, key: String| {
+        deadband(v, "slave", &what).map_err(|e| e.at(format!("mqtt.slave.{i}.{key}")))
+    };
     let deadband = t
         .get("deadband")
-        .map(|v| deadband_of(v, format!("{at}`deadband` ")))
+        .map(|v| deadband_of(v, format!("{at}`deadband` "), "deadband".into()))
         .transpose()?;
     let channels = match t.get("channels") {
         None => vec![],
@@ -399,13 +455,17 @@ fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError
             .map(|(name, v)| {
                 Ok((
                     name.clone(),
-                    deadband_of(v, format!("{at}channel `{name}` "))?,
+                    deadband_of(
+                        v,
+                        format!("{at}channel `{name}` "),
+                        format!("channels.{name}"),
+                    )?,
                 ))
             })
             .collect::<Result<_, SettingsError>>()?,
         Some(_) => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "channels",
                 format!("{at}`channels` must be a table of deadbands by channel name"),
             ))
         }
@@ -617,7 +677,8 @@ impl MqttSettings {
             .enumerate()
             .find(|(i, s)| slave_traffic[..*i].iter().any(|o| o.address == s.address))
         {
-            return Err(bad("slave", format!("lists slave {} twice", s.1.address)));
+            return Err(bad("slave", format!("lists slave {} twice", s.1.address))
+                .at(format!("mqtt.slave.{}", s.0 + 1)));
         }
         let primary_host = string(t.primary_host, "primary_host")?;
         if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
@@ -644,6 +705,18 @@ impl MqttSettings {
             Some(Ok(b)) => b,
             Some(Err(())) => return Err(bad("retain_values", "must be true or false")),
         };
+        let alerts = match t.alerts.given() {
+            None => vec![],
+            Some(Ok(v)) => v
+                .iter()
+                .map(|r| AlertRule::parse(r).map_err(|e| bad("alerts", e.to_string())))
+                .collect::<Result<_, _>>()?,
+            Some(Err(())) => {
+                return Err(bad("alerts", "must be a list of rules like \"retries>1%\""))
+            }
+        };
+        let alert_interval =
+            millis(t.alert_interval_ms, "alert_interval_ms")?.unwrap_or(Duration::from_secs(1));
         Ok(MqttSettings {
             broker,
             client_id: client_id.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -667,6 +740,8 @@ impl MqttSettings {
             version,
             message_expiry_s,
             retain_values,
+            alerts,
+            alert_interval,
         })
     }
 
@@ -841,6 +916,55 @@ mod tests {
                 ],
             }]
         );
+    }
+
+    /// Each error knows the key it is about (for its line and column in
+    /// the bus file); the message stays the key's.
+    #[test]
+    fn errors_name_their_key_path() {
+        let path = |text: &str| parse(text).unwrap_err().key_path();
+        assert_eq!(path("qos = 3"), "mqtt.qos");
+        assert_eq!(path("retain = 1"), "mqtt.retain");
+        assert_eq!(
+            path("[[slave]]\naddress = 3\naddres = 4"),
+            "mqtt.slave.1.addres"
+        );
+        assert_eq!(path("[[slave]]\nchannels = {}"), "mqtt.slave.1.address");
+        let e = parse("[[slave]]\naddress = 3\n[[slave]]\naddress = 4\nchannels = { ai = \"x\" }")
+            .unwrap_err();
+        assert_eq!(e.key_path(), "mqtt.slave.2.channels.ai");
+        assert!(
+            e.to_string()
+                .starts_with("[mqtt]: `slave` entry 2: channel `ai` must"),
+            "{e}"
+        );
+        assert_eq!(
+            path("[[slave]]\naddress = 3\n[[slave]]\naddress = 3"),
+            "mqtt.slave.2"
+        );
+    }
+
+    #[test]
+    fn alert_keys() {
+        let s = MqttSettings::from_table(None, "l").unwrap();
+        assert_eq!(
+            (s.alerts.len(), s.alert_interval),
+            (0, Duration::from_secs(1))
+        );
+        let s = parse("alerts = [\"retries>1%\", \"restart\"]\nalert_interval_ms = 5000").unwrap();
+        let rules: Vec<String> = s.alerts.iter().map(|r| r.to_string()).collect();
+        assert_eq!(rules, ["retries>1%", "restart"]);
+        assert_eq!(s.alert_interval, Duration::from_secs(5));
+        for (text, message) in [
+            (
+                "alerts = [\"retrys>1%\"]",
+                "[mqtt]: `alerts` alert rule `retrys>1%`, column 1: unknown statistic `retrys` (did you mean `retries`?)",
+            ),
+            ("alerts = \"restart\"", "[mqtt]: `alerts` must be a list of rules like \"retries>1%\""),
+            ("alert_interval_ms = 0", "[mqtt]: `alert_interval_ms` must be 1..=86400000"),
+        ] {
+            assert_eq!(parse(text).unwrap_err().to_string(), message, "{text}");
+        }
     }
 
     #[test]

@@ -5,8 +5,12 @@
 //! - [`pdu`]: the FMS PDUs (Initiate, Reject, Status, Identify, Get-OD,
 //!   Read, Write, Information-Report; confirmed request/response/error
 //!   with invoke ID) and their codec.
+//! - [`lli`]: the lower layer interface on master-slave relationships:
+//!   client and server state machines (connect, confirmed services,
+//!   release, connection monitoring) over FDL SRD.
 //!
 //! What is confirmed by which public source and what is marked
 //! (unverified): the module docs of [`pdu`] and `docs/fms.md`.
 
+pub mod lli;
 pub mod pdu;
