@@ -117,7 +117,7 @@ impl Control {
     pub fn open(path: &Path, readonly: bool, bus: &ProfiledBus) -> Result<Control> {
         let settings =
             profibus_gateway::MqttSettings::for_bus_file(bus.file.mqtt.as_ref(), &bus.file.path)
-                .with_context(|| bus.file.path.display().to_string())?;
+                .map_err(|e| e.in_bus_file(&bus.file))?;
         let server = ControlServer::bind(path)?;
         tracing::info!(path = %path.display(), readonly, "control socket open");
         Ok(Control {

@@ -69,7 +69,7 @@ pub fn run(args: Args) -> Result<()> {
         crate::out::errln!("dpctl gateway: warning: {w}");
     }
     let settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
     if args.opcua.is_some() || profiled.file.opcua.is_some() {
         return with_opcua(args, profiled, settings);
     }
@@ -79,7 +79,7 @@ pub fn run(args: Args) -> Result<()> {
         .or_else(|| settings.broker.clone())
         .context("no broker: give --mqtt mqtt://HOST:PORT (or mqtts://) or [mqtt] broker")?;
     profibus_gateway::traffic::check(&settings, &slave_infos(&profiled)?)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
     let conn = Connection::from_settings(&settings, &url)?;
     let sparkplug = args.sparkplug.clone().or(settings.sparkplug.clone());
     tracing::info!(
@@ -119,13 +119,16 @@ fn with_opcua(args: Args, profiled: ProfiledBus, settings: MqttSettings) -> Resu
         args.opcua_insecure,
         dir,
     )
-    .with_context(|| args.config.display().to_string())?;
+    .map_err(|e| match e.key_path() {
+        Some(key) => anyhow::Error::new(profiled.file.error_at(&key, e.to_string())),
+        None => anyhow::Error::new(e).context(args.config.display().to_string()),
+    })?;
     if args.sparkplug.is_some() || settings.sparkplug.is_some() {
         anyhow::bail!("--opcua goes with plain JSON topics, not with Sparkplug B");
     }
     let infos = slave_infos(&profiled)?;
     profibus_gateway::traffic::check(&settings, &infos)
-        .with_context(|| args.config.display().to_string())?;
+        .map_err(|e| e.in_bus_file(&profiled.file))?;
     let conn = (args.mqtt.clone().or_else(|| settings.broker.clone()))
         .map(|u| Connection::from_settings(&settings, &u))
         .transpose()?;
@@ -260,9 +263,11 @@ fn reload(
     running: Option<&toml::Table>,
 ) -> Result<(Option<toml::Table>, ops::Reload)> {
     let file = ProfiledBus::load(path)?;
-    let table = file.file.mqtt;
-    let settings = MqttSettings::for_bus_file(table.as_ref(), path)
-        .with_context(|| path.display().to_string())?;
+    let table = file.file.mqtt.clone();
+    let settings =
+        MqttSettings::for_bus_file(table.as_ref(), path).map_err(|e| e.in_bus_file(&file.file))?;
+    profibus_gateway::traffic::check(&settings, &slave_infos(&file)?)
+        .map_err(|e| e.in_bus_file(&file.file))?;
     let changes = ops::changes(running, table.as_ref());
     let fixed: Vec<&str> = changes
         .iter()

@@ -252,7 +252,7 @@ impl<S: Session> Operated<S> {
 
     fn take_reloads(&mut self) {
         while let Ok(r) = self.reloads.try_recv() {
-            *self.inner.settings_mut() = r.settings;
+            self.inner.reload(r.settings);
             match r.changes.is_empty() {
                 true => tracing::info!(target: TARGET, "reloaded [mqtt]: nothing changed"),
                 false => tracing::info!(
@@ -310,6 +310,9 @@ impl<S: Session> Session for Operated<S> {
     fn settings_mut(&mut self) -> &mut MqttSettings {
         self.inner.settings_mut()
     }
+    fn reload(&mut self, settings: MqttSettings) {
+        self.inner.reload(settings)
+    }
     fn link_setup(&self) -> LinkSetup {
         self.inner.link_setup()
     }
@@ -358,9 +361,9 @@ fn write_atomically(path: &std::path::Path, health: &Health) -> std::io::Result<
 }
 
 /// `[mqtt]` keys a running gateway cannot take: its connection (broker,
-/// identity, credentials), its topics and subscriptions, its mode, and
-/// what the core builds its per-slave state from at the start (the
-/// report-by-exception filters).
+/// identity, credentials), its topics and subscriptions, its mode. The
+/// report-by-exception keys (`min_interval_ms`, `deadband`,
+/// `[[mqtt.slave]]`) are taken ([`Session::reload`]).
 pub const RESTART_KEYS: &[&str] = &[
     "broker",
     "client_id",
@@ -375,9 +378,6 @@ pub const RESTART_KEYS: &[&str] = &[
     "job_timeout_ms",
     "version",
     "primary_host",
-    "min_interval_ms",
-    "deadband",
-    "slave",
 ];
 
 /// The keys of two `[mqtt]` tables that differ, as `key: old → new`

@@ -211,3 +211,165 @@ fn gateway_reloads_on_sighup_reports_health_and_stops_on_sigterm() {
         }
     }
 }
+
+/// The `ts` (publish time, wall ms) of the messages on `topic` published
+/// at or after `since`, waiting (within [`T`]) until there are `n`.
+fn published_since(lines: &mut Lines, topic: &str, since: u64, n: usize) -> Vec<u64> {
+    let ts = |lines: &Lines| -> Vec<u64> {
+        (lines.1.iter())
+            .filter_map(|l| l.split_once(' ').filter(|(t, _)| *t == topic))
+            .filter_map(|(_, p)| serde_json::from_str::<serde_json::Value>(p).ok()?["ts"].as_u64())
+            .filter(|ts| *ts >= since)
+            .collect()
+    };
+    let end = Instant::now() + T;
+    while ts(lines).len() < n {
+        if lines
+            .next_line(end.saturating_duration_since(Instant::now()))
+            .is_none()
+        {
+            panic!("only {} messages on {topic} since {since}", ts(lines).len());
+        }
+    }
+    ts(lines)[..n].to_vec()
+}
+
+fn wall_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis() as u64
+}
+
+/// SIGHUP takes the report-by-exception keys without a restart: a
+/// BK3000's noisy analog inputs (the simulation's sine waves change in
+/// every cycle) come at most every 250 ms on the defaults; after
+/// `deadband = 0` and `min_interval_ms = 0` every change is published
+/// (50 messages in well under the 12 s the defaults would take); after
+/// `[[mqtt.slave]] min_interval_ms = 1000` at most one a second.
+#[test]
+fn sighup_retunes_the_traffic_of_a_noisy_slave() {
+    let dir = TempDir::new("gateway-retune");
+    let port = free_port();
+    let _mosq = broker(&dir, port);
+    let bus_text = |mqtt: &str| {
+        format!(
+            "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 40\ndevice = \"bk3000\"\n\
+             terminals = [\"KL3102\", \"KL3102\", \"KL9010\"]\n\n[mqtt]\nbus = \"line\"\n{mqtt}"
+        )
+    };
+    let bus = write_bus(&dir, &bus_text(""));
+    let (_sub, mut lines) = mqtt::subscribe(
+        port,
+        &["-v", "-t", "profibus/line/#"],
+        &[],
+        "profibus/line/probe",
+    );
+    let mut gw = Proc::spawn(
+        "dpctl gateway",
+        Command::new("sh")
+            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
+            .arg(dpctl())
+            .args(["--log-format", "json", "gateway", "--config"])
+            .arg(&bus)
+            .arg("--sim")
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+            .env_remove("DPCTL_LOG")
+            .stdout(Stdio::piped()),
+    );
+    let mut log = Lines::from(&mut gw);
+    let topic = "profibus/line/40/inputs";
+    let ts = published_since(&mut lines, topic, 0, 5);
+    let gaps: Vec<u64> = ts.windows(2).skip(1).map(|w| w[1] - w[0]).collect();
+    assert!(gaps.iter().all(|g| *g >= 250), "defaults: {gaps:?}");
+
+    // Every change.
+    std::fs::write(&bus, bus_text("deadband = 0\nmin_interval_ms = 0\n")).unwrap();
+    gw.signal(1);
+    let l = logged(&mut log, "reloaded [mqtt]");
+    let m = l["message"].as_str().unwrap();
+    assert!(
+        m.contains("deadband: (none) → 0") && m.contains("min_interval_ms: (none) → 0"),
+        "{l}"
+    );
+    let since = wall_ms();
+    let ts = published_since(&mut lines, topic, since, 50);
+    let took = ts[49] - ts[0];
+    assert!(took < 5000, "50 messages took {took} ms");
+
+    // One a second for this slave.
+    std::fs::write(
+        &bus,
+        bus_text("deadband = 0\nmin_interval_ms = 0\n[[mqtt.slave]]\naddress = 40\nmin_interval_ms = 1000\n"),
+    )
+    .unwrap();
+    gw.signal(1);
+    assert!(
+        log.wait_for("slave: (none) → ", T),
+        "no reload of `slave`:\n{}",
+        log.1.join("\n")
+    );
+    let since = wall_ms();
+    let ts = published_since(&mut lines, topic, since, 3);
+    let gaps: Vec<u64> = ts.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(
+        gaps.iter().all(|g| (1000..4000).contains(g)),
+        "[[mqtt.slave]] min_interval_ms = 1000: {gaps:?}"
+    );
+    assert!(
+        !log.1
+            .iter()
+            .any(|l| l.contains("only change with a restart")),
+        "{}",
+        log.1.join("\n")
+    );
+}
+
+/// A bad `[mqtt]` or `[opcua]` setting is one line with the file, the
+/// line and the column of the key, then the message as before.
+#[test]
+fn bad_gateway_settings_name_their_line_and_column() {
+    let dir = TempDir::new("gateway-bad-at");
+    // echo_bus_text: `[mqtt]` on line 10, its keys from line 11.
+    for (mqtt, want) in [
+        (
+            "bus = \"line\"\nqos = 3\n",
+            "bus.toml:12:1: [mqtt]: `qos` must be 0, 1 or 2",
+        ),
+        (
+            "retain = true\n",
+            "bus.toml:11:1: [mqtt]: unknown key `retain`",
+        ),
+        (
+            "[[mqtt.slave]]\naddress = 3\n[[mqtt.slave]]\naddress = 3\n",
+            "bus.toml:13:1: [mqtt]: `slave` lists slave 3 twice",
+        ),
+        (
+            "[[mqtt.slave]]\naddress = 3\nchannels = { nope = 1 }\n",
+            "bus.toml:13:14: [mqtt]: `slave` slave 3 has no channel `nope`",
+        ),
+        (
+            "[[mqtt.slave]]\naddress = 9\n",
+            "bus.toml:12:1: [mqtt]: `slave` names slave 9, which the bus file does not have",
+        ),
+        (
+            "bus = \"line\"\n\n[opcua]\nanonymous = true\nsecurity = [\"none\"]\n",
+            "bus.toml:15:1: [opcua]: `security` `none` is only taken from the command line",
+        ),
+    ] {
+        let bus = write_bus(&dir, &echo_bus_text(mqtt));
+        let mut cmd = Command::new(dpctl());
+        cmd.args(["gateway", "--sim", "--config"])
+            .arg(&bus)
+            .args(["--mqtt", "mqtt://127.0.0.1:1"]);
+        let out = Proc::spawn_captured(cmd).finish(T);
+        assert!(!out.status.success(), "{mqtt}");
+        let lines: Vec<&str> = out.stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{mqtt}: {}", out.stderr);
+        assert!(
+            lines[0].starts_with("dpctl: ") && lines[0].contains(want),
+            "{mqtt}: want {want}\n{}",
+            out.stderr
+        );
+    }
+}

@@ -17,6 +17,7 @@
 //!     slave's state, data, diagnosis, cycle times, retries and errors,
 //!     and the masters in the token ring (`dpctl monitor`).
 //!   - [`scan`]: the live-list scanner behind `dpctl scan`.
+//! - [`fms`]: PROFIBUS-FMS PDUs (the BK3000's DP/FMS mixed mode).
 //! - [`config`]: configuration files — GSD files, the TOML bus file of a
 //!   master, and the helpers they share (file reading, closest names).
 
@@ -24,6 +25,7 @@
 
 pub mod class2;
 pub mod config;
+pub mod fms;
 pub mod master;
 pub mod monitor;
 pub mod pdu;

@@ -652,6 +652,15 @@ impl Session for Gateway {
     fn settings_mut(&mut self) -> &mut MqttSettings {
         &mut self.settings
     }
+    fn reload(&mut self, settings: MqttSettings) {
+        for e in &mut self.slaves {
+            let t = Traffic::of(&settings, &e.info);
+            let [fin, fout] = &mut e.filters;
+            fin.retune(t.filter(&e.info, Direction::Input));
+            fout.retune(t.filter(&e.info, Direction::Output));
+        }
+        self.settings = settings;
+    }
     fn link_setup(&self) -> LinkSetup {
         let will = Gateway::last_will(self);
         LinkSetup {

@@ -30,6 +30,13 @@ pub trait Session {
     /// published when, `writable`, the outage settings); the connection's
     /// (broker, client id, topics, QoS) need a new core.
     fn settings_mut(&mut self) -> &mut MqttSettings;
+    /// Take `settings` while running (`dpctl gateway` on SIGHUP): what
+    /// [`Session::settings_mut`] takes, and the traffic keys
+    /// (`min_interval_ms`, `deadband`, `[[mqtt.slave]]`) for the next
+    /// publish of every slave.
+    fn reload(&mut self, settings: MqttSettings) {
+        *self.settings_mut() = settings;
+    }
     /// What the connection needs of this core: subscriptions and wills.
     fn link_setup(&self) -> LinkSetup;
     /// The broker accepted the connection.

@@ -5,6 +5,7 @@
 
 use crate::field::Field;
 use crate::topics::SparkplugId;
+use profibus_dp::config::busfile::BusFileError;
 use serde::de::IgnoredAny;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -199,6 +200,43 @@ pub enum SettingsError {
     /// A broker URL that is not `mqtt://HOST[:PORT]` or `mqtts://HOST[:PORT]`.
     #[error("broker URL `{0}` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")]
     BadUrl(String),
+    /// `error` inside the table, at the dotted `path` (an entry of an
+    /// array by its 1-based number: `mqtt.slave.2.channels.ai1`); the
+    /// message is `error`'s.
+    #[error("{error}")]
+    At {
+        /// Where, from the bus file's root.
+        path: String,
+        /// What is wrong.
+        error: Box<SettingsError>,
+    },
+}
+
+impl SettingsError {
+    /// `self` at the dotted `path` (see [`SettingsError::At`]).
+    pub fn at(self, path: impl Into<String>) -> SettingsError {
+        SettingsError::At {
+            path: path.into(),
+            error: Box::new(self),
+        }
+    }
+
+    /// The dotted path of the key this error is about (`mqtt.qos`), for
+    /// its position in the bus file.
+    pub fn key_path(&self) -> String {
+        match self {
+            SettingsError::UnknownKey(k) => format!("mqtt.{k}"),
+            SettingsError::Bad { key, .. } => format!("mqtt.{key}"),
+            SettingsError::BadUrl(_) => "mqtt.broker".into(),
+            SettingsError::At { path, .. } => path.clone(),
+        }
+    }
+
+    /// This error as a bus-file error of `file`: `FILE:LINE:COL: …` at
+    /// the key it is about.
+    pub fn in_bus_file(&self, file: &profibus_dp::config::busfile::BusFile) -> BusFileError {
+        file.error_at(&self.key_path(), self.to_string())
+    }
 }
 
 /// The `[mqtt]` table as written.
@@ -302,18 +340,21 @@ fn min_interval(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, Se
     }
 }
 
-/// One `[[mqtt.slave]]` entry (the `i`th, from 1).
+/// One `[[mqtt.slave]]` entry (the `i`th, from 1); its errors are at
+/// `mqtt.slave.I.KEY`.
 fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError> {
     let at = format!("entry {i}: ");
+    let err =
+        |key: &str, problem: String| bad("slave", problem).at(format!("mqtt.slave.{i}.{key}"));
     if let Some(k) = t.keys().find(|k| !SLAVE_KEYS.contains(&k.as_str())) {
         let hint = did_you_mean(k, SLAVE_KEYS.iter().copied());
-        return Err(bad("slave", format!("{at}unknown key `{k}`{hint}")));
+        return Err(err(k, format!("{at}unknown key `{k}`{hint}")));
     }
     let address = match t.get("address") {
         Some(toml::Value::Integer(a @ 0..=125)) => *a as u8,
         _ => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "address",
                 format!("{at}needs `address`, a station address 0..=125"),
             ))
         }
@@ -322,16 +363,18 @@ fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError
         None => None,
         Some(toml::Value::Integer(ms @ 0..=86_400_000)) => Some(Duration::from_millis(*ms as u64)),
         Some(_) => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "min_interval_ms",
                 format!("{at}`min_interval_ms` must be 0..=86400000"),
             ))
         }
     };
-    let deadband_of = |v: &toml::Value, what: String| deadband(v, "slave", &what);
+    let deadband_of = |v: &toml::Value, what: String, key: String| {
+        deadband(v, "slave", &what).map_err(|e| e.at(format!("mqtt.slave.{i}.{key}")))
+    };
     let deadband = t
         .get("deadband")
-        .map(|v| deadband_of(v, format!("{at}`deadband` ")))
+        .map(|v| deadband_of(v, format!("{at}`deadband` "), "deadband".into()))
         .transpose()?;
     let channels = match t.get("channels") {
         None => vec![],
@@ -340,13 +383,17 @@ fn slave_traffic(i: usize, t: toml::Table) -> Result<SlaveTraffic, SettingsError
             .map(|(name, v)| {
                 Ok((
                     name.clone(),
-                    deadband_of(v, format!("{at}channel `{name}` "))?,
+                    deadband_of(
+                        v,
+                        format!("{at}channel `{name}` "),
+                        format!("channels.{name}"),
+                    )?,
                 ))
             })
             .collect::<Result<_, SettingsError>>()?,
         Some(_) => {
-            return Err(bad(
-                "slave",
+            return Err(err(
+                "channels",
                 format!("{at}`channels` must be a table of deadbands by channel name"),
             ))
         }
@@ -555,7 +602,8 @@ impl MqttSettings {
             .enumerate()
             .find(|(i, s)| slave_traffic[..*i].iter().any(|o| o.address == s.address))
         {
-            return Err(bad("slave", format!("lists slave {} twice", s.1.address)));
+            return Err(bad("slave", format!("lists slave {} twice", s.1.address))
+                .at(format!("mqtt.slave.{}", s.0 + 1)));
         }
         let primary_host = string(t.primary_host, "primary_host")?;
         if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
@@ -736,6 +784,32 @@ mod tests {
                     ("speed".into(), Deadband::Absolute(3.0)),
                 ],
             }]
+        );
+    }
+
+    /// Each error knows the key it is about (for its line and column in
+    /// the bus file); the message stays the key's.
+    #[test]
+    fn errors_name_their_key_path() {
+        let path = |text: &str| parse(text).unwrap_err().key_path();
+        assert_eq!(path("qos = 3"), "mqtt.qos");
+        assert_eq!(path("retain = 1"), "mqtt.retain");
+        assert_eq!(
+            path("[[slave]]\naddress = 3\naddres = 4"),
+            "mqtt.slave.1.addres"
+        );
+        assert_eq!(path("[[slave]]\nchannels = {}"), "mqtt.slave.1.address");
+        let e = parse("[[slave]]\naddress = 3\n[[slave]]\naddress = 4\nchannels = { ai = \"x\" }")
+            .unwrap_err();
+        assert_eq!(e.key_path(), "mqtt.slave.2.channels.ai");
+        assert!(
+            e.to_string()
+                .starts_with("[mqtt]: `slave` entry 2: channel `ai` must"),
+            "{e}"
+        );
+        assert_eq!(
+            path("[[slave]]\naddress = 3\n[[slave]]\naddress = 3"),
+            "mqtt.slave.2"
         );
     }
 

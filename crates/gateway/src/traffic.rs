@@ -116,7 +116,8 @@ impl Traffic {
 /// configured, each channel named one of the slave's (closest names
 /// otherwise) and not a bit or byte.
 pub fn check(s: &MqttSettings, infos: &[SlaveInfo]) -> Result<(), SettingsError> {
-    for t in &s.slave_traffic {
+    for (i, t) in s.slave_traffic.iter().enumerate() {
+        let entry = format!("mqtt.slave.{}", i + 1);
         let Some(info) = infos.iter().find(|i| i.layout.address == t.address) else {
             return Err(SettingsError::Bad {
                 key: "slave",
@@ -124,7 +125,8 @@ pub fn check(s: &MqttSettings, infos: &[SlaveInfo]) -> Result<(), SettingsError>
                     "names slave {}, which the bus file does not have",
                     t.address
                 ),
-            });
+            }
+            .at(format!("{entry}.address")));
         };
         let channels: Vec<&Channel> = info.channels.iter().flat_map(|m| &m.channels).collect();
         for (name, _) in &t.channels {
@@ -137,7 +139,8 @@ pub fn check(s: &MqttSettings, infos: &[SlaveInfo]) -> Result<(), SettingsError>
                             "slave {}: channel `{name}` is a {}, not an analog channel: it takes no deadband",
                             t.address, c.ty
                         ),
-                    })
+                    }
+                    .at(format!("{entry}.channels.{name}")))
                 }
                 None => {
                     let close = profibus_dp::config::names::closest(
@@ -151,7 +154,8 @@ pub fn check(s: &MqttSettings, infos: &[SlaveInfo]) -> Result<(), SettingsError>
                     return Err(SettingsError::Bad {
                         key: "slave",
                         problem: format!("slave {} has no channel `{name}`{hint}", t.address),
-                    });
+                    }
+                    .at(format!("{entry}.channels.{name}")));
                 }
             }
         }
@@ -232,6 +236,14 @@ impl ImageFilter {
     pub fn published(&mut self, img: &[u8], ts_ms: u64) {
         self.last = Some(img.to_vec());
         self.published_ms = ts_ms;
+    }
+
+    /// Take the minimum interval and deadbands of `fresh` (new settings,
+    /// `dpctl gateway` on SIGHUP), keeping what was published and seen:
+    /// the next publish follows the new rules from the last one.
+    pub fn retune(&mut self, fresh: ImageFilter) {
+        self.min_interval_ms = fresh.min_interval_ms;
+        self.analog = fresh.analog;
     }
 
     /// Forget what was published (a new connection publishes everything
@@ -347,6 +359,26 @@ mod tests {
         assert!(f.due(&img(0, 1, 0), 1));
         assert!(!f.due(&img(1, 0, 0), 1), "1 raw step of ai: within");
         assert!(f.due(&img(0, 0, 1), 1), "the counter: exact");
+    }
+
+    /// New settings (SIGHUP) change the rules from the next image on and
+    /// keep what was published: no image again at once.
+    #[test]
+    fn a_retuned_filter_keeps_what_was_published() {
+        let i = info();
+        let mut f = Traffic::of(&settings(""), &i).filter(&i, Direction::Input);
+        f.published(&img(0, 0, 0), 0);
+        assert!(!f.due(&img(328, 0, 0), 10), "within 0.2 V, too soon");
+        f.retune(
+            Traffic::of(&settings("deadband = 0\nmin_interval_ms = 0"), &i)
+                .filter(&i, Direction::Input),
+        );
+        assert!(!f.due(&img(0, 0, 0), 11), "the image published before");
+        assert!(f.due(&img(328, 0, 0), 12), "every change now");
+        f.published(&img(328, 0, 0), 12);
+        f.retune(Traffic::of(&settings("min_interval_ms = 1000"), &i).filter(&i, Direction::Input));
+        assert!(!f.due(&img(9000, 0, 0), 500), "1 s since the last publish");
+        assert!(f.due(&img(9000, 0, 0), 1012));
     }
 
     #[test]

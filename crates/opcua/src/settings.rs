@@ -78,6 +78,20 @@ pub enum SettingsError {
     NoLogin,
 }
 
+impl SettingsError {
+    /// The dotted path in the bus file of the key this error is about
+    /// (`opcua.security`), for its position; `None` for what is not in
+    /// the table (an endpoint from the command line, a users file's line).
+    pub fn key_path(&self) -> Option<String> {
+        match self {
+            SettingsError::UnknownKey(k) => Some(format!("opcua.{k}")),
+            SettingsError::Bad { key, .. } => Some(format!("opcua.{key}")),
+            SettingsError::NoLogin => Some("opcua".into()),
+            SettingsError::BadUrl(_) | SettingsError::Users(_) => None,
+        }
+    }
+}
+
 /// The `[opcua]` table as written.
 #[derive(Debug, Default, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -12,6 +12,7 @@
 //! - [`prm`]: User_Prm_Data and the coupler's diagnosis bytes.
 //! - [`master`]: the master side: Chk_Cfg and User_Prm_Data of a terminal
 //!   list, named channels decoded from and encoded into the image.
+//! - [`fms`]: the FMS object dictionary and KBL of the DP/FMS mixed mode.
 //! - [`Bk3000`]: the slave device.
 //!
 //! # Behaviour of the emulated coupler
@@ -40,6 +41,7 @@
 
 pub mod catalogue;
 pub mod commission;
+pub mod fms;
 pub mod image;
 pub mod master;
 pub mod plc;

@@ -305,6 +305,46 @@ pub struct BusFile {
     /// The `[opcua]` table as written, for the OPC UA server
     /// (`profibus-opcua` parses and checks it; this crate only carries it).
     pub opcua: Option<toml::Table>,
+    /// Where the keys of `[mqtt]` and `[opcua]` are, for the errors of
+    /// the crates that read those tables ([`BusFile::error_at`]).
+    pub positions: KeyPositions,
+}
+
+/// Where the keys of the tables a bus file carries raw (`[mqtt]`,
+/// `[opcua]`) are written: 1-based line and column by dotted path
+/// (`mqtt.deadband`; the entries of an array by their 1-based number,
+/// `mqtt.slave.2.channels.ai1`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct KeyPositions(BTreeMap<String, (usize, usize)>);
+
+impl KeyPositions {
+    /// The position of `path`, else of its closest enclosing key that
+    /// has one.
+    pub fn at(&self, path: &str) -> Option<(usize, usize)> {
+        let mut p = path;
+        loop {
+            if let Some(at) = self.0.get(p) {
+                return Some(*at);
+            }
+            p = &p[..p.rfind('.')?];
+        }
+    }
+}
+
+impl BusFile {
+    /// An error about the key at dotted `path` of a table the bus file
+    /// carries raw (`mqtt.slave.2.deadband`; see [`KeyPositions`]),
+    /// shown at the key (or its closest enclosing key) like every other
+    /// bus-file error: `FILE:LINE:COL: MESSAGE`.
+    pub fn error_at(&self, path: &str, message: impl Into<String>) -> BusFileError {
+        let (line, column) = self.positions.at(path).unwrap_or((0, 0));
+        BusFileError {
+            path: self.path.clone(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
 }
 
 /// What is wrong with a bus file, with its position.
@@ -345,20 +385,20 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
+    /// The 1-based line and column of byte `at` of the file.
+    fn line_col(&self, at: usize) -> (usize, usize) {
+        let upto = &self.text[..at.min(self.text.len())];
+        let line = upto.matches('\n').count() + 1;
+        let column = upto.len() - upto.rfind('\n').map_or(0, |i| i + 1) + 1;
+        (line, column)
+    }
+
     fn err(
         &self,
         span: Option<std::ops::Range<usize>>,
         message: impl Into<String>,
     ) -> BusFileError {
-        let (line, column) = match span {
-            Some(r) => {
-                let upto = &self.text[..r.start.min(self.text.len())];
-                let line = upto.matches('\n').count() + 1;
-                let column = upto.len() - upto.rfind('\n').map_or(0, |i| i + 1) + 1;
-                (line, column)
-            }
-            None => (0, 0),
-        };
+        let (line, column) = span.map_or((0, 0), |r| self.line_col(r.start));
         BusFileError {
             path: self.path.to_path_buf(),
             line,
@@ -638,7 +678,7 @@ impl BusFile {
         resolver: &dyn DeviceResolver,
     ) -> Result<BusFile, BusFileError> {
         let cx = Ctx { path, text };
-        let profile_options = cx.read_keys()?;
+        let (profile_options, positions) = cx.read_keys()?;
         let raw: RawFile = toml::from_str(text).map_err(|e| cx.err(e.span(), e.message()))?;
         let mut warnings = Vec::new();
         let (address, baud) = cx.master(&raw.master)?;
@@ -675,6 +715,7 @@ impl BusFile {
             warnings,
             mqtt: raw.mqtt,
             opcua: raw.opcua,
+            positions,
         })
     }
 }
@@ -727,21 +768,77 @@ impl Ctx<'_> {
     /// the typed read, so that a profile option given where a slave key
     /// of the same name goes gets its own message rather than the slave
     /// key's type error).
-    fn read_keys(&self) -> Result<Vec<toml::Table>, BusFileError> {
+    ///
+    /// Also returns where the keys of `[mqtt]` and `[opcua]` are.
+    fn read_keys(&self) -> Result<(Vec<toml::Table>, KeyPositions), BusFileError> {
         // The parsed document is dropped before the file is read again:
         // a large file costs one parse at a time.
+        let mut positions = KeyPositions::default();
         {
             let doc = toml_edit::ImDocument::parse(self.text)
                 .map_err(|e| self.err(e.span(), e.message().trim_end()))?;
             self.check_keys(doc.as_table())?;
+            let root = doc.as_table();
+            for name in ["mqtt", "opcua"] {
+                if let Some(item) = root.get(name) {
+                    self.record(&mut positions, name, key_at(root, name), item);
+                }
+            }
         }
         let tables: SlaveTables =
             toml::from_str(self.text).map_err(|e| self.err(e.span(), e.message()))?;
-        tables
+        let options = tables
             .slave
             .iter()
             .map(|t| self.profile_options(t))
-            .collect()
+            .collect::<Result<_, _>>()?;
+        Ok((options, positions))
+    }
+
+    /// Record where `path` (at `span`) and everything inside `item` are.
+    fn record(
+        &self,
+        out: &mut KeyPositions,
+        path: &str,
+        span: Option<std::ops::Range<usize>>,
+        item: &Item,
+    ) {
+        if let Some(r) = span {
+            out.0.insert(path.to_string(), self.line_col(r.start));
+        }
+        match item {
+            Item::ArrayOfTables(a) => {
+                for (i, t) in a.iter().enumerate() {
+                    let p = format!("{path}.{}", i + 1);
+                    if let Some(r) = t.span() {
+                        out.0.insert(p.clone(), self.line_col(r.start));
+                    }
+                    self.record_table(out, &p, t);
+                }
+            }
+            Item::Value(toml_edit::Value::Array(a)) => {
+                for (i, v) in a.iter().enumerate() {
+                    let p = format!("{path}.{}", i + 1);
+                    if let Some(r) = v.span() {
+                        out.0.insert(p.clone(), self.line_col(r.start));
+                    }
+                    if let Some(t) = v.as_inline_table() {
+                        self.record_table(out, &p, t);
+                    }
+                }
+            }
+            _ => {
+                if let Some(t) = item.as_table_like() {
+                    self.record_table(out, path, t);
+                }
+            }
+        }
+    }
+
+    fn record_table(&self, out: &mut KeyPositions, path: &str, t: &dyn TableLike) {
+        for (k, item) in t.iter() {
+            self.record(out, &format!("{path}.{k}"), key_at(t, k), item);
+        }
     }
 
     /// Step 2, the `[master]` table: its address and baud rate.
@@ -1259,6 +1356,42 @@ mod tests {
 
     fn load(text: &str) -> Result<BusFile, BusFileError> {
         BusFile::parse(&gsd_dir(), text)
+    }
+
+    /// The keys of the raw tables are found where they are written, in
+    /// `[mqtt]`, dotted, in `[[mqtt.slave]]` entries (by number) and in
+    /// inline tables; an unknown path falls back to the closest key.
+    #[test]
+    fn raw_tables_know_where_their_keys_are() {
+        let b = load(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n\n[mqtt]\nqos = 3\n  deadband = \"x\"\n\
+             [[mqtt.slave]]\naddress = 4\n[[mqtt.slave]]\naddress = 5\n\
+             channels = { \"1.KL3102.1\" = 0.5, ai = [] }\n\n[opcua]\nsecurity = 1\n",
+        )
+        .unwrap();
+        let at = |p: &str| b.positions.at(p);
+        assert_eq!(at("mqtt"), Some((5, 2)));
+        assert_eq!(at("mqtt.qos"), Some((6, 1)));
+        assert_eq!(at("mqtt.deadband"), Some((7, 3)));
+        assert_eq!(at("mqtt.slave.1"), Some((8, 1)));
+        assert_eq!(at("mqtt.slave.2.address"), Some((11, 1)));
+        assert_eq!(at("mqtt.slave.2.channels.1.KL3102.1"), Some((12, 14)));
+        assert_eq!(at("mqtt.slave.2.channels.ai"), Some((12, 34)));
+        assert_eq!(at("mqtt.slave.2.nothing"), Some((10, 1)));
+        assert_eq!(at("mqtt.nothing"), Some((5, 2)));
+        assert_eq!(at("opcua.security"), Some((15, 1)));
+        assert_eq!(at("nothing"), None);
+        let e = b.error_at("mqtt.qos", "[mqtt]: `qos` must be 0, 1 or 2");
+        assert!(
+            e.to_string()
+                .ends_with("bus.toml:6:1: [mqtt]: `qos` must be 0, 1 or 2"),
+            "{e}"
+        );
+        let e = b.error_at("nothing", "why");
+        assert!(e.to_string().ends_with("bus.toml: why"), "{e}");
+        // Dotted keys at the root.
+        let b = load("mqtt.qos = 3\n[master]\naddress = 2\nbaud = \"1.5M\"\n").unwrap();
+        assert_eq!(b.positions.at("mqtt.qos"), Some((1, 6)));
     }
 
     #[test]

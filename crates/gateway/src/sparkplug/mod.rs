@@ -573,6 +573,15 @@ impl Session for EdgeNode {
     fn settings_mut(&mut self) -> &mut MqttSettings {
         &mut self.settings
     }
+    fn reload(&mut self, settings: MqttSettings) {
+        for e in &mut self.devices {
+            let t = Traffic::of(&settings, &e.device.info);
+            let [fin, fout] = &mut e.filters;
+            fin.retune(t.filter(&e.device.info, Direction::Input));
+            fout.retune(t.filter(&e.device.info, Direction::Output));
+        }
+        self.settings = settings;
+    }
 
     /// QoS 0 for everything but the will (QoS 1); subscribed to NCMD and
     /// DCMD; the will is the NDEATH with the bdSeq of each attempt.
