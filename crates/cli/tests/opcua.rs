@@ -200,12 +200,9 @@ fn opcua_survives_a_client_killed_mid_subscription_and_50_clients() {
     assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
 }
 
-#[test]
-fn opcua_default_security_takes_users_and_refuses_anonymous_and_none() {
-    let dir = TempDir::new("opcua-secure");
-    std::fs::write(dir.path("users"), "operator:s3cret\n").unwrap();
-    // A client certificate of its own: the server trusts client
-    // certificates only when told to (`trust_client_certs`).
+/// A self-signed client certificate and its key for asyncua, made in
+/// `dir`.
+fn client_cert(dir: &TempDir) -> (PathBuf, PathBuf) {
     let cert = dir.path("client.der");
     let key = dir.path("client.pem");
     let gen = Command::new(python())
@@ -224,6 +221,47 @@ fn opcua_default_security_takes_users_and_refuses_anonymous_and_none() {
         .status()
         .unwrap();
     assert!(gen.success(), "client certificate");
+    (cert, key)
+}
+
+/// Under the default settings a client certificate the server does not
+/// know is refused (and kept in `rejected/`); moved to `trusted/`, as
+/// docs/opcua.md says, it is accepted without a
+/// restart.
+#[test]
+fn opcua_refuses_an_untrusted_client_certificate_until_it_is_trusted() {
+    let dir = TempDir::new("opcua-untrusted");
+    let (cert, key) = client_cert(&dir);
+    let (gw, url) = gateway(&dir, "[opcua]\nanonymous = true\n", &[]);
+    let args = ["cert", cert.to_str().unwrap(), key.to_str().unwrap()];
+    let v = client(&url, &args);
+    assert_ne!(v["result"], "accepted", "{v}");
+    let pki = dir.path("xdg/dpctl/opcua/pki");
+    let rejected: Vec<PathBuf> = std::fs::read_dir(pki.join("rejected"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    assert_eq!(
+        rejected.len(),
+        1,
+        "the refused certificate is kept: {rejected:?}"
+    );
+    let trusted = pki.join("trusted");
+    std::fs::create_dir_all(&trusted).unwrap();
+    let name = rejected[0].file_name().unwrap();
+    std::fs::rename(&rejected[0], trusted.join(name)).unwrap();
+    let v = client(&url, &args);
+    assert_eq!(v["result"], "accepted", "{v}");
+    let out = gw.stop();
+    assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
+}
+
+#[test]
+fn opcua_default_security_takes_users_and_refuses_anonymous_and_none() {
+    let dir = TempDir::new("opcua-secure");
+    std::fs::write(dir.path("users"), "operator:s3cret\n").unwrap();
+    // A client certificate of its own: the server trusts client
+    // certificates only when told to (`trust_client_certs`).
+    let (cert, key) = client_cert(&dir);
     let (gw, url) = gateway(
         &dir,
         "[opcua]\nusers_file = \"users\"\ntrust_client_certs = true\n",
@@ -336,7 +374,10 @@ fn opcua_alarm_events_and_im0_identity_of_a_dpv1_slave() {
     let client = Proc::spawn_captured(cmd);
     if client.stdout_line(T).as_deref() != Some("subscribed") {
         let out = client.finish(T);
-        panic!("the client did not subscribe:\n{}\n{}", out.stdout, out.stderr);
+        panic!(
+            "the client did not subscribe:\n{}\n{}",
+            out.stdout, out.stderr
+        );
     }
     common::send(&mut slave, "alarm plug 3 appears");
     let out = client.finish(T);
@@ -359,7 +400,10 @@ fn opcua_alarm_events_and_im0_identity_of_a_dpv1_slave() {
     assert!(e["sequence_number"].as_u64().unwrap() < 32, "{v}");
     let msg = e["message"].as_str().unwrap();
     assert!(msg.contains("plug") && msg.contains("slot 3"), "{v}");
-    assert!(e["event_type"].as_str().unwrap().contains("DpAlarmEventType"));
+    assert!(e["event_type"]
+        .as_str()
+        .unwrap()
+        .contains("DpAlarmEventType"));
     assert_eq!(v["server_events"], 1, "once on the Server object: {v}");
     let out = gw.stop();
     assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
@@ -390,10 +434,9 @@ fn opcua_access_levels_follow_a_reload_of_writable() {
     assert_eq!(before["control1"]["access_level"], 1, "{before}");
     assert_ne!(before["control1"]["write"], "Good", "{before}");
     let bus = dir.path("bus.toml");
-    let text = std::fs::read_to_string(&bus).unwrap().replace(
-        r#"channels = ["setpoint1"]"#,
-        r#"channels = ["control1"]"#,
-    );
+    let text = std::fs::read_to_string(&bus)
+        .unwrap()
+        .replace(r#"channels = ["setpoint1"]"#, r#"channels = ["control1"]"#);
     assert!(text.contains(r#"channels = ["control1"]"#));
     std::fs::write(&bus, text).unwrap();
     gw.signal(1);

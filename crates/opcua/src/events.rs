@@ -207,7 +207,10 @@ mod tests {
         );
         assert_eq!(field(2, "Acknowledged"), Variant::Boolean(true));
         assert_eq!(field(0, "Severity"), Variant::UInt16(400));
-        assert_eq!(field(0, "SourceNode"), Variant::from(NodeId::new(2, "line.9")));
+        assert_eq!(
+            field(0, "SourceNode"),
+            Variant::from(NodeId::new(2, "line.9"))
+        );
         assert_eq!(
             field(0, "Message"),
             Variant::from(LocalizedText::new("", "plug alarm slot 3"))

@@ -16,10 +16,10 @@
 
 use crate::identity::Identities;
 use crate::space::{access_levels, Sampler, SlaveNodes, Update};
-use profibus_gateway::WriteAccess;
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
 use profibus_gateway::topics::Service;
+use profibus_gateway::WriteAccess;
 use profibus_gateway::{Gateway, LinkSetup, MqttSettings, Publish, Session};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc;

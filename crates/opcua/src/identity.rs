@@ -43,7 +43,7 @@ enum Read {
     /// Not yet in Data_Exchange.
     Waiting,
     /// Jobs of the master run.
-    Running(C1Records<Im0Only>),
+    Running(Box<C1Records<Im0Only>>),
     /// Read (its values shown) or given up (logged).
     Done,
 }
@@ -96,7 +96,9 @@ impl Identities {
             };
             let in_dx = m.slave(h).state == SlaveState::DataExchange;
             let mut task = match std::mem::replace(&mut s.read, Read::Done) {
-                Read::Waiting if in_dx => C1Records::new(s.address, Im0Only(ImReader::new(0, None))),
+                Read::Waiting if in_dx => {
+                    Box::new(C1Records::new(s.address, Im0Only(ImReader::new(0, None))))
+                }
                 Read::Running(t) => t,
                 r => {
                     s.read = r;

@@ -169,15 +169,14 @@ impl OpcuaServer {
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<ToServer>();
         let subs = handle.subscriptions().clone();
         let nm2 = nm.clone();
-        let sources: std::collections::HashMap<u8, (opcua::types::NodeId, String)> = (space
-            .slaves
-            .iter())
-        .zip(&slaves)
-        .map(|(n, info)| {
-            let name = format!("{} {}", n.address, info.layout.name);
-            (n.address, (n.object.clone(), name))
-        })
-        .collect();
+        let sources: std::collections::HashMap<u8, (opcua::types::NodeId, String)> =
+            (space.slaves.iter())
+                .zip(&slaves)
+                .map(|(n, info)| {
+                    let name = format!("{} {}", n.address, info.layout.name);
+                    (n.address, (n.object.clone(), name))
+                })
+                .collect();
         let thread = std::thread::Builder::new()
             .name("opcua-server".into())
             .spawn(move || {

@@ -578,7 +578,11 @@ pub fn can_write(writable: &[WriteAccess], address: u8, channel: &str) -> bool {
     writable
         .iter()
         .find(|w| w.address == address)
-        .is_some_and(|w| w.channels.as_ref().is_none_or(|c| c.iter().any(|n| n == channel)))
+        .is_some_and(|w| {
+            w.channels
+                .as_ref()
+                .is_none_or(|c| c.iter().any(|n| n == channel))
+        })
 }
 
 /// The access levels of `slaves`' output variables under `writable`:
