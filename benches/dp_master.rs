@@ -2,19 +2,23 @@
 //!
 //! (a)  Data_Exchange transactions per second with one slave over a socat
 //!      pty pair and through an unpaced `dpctl bus`: `dpctl master`
-//!      (default, `--busy-poll 300`, `--gather`, with several poll
-//!      cycles per token visit, `alone_hold_bits = 3000`, and
-//!      `--anticipate 100`) and pyprofibus's master
+//!      (default: several poll cycles per token visit while the token
+//!      hold time lasts; `--busy-poll 300`, `--gather`,
+//!      `alone_hold_bits = 3000`, `alone_hold_bits = 0` (the token after
+//!      every poll cycle) and `--anticipate 100`) and pyprofibus's master
 //!      against the same `dpctl slave`, next to the raw round trip of the
 //!      same path (a bare echo of a 13-byte telegram) as the physical
-//!      limit, with CPU seconds per 10 000 exchanges of each master.
+//!      limit, with CPU seconds per 10 000 exchanges of each master;
+//!      every row with its ratio to its line-timing floor.
 //! (a') CPU cost of the master core per Data_Exchange in process (an FDL
 //!      active station with the DP master against a canned responder),
 //!      next to pyprofibus's master on its in-process dummy PHY.
-//! (b)  4 and 32 slaves on an unpaced `dpctl bus`: all exchanges per
-//!      second against the line-timing floors, by default (the token
-//!      held alone) and with `alone_hold_bits = 0` (the token after
-//!      every poll cycle).
+//! (b)  4 and 32 slaves on an unpaced `dpctl bus` and over a socat pty
+//!      pair: all exchanges per second against the line-timing floors,
+//!      by default (the token held alone) and with `alone_hold_bits = 0`
+//!      (the token after every poll cycle). A tty has one reader, so on
+//!      the pty pair one thread of this bench answers for all n slaves
+//!      (the slave cores of `dpctl slave`, `PassiveStation<DpSlave>`).
 //! (c)  Resident memory of `dpctl master` with 125 configured slaves.
 //!
 //! Run: `cargo bench --bench dp_master` (needs socat and the .venv of
@@ -259,44 +263,56 @@ fn dpctl_rate(
 /// `dpctl master` with `n` slaves (addresses 8..) on an unpaced `dpctl
 /// bus` of n + 1 links: Data_Exchange transactions per second of all
 /// slaves together in the steady state (every slave in Data_Exchange).
-fn dpctl_rate_n(dpctl: &Path, dir: &Path, n: u8, secs: f64, options: &str) -> f64 {
-    let prefix = dir.join(format!("n{n}h"));
-    for i in 0..=n {
-        let _ = std::fs::remove_file(format!("{}{i}", prefix.display()));
-    }
-    let _hub = Kill(
-        Command::new(dpctl)
-            .args(["bus", "--stations", &(n + 1).to_string(), "--link"])
-            .arg(&prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let link = |i: u8| PathBuf::from(format!("{}{i}", prefix.display()));
-    let end = std::time::Instant::now() + Duration::from_secs(10);
-    while !(0..=n).all(|i| link(i).exists()) {
-        assert!(std::time::Instant::now() < end, "no bus links");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+fn dpctl_rate_n(dpctl: &Path, dir: &Path, kind: &Line, n: u8, secs: f64, options: &str) -> f64 {
     let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
-    let _slaves: Vec<Kill> = (0..n)
-        .map(|k| {
-            Kill(
+    let prefix = dir.join(format!("n{n}h"));
+    let link = |i: u8| PathBuf::from(format!("{}{i}", prefix.display()));
+    // What keeps the line and the slaves alive.
+    let mut _keep: Vec<Kill> = vec![];
+    let mut _responder = None;
+    let master_port = match kind {
+        Line::Hub => {
+            for i in 0..=n {
+                let _ = std::fs::remove_file(link(i));
+            }
+            _keep.push(Kill(
                 Command::new(dpctl)
-                    .args(["slave", "--baud", "1.5M", "--addr", &(8 + k).to_string()])
-                    .arg("--port")
-                    .arg(link(k + 1))
-                    .arg("--gsd")
-                    .arg(&gsd)
-                    .args(["--module", "2 words in/out"])
+                    .args(["bus", "--stations", &(n + 1).to_string(), "--link"])
+                    .arg(&prefix)
                     .stdout(Stdio::null())
                     .stderr(Stdio::null())
                     .spawn()
                     .unwrap(),
-            )
-        })
-        .collect();
+            ));
+            let end = std::time::Instant::now() + Duration::from_secs(10);
+            while !(0..=n).all(|i| link(i).exists()) {
+                assert!(std::time::Instant::now() < end, "no bus links");
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            for k in 0..n {
+                _keep.push(Kill(
+                    Command::new(dpctl)
+                        .args(["slave", "--baud", "1.5M", "--addr", &(8 + k).to_string()])
+                        .arg("--port")
+                        .arg(link(k + 1))
+                        .arg("--gsd")
+                        .arg(&gsd)
+                        .args(["--module", "2 words in/out"])
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .spawn()
+                        .unwrap(),
+                ));
+            }
+            link(0)
+        }
+        Line::Socat => {
+            let (a, b, k) = line(dpctl, dir, kind, &format!("n{n}s"));
+            _keep.push(k);
+            _responder = Some(Responder::start(&b, n));
+            a
+        }
+    };
     let mut text = format!(
         "[master]\naddress = 2\nbaud = \"1.5M\"\n[bus]\nhsa = 2\ngap_factor = 100\n[options]\n{options}\n"
     );
@@ -312,7 +328,7 @@ fn dpctl_rate_n(dpctl: &Path, dir: &Path, n: u8, secs: f64, options: &str) -> f6
     let mut child = Kill(
         Command::new(dpctl)
             .args(["master", "--json", "--interval", "100", "--port"])
-            .arg(link(0))
+            .arg(&master_port)
             .arg("--config")
             .arg(&cfg)
             .stdout(Stdio::piped())
@@ -349,6 +365,116 @@ fn dpctl_rate_n(dpctl: &Path, dir: &Path, n: u8, secs: f64, options: &str) -> f6
     match (rows.first(), rows.last()) {
         (Some(first), Some(last)) if last.0 > first.0 => (last.1 - first.1) / (last.0 - first.0),
         _ => 0.0,
+    }
+}
+
+/// `n` generic slaves (addresses 8..) answering on one end of a pty
+/// pair, in a thread of this process: the slave cores of `dpctl slave`
+/// fed from one reader (a tty has one), spinning while an answer is due
+/// within 2 ms, otherwise waiting in `ppoll`.
+struct Responder {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Responder {
+    fn start(far: &Path, n: u8) -> Responder {
+        use profibus::devices::generic::InputPattern;
+        use profibus::dp::config::gsd::{Gsd, ParseOptions};
+        use profibus::fdl::station::passive::PassiveStation;
+        use std::os::fd::AsFd;
+        use std::sync::atomic::Ordering;
+        let text =
+            std::fs::read_to_string(repo().join("crates/devices/gsd/DPCTL_GEN.GSD")).unwrap();
+        let gsd = Gsd::parse(&text, ParseOptions::default()).unwrap().gsd;
+        let mut b = profibus_plant::Plant::builder()
+            .baud(Baud::B1500000)
+            .master(2);
+        for k in 0..n {
+            b = b
+                .generic(
+                    8 + k,
+                    &format!("s{k}"),
+                    &gsd,
+                    &["2 words in/out"],
+                    InputPattern::Echo,
+                )
+                .unwrap();
+        }
+        let params = BusParams::defaults(Baud::B1500000);
+        // The pty allowance of `dpctl slave` (5 ms).
+        let mut slaves: Vec<_> = b
+            .stations()
+            .unwrap()
+            .slaves
+            .into_iter()
+            .map(|(_, st)| {
+                PassiveStation::with_latency_allowance(
+                    st.into_app(),
+                    params,
+                    Duration::from_millis(5),
+                )
+            })
+            .collect();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = stop.clone();
+        let mut tty = raw_tty(far);
+        let thread = std::thread::spawn(move || {
+            use nix::poll::{PollFd, PollFlags};
+            use nix::sys::time::TimeSpec;
+            let t0 = std::time::Instant::now();
+            let clock = || Instant::from_nanos(t0.elapsed().as_nanos() as u64);
+            let mut buf = [0u8; 512];
+            while !flag.load(Ordering::Relaxed) {
+                let now = clock();
+                let next = slaves.iter().filter_map(|s| s.poll_timeout()).min();
+                let wait = match next {
+                    Some(d) if d.saturating_duration_since(now) < Duration::from_millis(2) => {
+                        Duration::ZERO
+                    }
+                    _ => Duration::from_millis(1),
+                };
+                let readable = {
+                    let mut fds = [PollFd::new(tty.as_fd(), PollFlags::POLLIN)];
+                    nix::poll::ppoll(&mut fds, Some(TimeSpec::from_duration(wait)), None)
+                        .unwrap_or(0)
+                        > 0
+                };
+                if readable {
+                    let Ok(k) = tty.read(&mut buf) else {
+                        break;
+                    };
+                    let now = clock();
+                    for s in &mut slaves {
+                        s.handle_rx(now, &buf[..k]);
+                    }
+                }
+                let now = clock();
+                for s in &mut slaves {
+                    if s.poll_timeout().is_some_and(|d| d <= now) {
+                        s.handle_timeout(now);
+                    }
+                    while let Some(bytes) = s.poll_transmit(now) {
+                        if tty.write_all(bytes).is_err() {
+                            return;
+                        }
+                    }
+                }
+            }
+        });
+        Responder {
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Responder {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
 
@@ -579,7 +705,7 @@ fn main() {
             Line::Socat => "a socat pty pair",
             Line::Hub => "dpctl bus (unpaced)",
         };
-        let mut rows: Vec<[Rate; 7]> = vec![];
+        let mut rows: Vec<[Rate; 8]> = vec![];
         for _ in 0..rounds {
             let raw = Rate {
                 per_s: raw_echo_rate(&dpctl, &dir, &kind, n),
@@ -590,14 +716,15 @@ fn main() {
             let gather = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--gather"], "");
             let each = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 3000");
             let ant = dpctl_rate(&dpctl, &dir, &kind, 2.5, &["--anticipate", "100"], "");
+            let zero = dpctl_rate(&dpctl, &dir, &kind, 2.5, &[], "alone_hold_bits = 0");
             let py = pyprofibus_rate(&dpctl, &dir, &kind, n);
             println!(
-                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), --anticipate 100 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
+                "  round ({name}): raw {:.0}/s, dpctl master {:.0}/s ({:.2} s CPU/10k), --busy-poll 300 {:.0}/s ({:.2} s), --gather {:.0}/s ({:.2} s), alone_hold_bits = 3000 {:.0}/s ({:.2} s), --anticipate 100 {:.0}/s ({:.2} s), alone_hold_bits = 0 {:.0}/s ({:.2} s), pyprofibus {:.0}/s ({:.2} s)",
                 raw.per_s, ours.per_s, ours.cpu_per_10k, busy.per_s, busy.cpu_per_10k,
                 gather.per_s, gather.cpu_per_10k, each.per_s, each.cpu_per_10k, ant.per_s,
-                ant.cpu_per_10k, py.per_s, py.cpu_per_10k
+                ant.cpu_per_10k, zero.per_s, zero.cpu_per_10k, py.per_s, py.cpu_per_10k
             );
-            rows.push([raw, ours, busy, gather, py, each, ant]);
+            rows.push([raw, ours, busy, gather, py, each, ant, zero]);
         }
         let median = |i: usize, cpu: bool| {
             let mut v: Vec<f64> = rows
@@ -611,8 +738,9 @@ fn main() {
         // The fastest a master can poll while keeping the line timing: the
         // raw round trip plus the slave's min TSDR before its answer and
         // the master's TID1 (TSYN + safety margin) before its next request.
-        // With a token to itself after every poll cycle (the default) the
-        // token (3 characters) and a second TID1 come on top.
+        // With a token to itself after every poll cycle
+        // (`alone_hold_bits = 0`) the token (3 characters) and a second
+        // TID1 come on top.
         let p = BusParams::defaults(Baud::B1500000);
         let gaps = p.bits((p.min_tsdr + p.tid1()) as u64).as_secs_f64();
         let floor = 1.0 / (1.0 / raw + gaps);
@@ -622,39 +750,50 @@ fn main() {
         let token_floor = 1.0 / (1.0 / raw + token_gaps);
         println!("(a) Data_Exchange over {name}, 1 slave, medians of {rounds} rounds");
         println!(
-            "| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 | vs floor |"
+            "| peer | transactions/s | vs raw | vs pyprofibus | CPU s per 10 000 | vs its floor |"
         );
         println!("|---|---|---|---|---|---|");
-        println!("| raw round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | | |");
         println!(
-            "| line-timing floor (raw + min TSDR + TID1 = {:.1} µs) | {floor:.0} | {:.0} % | {:.2}× | |",
+            "| raw round trip (bare echo, 13 bytes) | {raw:.0} | 100 % | | | {:.0} % (F) |",
+            100.0 * raw / floor
+        );
+        println!(
+            "| F: line-timing floor, several cycles per token visit (raw + min TSDR + TID1 = {:.1} µs) | {floor:.0} | {:.0} % | {:.2}× | | 100 % |",
             gaps * 1e6,
             100.0 * floor / raw,
             floor / py
         );
         println!(
-            "| line-timing floor, token to itself every cycle (raw + {:.1} µs) | {token_floor:.0} | {:.0} % | {:.2}× | |",
+            "| T: line-timing floor, token to itself every cycle (raw + {:.1} µs) | {token_floor:.0} | {:.0} % | {:.2}× | | 100 % |",
             token_gaps * 1e6,
             100.0 * token_floor / raw,
             token_floor / py
         );
-        for (i, label) in [
-            (1, "dpctl master"),
-            (2, "dpctl master --busy-poll 300"),
-            (3, "dpctl master --gather (benchmark option)"),
-            (5, "dpctl master, alone_hold_bits = 3000"),
-            (6, "dpctl master --anticipate 100"),
-            (4, "pyprofibus 1.13 master"),
+        for (i, label, token_every_cycle) in [
+            (1, "dpctl master (default)", false),
+            (2, "dpctl master --busy-poll 300", false),
+            (3, "dpctl master --gather (benchmark option)", false),
+            (5, "dpctl master, alone_hold_bits = 3000", false),
+            (6, "dpctl master --anticipate 100", false),
+            (7, "dpctl master, alone_hold_bits = 0", true),
+            // pyprofibus passes no token and keeps no TSYN: F is the
+            // floor of a master that keeps the line timing.
+            (4, "pyprofibus 1.13 master", false),
         ] {
             let r = median(i, false);
-            // Each row against the floor of several cycles per token
-            // visit (a lone master holds the token by default).
+            // Each row against its floor: F when the token is held for
+            // several cycles per visit, T with the token every cycle.
+            let (f, tag) = if token_every_cycle {
+                (token_floor, "T")
+            } else {
+                (floor, "F")
+            };
             println!(
-                "| {label} | {r:.0} | {:.0} % | {:.2}× | {:.2} | {:.0} % |",
+                "| {label} | {r:.0} | {:.0} % | {:.2}× | {:.2} | {:.0} % ({tag}) |",
                 100.0 * r / raw,
                 r / py,
                 median(i, true),
-                100.0 * r / floor
+                100.0 * r / f
             );
         }
         println!();
@@ -668,22 +807,28 @@ fn main() {
     let gaps = p.bits((p.min_tsdr + p.tid1()) as u64).as_secs_f64();
     let token =
         p.bits(p.tid1() as u64).as_secs_f64() + Baud::B1500000.chars_to_duration(3).as_secs_f64();
-    println!("(b) Data_Exchange over dpctl bus (unpaced), n slaves, all together");
-    println!("| slaves | raw | floor | floor, token every cycle | dpctl master | vs floor | alone_hold_bits = 0 | vs its floor |");
-    println!("|---|---|---|---|---|---|---|---|");
-    for n in [4u8, 32] {
-        let raw = raw_echo_rate(&dpctl, &dir, &Line::Hub, 3000);
-        let floor = 1.0 / (1.0 / raw + gaps);
-        let per_cycle = n as f64 * (1.0 / raw + gaps) + token;
-        let token_floor = n as f64 / per_cycle;
-        let secs = if n > 8 { 6.0 } else { 3.0 };
-        let ours = dpctl_rate_n(&dpctl, &dir, n, secs, "");
-        let each = dpctl_rate_n(&dpctl, &dir, n, secs, "alone_hold_bits = 0");
-        println!(
-            "| {n} | {raw:.0} | {floor:.0} | {token_floor:.0} | {ours:.0} | {:.0} % | {each:.0} | {:.0} % |",
-            100.0 * ours / floor,
-            100.0 * each / token_floor
-        );
+    println!("(b) Data_Exchange with n slaves, all together (one round)");
+    println!("| line | slaves | raw | F: floor | T: floor, token every cycle | dpctl master (default) | vs F | alone_hold_bits = 0 | vs T |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for kind in [Line::Socat, Line::Hub] {
+        let name = match kind {
+            Line::Socat => "socat pty pair",
+            Line::Hub => "dpctl bus (unpaced)",
+        };
+        for n in [4u8, 32] {
+            let raw = raw_echo_rate(&dpctl, &dir, &kind, 3000);
+            let floor = 1.0 / (1.0 / raw + gaps);
+            let per_cycle = n as f64 * (1.0 / raw + gaps) + token;
+            let token_floor = n as f64 / per_cycle;
+            let secs = if n > 8 { 6.0 } else { 3.0 };
+            let ours = dpctl_rate_n(&dpctl, &dir, &kind, n, secs, "");
+            let each = dpctl_rate_n(&dpctl, &dir, &kind, n, secs, "alone_hold_bits = 0");
+            println!(
+                "| {name} | {n} | {raw:.0} | {floor:.0} | {token_floor:.0} | {ours:.0} | {:.0} % | {each:.0} | {:.0} % |",
+                100.0 * ours / floor,
+                100.0 * each / token_floor
+            );
+        }
     }
     println!();
 

@@ -8,6 +8,7 @@ use crate::ops::{self, Operated, ReloadSender, Stopping};
 use anyhow::{Context, Result};
 use profibus_devices::bus::ProfiledBus;
 use profibus_dp::master::DpMaster;
+use profibus_dp::monitor::alert::AlertRule;
 use profibus_gateway::sim::slave_infos;
 use profibus_gateway::{
     link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
@@ -58,6 +59,14 @@ pub struct Args {
     /// Basic256Sha256 Sign and SignAndEncrypt.
     #[arg(long)]
     opcua_insecure: bool,
+    /// Publish an alert when RULE holds for a slave over an interval
+    /// (`[mqtt] alert_interval_ms`, default 1 s), on
+    /// `<prefix>/<bus>/alert` (Sparkplug B: node metric `Bus/Alert`);
+    /// repeatable, added to `[mqtt] alerts`. RULE as in `dpctl sniff
+    /// --alert`: `[ADDR:]STATISTIC [OP VALUE[%|ms|us|s]]` on the master's
+    /// counters, e.g. `no_answer>0`, `retries>1%`, `restart`, `health<80`.
+    #[arg(long, value_name = "RULE", value_parser = AlertRule::parse)]
+    alert: Vec<AlertRule>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -68,8 +77,9 @@ pub fn run(args: Args) -> Result<()> {
     for w in &profiled.file.warnings {
         crate::out::errln!("dpctl gateway: warning: {w}");
     }
-    let settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
+    let mut settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
         .map_err(|e| e.in_bus_file(&profiled.file))?;
+    settings.alerts.extend(args.alert.iter().cloned());
     if args.opcua.is_some() || profiled.file.opcua.is_some() {
         return with_opcua(args, profiled, settings);
     }
@@ -200,7 +210,7 @@ fn serve<S: Session + Send + 'static>(
     let shared = gw.stopped_handle();
     let rt = common::runtime()?;
     let result = rt.block_on(async move {
-        reload_on_sighup(&args.config, &profiled, reloads)?;
+        reload_on_sighup(&args.config, &args.alert, &profiled, reloads)?;
         let link = MqttLink::connect(&conn, &gw);
         let shutdown = stop(stopping);
         match &args.port {
@@ -230,17 +240,20 @@ async fn stop(stopping: Stopping) {
 /// keeps running either way.
 fn reload_on_sighup(
     path: &std::path::Path,
+    alerts: &[AlertRule],
     profiled: &ProfiledBus,
     reloads: ReloadSender,
 ) -> Result<()> {
     use tokio::signal::unix::{signal, SignalKind};
     let mut hup = signal(SignalKind::hangup()).context("installing the SIGHUP handler")?;
     let path = path.to_path_buf();
+    let alerts = alerts.to_vec();
     let mut running = profiled.file.mqtt.clone();
     tokio::spawn(async move {
         while hup.recv().await.is_some() {
             match reload(&path, running.as_ref()) {
-                Ok((table, r)) => {
+                Ok((table, mut r)) => {
+                    r.settings.alerts.extend(alerts.iter().cloned());
                     running = table;
                     if reloads.send(r).is_err() {
                         return;

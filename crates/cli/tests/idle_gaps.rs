@@ -385,7 +385,10 @@ fn poll_idle_framing_slave(
              [options]\n{}\n\
              [[slave]]\naddress = {SLAVE}\ngsd = \"{}\"\nmodules = [\"2 words in/out\"]\n",
             baud.bps(),
-            if hold { "alone_hold_bits = 3000" } else { "" },
+            // `hold`: the default, a lone master holds the token for
+            // several poll cycles per visit; else the token after every
+            // cycle (the token→request gap in every cycle).
+            if hold { "" } else { "alone_hold_bits = 0" },
             repo().join("crates/devices/gsd/DPCTL_GEN.GSD").display()
         ),
     )

@@ -367,6 +367,17 @@ impl Device for IdentityDevice {
     fn prm_refused(&mut self, now: Instant, reason: &Reason) {
         self.inner.prm_refused(now, reason)
     }
+    fn fdl_request(
+        &mut self,
+        now: Instant,
+        from: u8,
+        dsap: u8,
+        ssap: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Option<usize> {
+        self.inner.fdl_request(now, from, dsap, ssap, data, out)
+    }
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         self.inner.poll_event()
     }

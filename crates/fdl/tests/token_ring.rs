@@ -25,6 +25,9 @@ struct Poller {
     targets: Vec<u8>,
     next: usize,
     greedy: bool,
+    /// With `greedy`: stop this long before the token hold time ends
+    /// (time left for the GAP poll).
+    reserve: Duration,
     answered: u64,
     unanswered: u64,
     events: Vec<FdlEvent>,
@@ -34,6 +37,9 @@ struct Poller {
 impl MasterApp for Poller {
     fn poll_request(&mut self, ctx: &TokenContext) -> Option<Request<'_>> {
         if self.targets.is_empty() || (!self.greedy && ctx.cycles as usize >= self.targets.len()) {
+            return None;
+        }
+        if self.greedy && ctx.cycles > 0 && ctx.now + self.reserve >= ctx.hold_until {
             return None;
         }
         let da = self.targets[self.next % self.targets.len()];
@@ -566,4 +572,59 @@ fn the_lowest_survivor_claims_the_token_of_a_dead_holder() {
             .collect();
         assert!(between.len() > 3, "lag {lag_us} µs: {passes:?}");
     }
+}
+
+/// A master switched on next to a lone master that uses its whole token
+/// hold time (one GAP address per visit of about TTR) answers the first
+/// GAP poll "not ready" (it is still listening to two rotations); it is
+/// polled again on the next visits and joins a few rotations later,
+/// instead of after the rest of the sweep (123 more visits, about 2.7 s
+/// here) and the G rotations of the GAP factor.
+#[test]
+fn a_master_answering_not_ready_is_polled_again_and_joins_within_a_few_rotations() {
+    let baud = Baud::B1500000;
+    let params = BusParams::defaults(baud);
+    let mut bus = SimBus::new(MediumConfig::paced(baud));
+    let greedy = Poller {
+        targets: vec![10],
+        greedy: true,
+        reserve: Duration::from_millis(1),
+        ..Poller::default()
+    };
+    let m2 = bus.add(ActiveStation::new(ActiveConfig::new(2, params), greedy));
+    let m3 = bus.add(ActiveStation::new(
+        ActiveConfig::new(3, params),
+        Poller::default(),
+    ));
+    bus.add(PassiveStation::new(Echo::new(10), params));
+    let visit = params.bits(u64::from(params.ttr));
+    let joined = bus.run_while(visit * 10, |b| b.station::<Master>(m3).stats().tokens > 0);
+    let holder = bus.station::<Master>(m2);
+    let gap: Vec<_> = holder
+        .app()
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            FdlEvent::GapStatus { address, station } => Some((*address, *station)),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        joined,
+        "master 3 not in the ring after {:?}; GAP polls {gap:?}",
+        bus.now()
+    );
+    assert!(holder.app().events.contains(&FdlEvent::StationJoined(3)));
+    // Long visits: one GAP address per about TTR.
+    assert!(
+        holder.stats().rotation_min_ns > visit.as_nanos() as u64 / 2,
+        "{:?}",
+        holder.stats()
+    );
+    assert_eq!(
+        gap.first(),
+        Some(&(3, Some(profibus_fdl::wire::StationType::ActiveNotReady))),
+        "{gap:?}"
+    );
+    assert!(gap.iter().all(|(a, _)| *a == 3), "{gap:?}");
 }

@@ -3,6 +3,7 @@
 //! broker, no clock: the driver hands in messages and the time, and
 //! sends what [`Gateway::poll_publish`] returns.
 
+use crate::alerts::{self, AlertWatch};
 use crate::outage::Outage;
 use crate::payload::{
     hex, to_bytes, AlarmPayload, Answer, AnswerData, DiagPayload, ImagePayload, OutputsTimeout,
@@ -91,6 +92,8 @@ pub struct Gateway {
     status_master: Option<OperatingState>,
     /// The broker outage and the outputs' safe state.
     outage: Outage,
+    /// The alert rules' interval statistics.
+    alerts: AlertWatch,
 }
 
 impl Gateway {
@@ -126,6 +129,7 @@ impl Gateway {
             online: false,
             status_master: None,
             outage: Outage::default(),
+            alerts: AlertWatch::new(),
         }
     }
 
@@ -383,6 +387,9 @@ impl Gateway {
         }
         for (t, o) in answers {
             self.answer(t, o, ts_ms);
+        }
+        for a in self.alerts.step(&self.settings, m, now) {
+            self.push(alerts::topic(&self.settings), &a, false);
         }
         if self.online {
             self.publish_state(m, ts_ms);

@@ -24,15 +24,16 @@
 //! 2. [`topics`]: the topic names, plain and Sparkplug B.
 //! 3. [`slave`]: what the gateway knows of a configured slave.
 //! 4. [`settings`]: the `[mqtt]` table.
-//! 5. [`traffic`]: report by exception (deadbands, minimum interval).
-//! 6. [`request`]: requests from clients, parsed from their payloads.
-//! 7. [`payload`]: the JSON payloads the plain mode publishes.
-//! 8. [`session`]: the [`Session`] interface of the cores, [`Publish`].
-//! 9. [`outage`]: the outputs while the broker is away.
-//! 10. [`json`]: the plain JSON core, [`Gateway`].
-//! 11. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
-//! 12. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
-//! 13. [`sim`]: the simulated plant of `dpctl gateway --sim`.
+//! 5. [`alerts`]: alert rules on the master's per-slave statistics.
+//! 6. [`traffic`]: report by exception (deadbands, minimum interval).
+//! 7. [`request`]: requests from clients, parsed from their payloads.
+//! 8. [`payload`]: the JSON payloads the plain mode publishes.
+//! 9. [`session`]: the [`Session`] interface of the cores, [`Publish`].
+//! 10. [`outage`]: the outputs while the broker is away.
+//! 11. [`json`]: the plain JSON core, [`Gateway`].
+//! 12. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
+//! 13. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
+//! 14. [`sim`]: the simulated plant of `dpctl gateway --sim`.
 //!
 //! # Example
 //!
@@ -86,6 +87,7 @@
 //!
 //! [`DpMaster`]: profibus_dp::master::DpMaster
 
+pub mod alerts;
 pub mod field;
 pub mod json;
 pub mod link;
@@ -113,11 +115,12 @@ pub use topics::{Service, SparkplugId, Topics};
 
 /// The module order of the crate documentation's layers.
 #[cfg(test)]
-const LAYERS: [&str; 13] = [
+const LAYERS: [&str; 14] = [
     "field",
     "topics",
     "slave",
     "settings",
+    "alerts",
     "traffic",
     "request",
     "payload",

@@ -6,6 +6,7 @@
 use crate::field::Field;
 use crate::topics::SparkplugId;
 use profibus_dp::config::busfile::BusFileError;
+use profibus_dp::monitor::alert::AlertRule;
 use serde::de::IgnoredAny;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -112,6 +113,13 @@ pub struct MqttSettings {
     /// Sparkplug B: the host id of the primary host application whose
     /// `spBv1.0/STATE/<id>` the edge node follows (`None`: none).
     pub primary_host: Option<String>,
+    /// Alert rules on the master's per-slave statistics (`[mqtt] alerts`
+    /// and `dpctl gateway --alert`), the syntax of
+    /// [`profibus_dp::monitor::alert`].
+    pub alerts: Vec<AlertRule>,
+    /// The interval the alert rules are checked over (`[mqtt]
+    /// alert_interval_ms`, default 1 s).
+    pub alert_interval: Duration,
 }
 
 /// How far an analog channel must move from the value last published
@@ -263,6 +271,8 @@ struct RawSettings {
     deadband: Field<toml::Value>,
     slave: Field<Vec<toml::Table>>,
     primary_host: Field<String>,
+    alerts: Field<Vec<String>>,
+    alert_interval_ms: Field<u64>,
 }
 
 /// The keys of the `[mqtt]` table (closest names of an unknown one).
@@ -287,6 +297,8 @@ const KEYS: &[&str] = &[
     "deadband",
     "slave",
     "primary_host",
+    "alerts",
+    "alert_interval_ms",
 ];
 
 /// The keys of a `[[mqtt.slave]]` entry.
@@ -609,6 +621,18 @@ impl MqttSettings {
         if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
             return Err(bad("primary_host", format!("`{h}` is not one topic level")));
         }
+        let alerts = match t.alerts.given() {
+            None => vec![],
+            Some(Ok(v)) => v
+                .iter()
+                .map(|r| AlertRule::parse(r).map_err(|e| bad("alerts", e.to_string())))
+                .collect::<Result<_, _>>()?,
+            Some(Err(())) => {
+                return Err(bad("alerts", "must be a list of rules like \"retries>1%\""))
+            }
+        };
+        let alert_interval =
+            millis(t.alert_interval_ms, "alert_interval_ms")?.unwrap_or(Duration::from_secs(1));
         Ok(MqttSettings {
             broker,
             client_id: client_id.unwrap_or_else(|| format!("dpctl-gateway-{bus}")),
@@ -629,6 +653,8 @@ impl MqttSettings {
             deadband,
             slave_traffic,
             primary_host,
+            alerts,
+            alert_interval,
         })
     }
 
@@ -811,6 +837,29 @@ mod tests {
             path("[[slave]]\naddress = 3\n[[slave]]\naddress = 3"),
             "mqtt.slave.2"
         );
+    }
+
+    #[test]
+    fn alert_keys() {
+        let s = MqttSettings::from_table(None, "l").unwrap();
+        assert_eq!(
+            (s.alerts.len(), s.alert_interval),
+            (0, Duration::from_secs(1))
+        );
+        let s = parse("alerts = [\"retries>1%\", \"restart\"]\nalert_interval_ms = 5000").unwrap();
+        let rules: Vec<String> = s.alerts.iter().map(|r| r.to_string()).collect();
+        assert_eq!(rules, ["retries>1%", "restart"]);
+        assert_eq!(s.alert_interval, Duration::from_secs(5));
+        for (text, message) in [
+            (
+                "alerts = [\"retrys>1%\"]",
+                "[mqtt]: `alerts` alert rule `retrys>1%`, column 1: unknown statistic `retrys` (did you mean `retries`?)",
+            ),
+            ("alerts = \"restart\"", "[mqtt]: `alerts` must be a list of rules like \"retries>1%\""),
+            ("alert_interval_ms = 0", "[mqtt]: `alert_interval_ms` must be 1..=86400000"),
+        ] {
+            assert_eq!(parse(text).unwrap_err().to_string(), message, "{text}");
+        }
     }
 
     #[test]

@@ -870,4 +870,191 @@ mod tests {
         };
         assert!(text.ends_with("Beckhoff BK3000 emulated"), "{text}");
     }
+
+    /// The checks of issue 35 at the slave: a BK3000 with KL3102 and
+    /// KL4002 in Data_Exchange with a class-1 master while an FMS client
+    /// on the same slave reads a channel object (status byte plus value
+    /// equal to what Data_Exchange carries), writes an output channel
+    /// object and reads the OD; DP only: the LSAP is not activated; a
+    /// silent client is aborted by connection monitoring.
+    #[test]
+    fn mixed_mode_serves_fms_beside_data_exchange() {
+        use super::super::master::Bk3000Master;
+        use super::super::Bk3000;
+        use profibus_dp::pdu::sap;
+        use profibus_dp::slave::{Device, DpSlave, SlaveState};
+        use profibus_fdl::station::passive::{Reply, Responder};
+        use profibus_fdl::{DataTelegram, FunctionCode, RequestKind};
+
+        const LIST: &str = "KL3102,KL4002,KL9010";
+        let names: Vec<&str> = LIST.split(',').collect();
+        let m = Bk3000Master::from_names(&names).unwrap();
+        let mut prm = vec![0x88, 1, 100, 11, 0xBE, 0xCF, 0];
+        prm.extend_from_slice(&m.user_prm_data());
+        let req = |slave: &mut DpSlave<Bk3000>,
+                   now: Instant,
+                   saps: Option<(u8, u8)>,
+                   data: &[u8]|
+         -> (Reply, Vec<u8>) {
+            let fc = FunctionCode::request(RequestKind::SrdHigh);
+            let t =
+                DataTelegram::new(5, 2, fc, data).with_saps(saps.map(|s| s.0), saps.map(|s| s.1));
+            let mut out = [0u8; 246];
+            let r = slave.on_request(now, &t, &mut out);
+            let len = match r {
+                Reply::Data { len, .. } => len,
+                _ => 0,
+            };
+            (r, out[..len].to_vec())
+        };
+        for mode in [FmsMode::DpOnly, FmsMode::Mixed] {
+            let dev = Bk3000::new(Strip::parse(LIST).unwrap()).with_fms_mode(mode);
+            let mut slave = DpSlave::new(dev, 5);
+            let mut now = Instant::ZERO;
+            req(&mut slave, now, Some((sap::SET_PRM, sap::MASTER)), &prm);
+            req(
+                &mut slave,
+                now,
+                Some((sap::CHK_CFG, sap::MASTER)),
+                m.chk_cfg(),
+            );
+            let outputs = vec![0u8; m.image().out_len];
+            let inputs = req(&mut slave, now, None, &outputs).1;
+            assert_eq!(slave.state(), SlaveState::DataExch);
+            let lsap = 40;
+            let mut client = LliClient::new(5, lsap, 33, Some(Duration::from_millis(300)));
+            client.connect(
+                now,
+                InitiateRequest {
+                    version_od: 0,
+                    profile: [0, 0],
+                    access_protection: false,
+                    password: 0,
+                    access_groups: 0,
+                    max_pdu_send_high: 0,
+                    max_pdu_send_low: 241,
+                    max_pdu_recv_high: 0,
+                    max_pdu_recv_low: 241,
+                    features: [0; 6],
+                },
+            );
+            let du = client.next_srd(now).unwrap();
+            let (reply, data) = req(&mut slave, now, Some((lsap, 33)), &du);
+            if mode == FmsMode::DpOnly {
+                assert!(
+                    matches!(
+                        reply,
+                        Reply::Data {
+                            status: profibus_fdl::ResponseStatus::Rs,
+                            ..
+                        }
+                    ),
+                    "SAP not activated: {reply:?}"
+                );
+                continue;
+            }
+            client.on_reply(now, Some(&data));
+            assert!(client.is_open(), "{:?}", client.take_events());
+            client.take_events();
+            // Read KL3102 channel 2 (slot 1): index 2022, equal to the
+            // bytes the last Data_Exchange carried.
+            now += Duration::from_millis(10);
+            client
+                .request(Request::Read {
+                    index: 2022,
+                    subindex: None,
+                })
+                .unwrap();
+            let du = client.next_srd(now).unwrap();
+            let data = req(&mut slave, now, Some((lsap, 33)), &du).1;
+            client.on_reply(now, Some(&data));
+            let img = slave.device().image().clone();
+            let st = img.entries.iter().find(|e| e.name == "1.KL3102.2.status");
+            let val = img.entries.iter().find(|e| e.name == "1.KL3102.2").unwrap();
+            let mut expect = vec![st.map_or(0, |e| Image::get(e, &inputs) as u8)];
+            expect.extend_from_slice(&inputs[val.byte..val.byte + 2]);
+            let ev = client.take_events();
+            assert!(
+                matches!(&ev[..], [ClientEvent::Confirmation { result: Ok(Response::Read(v)), .. }] if *v == expect),
+                "{ev:?} expected {expect:02X?}"
+            );
+            // Write KL4002 channel 1 (slot 2): index 2041.
+            client
+                .request(Request::Write {
+                    index: 2041,
+                    subindex: None,
+                    data: vec![0, 0x20, 0x00],
+                })
+                .unwrap();
+            let du = client.next_srd(now).unwrap();
+            let data = req(&mut slave, now, Some((lsap, 33)), &du).1;
+            client.on_reply(now, Some(&data));
+            assert!(matches!(
+                &client.take_events()[..],
+                [ClientEvent::Confirmation {
+                    result: Ok(Response::Write),
+                    ..
+                }]
+            ));
+            assert_eq!(slave.device().output_value("2.KL4002.1"), Some(0x2000));
+            // Get-OD from index 2000 on.
+            client
+                .request(Request::GetOd(GetOdRequest {
+                    long_form: false,
+                    from_index: true,
+                    index: 2000,
+                }))
+                .unwrap();
+            let du = client.next_srd(now).unwrap();
+            let data = req(&mut slave, now, Some((lsap, 33)), &du).1;
+            client.on_reply(now, Some(&data));
+            let ev = client.take_events();
+            let [ClientEvent::Confirmation {
+                result: Ok(Response::GetOd { descriptions, .. }),
+                ..
+            }] = &ev[..]
+            else {
+                panic!("{ev:?}")
+            };
+            let idx: Vec<u16> = descriptions
+                .iter()
+                .map(|d| u16::from_be_bytes([d[0], d[1]]))
+                .collect();
+            assert!(idx.contains(&2020) && idx.contains(&2041), "{idx:?}");
+            // Data_Exchange went on all along.
+            req(&mut slave, now, None, &outputs);
+            assert_eq!(slave.state(), SlaveState::DataExch);
+            // The client falls silent: connection monitoring aborts it.
+            let due = slave.device().poll_timeout().unwrap();
+            assert!(due <= now + Duration::from_millis(300));
+            slave.device_mut().handle_timeout(due);
+            let texts: Vec<String> = std::iter::from_fn(|| slave.device_mut().poll_event())
+                .filter(|e| e.kind == "fms")
+                .map(|e| e.text)
+                .collect();
+            assert!(
+                texts
+                    .iter()
+                    .any(|t| t.contains("aborted by the coupler") && t.contains("client silent")),
+                "{texts:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_fms_device_option_names_its_modes() {
+        use super::super::profile::{Bk3000Profile, Options};
+        use crate::profile::Profile;
+        let o = Options {
+            fms: Some("both".into()),
+            ..Default::default()
+        };
+        let e = Bk3000Profile::configure(o, None).unwrap_err().to_string();
+        assert!(e.contains("use dp, mixed or fms"), "{e}");
+        let o = Options {
+            fms: Some("mixed".into()),
+            ..Default::default()
+        };
+        assert!(Bk3000Profile::configure(o, None).is_ok());
+    }
 }

@@ -104,6 +104,8 @@ pub struct Bk3000 {
     plc: plc::PlcInterface,
     /// Coupler table 0 (settings) and table 98 register 3.
     table0: [u16; 256],
+    /// The FMS relationships of the KBL that clients have addressed.
+    fms_servers: Vec<profibus_dp::fms::lli::LliServer>,
     /// K-bus cycle time set for the cycle-time measurement (table 98 R3).
     cycle_set: u16,
     /// In data exchange with the K-bus started (for the LEDs).
@@ -183,6 +185,7 @@ impl Bk3000 {
             term_diag: vec![],
             plc: plc::PlcInterface::default(),
             table0: [0; 256],
+            fms_servers: vec![],
             cycle_set: 0,
             exchanging: false,
             leds: None,
@@ -295,6 +298,29 @@ impl Bk3000 {
     pub fn with_kbus_timing(mut self, on: bool) -> Bk3000 {
         self.kbus_timing = on;
         self
+    }
+
+    /// The coupler with FMS mode `mode` in table 0 register 16 (p.66):
+    /// in [`fms::FmsMode::Mixed`] and [`fms::FmsMode::FmsOnly`] it serves
+    /// its object dictionary on the LSAPs of its KBL beside DP.
+    pub fn with_fms_mode(mut self, mode: fms::FmsMode) -> Bk3000 {
+        self.table0[16] = match mode {
+            fms::FmsMode::DpOnly => 0,
+            fms::FmsMode::Mixed => 1,
+            fms::FmsMode::FmsOnly => 2,
+        };
+        self
+    }
+
+    /// The FMS mode of table 0 register 16.
+    pub fn fms_mode(&self) -> fms::FmsMode {
+        fms::FmsMode::from_register16(self.table0[16])
+    }
+
+    /// The object dictionary of the present configuration (automatic:
+    /// channel objects of the current process image).
+    pub fn object_dictionary(&self) -> fms::ObjectDictionary {
+        fms::ObjectDictionary::new(&self.strip, &self.image, None)
     }
 
     /// Read control commands from `inbox` ([`Bk3000::control`]).
@@ -1344,14 +1370,78 @@ impl Device for Bk3000 {
         self.events.pop()
     }
 
+    fn fdl_request(
+        &mut self,
+        now: Instant,
+        from: u8,
+        dsap: u8,
+        ssap: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Option<usize> {
+        let entry = fms::kbl(self.fms_mode())
+            .into_iter()
+            .find(|e| e.lsap == dsap)?;
+        self.clock = self.clock.max(now);
+        // The inputs as the last Data_Exchange carried them; without one
+        // (FMS only) the terminals' inputs now.
+        if self.inputs.len() != self.image.in_len {
+            let mut fresh = vec![0; self.image.in_len];
+            self.read_inputs(now, &mut fresh);
+        }
+        if self.outputs.len() != self.image.out_len {
+            self.outputs.resize(self.image.out_len, 0);
+        }
+        let od = self.object_dictionary();
+        let pos = match self.fms_servers.iter().position(|s| s.lsap == dsap) {
+            Some(i) => i,
+            None => {
+                self.fms_servers.push(profibus_dp::fms::lli::LliServer::new(
+                    dsap, entry.kind, None,
+                ));
+                self.fms_servers.len() - 1
+            }
+        };
+        let mut outputs = self.outputs.clone();
+        let mut app = fms::FmsServer {
+            od: &od,
+            inputs: &self.inputs,
+            outputs: &mut outputs,
+            written: false,
+        };
+        let reply = self.fms_servers[pos].on_srd(now, from, ssap, data, &mut app);
+        if app.written {
+            // Applied at once; a class-1 master's next outputs replace
+            // them (docs/fms.md).
+            self.apply_outputs(&outputs);
+        }
+        self.note_fms_events();
+        let reply = reply.unwrap_or_default();
+        let n = reply.len().min(out.len());
+        out[..n].copy_from_slice(&reply[..n]);
+        Some(n)
+    }
+
     fn poll_timeout(&self) -> Option<Instant> {
         let out = self.pending_outputs.as_ref().map(|(t, _)| *t);
-        [self.inbox.deadline(), out].into_iter().flatten().min()
+        let fms = self
+            .fms_servers
+            .iter()
+            .filter_map(|s| s.poll_timeout())
+            .min();
+        [self.inbox.deadline(), out, fms]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     fn handle_timeout(&mut self, now: Instant) {
         self.clock = self.clock.max(now);
         self.deliver_outputs(now);
+        for srv in &mut self.fms_servers {
+            srv.handle_timeout(now);
+        }
+        self.note_fms_events();
         for line in self.inbox.due(now) {
             let kbus = ["pull", "plug", "mute", "unmute", "swap"]
                 .iter()
@@ -1366,6 +1456,32 @@ impl Device for Bk3000 {
 }
 
 impl Bk3000 {
+    /// The FMS servers' connects and aborts as `fms` events.
+    fn note_fms_events(&mut self) {
+        use profibus_dp::fms::lli::ServerEvent;
+        for i in 0..self.fms_servers.len() {
+            let lsap = self.fms_servers[i].lsap;
+            for ev in self.fms_servers[i].take_events() {
+                let text = match ev {
+                    ServerEvent::Connected { client, monitoring } => format!(
+                        "LSAP {lsap}: client {client} connected, monitoring {}",
+                        monitoring.map_or("off".to_string(), |m| format!("{} ms", m.as_millis()))
+                    ),
+                    ServerEvent::Aborted { reason, locally } => format!(
+                        "LSAP {lsap}: connection aborted by the {}, reason {reason}{}",
+                        if locally { "coupler" } else { "client" },
+                        if reason == profibus_dp::fms::lli::ABORT_TIMEOUT {
+                            " (client silent)"
+                        } else {
+                            ""
+                        }
+                    ),
+                };
+                self.events.note("fms", text);
+            }
+        }
+    }
+
     fn options(&self) -> Options {
         Options {
             plc_interface: self.prm.plc_interface,

@@ -55,6 +55,10 @@ pub struct Options {
     /// Delay the process data by the modelled K-bus cycle time (manual
     /// p. 23; [`Bk3000::with_kbus_timing`]).
     pub kbus_timing: bool,
+    /// DP/FMS mode, table 0 register 16 (p. 66): `dp` (default), `mixed`
+    /// (DP and FMS at once), `fms` (FMS only, the whole KBL); see
+    /// docs/fms.md.
+    pub fms: Option<String>,
 }
 
 /// A BK3000 with its strip.
@@ -65,6 +69,7 @@ pub struct Bk3000Profile {
     programmed: Option<Vec<u8>>,
     placement: Vec<image::Placement>,
     kbus_timing: bool,
+    fms: super::fms::FmsMode,
     gsd: Gsd,
 }
 
@@ -178,6 +183,7 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
 --device-opt programmed-cfg=HEX (table 70), --device-opt placement=POS@IN/OUT,... (free placement in it), \
 --device-opt terminal-types-file=FILE.toml (terminals the catalogue lacks; bus file: [slave.terminal_types.NAME]), \
 --device-opt kbus-timing=true (process data delayed by the K-bus cycle time), \
+--device-opt fms=dp|mixed|fms (DP/FMS mode, table 0 register 16: FMS server on the KBL's LSAPs), \
 --control FILE|- (commands: status, outputs, set NAME VALUE, release NAME|all, pull N, plug N, run)";
     const PATH_OPTIONS: &'static [&'static str] = &["terminals_file", "terminal_types_file"];
     const IDENT: Option<u16> = Some(IDENT);
@@ -218,12 +224,24 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
             }
             (None, true) => {}
         }
+        let fms = match options.fms.as_deref() {
+            None | Some("dp") => super::fms::FmsMode::DpOnly,
+            Some("mixed") => super::fms::FmsMode::Mixed,
+            Some("fms") => super::fms::FmsMode::FmsOnly,
+            Some(other) => {
+                return Err(ProfileError::BadOption {
+                    key: "fms".into(),
+                    message: format!("{other:?} is no FMS mode; use dp, mixed or fms"),
+                })
+            }
+        };
         Ok(Bk3000Profile {
             strip,
             address,
             programmed,
             placement,
             kbus_timing: options.kbus_timing,
+            fms,
             gsd: crate::gsd_files::parse(crate::gsd_files::BK30BECF).expect("BK30BECF.GSD parses"),
         })
     }
@@ -245,7 +263,9 @@ bus file: terminals = [...]) or --device-opt terminals-file=FILE (default: the m
     }
 
     fn device(&self, control: Option<ControlInbox>) -> Result<BoxedDevice, ProfileError> {
-        let mut dev = Bk3000::new(self.strip.clone()).with_kbus_timing(self.kbus_timing);
+        let mut dev = Bk3000::new(self.strip.clone())
+            .with_kbus_timing(self.kbus_timing)
+            .with_fms_mode(self.fms);
         match &self.programmed {
             Some(p) if !self.placement.is_empty() => {
                 dev = dev

@@ -17,8 +17,8 @@
 //! diag_interval_ms = 0   # periodic diagnosis (0 = only on DH)
 //! global_control_ms = 100  # repeat operate/clear Global_Control (default 100; 0 = only on change)
 //! alone_hold_bits = 3000  # alone in the ring: poll cycles per token visit for at most
-//!                         # this many bit times, within the token hold time (default
-//!                         # 0: the token to itself after every cycle)
+//!                         # this many bit times, within the token hold time (default:
+//!                         # 10 ms a visit; 0: the token to itself after every cycle)
 //!
 //! [[slave]]
 //! address = 8

@@ -512,6 +512,11 @@ impl LliClient {
         self.state == ClientState::Open
     }
 
+    /// Whether PDUs wait to be sent (a release's Abort, …).
+    pub fn has_queued(&self) -> bool {
+        !self.queue.is_empty()
+    }
+
     /// Whether a confirmed request or the Initiate waits for its answer.
     pub fn is_busy(&self) -> bool {
         self.outstanding.is_some() || self.state == ClientState::Connecting

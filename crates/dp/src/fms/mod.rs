@@ -8,9 +8,12 @@
 //! - [`lli`]: the lower layer interface on master-slave relationships:
 //!   client and server state machines (connect, confirmed services,
 //!   release, connection monitoring) over FDL SRD.
+//! - [`client`]: an FMS client as the application of an FDL active
+//!   station, and a run of requests on one connection (`dpctl fms`).
 //!
 //! What is confirmed by which public source and what is marked
 //! (unverified): the module docs of [`pdu`] and `docs/fms.md`.
 
+pub mod client;
 pub mod lli;
 pub mod pdu;

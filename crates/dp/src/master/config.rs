@@ -175,20 +175,19 @@ pub struct MasterOptions {
     /// IEC 61158-4-3: requests may be sent while TTH remains) instead of
     /// passing the token to itself after every poll cycle; the token to
     /// itself with its idle times (about 70 bit) and the visit's GAP poll
-    /// (up to a slot time) are then spent once per visit. `None`: TTH bounds the visit, and
-    /// so that the GAP sweep (one address per visit: the live list, and
-    /// how a new master joins) keeps its pace at any TTR and rate, so
-    /// does [`ALONE_VISIT_MAX`]; a new master joins within
-    /// [`join_bound`]. `Some(n)`: the override, a visit ends once it has
-    /// lasted `n` bit times (or TTH is used); `Some(0)` (the default,
-    /// [`DEFAULT_ALONE_HOLD_BITS`]) passes the token after every poll
-    /// cycle, as masters that ignore TTH do. `None` is not yet the
-    /// default: with it, a class-2 master or a second class-1 master
-    /// joining a lone master's ring was starved of its low-priority
-    /// requests in the end-to-end tests (tests/class2_sim.rs,
-    /// tests/ownership.rs, crates/cli/tests/class2.rs), issue 34. With other
-    /// masters in the ring the token passes after every poll cycle
-    /// whatever this says (their rotation is kept).
+    /// (up to a slot time) are then spent once per visit. `None` (the
+    /// default, [`DEFAULT_ALONE_HOLD_BITS`]): TTH (from the bus file's
+    /// TTR) bounds the visit, and so that the GAP sweep (one address per
+    /// visit: the live list, and how a new master joins) keeps its pace
+    /// at any TTR and rate, so does [`ALONE_VISIT_MAX`]; a new master
+    /// joins within [`join_bound`], and a few rotations after it is ready
+    /// when it was switched on just before its GAP poll (the station
+    /// polls a "not ready" master again, `profibus_fdl` active station).
+    /// `Some(n)`: the override, a visit ends once it has lasted `n` bit
+    /// times (or TTH is used); `Some(0)` passes the token after every
+    /// poll cycle, as masters that ignore TTH do. With other masters in
+    /// the ring the token passes after every poll cycle whatever this
+    /// says (their rotation is kept).
     pub alone_hold_bits: Option<u32>,
 }
 
@@ -201,7 +200,8 @@ pub struct MasterOptions {
 pub const ALONE_VISIT_MAX: Duration = Duration::from_millis(10);
 
 /// How long a master switched on beside a lone master with the default
-/// token use waits at most until it is in the ring: its own
+/// token use waits at most until it is in the ring (when it was switched
+/// on just after the holder polled its address): its own
 /// Listen_Token (two rotations) and the holder's whole GAP sweep, one
 /// address per visit, up to HSA, plus the G rotations the GAP factor
 /// waits after a sweep, each rotation at most two visits (a long one of
@@ -235,10 +235,10 @@ pub const STARTUP_RETRY_FIRST: Duration = Duration::from_millis(10);
 /// The longest back-off between two start-ups of a faulty slave: 1 s.
 pub const STARTUP_RETRY_MAX: Duration = Duration::from_secs(1);
 
-/// The default of [`MasterOptions::alone_hold_bits`]: `Some(0)`, the
-/// token after every poll cycle (see there why `None` is not yet the
-/// default).
-pub const DEFAULT_ALONE_HOLD_BITS: Option<u32> = Some(0);
+/// The default of [`MasterOptions::alone_hold_bits`]: `None`, the token
+/// hold rule (poll cycles while TTH lasts, at most [`ALONE_VISIT_MAX`]
+/// per visit).
+pub const DEFAULT_ALONE_HOLD_BITS: Option<u32> = None;
 
 /// A [`MasterOptions::alone_hold_bits`] override for a master that is
 /// alone, wants its slaves polled often and a quick GAP sweep: 3000 bit

@@ -86,6 +86,7 @@ use std::fmt;
 use std::time::Duration;
 
 pub mod alert;
+pub mod counters;
 pub mod stats;
 #[cfg(test)]
 mod tests;

@@ -116,6 +116,20 @@ impl Durations {
         self.count += 1;
     }
 
+    /// Adds `n` measurements of `each`.
+    pub fn add_many(&mut self, each: Duration, n: u64) {
+        if n == 0 {
+            return;
+        }
+        let ns = each.as_nanos().min(u64::MAX as u128) as u64;
+        self.merge(&Durations {
+            count: n,
+            min_ns: ns,
+            max_ns: ns,
+            sum_ns: ns.saturating_mul(n),
+        });
+    }
+
     /// Adds all of `o`'s measurements.
     pub fn merge(&mut self, o: &Durations) {
         if o.count == 0 {

@@ -336,7 +336,9 @@ fn show(e: &Expr, f: &mut fmt::Formatter<'_>, outer: u8) -> fmt::Result {
             }
             show(a, f, 1)?;
             f.write_str(" or ")?;
-            show(b, f, 1)?;
+            // The parser groups to the left: a right operand that is
+            // itself an `or` keeps its parentheses.
+            show(b, f, 2)?;
             if outer > 1 {
                 f.write_str(")")?;
             }
@@ -348,7 +350,7 @@ fn show(e: &Expr, f: &mut fmt::Formatter<'_>, outer: u8) -> fmt::Result {
             }
             show(a, f, 2)?;
             f.write_str(" and ")?;
-            show(b, f, 2)?;
+            show(b, f, 3)?;
             if outer > 2 {
                 f.write_str(")")?;
             }

@@ -166,7 +166,7 @@ fn data_reply(req: &DataTelegram<'_>, len: usize) -> Reply {
 
 impl<D: Device> DpSlave<D> {
     /// The slave offers class 2 (SAP 49 and the connection SAPs active).
-    fn c2_offered(&self) -> bool {
+    pub(super) fn c2_offered(&self) -> bool {
         self.features.dpv1 && self.features.c2_read_write
     }
 

@@ -551,6 +551,24 @@ pub trait Device {
     /// Default: nothing.
     fn prm_refused(&mut self, _now: Instant, _reason: &Reason) {}
 
+    /// An SRD request to a SAP no DP service of this slave uses (the
+    /// LSAPs of an FMS communication relationship list, for one): write
+    /// the response's data unit into `out` and return its length, or
+    /// `None` to answer "SAP not activated" (RS) as before. Requests to
+    /// the class-2 connection SAPs 0..=48 come here only while MSAC_C2 is
+    /// not offered. Default: `None`.
+    fn fdl_request(
+        &mut self,
+        _now: Instant,
+        _from: u8,
+        _dsap: u8,
+        _ssap: u8,
+        _data: &[u8],
+        _out: &mut [u8],
+    ) -> Option<usize> {
+        None
+    }
+
     /// Something for people (polled after every request and timeout).
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         None
@@ -652,6 +670,17 @@ impl<D: Device + ?Sized> Device for Box<D> {
     }
     fn prm_refused(&mut self, now: Instant, reason: &Reason) {
         (**self).prm_refused(now, reason)
+    }
+    fn fdl_request(
+        &mut self,
+        now: Instant,
+        from: u8,
+        dsap: u8,
+        ssap: u8,
+        data: &[u8],
+        out: &mut [u8],
+    ) -> Option<usize> {
+        (**self).fdl_request(now, from, dsap, ssap, data, out)
     }
     fn poll_event(&mut self) -> Option<DeviceEvent> {
         (**self).poll_event()

@@ -1224,11 +1224,32 @@ impl<D: Device> Responder for DpSlave<D> {
                 sap::MSAC_C1 => self.msac_c1(now, req, out).unwrap_or_else(|| rs(req)),
                 sap::ALARM_ACK => self.alarm_ack(now, req, out).unwrap_or_else(|| rs(req)),
                 sap::MSAC_C2_INITIATE => self.c2_resource_manager(now, req, out),
-                0..=crate::pdu::c2::MAX_CONNECTION_SAP => self.c2_connection(now, req, out),
-                _ => {
-                    self.stats.refused += 1;
-                    rs(req)
+                0..=crate::pdu::c2::MAX_CONNECTION_SAP if self.c2_offered() => {
+                    self.c2_connection(now, req, out)
                 }
+                // Other SAPs are the device's (FMS LSAPs …), else refused.
+                _ => match self.device.fdl_request(
+                    now,
+                    from,
+                    dsap,
+                    req.ssap.unwrap_or(0),
+                    req.data,
+                    out,
+                ) {
+                    Some(len) => Reply::Data {
+                        status: ResponseStatus::Dl,
+                        dsap: req.ssap,
+                        ssap: req.dsap,
+                        len: len.min(out.len()),
+                    },
+                    None if dsap <= crate::pdu::c2::MAX_CONNECTION_SAP => {
+                        self.c2_connection(now, req, out)
+                    }
+                    None => {
+                        self.stats.refused += 1;
+                        rs(req)
+                    }
+                },
             },
             // One SAP without the other: not a DP request.
             _ => {

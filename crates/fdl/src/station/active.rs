@@ -44,7 +44,11 @@
 //!   profirust does), awaited for TSL plus at most 1 ms of the latency
 //!   allowance. A station answering "ready for
 //!   ring" or "in ring" becomes the new NS. After a whole sweep the station
-//!   waits G rotations (GAP factor) before sweeping again.
+//!   waits G rotations (GAP factor) before sweeping again. A master that
+//!   answers "not ready" (still in Listen_Token) is polled again on the
+//!   next visits, up to G times, before the sweep goes on, so that a
+//!   master switched on joins a few rotations after it is ready rather
+//!   than a whole sweep later (see `Core::gap_recheck_address`).
 //! - **Pass_Token / Check_Token_Pass**: the token telegram `DC NS TS`; NS
 //!   must start transmitting within TSL. The pass is repeated up to
 //!   `token_retry` times, then NS is removed from the LAS and the next
@@ -549,6 +553,10 @@ struct Core {
     gap_polled_this_visit: bool,
     gap_next: u8,
     gap_wait: u8,
+    /// A master that answered the GAP poll "not ready" (still in
+    /// Listen_Token) and how many more visits it is polled again before
+    /// the sweep goes on.
+    gap_recheck: Option<(u8, u8)>,
     collisions_in_row: u8,
     was_in_ring: bool,
     stats: ActiveStats,
@@ -605,6 +613,7 @@ impl<A: MasterApp> ActiveStation<A> {
                 gap_polled_this_visit: false,
                 gap_next: next_addr(ts, cfg.params.hsa),
                 gap_wait: 0,
+                gap_recheck: None,
                 collisions_in_row: 0,
                 was_in_ring: false,
                 stats: ActiveStats::default(),
@@ -622,6 +631,7 @@ impl<A: MasterApp> ActiveStation<A> {
         c.listen = Listen::default();
         c.las = [false; 128];
         c.las_valid = false;
+        c.gap_recheck = None;
         c.last_activity = now;
         c.pending = None;
         c.tx_at = None;
@@ -1064,6 +1074,16 @@ impl Core {
                             station: Some(station),
                         },
                     );
+                    self.gap_recheck = match station {
+                        StationType::ActiveNotReady => {
+                            let left = match self.gap_recheck {
+                                Some((a, n)) if a == address => n.saturating_sub(1),
+                                _ => self.p().gap_factor,
+                            };
+                            (left > 0).then_some((address, left))
+                        }
+                        _ => None,
+                    };
                     if matches!(
                         station,
                         StationType::ActiveReady | StationType::ActiveInRing
@@ -1371,6 +1391,9 @@ impl Core {
             }
             State::AwaitStatus { address, deadline } => {
                 if now >= deadline && !receiving {
+                    if self.gap_recheck.is_some_and(|(a, _)| a == address) {
+                        self.gap_recheck = None;
+                    }
                     app.on_event(
                         now,
                         FdlEvent::GapStatus {
@@ -1425,25 +1448,34 @@ impl Core {
                 return;
             }
         }
-        if !self.gap_polled_this_visit && time_left && self.gap_wait == 0 {
-            if self.try_gap_poll(now) {
+        if !self.gap_polled_this_visit {
+            let waiting = self.gap_wait > 0;
+            if time_left && self.try_gap_poll(now) {
                 return;
             }
-        } else if !self.gap_polled_this_visit && self.gap_wait > 0 {
-            self.gap_wait -= 1;
+            if waiting {
+                self.gap_wait -= 1;
+            }
         }
         self.pass_token(now, 0);
     }
 
     /// Send this visit's GAP poll (FDL_Status to the next address of the
     /// GAP), if one is due: at most one per token visit, none while the
-    /// GAP factor is counting. Returns whether it was sent.
+    /// GAP factor is counting, except to a master that answered "not
+    /// ready" on one of the last visits ([`Core::gap_recheck_address`]).
+    /// Returns whether it was sent.
     fn try_gap_poll(&mut self, now: Instant) -> bool {
-        if self.gap_polled_this_visit || self.gap_wait > 0 {
+        if self.gap_polled_this_visit {
             return false;
         }
-        let Some(address) = self.next_gap_address() else {
-            return false;
+        let address = match self.gap_recheck_address() {
+            Some(a) => a,
+            None if self.gap_wait > 0 => return false,
+            None => match self.next_gap_address() {
+                Some(a) => a,
+                None => return false,
+            },
         };
         self.gap_polled_this_visit = true;
         self.stats.gap_polls += 1;
@@ -1465,6 +1497,38 @@ impl Core {
             deadline: end + self.gap_slot(),
         };
         true
+    }
+
+    /// A master in this station's GAP that answered "not ready" (it is
+    /// still learning the ring in Listen_Token) is polled again on the
+    /// next visits, up to G (GAP factor) times, before the sweep goes on.
+    ///
+    /// The standard examines one GAP address per token receipt and marks
+    /// a "not ready" answer in the GAP list before checking the next
+    /// address (PROFIBUS Specification, EN 50170 Vol. 2, Part 4 §4.4
+    /// "GAP maintenance", p. 102); it does not forbid asking that station
+    /// again. A master switched on is polled by its predecessor before it
+    /// has listened to two rotations; without the second look it joins
+    /// only after the rest of the sweep and the GAP update time, and a
+    /// lone master that holds the token for several poll cycles per visit
+    /// (one GAP address per visit) makes that a second or more. With it
+    /// the new master joins a few rotations after it is ready. A station
+    /// that stays "not ready" (a master that does not want the token)
+    /// costs G extra polls per sweep.
+    fn gap_recheck_address(&mut self) -> Option<u8> {
+        let (a, _) = self.gap_recheck?;
+        let hsa = self.p().hsa.max(self.ts());
+        let gap = if self.ns == self.ts() {
+            hsa as u32 + 1
+        } else {
+            self.dist(self.ts(), self.ns)
+        };
+        let d = self.dist(self.ts(), a);
+        if d == 0 || d >= gap {
+            self.gap_recheck = None;
+            return None;
+        }
+        Some(a)
     }
 
     /// The next address of the GAP sweep, or `None` when the sweep ended

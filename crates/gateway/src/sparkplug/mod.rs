@@ -15,6 +15,7 @@ pub mod proto;
 
 pub use crate::topics::{IdError, MessageType, SparkplugId, NAMESPACE};
 
+use crate::alerts::AlertWatch;
 use crate::outage::Outage;
 use crate::session::{LinkSetup, Publish, Session};
 use crate::settings::MqttSettings;
@@ -47,10 +48,14 @@ pub const RETRIES: &str = "Bus/Retries";
 pub const ERRORS: &str = "Bus/Errors";
 /// Node metric: start-ups begun again, all slaves, UInt64.
 pub const RESTARTS: &str = "Bus/Restarts";
+/// Node metric: the last alert of the `[mqtt] alerts` rules, String, the
+/// JSON of `<prefix>/<bus>/alert` (`""` before the first); each alert
+/// goes out at once in an NDATA of its own.
+pub const ALERT: &str = "Bus/Alert";
 
 /// The node metrics after `bdSeq`, in birth order, with their datatypes;
 /// each one's alias is its index.
-const NODE_METRICS: [(&str, DataType); 7] = [
+const NODE_METRICS: [(&str, DataType); 8] = [
     (REBIRTH, DataType::Boolean),
     (BUS_STATE, DataType::String),
     (CYCLE_TIME, DataType::Double),
@@ -58,10 +63,11 @@ const NODE_METRICS: [(&str, DataType); 7] = [
     (RETRIES, DataType::UInt64),
     (ERRORS, DataType::UInt64),
     (RESTARTS, DataType::UInt64),
+    (ALERT, DataType::String),
 ];
 
 /// The alias of metric `index` of the device of slave `address`: unique
-/// in the edge node (the node's metrics are 0..=6).
+/// in the edge node (the node's metrics are 0..=7).
 pub fn device_alias(address: u8, index: usize) -> u64 {
     ((address as u64 + 1) << 16) | index as u64
 }
@@ -125,6 +131,10 @@ pub struct EdgeNode {
     next_ndata_ms: u64,
     /// Cycles and their summed time at the last node report.
     cycles_at: (u64, u64),
+    /// The alert rules' interval statistics.
+    alerts: AlertWatch,
+    /// The JSON of the last alert (`Bus/Alert`).
+    last_alert: String,
 }
 
 /// A metric of a data message: its alias only, no name, no datatype (the
@@ -195,6 +205,8 @@ impl EdgeNode {
             node_sent: None,
             next_ndata_ms: 0,
             cycles_at: (0, 0),
+            alerts: AlertWatch::new(),
+            last_alert: String::new(),
         }
     }
 
@@ -282,6 +294,7 @@ impl EdgeNode {
             Some(MetricValue::LongValue(stats[0])),
             Some(MetricValue::LongValue(stats[1])),
             Some(MetricValue::LongValue(stats[2])),
+            Some(MetricValue::StringValue(self.last_alert.clone())),
         ]
     }
 
@@ -651,7 +664,7 @@ impl Session for EdgeNode {
     /// once), put the outputs into the safe state after `outputs_timeout`
     /// without a broker (see [`crate::outage`]), then queue births,
     /// deaths and data.
-    fn step(&mut self, m: &mut DpMaster, _now: Instant, ts_ms: u64) {
+    fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
         while let Some(ev) = m.poll_event() {
             match ev {
                 MasterEvent::Fault { address, reason } => {
@@ -688,6 +701,16 @@ impl Session for EdgeNode {
             }
         }
         self.outage.step(&self.settings, self.online, m, ts_ms);
+        for a in self.alerts.step(&self.settings, m, now) {
+            self.last_alert = serde_json::to_string(&a).expect("alerts serialise");
+            let value = Some(MetricValue::StringValue(self.last_alert.clone()));
+            let i = NODE_METRICS.len() - 1;
+            if let (true, Some(sent)) = (self.online, &mut self.node_sent) {
+                sent[i] = value.clone();
+                let metric = data_metric(i as u64, DataType::String, value, ts_ms);
+                self.push(self.id.node_topic(MessageType::NData), vec![metric], ts_ms);
+            }
+        }
         if self.online {
             self.publish_changes(m, ts_ms);
         }

@@ -47,6 +47,26 @@ fn parses_and_prints_in_canonical_form() {
     );
 }
 
+/// Found by the `trigger` fuzz target: the parser groups `or` and `and`
+/// to the left, so a right operand of the same operator must keep its
+/// parentheses or the canonical form parses to another tree.
+#[test]
+fn right_nested_operands_keep_their_parentheses() {
+    for (src, canon) in [
+        ("diag or (fcs or retry)", "diag or (fcs or retry)"),
+        ("diag and (fcs and retry)", "diag and (fcs and retry)"),
+        ("(diag or fcs) or retry", "diag or fcs or retry"),
+        (
+            "(not((diag)or((diag)or deactivated)or deactivated)or diag)",
+            "not (diag or (diag or deactivated) or deactivated) or diag",
+        ),
+    ] {
+        let t = parse(src);
+        assert_eq!(t.to_string(), canon);
+        assert_eq!(parse(canon), t, "{canon}");
+    }
+}
+
 #[test]
 fn errors_name_the_column_and_the_closest_name() {
     assert_eq!(
