@@ -495,3 +495,63 @@ pub fn json_line<T: serde::Serialize + ?Sized>(v: &T) -> String {
         }
     }
 }
+
+/// The clean stop of a master on a line on SIGTERM or Ctrl-C
+/// ([`profibus_dp::master::Farewell`]): Global_Control Clear_Data to the
+/// slaves, one poll cycle in Clear, the token passed on; then the driver
+/// stops. Hand [`CleanStop::shutdown`] to the driver instead of the
+/// plain stop future and call [`CleanStop::step`] at every step.
+#[derive(Default)]
+pub struct CleanStop {
+    asked: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    farewell: Option<profibus_dp::master::Farewell>,
+}
+
+impl CleanStop {
+    /// The driver's stop future: `stop` (the signal) starts the farewell;
+    /// the driver is stopped regardless half a second after its bound
+    /// ([`profibus_dp::master::FAREWELL_LIMIT`]), should no step come.
+    pub fn shutdown(
+        &self,
+        stop: impl std::future::Future<Output = ()>,
+    ) -> impl std::future::Future<Output = ()> {
+        let asked = self.asked.clone();
+        async move {
+            stop.await;
+            asked.store(true, std::sync::atomic::Ordering::Relaxed);
+            let bound = profibus_dp::master::FAREWELL_LIMIT + Duration::from_millis(500);
+            tokio::time::sleep(bound).await;
+        }
+    }
+
+    /// One step of the stop, once asked: `Break` when the master may
+    /// fall silent.
+    pub fn step(
+        &mut self,
+        st: &mut profibus_fdl::station::active::ActiveStation<profibus_dp::master::DpMaster>,
+        now: profibus_fdl::Instant,
+    ) -> std::ops::ControlFlow<()> {
+        use std::ops::ControlFlow;
+        if !self.asked.load(std::sync::atomic::Ordering::Relaxed) {
+            return ControlFlow::Continue(());
+        }
+        let f = *self.farewell.get_or_insert_with(|| {
+            tracing::info!("stopping: Global_Control Clear_Data to the slaves");
+            profibus_dp::master::Farewell::begin(st.app_mut(), now)
+        });
+        let alone = st.next_station() == st.config().address;
+        if !f.done(st.app(), st.ring_state(), alone, now) {
+            return ControlFlow::Continue(());
+        }
+        if f.timed_out(now) {
+            tracing::warn!(
+                cleared = f.cleared(st.app()),
+                "stopped without a clean farewell within {:?}",
+                profibus_dp::master::FAREWELL_LIMIT
+            );
+        } else {
+            tracing::info!("slaves cleared, token passed on: stopping");
+        }
+        ControlFlow::Break(())
+    }
+}

@@ -181,13 +181,17 @@ async fn on_line_opcua(
     let (mut station, mut line) =
         common::master_station(port, bus, dp, args.latency, Default::default())?;
     let options = common::driver_options(&line, 0, false)?;
+    let mut clean = common::CleanStop::default();
     driver::run_with(
         &mut station,
         &mut line,
         Clock::start(),
         options,
-        common::shutdown(),
+        clean.shutdown(common::shutdown()),
         |st, now| {
+            if clean.step(st, now).is_break() {
+                return ControlFlow::Break(());
+            }
             face.step(st.app_mut(), now, link::wall_ms());
             ControlFlow::<()>::Continue(())
         },
@@ -325,13 +329,19 @@ async fn on_line(
         bus.master.params.baud,
         bus.slaves.len()
     );
+    // SIGTERM / Ctrl-C: the offline health, then Clear to the slaves and
+    // the token passed on.
+    let mut clean = common::CleanStop::default();
     let result = driver::run_with(
         &mut station,
         &mut line,
         Clock::start(),
         options,
-        shutdown,
+        clean.shutdown(shutdown),
         |st, now| {
+            if clean.step(st, now).is_break() {
+                return ControlFlow::Break(());
+            }
             if let Some(c) = &mut control {
                 c.tick(st.app_mut(), now, profiled, &info, baud);
             }

@@ -143,14 +143,19 @@ async fn master(args: Args, profiled: ProfiledBus) -> Result<()> {
     let mut timed_out = false;
     let mut last_now = Instant::ZERO;
     let mut rfid = profibus_devices::rfid::jobs::MasterJobs::default();
+    // SIGTERM / Ctrl-C: Clear to the slaves and the token passed on first.
+    let mut clean = common::CleanStop::default();
     let result = driver::run_with(
         &mut station,
         &mut port,
         Clock::start(),
         options,
-        common::shutdown(),
+        clean.shutdown(common::shutdown()),
         |st, now| {
             last_now = now;
+            if clean.step(st, now).is_break() {
+                return ControlFlow::Break(());
+            }
             let m = st.app_mut();
             while let Some(line) = rx.as_mut().and_then(|rx| rx.try_recv().ok()) {
                 let channels = |a| {

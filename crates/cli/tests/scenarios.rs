@@ -317,6 +317,80 @@ fn a_killed_master_leaves_each_slave_safe_within_its_watchdog() {
     drop(slaves);
 }
 
+/// SIGTERM (and Ctrl-C) to `dpctl master`: before it exits it sends
+/// Global_Control with Clear_Data and a cycle of zero outputs, so each
+/// slave is in its safe state at once, seconds before its watchdog
+/// (5 s here) would have put it there; the master exits with status 0
+/// within the farewell's bound.
+#[test]
+fn a_terminated_master_clears_its_slaves_before_it_exits() {
+    let dir = TempDir::new("scn-farewell");
+    let bus = Bus::start(3, &[]);
+    let watchdogs = [(10u8, 5000u64), (11, 5000)];
+    let mut slaves: Vec<(Proc, Timed)> = watchdogs
+        .iter()
+        .enumerate()
+        .map(|(i, &(a, _))| {
+            let mut p = slave(&bus, i + 1, a, true);
+            let t = Timed::from(&mut p);
+            (p, t)
+        })
+        .collect();
+    let cfg = bus_file(&dir, 2, &watchdogs);
+    let (mut m, mut ml) = master(&bus.link_str(0), &cfg);
+    ml.wait("both slaves in data exchange", status_all_dx);
+    for (a, _) in watchdogs {
+        send(
+            &mut m,
+            &format!(r#"{{"slave": {a}, "outputs": "12 34 56 78"}}"#),
+        );
+    }
+    ml.wait("outputs echoed", |v| {
+        status_all_dx(v)
+            && watchdogs
+                .iter()
+                .all(|(a, _)| slave_of(v, *a)["inputs"] == "12 34 56 78")
+    });
+    for (_, lines) in &mut slaves {
+        lines.skip_to_end();
+    }
+    let asked = wall();
+    m.signal(15);
+    let status = m.wait(Duration::from_secs(10));
+    let ended = wall();
+    assert!(status.success(), "{status}");
+    assert!(
+        ended - asked < 3.0,
+        "the master took {:.2} s",
+        ended - asked
+    );
+    for (_, lines) in &mut slaves {
+        // The slave clears its outputs, then reports the Global_Control.
+        let (_, c) = lines.wait("outputs in the safe state", |v| {
+            v["event"] == "outputs_cleared" || v["event"] == "watchdog"
+        });
+        assert_eq!(
+            c["event"], "outputs_cleared",
+            "the watchdog came first: {c}"
+        );
+        assert_eq!(c["reason"], "Global_Control Clear_Data", "{c}");
+        let (_, g) = lines.wait("Global_Control Clear_Data", |v| {
+            v["event"] == "global_control"
+                && v["command"].as_str().is_some_and(|c| c.contains("Clear"))
+        });
+        assert_eq!(g["master"], 2, "{g}");
+        // Cleared while the master still ran (the slave's clock against
+        // the wall clock: reading its lines only adds delay).
+        let at = c["t"].as_f64().unwrap() + lines.offset();
+        assert!(
+            at <= ended + 0.05,
+            "cleared {:.3} s after the master ended",
+            at - ended
+        );
+    }
+    bus.stop();
+}
+
 /// CPU time (user + system, s) of process `pid`.
 fn cpu_time(pid: u32) -> f64 {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();

@@ -71,7 +71,7 @@ pub use config::{
     STARTUP_RETRY_MAX,
 };
 pub use report::{AlarmReport, CfgGroup, CycleMicros, MasterReport, MasterStatus, SlaveStatus};
-pub use stop::{StopReason, StopWhen, EXCHANGES_TIMEOUT};
+pub use stop::{Farewell, StopReason, StopWhen, EXCHANGES_TIMEOUT, FAREWELL_LIMIT};
 pub use task::{RecordError, RecordOutcome, RecordTask, SlaveTask, TaskRun};
 pub use wait::{SlaveWait, StartupTimeout};
 
@@ -870,6 +870,11 @@ impl DpMaster {
         if state != OperatingState::Stop {
             self.global_control(command, 0);
         }
+    }
+
+    /// Whether a queued Global_Control is still to be sent.
+    pub fn global_control_pending(&self) -> bool {
+        !self.gc_queue.is_empty()
     }
 
     /// Queue a Global_Control (sync/unsync, freeze/unfreeze, clear) for

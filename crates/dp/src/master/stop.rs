@@ -2,7 +2,9 @@
 //! every slave has exchanged data N times (however long its start-up
 //! took), or at a deadline (`dpctl master --cycles/--exchanges/--timeout`).
 
-use super::DpMaster;
+use super::{DpMaster, OperatingState};
+use crate::pdu::control::ControlCommand;
+use profibus_fdl::station::active::RingState;
 use profibus_fdl::Instant;
 use std::time::Duration;
 
@@ -62,6 +64,78 @@ impl StopWhen {
         } else {
             None
         }
+    }
+}
+
+/// The longest a [`Farewell`] takes: 1 s, some ten poll cycles of a
+/// full segment at 19.2 kbit/s and many token rotations at 1.5 Mbit/s.
+pub const FAREWELL_LIMIT: Duration = Duration::from_secs(1);
+
+/// The clean stop of a master that was asked to end (`dpctl master` and
+/// `dpctl gateway` on SIGTERM or Ctrl-C). Sans-IO: [`Farewell::begin`]
+/// once, then ask [`Farewell::done`] at every step until it says stop.
+///
+/// 1. **Clear**: the master goes to Clear, which sends a Global_Control
+///    with Clear_Data to all slaves (broadcast SDN to SAP 58; the
+///    standard's "master in Clear": slaves set their outputs to the safe
+///    state, IEC 61158-6-3 / reference profibus-dp.md, Global_Control),
+///    and then exchanges data with zero outputs. `done` waits until the
+///    Global_Control is sent and one whole poll cycle in Clear has
+///    followed it, so every slave in Data_Exchange has seen Clear_Data or
+///    zero outputs — at once, not after its watchdog (often seconds).
+/// 2. **Leave the ring**: PROFIBUS has no telegram for leaving; a master
+///    leaves cleanly by not holding the token when it falls silent (the
+///    others then drop it from their LAS when it takes no token pass,
+///    instead of waiting for a lost token and claiming a new one). `done`
+///    waits until the station has passed the token on (Active_Idle), or is
+///    alone in the ring.
+///
+/// Both bounded by [`FAREWELL_LIMIT`]: a segment that does not let the
+/// master finish (no token, a broken line) still ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Farewell {
+    /// Poll cycles completed when the Clear began.
+    cycles: u64,
+    /// When to give up waiting.
+    until: Instant,
+}
+
+impl Farewell {
+    /// Start the clean stop of `m` at `now`: Clear with a Global_Control
+    /// Clear_Data to all slaves (sent again if `m` already is in Clear).
+    pub fn begin(m: &mut DpMaster, now: Instant) -> Farewell {
+        if m.operating_state() == OperatingState::Clear {
+            m.global_control(ControlCommand::empty(), 0);
+        } else {
+            m.set_operating_state(OperatingState::Clear);
+        }
+        Farewell {
+            cycles: m.cycle_stats().cycles,
+            until: now + FAREWELL_LIMIT,
+        }
+    }
+
+    /// Whether the slaves saw the Clear: the Global_Control sent and a
+    /// whole poll cycle after it.
+    pub fn cleared(&self, m: &DpMaster) -> bool {
+        // The cycle running at `begin` ends (+1), then a whole one (+2).
+        !m.global_control_pending() && m.cycle_stats().cycles >= self.cycles + 2
+    }
+
+    /// Whether the master may fall silent now: cleared and not holding
+    /// the token (`ring` the station's state, `alone` when it is the only
+    /// master in its ring), or [`FAREWELL_LIMIT`] passed.
+    pub fn done(&self, m: &DpMaster, ring: RingState, alone: bool, now: Instant) -> bool {
+        if now >= self.until {
+            return true;
+        }
+        let token_held = matches!(ring, RingState::UseToken | RingState::CheckTokenPass);
+        self.cleared(m) && (alone || !token_held)
+    }
+
+    /// Whether the bound passed (the stop was not clean).
+    pub fn timed_out(&self, now: Instant) -> bool {
+        now >= self.until
     }
 }
 
