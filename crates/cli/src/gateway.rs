@@ -11,7 +11,8 @@ use profibus_dp::master::DpMaster;
 use profibus_dp::monitor::alert::AlertRule;
 use profibus_gateway::sim::slave_infos;
 use profibus_gateway::{
-    link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, Session, SparkplugId,
+    link, sparkplug, Connection, EdgeNode, Gateway, MqttLink, MqttSettings, MqttVersion, Session,
+    SparkplugId,
 };
 use profibus_io::driver::{self, Clock};
 use profibus_opcua::{Face, OpcuaServer, OpcuaSettings};
@@ -35,6 +36,11 @@ pub struct Args {
     /// (default: `[mqtt] broker`).
     #[arg(long, value_name = "URL")]
     mqtt: Option<String>,
+    /// MQTT protocol version: 4 (MQTT 3.1.1) or 5 (MQTT 5: answers on the
+    /// request's response topic with its correlation data, units as user
+    /// properties, message expiry) (default: `[mqtt] version`, else 4).
+    #[arg(long, value_name = "4|5", value_parser = mqtt_version)]
+    mqtt_version: Option<MqttVersion>,
     /// Sparkplug B mode: publish as edge node EDGE of group GROUP
     /// (default: `[mqtt] sparkplug`; without either, plain JSON topics).
     #[arg(long, value_name = "GROUP/EDGE")]
@@ -69,6 +75,14 @@ pub struct Args {
     alert: Vec<AlertRule>,
 }
 
+/// `--mqtt-version`: 4 or 5.
+fn mqtt_version(s: &str) -> Result<MqttVersion, String> {
+    s.parse()
+        .ok()
+        .and_then(MqttVersion::from_level)
+        .ok_or_else(|| "must be 4 (MQTT 3.1.1) or 5 (MQTT 5)".to_string())
+}
+
 pub fn run(args: Args) -> Result<()> {
     if args.sim && args.control.control.is_some() {
         anyhow::bail!("--control shares a line's master: give --port, not --sim");
@@ -80,6 +94,14 @@ pub fn run(args: Args) -> Result<()> {
     let mut settings = MqttSettings::for_bus_file(profiled.file.mqtt.as_ref(), &args.config)
         .map_err(|e| e.in_bus_file(&profiled.file))?;
     settings.alerts.extend(args.alert.iter().cloned());
+    if let Some(v) = args.mqtt_version {
+        settings.version = v;
+    }
+    if settings.version == MqttVersion::V5
+        && (args.sparkplug.is_some() || settings.sparkplug.is_some())
+    {
+        anyhow::bail!(profibus_gateway::SettingsError::SparkplugNeedsV311);
+    }
     if args.opcua.is_some() || profiled.file.opcua.is_some() {
         return with_opcua(args, profiled, settings);
     }

@@ -8,7 +8,7 @@
 
 use profibus_dp::master::{DpMaster, SlaveState};
 use profibus_fdl::Instant;
-use profibus_gateway::{LinkSetup, MqttSettings, Publish, Session};
+use profibus_gateway::{LinkSetup, MqttSettings, Properties, Publish, Session};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -252,7 +252,10 @@ impl<S: Session> Operated<S> {
 
     fn take_reloads(&mut self) {
         while let Ok(r) = self.reloads.try_recv() {
-            self.inner.reload(r.settings);
+            // The connection's version (maybe from --mqtt-version) stays.
+            let mut settings = r.settings;
+            settings.version = self.inner.settings().version;
+            self.inner.reload(settings);
             match r.changes.is_empty() {
                 true => tracing::info!(target: TARGET, "reloaded [mqtt]: nothing changed"),
                 false => tracing::info!(
@@ -295,11 +298,7 @@ impl<S: Session> Operated<S> {
         if stopping {
             self.offline_sent = true;
         }
-        Some(Publish {
-            topic: self.health_topic.clone(),
-            payload,
-            retain: true,
-        })
+        Some(Publish::new(self.health_topic.clone(), payload, true))
     }
 }
 
@@ -326,8 +325,8 @@ impl<S: Session> Session for Operated<S> {
         self.snapshot().broker = false;
         self.inner.disconnected(ts_ms)
     }
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
-        self.inner.handle_message(topic, payload, ts_ms)
+    fn handle_message_with(&mut self, topic: &str, payload: &[u8], props: &Properties, ts_ms: u64) {
+        self.inner.handle_message_with(topic, payload, props, ts_ms)
     }
     fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
         self.take_reloads();

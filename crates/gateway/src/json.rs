@@ -10,7 +10,7 @@ use crate::payload::{
     SlaveStatePayload, Status,
 };
 use crate::request::{parse_request, OutputWrite, ReplyTo, Request, RequestError, QUEUE_LIMIT};
-use crate::session::{LinkSetup, Publish, Session};
+use crate::session::{LinkSetup, Properties, Publish, Session};
 use crate::settings::{MqttSettings, PublishMode};
 use crate::slave::SlaveInfo;
 use crate::topics::{Service, SlaveTopic, Topics};
@@ -146,11 +146,7 @@ impl Gateway {
     /// The last will to register when connecting: the status, offline,
     /// retained.
     pub fn last_will(&self) -> Publish {
-        Publish {
-            topic: self.topics.status(),
-            payload: to_bytes(&Status::Offline),
-            retain: true,
-        }
+        Publish::new(self.topics.status(), to_bytes(&Status::Offline), true)
     }
 
     /// The broker accepted the connection: at the next [`Gateway::step`]
@@ -174,12 +170,30 @@ impl Gateway {
     }
 
     fn push(&mut self, topic: String, payload: &impl serde::Serialize, retain: bool) {
+        let props = self.properties(retain, vec![]);
+        self.push_with(topic, to_bytes(payload), retain, props);
+    }
+
+    fn push_with(&mut self, topic: String, payload: Vec<u8>, retain: bool, props: Properties) {
         if self.online {
             self.out.push_back(Publish {
                 topic,
-                payload: to_bytes(payload),
+                payload,
                 retain,
+                props,
             });
+        }
+    }
+
+    /// The MQTT 5 properties of a message: `user`, and the message expiry
+    /// interval when it is not retained (a retained message is the
+    /// topic's current value: with report by exception a steady value is
+    /// not published again, so it must not expire).
+    fn properties(&self, retain: bool, user: Vec<(String, String)>) -> Properties {
+        Properties {
+            user,
+            message_expiry_s: self.settings.message_expiry_s.filter(|_| !retain),
+            ..Properties::default()
         }
     }
 
@@ -202,7 +216,11 @@ impl Gateway {
             self.topics
                 .slave(t.address, SlaveTopic::Response(t.service))
         });
-        self.push(topic, &a, false);
+        let props = Properties {
+            correlation_data: t.to.correlation_data,
+            ..self.properties(false, vec![])
+        };
+        self.push_with(topic, to_bytes(&a), false, props);
     }
 
     /// Check `request` for slave `address` against the configuration and
@@ -273,6 +291,20 @@ impl Gateway {
     /// one is answered at once and changes nothing) and carried out from
     /// the next [`Gateway::step`]. Messages on other topics are ignored.
     pub fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        self.handle_message_with(topic, payload, &Properties::default(), ts_ms)
+    }
+
+    /// [`Gateway::handle_message`] with the message's MQTT 5 properties:
+    /// a request with a Response Topic is answered there instead of on
+    /// the slave's response topic (or its `"reply_to"`), and its
+    /// Correlation Data goes back with the answer.
+    pub fn handle_message_with(
+        &mut self,
+        topic: &str,
+        payload: &[u8],
+        props: &Properties,
+        ts_ms: u64,
+    ) {
         let (service, address) = match self.topics.parse_request(topic) {
             None => return,
             Some((s, Ok(a))) => (s, a),
@@ -282,7 +314,13 @@ impl Gateway {
                 return;
             }
         };
-        let (to, request) = parse_request(service, payload);
+        let (mut to, request) = parse_request(service, payload);
+        let request = to
+            .take_properties(
+                props.response_topic.as_deref(),
+                props.correlation_data.as_deref(),
+            )
+            .and(request);
         let target = Target {
             service,
             address,
@@ -489,7 +527,7 @@ impl Gateway {
                     ts: ts_ms,
                     cycle,
                 };
-                msgs.push((SlaveTopic::State, to_bytes(&p)));
+                msgs.push((SlaveTopic::State, to_bytes(&p), true, vec![]));
             }
             let [fin, fout] = &mut e.filters;
             for (t, dir, img, last, filter) in [
@@ -519,7 +557,12 @@ impl Gateway {
                         Direction::Output => map.values(&[], img).outputs,
                     });
                     let p = ImagePayload::new(addr, img, values, ts_ms, cycle);
-                    msgs.push((t, to_bytes(&p)));
+                    // MQTT 5: each unit as a user property `unit`,
+                    // `channel=unit`.
+                    let units = (p.units.0.iter())
+                        .map(|(name, unit)| ("unit".to_string(), format!("{name}={unit}")))
+                        .collect();
+                    msgs.push((t, to_bytes(&p), self.settings.retain_values, units));
                 }
             }
             if e.published.diag.as_deref() != Some(v.diag) {
@@ -534,16 +577,11 @@ impl Gateway {
                     )
                 };
                 let p = DiagPayload::new(addr, v.diag, text, ts_ms, cycle);
-                msgs.push((SlaveTopic::Diag, to_bytes(&p)));
+                msgs.push((SlaveTopic::Diag, to_bytes(&p), true, vec![]));
             }
-            if self.online {
-                for (t, payload) in msgs {
-                    self.out.push_back(Publish {
-                        topic: self.topics.slave(addr, t),
-                        payload,
-                        retain: true,
-                    });
-                }
+            for (t, payload, retain, user) in msgs {
+                let props = self.properties(retain, user);
+                self.push_with(self.topics.slave(addr, t), payload, retain, props);
             }
         }
     }
@@ -683,8 +721,8 @@ impl Session for Gateway {
     fn disconnected(&mut self, ts_ms: u64) {
         Gateway::disconnected(self, ts_ms)
     }
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
-        Gateway::handle_message(self, topic, payload, ts_ms)
+    fn handle_message_with(&mut self, topic: &str, payload: &[u8], props: &Properties, ts_ms: u64) {
+        Gateway::handle_message_with(self, topic, payload, props, ts_ms)
     }
     fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64) {
         Gateway::step(self, m, now, ts_ms)
@@ -816,6 +854,144 @@ mod tests {
         g.step(&mut m, Instant::ZERO, 21);
         assert_eq!(drain(&mut g).len(), 1 + 3 * 4);
         assert_eq!(g.last_will().payload, br#"{"state":"offline"}"#);
+    }
+
+    fn publishes(g: &mut Gateway) -> Vec<Publish> {
+        std::iter::from_fn(|| g.poll_publish()).collect()
+    }
+
+    #[test]
+    fn mqtt5_requests_are_answered_on_their_response_topic_with_their_correlation_data() {
+        let (mut g, mut m) = setup();
+        g.connected(0);
+        g.step(&mut m, Instant::ZERO, 0);
+        drain(&mut g);
+        let props = |topic: Option<&str>, data: &[u8]| Properties {
+            response_topic: topic.map(Into::into),
+            correlation_data: Some(data.to_vec()),
+            ..Properties::default()
+        };
+        // No `id`, no `reply_to`: the properties say where and which.
+        g.handle_message_with(
+            "profibus/l1/3/outputs/set",
+            br#"{"channels": {"speed": 5}}"#,
+            &props(Some("client/7/answers"), b"\xca\xfe"),
+            1,
+        );
+        g.step(&mut m, Instant::ZERO, 2);
+        assert_eq!(m.outputs(3).unwrap(), [0, 5, 0, 0]);
+        let all = publishes(&mut g);
+        assert!(all
+            .iter()
+            .all(|p| p.topic != "profibus/l1/3/outputs/response"));
+        let a = all.iter().find(|p| p.topic == "client/7/answers").unwrap();
+        assert_eq!(a.props.correlation_data.as_deref(), Some(&b"\xca\xfe"[..]));
+        assert_eq!(a.props.message_expiry_s, Some(10), "not retained: expires");
+        assert!(!a.retain);
+        let v: serde_json::Value = serde_json::from_slice(&a.payload).unwrap();
+        assert_eq!(v["ok"], true);
+        assert!(v.get("id").is_none(), "{v}");
+        // Retained images never expire.
+        let img = all
+            .iter()
+            .find(|p| p.topic == "profibus/l1/3/outputs")
+            .unwrap();
+        assert_eq!((img.retain, img.props.message_expiry_s), (true, None));
+        // The Response Topic wins over `reply_to`; a refusal goes there too.
+        g.handle_message_with(
+            "profibus/l1/4/outputs/set",
+            br#"{"hex": "0102", "reply_to": "elsewhere"}"#,
+            &props(Some("client/7/answers"), b"2"),
+            3,
+        );
+        let all = publishes(&mut g);
+        assert_eq!(all.len(), 1);
+        assert_eq!(
+            (
+                all[0].topic.as_str(),
+                all[0].props.correlation_data.as_deref()
+            ),
+            ("client/7/answers", Some(&b"2"[..]))
+        );
+        let v: serde_json::Value = serde_json::from_slice(&all[0].payload).unwrap();
+        assert_eq!(v["ok"], false);
+        // Correlation Data alone: the slave's response topic; a wildcard
+        // Response Topic is refused there, with the data.
+        for (topic, error) in [(None, None), (Some("client/+"), Some("wildcards"))] {
+            g.handle_message_with(
+                "profibus/l1/3/outputs/set",
+                br#"{"channels": {"speed": 6}}"#,
+                &props(topic, b"3"),
+                4,
+            );
+            g.step(&mut m, Instant::ZERO, 5);
+            let all = publishes(&mut g);
+            let a = all
+                .iter()
+                .find(|p| p.topic == "profibus/l1/3/outputs/response")
+                .unwrap();
+            assert_eq!(a.props.correlation_data.as_deref(), Some(&b"3"[..]));
+            let v: serde_json::Value = serde_json::from_slice(&a.payload).unwrap();
+            assert_eq!(v["ok"], error.is_none(), "{v}");
+            if let Some(e) = error {
+                assert!(v["error"].as_str().unwrap().contains(e), "{v}");
+            }
+        }
+    }
+
+    #[test]
+    fn images_carry_their_units_and_expire_when_not_retained() {
+        use profibus_devices::channels::{Channel, Scale};
+        let (_, mut m) = setup();
+        let mut ch = ChannelMap::new();
+        ch.channels.push(
+            Channel::new("ai", Direction::Input, 0, ChannelType::I16).scaled(Scale {
+                num: 10,
+                den: 32767,
+                unit: "V".into(),
+            }),
+        );
+        ch.push("count", Direction::Input, 2, ChannelType::U16);
+        let info = SlaveInfo {
+            layout: SlaveLayout {
+                address: 3,
+                ..SlaveLayout::default()
+            },
+            channels: Some(ch),
+            pkw: None,
+        };
+        for (text, retain, expiry) in [
+            ("", true, None),
+            ("retain_values = false", false, Some(10)),
+            ("retain_values = false\nmessage_expiry_s = 0", false, None),
+        ] {
+            let t: toml::Table = toml::from_str(text).unwrap();
+            let settings = crate::MqttSettings::from_table(Some(&t), "l1").unwrap();
+            let mut g = Gateway::new(settings, vec![info.clone()]);
+            g.connected(0);
+            g.step(&mut m, Instant::ZERO, 0);
+            let all = publishes(&mut g);
+            let inputs = all
+                .iter()
+                .find(|p| p.topic == "profibus/l1/3/inputs")
+                .unwrap();
+            assert_eq!(
+                inputs.props.user,
+                [("unit".to_string(), "ai=V".to_string())],
+                "{text}"
+            );
+            assert_eq!(
+                (inputs.retain, inputs.props.message_expiry_s),
+                (retain, expiry),
+                "{text}"
+            );
+            let state = all
+                .iter()
+                .find(|p| p.topic == "profibus/l1/3/state")
+                .unwrap();
+            assert_eq!((state.retain, state.props.message_expiry_s), (true, None));
+            assert!(state.props.user.is_empty());
+        }
     }
 
     #[test]

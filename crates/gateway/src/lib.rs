@@ -104,10 +104,10 @@ pub mod traffic;
 
 pub use json::Gateway;
 pub use link::{Connection, ConnectionError, LinkEvent, MqttLink};
-pub use session::{LinkSetup, Publish, Session};
+pub use session::{LinkSetup, Properties, Publish, Session};
 pub use settings::{
-    Broker, Deadband, MqttSettings, PublishMode, SafeState, SettingsError, SlaveTraffic,
-    WriteAccess,
+    Broker, Deadband, MqttSettings, MqttVersion, PublishMode, SafeState, SettingsError,
+    SlaveTraffic, WriteAccess,
 };
 pub use slave::{slave_infos, SlaveInfo, SlaveInfoError};
 pub use sparkplug::EdgeNode;

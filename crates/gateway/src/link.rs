@@ -11,14 +11,24 @@
 //! loss. Publishing never blocks the bus: a message that finds
 //! the client's queue full (the broker is away) is dropped, and the
 //! gateway republishes every retained topic when the broker is back.
+//!
+//! It speaks MQTT 3.1.1 or, with `[mqtt] version = 5`, MQTT 5 (the
+//! client of `rumqttc::v5`): the version is the link's business alone;
+//! the cores fill and read [`Properties`] either way and the 3.1.1 link
+//! leaves them out. Both versions connect with a clean session (clean
+//! start, no session kept: the gateway subscribes again and republishes
+//! its retained topics on every connection). On MQTT 5 the line of a
+//! lost connection gives the reason code of the broker's DISCONNECT or
+//! refusing CONNACK.
 
-use crate::session::{Publish, Session};
-use crate::settings::{parse_broker, Broker, MqttSettings, PasswordSource, SettingsError};
+use crate::session::{Properties, Publish, Session};
+use crate::settings::{
+    parse_broker, Broker, MqttSettings, MqttVersion, PasswordSource, SettingsError,
+};
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
-use rumqttc::{
-    AsyncClient, Event, LastWill, MqttOptions, Outgoing, Packet, QoS, TlsConfiguration, Transport,
-};
+use rumqttc::v5::mqttbytes::v5 as mqtt5;
+use rumqttc::{Event, LastWill, MqttOptions, Outgoing, Packet, QoS, TlsConfiguration, Transport};
 use std::path::PathBuf;
 use std::time::Duration;
 use tokio::sync::mpsc;
@@ -36,18 +46,27 @@ pub enum LinkEvent {
         topic: String,
         /// Payload.
         payload: Vec<u8>,
+        /// Its MQTT 5 properties (empty on MQTT 3.1.1).
+        props: Properties,
     },
 }
 
-/// A failed publish. The message includes the cause, which is therefore
-/// not also returned as `source()`: a printed error chain names it once.
+/// A failed publish (the client's queue is full or closed). The message
+/// includes the cause, which is therefore not also returned as
+/// `source()`: a printed error chain names it once.
 #[derive(Debug, thiserror::Error)]
 #[error("MQTT publish failed: {0}")]
-pub struct LinkError(rumqttc::ClientError);
+pub struct LinkError(String);
 
 impl From<rumqttc::ClientError> for LinkError {
     fn from(e: rumqttc::ClientError) -> Self {
-        LinkError(e)
+        LinkError(e.to_string())
+    }
+}
+
+impl From<rumqttc::v5::ClientError> for LinkError {
+    fn from(e: rumqttc::v5::ClientError) -> Self {
+        LinkError(e.to_string())
     }
 }
 
@@ -146,24 +165,211 @@ impl Connection {
         })
     }
 
-    fn options(&self, client_id: String) -> MqttOptions {
-        let mut o = MqttOptions::new(client_id, self.broker.host.clone(), self.broker.port);
-        if let Some((u, p)) = &self.credentials {
-            o.set_credentials(u.clone(), p.clone());
+    fn transport(&self) -> Transport {
+        match (&self.ca_pem, self.broker.tls) {
+            (_, false) => Transport::tcp(),
+            (Some(ca), true) => Transport::tls(ca.clone(), None, None),
+            (None, true) => Transport::tls_with_config(TlsConfiguration::default()),
         }
-        if self.broker.tls {
-            o.set_transport(match &self.ca_pem {
-                Some(ca) => Transport::tls(ca.clone(), None, None),
-                None => Transport::tls_with_config(TlsConfiguration::default()),
-            });
+    }
+
+    /// The client and its event loop: clean session, keep-alive 5 s,
+    /// the last will `will`.
+    fn client(
+        &self,
+        version: MqttVersion,
+        client_id: String,
+        will: Publish,
+        will_qos: QoS,
+    ) -> (Client, EventLoop) {
+        let (host, port) = (self.broker.host.clone(), self.broker.port);
+        let keep_alive = Duration::from_secs(5);
+        match version {
+            MqttVersion::V311 => {
+                let mut o = MqttOptions::new(client_id, host, port);
+                if let Some((u, p)) = &self.credentials {
+                    o.set_credentials(u.clone(), p.clone());
+                }
+                o.set_transport(self.transport());
+                o.set_keep_alive(keep_alive);
+                o.set_clean_session(true);
+                let (client, el) = rumqttc::AsyncClient::new(o, QUEUE);
+                let mut el = EventLoop::V4(el);
+                el.set_last_will(will, will_qos);
+                (Client::V4(client), el)
+            }
+            MqttVersion::V5 => {
+                let mut o = rumqttc::v5::MqttOptions::new(client_id, host, port);
+                if let Some((u, p)) = &self.credentials {
+                    o.set_credentials(u.clone(), p.clone());
+                }
+                o.set_transport(self.transport());
+                o.set_keep_alive(keep_alive);
+                // Clean Start, Session Expiry Interval 0 (absent): no
+                // session outlives the connection.
+                o.set_clean_start(true);
+                let (client, el) = rumqttc::v5::AsyncClient::new(o, QUEUE);
+                let mut el = EventLoop::V5(el);
+                el.set_last_will(will, will_qos);
+                (Client::V5(client), el)
+            }
         }
-        o
+    }
+}
+
+/// The client half of either protocol version.
+#[derive(Clone)]
+enum Client {
+    V4(rumqttc::AsyncClient),
+    V5(rumqttc::v5::AsyncClient),
+}
+
+fn qos5(q: QoS) -> rumqttc::v5::mqttbytes::QoS {
+    use rumqttc::v5::mqttbytes::QoS as Q5;
+    match q {
+        QoS::AtMostOnce => Q5::AtMostOnce,
+        QoS::AtLeastOnce => Q5::AtLeastOnce,
+        QoS::ExactlyOnce => Q5::ExactlyOnce,
+    }
+}
+
+impl Client {
+    /// Queue `p` without waiting; on MQTT 5 with its properties.
+    fn try_publish(&self, p: Publish, q: QoS) -> Result<(), LinkError> {
+        match self {
+            Client::V4(c) => c.try_publish(p.topic, q, p.retain, p.payload)?,
+            Client::V5(c) => {
+                let props = mqtt5::PublishProperties {
+                    message_expiry_interval: p.props.message_expiry_s,
+                    response_topic: p.props.response_topic,
+                    correlation_data: p.props.correlation_data.map(Into::into),
+                    user_properties: p.props.user,
+                    ..Default::default()
+                };
+                c.try_publish_with_properties(p.topic, qos5(q), p.retain, p.payload, props)?
+            }
+        }
+        Ok(())
+    }
+
+    fn try_subscribe(&self, filter: String, q: QoS) -> Result<(), LinkError> {
+        match self {
+            Client::V4(c) => c.try_subscribe(filter, q)?,
+            Client::V5(c) => c.try_subscribe(filter, qos5(q))?,
+        }
+        Ok(())
+    }
+
+    fn try_disconnect(&self) -> Result<(), LinkError> {
+        match self {
+            Client::V4(c) => c.try_disconnect()?,
+            Client::V5(c) => c.try_disconnect()?,
+        }
+        Ok(())
+    }
+}
+
+/// The event loop of either protocol version (one per link, never moved
+/// once its task runs: the size of the variants does not matter).
+#[allow(clippy::large_enum_variant)]
+enum EventLoop {
+    V4(rumqttc::EventLoop),
+    V5(rumqttc::v5::EventLoop),
+}
+
+/// What the event loop reports, whichever the version.
+enum Polled {
+    /// The broker accepted the connection.
+    ConnAck {
+        /// Whether the broker kept a session (never, with clean start).
+        session_present: bool,
+    },
+    /// A message.
+    Message(String, Vec<u8>, Properties),
+    /// Our DISCONNECT went out.
+    Disconnected,
+    /// Anything else.
+    Other,
+}
+
+impl EventLoop {
+    /// The next event, or why the connection failed (on MQTT 5 with the
+    /// reason code of the broker's DISCONNECT or CONNACK).
+    async fn poll(&mut self) -> Result<Polled, String> {
+        match self {
+            EventLoop::V4(el) => Ok(match el.poll().await.map_err(|e| e.to_string())? {
+                Event::Incoming(Packet::ConnAck(a)) => Polled::ConnAck {
+                    session_present: a.session_present,
+                },
+                Event::Incoming(Packet::Publish(p)) => {
+                    Polled::Message(p.topic, p.payload.to_vec(), Properties::default())
+                }
+                Event::Outgoing(Outgoing::Disconnect) => Polled::Disconnected,
+                _ => Polled::Other,
+            }),
+            EventLoop::V5(el) => {
+                use rumqttc::v5::{ConnectionError as E, Event as Ev, StateError};
+                let ev = el.poll().await.map_err(|e| match e {
+                    E::ConnectionRefused(code) => {
+                        format!("connection refused, CONNACK reason {code:?}")
+                    }
+                    E::MqttState(StateError::ServerDisconnect {
+                        reason_code,
+                        reason_string,
+                    }) => format!(
+                        "DISCONNECT from the broker, reason code 0x{:02x} ({reason_code:?}){}",
+                        reason_code as u8,
+                        reason_string.map(|r| format!(": {r}")).unwrap_or_default()
+                    ),
+                    e => e.to_string(),
+                })?;
+                Ok(match ev {
+                    Ev::Incoming(mqtt5::Packet::ConnAck(a)) => Polled::ConnAck {
+                        session_present: a.session_present,
+                    },
+                    Ev::Incoming(mqtt5::Packet::Publish(p)) => {
+                        let props = p.properties.map(|q| Properties {
+                            response_topic: q.response_topic,
+                            correlation_data: q.correlation_data.map(|c| c.to_vec()),
+                            user: q.user_properties,
+                            message_expiry_s: q.message_expiry_interval,
+                        });
+                        Polled::Message(
+                            String::from_utf8_lossy(&p.topic).into_owned(),
+                            p.payload.to_vec(),
+                            props.unwrap_or_default(),
+                        )
+                    }
+                    Ev::Outgoing(Outgoing::Disconnect) => Polled::Disconnected,
+                    _ => Polled::Other,
+                })
+            }
+        }
+    }
+
+    /// The last will of the next connection attempt.
+    fn set_last_will(&mut self, w: Publish, q: QoS) {
+        match self {
+            EventLoop::V4(el) => {
+                el.mqtt_options
+                    .set_last_will(LastWill::new(w.topic, w.payload, q, w.retain));
+            }
+            EventLoop::V5(el) => {
+                el.options.set_last_will(mqtt5::LastWill::new(
+                    w.topic,
+                    w.payload,
+                    qos5(q),
+                    w.retain,
+                    None,
+                ));
+            }
+        }
     }
 }
 
 /// The connection to the broker of one gateway.
 pub struct MqttLink {
-    client: AsyncClient,
+    client: Client,
     qos: QoS,
     will_qos: QoS,
     events: mpsc::UnboundedReceiver<LinkEvent>,
@@ -186,29 +392,23 @@ const QUEUE: usize = 1024;
 
 impl MqttLink {
     /// Start connecting over `conn` for `gateway` (its client id, last
-    /// will and subscriptions). Needs a tokio runtime.
+    /// will and subscriptions, and the protocol version of its
+    /// settings). Needs a tokio runtime.
     pub fn connect(conn: &Connection, gateway: &impl Session) -> MqttLink {
         let s = gateway.settings();
+        let version = s.version;
         let setup = gateway.link_setup();
         let q = qos(setup.qos);
         let will_qos = qos(setup.will_qos);
-        let mut next_will = setup.will;
-        let mut will = move || {
-            let w = next_will();
-            LastWill::new(w.topic, w.payload, will_qos, w.retain)
-        };
-        let mut o = conn.options(s.client_id.clone());
-        o.set_keep_alive(Duration::from_secs(5));
-        o.set_clean_session(true);
-        o.set_last_will(will());
-        let (client, mut eventloop) = AsyncClient::new(o, QUEUE);
+        let mut will = setup.will;
+        let (client, mut eventloop) = conn.client(version, s.client_id.clone(), will(), will_qos);
         let (tx, events) = mpsc::unbounded_channel();
         let filters = setup.filters;
         let sub = client.clone();
         let (closing, mut closed) = tokio::sync::watch::channel(false);
         let url = conn.broker.to_string();
         tracing::info!(
-            "MQTT gateway starting: broker {url}, client id `{}`",
+            "MQTT gateway starting: broker {url}, MQTT {version}, client id `{}`",
             s.client_id
         );
         let task = tokio::spawn(async move {
@@ -218,11 +418,19 @@ impl MqttLink {
             let (mut ever, mut lost) = (false, false);
             loop {
                 match eventloop.poll().await {
-                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    Ok(Polled::ConnAck { session_present }) => {
                         pause = Duration::from_millis(100);
+                        let session = match session_present {
+                            false => "clean session",
+                            true => "session present",
+                        };
                         match ever {
-                            false => tracing::info!("connected to the MQTT broker {url}"),
-                            true => tracing::info!("reconnected to the MQTT broker {url}"),
+                            false => tracing::info!(
+                                "connected to the MQTT broker {url} (MQTT {version}, {session})"
+                            ),
+                            true => tracing::info!(
+                                "reconnected to the MQTT broker {url} (MQTT {version}, {session})"
+                            ),
                         }
                         (ever, lost) = (true, false);
                         for f in &filters {
@@ -234,18 +442,19 @@ impl MqttLink {
                             return;
                         }
                     }
-                    Ok(Event::Incoming(Packet::Publish(p))) => {
+                    Ok(Polled::Message(topic, payload, props)) => {
                         let ev = LinkEvent::Message {
-                            topic: p.topic,
-                            payload: p.payload.to_vec(),
+                            topic,
+                            payload,
+                            props,
                         };
                         if tx.send(ev).is_err() {
                             return;
                         }
                     }
                     // Our clean disconnect went out (`MqttLink::close`).
-                    Ok(Event::Outgoing(Outgoing::Disconnect)) => return,
-                    Ok(_) => {}
+                    Ok(Polled::Disconnected) => return,
+                    Ok(Polled::Other) => {}
                     // The broker closing the connection we are closing.
                     Err(_) if *closed.borrow() => return,
                     Err(e) => {
@@ -262,11 +471,11 @@ impl MqttLink {
                             ),
                         }
                         lost = true;
-                        if tx.send(LinkEvent::Disconnected(e.to_string())).is_err() {
+                        if tx.send(LinkEvent::Disconnected(e)).is_err() {
                             return;
                         }
                         // The next poll connects again, with the next will.
-                        eventloop.mqtt_options.set_last_will(will());
+                        eventloop.set_last_will(will(), will_qos);
                         // Reconnection backoff, not a wait for an event;
                         // a close ends it.
                         tokio::select! {
@@ -298,11 +507,10 @@ impl MqttLink {
         self.events.recv().await
     }
 
-    /// Queue a message for the broker without waiting.
+    /// Queue a message for the broker without waiting (on MQTT 5 with its
+    /// properties).
     pub fn publish(&self, p: Publish) -> Result<(), LinkError> {
-        self.client
-            .try_publish(p.topic, self.qos, p.retain, p.payload)?;
-        Ok(())
+        self.client.try_publish(p, self.qos)
     }
 
     /// Publish `p` and disconnect cleanly (the broker then does not send
@@ -311,9 +519,7 @@ impl MqttLink {
     /// is given at most [`CLOSE_WAIT`] to send both.
     pub async fn close(self, last: Publish) {
         self.closing.send_replace(true);
-        let _ = self
-            .client
-            .try_publish(last.topic, self.will_qos, last.retain, last.payload);
+        let _ = self.client.try_publish(last, self.will_qos);
         let _ = self.client.try_disconnect();
         let _ = tokio::time::timeout(CLOSE_WAIT, self.task).await;
     }
@@ -330,9 +536,11 @@ pub fn pump(link: &mut MqttLink, gateway: &mut impl Session, ts_ms: u64) {
         match ev {
             LinkEvent::Connected => gateway.connected(ts_ms),
             LinkEvent::Disconnected(_) => gateway.disconnected(ts_ms),
-            LinkEvent::Message { topic, payload } => {
-                gateway.handle_message(&topic, &payload, ts_ms)
-            }
+            LinkEvent::Message {
+                topic,
+                payload,
+                props,
+            } => gateway.handle_message_with(&topic, &payload, &props, ts_ms),
         }
     }
 }

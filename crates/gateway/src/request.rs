@@ -86,9 +86,37 @@ impl Request {
 pub struct ReplyTo {
     /// The request's `"id"` (any JSON value), repeated in the answer.
     pub id: Option<serde_json::Value>,
-    /// The request's `"reply_to"` topic; `None`: the service's response
-    /// topic of the slave.
+    /// The request's MQTT 5 Response Topic property, else its
+    /// `"reply_to"` topic; `None`: the service's response topic of the
+    /// slave.
     pub topic: Option<String>,
+    /// The request's MQTT 5 Correlation Data, returned as the answer's.
+    pub correlation_data: Option<Vec<u8>>,
+}
+
+impl ReplyTo {
+    /// The MQTT 5 properties of a request take the place of its payload
+    /// fields: a Response Topic replaces `"reply_to"` (one with wildcards
+    /// is refused: the answer then goes to the slave's response topic,
+    /// still with the Correlation Data), Correlation Data goes back with
+    /// the answer.
+    pub fn take_properties(
+        &mut self,
+        response_topic: Option<&str>,
+        correlation_data: Option<&[u8]>,
+    ) -> Result<(), RequestError> {
+        self.correlation_data = correlation_data.map(<[u8]>::to_vec);
+        match response_topic {
+            None => Ok(()),
+            Some(t) if publishable(t) => {
+                self.topic = Some(t.to_string());
+                Ok(())
+            }
+            Some(_) => Err(malformed(
+                "the response topic must be a topic without wildcards",
+            )),
+        }
+    }
 }
 
 /// Why a request was refused or failed.
@@ -207,6 +235,7 @@ pub fn parse_request(service: Service, payload: &[u8]) -> (ReplyTo, Result<Reque
             _ => None,
         },
         topic: None,
+        correlation_data: None,
     };
     match f.reply_to.clone() {
         Field::Absent => {}
@@ -599,7 +628,8 @@ mod tests {
             to,
             ReplyTo {
                 id: Some("x".into()),
-                topic: Some("me/r".into())
+                topic: Some("me/r".into()),
+                correlation_data: None,
             }
         );
         assert_eq!(

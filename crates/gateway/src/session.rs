@@ -1,7 +1,10 @@
 //! The interface between a gateway core and its connection: [`Session`],
 //! which the plain JSON core ([`crate::Gateway`]) and the Sparkplug B
 //! core ([`crate::EdgeNode`]) implement and the link ([`crate::link`])
-//! and the drivers use, and the [`Publish`]es it queues.
+//! and the drivers use, the [`Publish`]es it queues, and the MQTT 5
+//! [`Properties`] of messages both ways (a core fills and reads them
+//! whichever protocol version the link speaks; on MQTT 3.1.1 the link
+//! sends none and hands in none).
 
 use crate::settings::MqttSettings;
 use profibus_dp::master::DpMaster;
@@ -16,6 +19,37 @@ pub struct Publish {
     pub payload: Vec<u8>,
     /// Whether the broker keeps it for late subscribers.
     pub retain: bool,
+    /// Its MQTT 5 properties (not sent on MQTT 3.1.1).
+    pub props: Properties,
+}
+
+impl Publish {
+    /// A message without properties.
+    pub fn new(topic: String, payload: Vec<u8>, retain: bool) -> Publish {
+        Publish {
+            topic,
+            payload,
+            retain,
+            props: Properties::default(),
+        }
+    }
+}
+
+/// The MQTT 5 properties the gateway uses (MQTT 5.0, 3.3.2.3): on
+/// requests the client's response topic and correlation data, on answers
+/// the correlation data, on value messages the units and the message
+/// expiry interval. Empty on MQTT 3.1.1, which has no properties.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Properties {
+    /// Response Topic: where the requester wants the answer.
+    pub response_topic: Option<String>,
+    /// Correlation Data: the requester's bytes, returned with the answer.
+    pub correlation_data: Option<Vec<u8>>,
+    /// User Properties, name and value, in order (a name may repeat).
+    pub user: Vec<(String, String)>,
+    /// Message Expiry Interval in seconds: the broker drops the message
+    /// when it could not deliver it within this time (`None`: never).
+    pub message_expiry_s: Option<u32>,
 }
 
 /// A gateway core as the link and the driver see it: the plain JSON
@@ -43,8 +77,13 @@ pub trait Session {
     fn connected(&mut self, ts_ms: u64);
     /// The connection was lost (or a connection attempt failed).
     fn disconnected(&mut self, ts_ms: u64);
-    /// A message arrived on a subscribed topic.
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64);
+    /// A message arrived on a subscribed topic, with its MQTT 5
+    /// properties (empty on MQTT 3.1.1).
+    fn handle_message_with(&mut self, topic: &str, payload: &[u8], props: &Properties, ts_ms: u64);
+    /// A message without properties arrived on a subscribed topic.
+    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
+        self.handle_message_with(topic, payload, &Properties::default(), ts_ms)
+    }
     /// One step at a cycle boundary of the master; `now` is the master's
     /// time, `ts_ms` the wall clock in ms since the Unix epoch.
     fn step(&mut self, m: &mut DpMaster, now: Instant, ts_ms: u64);

@@ -24,6 +24,45 @@ pub enum PublishMode {
     Both,
 }
 
+/// The MQTT protocol version the gateway speaks (`[mqtt] version`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MqttVersion {
+    /// MQTT 3.1.1 (`version = 4`, the protocol level of its CONNECT), the
+    /// default.
+    #[default]
+    V311,
+    /// MQTT 5.0 (`version = 5`): request/response through the Response
+    /// Topic and Correlation Data properties, units as user properties,
+    /// message expiry.
+    V5,
+}
+
+impl MqttVersion {
+    /// The version from the number of `version` (the CONNECT's protocol
+    /// level): 4 or 5.
+    pub fn from_level(level: i64) -> Option<MqttVersion> {
+        match level {
+            4 => Some(MqttVersion::V311),
+            5 => Some(MqttVersion::V5),
+            _ => None,
+        }
+    }
+}
+
+/// `3.1.1` or `5`, as in log lines.
+impl std::fmt::Display for MqttVersion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            MqttVersion::V311 => "3.1.1",
+            MqttVersion::V5 => "5",
+        })
+    }
+}
+
+/// The default of `[mqtt] message_expiry_s`: a non-retained value
+/// message older than this is of no use to a client that was away.
+pub const DEFAULT_MESSAGE_EXPIRY_S: u32 = 10;
+
 /// What the outputs do after `outputs_timeout` without a broker.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SafeState {
@@ -113,6 +152,15 @@ pub struct MqttSettings {
     /// Sparkplug B: the host id of the primary host application whose
     /// `spBv1.0/STATE/<id>` the edge node follows (`None`: none).
     pub primary_host: Option<String>,
+    /// The protocol version (`[mqtt] version`).
+    pub version: MqttVersion,
+    /// MQTT 5: the Message Expiry Interval of every message published
+    /// without retain, in seconds (`[mqtt] message_expiry_s`; `None`:
+    /// none).
+    pub message_expiry_s: Option<u32>,
+    /// Whether the images (`inputs`, `outputs`) are retained
+    /// (`[mqtt] retain_values`, default true).
+    pub retain_values: bool,
     /// Alert rules on the master's per-slave statistics (`[mqtt] alerts`
     /// and `dpctl gateway --alert`), the syntax of
     /// [`profibus_dp::monitor::alert`].
@@ -205,6 +253,11 @@ pub enum SettingsError {
         /// What is wrong.
         problem: String,
     },
+    /// Sparkplug B with MQTT 5.
+    #[error(
+        "[mqtt]: Sparkplug B needs MQTT 3.1.1 (`version = 4`, the default), not `version = 5`"
+    )]
+    SparkplugNeedsV311,
     /// A broker URL that is not `mqtt://HOST[:PORT]` or `mqtts://HOST[:PORT]`.
     #[error("broker URL `{0}` is not mqtt://HOST[:PORT] or mqtts://HOST[:PORT]")]
     BadUrl(String),
@@ -236,6 +289,7 @@ impl SettingsError {
             SettingsError::UnknownKey(k) => format!("mqtt.{k}"),
             SettingsError::Bad { key, .. } => format!("mqtt.{key}"),
             SettingsError::BadUrl(_) => "mqtt.broker".into(),
+            SettingsError::SparkplugNeedsV311 => "mqtt.version".into(),
             SettingsError::At { path, .. } => path.clone(),
         }
     }
@@ -271,6 +325,9 @@ struct RawSettings {
     deadband: Field<toml::Value>,
     slave: Field<Vec<toml::Table>>,
     primary_host: Field<String>,
+    version: Field<toml::Value>,
+    message_expiry_s: Field<u64>,
+    retain_values: Field<bool>,
     alerts: Field<Vec<String>>,
     alert_interval_ms: Field<u64>,
 }
@@ -297,6 +354,9 @@ const KEYS: &[&str] = &[
     "deadband",
     "slave",
     "primary_host",
+    "version",
+    "message_expiry_s",
+    "retain_values",
     "alerts",
     "alert_interval_ms",
 ];
@@ -482,6 +542,9 @@ fn millis(v: Field<u64>, key: &'static str) -> Result<Option<Duration>, Settings
     }
 }
 
+/// What `version` may be.
+const VERSION_VALUES: &str = "must be 4 (MQTT 3.1.1, the default) or 5 (MQTT 5)";
+
 /// Whether `s` is usable as one topic level (no wildcards, no `/`).
 fn topic_level(s: &str) -> bool {
     !s.is_empty() && !s.contains(['/', '+', '#', '\0'])
@@ -621,6 +684,27 @@ impl MqttSettings {
         if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
             return Err(bad("primary_host", format!("`{h}` is not one topic level")));
         }
+        let version = match t.version.given() {
+            None => MqttVersion::default(),
+            Some(Ok(toml::Value::Integer(n))) => {
+                MqttVersion::from_level(n).ok_or_else(|| bad("version", VERSION_VALUES))?
+            }
+            Some(_) => return Err(bad("version", VERSION_VALUES)),
+        };
+        if sparkplug.is_some() && version == MqttVersion::V5 {
+            return Err(SettingsError::SparkplugNeedsV311);
+        }
+        let message_expiry_s = match t.message_expiry_s.given() {
+            None => Some(DEFAULT_MESSAGE_EXPIRY_S),
+            Some(Ok(0)) => None,
+            Some(Ok(s @ 1..=86_400)) => Some(s as u32),
+            Some(_) => return Err(bad("message_expiry_s", "must be 0 (none) to 86400 seconds")),
+        };
+        let retain_values = match t.retain_values.given() {
+            None => true,
+            Some(Ok(b)) => b,
+            Some(Err(())) => return Err(bad("retain_values", "must be true or false")),
+        };
         let alerts = match t.alerts.given() {
             None => vec![],
             Some(Ok(v)) => v
@@ -653,6 +737,9 @@ impl MqttSettings {
             deadband,
             slave_traffic,
             primary_host,
+            version,
+            message_expiry_s,
+            retain_values,
             alerts,
             alert_interval,
         })
@@ -785,6 +872,24 @@ mod tests {
     }
 
     #[test]
+    fn mqtt5_keys() {
+        let s = MqttSettings::from_table(None, "l").unwrap();
+        assert_eq!(s.version, MqttVersion::V311);
+        assert_eq!(s.message_expiry_s, Some(DEFAULT_MESSAGE_EXPIRY_S));
+        assert!(s.retain_values);
+        let s = parse("version = 5\nmessage_expiry_s = 0\nretain_values = false").unwrap();
+        assert_eq!(
+            (s.version, s.message_expiry_s, s.retain_values),
+            (MqttVersion::V5, None, false)
+        );
+        let s = parse("version = 4\nmessage_expiry_s = 30").unwrap();
+        assert_eq!(
+            (s.version, s.message_expiry_s),
+            (MqttVersion::V311, Some(30))
+        );
+    }
+
+    #[test]
     fn traffic_keys() {
         let s = MqttSettings::from_table(None, "l").unwrap();
         assert_eq!(
@@ -886,7 +991,10 @@ mod tests {
     #[test]
     fn each_bad_setting_has_its_message() {
         for (text, message) in [
-            ("retain = true", "[mqtt]: unknown key `retain`"),
+            (
+                "retain = true",
+                "[mqtt]: unknown key `retain`; did you mean `retain_values`?",
+            ),
             ("bus = 3", "[mqtt]: `bus` must be a non-empty string"),
             ("bus = \"a/b\"", "[mqtt]: `bus` `a/b` is not one topic level"),
             ("prefix = \"a/#\"", "[mqtt]: `prefix` `a/#` is not a topic prefix"),
@@ -979,6 +1087,23 @@ mod tests {
                 "sparkplug = \"g\"",
                 "[mqtt]: `sparkplug` `g` is not GROUP/EDGE (two non-empty ids without `/`, `+` or `#`)",
             ),
+            (
+                "version = 3",
+                "[mqtt]: `version` must be 4 (MQTT 3.1.1, the default) or 5 (MQTT 5)",
+            ),
+            (
+                "version = \"5.0\"",
+                "[mqtt]: `version` must be 4 (MQTT 3.1.1, the default) or 5 (MQTT 5)",
+            ),
+            (
+                "version = 5\nsparkplug = \"g/e\"",
+                "[mqtt]: Sparkplug B needs MQTT 3.1.1 (`version = 4`, the default), not `version = 5`",
+            ),
+            (
+                "message_expiry_s = 86401",
+                "[mqtt]: `message_expiry_s` must be 0 (none) to 86400 seconds",
+            ),
+            ("retain_values = 1", "[mqtt]: `retain_values` must be true or false"),
         ] {
             assert_eq!(parse(text).unwrap_err().to_string(), message, "{text}");
         }

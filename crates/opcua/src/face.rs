@@ -20,7 +20,7 @@ use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
 use profibus_gateway::topics::Service;
 use profibus_gateway::WriteAccess;
-use profibus_gateway::{Gateway, LinkSetup, MqttSettings, Publish, Session};
+use profibus_gateway::{Gateway, LinkSetup, MqttSettings, Properties, Publish, Session};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
@@ -228,8 +228,8 @@ impl Session for Face {
         self.core.disconnected(ts_ms);
     }
 
-    fn handle_message(&mut self, topic: &str, payload: &[u8], ts_ms: u64) {
-        self.core.handle_message(topic, payload, ts_ms);
+    fn handle_message_with(&mut self, topic: &str, payload: &[u8], props: &Properties, ts_ms: u64) {
+        self.core.handle_message_with(topic, payload, props, ts_ms);
         self.route();
     }
 

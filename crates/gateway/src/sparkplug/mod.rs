@@ -17,7 +17,7 @@ pub use crate::topics::{IdError, MessageType, SparkplugId, NAMESPACE};
 
 use crate::alerts::AlertWatch;
 use crate::outage::Outage;
-use crate::session::{LinkSetup, Publish, Session};
+use crate::session::{LinkSetup, Properties, Publish, Session};
 use crate::settings::MqttSettings;
 use crate::slave::{slave_infos, SlaveInfo, SlaveInfoError};
 use crate::traffic::{ImageFilter, Traffic};
@@ -356,11 +356,8 @@ impl EdgeNode {
             seq: Some(self.next_seq()),
             ..Default::default()
         };
-        self.out.push_back(Publish {
-            topic,
-            payload: payload.encode_to_vec(),
-            retain: false,
-        });
+        self.out
+            .push_back(Publish::new(topic, payload.encode_to_vec(), false));
     }
 
     fn nbirth(&mut self, m: &DpMaster, ts: u64) {
@@ -613,11 +610,7 @@ impl Session for EdgeNode {
             will: Box::new({
                 let topic = self.id.node_topic(MessageType::NDeath);
                 move || {
-                    let p = Publish {
-                        topic: topic.clone(),
-                        payload: ndeath(bd),
-                        retain: false,
-                    };
+                    let p = Publish::new(topic.clone(), ndeath(bd), false);
                     bd = bd.wrapping_add(1);
                     p
                 }
@@ -648,8 +641,15 @@ impl Session for EdgeNode {
         }
     }
 
-    /// NCMD and DCMD; with a primary host application its STATE.
-    fn handle_message(&mut self, topic: &str, payload: &[u8], _ts_ms: u64) {
+    /// NCMD and DCMD; with a primary host application its STATE. (MQTT
+    /// 3.1.1 only: no properties.)
+    fn handle_message_with(
+        &mut self,
+        topic: &str,
+        payload: &[u8],
+        _props: &Properties,
+        _ts_ms: u64,
+    ) {
         if let Some(host) = &self.settings.primary_host {
             if topic == state_topic(host) {
                 return self.host_state(payload);
@@ -722,11 +722,11 @@ impl Session for EdgeNode {
 
     /// The NDEATH of the current connection.
     fn last_will(&self) -> Publish {
-        Publish {
-            topic: self.id.node_topic(MessageType::NDeath),
-            payload: ndeath(self.bd_seq),
-            retain: false,
-        }
+        Publish::new(
+            self.id.node_topic(MessageType::NDeath),
+            ndeath(self.bd_seq),
+            false,
+        )
     }
 }
 
