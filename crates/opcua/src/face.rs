@@ -8,11 +8,18 @@
 //! With `--mqtt` too, the same core talks to the broker: the face hands
 //! the core's publishes to the MQTT link and keeps only the answers to
 //! its own requests. Alone, it drops the publishes.
+//!
+//! The core's alarm reports (`<addr>/alarm`) also become OPC UA events
+//! ([`crate::events`]); DP-V1 slaves' I&M0 is read once for their
+//! identity ([`crate::identity`]); when a reload (SIGHUP) changes
+//! `[mqtt] writable`, the output variables' access levels follow.
 
-use crate::space::{Sampler, Update};
+use crate::identity::Identities;
+use crate::space::{access_levels, Sampler, SlaveNodes, Update};
 use profibus_dp::master::DpMaster;
 use profibus_fdl::Instant;
 use profibus_gateway::topics::Service;
+use profibus_gateway::WriteAccess;
 use profibus_gateway::{Gateway, LinkSetup, MqttSettings, Properties, Publish, Session};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc;
@@ -67,12 +74,32 @@ impl Requests {
     }
 }
 
+/// What the bus thread hands the OPC UA server.
+#[derive(Debug)]
+pub enum ToServer {
+    /// Values that changed.
+    Values(Vec<Update>),
+    /// An alarm report of the core (the JSON of `<addr>/alarm`) to raise
+    /// as an event of slave `address`.
+    Alarm {
+        /// The station address.
+        address: u8,
+        /// The report.
+        report: serde_json::Value,
+    },
+    /// New access levels of output variables: writable or not.
+    Access(Vec<(opcua::types::NodeId, bool)>),
+}
+
 /// The gateway core with its OPC UA face (see the module documentation).
 pub struct Face {
     core: Gateway,
     requests: Arc<Requests>,
     sampler: Sampler,
-    updates: tokio::sync::mpsc::UnboundedSender<Vec<Update>>,
+    identities: Identities,
+    slaves: Vec<SlaveNodes>,
+    writable: Vec<WriteAccess>,
+    updates: tokio::sync::mpsc::UnboundedSender<ToServer>,
     waiting: HashMap<u64, mpsc::Sender<serde_json::Value>>,
     next: u64,
     mqtt: bool,
@@ -81,19 +108,27 @@ pub struct Face {
 }
 
 impl Face {
-    /// The face of `core`: requests from `requests`, value updates to
-    /// `updates`; `mqtt`: whether a broker link also uses the core.
+    /// The face of `core`: requests from `requests`, value updates,
+    /// events and access levels to `updates`; `identities` reads I&M0,
+    /// `slaves` are the nodes of the space; `mqtt`: whether a broker
+    /// link also uses the core.
     pub fn new(
         core: Gateway,
         sampler: Sampler,
+        identities: Identities,
+        slaves: Vec<SlaveNodes>,
         requests: Arc<Requests>,
-        updates: tokio::sync::mpsc::UnboundedSender<Vec<Update>>,
+        updates: tokio::sync::mpsc::UnboundedSender<ToServer>,
         mqtt: bool,
     ) -> Face {
+        let writable = core.settings().writable.clone();
         Face {
             core,
             requests,
             sampler,
+            identities,
+            slaves,
+            writable,
             updates,
             waiting: HashMap::new(),
             next: 0,
@@ -114,10 +149,40 @@ impl Face {
                     // The caller may have given up waiting.
                     let _ = tx.send(v);
                 }
-            } else if self.mqtt {
+                continue;
+            }
+            if p.topic.ends_with("/alarm") {
+                self.alarm(&p);
+            }
+            if self.mqtt {
                 self.out.push_back(p);
             }
         }
+    }
+
+    /// An alarm report of the core, `<base>/<addr>/alarm`, as an event.
+    fn alarm(&mut self, p: &Publish) {
+        let Ok(report) = serde_json::from_slice::<serde_json::Value>(&p.payload) else {
+            return;
+        };
+        let Some(address) = report["slave"].as_u64().and_then(|a| u8::try_from(a).ok()) else {
+            return;
+        };
+        // The server may be gone while the bus stops.
+        let _ = self.updates.send(ToServer::Alarm { address, report });
+    }
+
+    /// After a reload of `[mqtt]`: the access levels that `writable`
+    /// gives now.
+    fn follow_writable(&mut self) {
+        let now = &self.core.settings().writable;
+        if *now == self.writable {
+            return;
+        }
+        self.writable = now.clone();
+        let levels = access_levels(&self.slaves, now);
+        tracing::info!("OPC UA access levels follow the reloaded `writable`");
+        let _ = self.updates.send(ToServer::Access(levels));
     }
 
     fn take_requests(&mut self, ts_ms: u64) {
@@ -176,13 +241,15 @@ impl Session for Face {
                 self.core.connected(ts_ms);
             }
         }
+        self.follow_writable();
         self.take_requests(ts_ms);
         self.core.step(m, now, ts_ms);
         self.route();
-        let updates = self.sampler.sample(m, ts_ms);
+        let mut updates = self.sampler.sample(m, ts_ms);
+        updates.extend(self.identities.step(m, now, ts_ms));
         if !updates.is_empty() {
             // The server may be gone while the bus stops.
-            let _ = self.updates.send(updates);
+            let _ = self.updates.send(ToServer::Values(updates));
         }
     }
 

@@ -15,12 +15,16 @@
 //!   with this face: writes and method calls become the core's requests,
 //!   with the same checks and permissions as MQTT's.
 //! - [`server`]: [`OpcuaServer`], endpoints, security, users, callbacks.
+//! - [`events`]: DP-V1 alarms as events of `DpAlarmEventType`.
+//! - [`identity`]: I&M0 of DP-V1 slaves in their identity properties.
 //! - [`sim`]: the simulated plant of `dpctl gateway --sim --opcua`.
 //!
 //! The address space, security and the certificate's path are
 //! described in `docs/opcua.md` in the repository.
 
+pub mod events;
 pub mod face;
+pub mod identity;
 pub mod server;
 pub mod settings;
 pub mod sim;

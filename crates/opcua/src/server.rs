@@ -5,9 +5,10 @@
 //! The server runs on a tokio runtime of its own, on its own threads, so
 //! that a callback waiting for the bus never holds up the bus driver.
 
-use crate::face::{Face, Requests};
+use crate::face::{Face, Requests, ToServer};
+use crate::identity::Identities;
 use crate::settings::{OpcuaSettings, Security};
-use crate::space::{value_of, Sampler, Space, Update, NAMESPACE_URI};
+use crate::space::{value_of, Sampler, Space, NAMESPACE_URI};
 use opcua::crypto::SecurityPolicy;
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
@@ -80,11 +81,15 @@ impl OpcuaServer {
             let mut sp = nm.address_space().write();
             Space::build(&mut sp, ns, &bus, &slaves, &writable)
         };
+        crate::events::register_type(&mut handle.type_tree().write(), ns);
         let requests = Arc::new(Requests::default());
         let wait = job_timeout + Duration::from_secs(1);
         for s in &space.slaves {
             let a = s.address;
-            for (id, channel) in &s.writable_outputs {
+            // Every output: its access level says whether OPC UA may
+            // write it now (it follows a reload of `writable`), the core
+            // checks the permission again.
+            for (id, channel) in &s.outputs {
                 let rq = requests.clone();
                 let channel = channel.clone();
                 nm.inner().add_write_callback(id.clone(), move |dv, range| {
@@ -161,20 +166,62 @@ impl OpcuaServer {
                 });
             }
         }
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Vec<Update>>();
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<ToServer>();
         let subs = handle.subscriptions().clone();
         let nm2 = nm.clone();
+        let sources: std::collections::HashMap<u8, (opcua::types::NodeId, String)> =
+            (space.slaves.iter())
+                .zip(&slaves)
+                .map(|(n, info)| {
+                    let name = format!("{} {}", n.address, info.layout.name);
+                    (n.address, (n.object.clone(), name))
+                })
+                .collect();
         let thread = std::thread::Builder::new()
             .name("opcua-server".into())
             .spawn(move || {
                 rt.block_on(async move {
                     tokio::spawn(async move {
-                        while let Some(mut batch) = rx.recv().await {
-                            // Everything waiting, in one lock of the space.
-                            while let Ok(more) = rx.try_recv() {
-                                batch.extend(more);
+                        let mut raised = 0u64;
+                        while let Some(first) = rx.recv().await {
+                            // Everything waiting: values in one lock of
+                            // the space, events and access levels in order.
+                            let mut values = vec![];
+                            let mut next = Some(first);
+                            while let Some(msg) = next.take().or_else(|| rx.try_recv().ok()) {
+                                match msg {
+                                    ToServer::Values(v) => values.extend(v),
+                                    ToServer::Access(levels) => set_access(&nm2, &levels),
+                                    ToServer::Alarm { address, report } => {
+                                        let Some((source, name)) = sources.get(&address) else {
+                                            continue;
+                                        };
+                                        raised += 1;
+                                        let Some(ev) = crate::events::from_report(
+                                            &report,
+                                            ns,
+                                            source.clone(),
+                                            name,
+                                            raised,
+                                        ) else {
+                                            continue;
+                                        };
+                                        // The slave notifies it, and with
+                                        // it the Server object (the
+                                        // library adds it), which stands
+                                        // for the bus: one server per
+                                        // bus. Notifying the bus object
+                                        // too would hand the Server's
+                                        // subscribers every alarm twice.
+                                        let ev: &dyn opcua::nodes::Event = &ev;
+                                        subs.notify_events([(ev, source)].into_iter());
+                                    }
+                                }
                             }
-                            let it = batch.iter().map(|(id, dv)| (id, None, dv.clone()));
+                            if values.is_empty() {
+                                continue;
+                            }
+                            let it = values.iter().map(|(id, dv)| (id, None, dv.clone()));
                             if let Err(e) = nm2.set_values(&subs, it) {
                                 tracing::warn!("OPC UA value update: {e}");
                             }
@@ -187,8 +234,17 @@ impl OpcuaServer {
             })
             .map_err(|e| fail(e.to_string()))?;
         let sampler = Sampler::new(ns, &bus, slaves.clone());
+        let identities = Identities::new(
+            ns,
+            &bus,
+            slaves.iter().map(|s| {
+                let l = &s.layout;
+                let vendor = l.gsd.as_ref().is_some_and(|g| g.vendor_name.is_some());
+                (l.address, l.dpv1, vendor)
+            }),
+        );
         let core = Gateway::new(mqtt_settings, slaves);
-        let face = Face::new(core, sampler, requests, tx, mqtt);
+        let face = Face::new(core, sampler, identities, space.slaves, requests, tx, mqtt);
         tracing::info!("OPC UA server on {url}");
         Ok((
             OpcuaServer {
@@ -293,6 +349,23 @@ fn builder(s: &OpcuaSettings) -> ServerBuilder {
         }
     }
     b
+}
+
+/// Output variables writable (`CurrentRead | CurrentWrite`) or not
+/// (`CurrentRead`), attribute and user attribute alike.
+fn set_access(nm: &SimpleNodeManager, levels: &[(opcua::types::NodeId, bool)]) {
+    use opcua::server::address_space::AccessLevel;
+    let mut sp = nm.address_space().write();
+    for (id, writable) in levels {
+        if let Some(opcua::nodes::NodeType::Variable(v)) = sp.find_mut(id) {
+            let level = match writable {
+                true => AccessLevel::CURRENT_READ | AccessLevel::CURRENT_WRITE,
+                false => AccessLevel::CURRENT_READ,
+            };
+            v.set_access_level(level);
+            v.set_user_access_level(level);
+        }
+    }
 }
 
 fn obj(v: Json) -> serde_json::Map<String, Json> {

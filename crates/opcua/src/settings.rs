@@ -38,7 +38,7 @@ pub struct OpcuaSettings {
     /// client certificates (`pki_dir`; default [`default_pki_dir`]).
     pub pki_dir: PathBuf,
     /// Trust every client certificate instead of only those in
-    /// `PKI/trusted/certs` (`trust_client_certs`).
+    /// `PKI/trusted` (`trust_client_certs`).
     pub trust_client_certs: bool,
     /// The last path component of the endpoint URL (empty: `/`).
     pub path: String,

@@ -6,7 +6,9 @@
 //! with the cycle's time as source timestamp. Neither knows the server's
 //! sessions: the driver hands the updates to the node manager.
 
-use opcua::server::address_space::{AddressSpace, MethodBuilder, ObjectBuilder, VariableBuilder};
+use opcua::server::address_space::{
+    AddressSpace, EventNotifier, MethodBuilder, ObjectBuilder, VariableBuilder,
+};
 use opcua::types::{
     Argument, ByteString, DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId,
     ObjectId, ObjectTypeId, QualifiedName, StatusCode, UAString, VariableTypeId, Variant,
@@ -37,8 +39,9 @@ pub struct SlaveNodes {
     pub pkw_read: Option<NodeId>,
     /// Its `PkwWrite` method (slaves with a PKW channel).
     pub pkw_write: Option<NodeId>,
-    /// Its writable output channels: node and channel name.
-    pub writable_outputs: Vec<(NodeId, String)>,
+    /// Its output channels: node and channel name (each writable or
+    /// not by `[mqtt] writable`, see [`access_levels`]).
+    pub outputs: Vec<(NodeId, String)>,
 }
 
 /// The nodes of a bus.
@@ -47,6 +50,8 @@ pub struct Space {
     bus: String,
     /// The bus object `Objects/PROFIBUS/<bus>`.
     pub bus_object: NodeId,
+    /// `DpAlarmEventType` ([`crate::events`]).
+    pub alarm_type: NodeId,
     /// One entry per slave, in bus-file order.
     pub slaves: Vec<SlaveNodes>,
 }
@@ -252,6 +257,7 @@ impl Space {
             ns,
             bus: bus.to_string(),
             bus_object: NodeId::new(ns, bus.to_string()),
+            alarm_type: crate::events::build_type(sp, ns),
             slaves: vec![],
         };
         let root = NodeId::new(ns, "PROFIBUS");
@@ -333,10 +339,12 @@ impl Space {
         let name = format!("{a} {}", l.name);
         ObjectBuilder::new(&obj, self.qn(&name), name.as_str())
             .has_type_definition(ObjectTypeId::BaseObjectType)
+            .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
             .organized_by(bus_id.clone())
             .insert(sp);
         // Identity, named after the OPC UA for Devices `DeviceType`
-        // properties (OPC 10000-100, 5.5.2) in this namespace.
+        // properties (OPC 10000-100, 5.5.2) in this namespace; DP-V1
+        // slaves' I&M0 replaces the GSD's values ([`crate::identity`]).
         let gsd = l.gsd.as_ref();
         let text = |f: Option<&String>| f.cloned().unwrap_or_default();
         self.property(
@@ -347,11 +355,16 @@ impl Space {
             DataTypeId::UInt16,
             l.ident_number,
         );
-        let props: [(&str, String); 5] = [
+        let props: [(&str, String); 7] = [
             (
                 "Manufacturer",
                 text(gsd.and_then(|g| g.vendor_name.as_ref())),
             ),
+            (
+                "ProductCode",
+                text(gsd.and_then(|g| g.order_number.as_ref())),
+            ),
+            ("SerialNumber", String::new()),
             ("Model", text(gsd.and_then(|g| g.model_name.as_ref()))),
             (
                 "DeviceRevision",
@@ -368,6 +381,25 @@ impl Space {
         ];
         for (n, v) in props {
             self.property(sp, &p(n), n, &obj, DataTypeId::String, v);
+        }
+        // -1: not known (OPC 10000-100); I&M0's REVISION_COUNTER.
+        self.property(
+            sp,
+            &p("RevisionCounter"),
+            "RevisionCounter",
+            &obj,
+            DataTypeId::Int32,
+            -1i32,
+        );
+        if l.dpv1 {
+            self.property(
+                sp,
+                &p("ManufacturerId"),
+                "ManufacturerId",
+                &obj,
+                DataTypeId::UInt16,
+                0u16,
+            );
         }
         self.variable(
             sp,
@@ -411,17 +443,14 @@ impl Space {
                 false,
             );
         }
-        let access = writable.iter().find(|w| w.address == a);
-        let mut writable_outputs = vec![];
+        let mut outputs = vec![];
         for (dir, folder) in [(Direction::Input, "Inputs"), (Direction::Output, "Outputs")] {
             let f = p(folder);
             self.folder(sp, &f, folder, &obj);
             let Some(map) = &info.channels else { continue };
             for ch in map.of(dir) {
                 let id = p(&format!("{folder}.{}", ch.name));
-                let can_write = dir == Direction::Output
-                    && access
-                        .is_some_and(|w| w.channels.as_ref().is_none_or(|c| c.contains(&ch.name)));
+                let can_write = dir == Direction::Output && can_write(writable, a, &ch.name);
                 self.variable(
                     sp,
                     &id,
@@ -431,8 +460,8 @@ impl Space {
                     variant(ch, Value::Int(0)),
                     can_write,
                 );
-                if can_write {
-                    writable_outputs.push((id.clone(), ch.name.clone()));
+                if dir == Direction::Output {
+                    outputs.push((id.clone(), ch.name.clone()));
                 }
                 if let Some(scale) = &ch.scale {
                     self.property(
@@ -479,7 +508,7 @@ impl Space {
             write_record: None,
             pkw_read: None,
             pkw_write: None,
-            writable_outputs,
+            outputs,
         };
         let method = |sp: &mut AddressSpace, n: &str, ins: &[Argument], outs: &[Argument]| {
             let id = p(n);
@@ -541,6 +570,32 @@ impl Space {
     fn bus_slave(&self, a: u8) -> String {
         format!("{}.{a}", self.bus)
     }
+}
+
+/// Whether `[mqtt] writable` lets OPC UA write output `channel` of
+/// slave `address`.
+pub fn can_write(writable: &[WriteAccess], address: u8, channel: &str) -> bool {
+    writable
+        .iter()
+        .find(|w| w.address == address)
+        .is_some_and(|w| {
+            w.channels
+                .as_ref()
+                .is_none_or(|c| c.iter().any(|n| n == channel))
+        })
+}
+
+/// The access levels of `slaves`' output variables under `writable`:
+/// node and whether it is writable.
+pub fn access_levels(slaves: &[SlaveNodes], writable: &[WriteAccess]) -> Vec<(NodeId, bool)> {
+    slaves
+        .iter()
+        .flat_map(|s| {
+            s.outputs
+                .iter()
+                .map(|(id, ch)| (id.clone(), can_write(writable, s.address, ch)))
+        })
+        .collect()
 }
 
 /// The counters under `Statistics`, from the master's slave statistics.

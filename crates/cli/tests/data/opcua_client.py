@@ -10,6 +10,13 @@ Scenarios:
   many N           N clients at once, each reading and subscribing
   secure USER PW CERT KEY   Basic256Sha256 SignAndEncrypt with a user;
                    then the same endpoint anonymously (must be refused)
+  events ADDR      wait for slave ADDR's SerialNumber (I&M0), subscribe
+                   to its events, print "subscribed", then print the
+                   first DpAlarmEventType event's fields
+  access ADDR CH.. the AccessLevel and UserAccessLevel of output
+                   channels CH of slave ADDR, and a write of each
+  cert CERT KEY    Basic256Sha256 SignAndEncrypt anonymously with the
+                   client certificate CERT: "accepted" or why not
 """
 
 import asyncio
@@ -18,6 +25,7 @@ import sys
 import time
 
 from asyncua import Client, ua
+from asyncua.common.events import get_filter_from_event_type
 
 NS_URI = "urn:profibus:dpctl"
 T = 20.0
@@ -38,8 +46,8 @@ async def slave(client, ns, bus, address):
     fail(f"no slave {address} under PROFIBUS/{bus}")
 
 
-async def wait_value(node, pred, what):
-    end = time.monotonic() + T
+async def wait_value(node, pred, what, timeout=T):
+    end = time.monotonic() + timeout
     while time.monotonic() < end:
         dv = await node.read_data_value(raise_on_bad_status=False)
         if dv.StatusCode.is_good() and pred(dv.Value.Value):
@@ -212,6 +220,103 @@ async def secure(url, user, pw, cert, key):
     print(json.dumps(out))
 
 
+class Events:
+    def __init__(self):
+        self.events = []
+
+    def event_notification(self, event):
+        self.events.append(event)
+
+
+async def events(url, address):
+    out = {}
+    async with Client(url, timeout=T) as client:
+        ns = await client.get_namespace_index(NS_URI)
+        node, name = await slave(client, ns, "line", int(address))
+        serial = await node.get_child(f"{ns}:SerialNumber")
+        # The slave reaches Data_Exchange, then the master reads I&M0.
+        dv = await wait_value(serial, lambda v: v != "", "the SerialNumber from I&M0", 90)
+        out["serial_number"] = dv.Value.Value
+        for p in ["RevisionCounter", "ProductCode", "HardwareRevision", "SoftwareRevision",
+                  "Manufacturer", "ManufacturerId"]:
+            out[p] = await (await node.get_child(f"{ns}:{p}")).read_value()
+        notifier = (await node.read_attribute(ua.AttributeIds.EventNotifier)).Value.Value
+        out["event_notifier"] = int(notifier)
+        evtype = client.get_node(ua.NodeId("DpAlarmEventType", ns))
+        # The type's fields, filtered with OfType (asyncua's default
+        # where clause, EventType InList [...], compares NodeIds, which
+        # async-opcua 0.19 does not evaluate: see docs/opcua.md).
+        evfilter = await get_filter_from_event_type([evtype])
+        evfilter.WhereClause = ua.ContentFilter(Elements=[ua.ContentFilterElement(
+            FilterOperator_=ua.FilterOperator.OfType,
+            FilterOperands=[ua.LiteralOperand(Value=ua.Variant(evtype.nodeid))])])
+        h = Events()
+        sub = await client.create_subscription(20, h)
+        await sub.subscribe_events(node, evtype, evfilter=evfilter)
+        # The Server object stands for the bus (one server per bus).
+        bus_h = Events()
+        sub2 = await client.create_subscription(20, bus_h)
+        await sub2.subscribe_events(client.nodes.server, evtype, evfilter=evfilter)
+        print("subscribed", flush=True)
+        end = time.monotonic() + T
+        while time.monotonic() < end and not (h.events and bus_h.events):
+            await asyncio.sleep(0.05)
+        if not h.events:
+            fail("no event from the slave")
+        e = h.events[0]
+        out["event"] = {
+            "source_node": e.SourceNode.to_string(),
+            "source_name": e.SourceName,
+            "severity": e.Severity,
+            "message": e.Message.Text,
+            "slot": e.Slot,
+            "alarm_type": e.AlarmType,
+            "sequence_number": e.SequenceNumber,
+            "specifier": e.Specifier,
+            "data": e.Data.hex() if e.Data is not None else None,
+            "acknowledged": e.Acknowledged,
+            "event_type": e.EventType.to_string(),
+        }
+        out["slave_node"] = node.nodeid.to_string()
+        out["slave_name"] = name
+        out["server_events"] = len(bus_h.events)
+    print(json.dumps(out))
+
+
+async def access(url, address, *channels):
+    out = {}
+    async with Client(url, timeout=T) as client:
+        ns = await client.get_namespace_index(NS_URI)
+        node, _ = await slave(client, ns, "line", int(address))
+        for ch in channels:
+            n = await node.get_child([f"{ns}:Outputs", f"{ns}:{ch}"])
+            level = (await n.read_attribute(ua.AttributeIds.AccessLevel)).Value.Value
+            user = (await n.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value
+            try:
+                await write_typed(n, 7)
+                written = "Good"
+            except ua.UaStatusCodeError as e:
+                written = ua.StatusCode(e.code).name
+            out[ch] = {"access_level": int(level), "user_access_level": int(user),
+                       "write": written}
+    print(json.dumps(out))
+
+
+async def cert(url, cert, key):
+    client = Client(url, timeout=T)
+    client.application_uri = "urn:profibus:dpctl:test-client"
+    await client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{cert},{key}")
+    try:
+        async with client:
+            ns = await client.get_namespace_index(NS_URI)
+            bus = await client.nodes.objects.get_child([f"{ns}:PROFIBUS", f"{ns}:line"])
+            await (await bus.get_child(f"{ns}:MasterState")).read_value()
+            result = "accepted"
+    except Exception as e:  # the server refuses the channel or session
+        result = type(e).__name__ + ": " + str(e)[:120]
+    print(json.dumps({"result": result}))
+
+
 def main():
     url, what, *rest = sys.argv[1:]
     if what == "check":
@@ -222,6 +327,12 @@ def main():
         asyncio.run(many(url, int(rest[0])))
     elif what == "secure":
         asyncio.run(secure(url, *rest))
+    elif what == "events":
+        asyncio.run(events(url, *rest))
+    elif what == "access":
+        asyncio.run(access(url, *rest))
+    elif what == "cert":
+        asyncio.run(cert(url, *rest))
     else:
         fail(f"unknown scenario {what}")
 
