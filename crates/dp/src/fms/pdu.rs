@@ -237,7 +237,8 @@ pub enum Response {
     GetOd {
         /// More descriptions follow (ask again from the next index).
         more_follows: bool,
-        /// The object descriptions (see [`crate::fms::od`]).
+        /// The object descriptions, each as its bytes (the BK3000 builds them:
+        /// `profibus_devices::bk3000::fms`).
         descriptions: Vec<Vec<u8>>,
     },
 }
