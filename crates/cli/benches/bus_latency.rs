@@ -15,31 +15,13 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use common::{Bus, Proc, TempDir};
-use std::fs::{File, OpenOptions};
+use common::{make_raw, open_tty, Bus, Proc, TempDir};
+use std::fs::File;
 use std::io::{Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
-use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 const TELEGRAM: [u8; 6] = [0x10, 0x02, 0x01, 0x49, 0x4C, 0x16];
-
-fn open_tty(path: &Path) -> File {
-    OpenOptions::new()
-        .read(true)
-        .write(true)
-        .custom_flags(nix::libc::O_NOCTTY)
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
-}
-
-fn make_raw(f: &File) {
-    use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
-    let mut t = tcgetattr(f).unwrap();
-    cfmakeraw(&mut t);
-    tcsetattr(f, SetArg::TCSANOW, &t).unwrap();
-}
 
 /// Echo telegrams of `TELEGRAM.len()` bytes from `b` back to `b` until
 /// `n` have been echoed.

@@ -560,6 +560,25 @@ impl Bus {
         out
     }
 }
+/// Open a tty (a pty link) for reading and writing, not as the
+/// controlling terminal.
+pub fn open_tty(path: &Path) -> std::fs::File {
+    use std::os::unix::fs::OpenOptionsExt;
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags(nix::libc::O_NOCTTY)
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
+}
+
+/// Put a tty in raw mode (no line discipline, no echo).
+pub fn make_raw(f: &std::fs::File) {
+    use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+    let mut t = tcgetattr(f).unwrap();
+    cfmakeraw(&mut t);
+    tcsetattr(f, SetArg::TCSANOW, &t).unwrap();
+}
 
 #[cfg(test)]
 mod tempdir_tests {
