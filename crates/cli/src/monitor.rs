@@ -13,6 +13,7 @@ use profibus_dp::monitor::{Monitor, MonitorOptions};
 use profibus_io::listen::{listen, Heard, ListenOptions};
 use profibus_io::transport::Port;
 use profibus_tui::lines::monitor_slaves;
+use profibus_tui::source::WithLiveList;
 use profibus_tui::term::LiveBus;
 use std::io::{IsTerminal, Write as _};
 use std::path::PathBuf;
@@ -20,8 +21,9 @@ use std::time::Duration;
 
 /// Listen to a bus (never send) and follow the master(s) on it: every
 /// slave's state, data, diagnosis, cycle times, retries and errors, and
-/// the masters in the token ring. On a terminal a refreshing table: `q`
-/// quit, `p` pause, up/down select a slave, Enter its details.
+/// the masters in the token ring. On a terminal a refreshing table with
+/// each station's role and health bar: `q` quit, `p` pause, up/down
+/// select a slave, Enter its details.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Serial device or pty path, or tcp://HOST:PORT (serial device server).
@@ -84,14 +86,15 @@ pub fn run(args: Args) -> Result<()> {
     // The target rotation time is not on the wire: the bus file's.
     let params = &bus.file.master.params;
     let ttr = params.baud.bits_to_duration(params.ttr as u64);
-    let mut analysis = crate::stats_args::StatsRun::new(
-        &args.stats,
-        profibus_dp::monitor::stats::StatsOptions {
-            baud: Some(baud),
-            ttr: Some(ttr),
-        },
-    );
+    let stats_options = profibus_dp::monitor::stats::StatsOptions {
+        baud: Some(baud),
+        ttr: Some(ttr),
+    };
     let live = !args.json && !args.plain && std::io::stdout().is_terminal();
+    // The table shows each station's role and health: statistics run
+    // beside the monitor on a terminal even without `--stats`.
+    let mut analysis = crate::stats_args::StatsRun::new(&args.stats, stats_options)
+        .or_else(|| live.then(|| crate::stats_args::StatsRun::quiet(stats_options)));
     let mut view = View::new(args.json, Duration::from_millis(args.interval.max(10)));
     if live {
         view.open_terminal(bus_view("dpctl monitor", baud, &info).listen_only())?;
@@ -109,12 +112,22 @@ pub fn run(args: Args) -> Result<()> {
                 monitor.tick(at);
                 at
             }
+            Heard::Drained(_) => return std::ops::ControlFlow::Continue(()),
         };
         show(&mut monitor, &mut view, now, false);
         if let Some(due) = analysis.as_mut().and_then(|s| s.due(now)) {
             print_stats(&due, args.json, live);
         }
-        view.tick(&mut monitor, now)
+        match &analysis {
+            Some(a) => view.tick(
+                &mut WithLiveList {
+                    source: &mut monitor,
+                    stats: &a.stats,
+                },
+                now,
+            ),
+            None => view.tick(&mut monitor, now),
+        }
     };
     let stats = rt.block_on(listen(&mut port, listen_opts, common::shutdown(), on_heard));
     view.close();

@@ -93,6 +93,18 @@ impl StatsRun {
         })
     }
 
+    /// Statistics that print nothing and raise no alerts: for a view's
+    /// live list (role, DP state, health).
+    pub fn quiet(options: StatsOptions) -> StatsRun {
+        StatsRun {
+            stats: Stats::new(options),
+            every: Duration::from_secs(1),
+            next: None,
+            rules: vec![],
+            print: false,
+        }
+    }
+
     /// A tap event.
     pub fn hear(&mut self, e: &TapEvent) {
         self.stats.hear(e);

@@ -494,6 +494,18 @@ fn monitor_shows_another_masters_slaves_and_the_token_ring_and_never_writes() {
     assert!(s.contains("setpoint1=") && s.contains("actual1="), "{s}");
     assert!(s.contains("listening only: no writes"), "{s}");
     t.wait("a cycle time", |s| line_with(s, "echo").contains(" ms "));
+    // Role and health per station, without --stats: each slave's row,
+    // and master 2 on the token ring line.
+    let s = t.wait("role and health bars", |s| {
+        let has = |needle: &str, parts: &[&str]| {
+            (s.lines()).any(|l| l.contains(needle) && parts.iter().all(|p| l.contains(p)))
+        };
+        s.contains("Role")
+            && s.contains("Health")
+            && has("drive", &[" slave ", "█"])
+            && has("token ring: masters 2 (", &["█"])
+    });
+    assert!(line_with(&s, "echo").contains(" slave "), "{s}");
 
     // No write prompt: the monitor never sends.
     t.keys(&["w"]);

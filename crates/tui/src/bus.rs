@@ -21,6 +21,7 @@ use profibus_devices::channels::{ChannelMap, Direction, OutputWriteError, Value}
 use profibus_dp::config::gsd::Gsd;
 use profibus_dp::config::layout::ModuleLayout;
 use profibus_dp::master::{OperatingState, SlaveState};
+use profibus_dp::monitor::stats::LiveStation;
 use profibus_dp::monitor::{BusCounters, MasterStatus};
 use profibus_dp::pdu::diag;
 use profibus_fdl::{Baud, Instant};
@@ -173,6 +174,17 @@ struct MasterLine {
     bus_time: Duration,
     ring: Option<Vec<MasterStatus>>,
     line: Option<BusCounters>,
+    /// The analyser's live list (role, DP state, health), when
+    /// statistics run beside the source.
+    live: Option<Vec<LiveStation>>,
+}
+
+impl MasterLine {
+    /// The station at `address` in the live list (`None` also without
+    /// a live list).
+    fn live(&self, address: u8) -> Option<&LiveStation> {
+        self.live.as_ref()?.iter().find(|l| l.address == address)
+    }
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -296,6 +308,7 @@ impl BusView {
             bus_time: snap.bus_time,
             ring: snap.ring.clone(),
             line: snap.line,
+            live: snap.live.clone(),
         };
         for s in &snap.slaves {
             let i = match self.specs.iter().position(|x| x.address == s.address) {
@@ -565,31 +578,38 @@ impl BusView {
         }
         let mut lines = vec![Line::from(spans)];
         if let Some(ring) = &m.ring {
-            let masters: Vec<String> = ring
-                .iter()
-                .map(|r| {
-                    let mut t = format!("{} (", r.address);
-                    if let Some(o) = r.operating {
-                        t.push_str(&format!("{}, ", o.as_str()));
-                    }
-                    t.push_str(&format!(
-                        "rotation {})",
-                        cycle_text(Some(Duration::from_micros(r.rotation_us.avg))).trim()
+            let mut spans = vec![Span::raw("token ring: ")];
+            if ring.is_empty() {
+                spans.push(Span::raw("no master heard"));
+            } else {
+                spans.push(Span::raw("masters "));
+            }
+            for (i, r) in ring.iter().enumerate() {
+                let mut t = format!("{}{} (", if i > 0 { ", " } else { "" }, r.address);
+                if let Some(o) = r.operating {
+                    t.push_str(&format!("{}, ", o.as_str()));
+                }
+                t.push_str(&format!(
+                    "rotation {})",
+                    cycle_text(Some(Duration::from_micros(r.rotation_us.avg))).trim()
+                ));
+                spans.push(Span::raw(t));
+                // The master's health, drawn as in the slaves' rows.
+                if let Some(l) = m.live(r.address) {
+                    spans.push(Span::raw(" "));
+                    spans.push(Span::styled(
+                        crate::health::health_bar(l.health),
+                        crate::health::health_style(l.health),
                     ));
-                    t
-                })
-                .collect();
-            let mut text = format!("token ring: masters {}", masters.join(", "));
-            if masters.is_empty() {
-                text = "token ring: no master heard".into();
+                }
             }
             if let Some(l) = m.line {
-                text.push_str(&format!(
+                spans.push(Span::raw(format!(
                     "  line: telegrams {}  corrupt {}  no reply {}",
                     l.telegrams, l.corrupt, l.no_reply
-                ));
+                )));
             }
-            lines.push(Line::raw(text));
+            lines.push(Line::from(spans));
         }
         lines
     }
@@ -628,13 +648,29 @@ impl BusView {
             .max()
             .unwrap_or(0)
             .clamp(4, 30) as u16;
+        // With the analyser's live list, Role before and Health after
+        // State ([`crate::health`]).
+        let live = self.master.live.is_some();
+        let [role_w, _, health_w] = crate::health::WIDTHS;
         // Addr, Name, State, Cycle, Retry/Err; 7 gaps between 8 columns
         // and the two borders.
-        let fixed = 4 + name_w + 13 + 9 + 9 + 7 + 2;
+        let mut fixed = 4 + name_w + 13 + 9 + 9 + 7 + 2;
+        if live {
+            fixed += role_w + health_w + 2;
+        }
         let rest = area.width.saturating_sub(fixed).max(24);
         let io_w = rest * 3 / 8;
         let diag_w = rest - 2 * io_w;
-        let header = Row::new(COLUMNS)
+        let [role_h, _, health_h] = crate::health::COLUMNS;
+        let columns: Vec<&str> = if live {
+            let mut c = COLUMNS.to_vec();
+            c.insert(2, role_h);
+            c.insert(4, health_h);
+            c
+        } else {
+            COLUMNS.to_vec()
+        };
+        let header = Row::new(columns)
             .style(Style::default().add_modifier(Modifier::BOLD | Modifier::UNDERLINED));
         let rows = self.specs.iter().zip(&self.rows).map(|(spec, r)| {
             // Hex, then the decoded values, wrapped into the column.
@@ -665,10 +701,18 @@ impl BusView {
             let diag: Vec<String> = diag_summary(&r.diag_words);
             let diag = wrap(&diag, "; ", diag_w as usize);
             let height = i.len().max(o.len()).max(diag.len()).clamp(1, MAX_ROW_LINES);
-            Row::new(vec![
+            let mut cells = vec![
                 Cell::from(format!("{:>3}", spec.address)),
                 Cell::from(fit(&spec.name, name_w as usize)),
                 Cell::from(Span::styled(state_name(r.state), state_style)),
+            ];
+            if live {
+                // The State column is the DP state already.
+                let [role, _, health] = crate::health::cells(self.master.live(spec.address));
+                cells.insert(2, role);
+                cells.push(health);
+            }
+            cells.extend([
                 Cell::from(cycle_text(r.cycle)),
                 Cell::from(format!(
                     "{:>9}",
@@ -677,25 +721,27 @@ impl BusView {
                 Cell::from(Text::from(i)),
                 Cell::from(Text::from(o)),
                 Cell::from(Text::from(diag.join("\n"))),
-            ])
-            .height(height as u16)
+            ]);
+            Row::new(cells).height(height as u16)
         });
-        let table = Table::new(
-            rows,
-            [
-                Constraint::Length(4),
-                Constraint::Length(name_w),
-                Constraint::Length(13),
-                Constraint::Length(9),
-                Constraint::Length(9),
-                Constraint::Length(io_w),
-                Constraint::Length(io_w),
-                Constraint::Length(diag_w),
-            ],
-        )
-        .header(header)
-        .row_highlight_style(Style::default().add_modifier(Modifier::REVERSED))
-        .block(Block::default().borders(Borders::ALL).title(" slaves "));
+        let mut widths = vec![
+            Constraint::Length(4),
+            Constraint::Length(name_w),
+            Constraint::Length(13),
+            Constraint::Length(9),
+            Constraint::Length(9),
+            Constraint::Length(io_w),
+            Constraint::Length(io_w),
+            Constraint::Length(diag_w),
+        ];
+        if live {
+            widths.insert(2, Constraint::Length(role_w));
+            widths.insert(4, Constraint::Length(health_w));
+        }
+        let table = Table::new(rows, widths)
+            .header(header)
+            .row_highlight_style(Style::default().add_modifier(Modifier::REVERSED))
+            .block(Block::default().borders(Borders::ALL).title(" slaves "));
         let mut state = TableState::default().with_selected(Some(self.selected));
         f.render_stateful_widget(table, area, &mut state);
     }
@@ -710,6 +756,13 @@ impl BusView {
         let mut l = format!("state {}", state_name(r.state));
         if let Some(m) = r.master {
             l.push_str(&format!("  polled by master {m}"));
+        }
+        if let Some(live) = self.master.live(spec.address) {
+            l.push_str(&format!(
+                "  role {}  health {}",
+                live.role.map_or("-", |r| r.name()),
+                live.health
+            ));
         }
         if let Some(g) = &spec.gsd {
             l.push_str(&format!(
@@ -1083,6 +1136,7 @@ mod tests {
                 slave(25, Some(SlaveState::DataExchange), &[]),
                 slave(40, None, &["station status: station not existent"]),
             ],
+            live: None,
         };
         v.show(&snap);
         let s = screen(&v);
@@ -1123,6 +1177,97 @@ mod tests {
         let s = screen(&v);
         assert!(s.contains("state data_exchange  polled by master 2"), "{s}");
         assert!(!s.contains("diagnosis reads"), "{s}");
+    }
+
+    #[test]
+    fn a_monitor_view_with_statistics_shows_role_and_health_per_station() {
+        use crate::source::WithLiveList;
+        use profibus_dp::config::layout::SlaveLayout;
+        use profibus_dp::monitor::stats::{Stats, StatsOptions};
+        use profibus_dp::monitor::{Monitor, MonitorOptions, SlaveInfo};
+        use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
+        use profibus_fdl::Telegram;
+        let infos = [8, 25]
+            .into_iter()
+            .map(|address| {
+                SlaveInfo::from(SlaveLayout {
+                    address,
+                    ..SlaveLayout::default()
+                })
+            })
+            .collect();
+        let mut mon = Monitor::new(infos, MonitorOptions::default());
+        let mut stats = Stats::new(StatsOptions::default());
+        let mut at = Instant::ZERO;
+        let mut hear = |t: Telegram<'_>, mon: &mut Monitor, stats: &mut Stats| {
+            at += Duration::from_micros(500);
+            mon.observe(at, &t);
+            stats.observe(at, &t, 8);
+            at
+        };
+        let data = |da, sa, fc, du| {
+            Telegram::Data(DataTelegram {
+                da,
+                sa,
+                fc,
+                dsap: None,
+                ssap: None,
+                data: du,
+                format: None,
+            })
+        };
+        let mut now = Instant::ZERO;
+        for i in 0..20 {
+            let fc = FunctionCode::Request {
+                kind: RequestKind::SrdHigh,
+                fcb: i % 2 == 0,
+                fcv: true,
+            };
+            // 25 answers every Data_Exchange; 8 answers none.
+            hear(data(25, 2, fc, &[0x01, 0x02]), &mut mon, &mut stats);
+            let resp = FunctionCode::slave_response(ResponseStatus::Dl);
+            hear(data(2, 25, resp, &[0x00, 0x7B]), &mut mon, &mut stats);
+            hear(data(8, 2, fc, &[0x00]), &mut mon, &mut stats);
+            now = hear(Telegram::Token { da: 2, sa: 2 }, &mut mon, &mut stats);
+        }
+        let mut v = view().listen_only();
+        v.update(
+            &WithLiveList {
+                source: &mut mon,
+                stats: &stats,
+            },
+            now,
+        );
+        let s = screen(&v);
+        for h in crate::health::COLUMNS.iter().filter(|h| **h != "DP state") {
+            assert!(s.contains(h), "heading {h} missing:\n{s}");
+        }
+        // The same cells sniff's stations show (`health::cells`).
+        let flat = |l: &str| l.split_whitespace().collect::<Vec<_>>().join(" ");
+        let drive = flat(s.lines().find(|l| l.contains("drive")).expect(&s));
+        assert!(
+            drive.contains("25 drive slave data_exchange ██████████ 100"),
+            "{drive}"
+        );
+        let pump = flat(s.lines().find(|l| l.contains("pump")).expect(&s));
+        assert!(pump.contains("8 pump - "), "{pump}");
+        assert!(pump.contains("░░░░░░░░░░ 0"), "{pump}");
+        // The master's health in the token ring line.
+        let ring = s.lines().find(|l| l.contains("token ring")).expect(&s);
+        assert!(ring.contains("rotation 2.0 ms) ██████████ 100"), "{ring}");
+        // In the details too.
+        v.key(Key::Down);
+        v.key(Key::Enter);
+        assert!(
+            screen(&v).contains("polled by master 2  role slave  health 100"),
+            "{}",
+            screen(&v)
+        );
+        // Without statistics beside it, the monitor's table is as before.
+        let mut plain = view().listen_only();
+        plain.update(&mon, now);
+        let s = screen(&plain);
+        assert!(!s.contains("Health") && !s.contains("█"), "{s}");
     }
 
     #[test]

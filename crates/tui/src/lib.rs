@@ -31,6 +31,7 @@
 //! `profibus_dp::pdu::diag`, telegrams from `profibus_fdl::wire`.
 
 pub mod bus;
+pub mod health;
 pub mod lines;
 pub mod sniff;
 pub mod source;

@@ -388,34 +388,25 @@ impl SniffView {
             .iter()
             .filter(|(_, s)| s.on_the_line())
             .map(|(a, s)| {
-                let l = live.get(a);
-                let health = l.map_or(100, |l| l.health);
-                let style = match health {
-                    90.. => Style::default().fg(Color::Green),
-                    60..=89 => Style::default().fg(Color::Yellow),
-                    _ => Style::default().fg(Color::Red),
-                };
-                Row::new(vec![
-                    ratatui::widgets::Cell::from(format!("{a:>3}")),
-                    ratatui::widgets::Cell::from(l.and_then(|l| l.role).map_or("-", |r| r.name())),
-                    ratatui::widgets::Cell::from(
-                        l.and_then(|l| l.dp_state).map_or("-", |s| s.name()),
-                    ),
-                    ratatui::widgets::Cell::from(health_bar(health)).style(style),
+                let mut cells = vec![ratatui::widgets::Cell::from(format!("{a:>3}"))];
+                cells.extend(crate::health::cells(live.get(a)));
+                cells.extend([
                     ratatui::widgets::Cell::from(format!("{:>6}", s.requests)),
                     ratatui::widgets::Cell::from(format!("{:>6}", s.responses)),
                     ratatui::widgets::Cell::from(format!("{:>5}", s.tokens)),
                     ratatui::widgets::Cell::from(format!("{:>5}", s.no_answer)),
                     ratatui::widgets::Cell::from(format!("{:>3}", s.negative)),
-                ])
+                ]);
+                Row::new(cells)
             });
+        let [role_w, state_w, health_w] = crate::health::WIDTHS;
         let table = Table::new(
             rows,
             [
                 Constraint::Length(4),
-                Constraint::Length(7),
-                Constraint::Length(14),
-                Constraint::Length(15),
+                Constraint::Length(role_w),
+                Constraint::Length(state_w),
+                Constraint::Length(health_w),
                 Constraint::Length(7),
                 Constraint::Length(7),
                 Constraint::Length(6),
@@ -424,9 +415,12 @@ impl SniffView {
             ],
         )
         .header(
-            Row::new([
-                "Addr", "Role", "DP state", "Health", "Req", "Resp", "Token", "NoAns", "Neg",
-            ])
+            Row::new(
+                ["Addr"]
+                    .into_iter()
+                    .chain(crate::health::COLUMNS)
+                    .chain(["Req", "Resp", "Token", "NoAns", "Neg"]),
+            )
             .style(Style::default().add_modifier(Modifier::BOLD)),
         )
         .block(Block::default().borders(Borders::ALL).title(" stations "));
@@ -452,13 +446,6 @@ impl SniffView {
         };
         f.render_widget(Paragraph::new(footer), foot);
     }
-}
-
-/// A health score 0 … 100 as a bar of ten cells and the number, e.g.
-/// `████████░░  80`.
-pub fn health_bar(health: u8) -> String {
-    let full = (health.min(100) as usize + 5) / 10;
-    format!("{}{} {health:>3}", "█".repeat(full), "░".repeat(10 - full))
 }
 
 /// Skipped bytes in words for the list, e.g. `bad FCS: 3 bytes skipped: 68 01 02`.
@@ -575,8 +562,6 @@ mod tests {
         assert!(flat.contains("│ 8 slave diag ██████████ 100 0 2"), "{s}");
         assert!(flat.contains("│ 2 master - ░░░░░░░░░░ 0 3 0"), "{s}");
         assert!(flat.contains("│ 9 - - ░░░░░░░░░░ 0 0 0"), "{s}");
-        assert_eq!(health_bar(80), "████████░░  80");
-        assert_eq!(health_bar(100), "██████████ 100");
     }
 
     #[test]

@@ -5,6 +5,7 @@
 //! which never sends: its view refuses writes).
 
 use profibus_dp::master::{DpMaster, OperatingState, SlaveState};
+use profibus_dp::monitor::stats::{LiveStation, Stats};
 use profibus_dp::monitor::{BusCounters, MasterStatus, Monitor, MonitorStatus};
 use profibus_fdl::Instant;
 use std::time::Duration;
@@ -82,6 +83,10 @@ pub struct BusSnapshot {
     pub line: Option<BusCounters>,
     /// The slaves.
     pub slaves: Vec<SlaveSnapshot>,
+    /// The analyser's live list: role, DP state and health of every
+    /// station heard (`None`: no statistics run beside the source;
+    /// [`WithLiveList`]).
+    pub live: Option<Vec<LiveStation>>,
 }
 
 impl BusSnapshot {
@@ -122,6 +127,7 @@ impl BusSnapshot {
             ring: None,
             line: None,
             slaves,
+            live: None,
         }
     }
 
@@ -155,6 +161,7 @@ impl BusSnapshot {
                     diag: Diagnosis::Words(x.diag.clone()),
                 })
                 .collect(),
+            live: None,
         }
     }
 }
@@ -188,6 +195,28 @@ impl BusSource for Monitor {
 
     fn outputs_mut(&mut self, _address: u8) -> Option<&mut [u8]> {
         None
+    }
+}
+
+/// A source with the analyser's statistics core beside it (`dpctl
+/// monitor`): its snapshots carry the live list, so the view shows each
+/// station's role and health ([`crate::health`]).
+pub struct WithLiveList<'a, S: ?Sized> {
+    /// The source.
+    pub source: &'a mut S,
+    /// The statistics core fed with the same telegrams.
+    pub stats: &'a Stats,
+}
+
+impl<S: BusSource + ?Sized> BusSource for WithLiveList<'_, S> {
+    fn snapshot(&self, now: Instant) -> BusSnapshot {
+        let mut s = self.source.snapshot(now);
+        s.live = Some(self.stats.live());
+        s
+    }
+
+    fn outputs_mut(&mut self, address: u8) -> Option<&mut [u8]> {
+        self.source.outputs_mut(address)
     }
 }
 
