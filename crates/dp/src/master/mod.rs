@@ -1802,4 +1802,4 @@ impl MasterApp for DpMaster {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

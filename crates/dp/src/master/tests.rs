@@ -7,7 +7,7 @@ use profibus_fdl::wire::StationType;
 
 /// A master with one slave; no cyclic Global_Control, so that the tests
 /// of the poll sequence see only the slave's requests.
-pub(super) fn master() -> DpMaster {
+pub(crate) fn master() -> DpMaster {
     master_with(MasterOptions {
         global_control_interval: None,
         ..MasterOptions::default()
@@ -37,7 +37,7 @@ fn ctx(now: u64, cycles: u32) -> TokenContext {
 }
 
 /// The next request of a fresh token visit, as (dsap, data).
-fn next(m: &mut DpMaster, now: u64) -> Option<(Option<u8>, Vec<u8>)> {
+pub(crate) fn next(m: &mut DpMaster, now: u64) -> Option<(Option<u8>, Vec<u8>)> {
     m.poll_request(&ctx(now, 0))
         .map(|r| (r.dsap, r.data.to_vec()))
 }
@@ -55,7 +55,7 @@ fn answer(m: &mut DpMaster, now: u64, outcome: Outcome<'_>) {
 }
 
 /// A data response without SAPs (Data_Exchange).
-fn data_resp(status: ResponseStatus, data: &[u8]) -> Outcome<'_> {
+pub(crate) fn data_resp(status: ResponseStatus, data: &[u8]) -> Outcome<'_> {
     Outcome::Response {
         status,
         station: StationType::Passive,
@@ -65,7 +65,7 @@ fn data_resp(status: ResponseStatus, data: &[u8]) -> Outcome<'_> {
     }
 }
 
-fn diag_resp(data: &[u8]) -> Outcome<'_> {
+pub(crate) fn diag_resp(data: &[u8]) -> Outcome<'_> {
     Outcome::Response {
         status: ResponseStatus::Dl,
         station: StationType::Passive,
@@ -85,10 +85,10 @@ fn states(m: &mut DpMaster) -> Vec<SlaveState> {
     v
 }
 
-const FRESH: [u8; 6] = [0x02, 0x05, 0x00, 0xFF, 0x12, 0x34];
-const READY: [u8; 6] = [0x00, 0x0C, 0x00, 0x02, 0x12, 0x34];
+pub(crate) const FRESH: [u8; 6] = [0x02, 0x05, 0x00, 0xFF, 0x12, 0x34];
+pub(crate) const READY: [u8; 6] = [0x00, 0x0C, 0x00, 0x02, 0x12, 0x34];
 
-fn bring_up(m: &mut DpMaster) {
+pub(crate) fn bring_up(m: &mut DpMaster) {
     assert_eq!(next(m, 1).unwrap().0, Some(sap::SLAVE_DIAG));
     answer(m, 1, diag_resp(&FRESH));
     let (dsap, prm) = next(m, 2).unwrap();

@@ -180,3 +180,151 @@ impl MasterCounters {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::master::tests::{bring_up, data_resp, diag_resp, master, next, FRESH, READY};
+    use crate::pdu::sap;
+    use profibus_fdl::station::active::{CycleResult, MasterApp, Outcome, Service};
+    use profibus_fdl::wire::ResponseStatus;
+
+    /// The master's request at `now` µs answered with `outcome` after
+    /// `retries` layer-2 repetitions.
+    fn cycle(m: &mut DpMaster, now: u64, outcome: Outcome<'_>, retries: u8) {
+        next(m, now).expect("a request");
+        m.on_result(
+            Instant::from_nanos(now),
+            &CycleResult {
+                da: 8,
+                service: Service::SrdHigh,
+                outcome,
+                retries,
+            },
+        );
+    }
+
+    fn at(ns: u64) -> Instant {
+        Instant::from_nanos(ns)
+    }
+
+    #[test]
+    fn requests_no_answer_and_retries_are_derived_from_the_masters_counters() {
+        let mut m = master();
+        let mut c = MasterCounters::new();
+        bring_up(&mut m);
+        // Two diagnosis reads of the start-up, then four Data_Exchange
+        // cycles: one after 2 repetitions, one unanswered.
+        cycle(&mut m, 5, data_resp(ResponseStatus::Dl, &[1, 2]), 0);
+        cycle(&mut m, 6, data_resp(ResponseStatus::Dl, &[1, 2]), 2);
+        cycle(&mut m, 7, Outcome::NoResponse, 0);
+        cycle(&mut m, 8, data_resp(ResponseStatus::Dl, &[1, 2]), 0);
+        let st = m.slave_stats(8).unwrap();
+        assert_eq!((st.data_exchanges, st.diag_reads), (3, 2), "{st:?}");
+        assert_eq!((st.retries, st.errors, st.restarts), (2, 1, 0), "{st:?}");
+
+        let r = c.report(&m, at(1_000_000_000));
+        let s = &r.interval.stations[&8];
+        assert_eq!(s.role, Some(Role::Slave));
+        assert_eq!(s.dp_state, Some(SlaveState::DataExchange));
+        // requests = exchanges 3 + diagnosis reads 2 + retries 2 + no answer 1.
+        assert_eq!((s.requests, s.answers), (8, 5));
+        assert_eq!((s.retries, s.no_answer, s.restarts), (2, 1, 0));
+        assert_eq!((s.diag_requests, s.diag_answers), (2, 2));
+        // 1/8 lost costs 125 points, 2/8 retries 125: nothing left.
+        assert_eq!(s.health, 0);
+        let own = &r.interval.stations[&2];
+        assert_eq!((own.role, own.requests_sent), (Some(Role::Master), 8));
+        assert_eq!(r.interval_s, 1.0);
+
+        // The next interval holds only what happened since.
+        for k in 0..4 {
+            cycle(&mut m, 10 + k, data_resp(ResponseStatus::Dl, &[1, 2]), 0);
+        }
+        let r = c.report(&m, at(3_000_000_000));
+        let s = &r.interval.stations[&8];
+        assert_eq!(
+            (s.requests, s.answers, s.retries, s.no_answer),
+            (4, 4, 0, 0)
+        );
+        assert_eq!(s.health, 100);
+        assert_eq!(r.interval.stations[&2].requests_sent, 4);
+        assert_eq!(r.interval_s, 2.0);
+        // The totals since the start.
+        let t = &r.totals.stations[&8];
+        assert_eq!(
+            (t.requests, t.answers, t.retries, t.no_answer),
+            (12, 9, 2, 1)
+        );
+        assert_eq!(r.totals.stations[&2].requests_sent, 12);
+    }
+
+    #[test]
+    fn a_slave_that_goes_offline_and_comes_back_counts_one_restart() {
+        let mut m = master();
+        let mut c = MasterCounters::new();
+        bring_up(&mut m);
+        c.observe(&m);
+        cycle(&mut m, 5, data_resp(ResponseStatus::Dl, &[1, 2]), 0);
+        c.observe(&m);
+        // Silent three times: offline.
+        for k in 0..3 {
+            cycle(&mut m, 10 + k, Outcome::NoResponse, 0);
+            c.observe(&m);
+        }
+        assert_eq!(m.slave_state(8), Some(SlaveState::Offline));
+        let r = c.report(&m, at(1_000_000));
+        let s = &r.interval.stations[&8];
+        assert_eq!((s.no_answer, s.restarts, s.health), (3, 0, 0));
+
+        // Probed again after the reprobe interval: back through the
+        // start-up into Data_Exchange.
+        let t = 20
+            + crate::master::MasterOptions::default()
+                .reprobe_interval
+                .as_nanos() as u64;
+        for (k, (dsap, outcome)) in [
+            (Some(sap::SLAVE_DIAG), diag_resp(&FRESH)),
+            (Some(sap::SET_PRM), Outcome::ShortAck),
+            (Some(sap::CHK_CFG), Outcome::ShortAck),
+            (Some(sap::SLAVE_DIAG), diag_resp(&READY)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let now = t + k as u64;
+            assert_eq!(next(&mut m, now).unwrap().0, dsap);
+            m.on_result(
+                Instant::from_nanos(now),
+                &CycleResult {
+                    da: 8,
+                    service: Service::SrdHigh,
+                    outcome,
+                    retries: 0,
+                },
+            );
+            c.observe(&m);
+        }
+        assert_eq!(m.slave_state(8), Some(SlaveState::DataExchange));
+        // The master's own counter leaves a return from offline out …
+        assert_eq!(m.slave_stats(8).unwrap().restarts, 0);
+        cycle(&mut m, t + 10, data_resp(ResponseStatus::Dl, &[1, 2]), 0);
+        let r = c.report(&m, at(2_000_000));
+        // … the statistics count it once, in the interval and the totals.
+        assert_eq!(r.interval.stations[&8].restarts, 1);
+        assert_eq!(r.totals.stations[&8].restarts, 1);
+        // Observed again and again, it stays one.
+        for k in 0..3 {
+            cycle(
+                &mut m,
+                t + 20 + k,
+                data_resp(ResponseStatus::Dl, &[1, 2]),
+                0,
+            );
+            c.observe(&m);
+        }
+        let r = c.report(&m, at(3_000_000));
+        assert_eq!(r.interval.stations[&8].restarts, 0);
+        assert_eq!(r.totals.stations[&8].restarts, 1);
+    }
+}
