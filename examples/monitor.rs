@@ -47,7 +47,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             Heard::Event(TapEvent::Skipped { at, bytes, errors }) => {
                 println!("{at:?} !! {} bytes skipped: {errors:?}", bytes.len());
             }
-            Heard::Tick(_) => {}
+            Heard::Tick(_) | Heard::Drained(_) => {}
         }
         match seen >= 50 {
             true => ControlFlow::Break(()),

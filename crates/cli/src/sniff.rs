@@ -19,7 +19,6 @@
 
 use crate::common;
 use anyhow::{Context, Result};
-use profibus_dp::config::layout::SlaveLayout;
 use profibus_dp::monitor::trigger::{Output, Recorder, Trigger, Watch};
 use profibus_dp::pdu::decode::{DpTelegram, Exchanges};
 use profibus_dp::pdu::describe::TelegramSummary;
@@ -30,6 +29,7 @@ use profibus_fdl::wire::Telegram;
 use profibus_fdl::Baud;
 use profibus_io::listen::{listen, Heard, ListenOptions};
 use profibus_io::transport::Port;
+use profibus_tui::lines::{monitor_slaves, SlaveInfo};
 use profibus_tui::sniff::{skipped_text, SniffView};
 use profibus_tui::term::LiveSniff;
 use std::fs::File;
@@ -82,7 +82,9 @@ pub struct Args {
     #[arg(long, requires = "trigger")]
     pub split: bool,
     /// Bus file of the segment: its slaves' modules split Data_Exchange
-    /// data by module, their GSD files name diagnosis bits; its master's
+    /// data by module, and by the channels of a device profile (`device
+    /// = "bk3000"`, …) as `dpctl monitor` names them (JSON `"channels":
+    /// {"NAME": value}`); their GSD files name diagnosis bits; its master's
     /// bus parameters give the rate (unless --baud) and the TTR the
     /// token rotations are measured against. Without it the modules come
     /// from the Chk_Cfg seen on the wire.
@@ -261,7 +263,13 @@ struct Printer {
     triggered: Option<Triggered>,
     /// `--stats` / `--alert` (`crate::stats_args`).
     stats: Option<crate::stats_args::StatsRun>,
+    /// When `out` was last flushed.
+    last_flush: std::time::Instant,
 }
+
+/// Longest time a printed telegram waits in the output buffer while the
+/// line keeps the reader busy (on a resting line it is printed at once).
+const FLUSH_EVERY: Duration = Duration::from_millis(20);
 
 impl Printer {
     fn event(&mut self, ev: TapEvent) -> Result<()> {
@@ -345,9 +353,18 @@ impl Printer {
                 }
             }
         }
-        if self.live.is_none() {
-            self.out.flush()?;
+        // Flushed when the line has no more bytes ready (`Heard::Drained`),
+        // and at least every FLUSH_EVERY on a line that never rests.
+        if self.live.is_none() && self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.flush()?;
         }
+        Ok(())
+    }
+
+    /// Print what is buffered.
+    fn flush(&mut self) -> Result<()> {
+        self.last_flush = std::time::Instant::now();
+        self.out.flush()?;
         Ok(())
     }
 
@@ -456,8 +473,14 @@ async fn sniff(args: Args) -> Result<()> {
         .transpose()?;
     let mut exchanges = Exchanges::default();
     if let Some(bus) = &bus {
-        for s in SlaveLayout::of_bus(&bus.file) {
-            exchanges.set_slave(s.address, s.gsd, s.modules);
+        // The slaves as `dpctl monitor` knows them: modules, GSD, and the
+        // named channels of device profiles.
+        for s in monitor_slaves(&SlaveInfo::of_bus(bus)?) {
+            let address = s.layout.address;
+            exchanges.set_slave(address, s.layout.gsd, s.layout.modules);
+            if let Some(d) = s.decoder {
+                exchanges.set_decoder(address, d);
+            }
         }
     }
     if !args.gsd_dir.is_empty() {
@@ -468,10 +491,12 @@ async fn sniff(args: Args) -> Result<()> {
     let mut printer = Printer {
         json: args.json,
         live,
-        out: BufWriter::new(crate::out::stdout()),
+        // One write per burst of telegrams, not one per telegram.
+        out: BufWriter::with_capacity(64 * 1024, crate::out::stdout()),
         pcap,
         exchanges,
         triggered,
+        last_flush: std::time::Instant::now(),
         stats: crate::stats_args::StatsRun::new(
             &args.stats,
             profibus_dp::monitor::stats::StatsOptions {
@@ -486,6 +511,8 @@ async fn sniff(args: Args) -> Result<()> {
     let heard = listen(&mut port, options, common::shutdown(), |heard| {
         let r = match heard {
             Heard::Event(ev) => printer.event(ev),
+            Heard::Drained(_) if printer.live.is_none() => printer.flush(),
+            Heard::Drained(_) => Ok(()),
             Heard::Tick(at) => {
                 let live = printer.live.as_mut();
                 if live.is_some_and(|l| !l.tick().unwrap_or(false)) {

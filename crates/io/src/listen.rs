@@ -4,7 +4,9 @@
 //! [`listen`] takes only an [`AsyncRead`], so nothing it does can send a
 //! byte. Time stamps are real time since the call, as [`Instant`]s; a
 //! [`Heard::Tick`] comes at least every [`ListenOptions::tick`] even on a
-//! silent line, for status output and timeouts.
+//! silent line, for status output and timeouts; a [`Heard::Drained`]
+//! after the events of the bytes read so far, when the line has no more
+//! ready (a caller that buffers its output flushes there).
 
 use crate::transport::Port;
 use profibus_fdl::codec::CodecStats;
@@ -24,6 +26,12 @@ pub enum Heard {
     Event(TapEvent),
     /// Time passed (at least every [`ListenOptions::tick`]).
     Tick(Instant),
+    /// Every event of the bytes read so far was passed on, and the last
+    /// read took all the line had ready (it did not fill the buffer): a
+    /// good moment to flush buffered output, so a person sees each
+    /// telegram at once while a busy line is printed in large writes.
+    /// Comes only after events.
+    Drained(Instant),
 }
 
 /// Options of [`listen`].
@@ -85,7 +93,10 @@ where
     let mut last_byte = clock;
     tokio::pin!(stop);
     let mut result = Ok(());
+    // Events passed on since the last `Drained`.
+    let mut undrained = false;
     'outer: loop {
+        let mut more_ready = false;
         let to_tick = next_tick.saturating_duration_since(std::time::Instant::now());
         let wait = if tap.pending() > 0 {
             (last_byte + options.idle)
@@ -106,6 +117,7 @@ where
                 Ok(Ok(n)) => {
                     last_byte = std::time::Instant::now();
                     tap.push(now(), &buf[..n]);
+                    more_ready = n == buf.len();
                 }
                 Ok(Err(e)) => {
                     result = Err(e);
@@ -114,8 +126,15 @@ where
             },
         }
         while let Some(ev) = tap.poll() {
+            undrained = true;
             if f(Heard::Event(ev)).is_break() {
                 break 'outer;
+            }
+        }
+        if undrained && !more_ready {
+            undrained = false;
+            if f(Heard::Drained(now())).is_break() {
+                break;
             }
         }
         if std::time::Instant::now() >= next_tick {
@@ -162,6 +181,16 @@ mod tests {
         )
         .await
         .unwrap();
+        // The two telegrams came in one read: one `Drained` after both.
+        let kinds: Vec<&str> = (heard.iter())
+            .map(|h| match h {
+                Heard::Event(_) => "event",
+                Heard::Tick(_) => "tick",
+                Heard::Drained(_) => "drained",
+            })
+            .filter(|k| *k != "tick")
+            .collect();
+        assert_eq!(kinds, ["event", "event", "event", "drained"], "{heard:?}");
         let bytes: Vec<Vec<u8>> = heard
             .iter()
             .filter_map(|h| match h {

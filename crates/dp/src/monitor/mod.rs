@@ -1279,7 +1279,7 @@ fn slave_status(s: &SlaveTrack) -> SlaveStatus {
 }
 
 #[cfg(feature = "serde")]
-mod ser {
+pub(crate) mod ser {
     //! Channels as a `name: value` object.
     use super::Reading;
     use serde::ser::SerializeMap;

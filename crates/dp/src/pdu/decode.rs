@@ -37,6 +37,7 @@
 
 use crate::config::gsd::Gsd;
 use crate::config::layout::{ModuleLayout, Span};
+use crate::monitor::{Image, ImageDecoder, Reading};
 use crate::pdu::alarm::{self, DiagBlock};
 use crate::pdu::c2::{C2Pdu, InitiateRes};
 use crate::pdu::cfg;
@@ -49,6 +50,7 @@ use crate::pdu::sap;
 use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus, Telegram};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
+use std::sync::Arc;
 
 /// What a decoder needs to know of a request to read its response.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -129,7 +131,7 @@ pub struct AlarmInfo {
 }
 
 /// What the data unit of a DP telegram says, per service.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[cfg_attr(feature = "serde", serde(untagged))]
 pub enum Detail {
@@ -197,6 +199,17 @@ pub enum Detail {
         /// slave's modules (a bus file, or the Chk_Cfg seen on the wire).
         #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
         modules: Vec<ModuleSlice>,
+        /// The bytes as the named channels of the slave's device profile,
+        /// when [`Exchanges`] has its decoder ([`Exchanges::set_decoder`]);
+        /// JSON `{"NAME": value, …}`, as `dpctl monitor` names them.
+        #[cfg_attr(
+            feature = "serde",
+            serde(
+                skip_serializing_if = "Vec::is_empty",
+                serialize_with = "crate::monitor::ser::readings"
+            )
+        )]
+        channels: Vec<Reading>,
     },
     /// Inputs: a Data_Exchange or Rd_Inp response.
     Inputs {
@@ -208,6 +221,15 @@ pub enum Detail {
         /// The bytes split by module (see [`Detail::Outputs`]).
         #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
         modules: Vec<ModuleSlice>,
+        /// The named channels (see [`Detail::Outputs`]).
+        #[cfg_attr(
+            feature = "serde",
+            serde(
+                skip_serializing_if = "Vec::is_empty",
+                serialize_with = "crate::monitor::ser::readings"
+            )
+        )]
+        channels: Vec<Reading>,
     },
     /// A Global_Control broadcast.
     GlobalControl {
@@ -266,7 +288,7 @@ pub enum Detail {
 }
 
 /// A telegram's DP layer.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct DpTelegram {
     /// The DP service: `Data_Exchange`, `Slave_Diag`, `Set_Prm`,
@@ -304,9 +326,19 @@ fn group_list(g: &[u8]) -> String {
     g.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
 }
 
-fn show_modules(f: &mut fmt::Formatter<'_>, modules: &[ModuleSlice]) -> fmt::Result {
+fn show_modules(
+    f: &mut fmt::Formatter<'_>,
+    modules: &[ModuleSlice],
+    channels: &[Reading],
+) -> fmt::Result {
     for m in modules {
         write!(f, "; {} {}: {}", m.slot, m.name, hex(&m.data))?;
+    }
+    if !channels.is_empty() {
+        f.write_str(";")?;
+        for c in channels {
+            write!(f, " {c}")?;
+        }
     }
     Ok(())
 }
@@ -401,20 +433,25 @@ impl fmt::Display for DpTelegram {
                 }
                 Ok(())
             }
-            Detail::Outputs { outputs, modules } => {
+            Detail::Outputs {
+                outputs,
+                modules,
+                channels,
+            } => {
                 write!(f, "outputs {}", hex(outputs))?;
-                show_modules(f, modules)
+                show_modules(f, modules, channels)
             }
             Detail::Inputs {
                 inputs,
                 new_diag,
                 modules,
+                channels,
             } => {
                 write!(f, "inputs {}", hex(inputs))?;
                 if *new_diag {
                     f.write_str(" (new diagnosis)")?;
                 }
-                show_modules(f, modules)
+                show_modules(f, modules, channels)
             }
             Detail::GlobalControl { command, groups } => {
                 f.write_str(&list(command, "no command"))?;
@@ -524,6 +561,7 @@ fn request(d: &DataTelegram<'_>, kind: RequestKind) -> Option<DpTelegram> {
         None => Some(Detail::Outputs {
             outputs: du.to_vec(),
             modules: vec![],
+            channels: vec![],
         }),
         Some(sap::SET_PRM) => Some(set_prm(du)),
         Some(sap::CHK_CFG) => Some(config(du)),
@@ -580,6 +618,7 @@ fn response(
                 inputs: du.to_vec(),
                 new_diag: matches!(status, ResponseStatus::Dh | ResponseStatus::Rdh),
                 modules: vec![],
+                channels: vec![],
             }),
             Some(sap::SLAVE_DIAG) => Some(slave_diag(du, dpv1)),
             Some(sap::GET_CFG) => Some(config(du)),
@@ -587,10 +626,12 @@ fn response(
                 inputs: du.to_vec(),
                 new_diag: false,
                 modules: vec![],
+                channels: vec![],
             }),
             Some(sap::RD_OUTP) => Some(Detail::Outputs {
                 outputs: du.to_vec(),
                 modules: vec![],
+                channels: vec![],
             }),
             Some(s) if s <= sap::MSAC_C2_INITIATE && !du.is_empty() => Some(c2_pdu(du, false)),
             Some(s) if s <= sap::MSAC_C1 && !du.is_empty() => Some(dpv1_pdu(du, false)),
@@ -992,6 +1033,8 @@ pub struct Exchanges {
     /// Module layouts by slave address, and whether configured (a bus
     /// file: kept) or learned from the last Chk_Cfg.
     layouts: BTreeMap<u8, (Vec<ModuleLayout>, bool)>,
+    /// Named channels by slave address (device profiles of a bus file).
+    decoders: BTreeMap<u8, Arc<dyn ImageDecoder>>,
 }
 
 impl Exchanges {
@@ -1004,6 +1047,15 @@ impl Exchanges {
         if !modules.is_empty() {
             self.layouts.insert(address, (modules, true));
         }
+    }
+
+    /// Names the channels of the slave at `address` with `decoder` (a
+    /// device profile's, `profibus_devices::channels::ChannelMap`, the
+    /// one `dpctl monitor` decodes with): its Data_Exchange, Rd_Inp and
+    /// Rd_Outp data get [`Detail::Inputs`]'s and [`Detail::Outputs`]'
+    /// `channels`.
+    pub fn set_decoder(&mut self, address: u8, decoder: Box<dyn ImageDecoder>) {
+        self.decoders.insert(address, Arc::from(decoder));
     }
 
     /// Knows `gsd`: a slave with its ident number gets its diagnosis
@@ -1048,13 +1100,22 @@ impl Exchanges {
                     .collect();
                 self.layouts.insert(slave, (learned, false));
             }
-            Some(Detail::Outputs { outputs, modules }) => {
+            Some(Detail::Outputs {
+                outputs,
+                modules,
+                channels,
+            }) => {
                 *modules = self.split(slave, outputs, |m| m.outputs);
+                *channels = self.readings(slave, Image::Outputs, outputs);
             }
             Some(Detail::Inputs {
-                inputs, modules, ..
+                inputs,
+                modules,
+                channels,
+                ..
             }) => {
                 *modules = self.split(slave, inputs, |m| m.inputs);
+                *channels = self.readings(slave, Image::Inputs, inputs);
             }
             Some(Detail::SlaveDiag {
                 ext_diag,
@@ -1069,6 +1130,11 @@ impl Exchanges {
             _ => {}
         }
         Some(dp)
+    }
+
+    /// `bytes` as the named channels of `slave`; empty without a decoder.
+    fn readings(&self, slave: u8, image: Image, bytes: &[u8]) -> Vec<Reading> {
+        (self.decoders.get(&slave)).map_or(vec![], |d| d.decode(image, bytes))
     }
 
     /// `image` split by the modules known of `slave` (`span` picks the

@@ -235,6 +235,7 @@ fn data_exchange_global_control_and_set_slave_add() {
             Some(Detail::Outputs {
                 outputs: vec![0xAA, 0xBB],
                 modules: vec![],
+                channels: vec![],
             })
         )
     );
@@ -247,6 +248,7 @@ fn data_exchange_global_control_and_set_slave_add() {
                 inputs: vec![0x42],
                 new_diag: true,
                 modules: vec![],
+                channels: vec![],
             })
         )
     );
@@ -578,6 +580,50 @@ fn data_exchange_split_by_the_modules_of_the_chk_cfg_seen() {
         panic!()
     };
     assert_eq!(modules[0].name, "valve");
+}
+
+/// Names byte 0 of each image `first`, with a unit on the inputs.
+#[derive(Debug)]
+struct FirstByte;
+
+impl ImageDecoder for FirstByte {
+    fn decode(&self, image: Image, bytes: &[u8]) -> Vec<Reading> {
+        let value = crate::monitor::ReadingValue::Int(bytes.first().map_or(0, |b| *b as i64));
+        vec![Reading {
+            name: "first".into(),
+            value,
+            unit: (image == Image::Inputs).then(|| "V".into()),
+        }]
+    }
+}
+
+#[test]
+fn data_exchange_names_the_channels_of_a_slave_with_a_decoder() {
+    let mut ex = Exchanges::default();
+    ex.set_decoder(8, Box::new(FirstByte));
+    let (_, _, out) = detail(&mut ex, &tel(true, None, &[7, 1]));
+    let Some(Detail::Outputs { channels, .. }) = &out else {
+        panic!("{out:?}")
+    };
+    assert_eq!(channels.len(), 1);
+    assert_eq!(channels[0].to_string(), "first=7");
+    let dp = ex.decode(&tg(&tel(false, None, &[42]))).unwrap();
+    assert_eq!(
+        dp.to_string(),
+        "Data_Exchange response: inputs 2A; first=42 V"
+    );
+    #[cfg(feature = "serde")]
+    {
+        let json = serde_json::to_value(&dp).unwrap();
+        assert_eq!(json["channels"], serde_json::json!({"first": 42}), "{json}");
+    }
+    // Another slave has no decoder: no channels.
+    let mut other = Exchanges::default();
+    let (_, _, out) = detail(&mut other, &tel(true, None, &[7, 1]));
+    let Some(Detail::Outputs { channels, .. }) = &out else {
+        panic!("{out:?}")
+    };
+    assert!(channels.is_empty());
 }
 
 #[test]
