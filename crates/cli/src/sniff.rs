@@ -321,7 +321,7 @@ impl Printer {
                         Some(Layer::Dp(dp)) => (Some(dp), None),
                         Some(Layer::Fms(fms)) => {
                             what.service_sap = Some("FMS");
-                            (None, Some(fms))
+                            (None, Some(*fms))
                         }
                         None => (None, None),
                     };

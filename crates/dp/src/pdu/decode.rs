@@ -983,7 +983,7 @@ pub enum Layer {
     Dp(DpTelegram),
     /// A telegram of an FMS connection: its LLI and FMS PDUs
     /// ([`crate::fms::decode`]).
-    Fms(FmsTelegram),
+    Fms(Box<FmsTelegram>),
 }
 
 /// Pairs responses with their requests on a stream of telegrams (see the
@@ -1036,7 +1036,7 @@ impl Exchanges {
         let fms = self.fms_of(telegram);
         let dp = self.decode(telegram);
         match fms {
-            Some(f) => Some(Layer::Fms(f)),
+            Some(f) => Some(Layer::Fms(Box::new(f))),
             None => dp.map(Layer::Dp),
         }
     }
