@@ -9,7 +9,7 @@
 mod common;
 
 use common::mqtt::{broker, free_port, subscribe, write_bus};
-use common::{dpctl, repo, Bus, Proc, TempDir};
+use common::{dpctl, generic_slave, Bus, Proc, TempDir};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
@@ -94,15 +94,10 @@ fn a_terminated_gateway_clears_its_slaves_before_it_goes_offline() {
     let port = free_port();
     let _mosq = broker(&dir, port);
     let line = Bus::start(2, &[]);
-    let gsd = repo().join("crates/devices/gsd/DPCTL_GEN.GSD");
     let mut slave = Proc::spawn(
         "dpctl slave",
-        Command::new(dpctl())
-            .args(["slave", "--json", "--port", &line.link_str(1)])
-            .args(["--addr", "3", "--baud", "1.5M", "--gsd"])
-            .arg(&gsd)
-            .args(["--module", "2 words in/out"])
-            .stdin(Stdio::null())
+        generic_slave(line.link(1), 3, "1.5M", &["2 words in/out"])
+            .arg("--json")
             .stdout(Stdio::piped())
             .stderr(Stdio::null()),
     );
