@@ -54,9 +54,17 @@ fuzz_target!(|data: &[u8]| {
     } else {
         FunctionCode::slave_response(ResponseStatus::Dl)
     };
-    let (da, sa, dsap, ssap) = if request { (5, 3, sap, 33) } else { (3, 5, 33, sap) };
+    let (da, sa, dsap, ssap) = if request {
+        (5, 3, sap, 33)
+    } else {
+        (3, 5, 33, sap)
+    };
     let tg = Telegram::Data(DataTelegram::new(da, sa, fc, du).with_saps(Some(dsap), Some(ssap)));
     let layer = Exchanges::default().decode_layer(&tg);
     let fms = matches!(layer, Some(Layer::Fms(_)));
-    assert_eq!(fms, sap <= 48 && starts_lli_pdu(du), "SAP {sap} {du:02X?}: {layer:?}");
+    assert_eq!(
+        fms,
+        sap <= 48 && starts_lli_pdu(du),
+        "SAP {sap} {du:02X?}: {layer:?}"
+    );
 });
