@@ -55,6 +55,17 @@ pub const ABORT_PROTOCOL: u8 = 2;
 /// Abort reason: the server refused the Initiate.
 pub const ABORT_REFUSED: u8 = 3;
 
+/// An abort reason in words (this LLI's reason codes, unverified).
+pub fn abort_reason_text(reason: u8) -> &'static str {
+    match reason {
+        ABORT_USER => "connection released",
+        ABORT_TIMEOUT => "connection monitoring: no traffic within the monitoring interval",
+        ABORT_PROTOCOL => "protocol error (a PDU the connection's state does not allow)",
+        ABORT_REFUSED => "connection refused",
+        _ => "unknown reason",
+    }
+}
+
 /// The type of a communication relationship (KBL "type" column).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RelationshipType {
