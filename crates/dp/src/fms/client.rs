@@ -6,7 +6,7 @@
 
 use core::time::Duration;
 
-use super::lli::{abort_reason_text, ClientEvent, LliClient, ABORT_REFUSED, ABORT_TIMEOUT};
+use super::lli::{abort_reason, ClientEvent, LliClient, ABORT_REFUSED, ABORT_TIMEOUT};
 use super::od::Description;
 use super::pdu::{
     reject_code_text, GetOdRequest, InitiateRequest, Request, Response, ServiceError, MAX_PDU_LEN,
@@ -136,7 +136,7 @@ pub enum FmsRunError {
     #[error(
         "the FMS connection was aborted by the {}: {} (reason {reason})",
         if *.locally { "client" } else { "server" },
-        abort_reason_text(*.reason)
+        abort_reason(*.reason)
     )]
     Aborted {
         /// Reason code.

@@ -55,13 +55,13 @@ pub const ABORT_PROTOCOL: u8 = 2;
 /// Abort reason: the server refused the Initiate.
 pub const ABORT_REFUSED: u8 = 3;
 
-/// An abort reason in words (this LLI's reason codes, unverified).
-pub fn abort_reason_text(reason: u8) -> &'static str {
+/// An Abort reason code in words (the codes above; unverified values).
+pub fn abort_reason(reason: u8) -> &'static str {
     match reason {
-        ABORT_USER => "connection released",
-        ABORT_TIMEOUT => "connection monitoring: no traffic within the monitoring interval",
-        ABORT_PROTOCOL => "protocol error (a PDU the connection's state does not allow)",
-        ABORT_REFUSED => "connection refused",
+        ABORT_USER => "released by the user",
+        ABORT_TIMEOUT => "connection monitoring: the peer fell silent",
+        ABORT_PROTOCOL => "protocol error",
+        ABORT_REFUSED => "Initiate refused",
         _ => "unknown reason",
     }
 }

@@ -353,9 +353,9 @@ impl ServiceError {
         }
     }
 
-    /// The error in words.
-    pub fn describe(&self) -> String {
-        let what = match (self.class, self.code) {
+    /// What the class and code mean, in a few words.
+    pub fn meaning(&self) -> &'static str {
+        match (self.class, self.code) {
             (ERROR_CLASS_ACCESS, ACCESS_OBJECT_NON_EXISTENT) => "object does not exist",
             (ERROR_CLASS_ACCESS, ACCESS_DENIED) => "object access denied",
             (ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT) => "type or length conflict",
@@ -365,10 +365,17 @@ impl ServiceError {
             (ERROR_CLASS_OD, OD_INVALID_INDEX) => "index not in the object dictionary",
             (ERROR_CLASS_OD, _) => "object dictionary error",
             _ => "error",
-        };
+        }
+    }
+
+    /// The error in words.
+    pub fn describe(&self) -> String {
         format!(
-            "{what} (class {}, code {}, additional code {})",
-            self.class, self.code, self.additional
+            "{} (class {}, code {}, additional code {})",
+            self.meaning(),
+            self.class,
+            self.code,
+            self.additional
         )
     }
 }
