@@ -1,10 +1,10 @@
 //! `dpctl gateway --sim --opcua` without `--mqtt`: the bus file's
 //! slaves emulated on the in-process simulated bus
 //! ([`profibus_plant::Plant::from_bus`]), paced on the wall clock, the
-//! [`Face`] stepped after every turn. (With `--mqtt` too, the gateway
-//! crate's [`profibus_gateway::sim::serve`] steps the face.)
+//! [`Face`](crate::Face) (or the CLI's wrapper around it) stepped after
+//! every turn. (With `--mqtt` too, the gateway crate's
+//! [`profibus_gateway::sim::serve`] steps the face.)
 
-use crate::face::Face;
 use profibus_devices::bus::ProfiledBus;
 use profibus_gateway::link::wall_ms;
 use profibus_gateway::Session;
@@ -15,10 +15,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Run the plant of `profiled` on a thread of its own with `face`
-/// stepped after every turn, until `shutdown` ends.
-pub async fn serve(
+/// stepped after every turn, until `shutdown` ends. No broker: the
+/// face's publishes are not asked for.
+pub async fn serve<S: Session + Send + 'static>(
     profiled: ProfiledBus,
-    mut face: Face,
+    mut face: S,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), PlantError> {
     let stop = Arc::new(AtomicBool::new(false));
