@@ -410,6 +410,36 @@ fn opcua_alarm_events_and_im0_identity_of_a_dpv1_slave() {
     slave.terminate(T);
 }
 
+/// Before: the Omega's `setpoint1` writable, `control1` not. Then the
+/// bus file's `writable` names `control1` instead and the gateway gets
+/// SIGHUP: access levels and writes follow. Returns the new bus text.
+fn reload_writable_and_check(dir: &TempDir, gw: &Proc, url: &str) -> String {
+    let before = client(url, &["access", "25", "setpoint1", "control1"]);
+    assert_eq!(before["setpoint1"]["access_level"], 3, "{before}");
+    assert_eq!(before["setpoint1"]["user_access_level"], 3, "{before}");
+    assert_eq!(before["setpoint1"]["write"], "Good", "{before}");
+    assert_eq!(before["control1"]["access_level"], 1, "{before}");
+    assert_ne!(before["control1"]["write"], "Good", "{before}");
+    let bus = dir.path("bus.toml");
+    let text = std::fs::read_to_string(&bus)
+        .unwrap()
+        .replace(r#"channels = ["setpoint1"]"#, r#"channels = ["control1"]"#);
+    assert!(text.contains(r#"channels = ["control1"]"#));
+    std::fs::write(&bus, &text).unwrap();
+    gw.signal(1);
+    let mut after = serde_json::Value::Null;
+    common::wait_for("the access levels after SIGHUP", T, || {
+        after = client(url, &["access", "25", "setpoint1", "control1"]);
+        after["control1"]["access_level"] == 3
+    });
+    assert_eq!(after["control1"]["user_access_level"], 3, "{after}");
+    assert_eq!(after["control1"]["write"], "Good", "{after}");
+    assert_eq!(after["setpoint1"]["access_level"], 1, "{after}");
+    assert_eq!(after["setpoint1"]["user_access_level"], 1, "{after}");
+    assert_ne!(after["setpoint1"]["write"], "Good", "{after}");
+    text
+}
+
 /// SIGHUP with a changed `[mqtt] writable` (here beside MQTT, where the
 /// gateway reloads): the access levels of the Omega's output variables
 /// follow, and so do the writes.
@@ -427,29 +457,42 @@ fn opcua_access_levels_follow_a_reload_of_writable() {
             &format!("mqtt://127.0.0.1:{mqtt_port}"),
         ],
     );
-    let before = client(&url, &["access", "25", "setpoint1", "control1"]);
-    assert_eq!(before["setpoint1"]["access_level"], 3, "{before}");
-    assert_eq!(before["setpoint1"]["user_access_level"], 3, "{before}");
-    assert_eq!(before["setpoint1"]["write"], "Good", "{before}");
-    assert_eq!(before["control1"]["access_level"], 1, "{before}");
-    assert_ne!(before["control1"]["write"], "Good", "{before}");
-    let bus = dir.path("bus.toml");
-    let text = std::fs::read_to_string(&bus)
-        .unwrap()
-        .replace(r#"channels = ["setpoint1"]"#, r#"channels = ["control1"]"#);
-    assert!(text.contains(r#"channels = ["control1"]"#));
-    std::fs::write(&bus, text).unwrap();
-    gw.signal(1);
-    let mut after = serde_json::Value::Null;
-    common::wait_for("the access levels after SIGHUP", T, || {
-        after = client(&url, &["access", "25", "setpoint1", "control1"]);
-        after["control1"]["access_level"] == 3
-    });
-    assert_eq!(after["control1"]["user_access_level"], 3, "{after}");
-    assert_eq!(after["control1"]["write"], "Good", "{after}");
-    assert_eq!(after["setpoint1"]["access_level"], 1, "{after}");
-    assert_eq!(after["setpoint1"]["user_access_level"], 1, "{after}");
-    assert_ne!(after["setpoint1"]["write"], "Good", "{after}");
+    reload_writable_and_check(&dir, &gw, &url);
     let out = gw.stop();
     assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
+}
+
+/// The same reload without a broker (`--opcua` alone): SIGHUP reads the
+/// bus file again, a changed `[mqtt] writable` turns the Omega's
+/// `control1` writable and `setpoint1` read-only, and the writes follow;
+/// a changed `[opcua]` table is refused in one line (it needs a restart)
+/// and the gateway runs on. Before, only a gateway with `--mqtt` reloaded.
+#[test]
+fn opcua_alone_reloads_writable_on_sighup() {
+    let dir = TempDir::new("opcua-hup-alone");
+    let (gw, url) = gateway(&dir, "[opcua]\nanonymous = true\n", &["--opcua-insecure"]);
+    let text = reload_writable_and_check(&dir, &gw, &url);
+    // `[opcua]` is the server's set-up: not taken while running.
+    let bus = dir.path("bus.toml");
+    std::fs::write(&bus, format!("{text}trust_client_certs = true\n")).unwrap();
+    gw.signal(1);
+    let mut refused = String::new();
+    common::wait_for("the refused [opcua] reload", T, || {
+        let line = gw.stderr_line(T).unwrap_or_default();
+        let hit = line.contains("[opcua] only changes with a restart");
+        if hit {
+            refused = line;
+        }
+        hit
+    });
+    assert!(refused.contains("SIGHUP: not reloaded"), "{refused}");
+    let still = client(&url, &["access", "25", "control1"]);
+    assert_eq!(still["control1"]["access_level"], 3, "{still}");
+    let out = gw.stop();
+    assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("reloaded [mqtt]: writable:"),
+        "{}",
+        out.stderr
+    );
 }
