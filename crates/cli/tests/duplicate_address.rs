@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{dpctl, repo, Bus, Lines, Proc};
+use common::{dpctl, generic_slave, repo, Bus, Lines, Proc};
 use serde_json::Value;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -13,14 +13,7 @@ use std::time::{Duration, Instant};
 fn slave(bus: &Bus, link: usize) -> Proc {
     Proc::spawn(
         "dpctl slave",
-        Command::new(dpctl())
-            .args(["slave", "--addr", "5", "--baud", "1.5M", "--port"])
-            .arg(bus.link(link))
-            .arg("--gsd")
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "1 byte in"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
+        generic_slave(bus.link(link), 5, "1.5M", &["1 byte in"]).stderr(Stdio::null()),
     )
 }
 

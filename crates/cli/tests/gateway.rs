@@ -9,7 +9,7 @@ use common::mqtt::{
     self, broker, broker_with, echo_bus_text, echo_slave, free_port, write_bus, GATEWAY_SLAVES,
 };
 use common::{dpctl, Lines, Proc, TempDir};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 const T: Duration = Duration::from_secs(30);
@@ -108,18 +108,7 @@ fn gateway_publishes_takes_writes_and_survives_a_broker_restart() {
     let mut mosq = broker(&dir, port);
     // The gateway's log (stderr) read as it comes: `exec` keeps the pid
     // for the signals.
-    let mut gw = Proc::spawn(
-        "dpctl gateway",
-        Command::new("sh")
-            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
-            .arg(dpctl())
-            .arg("gateway")
-            .arg("--config")
-            .arg(&bus)
-            .arg("--sim")
-            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
-            .stdout(Stdio::piped()),
-    );
+    let mut gw = Proc::spawn("dpctl gateway", &mut mqtt::sim_gateway(&[], &bus, port));
     let mut log = Lines::from(&mut gw);
 
     // Every slave reaches Data_Exchange; a late subscriber gets the
@@ -552,17 +541,7 @@ fn gateway_logs_its_connections_and_stops_promptly_on_sigterm() {
     let mut mosq = broker(&dir, port);
     let mut gw = Proc::spawn(
         "dpctl gateway",
-        Command::new("sh")
-            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
-            .arg(dpctl())
-            .arg("gateway")
-            .arg("--config")
-            .arg(&bus)
-            .arg("--sim")
-            .args(["--mqtt", &url])
-            .env_remove("DPCTL_LOG")
-            .env_remove("NO_COLOR")
-            .stdout(Stdio::piped()),
+        mqtt::sim_gateway(&[], &bus, port).env_remove("NO_COLOR"),
     );
     let mut log = Lines::from(&mut gw);
     let seen = |log: &mut Lines, what: &str| {

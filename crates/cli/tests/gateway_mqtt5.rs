@@ -9,7 +9,7 @@ mod common;
 
 use common::mqtt::{self, broker, free_port, write_bus, GATEWAY_SLAVES};
 use common::{dpctl, Lines, Proc, TempDir};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 const T: Duration = Duration::from_secs(30);
@@ -101,19 +101,7 @@ fn mqtt5_answers_on_the_response_topic_with_the_correlation_data() {
     let port = free_port();
     let url = format!("mqtt://127.0.0.1:{port}");
     let _mosq = broker(&dir, port);
-    let mut gw = Proc::spawn(
-        "dpctl gateway",
-        Command::new("sh")
-            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
-            .arg(dpctl())
-            .arg("gateway")
-            .arg("--config")
-            .arg(&bus)
-            .arg("--sim")
-            .args(["--mqtt", &url])
-            .env_remove("DPCTL_LOG")
-            .stdout(Stdio::piped()),
-    );
+    let mut gw = Proc::spawn("dpctl gateway", &mut mqtt::sim_gateway(&[], &bus, port));
     let mut log = Lines::from(&mut gw);
     let (_sub, mut lines) = mqtt::subscribe(
         port,

@@ -7,7 +7,7 @@ mod common;
 
 use common::mqtt::{self, broker, echo_bus_text, free_port, write_bus};
 use common::{dpctl, Lines, Proc, TempDir};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 const T: Duration = Duration::from_secs(30);
@@ -78,17 +78,9 @@ fn gateway_reloads_on_sighup_reports_health_and_stops_on_sigterm() {
     );
     let mut gw = Proc::spawn(
         "dpctl gateway",
-        Command::new("sh")
-            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
-            .arg(dpctl())
-            .args(["--log-format", "json", "gateway", "--config"])
-            .arg(&bus)
-            .arg("--sim")
-            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+        mqtt::sim_gateway(&["--log-format", "json"], &bus, port)
             .arg("--health-file")
-            .arg(&health)
-            .env_remove("DPCTL_LOG")
-            .stdout(Stdio::piped()),
+            .arg(&health),
     );
     let mut log = Lines::from(&mut gw);
     let start = logged(&mut log, "starting: bus file");
@@ -267,15 +259,7 @@ fn sighup_retunes_the_traffic_of_a_noisy_slave() {
     );
     let mut gw = Proc::spawn(
         "dpctl gateway",
-        Command::new("sh")
-            .args(["-c", "exec \"$0\" \"$@\" 2>&1"])
-            .arg(dpctl())
-            .args(["--log-format", "json", "gateway", "--config"])
-            .arg(&bus)
-            .arg("--sim")
-            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
-            .env_remove("DPCTL_LOG")
-            .stdout(Stdio::piped()),
+        &mut mqtt::sim_gateway(&["--log-format", "json"], &bus, port),
     );
     let mut log = Lines::from(&mut gw);
     let topic = "profibus/line/40/inputs";

@@ -8,7 +8,8 @@
 mod common;
 
 use common::{
-    dpctl, json_lines, pty_pair, repo, require, run_dpctl, slave_of, Bus, Lines, Proc, TempDir,
+    dpctl, generic_slave, json_lines, pty_pair, repo, require, run_dpctl, slave_of, Bus, Lines,
+    Proc, TempDir,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -108,14 +109,7 @@ fn cfg_fault_backs_off_reports_once_and_shows_both_configurations() {
     let bus = Bus::start(2, &[]);
     let _slave = Proc::spawn(
         "dpctl slave 10",
-        Command::new(dpctl())
-            .args(["slave", "--port"])
-            .arg(bus.link(1))
-            .args(["--addr", "10", "--baud", "1.5M", "--gsd"])
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "4 words out consistent"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
+        generic_slave(bus.link(1), 10, "1.5M", &["4 words out consistent"]).stderr(Stdio::null()),
     );
     let cfg = write_bus(&dir, "1.5M", &[(10, "2 words in/out")]);
     let mut m = Proc::spawn(

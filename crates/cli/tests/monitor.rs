@@ -56,14 +56,7 @@ fn monitor_follows_a_master_and_its_slaves_to_data_exchange() {
     assert!(seen.wait_for("\"event\":\"status\"", Duration::from_secs(20)));
     let _echo = Proc::spawn(
         "dpctl slave (generic)",
-        Command::new(dpctl())
-            .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
-            .arg(line.link(1))
-            .arg("--gsd")
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "1 byte in", "--module", "2 words in/out"])
-            .stdout(Stdio::null())
-            .stdin(Stdio::null()),
+        &mut generic_slave(line.link(1), 3, "1.5M", &["1 byte in", "2 words in/out"]),
     );
     let _omega = Proc::spawn(
         "dpctl slave (omega)",
@@ -286,14 +279,7 @@ fn monitor_takes_slaves_out_of_data_exchange_when_their_master_stops() {
     assert!(seen.wait_for("\"event\":\"status\"", Duration::from_secs(20)));
     let _slave = Proc::spawn(
         "dpctl slave",
-        Command::new(dpctl())
-            .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
-            .arg(line.link(1))
-            .arg("--gsd")
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "1 byte in"])
-            .stdout(Stdio::null())
-            .stdin(Stdio::null()),
+        &mut generic_slave(line.link(1), 3, "1.5M", &["1 byte in"]),
     );
     let mut master = Proc::spawn(
         "dpctl master",

@@ -117,15 +117,8 @@ fn report_of_a_capture_with_a_restart_opens_in_a_browser() {
     line.wait_connected(1);
     let _echo = Proc::spawn(
         "dpctl slave (generic)",
-        Command::new(dpctl())
-            .args(["slave", "--addr", "3", "--baud", "1.5M", "--port"])
-            .arg(line.link(1))
-            .arg("--gsd")
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "1 byte in", "--module", "2 words in/out"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .stdin(Stdio::null()),
+        generic_slave(line.link(1), 3, "1.5M", &["1 byte in", "2 words in/out"])
+            .stderr(Stdio::null()),
     );
     let mut drive = omega(&line);
     let _master = Proc::spawn(

@@ -252,24 +252,26 @@ fn a_killed_slave_is_back_in_data_exchange_within_3_cycles_after_it_answers() {
     assert!(cycles <= 3, "{cycles} cycles");
 }
 
-#[test]
-fn a_killed_master_leaves_each_slave_safe_within_its_watchdog() {
-    let dir = TempDir::new("scn-master");
-    let pcap = dir.path("bus.pcapng");
-    let bus = Bus::start(3, &["--pcap", pcap.to_str().unwrap()]);
-    let watchdogs = [(10u8, 500u64), (11, 1500)];
-    let mut slaves: Vec<(Proc, Timed)> = watchdogs
+/// One `dpctl slave` per `(address, watchdog ms)` on the bus's links 1…,
+/// a `dpctl master` (address 2) on link 0 with them in its bus file, all
+/// in Data_Exchange with the outputs `12 34 56 78` echoed back as inputs.
+fn slaves_echoing_outputs(
+    bus: &Bus,
+    dir: &TempDir,
+    watchdogs: &[(u8, u64)],
+) -> (Vec<(Proc, Timed)>, Proc, Timed) {
+    let slaves: Vec<(Proc, Timed)> = watchdogs
         .iter()
         .enumerate()
         .map(|(i, &(a, _))| {
-            let mut p = slave(&bus, i + 1, a, true);
+            let mut p = slave(bus, i + 1, a, true);
             let t = Timed::from(&mut p);
             (p, t)
         })
         .collect();
-    let cfg = bus_file(&dir, 2, &watchdogs);
+    let cfg = bus_file(dir, 2, watchdogs);
     let (mut m, mut ml) = master(&bus.link_str(0), &cfg);
-    ml.wait("both slaves in data exchange", status_all_dx);
+    ml.wait("every slave in data exchange", status_all_dx);
     for (a, _) in watchdogs {
         send(
             &mut m,
@@ -282,6 +284,16 @@ fn a_killed_master_leaves_each_slave_safe_within_its_watchdog() {
                 .iter()
                 .all(|(a, _)| slave_of(v, *a)["inputs"] == "12 34 56 78")
     });
+    (slaves, m, ml)
+}
+
+#[test]
+fn a_killed_master_leaves_each_slave_safe_within_its_watchdog() {
+    let dir = TempDir::new("scn-master");
+    let pcap = dir.path("bus.pcapng");
+    let bus = Bus::start(3, &["--pcap", pcap.to_str().unwrap()]);
+    let watchdogs = [(10u8, 500u64), (11, 1500)];
+    let (mut slaves, mut m, _ml) = slaves_echoing_outputs(&bus, &dir, &watchdogs);
     m.signal(9);
     m.wait(Duration::from_secs(10));
     let mut expiries = vec![];
@@ -327,30 +339,7 @@ fn a_terminated_master_clears_its_slaves_before_it_exits() {
     let dir = TempDir::new("scn-farewell");
     let bus = Bus::start(3, &[]);
     let watchdogs = [(10u8, 5000u64), (11, 5000)];
-    let mut slaves: Vec<(Proc, Timed)> = watchdogs
-        .iter()
-        .enumerate()
-        .map(|(i, &(a, _))| {
-            let mut p = slave(&bus, i + 1, a, true);
-            let t = Timed::from(&mut p);
-            (p, t)
-        })
-        .collect();
-    let cfg = bus_file(&dir, 2, &watchdogs);
-    let (mut m, mut ml) = master(&bus.link_str(0), &cfg);
-    ml.wait("both slaves in data exchange", status_all_dx);
-    for (a, _) in watchdogs {
-        send(
-            &mut m,
-            &format!(r#"{{"slave": {a}, "outputs": "12 34 56 78"}}"#),
-        );
-    }
-    ml.wait("outputs echoed", |v| {
-        status_all_dx(v)
-            && watchdogs
-                .iter()
-                .all(|(a, _)| slave_of(v, *a)["inputs"] == "12 34 56 78")
-    });
+    let (mut slaves, mut m, _ml) = slaves_echoing_outputs(&bus, &dir, &watchdogs);
     for (_, lines) in &mut slaves {
         lines.skip_to_end();
     }

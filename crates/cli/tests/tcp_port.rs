@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{dpctl, repo, require, Lines, Proc, TempDir};
+use common::{dpctl, generic_slave, repo, require, Lines, Proc, TempDir};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -67,14 +67,7 @@ fn serial_server(link: &Path, port: u16) -> Proc {
 fn slave(link: &Path, addr: u8) -> Proc {
     Proc::spawn(
         "dpctl slave",
-        Command::new(dpctl())
-            .args(["slave", "--port"])
-            .arg(link)
-            .args(["--addr", &addr.to_string(), "--baud", "19200", "--gsd"])
-            .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"))
-            .args(["--module", "2 words in/out"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null()),
+        generic_slave(link, addr, "19200", &["2 words in/out"]).stderr(Stdio::null()),
     )
 }
 

@@ -580,6 +580,28 @@ pub fn make_raw(f: &std::fs::File) {
     tcsetattr(f, SetArg::TCSANOW, &t).unwrap();
 }
 
+/// `dpctl slave --port PORT --addr ADDR --baud BAUD` with the generic GSD
+/// (`crates/devices/gsd/DPCTL_GEN.GSD`) and one `--module` per entry;
+/// stdin and stdout are null, stderr is inherited (set it to keep a
+/// test's output quiet).
+pub fn generic_slave(
+    port: impl AsRef<std::ffi::OsStr>,
+    addr: u8,
+    baud: &str,
+    modules: &[&str],
+) -> Command {
+    let mut cmd = Command::new(dpctl());
+    cmd.args(["slave", "--port"])
+        .arg(port)
+        .args(["--addr", &addr.to_string(), "--baud", baud, "--gsd"])
+        .arg(repo().join("crates/devices/gsd/DPCTL_GEN.GSD"));
+    for m in modules {
+        cmd.args(["--module", m]);
+    }
+    cmd.stdin(Stdio::null()).stdout(Stdio::null());
+    cmd
+}
+
 #[cfg(test)]
 mod tempdir_tests {
     /// Tests run on parallel threads and ask for temp dirs at the same

@@ -1,7 +1,7 @@
 //! A real MQTT broker for the gateway tests: Debian's mosquitto on a free
 //! localhost port. Fails (never skips) when it is missing.
 
-use super::{need, require, wait_for, Lines, Proc, TempDir};
+use super::{dpctl, need, require, wait_for, Lines, Proc, TempDir};
 use std::collections::BTreeSet;
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -185,4 +185,21 @@ pub fn echo_slave(port: &Path) -> Proc {
             .stdout(Stdio::null())
             .stderr(Stdio::null()),
     )
+}
+
+/// `dpctl GLOBAL… gateway --config BUS --sim --mqtt mqtt://127.0.0.1:PORT`
+/// with stderr joined to stdout (piped) and `DPCTL_LOG` unset; add
+/// arguments or environment to the returned command before spawning.
+pub fn sim_gateway(global: &[&str], bus: &Path, port: u16) -> Command {
+    let mut cmd = Command::new("sh");
+    cmd.args(["-c", "exec \"$0\" \"$@\" 2>&1"])
+        .arg(dpctl())
+        .args(global)
+        .args(["gateway", "--config"])
+        .arg(bus)
+        .arg("--sim")
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+        .env_remove("DPCTL_LOG")
+        .stdout(Stdio::piped());
+    cmd
 }
