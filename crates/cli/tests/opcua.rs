@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::mqtt::{free_port, write_bus};
+use common::mqtt::{free_port, write_bus, GATEWAY_SLAVES};
 use common::{dpctl, need, repo, Proc, TempDir};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -13,38 +13,22 @@ use std::time::Duration;
 
 const T: Duration = Duration::from_secs(120);
 
-/// Two generic GSD slaves (3 DP-V1 echo and writable, 4 not writable),
-/// an Omega drive that follows its setpoint (25, only `setpoint1`
-/// writable) and a BK3000 strip (15).
-const SLAVES: &str = r#"[master]
-address = 1
-baud = "1.5M"
-
-[[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 4
-name = "locked"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 25
-device = "omega"
-setpoints = 1
-actual_values = 1
-drive_enable = "auto"
+/// The gateway tests' slaves ([`GATEWAY_SLAVES`]: generic GSD slaves 3
+/// `echo`, DP-V1 and writable, and 4 `locked`, not writable; an Omega
+/// drive at 25, here following its setpoint, only `setpoint1` writable)
+/// and a BK3000 strip (15).
+fn slaves() -> String {
+    format!(
+        r#"{GATEWAY_SLAVES}drive_enable = "auto"
 
 [[slave]]
 address = 15
 name = "coupler"
 device = "bk3000"
 terminals = ["KL1104", "KL2134", "KL3102", "KL4002", "KL9010"]
-"#;
+"#
+    )
+}
 
 const MQTT: &str = r#"
 [mqtt]
@@ -72,7 +56,7 @@ fn script() -> PathBuf {
 /// `dpctl gateway --sim --opcua` on a free port with `extra` arguments;
 /// returns once the port takes connections.
 fn gateway(dir: &TempDir, table: &str, extra: &[&str]) -> (Proc, String) {
-    let bus = write_bus(dir, &format!("{SLAVES}{MQTT}{table}"));
+    let bus = write_bus(dir, &format!("{}{MQTT}{table}", slaves()));
     let port = free_port();
     let url = format!("opc.tcp://127.0.0.1:{port}");
     let mut cmd = Command::new(dpctl());
@@ -308,7 +292,7 @@ fn opcua_refuses_bad_settings_with_one_line() {
             "OPC UA endpoint `http://x:1` is not opc.tcp://HOST[:PORT]",
         ),
     ] {
-        let bus = write_bus(&dir, &format!("{SLAVES}{MQTT}{table}"));
+        let bus = write_bus(&dir, &format!("{}{MQTT}{table}", slaves()));
         let mut cmd = Command::new(dpctl());
         cmd.args(["gateway", "--sim", "--config"])
             .arg(&bus)
