@@ -266,6 +266,56 @@ fn alone_in_the_ring_the_master_polls_several_cycles_per_token_visit() {
 }
 
 #[test]
+fn alone_with_a_slave_not_due_yet_the_master_idles_with_the_token() {
+    // One slave whose Min_Slave_Interval (300 µs) is longer than its poll
+    // cycle (about 190 µs at 1.5 Mbit/s): the master keeps the token and
+    // the line idle until the slave is due (less than a slot time)
+    // instead of passing the token to itself (about three times per
+    // cycle before), and polls the slave no more often than the interval
+    // allows.
+    let window = Duration::from_millis(200);
+    let interval = Duration::from_micros(300);
+    let params = BusParams::defaults(Baud::B1500000);
+    let mut bus = SimBus::new(MediumConfig::paced(Baud::B1500000));
+    let mut cfg = master_cfg(2, params, &[10]);
+    cfg.slaves[0].min_slave_interval = interval;
+    let master = bus.add(ActiveStation::new(
+        ActiveConfig::new(2, params),
+        DpMaster::new(&cfg).unwrap(),
+    ));
+    let slaves = vec![bus.add(slave(10, params, &CFG))];
+    let mut p = Plant {
+        bus,
+        master,
+        slaves,
+        params,
+    };
+    let before = steady_exchanges(&mut p);
+    let (_, passes, _, _) = steady_state(&mut p, window);
+    let exchanges = steady_exchanges(&mut p) - before;
+    assert!(
+        exchanges > 4 * passes.max(1),
+        "{exchanges} exchanges, {passes} token passes"
+    );
+    let most = (window.as_nanos() / interval.as_nanos()) as u64;
+    assert!(
+        exchanges * 100 >= most * 85 && exchanges <= most + 1,
+        "{exchanges} exchanges in {window:?}, at most {most}"
+    );
+}
+
+/// Data_Exchange cycles of the plant's slaves so far.
+fn steady_exchanges(p: &mut Plant) -> u64 {
+    let m = p.m();
+    let addrs: Vec<u8> = m.slave_addresses().collect();
+    addrs
+        .iter()
+        .filter_map(|&a| m.slave_stats(a))
+        .map(|s| s.data_exchanges)
+        .sum()
+}
+
+#[test]
 fn a_second_master_joins_a_master_that_holds_the_token_alone() {
     let fast = MasterOptions {
         alone_hold_bits: Some(ALONE_HOLD_BITS_FAST),

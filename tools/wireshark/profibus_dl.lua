@@ -18,6 +18,8 @@
 -- DP (protocol "pbdp"): Set_Prm, Chk_Cfg / Get_Cfg identifiers,
 -- Slave_Diag station status bits, Global_Control, Set_Slave_Add,
 -- DP-V1 MSAC_C1 read / write / errors, Data_Exchange outputs and inputs.
+-- FMS (protocol "pbfms"): the LLI PDU and the FMS PDU in it on a
+-- connection SAP (0..48), in the (unverified) encoding of docs/fms.md.
 --
 -- Every packet also shows (generated fields): `pbdl.src` / `pbdl.dst`,
 -- the station addresses, which also fill the Source and Destination
@@ -574,6 +576,333 @@ local function dissect_dp(tvb, whole, pinfo, root, request, dsap, ssap, function
   return service, detail
 end
 
+
+---------------------------------------------------------------------------
+-- FMS (protocol "pbfms") on a connection SAP: a request or response with
+-- both SAPs, the slave's SAP 0..48 (which DP-V1 leaves to MSAC_C2
+-- connections and FMS shares), whose data unit starts with an LLI or FMS
+-- type octet (none of them is a DP-V1 function number). The encoding is
+-- profibus_dp::fms::{lli, pdu}: every octet value here is (unverified),
+-- see docs/fms.md. Text as `dpctl sniff` prints it.
+
+local pbfms = Proto("pbfms", "PROFIBUS FMS")
+local FMS_TYPES = {
+  [1] = "Confirmed-Request", [2] = "Confirmed-Response", [3] = "Confirmed-Error",
+  [4] = "Unconfirmed", [5] = "Reject", [6] = "Initiate-Request", [7] = "Initiate-Response",
+  [8] = "Initiate-Error",
+}
+local FMS_SERVICES = { [0] = "Status", [1] = "Identify", [2] = "Read", [3] = "Write", [4] = "Get-OD" }
+local FMS_WORDS = { [0] = "status", [1] = "identify", [2] = "read", [3] = "write", [4] = "get_od" }
+local LLI_TYPES = { [0x10] = "Associate", [0x11] = "Associate.resp", [0x12] = "Abort", [0x13] = "Idle" }
+local LOGICAL = { [0x00] = "ready for communication", [0x02] = "limited services" }
+local PHYSICAL = {
+  [0x10] = "operational", [0x11] = "partly operational", [0x12] = "not operational",
+  [0x13] = "maintenance required",
+}
+local ABORT_REASONS = {
+  [0] = "released by the user", [1] = "connection monitoring: the peer fell silent",
+  [2] = "protocol error", [3] = "Initiate refused",
+}
+local FMS_ERRORS = {
+  [6] = { [7] = "object does not exist", [2] = "object access denied", [10] = "type or length conflict",
+          any = "access error" },
+  [5] = { [3] = "parameter inconsistent", any = "service error" },
+  [7] = { [1] = "index not in the object dictionary", any = "object dictionary error" },
+}
+
+local m = pbfms.fields
+m.lli = ProtoField.string("pbfms.lli", "LLI PDU")
+m.lli_type = ProtoField.uint8("pbfms.lli.type", "LLI PDU type", base.HEX, LLI_TYPES)
+m.monitoring = ProtoField.uint32("pbfms.monitoring_ms", "Connection monitoring (ms, 0: none)", base.DEC)
+m.abort_reason = ProtoField.uint8("pbfms.abort.reason", "Abort reason", base.DEC, ABORT_REASONS)
+m.abort_detail = ProtoField.uint8("pbfms.abort.detail", "Abort detail", base.DEC)
+m.pdu = ProtoField.string("pbfms.pdu", "FMS PDU")
+m.type = ProtoField.uint8("pbfms.type", "FMS PDU type", base.DEC, FMS_TYPES)
+m.invoke = ProtoField.uint8("pbfms.invoke_id", "Invoke ID", base.DEC)
+m.service = ProtoField.uint8("pbfms.service", "Service", base.DEC, FMS_SERVICES)
+m.index = ProtoField.uint16("pbfms.index", "Index", base.DEC)
+m.subindex = ProtoField.uint8("pbfms.subindex", "Subindex", base.DEC)
+m.data = ProtoField.bytes("pbfms.data", "Data")
+m.getod_flags = ProtoField.uint8("pbfms.getod.flags", "Get-OD flags", base.HEX)
+m.long_form = ProtoField.bool("pbfms.getod.long_form", "All attributes (long form)", 8, nil, 0x80)
+m.from_index = ProtoField.bool("pbfms.getod.from_index", "From the index on", 8, nil, 0x40)
+m.more = ProtoField.uint8("pbfms.getod.more_follows", "More follows", base.HEX, { [0] = "no", [0xFF] = "yes" })
+m.count = ProtoField.uint8("pbfms.getod.count", "Descriptions", base.DEC)
+m.description = ProtoField.bytes("pbfms.getod.description", "Object description")
+m.logical = ProtoField.uint8("pbfms.status.logical", "Logical status", base.HEX, LOGICAL)
+m.physical = ProtoField.uint8("pbfms.status.physical", "Physical status", base.HEX, PHYSICAL)
+m.detail = ProtoField.bytes("pbfms.status.local_detail", "Local detail")
+m.vendor = ProtoField.string("pbfms.identify.vendor", "Vendor name")
+m.model = ProtoField.string("pbfms.identify.model", "Model name")
+m.revision = ProtoField.string("pbfms.identify.revision", "Revision")
+m.err_class = ProtoField.uint8("pbfms.error.class", "Error class", base.DEC)
+m.err_code = ProtoField.uint8("pbfms.error.code", "Error code", base.DEC)
+m.err_add = ProtoField.uint16("pbfms.error.additional", "Additional code", base.DEC)
+m.err_text = ProtoField.string("pbfms.error.text", "Error")
+m.rej_invoke = ProtoField.uint8("pbfms.reject.invoke_id", "Original invoke ID", base.DEC)
+m.rej_type = ProtoField.uint8("pbfms.reject.pdu_type", "Rejected PDU type", base.DEC, FMS_TYPES)
+m.rej_code = ProtoField.uint8("pbfms.reject.code", "Reject code", base.DEC)
+m.version_od = ProtoField.int16("pbfms.initiate.version_od", "Version OD", base.DEC)
+m.profile = ProtoField.bytes("pbfms.initiate.profile", "Profile number")
+m.protection = ProtoField.uint8("pbfms.initiate.access_protection", "Access protection supported", base.HEX,
+  { [0] = "no", [0xFF] = "yes" })
+m.password = ProtoField.uint8("pbfms.initiate.password", "Password", base.DEC)
+m.groups = ProtoField.uint8("pbfms.initiate.access_groups", "Access groups", base.HEX)
+m.max_pdu = ProtoField.bytes("pbfms.initiate.max_pdu", "Max PDU send high/low, receive high/low")
+m.features = ProtoField.bytes("pbfms.initiate.features", "FMS features supported")
+m.init_err = ProtoField.uint8("pbfms.initiate.error_code", "Initiate error code", base.DEC)
+m.malformed = ProtoField.string("pbfms.malformed", "Does not decode")
+
+local e_fms = ProtoExpert.new("pbfms.malformed.expert", "Malformed FMS PDU", expert.group.MALFORMED,
+  expert.severity.ERROR)
+pbfms.experts = { e_fms }
+
+-- Whether a data unit's first octet is an LLI or FMS PDU type.
+local function is_fms_start(b)
+  return (b >= 1 and b <= 8) or (b >= 0x10 and b <= 0x13)
+end
+
+local function hex_text(tvb)
+  local out = {}
+  for i = 0, tvb:len() - 1 do out[#out + 1] = string.format("%02X", tvb(i, 1):uint()) end
+  return table.concat(out, " ")
+end
+
+-- Raised (as a table) when the PDU is too short or wrong; caught in
+-- dissect_fms.
+local function bad(why) error({ fms = why }) end
+
+local function need(tvb, o, n, what)
+  if tvb:len() < o + n then
+    bad(string.format("FMS %s is %d bytes long, needs %d", what, tvb:len(), o + n))
+  end
+end
+
+local function visible(tvb, t, o, field, what)
+  need(tvb, o, 1, what)
+  local n = tvb(o, 1):uint()
+  need(tvb, o + 1, n, what)
+  local s = n > 0 and tvb(o + 1, n):string() or ""
+  t:add(field, n > 0 and tvb(o + 1, n) or tvb(o, 1), s)
+  return s, o + 1 + n
+end
+
+local function ends(tvb, o, what)
+  if tvb:len() > o then bad(string.format("FMS %s has %d bytes too many", what, tvb:len() - o)) end
+end
+
+-- The FMS PDU in `tvb` (from octet 0); the text line.
+local function fms_pdu(tvb, t)
+  local ty = tvb(0, 1):uint()
+  local kind = FMS_TYPES[ty]
+  if kind == nil then bad(string.format("unknown FMS PDU type %d", ty)) end
+  t:add(m.type, tvb(0, 1))
+  local function service_at(o, what)
+    need(tvb, o, 1, what)
+    local s = tvb(o, 1):uint()
+    if FMS_SERVICES[s] == nil then
+      bad(string.format("unknown FMS service %d in a %s PDU", s, what))
+    end
+    t:add(m.service, tvb(o, 1))
+    return s
+  end
+  if ty == 1 or ty == 2 or ty == 3 then
+    local what = ({ "confirmed request", "confirmed response", "confirmed error" })[ty]
+    need(tvb, 1, 1, what)
+    local invoke = tvb(1, 1):uint()
+    t:add(m.invoke, tvb(1, 1))
+    local s = service_at(2, what)
+    local name = FMS_SERVICES[s]
+    if ty == 3 then
+      need(tvb, 3, 4, what)
+      ends(tvb, 7, what)
+      local class, code = tvb(3, 1):uint(), tvb(4, 1):uint()
+      t:add(m.pdu, "error"):set_generated()
+      t:add(m.err_class, tvb(3, 1)); t:add(m.err_code, tvb(4, 1)); t:add(m.err_add, tvb(5, 2))
+      local c = FMS_ERRORS[class]
+      local text = c and (c[code] or c.any) or "error"
+      t:add(m.err_text, text):set_generated()
+      return string.format("FMS Error invoke %d (%s) class %d code %d additional %d: %s", invoke, name,
+        class, code, tvb(5, 2):uint(), text)
+    end
+    local suffix = ty == 1 and "req" or "resp"
+    t:add(m.pdu, FMS_WORDS[s] .. "_" .. suffix):set_generated()
+    local text = string.format("FMS %s.%s invoke %d", name, suffix, invoke)
+    local n = tvb:len()
+    if ty == 1 then
+      if s == 2 then
+        need(tvb, 3, 2, "Read request")
+        t:add(m.index, tvb(3, 2))
+        text = text .. " index " .. tvb(3, 2):uint()
+        if n == 6 then
+          t:add(m.subindex, tvb(5, 1)); text = text .. " subindex " .. tvb(5, 1):uint()
+        end
+        ends(tvb, 6, "Read request")
+      elseif s == 3 then
+        need(tvb, 3, 3, "Write request")
+        t:add(m.index, tvb(3, 2))
+        text = text .. " index " .. tvb(3, 2):uint()
+        if tvb(5, 1):uint() ~= 0 then
+          t:add(m.subindex, tvb(5, 1)); text = text .. " subindex " .. tvb(5, 1):uint()
+        end
+        if n > 6 then t:add(m.data, tvb(6)) end
+        text = text .. " data " .. (n > 6 and hex_text(tvb(6)) or "")
+      elseif s == 4 then
+        need(tvb, 3, 3, "Get-OD request")
+        ends(tvb, 6, "Get-OD request")
+        local ft = t:add(m.getod_flags, tvb(3, 1))
+        ft:add(m.long_form, tvb(3, 1)); ft:add(m.from_index, tvb(3, 1))
+        t:add(m.index, tvb(4, 2))
+        local flags = tvb(3, 1):uint()
+        text = text .. string.format(" index %d%s, %s form", tvb(4, 2):uint(),
+          bit.band(flags, 0x40) ~= 0 and " onwards" or "",
+          bit.band(flags, 0x80) ~= 0 and "long" or "short")
+      else
+        ends(tvb, 3, what)
+      end
+      return text
+    end
+    -- Responses.
+    if s == 0 then
+      need(tvb, 3, 5, "Status response")
+      ends(tvb, 8, "Status response")
+      t:add(m.logical, tvb(3, 1)); t:add(m.physical, tvb(4, 1)); t:add(m.detail, tvb(5, 3))
+      local l, p = tvb(3, 1):uint(), tvb(4, 1):uint()
+      return text .. string.format(": %s, %s (logical 0x%02X, physical 0x%02X, detail %s)",
+        LOGICAL[l] or "unknown logical status", PHYSICAL[p] or "unknown physical status", l, p,
+        hex_text(tvb(5, 3)))
+    elseif s == 1 then
+      local v, o = visible(tvb, t, 3, m.vendor, "Identify response")
+      local mo, o2 = visible(tvb, t, o, m.model, "Identify response")
+      local r, o3 = visible(tvb, t, o2, m.revision, "Identify response")
+      ends(tvb, o3, "Identify response")
+      return text .. string.format(': vendor "%s" model "%s" revision "%s"', v, mo, r)
+    elseif s == 2 then
+      if n > 3 then t:add(m.data, tvb(3)) end
+      return text .. " data " .. (n > 3 and hex_text(tvb(3)) or "")
+    elseif s == 3 then
+      ends(tvb, 3, "Write response")
+      return text
+    else
+      need(tvb, 3, 2, "Get-OD response")
+      local more = tvb(3, 1):uint()
+      if more ~= 0 and more ~= 0xFF then
+        bad(string.format("FMS more-follows is 0x%02X, neither 0x00 (false) nor 0xFF (true)", more))
+      end
+      t:add(m.more, tvb(3, 1)); t:add(m.count, tvb(4, 1))
+      local count, o = tvb(4, 1):uint(), 5
+      for _ = 1, count do
+        need(tvb, o, 1, "Get-OD response")
+        local len = tvb(o, 1):uint()
+        need(tvb, o + 1, len, "Get-OD response")
+        t:add(m.description, len > 0 and tvb(o + 1, len) or tvb(o, 1))
+        o = o + 1 + len
+      end
+      ends(tvb, o, "Get-OD response")
+      return text .. string.format(": %d description%s%s", count, count == 1 and "" or "s",
+        more == 0xFF and ", more follow" or "")
+    end
+  elseif ty == 4 then
+    need(tvb, 1, 1, "unconfirmed")
+    if tvb(1, 1):uint() ~= 0 then
+      bad(string.format("unknown FMS service %d in a unconfirmed PDU", tvb(1, 1):uint()))
+    end
+    need(tvb, 2, 2, "Information-Report")
+    t:add(m.pdu, "information_report"):set_generated()
+    t:add(m.index, tvb(2, 2))
+    if tvb:len() > 4 then t:add(m.data, tvb(4)) end
+    return string.format("FMS Information-Report index %d data %s", tvb(2, 2):uint(),
+      tvb:len() > 4 and hex_text(tvb(4)) or "")
+  elseif ty == 5 then
+    need(tvb, 1, 3, "reject")
+    ends(tvb, 4, "reject")
+    t:add(m.pdu, "reject"):set_generated()
+    t:add(m.rej_invoke, tvb(1, 1)); t:add(m.rej_type, tvb(2, 1)); t:add(m.rej_code, tvb(3, 1))
+    return string.format("FMS Reject invoke %d (PDU type %d) code %d", tvb(1, 1):uint(), tvb(2, 1):uint(),
+      tvb(3, 1):uint())
+  elseif ty == 6 or ty == 7 then
+    local what = ty == 6 and "Initiate request" or "Initiate response"
+    need(tvb, 1, ty == 6 and 17 or 7, what)
+    ends(tvb, ty == 6 and 18 or 8, what)
+    t:add(m.pdu, ty == 6 and "initiate_req" or "initiate_resp"):set_generated()
+    t:add(m.version_od, tvb(1, 2)); t:add(m.profile, tvb(3, 2)); t:add(m.protection, tvb(5, 1))
+    t:add(m.password, tvb(6, 1)); t:add(m.groups, tvb(7, 1))
+    local text = string.format("FMS Initiate.%s OD version %d, profile %s", ty == 6 and "req" or "resp",
+      tvb(1, 2):int(), hex_text(tvb(3, 2)))
+    if ty == 6 then
+      t:add(m.max_pdu, tvb(8, 4)); t:add(m.features, tvb(12, 6))
+      text = text .. string.format(", max PDU send %d/%d receive %d/%d, features %s", tvb(8, 1):uint(),
+        tvb(9, 1):uint(), tvb(10, 1):uint(), tvb(11, 1):uint(), hex_text(tvb(12, 6)))
+    end
+    return text
+  else
+    need(tvb, 1, 1, "Initiate error")
+    ends(tvb, 2, "Initiate error")
+    t:add(m.pdu, "initiate_error"):set_generated()
+    t:add(m.init_err, tvb(1, 1))
+    return "FMS Initiate error code " .. tvb(1, 1):uint()
+  end
+end
+
+-- The LLI PDU (and the FMS PDU in it) of a data unit; the text line.
+local function lli_pdu(tvb, t)
+  local ty = tvb(0, 1):uint()
+  if ty == 0x10 then
+    need(tvb, 1, 3, "LLI Associate")
+    if tvb(3, 1):uint() ~= 6 then bad("LLI Associate carries no Initiate") end
+    t:add(m.lli, "associate"):set_generated()
+    t:add(m.lli_type, tvb(0, 1))
+    local units = tvb(1, 2):uint()
+    t:add(m.monitoring, tvb(1, 2), units * 10)
+    local inner = fms_pdu(tvb(3):tvb(), t)
+    local mon = units == 0 and "no monitoring" or string.format("monitoring %d ms", units * 10)
+    return string.format("LLI Associate (%s): %s", mon, inner)
+  elseif ty == 0x11 then
+    need(tvb, 1, 1, "LLI Associate.resp")
+    local b = tvb(1, 1):uint()
+    if b ~= 7 and b ~= 8 then bad("LLI Associate.resp carries no Initiate") end
+    t:add(m.lli, "associate_res"):set_generated()
+    t:add(m.lli_type, tvb(0, 1))
+    local inner = fms_pdu(tvb(1):tvb(), t)
+    return "LLI Associate.resp: " .. inner
+  elseif ty == 0x12 then
+    need(tvb, 1, 2, "LLI Abort")
+    ends(tvb, 3, "LLI Abort")
+    t:add(m.lli, "abort"):set_generated()
+    t:add(m.lli_type, tvb(0, 1))
+    t:add(m.abort_reason, tvb(1, 1)); t:add(m.abort_detail, tvb(2, 1))
+    local r = tvb(1, 1):uint()
+    return string.format("LLI Abort reason %d detail %d: %s", r, tvb(2, 1):uint(),
+      ABORT_REASONS[r] or "unknown reason")
+  elseif ty == 0x13 then
+    ends(tvb, 1, "LLI Idle")
+    t:add(m.lli, "idle"):set_generated()
+    t:add(m.lli_type, tvb(0, 1))
+    return "LLI Idle"
+  end
+  local text = fms_pdu(tvb, t)
+  t:add(m.lli, "data"):set_generated()
+  return text
+end
+
+-- The FMS layer of a telegram, when it is one: its text, else nil.
+local function dissect_fms(du, root, request, dsap, ssap)
+  if du == nil or dsap == nil or ssap == nil then return nil end
+  local sap = request and dsap or ssap
+  if sap > 48 or not is_fms_start(du(0, 1):uint()) then return nil end
+  local t = root:add(pbfms, du, "PROFIBUS FMS")
+  local ok, text = pcall(lli_pdu, du:tvb(), t)
+  if ok then
+    t:append_text(", " .. text)
+    return text
+  end
+  local why = type(text) == "table" and text.fms or tostring(text)
+  t:add(m.lli, "malformed"):set_generated()
+  t:add(m.malformed, why):set_generated()
+  t:add_proto_expert_info(e_fms, why)
+  return "FMS malformed: " .. why
+end
+
 ---------------------------------------------------------------------------
 -- Layer 2
 
@@ -649,7 +978,14 @@ local function dissect_body(tvb, pinfo, tree, root, pos, body, sdname)
   if dsap or ssap then
     info = info .. string.format(" [%s:%s]", ssap and tostring(ssap) or "-", dsap and tostring(dsap) or "-")
   end
-  local service, detail = dissect_dp(du, tvb(), pinfo, root, request, dsap, ssap, code)
+  local fms = dissect_fms(du, root, request, dsap, ssap)
+  local service, detail
+  if fms then
+    pinfo.cols.protocol = "PROFIBUS FMS"
+    info = info .. " " .. fms
+  else
+    service, detail = dissect_dp(du, tvb(), pinfo, root, request, dsap, ssap, code)
+  end
   if service then
     pinfo.cols.protocol = "PROFIBUS DP"
     info = info .. " " .. service

@@ -377,6 +377,7 @@ pub const RESTART_KEYS: &[&str] = &[
     "job_timeout_ms",
     "version",
     "primary_host",
+    "sparkplug_templates",
 ];
 
 /// The keys of two `[mqtt]` tables that differ, as `key: old → new`

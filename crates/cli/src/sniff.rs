@@ -9,7 +9,9 @@
 //! the same as JSON lines (`"error"` marks the skipped bytes), with the
 //! DP layer of each DP telegram in a `"dp"` object
 //! (`profibus_dp::pdu::decode`: service and decoded data unit; a response is
-//! read by the request it answers); `--pcap` records the telegrams, and
+//! read by the request it answers) and the LLI and FMS PDUs of a telegram
+//! of an FMS connection in an `"fms"` object (`profibus_dp::fms::decode`;
+//! the plain line has them in words after ` | `); `--pcap` records the telegrams, and
 //! the skipped bytes flagged as corrupt; with `--trigger` only the
 //! telegrams around each firing of a trigger expression
 //! ([`profibus_dp::monitor::trigger`]), in segments. On Ctrl-C / SIGTERM it prints a summary line
@@ -20,8 +22,9 @@
 use crate::common;
 use anyhow::{Context, Result};
 use profibus_dp::config::layout::SlaveLayout;
+use profibus_dp::fms::decode::FmsTelegram;
 use profibus_dp::monitor::trigger::{Output, Recorder, Trigger, Watch};
-use profibus_dp::pdu::decode::{DpTelegram, Exchanges};
+use profibus_dp::pdu::decode::{DpTelegram, Exchanges, Layer};
 use profibus_dp::pdu::describe::TelegramSummary;
 use profibus_fdl::capture::pcap::PcapWriter;
 use profibus_fdl::codec::CodecStats;
@@ -52,7 +55,9 @@ pub struct Args {
     #[arg(long, value_name = "B")]
     pub baud: Option<common::BaudArg>,
     /// Print one JSON object per line; DP telegrams carry their decoded
-    /// DP layer in `"dp"` (`service`, and the data unit's fields).
+    /// DP layer in `"dp"` (`service`, and the data unit's fields),
+    /// telegrams of FMS connections their LLI and FMS PDUs in `"fms"`
+    /// (`lli`, `pdu`, `invoke_id`, `index`, …).
     #[arg(long)]
     pub json: bool,
     /// Print lines even on a terminal. Without it a terminal shows a live
@@ -247,6 +252,10 @@ struct Seen<T: serde::Serialize> {
     /// The DP layer (`profibus_dp::pdu::decode`), for DP telegrams.
     #[serde(skip_serializing_if = "Option::is_none")]
     dp: Option<DpTelegram>,
+    /// The LLI and FMS PDUs (`profibus_dp::fms::decode`), for telegrams
+    /// of FMS connections.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fms: Option<FmsTelegram>,
 }
 
 struct Printer {
@@ -304,18 +313,33 @@ impl Printer {
                 let Ok((t, _)) = Telegram::parse(&bytes) else {
                     return Ok(());
                 };
-                let what = TelegramSummary::new(t, &bytes);
+                let mut what = TelegramSummary::new(t, &bytes);
                 if let Some(live) = &mut self.live {
                     live.view_mut().telegram(at, &bytes, what.to_string());
-                } else if self.json {
-                    let dp = self.exchanges.decode(&t);
-                    let seen = Seen { t_us, what, dp };
-                    writeln!(self.out, "{}", common::json_line(&seen))?;
                 } else {
-                    // The DP layer in words after the telegram.
-                    match self.exchanges.decode(&t) {
-                        Some(dp) => writeln!(self.out, "{t_us:>12} {what} | {dp}")?,
-                        None => writeln!(self.out, "{t_us:>12} {what}")?,
+                    let (dp, fms) = match self.exchanges.decode_layer(&t) {
+                        Some(Layer::Dp(dp)) => (Some(dp), None),
+                        Some(Layer::Fms(fms)) => {
+                            what.service_sap = Some("FMS");
+                            (None, Some(*fms))
+                        }
+                        None => (None, None),
+                    };
+                    if self.json {
+                        let seen = Seen {
+                            t_us,
+                            what,
+                            dp,
+                            fms,
+                        };
+                        writeln!(self.out, "{}", common::json_line(&seen))?;
+                    } else if let Some(dp) = dp {
+                        // The DP or FMS layer in words after the telegram.
+                        writeln!(self.out, "{t_us:>12} {what} | {dp}")?;
+                    } else if let Some(fms) = fms {
+                        writeln!(self.out, "{t_us:>12} {what} | {fms}")?;
+                    } else {
+                        writeln!(self.out, "{t_us:>12} {what}")?;
                     }
                 }
                 if let Some(p) = self.pcap.as_mut() {
@@ -338,6 +362,7 @@ impl Printer {
                         t_us,
                         what,
                         dp: None,
+                        fms: None,
                     };
                     writeln!(self.out, "{}", common::json_line(&seen))?;
                 } else {

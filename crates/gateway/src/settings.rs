@@ -152,6 +152,10 @@ pub struct MqttSettings {
     /// Sparkplug B: the host id of the primary host application whose
     /// `spBv1.0/STATE/<id>` the edge node follows (`None`: none).
     pub primary_host: Option<String>,
+    /// Sparkplug B: each device's named channels as an instance of a
+    /// template defined in the NBIRTH, one definition per device type
+    /// (`[mqtt] sparkplug_templates`, default false: flat metrics).
+    pub sparkplug_templates: bool,
     /// The protocol version (`[mqtt] version`).
     pub version: MqttVersion,
     /// MQTT 5: the Message Expiry Interval of every message published
@@ -325,6 +329,7 @@ struct RawSettings {
     deadband: Field<toml::Value>,
     slave: Field<Vec<toml::Table>>,
     primary_host: Field<String>,
+    sparkplug_templates: Field<bool>,
     version: Field<toml::Value>,
     message_expiry_s: Field<u64>,
     retain_values: Field<bool>,
@@ -354,6 +359,7 @@ const KEYS: &[&str] = &[
     "deadband",
     "slave",
     "primary_host",
+    "sparkplug_templates",
     "version",
     "message_expiry_s",
     "retain_values",
@@ -691,6 +697,11 @@ impl MqttSettings {
         if let Some(h) = primary_host.as_deref().filter(|h| !topic_level(h)) {
             return Err(bad("primary_host", format!("`{h}` is not one topic level")));
         }
+        let sparkplug_templates = match t.sparkplug_templates.given() {
+            None => false,
+            Some(Ok(b)) => b,
+            Some(Err(())) => return Err(bad("sparkplug_templates", "must be true or false")),
+        };
         let version = match t.version.given() {
             None => MqttVersion::default(),
             Some(Ok(toml::Value::Integer(n))) => {
@@ -744,6 +755,7 @@ impl MqttSettings {
             deadband,
             slave_traffic,
             primary_host,
+            sparkplug_templates,
             version,
             message_expiry_s,
             retain_values,
@@ -879,6 +891,23 @@ mod tests {
         assert_eq!(
             (s.version, s.message_expiry_s),
             (MqttVersion::V311, Some(30))
+        );
+    }
+
+    #[test]
+    fn sparkplug_templates_key() {
+        let s = MqttSettings::from_table(None, "l").unwrap();
+        assert!(!s.sparkplug_templates, "flat metrics by default");
+        assert!(
+            parse("sparkplug_templates = true")
+                .unwrap()
+                .sparkplug_templates
+        );
+        assert_eq!(
+            parse("sparkplug_templates = \"yes\"")
+                .unwrap_err()
+                .to_string(),
+            "[mqtt]: `sparkplug_templates` must be true or false"
         );
     }
 

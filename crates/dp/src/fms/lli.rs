@@ -55,6 +55,17 @@ pub const ABORT_PROTOCOL: u8 = 2;
 /// Abort reason: the server refused the Initiate.
 pub const ABORT_REFUSED: u8 = 3;
 
+/// An Abort reason code in words (the codes above; unverified values).
+pub fn abort_reason(reason: u8) -> &'static str {
+    match reason {
+        ABORT_USER => "released by the user",
+        ABORT_TIMEOUT => "connection monitoring: the peer fell silent",
+        ABORT_PROTOCOL => "protocol error",
+        ABORT_REFUSED => "Initiate refused",
+        _ => "unknown reason",
+    }
+}
+
 /// The type of a communication relationship (KBL "type" column).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RelationshipType {

@@ -8,12 +8,17 @@
 //! - [`lli`]: the lower layer interface on master-slave relationships:
 //!   client and server state machines (connect, confirmed services,
 //!   release, connection monitoring) over FDL SRD.
+//! - [`od`]: object descriptions as Get-OD carries them, the OD header,
+//!   the standard data types, values in words.
 //! - [`client`]: an FMS client as the application of an FDL active
 //!   station, and a run of requests on one connection (`dpctl fms`).
+//! - [`decode`]: FMS telegrams in words and JSON (`dpctl sniff`).
 //!
 //! What is confirmed by which public source and what is marked
 //! (unverified): the module docs of [`pdu`] and `docs/fms.md`.
 
 pub mod client;
+pub mod decode;
 pub mod lli;
+pub mod od;
 pub mod pdu;

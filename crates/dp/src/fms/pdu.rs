@@ -353,9 +353,9 @@ impl ServiceError {
         }
     }
 
-    /// The error in words.
-    pub fn describe(&self) -> String {
-        let what = match (self.class, self.code) {
+    /// What the class and code mean, in a few words.
+    pub fn meaning(&self) -> &'static str {
+        match (self.class, self.code) {
             (ERROR_CLASS_ACCESS, ACCESS_OBJECT_NON_EXISTENT) => "object does not exist",
             (ERROR_CLASS_ACCESS, ACCESS_DENIED) => "object access denied",
             (ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT) => "type or length conflict",
@@ -365,10 +365,17 @@ impl ServiceError {
             (ERROR_CLASS_OD, OD_INVALID_INDEX) => "index not in the object dictionary",
             (ERROR_CLASS_OD, _) => "object dictionary error",
             _ => "error",
-        };
+        }
+    }
+
+    /// The error in words.
+    pub fn describe(&self) -> String {
         format!(
-            "{what} (class {}, code {}, additional code {})",
-            self.class, self.code, self.additional
+            "{} (class {}, code {}, additional code {})",
+            self.meaning(),
+            self.class,
+            self.code,
+            self.additional
         )
     }
 }
@@ -472,6 +479,16 @@ pub const REJECT_OTHER: u8 = 0;
 /// Reject code: invalid PDU size (\[P5\] p.225: reject code 5 is the one
 /// the client reports).
 pub const REJECT_PDU_SIZE: u8 = 5;
+
+/// A reject code in words (the two codes of \[P5\] p.225; others by
+/// number).
+pub fn reject_code_text(code: u8) -> &'static str {
+    match code {
+        REJECT_OTHER => "other reason",
+        REJECT_PDU_SIZE => "invalid PDU size",
+        _ => "reject code without words",
+    }
+}
 
 /// An FMS PDU that cannot be decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]

@@ -1041,17 +1041,24 @@ impl DpMaster {
 
     /// Whether slave `i` is to be polled in this pass at `now`.
     fn due(&self, i: usize, now: Instant) -> bool {
+        now >= self.due_at(i)
+    }
+
+    /// From when slave `i` may be polled: its probe time (offline,
+    /// locked), its start-up retry time, and its Min_Slave_Interval after
+    /// the last poll (GSD `Min_Slave_Intervall`, in units of 100 µs).
+    fn due_at(&self, i: usize) -> Instant {
         let s = &self.slaves[i];
         if s.state == SlaveState::Offline || s.state == SlaveState::Locked {
-            return now >= s.next_probe;
+            return s.next_probe;
         }
-        if s.state == SlaveState::Diag && !s.read_cfg && now < s.retry_at {
-            return false;
+        let interval = s
+            .last_poll
+            .map_or(Instant::ZERO, |t| t + s.p.min_slave_interval);
+        if s.state == SlaveState::Diag && !s.read_cfg {
+            return interval.max(s.retry_at);
         }
-        match s.last_poll {
-            Some(t) => now >= t + s.p.min_slave_interval,
-            None => true,
-        }
+        interval
     }
 
     fn slave_request(&mut self, i: usize, now: Instant) -> Request<'_> {
@@ -1680,6 +1687,16 @@ impl DpMaster {
         }
     }
 
+    /// Alone in the ring: whether one more poll cycle started at `at`,
+    /// as long as the last one, ends within the token hold time and the
+    /// visit's share (alone_hold_bits, by default ALONE_VISIT_MAX).
+    fn next_cycle_fits(&self, at: Instant, ctx: &TokenContext) -> bool {
+        self.cycle_start.is_some_and(|start| {
+            let end = at + (at - start);
+            end < ctx.hold_until && end <= self.visit_start + self.alone_hold
+        })
+    }
+
     /// Any slave due for a poll now (its Min_Slave_Interval passed, or its
     /// probe time come)?
     fn any_due(&self, now: Instant) -> bool {
@@ -1753,11 +1770,7 @@ impl MasterApp for DpMaster {
         // token hold time and the visit's share (alone_hold_bits, by
         // default ALONE_VISIT_MAX), and a slave is due. The visit still ends with time left, so its GAP
         // poll (how a new master joins) is made.
-        let fits = self.cycle_start.is_some_and(|start| {
-            let end = now + (now - start);
-            end < ctx.hold_until && end <= self.visit_start + self.alone_hold
-        });
-        if ctx.alone && fits && self.any_due(now) {
+        if ctx.alone && self.next_cycle_fits(now, ctx) && self.any_due(now) {
             self.start_poll_cycle(now);
             self.queue_cyclic_global_control(now);
             self.job_sent_this_visit = false;
@@ -1766,6 +1779,20 @@ impl MasterApp for DpMaster {
             }
         }
         None
+    }
+
+    /// Alone in the ring, with no slave due yet: the time the next one
+    /// is (its Min_Slave_Interval ends), if a cycle started then still
+    /// fits the visit. The station then idles with the token until then
+    /// instead of passing it to itself: with one fast slave (a cycle
+    /// shorter than its Min_Slave_Interval) the token would otherwise
+    /// go round after almost every cycle.
+    fn next_request_at(&self, ctx: &TokenContext) -> Option<Instant> {
+        if !ctx.alone || ctx.high_only {
+            return None;
+        }
+        let t = (0..self.slaves.len()).map(|i| self.due_at(i)).min()?;
+        (t > ctx.now && self.next_cycle_fits(t, ctx)).then_some(t)
     }
 
     fn on_result(&mut self, now: Instant, r: &CycleResult<'_>) {

@@ -37,6 +37,7 @@
 
 use crate::config::gsd::Gsd;
 use crate::config::layout::{ModuleLayout, Span};
+use crate::fms::decode::{self as fms_decode, FmsTelegram};
 use crate::pdu::alarm::{self, DiagBlock};
 use crate::pdu::c2::{C2Pdu, InitiateRes};
 use crate::pdu::cfg;
@@ -974,6 +975,17 @@ fn c2_pdu(du: &[u8], request: bool) -> Detail {
     }
 }
 
+/// A telegram's layer above FDL, as [`Exchanges::decode_layer`] tells
+/// it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Layer {
+    /// A DP or DP-V1 telegram.
+    Dp(DpTelegram),
+    /// A telegram of an FMS connection: its LLI and FMS PDUs
+    /// ([`crate::fms::decode`]).
+    Fms(Box<FmsTelegram>),
+}
+
 /// Pairs responses with their requests on a stream of telegrams (see the
 /// module docs) and decodes each.
 #[derive(Debug, Default, Clone)]
@@ -992,6 +1004,8 @@ pub struct Exchanges {
     /// Module layouts by slave address, and whether configured (a bus
     /// file: kept) or learned from the last Chk_Cfg.
     layouts: BTreeMap<u8, (Vec<ModuleLayout>, bool)>,
+    /// Connections seen carrying FMS: (master, slave, the slave's SAP).
+    fms: BTreeSet<(u8, u8, u8)>,
 }
 
 impl Exchanges {
@@ -1010,6 +1024,60 @@ impl Exchanges {
     /// texts (unless a bus file gave the slave another GSD).
     pub fn add_gsd(&mut self, gsd: Gsd) {
         self.gsd_by_ident.entry(gsd.ident_number).or_insert(gsd);
+    }
+
+    /// The layer of the next telegram of the stream: FMS on a
+    /// connection SAP (0..=48, which DP-V1 leaves to MSAC_C2 and FMS
+    /// shares) when its data unit starts with an LLI or FMS type octet
+    /// ([`crate::fms::decode::starts_lli_pdu`]), or carries no data on a
+    /// connection seen carrying FMS (a poll, a short acknowledge); else
+    /// the DP layer ([`Exchanges::decode`]).
+    pub fn decode_layer(&mut self, telegram: &Telegram<'_>) -> Option<Layer> {
+        let fms = self.fms_of(telegram);
+        let dp = self.decode(telegram);
+        match fms {
+            Some(f) => Some(Layer::Fms(Box::new(f))),
+            None => dp.map(Layer::Dp),
+        }
+    }
+
+    /// The FMS layer of `telegram` (before [`Exchanges::decode`] moves
+    /// on to it), remembering the connections that carry FMS.
+    fn fms_of(&mut self, telegram: &Telegram<'_>) -> Option<FmsTelegram> {
+        let (key, request, du) = match telegram {
+            Telegram::Token { .. } => return None,
+            Telegram::ShortAck => {
+                let r = self.pending?;
+                ((r.master, r.slave, r.dsap?), false, &[][..])
+            }
+            Telegram::Data(d) => {
+                let request = d.fc.is_request();
+                let (master, slave) = if request { (d.sa, d.da) } else { (d.da, d.sa) };
+                let sap = match (d.dsap, d.ssap) {
+                    (Some(ds), Some(_)) if request => ds & 0x3F,
+                    (Some(_), Some(ss)) => ss & 0x3F,
+                    (None, None) if !request => self.last.get(&(master, slave))?.dsap?,
+                    _ => return None,
+                };
+                ((master, slave, sap), request, d.data)
+            }
+        };
+        if key.2 > crate::pdu::c2::MAX_CONNECTION_SAP {
+            return None;
+        }
+        if du.is_empty() {
+            return self
+                .fms
+                .contains(&key)
+                .then(|| fms_decode::describe(du, request));
+        }
+        if fms_decode::starts_lli_pdu(du) {
+            self.fms.insert(key);
+            Some(fms_decode::describe(du, request))
+        } else {
+            self.fms.remove(&key);
+            None
+        }
     }
 
     /// The DP layer of the next telegram of the stream, with what is

@@ -94,7 +94,9 @@ pub struct TelegramSummary<'a> {
     #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
     pub ssap: Option<u8>,
     /// The DP service of the slave's SAP (DSAP of a request, SSAP of a
-    /// response).
+    /// response), or `FMS` when the stream tells so
+    /// ([`crate::pdu::decode::Exchanges::decode_layer`]; the text line
+    /// names the SAP by it).
     #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
     pub service_sap: Option<&'static str>,
     /// The DSAP byte has the segment bit.
@@ -190,13 +192,18 @@ impl<'a> TelegramSummary<'a> {
     }
 }
 
-/// `named`: the SAP is the slave's side of the service (DSAP of a request,
-/// SSAP of a response), so it names the DP service.
-fn sap_text(f: &mut fmt::Formatter<'_>, label: &str, s: u8, named: bool) -> fmt::Result {
+/// `name`: the service of the SAP when it is the slave's side of the
+/// service (DSAP of a request, SSAP of a response).
+fn sap_text(
+    f: &mut fmt::Formatter<'_>,
+    label: &str,
+    s: u8,
+    name: Option<&'static str>,
+) -> fmt::Result {
     if s & 0x40 != 0 {
         return write!(f, " {label}=segment {}", s & 0x3F);
     }
-    match sap::name(s & 0x3F).filter(|_| named) {
+    match name {
         Some(n) => write!(f, " {label}={} ({n})", s & 0x3F),
         None => write!(f, " {label}={}", s & 0x3F),
     }
@@ -217,11 +224,12 @@ impl fmt::Display for TelegramSummary<'_> {
                     write!(f, "{}", d.da)?;
                 }
                 write!(f, " {}", d.fc)?;
+                let req = d.fc.is_request();
                 if let Some(x) = d.dsap {
-                    sap_text(f, "DSAP", x, d.fc.is_request())?;
+                    sap_text(f, "DSAP", x, self.service_sap.filter(|_| req))?;
                 }
                 if let Some(x) = d.ssap {
-                    sap_text(f, "SSAP", x, !d.fc.is_request())?;
+                    sap_text(f, "SSAP", x, self.service_sap.filter(|_| !req))?;
                 } else if d.dsap.is_none() && d.fc.is_request() && !d.data.is_empty() {
                     f.write_str(" (default SAP)")?;
                 }

@@ -379,6 +379,20 @@ pub trait MasterApp {
     /// the next request, or `None` to end this token visit.
     fn poll_request(&mut self, ctx: &TokenContext) -> Option<Request<'_>>;
 
+    /// Asked when [`MasterApp::poll_request`] returned `None` while the
+    /// station is alone in the ring ([`TokenContext::alone`]) with token
+    /// hold time left: when the application will have its next request
+    /// (e.g. once a slave's Min_Slave_Interval has run out). When that is
+    /// within one slot time TSL and the token hold time, the station keeps
+    /// the token and the line idle until then and asks again, instead of
+    /// passing the token to itself (token telegram, TID1, and its GAP
+    /// poll). An idle line shorter than TSL is far from any station's
+    /// token-loss timeout (TTO ≥ 6 TSL, IEC 61158-4-3). `None` (the
+    /// default): pass the token.
+    fn next_request_at(&self, _ctx: &TokenContext) -> Option<Instant> {
+        None
+    }
+
     /// A message cycle ended.
     fn on_result(&mut self, now: Instant, result: &CycleResult<'_>);
 
@@ -1446,6 +1460,15 @@ impl Core {
                     app.on_result(now, &result);
                 }
                 return;
+            }
+            if alone && time_left {
+                // Alone, a request due shortly: hold the token, idle,
+                // rather than pass it to itself.
+                let limit = (now + self.bits(self.p().slot_time)).min(self.hold_until);
+                if let Some(t) = app.next_request_at(&ctx).filter(|&t| t > now && t <= limit) {
+                    self.state = State::UseToken { wake: t };
+                    return;
+                }
             }
         }
         if !self.gap_polled_this_visit {

@@ -133,6 +133,12 @@ pub struct MetricDef {
 }
 
 impl MetricDef {
+    /// Whether the metric is one of the device's named channels (a
+    /// member of its template instance, [`super::template`]).
+    pub fn is_channel(&self) -> bool {
+        matches!(self.source, Source::Channel(_))
+    }
+
     /// The process image the metric's value comes from (`channels`: the
     /// device's), if any: the image metrics and the channels.
     pub fn image(&self, channels: &ChannelMap) -> Option<Direction> {
@@ -155,6 +161,10 @@ pub struct Device {
     pub metrics: Vec<MetricDef>,
     /// The last alarm of each type (by [`AlarmType::word`]), as JSON.
     pub alarms: std::collections::BTreeMap<&'static str, String>,
+    /// The device type: the name of its template definition
+    /// ([`super::template`]): the bus file's `device` profile, else the
+    /// GSD's `Model_Name` (`/` as `_`), else `Slave`.
+    pub kind: String,
 }
 
 /// Why a DCMD was refused.
@@ -282,11 +292,17 @@ impl Device {
                 });
             }
         }
+        let kind = (info.layout.gsd.as_ref())
+            .and_then(|g| g.model_name.as_deref())
+            .map(|m| m.trim().replace('/', "_"))
+            .filter(|m| !m.is_empty())
+            .unwrap_or_else(|| "Slave".into());
         Device {
             info,
             channels,
             metrics,
             alarms: Default::default(),
+            kind,
         }
     }
 

@@ -12,6 +12,7 @@
 
 pub mod metrics;
 pub mod proto;
+pub mod template;
 
 pub use crate::topics::{IdError, MessageType, SparkplugId, NAMESPACE};
 
@@ -84,7 +85,19 @@ pub fn devices(profiled: &ProfiledBus) -> Result<Vec<Device>, SlaveInfoError> {
     // `slave_infos` gives every slave channels: its profile's, or its
     // modules' bytes.
     let infos = slave_infos(profiled)?;
-    Ok(infos.into_iter().map(Device::of_info).collect())
+    Ok(infos
+        .into_iter()
+        .map(|info| {
+            let mut d = Device::of_info(info);
+            // A device profile names the type; the generic one is its GSD's.
+            if let Some(p) = profiled.profile(d.info.layout.address) {
+                if p.name() != "generic" {
+                    d.kind = p.name().to_string();
+                }
+            }
+            d
+        })
+        .collect())
 }
 
 /// What the edge node knows of one device.
@@ -95,6 +108,9 @@ struct Entry {
     born: Option<Vec<Option<MetricValue>>>,
     /// Report by exception of the input and output images.
     filters: [ImageFilter; 2],
+    /// Its template definition (an index into `EdgeNode::definitions`),
+    /// if it has channels.
+    template: Option<usize>,
 }
 
 /// A checked DCMD waiting for the next cycle boundary.
@@ -135,6 +151,9 @@ pub struct EdgeNode {
     alerts: AlertWatch,
     /// The JSON of the last alert (`Bus/Alert`).
     last_alert: String,
+    /// The template definitions of the devices' types (published with
+    /// `sparkplug_templates`).
+    definitions: Vec<template::Definition>,
 }
 
 /// A metric of a data message: its alias only, no name, no datatype (the
@@ -176,11 +195,13 @@ fn ndeath(bd_seq: u8) -> Vec<u8> {
 impl EdgeNode {
     /// An edge node `id` for these devices.
     pub fn new(settings: MqttSettings, id: SparkplugId, devices: Vec<Device>) -> EdgeNode {
+        let (definitions, of) = template::definitions(&devices);
         EdgeNode {
             id,
             devices: devices
                 .into_iter()
-                .map(|device| {
+                .zip(of)
+                .map(|(device, template)| {
                     let t = Traffic::of(&settings, &device.info);
                     Entry {
                         filters: [
@@ -189,9 +210,11 @@ impl EdgeNode {
                         ],
                         device,
                         born: None,
+                        template,
                     }
                 })
                 .collect(),
+            definitions,
             settings,
             pending: vec![],
             out: VecDeque::new(),
@@ -377,6 +400,9 @@ impl EdgeNode {
         }
         self.node_sent = Some(values);
         self.next_ndata_ms = ts + self.settings.interval.as_millis() as u64;
+        if self.settings.sparkplug_templates {
+            metrics.extend(self.definitions.iter().map(|d| d.metric(ts)));
+        }
         self.push(self.id.node_topic(MessageType::NBirth), metrics, ts);
         for e in &mut self.devices {
             e.born = None;
@@ -420,9 +446,9 @@ impl EdgeNode {
             .settings
             .access(address)
             .ok_or(CommandError::Unauthorised(address))?;
-        // Metrics by alias: named as in the DBIRTH.
-        let named: Vec<Metric> = p
-            .metrics
+        // Template instances as their members; metrics by alias: named
+        // as in the DBIRTH.
+        let named: Vec<Metric> = template::expand(address, &p.metrics)
             .iter()
             .map(|m| match (&m.name, m.alias) {
                 (None, Some(alias)) if alias >> 16 == address as u64 + 1 => Metric {
@@ -509,20 +535,14 @@ impl EdgeNode {
                 [f[0].due(v.inputs, ts), f[1].due(v.outputs, ts)]
             };
             let dev = &self.devices[i].device;
+            let def = (self.devices[i].template)
+                .filter(|_| self.settings.sparkplug_templates)
+                .map(|t| &self.definitions[t]);
             let topic = |t| self.id.device_topic(t, &dev.id());
             match (&self.devices[i].born, exchanging) {
                 (None, true) => {
                     let values = dev.values(&v);
-                    let metrics = dev
-                        .metrics
-                        .iter()
-                        .zip(&values)
-                        .enumerate()
-                        .map(|(k, (d, val))| Metric {
-                            alias: Some(device_alias(addr, k)),
-                            ..metric(&d.name, d.datatype, val.clone(), ts)
-                        })
-                        .collect();
+                    let metrics = template::birth(dev, def, &values, ts);
                     let t = topic(MessageType::DBirth);
                     self.push(t, metrics, ts);
                     let e = &mut self.devices[i];
@@ -547,16 +567,12 @@ impl EdgeNode {
                             values[k] = last[k].clone();
                         }
                     }
-                    let changed: Vec<Metric> = dev
-                        .metrics
-                        .iter()
-                        .zip(values.iter().zip(last))
+                    let changed: Vec<_> = (values.iter().zip(last))
                         .enumerate()
-                        .filter(|(_, (_, (now, before)))| now != before)
-                        .map(|(k, (d, (now, _)))| {
-                            data_metric(device_alias(addr, k), d.datatype, now.clone(), ts)
-                        })
+                        .filter(|(_, (now, before))| now != before)
+                        .map(|(k, (now, _))| (k, now.clone()))
                         .collect();
+                    let changed = template::data(dev, def, changed, ts);
                     let t = topic(MessageType::DData);
                     let e = &mut self.devices[i];
                     if due[0] {

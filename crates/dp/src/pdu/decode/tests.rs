@@ -609,3 +609,47 @@ fn diagnosis_words_from_the_gsd_found_by_ident() {
     };
     assert_eq!(ext_diag, ["device: Sensor missing"]);
 }
+
+/// FMS on a connection SAP: client 3 (LSAP 33) and server 5 (LSAP 40),
+/// SRD low (FC 0x4C) answered with DL (0x08); the data units in the
+/// (unverified) encoding of `fms::pdu` and `fms::lli`.
+#[test]
+fn fms_on_a_connection_sap_is_told_from_class_2() {
+    let mut ex = Exchanges::default();
+    let fms = |ex: &mut Exchanges, t: &[u8]| match ex.decode_layer(&tg(t)) {
+        Some(Layer::Fms(f)) => f,
+        other => panic!("{other:?}"),
+    };
+    // Before any FMS on it, a poll on SAP 40 is class 2's.
+    let poll = sd2(5, 3, 0x4C, 40, 33, &[]);
+    assert!(matches!(ex.decode_layer(&tg(&poll)), Some(Layer::Dp(_))));
+    let read = sd2(5, 3, 0x4C, 40, 33, &[1, 3, 2, 0x07, 0xE6]);
+    let f = fms(&mut ex, &read);
+    assert_eq!(
+        (f.pdu, f.invoke_id, f.index),
+        (Some("read_req"), Some(3), Some(2022))
+    );
+    let f = fms(
+        &mut ex,
+        &sd2(3, 5, 0x08, 33, 40, &[2, 3, 2, 0x00, 0x12, 0x34]),
+    );
+    assert_eq!(f.to_string(), "FMS Read.resp invoke 3 data 00 12 34");
+    // Now the connection is known: a poll and a short acknowledge are its.
+    assert_eq!(fms(&mut ex, &poll).lli, "poll");
+    assert_eq!(fms(&mut ex, &SC).lli, "empty");
+    // A DP-V1 PDU on the same SAP is class 2's again, and so is the next poll.
+    let c2 = sd2(5, 3, 0x4C, 40, 33, &[0x5E, 0, 1, 4]);
+    assert!(matches!(ex.decode_layer(&tg(&c2)), Some(Layer::Dp(_))));
+    assert!(matches!(ex.decode_layer(&tg(&poll)), Some(Layer::Dp(_))));
+    // Garbage with an FMS type octet is FMS, flagged.
+    let f = fms(&mut ex, &sd2(5, 3, 0x4C, 40, 33, &[1, 3, 9]));
+    assert_eq!(f.lli, "malformed");
+    // A DP SAP is never FMS, whatever its data unit.
+    assert!(matches!(
+        ex.decode_layer(&tg(&sd2(5, 3, 0x4C, 51, 33, &[1, 3, 2, 0x07, 0xE6]))),
+        Some(Layer::Dp(_))
+    ));
+    // Data_Exchange and tokens go on as before.
+    assert!(matches!(ex.decode_layer(&tg(&DX_REQ)), Some(Layer::Dp(_))));
+    assert_eq!(ex.decode_layer(&tg(&TOKEN)), None);
+}
