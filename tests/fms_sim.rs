@@ -162,6 +162,14 @@ fn fms_reads_and_writes_channel_objects_while_data_exchange_goes_on() {
 fn a_coupler_in_dp_mode_has_no_fms() {
     let (mut l, mut run) = line("dp", vec![Request::Identify]);
     l.run(&mut run);
-    assert_eq!(run.error, Some(FmsRunError::Timeout), "{run:?}");
+    let e = run.error.clone().expect("an error");
+    assert!(
+        matches!(e, FmsRunError::NotServer { lsap: 40, .. }),
+        "{e:?}"
+    );
+    assert_eq!(
+        e.to_string(),
+        "the station answered RS (SAP not activated): it serves no FMS connection on LSAP 40"
+    );
     assert!(run.results.is_empty());
 }

@@ -18,6 +18,7 @@ mod decode;
 mod demo;
 mod doctor;
 mod dpv1;
+mod fms;
 mod gateway;
 mod gsd;
 mod im;
@@ -105,6 +106,10 @@ enum Command {
     /// Read a slave's I&M0..I&M4 (identification and maintenance) in
     /// words, or write its I&M1 tag.
     Im(im::Args),
+    /// One PROFIBUS-FMS service (identify, status, get-od, read, write)
+    /// on an FMS server, e.g. a BK3000 in DP/FMS mixed mode, next to the
+    /// running masters.
+    Fms(fms::Args),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     Completions(completions::Args),
     /// Print the man page dpctl(1), or write all pages with --out-dir.
@@ -163,6 +168,7 @@ fn main() -> ExitCode {
         Command::Rfid(a) => rfid::run(a),
         Command::Dpv1(a) => dpv1::run(a),
         Command::Im(a) => im::run(a),
+        Command::Fms(a) => fms::run(a),
         Command::Completions(a) => completions::run(a),
         Command::Man(a) => completions::man(a),
         Command::Gateway(a) => gateway::run(a),

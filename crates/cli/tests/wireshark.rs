@@ -3,10 +3,13 @@
 //! of a real start-up: `dpctl bus --pcap` records `dpctl master` bringing
 //! a `dpctl slave` into Data_Exchange and running DP-V1 write and read
 //! jobs; the decoded fields must match what the processes did. A second
-//! test checks that a wrong FCS is flagged. The tests fail when tshark is
+//! test checks that a wrong FCS is flagged. An FMS exchange recorded by
+//! `dpctl sniff --pcap` (fms_capture/mod.rs) decodes to the same FMS
+//! fields as the sniffer's `--json`. The tests fail when tshark is
 //! missing.
 
 mod common;
+mod fms_capture;
 
 use common::{counter, dpctl, repo, require, send, Bus, Lines, Proc, TempDir};
 use profibus::fdl::capture::pcap::{PcapReader, PcapWriter};
@@ -608,4 +611,75 @@ fn dissector_decodes_alarm_blocks_and_alarm_ack() {
         assert_eq!(&r[1..6], &["1", "1", "5", "1", "1"], "{r:?}");
         assert_eq!(r[8], "0x5c", "{r:?}");
     }
+}
+
+/// The FMS exchange of fms_capture/mod.rs (a BK3000 in mixed mode and an
+/// FMS client on a `dpctl bus`), recorded by `dpctl sniff --pcap`: every
+/// telegram the sniffer decoded as FMS with data, the dissector decodes
+/// into the same `pbfms` fields, in the same order.
+#[test]
+fn dissector_decodes_an_fms_exchange_like_the_sniffer() {
+    require("tshark");
+    let cap = fms_capture::record();
+    let want: Vec<&serde_json::Value> = cap
+        .json
+        .iter()
+        .filter_map(|l| l.get("fms"))
+        .filter(|f| f["lli"] != "poll" && f["lli"] != "empty")
+        .collect();
+    let rows = tshark_filtered(
+        &cap.pcap,
+        Some("pbfms"),
+        &[
+            "pbfms.lli",
+            "pbfms.pdu",
+            "pbfms.invoke_id",
+            "pbfms.index",
+            "pbfms.data",
+            "pbfms.identify.vendor",
+            "pbfms.error.text",
+            "pbfms.monitoring_ms",
+            "pbfms.malformed",
+            "pbdl.dsap",
+        ],
+    );
+    assert_eq!(rows.len(), want.len(), "{rows:#?}\n{want:#?}");
+    // Associate, five services, the garbled request and its Reject (each
+    // with its answer), Abort.
+    assert_eq!(want.len(), 15, "{want:#?}");
+    let text = |v: &serde_json::Value| match v {
+        serde_json::Value::Null => String::new(),
+        serde_json::Value::String(s) => s.replace(' ', "").to_lowercase(),
+        other => other.to_string(),
+    };
+    for (r, w) in rows.iter().zip(&want) {
+        if w["lli"] == "malformed" {
+            // The dissector keeps the fields it read before the fault.
+            assert_eq!(
+                (r[0].as_str(), r[8].as_str()),
+                ("malformed", w["error"].as_str().unwrap())
+            );
+            continue;
+        }
+        let expect = [
+            text(&w["lli"]),
+            text(&w["pdu"]),
+            text(&w["invoke_id"]),
+            text(&w["index"]),
+            text(&w["data"]),
+            w["vendor"].as_str().unwrap_or("").to_string(),
+        ];
+        // Hex and names compared without case; the vendor as it is.
+        let mut got: Vec<String> = r[..5].iter().map(|c| c.to_lowercase()).collect();
+        got.push(r[5].clone());
+        assert_eq!(got, expect, "{r:?} vs {w}");
+        if w["pdu"] == "error" {
+            assert_eq!(r[6], w["error"].as_str().unwrap(), "{r:?}");
+        }
+        if w["lli"] == "associate" {
+            assert_eq!(r[7], "2000", "{r:?}");
+        }
+    }
+    // Requests go to the coupler's LSAP 40.
+    assert!(rows.iter().any(|r| r[9] == "40"), "{rows:?}");
 }

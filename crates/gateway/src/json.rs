@@ -185,14 +185,17 @@ impl Gateway {
         }
     }
 
-    /// The MQTT 5 properties of a message: `user`, and the message expiry
-    /// interval when it is not retained (a retained message is the
+    /// The MQTT 5 properties of a message: `user`, the content type
+    /// `application/json` and the payload format UTF-8, and the message
+    /// expiry interval when it is not retained (a retained message is the
     /// topic's current value: with report by exception a steady value is
     /// not published again, so it must not expire).
     fn properties(&self, retain: bool, user: Vec<(String, String)>) -> Properties {
         Properties {
             user,
             message_expiry_s: self.settings.message_expiry_s.filter(|_| !retain),
+            content_type: Some(crate::request::JSON.into()),
+            utf8: true,
             ..Properties::default()
         }
     }
@@ -320,6 +323,7 @@ impl Gateway {
                 props.response_topic.as_deref(),
                 props.correlation_data.as_deref(),
             )
+            .and_then(|()| crate::request::check_content_type(props.content_type.as_deref()))
             .and(request);
         let target = Target {
             service,
@@ -858,6 +862,60 @@ mod tests {
 
     fn publishes(g: &mut Gateway) -> Vec<Publish> {
         std::iter::from_fn(|| g.poll_publish()).collect()
+    }
+
+    #[test]
+    fn mqtt5_json_has_its_content_type_and_requests_of_another_type_are_refused() {
+        let (mut g, mut m) = setup();
+        g.connected(0);
+        g.step(&mut m, Instant::ZERO, 0);
+        let all = publishes(&mut g);
+        assert!(!all.is_empty());
+        assert!(all
+            .iter()
+            .all(|p| p.props.content_type.as_deref() == Some("application/json") && p.props.utf8));
+        let props = |ct: &str| Properties {
+            response_topic: Some("client/ct".into()),
+            content_type: Some(ct.into()),
+            ..Properties::default()
+        };
+        // Not JSON: refused on the response topic, nothing written.
+        g.handle_message_with(
+            "profibus/l1/3/outputs/set",
+            br#"{"channels": {"speed": 7}}"#,
+            &props("text/plain"),
+            1,
+        );
+        g.step(&mut m, Instant::ZERO, 2);
+        assert_eq!(m.outputs(3).unwrap(), [0, 0, 0, 0]);
+        let a = publishes(&mut g)
+            .into_iter()
+            .find(|p| p.topic == "client/ct")
+            .unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&a.payload).unwrap();
+        assert_eq!(v["ok"], false);
+        assert_eq!(
+            v["error"],
+            "content type `text/plain` is not JSON (send application/json or no content type)"
+        );
+        // JSON with parameters, in any case, and `+json` types: taken.
+        for (i, ct) in [
+            "Application/JSON; charset=utf-8",
+            "application/merge-patch+json",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            g.handle_message_with(
+                "profibus/l1/3/outputs/set",
+                format!(r#"{{"channels": {{"speed": {}}}}}"#, 8 + i).as_bytes(),
+                &props(ct),
+                3,
+            );
+            g.step(&mut m, Instant::ZERO, 4);
+            assert_eq!(m.outputs(3).unwrap(), [0, 8 + i as u8, 0, 0], "{ct}");
+            publishes(&mut g);
+        }
     }
 
     #[test]

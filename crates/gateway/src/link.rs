@@ -244,6 +244,8 @@ impl Client {
                     response_topic: p.props.response_topic,
                     correlation_data: p.props.correlation_data.map(Into::into),
                     user_properties: p.props.user,
+                    content_type: p.props.content_type,
+                    payload_format_indicator: p.props.utf8.then_some(1),
                     ..Default::default()
                 };
                 c.try_publish_with_properties(p.topic, qos5(q), p.retain, p.payload, props)?
@@ -333,6 +335,8 @@ impl EventLoop {
                             correlation_data: q.correlation_data.map(|c| c.to_vec()),
                             user: q.user_properties,
                             message_expiry_s: q.message_expiry_interval,
+                            content_type: q.content_type,
+                            utf8: q.payload_format_indicator == Some(1),
                         });
                         Polled::Message(
                             String::from_utf8_lossy(&p.topic).into_owned(),

@@ -119,12 +119,38 @@ impl ReplyTo {
     }
 }
 
+/// The media type of the gateway's payloads (MQTT 5 Content Type).
+pub const JSON: &str = "application/json";
+
+/// An MQTT 5 request's Content Type, if it gives one, must name JSON:
+/// `application/json`, `text/json` or a `+json` type (parameters after
+/// `;` and case do not matter).
+pub fn check_content_type(content_type: Option<&str>) -> Result<(), RequestError> {
+    let Some(ct) = content_type else {
+        return Ok(());
+    };
+    let media = ct
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    if media == JSON || media == "text/json" || media.ends_with("+json") {
+        Ok(())
+    } else {
+        Err(RequestError::ContentType(ct.to_string()))
+    }
+}
+
 /// Why a request was refused or failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RequestError {
     /// The payload is not a request of this service.
     #[error("malformed request: {0}")]
     Malformed(String),
+    /// An MQTT 5 request whose Content Type is not JSON.
+    #[error("content type `{0}` is not JSON (send application/json or no content type)")]
+    ContentType(String),
     /// The topic's address is not a configured slave.
     #[error("no slave {0} on this bus")]
     UnknownSlave(String),

@@ -36,9 +36,10 @@ impl Publish {
 }
 
 /// The MQTT 5 properties the gateway uses (MQTT 5.0, 3.3.2.3): on
-/// requests the client's response topic and correlation data, on answers
-/// the correlation data, on value messages the units and the message
-/// expiry interval. Empty on MQTT 3.1.1, which has no properties.
+/// requests the client's response topic, correlation data and content
+/// type, on answers the correlation data, on value messages the units
+/// and the message expiry interval, on every JSON message its content
+/// type and payload format. Empty on MQTT 3.1.1, which has no properties.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Properties {
     /// Response Topic: where the requester wants the answer.
@@ -50,6 +51,13 @@ pub struct Properties {
     /// Message Expiry Interval in seconds: the broker drops the message
     /// when it could not deliver it within this time (`None`: never).
     pub message_expiry_s: Option<u32>,
+    /// Content Type (MQTT 5.0, 3.3.2.3.9): the payload's media type;
+    /// `application/json` on everything the plain gateway publishes, and
+    /// a request that gives one must give a JSON one.
+    pub content_type: Option<String>,
+    /// Payload Format Indicator 1 (MQTT 5.0, 3.3.2.3.2): the payload is
+    /// UTF-8 text (set on the plain gateway's JSON).
+    pub utf8: bool,
 }
 
 /// A gateway core as the link and the driver see it: the plain JSON

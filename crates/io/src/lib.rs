@@ -18,6 +18,8 @@
 //!   with its [`driver::Clock`].
 //! - [`class2`]: a class-2 master (MSAC_C2) on a port, next to the
 //!   running masters, for one connection's requests.
+//! - [`fms`]: an FMS client (`FmsMaster`) on a port, next to the running
+//!   masters, for one connection's requests (`dpctl fms`).
 //! - [`runner`]: a slave's station on a port with the baud-rate search,
 //!   searching again after silence or a lost master.
 //! - [`listen`]: the passive driver of bus monitors: reads a line (never
@@ -42,6 +44,7 @@ pub mod codec;
 pub mod control_io;
 pub mod driver;
 pub mod emulation;
+pub mod fms;
 pub mod jx2;
 pub mod listen;
 pub mod pace;

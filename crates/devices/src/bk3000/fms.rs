@@ -46,6 +46,7 @@
 use super::catalogue::Role;
 use super::image::{Dir, Entry, Image, Owner, Strip};
 use profibus_dp::fms::lli::{FmsApplication, RelationshipType};
+use profibus_dp::fms::od::{Description, OdHeader};
 use profibus_dp::fms::pdu::{
     GetOdRequest, IdentifyResponse, InitiateRequest, InitiateResponse, Request, Response,
     ServiceError, StatusResponse, ACCESS_DENIED, ACCESS_OBJECT_NON_EXISTENT, ACCESS_TYPE_CONFLICT,
@@ -112,30 +113,9 @@ pub fn kbl(mode: FmsMode) -> Vec<KblEntry> {
         .collect()
 }
 
-/// FMS object codes of an object description (unverified values).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum ObjectCode {
-    /// A static data type (list of static types).
-    DataType = 5,
-    /// A record type (data type structure).
-    DataTypeStructure = 6,
-    /// Simple variable.
-    SimpleVariable = 7,
-    /// Array.
-    Array = 8,
-    /// Record.
-    Record = 9,
-}
-
-/// Access rights of a variable.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Access {
-    /// Read only.
-    Read,
-    /// Read and write.
-    ReadWrite,
-}
+/// Object codes and access rights of descriptions: the FMS client and
+/// this server share them (`profibus_dp::fms::od`).
+pub use profibus_dp::fms::od::{Access, ObjectCode};
 
 /// Data type indices of the static type list (unverified numbering).
 pub mod types {
@@ -225,24 +205,21 @@ enum Value {
 }
 
 impl ObjectDescription {
-    /// The description as Get-OD carries it (unverified layout): index
-    /// (2), object code, data type (2), length, access (1 read, 3
-    /// read/write), then the name with a length octet in the long form.
+    /// The description as Get-OD carries it ([`Description`], layout
+    /// unverified): the name only in the long form.
     pub fn encode(&self, long_form: bool) -> Vec<u8> {
-        let mut v = self.index.to_be_bytes().to_vec();
-        v.push(self.code as u8);
-        v.extend(self.data_type.to_be_bytes());
-        v.push(self.length);
-        v.push(match self.access {
-            Access::Read => 1,
-            Access::ReadWrite => 3,
-        });
-        if long_form {
-            let name = &self.name.as_bytes()[..self.name.len().min(32)];
-            v.push(name.len() as u8);
-            v.extend_from_slice(name);
+        Description {
+            index: self.index,
+            code: self.code as u8,
+            data_type: self.data_type,
+            length: self.length,
+            access: match self.code {
+                ObjectCode::DataType | ObjectCode::DataTypeStructure => 0,
+                _ => self.access.to_u8(),
+            },
+            name: long_form.then(|| self.name.clone()),
         }
-        v
+        .encode()
     }
 }
 
@@ -425,21 +402,20 @@ impl ObjectDictionary {
             .map(|i| &self.objects[i])
     }
 
-    /// The OD header (index 0; unverified layout): number of objects (2),
-    /// first and last index of the static type list (2 + 2), first index
-    /// of the static OD (2).
+    /// The OD header (index 0; [`OdHeader`], layout unverified).
     pub fn header(&self) -> Vec<u8> {
-        let n = self.objects.len() as u16;
-        let first_var = self
+        let first_object = self
             .objects
             .iter()
             .find(|o| o.value != Value::None)
             .map_or(0, |o| o.index);
-        let mut v = n.to_be_bytes().to_vec();
-        v.extend(types::UNSIGNED8.to_be_bytes());
-        v.extend((types::RECORD_U8_U16 + RECORD_TYPES.len() as u16 - 1).to_be_bytes());
-        v.extend(first_var.to_be_bytes());
-        v
+        OdHeader {
+            objects: self.objects.len() as u16,
+            first_type: types::UNSIGNED8,
+            last_type: types::RECORD_U8_U16 + RECORD_TYPES.len() as u16 - 1,
+            first_object,
+        }
+        .encode()
     }
 
     fn not_there() -> ServiceError {
@@ -1021,9 +997,17 @@ mod tests {
                 .map(|d| u16::from_be_bytes([d[0], d[1]]))
                 .collect();
             assert!(idx.contains(&2020) && idx.contains(&2041), "{idx:?}");
-            // Data_Exchange went on all along.
+            // Data_Exchange went on all along; the master's unchanged
+            // outputs keep the written value, different ones replace it.
             req(&mut slave, now, None, &outputs);
             assert_eq!(slave.state(), SlaveState::DataExch);
+            assert_eq!(slave.device().output_value("2.KL4002.1"), Some(0x2000));
+            let mut other = outputs.clone();
+            let ch2 = img.entries.iter().find(|e| e.name == "2.KL4002.2").unwrap();
+            Image::put(ch2, &mut other, 0x0100);
+            req(&mut slave, now, None, &other);
+            assert_eq!(slave.device().output_value("2.KL4002.1"), Some(0));
+            assert_eq!(slave.device().output_value("2.KL4002.2"), Some(0x0100));
             // The client falls silent: connection monitoring aborts it.
             let due = slave.device().poll_timeout().unwrap();
             assert!(due <= now + Duration::from_millis(300));

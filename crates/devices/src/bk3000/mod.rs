@@ -106,6 +106,12 @@ pub struct Bk3000 {
     table0: [u16; 256],
     /// The FMS relationships of the KBL that clients have addressed.
     fms_servers: Vec<profibus_dp::fms::lli::LliServer>,
+    /// The outputs of the last Data_Exchange, and whether an FMS Write
+    /// changed the terminals' outputs since: the same DP outputs again do
+    /// not undo the Write, different ones replace it (mixed mode,
+    /// docs/fms.md).
+    dp_outputs: Vec<u8>,
+    fms_written: bool,
     /// K-bus cycle time set for the cycle-time measurement (table 98 R3).
     cycle_set: u16,
     /// In data exchange with the K-bus started (for the LEDs).
@@ -186,6 +192,8 @@ impl Bk3000 {
             plc: plc::PlcInterface::default(),
             table0: [0; 256],
             fms_servers: vec![],
+            dp_outputs: vec![],
+            fms_written: false,
             cycle_set: 0,
             exchanging: false,
             leds: None,
@@ -1244,6 +1252,12 @@ impl Device for Bk3000 {
             // parameter mode and with the K-bus stopped (p. 45).
             self.plc_step(outputs[0], outputs[1]);
         }
+        if self.fms_written && self.dp_outputs == outputs {
+            return;
+        }
+        self.fms_written = false;
+        self.dp_outputs.clear();
+        self.dp_outputs.extend_from_slice(outputs);
         if self.held || !self.kbus_ok() {
             return;
         }
@@ -1313,6 +1327,7 @@ impl Device for Bk3000 {
     fn clear_outputs(&mut self, _now: Instant, why: ClearReason) {
         // Outputs still on the K-bus do not arrive after the safe state.
         self.pending_outputs = None;
+        self.fms_written = false;
         if matches!(why, ClearReason::Watchdog | ClearReason::LeftDataExchange) {
             self.exchanging = false;
         }
@@ -1414,6 +1429,7 @@ impl Device for Bk3000 {
             // Applied at once; a class-1 master's next outputs replace
             // them (docs/fms.md).
             self.apply_outputs(&outputs);
+            self.fms_written = true;
         }
         self.note_fms_events();
         let reply = reply.unwrap_or_default();

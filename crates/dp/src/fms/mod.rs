@@ -8,6 +8,8 @@
 //! - [`lli`]: the lower layer interface on master-slave relationships:
 //!   client and server state machines (connect, confirmed services,
 //!   release, connection monitoring) over FDL SRD.
+//! - [`od`]: object descriptions as Get-OD carries them, the OD header,
+//!   the standard data types, values in words.
 //! - [`client`]: an FMS client as the application of an FDL active
 //!   station, and a run of requests on one connection (`dpctl fms`).
 //! - [`decode`]: FMS telegrams in words and JSON (`dpctl sniff`).
@@ -18,4 +20,5 @@
 pub mod client;
 pub mod decode;
 pub mod lli;
+pub mod od;
 pub mod pdu;

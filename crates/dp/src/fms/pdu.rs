@@ -480,6 +480,16 @@ pub const REJECT_OTHER: u8 = 0;
 /// the client reports).
 pub const REJECT_PDU_SIZE: u8 = 5;
 
+/// A reject code in words (the two codes of \[P5\] p.225; others by
+/// number).
+pub fn reject_code_text(code: u8) -> &'static str {
+    match code {
+        REJECT_OTHER => "other reason",
+        REJECT_PDU_SIZE => "invalid PDU size",
+        _ => "reject code without words",
+    }
+}
+
 /// An FMS PDU that cannot be decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum FmsParseError {
