@@ -1,7 +1,8 @@
 //! `dpctl gateway`: a DP master's slaves on an MQTT broker (the
 //! `profibus-gateway` crate), on a line (`--port`) or on the in-process
 //! simulated bus with the bus file's slaves emulated (`--sim`); and/or
-//! as an OPC UA server (`--opcua`, the `profibus-opcua` crate).
+//! as an OPC UA server (`--opcua`, the `profibus-opcua` crate, behind
+//! the `opcua` cargo feature, on by default).
 
 use crate::common;
 use crate::ops::{self, Operated, ReloadSender, Stopping};
@@ -15,6 +16,7 @@ use profibus_gateway::{
     SparkplugId,
 };
 use profibus_io::driver::{self, Clock};
+#[cfg(feature = "opcua")]
 use profibus_opcua::{Face, OpcuaServer, OpcuaSettings};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -141,8 +143,20 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
+/// What `--opcua` or `[opcua]` says to a dpctl built without the `opcua`
+/// feature.
+#[cfg(not(feature = "opcua"))]
+pub const NO_OPCUA: &str = "this dpctl was built without OPC UA: rebuild with --features opcua";
+
+/// `dpctl gateway --opcua` in a dpctl built without OPC UA: one line.
+#[cfg(not(feature = "opcua"))]
+fn with_opcua(_args: Args, _profiled: ProfiledBus, _settings: MqttSettings) -> Result<()> {
+    anyhow::bail!(NO_OPCUA)
+}
+
 /// `dpctl gateway --opcua`: the OPC UA server, with MQTT when a broker
 /// is given.
+#[cfg(feature = "opcua")]
 fn with_opcua(args: Args, profiled: ProfiledBus, settings: MqttSettings) -> Result<()> {
     let dir = args.config.parent().unwrap_or(std::path::Path::new("."));
     let opcua = OpcuaSettings::new(
@@ -173,30 +187,36 @@ fn with_opcua(args: Args, profiled: ProfiledBus, settings: MqttSettings) -> Resu
         args.config.display(),
         opcua.url(),
     );
-    let result = match (conn, &args.port) {
-        (Some(conn), _) => serve(args, profiled, face, conn),
-        (None, None) => common::runtime()?
-            .block_on(profibus_opcua::sim::serve(
-                profiled,
-                face,
-                common::shutdown(),
-            ))
-            .map_err(Into::into),
-        (None, Some(port)) => {
-            let port = port.clone();
-            common::runtime()?.block_on(on_line_opcua(&args, &port, &profiled, face))
-        }
+    let result = match conn {
+        Some(conn) => serve(args, profiled, face, conn),
+        None => opcua_alone(args, profiled, face),
     };
     server.stop();
     result
 }
 
+/// The OPC UA face without a broker, on the line or the simulated bus;
+/// SIGHUP reloads the bus file's gateway settings as with MQTT (so a
+/// changed `[mqtt] writable` reaches the access levels).
+#[cfg(feature = "opcua")]
+fn opcua_alone(args: Args, profiled: ProfiledBus, face: Face) -> Result<()> {
+    let (face, reloads, _) = Operated::new(face, profiled.file.slaves.len());
+    common::runtime()?.block_on(async move {
+        reload_on_sighup(&args.config, &args.alert, &profiled, reloads)?;
+        match args.port.clone() {
+            None => Ok(profibus_opcua::sim::serve(profiled, face, common::shutdown()).await?),
+            Some(port) => on_line_opcua(&args, &port, &profiled, face).await,
+        }
+    })
+}
+
 /// [`on_line`] without a broker: the OPC UA face stepped alone.
+#[cfg(feature = "opcua")]
 async fn on_line_opcua(
     args: &Args,
     port: &str,
     profiled: &ProfiledBus,
-    mut face: Face,
+    mut face: impl Session,
 ) -> Result<()> {
     let bus = &profiled.file;
     let dp = DpMaster::new(&bus.master)?;
@@ -263,7 +283,8 @@ async fn stop(stopping: Stopping) {
 
 /// On every SIGHUP: read the bus file again and hand its `[mqtt]` table
 /// to the running core (through `reloads`), or log why not; the bus
-/// keeps running either way.
+/// keeps running either way. The same with or without a broker: the
+/// core's settings (`writable` among them) serve the OPC UA face too.
 fn reload_on_sighup(
     path: &std::path::Path,
     alerts: &[AlertRule],
@@ -275,9 +296,10 @@ fn reload_on_sighup(
     let path = path.to_path_buf();
     let alerts = alerts.to_vec();
     let mut running = profiled.file.mqtt.clone();
+    let opcua = profiled.file.opcua.clone();
     tokio::spawn(async move {
         while hup.recv().await.is_some() {
-            match reload(&path, running.as_ref()) {
+            match reload(&path, running.as_ref(), opcua.as_ref()) {
                 Ok((table, mut r)) => {
                     r.settings.alerts.extend(alerts.iter().cloned());
                     running = table;
@@ -296,12 +318,20 @@ fn reload_on_sighup(
 }
 
 /// The `[mqtt]` table of the bus file at `path` and the reload of it
-/// over `running`, or why it cannot be taken while running.
+/// over `running`, or why it cannot be taken while running (a changed
+/// restart key, or any change of the `[opcua]` table, `opcua` at start).
 fn reload(
     path: &std::path::Path,
     running: Option<&toml::Table>,
+    opcua: Option<&toml::Table>,
 ) -> Result<(Option<toml::Table>, ops::Reload)> {
     let file = ProfiledBus::load(path)?;
+    if file.file.opcua.as_ref() != opcua {
+        anyhow::bail!(
+            "{}: [opcua] only changes with a restart (the gateway core's settings, `writable` among them, are in [mqtt])",
+            path.display()
+        );
+    }
     let table = file.file.mqtt.clone();
     let settings =
         MqttSettings::for_bus_file(table.as_ref(), path).map_err(|e| e.in_bus_file(&file.file))?;

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::mqtt::{free_port, write_bus};
+use common::mqtt::{free_port, write_bus, GATEWAY_SLAVES};
 use common::{dpctl, need, repo, Proc, TempDir};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -13,38 +13,22 @@ use std::time::Duration;
 
 const T: Duration = Duration::from_secs(120);
 
-/// Two generic GSD slaves (3 DP-V1 echo and writable, 4 not writable),
-/// an Omega drive that follows its setpoint (25, only `setpoint1`
-/// writable) and a BK3000 strip (15).
-const SLAVES: &str = r#"[master]
-address = 1
-baud = "1.5M"
-
-[[slave]]
-address = 3
-name = "echo"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 4
-name = "locked"
-gsd = "DPCTL_GEN.GSD"
-modules = ["2 words in/out"]
-
-[[slave]]
-address = 25
-device = "omega"
-setpoints = 1
-actual_values = 1
-drive_enable = "auto"
+/// The gateway tests' slaves ([`GATEWAY_SLAVES`]: generic GSD slaves 3
+/// `echo`, DP-V1 and writable, and 4 `locked`, not writable; an Omega
+/// drive at 25, here following its setpoint, only `setpoint1` writable)
+/// and a BK3000 strip (15).
+fn slaves() -> String {
+    format!(
+        r#"{GATEWAY_SLAVES}drive_enable = "auto"
 
 [[slave]]
 address = 15
 name = "coupler"
 device = "bk3000"
 terminals = ["KL1104", "KL2134", "KL3102", "KL4002", "KL9010"]
-"#;
+"#
+    )
+}
 
 const MQTT: &str = r#"
 [mqtt]
@@ -72,7 +56,7 @@ fn script() -> PathBuf {
 /// `dpctl gateway --sim --opcua` on a free port with `extra` arguments;
 /// returns once the port takes connections.
 fn gateway(dir: &TempDir, table: &str, extra: &[&str]) -> (Proc, String) {
-    let bus = write_bus(dir, &format!("{SLAVES}{MQTT}{table}"));
+    let bus = write_bus(dir, &format!("{}{MQTT}{table}", slaves()));
     let port = free_port();
     let url = format!("opc.tcp://127.0.0.1:{port}");
     let mut cmd = Command::new(dpctl());
@@ -308,7 +292,7 @@ fn opcua_refuses_bad_settings_with_one_line() {
             "OPC UA endpoint `http://x:1` is not opc.tcp://HOST[:PORT]",
         ),
     ] {
-        let bus = write_bus(&dir, &format!("{SLAVES}{MQTT}{table}"));
+        let bus = write_bus(&dir, &format!("{}{MQTT}{table}", slaves()));
         let mut cmd = Command::new(dpctl());
         cmd.args(["gateway", "--sim", "--config"])
             .arg(&bus)
@@ -410,6 +394,36 @@ fn opcua_alarm_events_and_im0_identity_of_a_dpv1_slave() {
     slave.terminate(T);
 }
 
+/// Before: the Omega's `setpoint1` writable, `control1` not. Then the
+/// bus file's `writable` names `control1` instead and the gateway gets
+/// SIGHUP: access levels and writes follow. Returns the new bus text.
+fn reload_writable_and_check(dir: &TempDir, gw: &Proc, url: &str) -> String {
+    let before = client(url, &["access", "25", "setpoint1", "control1"]);
+    assert_eq!(before["setpoint1"]["access_level"], 3, "{before}");
+    assert_eq!(before["setpoint1"]["user_access_level"], 3, "{before}");
+    assert_eq!(before["setpoint1"]["write"], "Good", "{before}");
+    assert_eq!(before["control1"]["access_level"], 1, "{before}");
+    assert_ne!(before["control1"]["write"], "Good", "{before}");
+    let bus = dir.path("bus.toml");
+    let text = std::fs::read_to_string(&bus)
+        .unwrap()
+        .replace(r#"channels = ["setpoint1"]"#, r#"channels = ["control1"]"#);
+    assert!(text.contains(r#"channels = ["control1"]"#));
+    std::fs::write(&bus, &text).unwrap();
+    gw.signal(1);
+    let mut after = serde_json::Value::Null;
+    common::wait_for("the access levels after SIGHUP", T, || {
+        after = client(url, &["access", "25", "setpoint1", "control1"]);
+        after["control1"]["access_level"] == 3
+    });
+    assert_eq!(after["control1"]["user_access_level"], 3, "{after}");
+    assert_eq!(after["control1"]["write"], "Good", "{after}");
+    assert_eq!(after["setpoint1"]["access_level"], 1, "{after}");
+    assert_eq!(after["setpoint1"]["user_access_level"], 1, "{after}");
+    assert_ne!(after["setpoint1"]["write"], "Good", "{after}");
+    text
+}
+
 /// SIGHUP with a changed `[mqtt] writable` (here beside MQTT, where the
 /// gateway reloads): the access levels of the Omega's output variables
 /// follow, and so do the writes.
@@ -427,29 +441,42 @@ fn opcua_access_levels_follow_a_reload_of_writable() {
             &format!("mqtt://127.0.0.1:{mqtt_port}"),
         ],
     );
-    let before = client(&url, &["access", "25", "setpoint1", "control1"]);
-    assert_eq!(before["setpoint1"]["access_level"], 3, "{before}");
-    assert_eq!(before["setpoint1"]["user_access_level"], 3, "{before}");
-    assert_eq!(before["setpoint1"]["write"], "Good", "{before}");
-    assert_eq!(before["control1"]["access_level"], 1, "{before}");
-    assert_ne!(before["control1"]["write"], "Good", "{before}");
-    let bus = dir.path("bus.toml");
-    let text = std::fs::read_to_string(&bus)
-        .unwrap()
-        .replace(r#"channels = ["setpoint1"]"#, r#"channels = ["control1"]"#);
-    assert!(text.contains(r#"channels = ["control1"]"#));
-    std::fs::write(&bus, text).unwrap();
-    gw.signal(1);
-    let mut after = serde_json::Value::Null;
-    common::wait_for("the access levels after SIGHUP", T, || {
-        after = client(&url, &["access", "25", "setpoint1", "control1"]);
-        after["control1"]["access_level"] == 3
-    });
-    assert_eq!(after["control1"]["user_access_level"], 3, "{after}");
-    assert_eq!(after["control1"]["write"], "Good", "{after}");
-    assert_eq!(after["setpoint1"]["access_level"], 1, "{after}");
-    assert_eq!(after["setpoint1"]["user_access_level"], 1, "{after}");
-    assert_ne!(after["setpoint1"]["write"], "Good", "{after}");
+    reload_writable_and_check(&dir, &gw, &url);
     let out = gw.stop();
     assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
+}
+
+/// The same reload without a broker (`--opcua` alone): SIGHUP reads the
+/// bus file again, a changed `[mqtt] writable` turns the Omega's
+/// `control1` writable and `setpoint1` read-only, and the writes follow;
+/// a changed `[opcua]` table is refused in one line (it needs a restart)
+/// and the gateway runs on. Before, only a gateway with `--mqtt` reloaded.
+#[test]
+fn opcua_alone_reloads_writable_on_sighup() {
+    let dir = TempDir::new("opcua-hup-alone");
+    let (gw, url) = gateway(&dir, "[opcua]\nanonymous = true\n", &["--opcua-insecure"]);
+    let text = reload_writable_and_check(&dir, &gw, &url);
+    // `[opcua]` is the server's set-up: not taken while running.
+    let bus = dir.path("bus.toml");
+    std::fs::write(&bus, format!("{text}trust_client_certs = true\n")).unwrap();
+    gw.signal(1);
+    let mut refused = String::new();
+    common::wait_for("the refused [opcua] reload", T, || {
+        let line = gw.stderr_line(T).unwrap_or_default();
+        let hit = line.contains("[opcua] only changes with a restart");
+        if hit {
+            refused = line;
+        }
+        hit
+    });
+    assert!(refused.contains("SIGHUP: not reloaded"), "{refused}");
+    let still = client(&url, &["access", "25", "control1"]);
+    assert_eq!(still["control1"]["access_level"], 3, "{still}");
+    let out = gw.stop();
+    assert!(!out.stderr.contains("panicked"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("reloaded [mqtt]: writable:"),
+        "{}",
+        out.stderr
+    );
 }

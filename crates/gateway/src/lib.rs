@@ -101,6 +101,7 @@ pub mod slave;
 pub mod sparkplug;
 pub mod topics;
 pub mod traffic;
+pub mod url;
 
 pub use json::Gateway;
 pub use link::{Connection, ConnectionError, LinkEvent, MqttLink};

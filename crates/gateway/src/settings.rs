@@ -556,6 +556,26 @@ fn topic_level(s: &str) -> bool {
     !s.is_empty() && !s.contains(['/', '+', '#', '\0'])
 }
 
+/// A settings table as written, read into `T` whose fields all take
+/// any TOML value (`None`: `T::default()`); the error is the key this
+/// version does not know (else serde's message), the only one left.
+/// `[mqtt]` here and `[opcua]` in `profibus-opcua` are read this way.
+pub fn raw_table<T: serde::de::DeserializeOwned + Default>(
+    table: Option<&toml::Table>,
+) -> Result<T, String> {
+    let Some(t) = table else {
+        return Ok(T::default());
+    };
+    toml::Value::Table(t.clone()).try_into::<T>().map_err(|e| {
+        let m = e.message();
+        let key = m
+            .split('`')
+            .nth(1)
+            .filter(|_| m.starts_with("unknown field"));
+        key.unwrap_or(m).to_string()
+    })
+}
+
 impl MqttSettings {
     /// Settings from a bus file's `[mqtt]` table (`None`: all defaults);
     /// `default_bus` names the bus when the table does not.
@@ -563,20 +583,7 @@ impl MqttSettings {
         table: Option<&toml::Table>,
         default_bus: &str,
     ) -> Result<MqttSettings, SettingsError> {
-        let t = match table {
-            None => RawSettings::default(),
-            Some(t) => toml::Value::Table(t.clone())
-                .try_into::<RawSettings>()
-                .map_err(|e| {
-                    // The only error left: a key this version does not know.
-                    let m = e.message();
-                    let key = m
-                        .split('`')
-                        .nth(1)
-                        .filter(|_| m.starts_with("unknown field"));
-                    SettingsError::UnknownKey(key.unwrap_or(m).to_string())
-                })?,
-        };
+        let t: RawSettings = raw_table(table).map_err(SettingsError::UnknownKey)?;
         let bus = string(t.bus, "bus")?.unwrap_or_else(|| default_bus.to_string());
         if !topic_level(&bus) {
             return Err(bad("bus", format!("`{bus}` is not one topic level")));
@@ -823,27 +830,13 @@ fn access(v: RawAccess) -> Result<WriteAccess, SettingsError> {
 /// `mqtts://HOST[:PORT]` (`ssl://`) URL.
 pub fn parse_broker(url: &str) -> Result<Broker, SettingsError> {
     let bad = || SettingsError::BadUrl(url.to_string());
-    let (rest, tls) = [
-        ("mqtt://", false),
-        ("tcp://", false),
-        ("mqtts://", true),
-        ("ssl://", true),
-    ]
-    .iter()
-    .find_map(|(p, tls)| url.strip_prefix(p).map(|r| (r, *tls)))
-    .ok_or_else(bad)?;
-    let rest = rest.trim_end_matches('/');
-    let default = if tls { 8883 } else { 1883 };
-    let (host, port) = match rest.rsplit_once(':') {
-        Some((h, p)) if !h.ends_with(':') => (h, p.parse::<u16>().map_err(|_| bad())?),
-        _ => (rest, default),
-    };
-    if host.is_empty() || host.contains(['/', '@']) {
-        return Err(bad());
-    }
+    let u = crate::url::split_url(url, &["mqtt://", "tcp://", "mqtts://", "ssl://"])
+        .filter(|u| u.path.is_empty())
+        .ok_or_else(bad)?;
+    let tls = matches!(u.scheme, "mqtts://" | "ssl://");
     Ok(Broker {
-        host: host.trim_matches(['[', ']']).to_string(),
-        port,
+        host: u.host.to_string(),
+        port: u.port.unwrap_or(if tls { 8883 } else { 1883 }),
         tls,
     })
 }

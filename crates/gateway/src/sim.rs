@@ -8,6 +8,8 @@ use crate::link::MqttLink;
 use crate::session::Session;
 pub use crate::slave::slave_infos;
 use profibus_devices::bus::ProfiledBus;
+use profibus_dp::master::DpMaster;
+use profibus_fdl::Instant;
 use profibus_io::pace::Pacer;
 use profibus_plant::{Plant, PlantError};
 use std::future::Future;
@@ -21,10 +23,32 @@ use std::sync::Arc;
 /// client runs on the caller's tokio runtime.
 pub async fn serve<S: Session + Send + 'static>(
     profiled: ProfiledBus,
-    mut gateway: S,
-    mut link: MqttLink,
+    gateway: S,
+    link: MqttLink,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), PlantError> {
+    let (gateway, link) = run_plant(
+        profiled,
+        (gateway, link),
+        |(gateway, link), master, now| crate::link::step(link, gateway, master, now),
+        shutdown,
+    )
+    .await?;
+    let last = gateway.last_will();
+    link.close(last).await;
+    Ok(())
+}
+
+/// The plant of `profiled` paced on the wall clock ([`Pacer`]) on a
+/// thread of its own, `turn` called with `state`, the master and the
+/// plant's time after every turn, until `shutdown` ends; returns `state`.
+/// [`serve`] and the OPC UA server's simulated bus run on it.
+pub async fn run_plant<T: Send + 'static>(
+    profiled: ProfiledBus,
+    mut state: T,
+    mut turn: impl FnMut(&mut T, &mut DpMaster, Instant) + Send + 'static,
+    shutdown: impl Future<Output = ()>,
+) -> Result<T, PlantError> {
     let stop = Arc::new(AtomicBool::new(false));
     let (done, mut ended) = tokio::sync::oneshot::channel();
     let flag = stop.clone();
@@ -34,12 +58,12 @@ pub async fn serve<S: Session + Send + 'static>(
             while !flag.load(Ordering::Relaxed) {
                 let pause = pacer.turn(plant.now(), |t| plant.run_until(t));
                 let now = plant.now();
-                crate::link::step(&mut link, &mut gateway, plant.master(), now);
+                turn(&mut state, plant.master(), now);
                 // Pacing the simulated line, not waiting for an event.
                 std::thread::sleep(pause);
             }
         });
-        let _ = done.send(run.map(|()| (gateway, link)));
+        let _ = done.send(run.map(|()| state));
     });
     let result = tokio::select! {
         _ = shutdown => {
@@ -48,8 +72,5 @@ pub async fn serve<S: Session + Send + 'static>(
         }
         r = &mut ended => r,
     };
-    let (gateway, link) = result.expect("the bus thread answers")?;
-    let last = gateway.last_will();
-    link.close(last).await;
-    Ok(())
+    result.expect("the bus thread answers")
 }

@@ -216,6 +216,12 @@ impl Session for Face {
         Session::settings_mut(&mut self.core)
     }
 
+    /// The core's reload (its report-by-exception filters retuned); the
+    /// access levels follow at the next [`step`](Session::step).
+    fn reload(&mut self, settings: MqttSettings) {
+        self.core.reload(settings);
+    }
+
     fn link_setup(&self) -> LinkSetup {
         Session::link_setup(&self.core)
     }

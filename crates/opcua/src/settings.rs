@@ -127,31 +127,15 @@ fn boolean(v: Option<toml::Value>, key: &'static str) -> Result<Option<bool>, Se
     }
 }
 
-/// `opc.tcp://HOST[:PORT][/PATH]` as host, port and path.
+/// `opc.tcp://HOST[:PORT][/PATH]` as host, port and path (split as the
+/// MQTT broker's URL, [`profibus_gateway::url::split_url`]).
 pub fn parse_endpoint(url: &str) -> Result<(String, u16, String), SettingsError> {
-    let err = || SettingsError::BadUrl(url.to_string());
-    let rest = url.strip_prefix("opc.tcp://").ok_or_else(err)?;
-    let (authority, path) = rest.split_once('/').unwrap_or((rest, ""));
-    let (host, port) = if let Some(v6) = authority.strip_prefix('[') {
-        let (h, after) = v6.split_once(']').ok_or_else(err)?;
-        (h, after.strip_prefix(':'))
-    } else {
-        match authority.rsplit_once(':') {
-            Some((h, p)) => (h, Some(p)),
-            None => (authority, None),
-        }
-    };
-    if host.is_empty() {
-        return Err(err());
-    }
-    let port = match port {
-        None => DEFAULT_PORT,
-        Some(p) => p.parse::<u16>().ok().filter(|p| *p > 0).ok_or_else(err)?,
-    };
+    let u = profibus_gateway::url::split_url(url, &["opc.tcp://"])
+        .ok_or_else(|| SettingsError::BadUrl(url.to_string()))?;
     Ok((
-        host.to_string(),
-        port,
-        path.trim_end_matches('/').to_string(),
+        u.host.to_string(),
+        u.port.unwrap_or(DEFAULT_PORT),
+        u.path.to_string(),
     ))
 }
 
@@ -221,19 +205,8 @@ impl OpcuaSettings {
         insecure: bool,
         dir: &Path,
     ) -> Result<OpcuaSettings, SettingsError> {
-        let raw = match table {
-            None => Raw::default(),
-            Some(t) => toml::Value::Table(t.clone())
-                .try_into::<Raw>()
-                .map_err(|e| {
-                    let m = e.message();
-                    let key = m
-                        .split('`')
-                        .nth(1)
-                        .filter(|_| m.starts_with("unknown field"));
-                    SettingsError::UnknownKey(key.unwrap_or(m).to_string())
-                })?,
-        };
+        let raw: Raw =
+            profibus_gateway::settings::raw_table(table).map_err(SettingsError::UnknownKey)?;
         let written = string(raw.endpoint, "endpoint")?;
         let url = endpoint
             .map(str::to_string)

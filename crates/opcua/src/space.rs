@@ -168,6 +168,47 @@ fn arg(name: &str, ty: DataTypeId) -> Argument {
     }
 }
 
+/// A method's name, input and output arguments.
+type Signature = (&'static str, Vec<Argument>, Vec<Argument>);
+
+/// `ReadRecord(Slot, Index, Length) → Data` and `WriteRecord(Slot,
+/// Index, Data)` of DP-V1 slaves (MSAC_C1 Read and Write).
+fn record_methods() -> [Signature; 2] {
+    let byte = |n| arg(n, DataTypeId::Byte);
+    let data = || arg("Data", DataTypeId::ByteString);
+    [
+        (
+            "ReadRecord",
+            vec![byte("Slot"), byte("Index"), byte("Length")],
+            vec![data()],
+        ),
+        (
+            "WriteRecord",
+            vec![byte("Slot"), byte("Index"), data()],
+            vec![],
+        ),
+    ]
+}
+
+/// `PkwRead(Parameter, Index) → Value` and `PkwWrite(Parameter, Index,
+/// Value)` of slaves with a PKW channel.
+fn pkw_methods() -> [Signature; 2] {
+    let word = |n| arg(n, DataTypeId::UInt16);
+    let value = || arg("Value", DataTypeId::Int64);
+    [
+        (
+            "PkwRead",
+            vec![word("Parameter"), word("Index")],
+            vec![value()],
+        ),
+        (
+            "PkwWrite",
+            vec![word("Parameter"), word("Index"), value()],
+            vec![],
+        ),
+    ]
+}
+
 impl Space {
     fn id(&self, path: &str) -> NodeId {
         NodeId::new(self.ns, format!("{}.{path}", self.bus))
@@ -271,42 +312,15 @@ impl Space {
             .organized_by(root)
             .insert(sp);
         let s = &space;
-        s.variable(
-            sp,
-            &s.id("MasterState"),
-            "MasterState",
-            &bus_id,
-            DataTypeId::String,
-            "",
-            false,
-        );
-        s.variable(
-            sp,
-            &s.id("Cycles"),
-            "Cycles",
-            &bus_id,
-            DataTypeId::UInt64,
-            0u64,
-            false,
-        );
-        s.variable(
-            sp,
-            &s.id("CycleTimeAvg"),
-            "CycleTimeAvg",
-            &bus_id,
-            DataTypeId::Double,
-            0.0,
-            false,
-        );
-        s.variable(
-            sp,
-            &s.id("CycleTimeMax"),
-            "CycleTimeMax",
-            &bus_id,
-            DataTypeId::Double,
-            0.0,
-            false,
-        );
+        let counters: [(&str, DataTypeId, Variant); 4] = [
+            ("MasterState", DataTypeId::String, "".into()),
+            ("Cycles", DataTypeId::UInt64, 0u64.into()),
+            ("CycleTimeAvg", DataTypeId::Double, 0.0.into()),
+            ("CycleTimeMax", DataTypeId::Double, 0.0.into()),
+        ];
+        for (n, ty, v) in counters {
+            s.variable(sp, &s.id(n), n, &bus_id, ty, v, false);
+        }
         for u in ["CycleTimeAvg", "CycleTimeMax"] {
             s.property(
                 sp,
@@ -401,35 +415,22 @@ impl Space {
                 0u16,
             );
         }
-        self.variable(
-            sp,
-            &p("State"),
-            "State",
-            &obj,
-            DataTypeId::String,
-            "",
-            false,
-        );
         let diag = p("Diagnosis");
         self.object(sp, &diag, "Diagnosis", &obj);
-        self.variable(
-            sp,
-            &p("Diagnosis.Text"),
-            "Text",
-            &diag,
-            DataTypeId::String,
-            "",
-            false,
-        );
-        self.variable(
-            sp,
-            &p("Diagnosis.Raw"),
-            "Raw",
-            &diag,
-            DataTypeId::ByteString,
-            ByteString::null(),
-            false,
-        );
+        let status: [(&str, &NodeId, DataTypeId, Variant); 3] = [
+            ("State", &obj, DataTypeId::String, "".into()),
+            ("Diagnosis.Text", &diag, DataTypeId::String, "".into()),
+            (
+                "Diagnosis.Raw",
+                &diag,
+                DataTypeId::ByteString,
+                ByteString::null().into(),
+            ),
+        ];
+        for (path, parent, ty, v) in status {
+            let name = path.rsplit('.').next().unwrap_or(path);
+            self.variable(sp, &p(path), name, parent, ty, v, false);
+        }
         let stats = p("Statistics");
         self.object(sp, &stats, "Statistics", &obj);
         for n in STATS {
@@ -510,59 +511,26 @@ impl Space {
             pkw_write: None,
             outputs,
         };
-        let method = |sp: &mut AddressSpace, n: &str, ins: &[Argument], outs: &[Argument]| {
+        let method = |sp: &mut AddressSpace, (n, ins, outs): &Signature| {
             let id = p(n);
-            MethodBuilder::new(&id, self.qn(n), n)
+            MethodBuilder::new(&id, self.qn(n), *n)
                 .component_of(obj.clone())
                 .executable(true)
                 .user_executable(true)
                 .input_args(sp, &p(&format!("{n}.InputArguments")), ins)
                 .output_args(sp, &p(&format!("{n}.OutputArguments")), outs)
                 .insert(sp);
-            id
+            Some(id)
         };
         if l.dpv1 {
-            nodes.read_record = Some(method(
-                sp,
-                "ReadRecord",
-                &[
-                    arg("Slot", DataTypeId::Byte),
-                    arg("Index", DataTypeId::Byte),
-                    arg("Length", DataTypeId::Byte),
-                ],
-                &[arg("Data", DataTypeId::ByteString)],
-            ));
-            nodes.write_record = Some(method(
-                sp,
-                "WriteRecord",
-                &[
-                    arg("Slot", DataTypeId::Byte),
-                    arg("Index", DataTypeId::Byte),
-                    arg("Data", DataTypeId::ByteString),
-                ],
-                &[],
-            ));
+            let [read, write] = record_methods();
+            nodes.read_record = method(sp, &read);
+            nodes.write_record = method(sp, &write);
         }
         if info.pkw.is_some() {
-            nodes.pkw_read = Some(method(
-                sp,
-                "PkwRead",
-                &[
-                    arg("Parameter", DataTypeId::UInt16),
-                    arg("Index", DataTypeId::UInt16),
-                ],
-                &[arg("Value", DataTypeId::Int64)],
-            ));
-            nodes.pkw_write = Some(method(
-                sp,
-                "PkwWrite",
-                &[
-                    arg("Parameter", DataTypeId::UInt16),
-                    arg("Index", DataTypeId::UInt16),
-                    arg("Value", DataTypeId::Int64),
-                ],
-                &[],
-            ));
+            let [read, write] = pkw_methods();
+            nodes.pkw_read = method(sp, &read);
+            nodes.pkw_write = method(sp, &write);
         }
         nodes
     }
