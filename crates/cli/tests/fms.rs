@@ -1,0 +1,349 @@
+//! `dpctl fms` with real processes on `dpctl bus` (issue 35's check): a
+//! `dpctl slave --device bk3000` with KL3102 and KL4002 in DP/FMS mixed
+//! mode (`--device-opt fms=mixed`) in Data_Exchange with `dpctl master`,
+//! and `dpctl fms` as a third master on the same bus: Read of a KL3102
+//! channel object is the status byte plus the very bytes Data_Exchange
+//! carries, Write of a KL4002 output channel object changes the terminal
+//! output, Get-OD lists the objects, Identify and Status answer; the
+//! master keeps Data_Exchange throughout (no restart). A coupler in
+//! DP-only mode, an absent station and a refused object are told in
+//! words.
+
+mod common;
+
+use common::{dpctl, run_dpctl, slave_of, Bus, Lines, Proc, TempDir};
+use serde_json::Value;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{ChildStdin, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const WAIT: Duration = Duration::from_secs(40);
+const STRIP: &str = "KL3102,KL4002,KL9010";
+
+/// `dpctl slave --device bk3000` at `addr` with `fms=MODE`, its events
+/// as JSON on stdout and control lines on stdin.
+fn coupler(link: &Path, addr: u8, mode: &str) -> (Proc, ChildStdin, Lines) {
+    let mut p = Proc::spawn(
+        &format!("dpctl slave {addr}"),
+        Command::new(dpctl())
+            .args(["slave", "--device", "bk3000", "--terminals", STRIP])
+            .args(["--device-opt", &format!("fms={mode}")])
+            .args(["--addr", &addr.to_string(), "--baud", "1.5M"])
+            .args(["--json", "--control", "-", "--port"])
+            .arg(link)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null()),
+    );
+    let stdin = p.child.as_mut().unwrap().stdin.take().unwrap();
+    let lines = Lines::from(&mut p);
+    (p, stdin, lines)
+}
+
+fn bus_file(dir: &TempDir) -> PathBuf {
+    let list: Vec<String> = STRIP.split(',').map(|t| format!("\"{t}\"")).collect();
+    let p = dir.path("bus.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[master]\naddress = 2\nbaud = \"1.5M\"\n[options]\nreprobe_ms = 50\n\
+             [[slave]]\naddress = 5\ndevice = \"bk3000\"\nterminals = [{}]\n\
+             watchdog_ms = 5000\n",
+            list.join(", ")
+        ),
+    )
+    .unwrap();
+    p
+}
+
+/// The next status line of `dpctl master --json` that satisfies `ok`.
+fn status(lines: &mut Lines, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+    let end = Instant::now() + WAIT;
+    let mut seen = 0;
+    loop {
+        while seen < lines.1.len() {
+            let l = lines.1[seen].clone();
+            seen += 1;
+            if let Ok(v) = serde_json::from_str::<Value>(&l) {
+                if v["event"] == "status" && ok(&v) {
+                    return v;
+                }
+            }
+        }
+        assert!(Instant::now() < end, "timed out waiting for {what}");
+        lines.next_line(Duration::from_millis(100));
+    }
+}
+
+/// `dpctl fms --port LINK --addr 3 --baud 1.5M … ARGS`.
+fn fms(link: &Path, station: u8, args: &[&str]) -> common::Output {
+    let link = link.display().to_string();
+    let station = station.to_string();
+    let mut all = vec![
+        "fms",
+        "--port",
+        &link,
+        "--station",
+        &station,
+        "--addr",
+        "3",
+        "--baud",
+        "1.5M",
+        "--latency",
+        "100",
+    ];
+    all.extend_from_slice(args);
+    run_dpctl(&all)
+}
+
+/// The one JSON line of a successful `dpctl fms --json`.
+fn ok_json(out: &common::Output) -> Value {
+    assert!(out.status.success(), "{out:?}");
+    let v: Value =
+        serde_json::from_str(out.stdout.trim()).unwrap_or_else(|e| panic!("{e}: {out:?}"));
+    assert_eq!(v["ok"], true, "{v}");
+    v
+}
+
+fn bytes(hex: &Value) -> Vec<u8> {
+    hex.as_str()
+        .unwrap()
+        .split_whitespace()
+        .map(|b| u8::from_str_radix(b, 16).unwrap())
+        .collect()
+}
+
+#[test]
+fn fms_reads_writes_and_lists_a_bk3000_while_its_master_keeps_data_exchange() {
+    let dir = TempDir::new("fms");
+    let bus = Bus::start(4, &[]);
+    let (_s, mut control, mut events) = coupler(&bus.link(1), 5, "mixed");
+    let (_dp, _dp_in, _dp_events) = coupler(&bus.link(3), 6, "dp");
+    // Fixed inputs: what the master sees and what FMS reads must agree
+    // byte for byte.
+    writeln!(control, "set 1.KL3102.1 2.5").unwrap();
+    writeln!(control, "set 1.KL3102.2 -1.25").unwrap();
+    control.flush().unwrap();
+    assert!(
+        events.wait_for("pinned to -1.250 V", WAIT),
+        "{:?}",
+        events.1
+    );
+    let cfg = bus_file(&dir);
+    let mut m = Proc::spawn(
+        "dpctl master",
+        Command::new(dpctl())
+            .args(["master", "--json", "--interval", "100", "--latency", "100"])
+            .arg("--port")
+            .arg(bus.link(2))
+            .arg("--config")
+            .arg(&cfg)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null()),
+    );
+    let mut lines = Lines::from(&mut m);
+    let pinned = |v: &Value| {
+        let s = slave_of(v, 5);
+        s["state"] == "data_exchange"
+            && s["channels"]["inputs"]["1.KL3102.2"]
+                .as_f64()
+                .is_some_and(|x| (x + 1.25).abs() < 0.01)
+    };
+    let dx0 = status(&mut lines, "data exchange with pinned inputs", pinned);
+    let dx0 = slave_of(&dx0, 5)["data_exchanges"].as_u64().unwrap();
+    let link = bus.link(0);
+
+    // Read the KL3102's channel objects (slot 1: 2020, 2022): status byte
+    // plus the bytes the master's Data_Exchange carries (the BK3000's
+    // default compact mapping: channel 1 in input bytes 0-1, channel 2 in
+    // 2-3, no status byte, so it reads 0).
+    let r1 = ok_json(&fms(&link, 5, &["--json", "read", "2020"]));
+    let r2 = ok_json(&fms(&link, 5, &["--json", "read", "2022"]));
+    let seen = status(&mut lines, "a status after the reads", pinned);
+    let dx_inputs = bytes(&slave_of(&seen, 5)["inputs"]);
+    let (c1, c2) = (bytes(&r1["data"]), bytes(&r2["data"]));
+    assert_eq!(c1.len(), 3, "{r1}");
+    assert_eq!(c1[0], 0, "status byte: {r1}");
+    assert_eq!(c1[1..], dx_inputs[0..2], "{r1} vs {seen}");
+    assert_eq!(c2[1..], dx_inputs[2..4], "{r2} vs {seen}");
+    assert_eq!(r1["name"], "1.KL3102.1 input");
+    assert_eq!(r1["type"], "Unsigned8");
+    assert_eq!(r1["value"][1], c1[1], "decoded by the description: {r1}");
+
+    // Write the KL4002's channel 1 (slot 2: 2041): 0x2000 = 2.5 V at the
+    // terminal; the master's unchanged outputs keep it.
+    let w = fms(&link, 5, &["write", "2041", "00 20 00"]);
+    assert!(w.status.success(), "{w:?}");
+    assert_eq!(
+        w.stdout.trim(),
+        "station 5: index 2041: ok (wrote 00 20 00)"
+    );
+    assert!(
+        events.wait_for("2.KL4002.1=2.500 V", WAIT),
+        "the terminal output did not change: {:?}",
+        events.1
+    );
+    let back = ok_json(&fms(&link, 5, &["--json", "read", "2041"]));
+    assert_eq!(back["data"], "00 20 00", "{back}");
+
+    // The object dictionary, in JSON and as a table.
+    let od = ok_json(&fms(&link, 5, &["--json", "get-od"]));
+    let objects = od["objects"].as_array().unwrap();
+    let find = |i: u64| {
+        objects
+            .iter()
+            .find(|o| o["index"] == i)
+            .unwrap_or_else(|| panic!("no object {i}: {od}"))
+    };
+    for (i, name, access) in [
+        (2020, "1.KL3102.1 input", "r"),
+        (2022, "1.KL3102.2 input", "r"),
+        (2041, "2.KL4002.1 output", "rw"),
+        (2043, "2.KL4002.2 output", "rw"),
+    ] {
+        let o = find(i);
+        assert_eq!(
+            (&o["name"], &o["access"], &o["object_code"], &o["length"]),
+            (
+                &Value::from(name),
+                &Value::from(access),
+                &Value::from("Array"),
+                &Value::from(3)
+            ),
+            "{o}"
+        );
+    }
+    assert_eq!(find(5)["object_code"], "Data Type");
+    assert_eq!(od["header"]["objects"].as_u64(), Some(objects.len() as u64));
+    let table = fms(&link, 5, &["get-od"]);
+    assert!(table.status.success(), "{table:?}");
+    assert!(
+        table
+            .stdout
+            .lines()
+            .any(|l| l.split_whitespace().collect::<Vec<_>>()
+                == [
+                    "2041",
+                    "Array",
+                    "Unsigned8",
+                    "3",
+                    "rw",
+                    "2.KL4002.1",
+                    "output"
+                ]),
+        "{}",
+        table.stdout
+    );
+
+    // Identify and Status in words.
+    let id = fms(&link, 5, &["identify"]);
+    assert_eq!(
+        id.stdout.trim(),
+        "station 5: vendor Beckhoff, model BK3000, revision emulated",
+        "{id:?}"
+    );
+    let st = ok_json(&fms(&link, 5, &["--json", "status"]));
+    assert_eq!(
+        (&st["logical"], &st["physical"]),
+        (
+            &Value::from("ready for communication"),
+            &Value::from("operational")
+        )
+    );
+
+    // Errors in words: a read-only object, a missing one, a coupler in
+    // DP-only mode, an absent station.
+    let e = fms(&link, 5, &["write", "2020", "00 00 00"]);
+    assert!(!e.status.success());
+    assert_eq!(
+        e.stderr.trim(),
+        "dpctl: station 5: Write index 2020: object access denied (class 6, code 2, additional code 0)"
+    );
+    let e = fms(&link, 5, &["--json", "read", "2999"]);
+    assert!(!e.status.success());
+    let v: Value = serde_json::from_str(e.stdout.trim()).unwrap();
+    assert_eq!(
+        (&v["ok"], &v["error_class"], &v["error_code"]),
+        (&Value::from(false), &Value::from(6), &Value::from(7)),
+        "{v}"
+    );
+    assert!(
+        v["error"]
+            .as_str()
+            .unwrap()
+            .contains("object does not exist"),
+        "{v}"
+    );
+    let e = fms(&link, 6, &["identify"]);
+    assert!(!e.status.success());
+    assert!(
+        e.stderr.starts_with(
+            "dpctl: station 6: the station answered RS (SAP not activated): \
+             it serves no FMS connection on LSAP 40"
+        ),
+        "{e:?}"
+    );
+    let e = fms(&link, 9, &["status"]);
+    assert!(!e.status.success());
+    assert!(
+        e.stderr
+            .starts_with("dpctl: station 9: no answer from the station"),
+        "{e:?}"
+    );
+
+    // The class-1 master kept its slave all along.
+    let v = status(&mut lines, "data exchange goes on", |v| {
+        slave_of(v, 5)["data_exchanges"].as_u64().unwrap() > dx0 + 20
+    });
+    assert_eq!(slave_of(&v, 5)["state"], "data_exchange");
+    assert_eq!(slave_of(&v, 5)["restarts"], 0, "{v}");
+    let left: Vec<&String> = lines
+        .1
+        .iter()
+        .filter(|l| l.contains(r#""event":"state""#) && l.contains(r#""from":"data_exchange""#))
+        .collect();
+    assert!(left.is_empty(), "the slave left Data_Exchange: {left:#?}");
+    // The coupler saw each connection come and go.
+    assert!(
+        events
+            .1
+            .iter()
+            .any(|l| l.contains("client 3 connected") && l.contains("\"fms\"")),
+        "{:?}",
+        events.1
+    );
+    m.terminate(Duration::from_secs(5));
+}
+
+#[test]
+fn usage_errors_are_one_line() {
+    let e = run_dpctl(&[
+        "fms",
+        "--port",
+        "/nonexistent",
+        "--station",
+        "5",
+        "--addr",
+        "5",
+        "identify",
+    ]);
+    assert!(!e.status.success());
+    assert_eq!(
+        e.stderr.trim(),
+        "dpctl: --addr 5 is the server's address: the FMS client needs its own"
+    );
+    let e = run_dpctl(&[
+        "fms",
+        "--port",
+        "/nonexistent",
+        "--station",
+        "5",
+        "write",
+        "2041",
+        "0g",
+    ]);
+    assert!(!e.status.success());
+    assert!(e.stderr.starts_with("dpctl: "), "{e:?}");
+    assert_eq!(e.stderr.trim().lines().count(), 1, "{e:?}");
+}
