@@ -57,6 +57,8 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 /// or more). Empty when none is close.
 pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
     let want = normalize(name);
+    let want_len = want.chars().count();
+    let limit = (want_len + 2) / 4;
     let mut scored: Vec<(usize, &'a str)> = vec![];
     let mut containing = vec![];
     for c in candidates {
@@ -64,10 +66,15 @@ pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) ->
             continue;
         }
         let n = normalize(c);
-        let d = edit_distance(&want, &n);
-        if d <= (want.chars().count() + 2) / 4 || n == want {
+        // The distance is at least the difference in length: skip the
+        // quadratic edit distance when that alone is beyond the limit
+        // (a long misspelling against short names costs nothing then).
+        let close = (want_len.abs_diff(n.chars().count()) <= limit)
+            .then(|| edit_distance(&want, &n))
+            .filter(|&d| d <= limit);
+        if let Some(d) = close {
             scored.push((d, c));
-        } else if want.chars().count() >= 3 && n.contains(&want) {
+        } else if want_len >= 3 && n.contains(&want) {
             containing.push(c);
         }
     }
