@@ -485,3 +485,56 @@ fn primary_host_state_holds_data_and_rebirths() {
         Some(&MetricValue::BytesValue(vec![9, 9, 9, 9]))
     );
 }
+
+/// `[mqtt] alerts`: the NBIRTH declares `Bus/Alert` (String, alias 7,
+/// empty before the first alert); a rule that holds sends each alert in
+/// an NDATA of its own, by alias, with the alert's JSON (rule, station,
+/// value), at most once per alert interval.
+#[test]
+fn alerts_go_out_as_the_bus_alert_node_metric() {
+    use profibus_dp::monitor::alert::AlertRule;
+    use profibus_gateway::sparkplug::ALERT;
+    let mut r = Rig::with(|s| {
+        s.alerts = vec![AlertRule::parse("3:requests>0").unwrap()];
+        s.alert_interval = std::time::Duration::from_millis(200);
+    });
+    r.node.connected(0);
+    let msgs = r.until("spBv1.0/G/DBIRTH/E/4");
+    let nbirth = find(&msgs, "spBv1.0/G/NBIRTH/E");
+    let born = nbirth
+        .metrics
+        .iter()
+        .find(|m| m.name.as_deref() == Some(ALERT))
+        .expect("Bus/Alert in the NBIRTH");
+    assert_eq!(born.alias, Some(7));
+    assert_eq!(born.datatype, Some(DataType::String as u32));
+    assert_eq!(born.value, Some(MetricValue::StringValue(String::new())));
+    // The rule holds in every interval (slave 3 is polled): alerts come
+    // as NDATA with only Bus/Alert in them.
+    let mut alerts = vec![];
+    let start = r.t;
+    while alerts.len() < 3 {
+        assert!(r.t - start < 2000, "3 alerts within 2 s of bus time");
+        for (t, p) in r.tick() {
+            if t != "spBv1.0/G/NDATA/E" {
+                continue;
+            }
+            if let Some(MetricValue::StringValue(json)) = value(&p, ALERT) {
+                assert_eq!(p.metrics.len(), 1, "an alert in an NDATA of its own");
+                assert_eq!(p.metrics[0].alias, Some(7));
+                alerts.push((r.t, json.clone()));
+            }
+        }
+    }
+    for (_, json) in &alerts {
+        let v: serde_json::Value = serde_json::from_str(json).unwrap();
+        assert_eq!(v["rule"], "3:requests>0", "{v}");
+        assert_eq!(v["station"], 3, "{v}");
+        assert!(v["value"].as_f64().unwrap() > 0.0, "{v}");
+    }
+    let gaps: Vec<u64> = alerts.windows(2).map(|w| w[1].0 - w[0].0).collect();
+    assert!(
+        gaps.iter().all(|g| *g >= 190),
+        "one per 200 ms interval: {gaps:?}"
+    );
+}
