@@ -20,20 +20,21 @@
 //! (the test `layers` checks it), so the cores know no connection and
 //! nothing below the driver knows the simulated plant.
 //!
-//! 1. [`field`]: a field parsed leniently, checked afterwards.
-//! 2. [`topics`]: the topic names, plain and Sparkplug B.
-//! 3. [`slave`]: what the gateway knows of a configured slave.
-//! 4. [`settings`]: the `[mqtt]` table.
-//! 5. [`alerts`]: alert rules on the master's per-slave statistics.
-//! 6. [`traffic`]: report by exception (deadbands, minimum interval).
-//! 7. [`request`]: requests from clients, parsed from their payloads.
-//! 8. [`payload`]: the JSON payloads the plain mode publishes.
-//! 9. [`session`]: the [`Session`] interface of the cores, [`Publish`].
-//! 10. [`outage`]: the outputs while the broker is away.
-//! 11. [`json`]: the plain JSON core, [`Gateway`].
-//! 12. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
-//! 13. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
-//! 14. [`sim`]: the simulated plant of `dpctl gateway --sim`.
+//! 1. [`url`]: broker and endpoint URLs split into host, port and path.
+//! 2. [`field`]: a field parsed leniently, checked afterwards.
+//! 3. [`topics`]: the topic names, plain and Sparkplug B.
+//! 4. [`slave`]: what the gateway knows of a configured slave.
+//! 5. [`settings`]: the `[mqtt]` table.
+//! 6. [`alerts`]: alert rules on the master's per-slave statistics.
+//! 7. [`traffic`]: report by exception (deadbands, minimum interval).
+//! 8. [`request`]: requests from clients, parsed from their payloads.
+//! 9. [`payload`]: the JSON payloads the plain mode publishes.
+//! 10. [`session`]: the [`Session`] interface of the cores, [`Publish`].
+//! 11. [`outage`]: the outputs while the broker is away.
+//! 12. [`json`]: the plain JSON core, [`Gateway`].
+//! 13. [`sparkplug`]: the Sparkplug B core, [`EdgeNode`].
+//! 14. [`link`]: the MQTT connection on `rumqttc` and tokio, [`MqttLink`].
+//! 15. [`sim`]: the simulated plant of `dpctl gateway --sim`.
 //!
 //! # Example
 //!
@@ -116,7 +117,8 @@ pub use topics::{Service, SparkplugId, Topics};
 
 /// The module order of the crate documentation's layers.
 #[cfg(test)]
-const LAYERS: [&str; 14] = [
+const LAYERS: [&str; 15] = [
+    "url",
     "field",
     "topics",
     "slave",
