@@ -11,39 +11,11 @@ use common::mqtt::{self, broker, echo_bus_text, echo_slave, free_port, write_bus
 use common::{dpctl, require, Lines, Proc, TempDir};
 use std::collections::HashMap;
 use std::io::Write;
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const T: Duration = Duration::from_secs(30);
 const MESSAGE: &str = "org.eclipse.tahu.protobuf.Payload";
-
-fn proto_dir() -> PathBuf {
-    common::repo().join("crates/gateway/proto")
-}
-
-/// Run protoc with `mode` (`--decode=…` / `--encode=…`) on `input`.
-fn protoc(mode: &str, input: &[u8]) -> Vec<u8> {
-    require("protoc");
-    let mut p = Command::new("protoc")
-        .arg("-I")
-        .arg(proto_dir())
-        .arg(mode)
-        .arg("sparkplug_b.proto")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("protoc");
-    p.stdin.take().unwrap().write_all(input).unwrap();
-    let out = p.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "protoc {mode} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
 
 /// A payload as protoc decodes it: the top-level fields and the metrics,
 /// each as `field -> value` text (strings keep their quotes).
@@ -55,7 +27,7 @@ struct Decoded {
 
 impl Decoded {
     fn parse(bytes: &[u8]) -> Decoded {
-        let text = String::from_utf8(protoc(&format!("--decode={MESSAGE}"), bytes)).unwrap();
+        let text = String::from_utf8(mqtt::protoc(&format!("--decode={MESSAGE}"), bytes)).unwrap();
         let mut d = Decoded {
             fields: HashMap::new(),
             metrics: vec![],
@@ -218,7 +190,7 @@ impl Sub {
 /// Publish a command written in protobuf text format, encoded by protoc.
 fn command(port: u16, topic: &str, text: &str) {
     require("mosquitto_pub");
-    let payload = protoc(&format!("--encode={MESSAGE}"), text.as_bytes());
+    let payload = mqtt::protoc(&format!("--encode={MESSAGE}"), text.as_bytes());
     let mut p = Command::new("mosquitto_pub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string()])
         .args(["-t", topic, "-s"])

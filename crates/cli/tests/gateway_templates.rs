@@ -22,32 +22,9 @@ const MESSAGE: &str = "org.eclipse.tahu.protobuf.Payload";
 /// The template of the GSD slaves (DPCTL_GEN.GSD's `Model_Name`).
 const GENERIC: &str = "dpctl generic slave";
 
-/// Run protoc with `mode` (`--decode=…` / `--encode=…`) on `input`.
-fn protoc(mode: &str, input: &[u8]) -> Vec<u8> {
-    require("protoc");
-    let mut p = Command::new("protoc")
-        .arg("-I")
-        .arg(common::repo().join("crates/gateway/proto"))
-        .arg(mode)
-        .arg("sparkplug_b.proto")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("protoc");
-    p.stdin.take().unwrap().write_all(input).unwrap();
-    let out = p.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "protoc {mode} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
-
 /// A payload as protoc decodes it, as a [`text_tree`].
 fn decode(payload: &[u8]) -> Value {
-    let text = protoc(&format!("--decode={MESSAGE}"), payload);
+    let text = mqtt::protoc(&format!("--decode={MESSAGE}"), payload);
     text_tree(&String::from_utf8(text).unwrap())
 }
 
@@ -152,7 +129,7 @@ impl Sub {
 /// Publish a payload written in protobuf text format, encoded by protoc.
 fn command(port: u16, topic: &str, text: &str) {
     require("mosquitto_pub");
-    let payload = protoc(&format!("--encode={MESSAGE}"), text.as_bytes());
+    let payload = mqtt::protoc(&format!("--encode={MESSAGE}"), text.as_bytes());
     let mut p = Command::new("mosquitto_pub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string()])
         .args(["-t", topic, "-s"])

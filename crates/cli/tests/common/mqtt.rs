@@ -203,3 +203,30 @@ pub fn sim_gateway(global: &[&str], bus: &Path, port: u16) -> Command {
         .stdout(Stdio::piped());
     cmd
 }
+
+/// Run `protoc` with `mode` (`--decode=…` / `--encode=…`) on `input`
+/// against the Sparkplug B specification's `sparkplug_b.proto` (the
+/// independent payload decoder of the Sparkplug tests); fails (never
+/// skips) when protoc is missing.
+pub fn protoc(mode: &str, input: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    require("protoc");
+    let mut p = Command::new("protoc")
+        .arg("-I")
+        .arg(super::repo().join("crates/gateway/proto"))
+        .arg(mode)
+        .arg("sparkplug_b.proto")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("protoc");
+    p.stdin.take().unwrap().write_all(input).unwrap();
+    let out = p.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "protoc {mode} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
