@@ -694,35 +694,6 @@ pub fn generic_slave(
     cmd
 }
 
-#[cfg(test)]
-mod tempdir_tests {
-    /// Tests run on parallel threads and ask for temp dirs at the same
-    /// moment (two tests of `rfid.rs` once got the same one, and then the
-    /// same pty link): every `TempDir` is a directory of its own.
-    #[test]
-    fn temp_dirs_made_at_once_on_many_threads_are_distinct() {
-        use super::TempDir;
-        use std::collections::BTreeSet;
-        const THREADS: usize = 8;
-        const EACH: usize = 200;
-        let start = std::sync::Barrier::new(THREADS);
-        let dirs: Vec<TempDir> = std::thread::scope(|s| {
-            let made: Vec<_> = (0..THREADS)
-                .map(|_| {
-                    s.spawn(|| {
-                        start.wait();
-                        (0..EACH).map(|_| TempDir::new("same")).collect::<Vec<_>>()
-                    })
-                })
-                .collect();
-            made.into_iter().flat_map(|t| t.join().unwrap()).collect()
-        });
-        let paths: BTreeSet<_> = dirs.iter().map(|d| d.0.clone()).collect();
-        assert_eq!(paths.len(), THREADS * EACH, "two TempDirs share a path");
-        assert!(dirs.iter().all(|d| d.0.is_dir()));
-    }
-}
-
 /// Seconds since the Unix epoch (to compare the read times of [`Timed`]
 /// lines across processes).
 pub fn wall() -> f64 {
@@ -809,3 +780,32 @@ impl Timed {
 
 /// How long [`Timed::wait`] waits for a line.
 pub const TIMED_WAIT: Duration = Duration::from_secs(60);
+
+#[cfg(test)]
+mod tempdir_tests {
+    /// Tests run on parallel threads and ask for temp dirs at the same
+    /// moment (two tests of `rfid.rs` once got the same one, and then the
+    /// same pty link): every `TempDir` is a directory of its own.
+    #[test]
+    fn temp_dirs_made_at_once_on_many_threads_are_distinct() {
+        use super::TempDir;
+        use std::collections::BTreeSet;
+        const THREADS: usize = 8;
+        const EACH: usize = 200;
+        let start = std::sync::Barrier::new(THREADS);
+        let dirs: Vec<TempDir> = std::thread::scope(|s| {
+            let made: Vec<_> = (0..THREADS)
+                .map(|_| {
+                    s.spawn(|| {
+                        start.wait();
+                        (0..EACH).map(|_| TempDir::new("same")).collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            made.into_iter().flat_map(|t| t.join().unwrap()).collect()
+        });
+        let paths: BTreeSet<_> = dirs.iter().map(|d| d.0.clone()).collect();
+        assert_eq!(paths.len(), THREADS * EACH, "two TempDirs share a path");
+        assert!(dirs.iter().all(|d| d.0.is_dir()));
+    }
+}
