@@ -20,8 +20,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// Listen to a bus (never send) and follow the master(s) on it: every
-/// slave's state, data, diagnosis, cycle times, retries and errors, and
-/// the masters in the token ring. On a terminal a refreshing table with
+/// slave's state, data, diagnosis, cycle times, retries and errors, the
+/// masters in the token ring, and FMS services (one event per confirmed
+/// service, connections per station). On a terminal a refreshing table with
 /// each station's role and health bar: `q` quit, `p` pause, up/down
 /// select a slave, Enter its details.
 #[derive(clap::Args, Debug)]

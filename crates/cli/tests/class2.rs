@@ -12,9 +12,7 @@ use common::{dpctl, repo, run_dpctl, slave_of, Bus, Lines, Proc, TempDir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
-
-const WAIT: Duration = Duration::from_secs(40);
+use std::time::Duration;
 
 /// The generic GSD with class 2 added (2 connections, 240 bytes).
 fn c2_gsd(dir: &TempDir) -> PathBuf {
@@ -76,25 +74,6 @@ fn master(link: &Path, config: &Path) -> (Proc, Lines) {
     (p, lines)
 }
 
-/// The next status line of `lines` that satisfies `ok`.
-fn status(lines: &mut Lines, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-    let end = Instant::now() + WAIT;
-    let mut seen = 0;
-    loop {
-        while seen < lines.1.len() {
-            let l = lines.1[seen].clone();
-            seen += 1;
-            if let Ok(v) = serde_json::from_str::<Value>(&l) {
-                if v["event"] == "status" && ok(&v) {
-                    return v;
-                }
-            }
-        }
-        assert!(Instant::now() < end, "timed out waiting for {what}");
-        lines.next_line(Duration::from_millis(100));
-    }
-}
-
 /// `dpctl ARGS --class2` to `slave` as master 3 on `link`, with the
 /// bus file.
 fn class2(link: &Path, config: &Path, slave: u8, args: &[&str]) -> common::Output {
@@ -128,7 +107,7 @@ fn a_class2_master_next_to_a_class1_master_keeps_the_slave_in_data_exchange() {
     let _s = slave(&bus.link(1), 10, &gsd);
     let cfg = bus_file(&dir, 2, 10, &gsd);
     let (mut m, mut lines) = master(&bus.link(2), &cfg);
-    let dx0 = status(&mut lines, "data exchange", |v| {
+    let dx0 = lines.status_from(&mut 0, "data exchange", |v| {
         slave_of(v, 10)["state"] == "data_exchange"
     });
     let dx0 = slave_of(&dx0, 10)["data_exchanges"].as_u64().unwrap();
@@ -226,7 +205,7 @@ fn a_class2_master_next_to_a_class1_master_keeps_the_slave_in_data_exchange() {
     );
 
     // The class-1 master kept its slave all along.
-    let v = status(&mut lines, "data exchange goes on", |v| {
+    let v = lines.status_from(&mut 0, "data exchange goes on", |v| {
         slave_of(v, 10)["data_exchanges"].as_u64().unwrap() > dx0 + 20
     });
     assert_eq!(slave_of(&v, 10)["state"], "data_exchange");

@@ -12,7 +12,7 @@ use common::{all_dx, dpctl, repo, Bus, Lines, Output, Proc, TempDir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const GUARD: Duration = Duration::from_secs(120);
 
@@ -257,30 +257,6 @@ fn check_plans(rows: &[Value], owner: Option<u8>) {
     );
 }
 
-/// Status lines of a `dpctl master --json` from line `pos` on until one
-/// satisfies `ok`: that line and the position after it.
-fn wait_status(
-    lines: &mut Lines,
-    mut pos: usize,
-    what: &str,
-    ok: impl Fn(&Value) -> bool,
-) -> (Value, usize) {
-    let end = Instant::now() + Duration::from_secs(60);
-    loop {
-        while pos < lines.1.len() {
-            let l = lines.1[pos].clone();
-            pos += 1;
-            if let Ok(v) = serde_json::from_str::<Value>(&l) {
-                if v["event"] == "status" && ok(&v) {
-                    return (v, pos);
-                }
-            }
-        }
-        assert!(Instant::now() < end, "timed out waiting for {what}");
-        let _ = lines.wait_for("\u{0}never", Duration::from_millis(100));
-    }
-}
-
 #[test]
 fn scan_writes_a_bus_file_the_master_runs_unchanged() {
     let dir = TempDir::new("commissioning");
@@ -315,7 +291,8 @@ fn scan_writes_a_bus_file_the_master_runs_unchanged() {
             .stderr(Stdio::null()),
     );
     let mut lines = Lines::from(&mut master);
-    let (v, from) = wait_status(&mut lines, 0, "every written slave in Data_Exchange", |v| {
+    let mut from = 0;
+    let v = lines.status_from(&mut from, "every written slave in Data_Exchange", |v| {
         all_dx(v) && v["slaves"].as_array().unwrap().len() == 3
     });
     let addrs: Vec<u64> = v["slaves"]
@@ -343,8 +320,8 @@ fn scan_writes_a_bus_file_the_master_runs_unchanged() {
     };
     assert_eq!(body(&text), body(&text2));
     // No slave left Data_Exchange while the second master scanned.
-    let after = lines.1.len();
-    wait_status(&mut lines, after, "a status line after the scan", |_| true);
+    let mut after = lines.1.len();
+    lines.status_from(&mut after, "a status line after the scan", |_| true);
     for l in &lines.1[from..] {
         if let Ok(v) = serde_json::from_str::<Value>(l) {
             if v["event"] == "status" {
@@ -441,7 +418,7 @@ fn scan_reads_im0_and_a_bk3000_strip() {
             .stderr(Stdio::null()),
     );
     let mut lines = Lines::from(&mut master);
-    wait_status(&mut lines, 0, "both written slaves in Data_Exchange", |v| {
+    lines.status_from(&mut 0, "both written slaves in Data_Exchange", |v| {
         all_dx(v) && v["slaves"].as_array().unwrap().len() == 2
     });
     // While the master holds them: I&M0 through class 2 all the same;

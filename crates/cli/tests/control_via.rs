@@ -17,7 +17,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const WAIT: Duration = Duration::from_secs(60);
 const BM4: u8 = 6;
@@ -85,23 +85,12 @@ fn status(
     mut check: impl FnMut(&Value),
     ok: impl Fn(&Value) -> bool,
 ) -> Value {
-    let end = Instant::now() + WAIT;
-    loop {
-        while *seen < lines.1.len() {
-            let l = lines.1[*seen].clone();
-            *seen += 1;
-            if let Ok(v) = serde_json::from_str::<Value>(&l) {
-                if v["event"] == "status" {
-                    check(&v);
-                    if ok(&v) {
-                        return v;
-                    }
-                }
-            }
+    lines.json_from(seen, what, |v| {
+        v["event"] == "status" && {
+            check(v);
+            ok(v)
         }
-        assert!(Instant::now() < end, "timed out waiting for {what}");
-        lines.next_line(Duration::from_millis(100));
-    }
+    })
 }
 
 /// `dpctl ARGS` (a one-shot command) through the control socket.

@@ -9,84 +9,12 @@
 mod common;
 
 use common::mqtt::{broker, free_port, subscribe, write_bus};
-use common::{dpctl, generic_slave, Bus, Proc, TempDir};
-use serde_json::Value;
-use std::io::{BufRead, BufReader};
+use common::{dpctl, generic_slave, wall, Bus, Proc, TempDir, Timed};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 /// Generous: processes on a loaded 2-core machine.
 const WAIT: Duration = Duration::from_secs(60);
-
-fn wall() -> f64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_secs_f64()
-}
-
-/// The JSON lines of `dpctl slave --json`, each with the wall time it
-/// was read.
-struct Events {
-    rx: mpsc::Receiver<(f64, String)>,
-    lines: Vec<(f64, Value)>,
-    pos: usize,
-}
-
-impl Events {
-    fn from(p: &mut Proc) -> Events {
-        let out = p.child.as_mut().unwrap().stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                if tx.send((wall(), l)).is_err() {
-                    break;
-                }
-            }
-        });
-        Events {
-            rx,
-            lines: vec![],
-            pos: 0,
-        }
-    }
-
-    /// The next event after the last one returned that satisfies `ok`.
-    fn wait(&mut self, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-        let end = Instant::now() + WAIT;
-        loop {
-            while self.pos < self.lines.len() {
-                self.pos += 1;
-                let v = &self.lines[self.pos - 1].1;
-                if ok(v) {
-                    return v.clone();
-                }
-            }
-            let left = end.saturating_duration_since(Instant::now());
-            assert!(
-                !left.is_zero(),
-                "timed out waiting for {what}; last events: {:#?}",
-                &self.lines[self.lines.len().saturating_sub(8)..]
-            );
-            if let Ok((t, l)) = self.rx.recv_timeout(left.min(Duration::from_millis(200))) {
-                if let Ok(v) = serde_json::from_str(&l) {
-                    self.lines.push((t, v));
-                }
-            }
-        }
-    }
-
-    /// Offset from the slave's `"t"` (s since its start) to wall time:
-    /// the smallest (read time − t) over its events (reading only ever
-    /// adds delay).
-    fn offset(&self) -> f64 {
-        self.lines
-            .iter()
-            .filter_map(|(w, v)| Some(w - v["t"].as_f64()?))
-            .fold(f64::INFINITY, f64::min)
-    }
-}
 
 #[test]
 fn a_terminated_gateway_clears_its_slaves_before_it_goes_offline() {
@@ -101,7 +29,7 @@ fn a_terminated_gateway_clears_its_slaves_before_it_goes_offline() {
             .stdout(Stdio::piped())
             .stderr(Stdio::null()),
     );
-    let mut events = Events::from(&mut slave);
+    let mut events = Timed::from(&mut slave);
     let bus = write_bus(
         &dir,
         "[master]\naddress = 1\nbaud = \"1.5M\"\n\n[[slave]]\naddress = 3\n\
@@ -175,12 +103,12 @@ fn a_terminated_gateway_clears_its_slaves_before_it_goes_offline() {
 
     // The slave clears its outputs because of the Global_Control, not
     // its watchdog (5 s), and reports the command.
-    let cleared = events.wait("outputs in the safe state", |v| {
+    let (_, cleared) = events.wait("outputs in the safe state", |v| {
         v["event"] == "outputs_cleared" || v["event"] == "watchdog"
     });
     assert_eq!(cleared["event"], "outputs_cleared", "{cleared}");
     assert_eq!(cleared["reason"], "Global_Control Clear_Data", "{cleared}");
-    let g = events.wait("Global_Control Clear_Data", |v| {
+    let (_, g) = events.wait("Global_Control Clear_Data", |v| {
         v["event"] == "global_control" && v["command"].as_str().is_some_and(|c| c.contains("Clear"))
     });
     assert_eq!(g["master"], 1, "{g}");

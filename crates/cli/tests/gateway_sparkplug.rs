@@ -622,14 +622,6 @@ for line in sys.stdin:
 /// and values agree with what the gateway meant.
 #[test]
 fn sparkplug_payloads_decode_with_pysparkplug() {
-    let py = common::python();
-    let ok = Command::new(&py)
-        .args(["-c", "import pysparkplug"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        common::need("pysparkplug in .venv (scripts/setup-test-env)");
-    }
     let dir = TempDir::new("sparkplug-py");
     let mqtt = "[mqtt]\nbus = \"line\"\nwritable = [3]\n";
     let bus = write_bus(&dir, &format!("{GATEWAY_SLAVES}pkw = false\n\n{mqtt}"));
@@ -655,21 +647,7 @@ fn sparkplug_payloads_decode_with_pysparkplug() {
             input += &format!("{kind} {hex}\n");
         }
     }
-    let mut p = Command::new(&py)
-        .args(["-c", PYSPARKPLUG])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    p.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
-    let out = p.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "pysparkplug: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let msgs = common::json_lines(String::from_utf8(out.stdout).unwrap().lines());
+    let msgs = mqtt::pysparkplug(PYSPARKPLUG, &input);
     let metric = |m: &serde_json::Value, name: &str| {
         m["metrics"]
             .as_array()

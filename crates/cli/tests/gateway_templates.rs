@@ -154,33 +154,11 @@ for line in sys.stdin:
 "#;
 
 fn pysparkplug(payloads: &[&[u8]]) -> Vec<Value> {
-    let py = common::python();
-    let ok = Command::new(&py)
-        .args(["-c", "import pysparkplug"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        common::need("pysparkplug in .venv (scripts/setup-test-env)");
-    }
     let input: String = payloads
         .iter()
         .map(|p| p.iter().map(|b| format!("{b:02x}")).collect::<String>() + "\n")
         .collect();
-    let mut p = Command::new(&py)
-        .args(["-c", PYSPARKPLUG])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    p.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
-    let out = p.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "pysparkplug: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    common::json_lines(String::from_utf8(out.stdout).unwrap().lines())
+    mqtt::pysparkplug(PYSPARKPLUG, &input)
 }
 
 fn py_named<'a>(ms: &'a Value, name: &str) -> &'a Value {

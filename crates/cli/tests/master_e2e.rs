@@ -89,24 +89,7 @@ struct Watch {
 impl Watch {
     /// Wait for a new status line that satisfies `ok`; returns it.
     fn status(&mut self, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-        let end = Instant::now() + WAIT;
-        loop {
-            while self.pos < self.lines.1.len() {
-                let l = &self.lines.1[self.pos];
-                self.pos += 1;
-                if let Ok(v) = serde_json::from_str::<Value>(l) {
-                    if v["event"] == "status" && ok(&v) {
-                        return v;
-                    }
-                }
-            }
-            assert!(
-                Instant::now() < end,
-                "timed out waiting for {what}; last lines: {:#?}",
-                &self.lines.1[self.lines.1.len().saturating_sub(5)..]
-            );
-            self.pull();
-        }
+        self.lines.status_from(&mut self.pos, what, ok)
     }
 
     /// Collect what arrived in the next 100 ms.

@@ -144,6 +144,13 @@ fn report_of_a_capture_with_a_restart_opens_in_a_browser() {
         dp(v, "Set_Prm", "request", ("da", 25))
     });
     wait_sniffed(&sniff, "slave 25 back in Data_Exchange", dx);
+    // A hundred telegrams more, so that the capture has more than 100
+    // however slowly a loaded machine ran the restart.
+    for n in 0..100 {
+        wait_sniffed(&sniff, &format!("telegram {n} after the restart"), |v| {
+            v["t_us"].is_u64() && v["event"].is_null()
+        });
+    }
     let out = sniff.stop();
     assert!(out.status.success(), "{out:?}");
 

@@ -7,104 +7,22 @@
 
 mod common;
 
-use common::{all_dx, dpctl, repo, send, slave_of, Bus, Proc, TempDir};
+use common::{all_dx, dpctl, repo, send, slave_of, wall, Bus, Proc, TempDir, Timed};
 use profibus::fdl::capture::pcap::PcapReader;
 use profibus::fdl::station::active::ActiveConfig;
 use profibus::fdl::wire::{FunctionCode, Telegram};
 use profibus::fdl::{Baud, BusParams};
 use serde_json::Value;
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 /// Generous: processes on a loaded 2-core machine.
 const WAIT: Duration = Duration::from_secs(60);
 
 fn gen_gsd() -> PathBuf {
     repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
-}
-
-fn wall() -> f64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_secs_f64()
-}
-
-/// Lines of a child's stdout with the wall time each was read.
-struct Timed {
-    rx: mpsc::Receiver<(f64, String)>,
-    lines: Vec<(f64, String)>,
-    pos: usize,
-}
-
-impl Timed {
-    fn from(p: &mut Proc) -> Timed {
-        let out = p.child.as_mut().unwrap().stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                if tx.send((wall(), l)).is_err() {
-                    break;
-                }
-            }
-        });
-        Timed {
-            rx,
-            lines: vec![],
-            pos: 0,
-        }
-    }
-
-    /// The next JSON line after the last one returned that satisfies
-    /// `ok`, with the wall time it was read.
-    fn wait(&mut self, what: &str, ok: impl Fn(&Value) -> bool) -> (f64, Value) {
-        let end = Instant::now() + WAIT;
-        loop {
-            while self.pos < self.lines.len() {
-                let (t, l) = &self.lines[self.pos];
-                self.pos += 1;
-                if let Ok(v) = serde_json::from_str::<Value>(l) {
-                    if ok(&v) {
-                        return (*t, v);
-                    }
-                }
-            }
-            let left = end.saturating_duration_since(Instant::now());
-            assert!(
-                !left.is_zero(),
-                "timed out waiting for {what}; last lines: {:#?}",
-                &self.lines[self.lines.len().saturating_sub(8)..]
-            );
-            if let Ok(l) = self.rx.recv_timeout(left.min(Duration::from_millis(200))) {
-                self.lines.push(l);
-            }
-        }
-    }
-
-    /// Forget what arrived so far: the next [`Timed::wait`] looks at
-    /// lines read from now on.
-    fn skip_to_end(&mut self) {
-        while let Ok(l) = self.rx.try_recv() {
-            self.lines.push(l);
-        }
-        self.pos = self.lines.len();
-    }
-
-    /// Offset from the child's `"t"` (s since its start) to wall time:
-    /// the smallest (read time − t) over its lines so far (reading only
-    /// ever adds delay).
-    fn offset(&self) -> f64 {
-        self.lines
-            .iter()
-            .filter_map(|(w, l)| {
-                let v: Value = serde_json::from_str(l).ok()?;
-                Some(w - v["t"].as_f64()?)
-            })
-            .fold(f64::INFINITY, f64::min)
-    }
 }
 
 /// `dpctl slave --json` on station `i`; stdout piped when `events`

@@ -11,7 +11,7 @@ mod common;
 use common::{all_dx, dpctl, repo, Bus, Lines, Output, Proc, TempDir};
 use serde_json::Value;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn gen_gsd() -> std::path::PathBuf {
     repo().join("crates/devices/gsd/DPCTL_GEN.GSD")
@@ -43,24 +43,6 @@ fn ok_json(out: &Output) -> Value {
     serde_json::from_str(out.stdout.trim()).unwrap_or_else(|e| panic!("{}: {e}", out.stdout))
 }
 
-/// The first status line from line `pos` on that satisfies `ok`, and the
-/// position after it.
-fn wait_status(lines: &mut Lines, mut pos: usize, ok: impl Fn(&Value) -> bool) -> usize {
-    let end = Instant::now() + Duration::from_secs(60);
-    loop {
-        while pos < lines.1.len() {
-            pos += 1;
-            if let Ok(v) = serde_json::from_str::<Value>(&lines.1[pos - 1]) {
-                if v["event"] == "status" && ok(&v) {
-                    return pos;
-                }
-            }
-        }
-        assert!(Instant::now() < end, "timed out: {:?}", lines.1.last());
-        let _ = lines.wait_for("\u{0}never", Duration::from_millis(100));
-    }
-}
-
 #[test]
 fn service_commands_beside_a_running_master() {
     let dir = TempDir::new("service");
@@ -88,7 +70,8 @@ fn service_commands_beside_a_running_master() {
             .stderr(Stdio::null()),
     );
     let mut lines = Lines::from(&mut master);
-    let from = wait_status(&mut lines, 0, all_dx);
+    let mut from = 0;
+    lines.status_from(&mut from, "every slave in Data_Exchange", all_dx);
 
     // Slave_Diag and Get_Cfg of the slave master 1 holds.
     let v = ok_json(&service(&bus, &["diag", "--json", "--slave", "8"]));
@@ -136,8 +119,8 @@ fn service_commands_beside_a_running_master() {
     assert_eq!(v["bytes"], "02 00");
 
     // Slave 8 never left Data_Exchange.
-    let after = lines.1.len();
-    wait_status(&mut lines, after, |_| true);
+    let mut after = lines.1.len();
+    lines.status_from(&mut after, "a status line after the commands", |_| true);
     for l in &lines.1[from..] {
         if let Ok(v) = serde_json::from_str::<Value>(l) {
             if v["event"] == "status" {

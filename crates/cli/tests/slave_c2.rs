@@ -9,12 +9,10 @@
 mod common;
 
 use common::*;
-use profibus::fdl::wire::frame_len;
 use profibus::fdl::{DataTelegram, FunctionCode, Telegram};
-use std::io::{Read, Write};
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A DP-V1 slave with class 2 (two channels), its identity for I&M0.
 const GSD: &str = r#"#Profibus_DP
@@ -64,20 +62,16 @@ const INITIATE: [u8; 20] = [
 /// The class-2 master's end of the pty pair: SRD requests from station 2
 /// with the FCB rule (first frame FCV 0, then alternating).
 struct Master {
-    f: std::fs::File,
+    line: RawStation,
     fcb: Option<bool>,
 }
 
 impl Master {
     fn open(p: &Path) -> Master {
-        use std::os::unix::fs::OpenOptionsExt;
-        let f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-            .open(p)
-            .unwrap();
-        Master { f, fcb: None }
+        Master {
+            line: RawStation::open(p),
+            fcb: None,
+        }
     }
 
     /// The next SRD (high) function code byte.
@@ -93,32 +87,12 @@ impl Master {
 
     /// SRD from SSAP 50 to `dsap` with `data`; the answer's (DSAP, SSAP,
     /// data), or None for a short acknowledge.
-    fn c2(&mut self, dsap: u8, data: &[u8]) -> Option<(Option<u8>, Option<u8>, Vec<u8>)> {
+    fn c2(&mut self, dsap: u8, data: &[u8]) -> Answer {
         let fc = self.fc();
         let t = DataTelegram::new(ADDR, 2, FunctionCode::from_byte(fc), data)
             .with_saps(Some(dsap), Some(50));
         let req = Telegram::Data(t).to_vec().unwrap();
-        self.f.write_all(&req).unwrap();
-        let end = Instant::now() + Duration::from_secs(3);
-        let mut buf = vec![];
-        let mut chunk = [0u8; 256];
-        while Instant::now() < end {
-            match self.f.read(&mut chunk) {
-                Ok(n) if n > 0 => buf.extend_from_slice(&chunk[..n]),
-                _ => std::thread::sleep(Duration::from_millis(1)),
-            }
-            if let Ok(len) = frame_len(&buf) {
-                if buf.len() >= len {
-                    buf.truncate(len);
-                    return match Telegram::parse(&buf) {
-                        Ok((Telegram::Data(d), _)) => Some((d.dsap, d.ssap, d.data.to_vec())),
-                        Ok((Telegram::ShortAck, _)) => None,
-                        other => panic!("answer to {data:02X?}: {buf:02X?} {other:?}"),
-                    };
-                }
-            }
-        }
-        panic!("no answer to {data:02X?} on SAP {dsap}");
+        self.line.exchange(&req, Duration::from_secs(3))
     }
 
     /// Request, then one poll: the response.

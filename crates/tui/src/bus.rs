@@ -140,6 +140,8 @@ struct Snapshot {
     diag: Vec<u8>,
     /// Diagnosis in words (kept while `diag` stays the same).
     diag_words: Vec<String>,
+    /// FMS connections in words (a monitor's).
+    fms: Vec<String>,
     /// Time between two Data_Exchange cycles of this slave.
     cycle: Option<Duration>,
     /// Where the cycle time is measured from: (time, data exchanges).
@@ -156,6 +158,7 @@ impl Snapshot {
             stats: Counters::default(),
             diag: vec![],
             diag_words: vec![],
+            fms: vec![],
             cycle: None,
             mark: None,
         }
@@ -330,6 +333,7 @@ impl BusView {
             row.stats = s.counters;
             row.inputs.clone_from(&s.inputs);
             row.outputs.clone_from(&s.outputs);
+            row.fms.clone_from(&s.fms);
             match &s.diag {
                 Diagnosis::Raw { bytes, dpv1 } if *bytes != row.diag => {
                     row.diag.clone_from(bytes);
@@ -698,8 +702,16 @@ impl BusView {
                 io(Direction::Input, &r.inputs),
                 io(Direction::Output, &r.outputs),
             );
+            // The diagnosis, then the FMS connections (`dpctl monitor`).
             let diag: Vec<String> = diag_summary(&r.diag_words);
-            let diag = wrap(&diag, "; ", diag_w as usize);
+            let mut diag = wrap(&diag, "; ", diag_w as usize);
+            for c in &r.fms {
+                diag.extend(wrap(
+                    &c.split(' ').map(str::to_string).collect::<Vec<_>>(),
+                    " ",
+                    diag_w as usize,
+                ));
+            }
             let height = i.len().max(o.len()).max(diag.len()).clamp(1, MAX_ROW_LINES);
             let mut cells = vec![
                 Cell::from(format!("{:>3}", spec.address)),
@@ -816,6 +828,7 @@ impl BusView {
                 out.push(format!("    {w}"));
             }
         }
+        out.extend(r.fms.iter().cloned());
         out
     }
 
@@ -1114,6 +1127,7 @@ mod tests {
                 ..Counters::default()
             },
             diag: Diagnosis::Words(diag.iter().map(|w| w.to_string()).collect()),
+            fms: vec![],
         };
         let snap = BusSnapshot {
             station: None,
@@ -1177,6 +1191,57 @@ mod tests {
         let s = screen(&v);
         assert!(s.contains("state data_exchange  polled by master 2"), "{s}");
         assert!(!s.contains("diagnosis reads"), "{s}");
+    }
+
+    #[test]
+    fn a_monitor_view_shows_the_fms_connections_of_a_station() {
+        use profibus_dp::fms::lli::LliPdu;
+        use profibus_dp::fms::pdu::{FmsPdu, Request, Response};
+        use profibus_dp::monitor::{Monitor, MonitorOptions};
+        use profibus_fdl::wire::{DataTelegram, FunctionCode, RequestKind, ResponseStatus};
+        use profibus_fdl::Telegram;
+        let mut mon = Monitor::new(vec![], MonitorOptions::default());
+        let fc = FunctionCode::Request {
+            kind: RequestKind::SrdLow,
+            fcb: false,
+            fcv: false,
+        };
+        let resp = FunctionCode::slave_response(ResponseStatus::Dl);
+        // Master 3 reads object 2020 of station 25 on LSAP 40.
+        let read = LliPdu::Data(FmsPdu::Request {
+            invoke_id: 1,
+            request: Request::Read {
+                index: 2020,
+                subindex: None,
+            },
+        })
+        .to_vec()
+        .unwrap();
+        let value = LliPdu::Data(FmsPdu::Response {
+            invoke_id: 1,
+            response: Response::Read(vec![0, 0x12]),
+        })
+        .to_vec()
+        .unwrap();
+        let req = DataTelegram::new(25, 3, fc, &read).with_saps(Some(40), Some(41));
+        let res = DataTelegram::new(3, 25, resp, &value).with_saps(Some(41), Some(40));
+        mon.observe(Instant::from_nanos(1_000_000), &Telegram::Data(req));
+        mon.observe(Instant::from_nanos(2_000_000), &Telegram::Data(res));
+        let mut v = view().listen_only();
+        v.update(&mon, Instant::from_nanos(3_000_000));
+        let s = screen(&v);
+        // In the drive's row, wrapped in the diagnosis column.
+        let drive = s.lines().find(|l| l.contains("drive")).expect(&s);
+        assert!(drive.contains("FMS master 3 LSAP 40:"), "{s}");
+        assert!(s.contains("last Read 2020 ok"), "{s}");
+        // The details carry the whole line.
+        v.key(Key::Down);
+        v.key(Key::Enter);
+        let s = screen(&v);
+        assert!(
+            s.contains("FMS master 3 LSAP 40: connected, services 1, errors 0, last Read 2020 ok"),
+            "{s}"
+        );
     }
 
     #[test]

@@ -61,6 +61,9 @@ pub struct SlaveSnapshot {
     pub counters: Counters,
     /// The last diagnosis.
     pub diag: Diagnosis,
+    /// Its FMS connections in words, one line each (a monitor's
+    /// [`profibus_dp::monitor::fms::FmsConnectionStatus`]; empty: none).
+    pub fms: Vec<String>,
 }
 
 /// The bus at one moment.
@@ -115,6 +118,7 @@ impl BusSnapshot {
                         bytes: s.diag.to_vec(),
                         dpv1: m.slave_params(a).is_some_and(|p| p.dpv1),
                     },
+                    fms: vec![],
                 })
             })
             .collect();
@@ -159,6 +163,7 @@ impl BusSnapshot {
                         late_replies: None,
                     },
                     diag: Diagnosis::Words(x.diag.clone()),
+                    fms: x.fms.iter().map(|c| c.to_string()).collect(),
                 })
                 .collect(),
             live: None,

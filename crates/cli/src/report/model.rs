@@ -706,6 +706,8 @@ impl Report {
             MonitorEvent::Alarm(_) | MonitorEvent::Operating { .. } => {
                 self.mark(at, MarkKind::State, None, text)
             }
+            // FMS services are no DP events: not in the timeline.
+            MonitorEvent::Fms(_) => {}
         }
     }
 

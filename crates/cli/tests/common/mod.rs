@@ -11,11 +11,12 @@
 
 pub mod mqtt;
 
+use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc::{Receiver, Sender};
-use std::time::{Duration, Instant};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 /// The lines of `lines` that are JSON values (a command's `--json`
 /// output), parsed; other lines are passed over.
@@ -406,6 +407,44 @@ impl Lines {
         Some(l)
     }
 
+    /// The first JSON line from line `*pos` on that satisfies `ok`
+    /// (waiting up to 60 s for more lines); `*pos` moves past it.
+    pub fn json_from(
+        &mut self,
+        pos: &mut usize,
+        what: &str,
+        mut ok: impl FnMut(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let end = Instant::now() + Duration::from_secs(60);
+        loop {
+            while *pos < self.1.len() {
+                *pos += 1;
+                if let Ok(v) = serde_json::from_str::<serde_json::Value>(&self.1[*pos - 1]) {
+                    if ok(&v) {
+                        return v;
+                    }
+                }
+            }
+            assert!(
+                Instant::now() < end,
+                "timed out waiting for {what}; last lines: {:#?}",
+                &self.1[self.1.len().saturating_sub(5)..]
+            );
+            self.next_line(Duration::from_millis(100));
+        }
+    }
+
+    /// The first status line of `dpctl master --json` from line `*pos`
+    /// on that satisfies `ok`; `*pos` moves past it.
+    pub fn status_from(
+        &mut self,
+        pos: &mut usize,
+        what: &str,
+        ok: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        self.json_from(pos, what, |v| v["event"] == "status" && ok(v))
+    }
+
     /// Everything until the child closed its stdout.
     pub fn rest(&mut self) -> &[String] {
         while let Ok(l) = self.0.recv_timeout(Duration::from_secs(10)) {
@@ -572,6 +611,59 @@ pub fn open_tty(path: &Path) -> std::fs::File {
         .unwrap_or_else(|e| panic!("open {}: {e}", path.display()))
 }
 
+/// A station played by hand on a pty link (non-blocking, raw): writes a
+/// request telegram and reads the one answer.
+pub struct RawStation {
+    pub f: std::fs::File,
+}
+
+/// What a station answered: a data telegram's (DSAP, SSAP, data unit),
+/// or `None` for a short acknowledge.
+pub type Answer = Option<(Option<u8>, Option<u8>, Vec<u8>)>;
+
+impl RawStation {
+    pub fn open(path: &Path) -> RawStation {
+        use std::os::unix::fs::OpenOptionsExt;
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits() | nix::libc::O_NOCTTY)
+            .open(path)
+            .unwrap_or_else(|e| panic!("open {}: {e}", path.display()));
+        make_raw(&f);
+        RawStation { f }
+    }
+
+    /// Write the telegram `req`, then read its answer within `timeout`;
+    /// panics on no answer or on anything but a data telegram or a short
+    /// acknowledge.
+    pub fn exchange(&mut self, req: &[u8], timeout: Duration) -> Answer {
+        use profibus::fdl::wire::frame_len;
+        use profibus::fdl::Telegram;
+        use std::io::Write;
+        self.f.write_all(req).unwrap();
+        let end = Instant::now() + timeout;
+        let mut buf = vec![];
+        let mut chunk = [0u8; 256];
+        while Instant::now() < end {
+            match self.f.read(&mut chunk) {
+                Ok(n) if n > 0 => buf.extend_from_slice(&chunk[..n]),
+                _ => std::thread::sleep(Duration::from_millis(1)),
+            }
+            if let Ok(len) = frame_len(&buf) {
+                if buf.len() >= len {
+                    return match Telegram::parse(&buf[..len]) {
+                        Ok((Telegram::Data(d), _)) => Some((d.dsap, d.ssap, d.data.to_vec())),
+                        Ok((Telegram::ShortAck, _)) => None,
+                        other => panic!("answer to {req:02X?}: {buf:02X?} {other:?}"),
+                    };
+                }
+            }
+        }
+        panic!("no answer to {req:02X?} within {timeout:?} (heard {buf:02X?})");
+    }
+}
+
 /// Put a tty in raw mode (no line discipline, no echo).
 pub fn make_raw(f: &std::fs::File) {
     use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
@@ -601,6 +693,93 @@ pub fn generic_slave(
     cmd.stdin(Stdio::null()).stdout(Stdio::null());
     cmd
 }
+
+/// Seconds since the Unix epoch (to compare the read times of [`Timed`]
+/// lines across processes).
+pub fn wall() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64()
+}
+
+/// Lines of a child's stdout with the wall time each was read; waits of
+/// at most [`TIMED_WAIT`] (generous: processes on a loaded 2-core machine).
+pub struct Timed {
+    rx: mpsc::Receiver<(f64, String)>,
+    lines: Vec<(f64, String)>,
+    pos: usize,
+}
+
+impl Timed {
+    pub fn from(p: &mut Proc) -> Timed {
+        let out = p.child.as_mut().unwrap().stdout.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                if tx.send((wall(), l)).is_err() {
+                    break;
+                }
+            }
+        });
+        Timed {
+            rx,
+            lines: vec![],
+            pos: 0,
+        }
+    }
+
+    /// The next JSON line after the last one returned that satisfies
+    /// `ok`, with the wall time it was read.
+    pub fn wait(&mut self, what: &str, ok: impl Fn(&Value) -> bool) -> (f64, Value) {
+        let end = Instant::now() + TIMED_WAIT;
+        loop {
+            while self.pos < self.lines.len() {
+                let (t, l) = &self.lines[self.pos];
+                self.pos += 1;
+                if let Ok(v) = serde_json::from_str::<Value>(l) {
+                    if ok(&v) {
+                        return (*t, v);
+                    }
+                }
+            }
+            let left = end.saturating_duration_since(Instant::now());
+            assert!(
+                !left.is_zero(),
+                "timed out waiting for {what}; last lines: {:#?}",
+                &self.lines[self.lines.len().saturating_sub(8)..]
+            );
+            if let Ok(l) = self.rx.recv_timeout(left.min(Duration::from_millis(200))) {
+                self.lines.push(l);
+            }
+        }
+    }
+
+    /// Forget what arrived so far: the next [`Timed::wait`] looks at
+    /// lines read from now on.
+    pub fn skip_to_end(&mut self) {
+        while let Ok(l) = self.rx.try_recv() {
+            self.lines.push(l);
+        }
+        self.pos = self.lines.len();
+    }
+
+    /// Offset from the child's `"t"` (s since its start) to wall time:
+    /// the smallest (read time − t) over its lines so far (reading only
+    /// ever adds delay).
+    pub fn offset(&self) -> f64 {
+        self.lines
+            .iter()
+            .filter_map(|(w, l)| {
+                let v: Value = serde_json::from_str(l).ok()?;
+                Some(w - v["t"].as_f64()?)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// How long [`Timed::wait`] waits for a line.
+pub const TIMED_WAIT: Duration = Duration::from_secs(60);
 
 #[cfg(test)]
 mod tempdir_tests {

@@ -230,3 +230,33 @@ pub fn protoc(mode: &str, input: &[u8]) -> Vec<u8> {
     );
     out.stdout
 }
+
+/// Run the Python `script` in the venv with pysparkplug (the independent
+/// Sparkplug implementation of the tests) on `input` as stdin; its
+/// stdout's JSON lines. Fails (never skips) when pysparkplug is missing.
+pub fn pysparkplug(script: &str, input: &str) -> Vec<serde_json::Value> {
+    use std::io::Write;
+    let py = super::python();
+    let ok = Command::new(&py)
+        .args(["-c", "import pysparkplug"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        need("pysparkplug in .venv (scripts/setup-test-env)");
+    }
+    let mut p = Command::new(&py)
+        .args(["-c", script])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python");
+    p.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let out = p.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "pysparkplug: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    super::json_lines(String::from_utf8(out.stdout).unwrap().lines())
+}

@@ -33,6 +33,9 @@
 //! ```
 
 use core::fmt;
+use std::collections::{BTreeMap, BTreeSet};
+
+use profibus_fdl::wire::{FunctionCode, Telegram};
 
 use super::lli::{self, LliParseError, LliPdu, LLI_ASSOCIATE_REQ, LLI_IDLE};
 use super::pdu::{FmsPdu, PduType, Request, Response, Service};
@@ -433,6 +436,123 @@ impl FmsTelegram {
     /// Whether the data unit decoded (not `malformed`).
     pub fn is_ok(&self) -> bool {
         !matches!(self.parsed, Parsed::Malformed(_))
+    }
+
+    /// The LLI PDU decoded (`None`: no data, or `malformed`).
+    pub fn lli_pdu(&self) -> Option<&LliPdu> {
+        match &self.parsed {
+            Parsed::Pdu(p) => Some(p),
+            _ => None,
+        }
+    }
+}
+
+/// One FMS connection as the line shows it: the client (a master), the
+/// server and the server's LSAP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Connection {
+    /// The client (the requester).
+    pub master: u8,
+    /// The server (the responder).
+    pub station: u8,
+    /// The server's LSAP (without the segment bit).
+    pub lsap: u8,
+}
+
+/// Tells the telegrams of FMS connections on a stream of telegrams (the
+/// one rule of `dpctl sniff`, `dpctl monitor` and
+/// [`crate::pdu::decode::Exchanges::decode_layer`]): a request or
+/// response with both SAPs, the server's SAP 0..=48 (which DP-V1 leaves
+/// to MSAC_C2 connections and FMS shares), and a data unit that starts
+/// with an LLI or FMS type octet ([`starts_lli_pdu`]); an empty one (a
+/// poll, a short acknowledge, a response without SAPs) only on a
+/// connection seen carrying FMS. A DP-V1 PDU on the same SAP ends that.
+#[derive(Debug, Default, Clone)]
+pub struct FmsStream {
+    /// The last request that waits for its answer: a short acknowledge
+    /// answers it.
+    pending: Option<(u8, u8, Option<u8>)>,
+    /// The destination SAP of the last request per (master, station).
+    last: BTreeMap<(u8, u8), Option<u8>>,
+    /// Connections seen carrying FMS.
+    fms: BTreeSet<Connection>,
+}
+
+impl FmsStream {
+    /// The next telegram of the stream: its connection and its LLI/FMS
+    /// PDUs when it belongs to an FMS connection, else `None`.
+    pub fn telegram(&mut self, telegram: &Telegram<'_>) -> Option<(Connection, FmsTelegram)> {
+        let found = self.classify(telegram);
+        match telegram {
+            Telegram::Token { .. } => self.pending = None,
+            Telegram::ShortAck => self.pending = None,
+            Telegram::Data(d) => match d.fc {
+                FunctionCode::Request { kind, .. } => {
+                    let dsap = d.dsap.map(|s| s & 0x3F);
+                    self.pending =
+                        (kind.expects_reply() && !d.is_broadcast()).then_some((d.sa, d.da, dsap));
+                    if self.pending.is_some() {
+                        self.last.insert((d.sa, d.da), dsap);
+                    }
+                }
+                FunctionCode::Response { .. } => self.pending = None,
+            },
+        }
+        found
+    }
+
+    fn classify(&mut self, telegram: &Telegram<'_>) -> Option<(Connection, FmsTelegram)> {
+        let (key, request, du) = match telegram {
+            Telegram::Token { .. } => return None,
+            Telegram::ShortAck => {
+                let (master, station, dsap) = self.pending?;
+                let lsap = dsap?;
+                (
+                    Connection {
+                        master,
+                        station,
+                        lsap,
+                    },
+                    false,
+                    &[][..],
+                )
+            }
+            Telegram::Data(d) => {
+                let request = d.fc.is_request();
+                let (master, station) = if request { (d.sa, d.da) } else { (d.da, d.sa) };
+                let lsap = match (d.dsap, d.ssap) {
+                    (Some(ds), Some(_)) if request => ds & 0x3F,
+                    (Some(_), Some(ss)) => ss & 0x3F,
+                    (None, None) if !request => (*self.last.get(&(master, station))?)?,
+                    _ => return None,
+                };
+                (
+                    Connection {
+                        master,
+                        station,
+                        lsap,
+                    },
+                    request,
+                    d.data,
+                )
+            }
+        };
+        if key.lsap > crate::pdu::c2::MAX_CONNECTION_SAP {
+            return None;
+        }
+        if du.is_empty() {
+            return self
+                .fms
+                .contains(&key)
+                .then(|| (key, describe(du, request)));
+        }
+        if starts_lli_pdu(du) {
+            self.fms.insert(key);
+            Some((key, describe(du, request)))
+        } else {
+            self.fms.remove(&key);
+            None
+        }
     }
 }
 

@@ -87,6 +87,7 @@ use std::time::Duration;
 
 pub mod alert;
 pub mod counters;
+pub mod fms;
 pub mod stats;
 #[cfg(test)]
 mod tests;
@@ -287,6 +288,11 @@ pub enum MonitorEvent {
         /// Its address.
         master: u8,
     },
+    /// An FMS service confirmed (request and response paired by
+    /// connection and invoke ID), or an FMS connection event (Initiate,
+    /// Abort, Information-Report): [`fms::FmsEvent`].
+    #[cfg_attr(feature = "serde", serde(rename = "fms"))]
+    Fms(fms::FmsEvent),
 }
 
 impl fmt::Display for MonitorEvent {
@@ -317,6 +323,7 @@ impl fmt::Display for MonitorEvent {
             }
             MonitorEvent::MasterJoined { master } => write!(f, "master {master} in the token ring"),
             MonitorEvent::MasterLeft { master } => write!(f, "master {master} left the token ring"),
+            MonitorEvent::Fms(e) => e.fmt(f),
         }
     }
 }
@@ -448,6 +455,10 @@ pub struct SlaveStatus {
     /// Named channels (a device profile's decoding).
     #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Option::is_none"))]
     pub channels: Option<Channels>,
+    /// Its FMS connections as a server (`dpctl monitor` saw FMS
+    /// traffic to it; left out of the JSON when none).
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "Vec::is_empty"))]
+    pub fms: Vec<fms::FmsConnectionStatus>,
 }
 
 /// A master in the token ring.
@@ -600,6 +611,8 @@ pub struct Monitor {
     slaves: BTreeMap<u8, SlaveTrack>,
     masters: BTreeMap<u8, MasterTrack>,
     pending: Option<Pending>,
+    /// FMS connections on the line.
+    fms: fms::FmsWatch,
     events: VecDeque<MonitorEvent>,
     bus: BusCounters,
     now: Instant,
@@ -620,6 +633,7 @@ impl Monitor {
                 .collect(),
             masters: BTreeMap::new(),
             pending: None,
+            fms: fms::FmsWatch::default(),
             events: VecDeque::new(),
             bus: BusCounters::default(),
             now: Instant::ZERO,
@@ -756,6 +770,10 @@ impl Monitor {
     pub fn observe(&mut self, at: Instant, telegram: &Telegram<'_>) {
         self.tick(at);
         self.bus.telegrams += 1;
+        for e in self.fms.observe(at, telegram) {
+            self.slave(e.station);
+            self.push(MonitorEvent::Fms(e));
+        }
         match telegram {
             Telegram::Token { da, sa } => {
                 self.unanswered();
@@ -1143,7 +1161,9 @@ impl Monitor {
             .map(|s| {
                 cycle.merge(&s.cycle);
                 cycles = cycles.max(s.counters.data_exchanges);
-                slave_status(s)
+                let mut st = slave_status(s);
+                st.fms = self.fms.connections_of(st.address);
+                st
             })
             .collect();
         MonitorStatus {
@@ -1247,6 +1267,9 @@ impl fmt::Display for SlaveStatus {
         if !self.diag.is_empty() {
             write!(f, "\n      diagnosis: {}", self.diag.join("; "))?;
         }
+        for c in &self.fms {
+            write!(f, "\n      {c}")?;
+        }
         Ok(())
     }
 }
@@ -1275,6 +1298,7 @@ fn slave_status(s: &SlaveTrack) -> SlaveStatus {
         diag: s.diag_words.clone(),
         modules,
         channels,
+        fms: vec![],
     }
 }
 

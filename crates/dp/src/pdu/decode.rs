@@ -1047,8 +1047,8 @@ pub struct Exchanges {
     layouts: BTreeMap<u8, (Vec<ModuleLayout>, bool)>,
     /// Named channels by slave address (device profiles of a bus file).
     decoders: BTreeMap<u8, Arc<dyn ImageDecoder>>,
-    /// Connections seen carrying FMS: (master, slave, the slave's SAP).
-    fms: BTreeSet<(u8, u8, u8)>,
+    /// The FMS connections of the stream.
+    fms: fms_decode::FmsStream,
 }
 
 impl Exchanges {
@@ -1094,42 +1094,9 @@ impl Exchanges {
     }
 
     /// The FMS layer of `telegram` (before [`Exchanges::decode`] moves
-    /// on to it), remembering the connections that carry FMS.
+    /// on to it): [`fms_decode::FmsStream`], the one rule.
     fn fms_of(&mut self, telegram: &Telegram<'_>) -> Option<FmsTelegram> {
-        let (key, request, du) = match telegram {
-            Telegram::Token { .. } => return None,
-            Telegram::ShortAck => {
-                let r = self.pending?;
-                ((r.master, r.slave, r.dsap?), false, &[][..])
-            }
-            Telegram::Data(d) => {
-                let request = d.fc.is_request();
-                let (master, slave) = if request { (d.sa, d.da) } else { (d.da, d.sa) };
-                let sap = match (d.dsap, d.ssap) {
-                    (Some(ds), Some(_)) if request => ds & 0x3F,
-                    (Some(_), Some(ss)) => ss & 0x3F,
-                    (None, None) if !request => self.last.get(&(master, slave))?.dsap?,
-                    _ => return None,
-                };
-                ((master, slave, sap), request, d.data)
-            }
-        };
-        if key.2 > crate::pdu::c2::MAX_CONNECTION_SAP {
-            return None;
-        }
-        if du.is_empty() {
-            return self
-                .fms
-                .contains(&key)
-                .then(|| fms_decode::describe(du, request));
-        }
-        if fms_decode::starts_lli_pdu(du) {
-            self.fms.insert(key);
-            Some(fms_decode::describe(du, request))
-        } else {
-            self.fms.remove(&key);
-            None
-        }
+        self.fms.telegram(telegram).map(|(_, f)| f)
     }
 
     /// The DP layer of the next telegram of the stream, with what is

@@ -182,15 +182,31 @@ pub fn birth(
     ts: u64,
 ) -> Vec<Metric> {
     let address = d.info.layout.address;
-    let mut out = vec![];
-    let mut channels = vec![];
-    let mut at = None;
-    for (k, (m, v)) in d.metrics.iter().zip(values).enumerate() {
+    let metrics = d.metrics.iter().zip(values).enumerate().map(|(k, (m, v))| {
         let one = Metric {
             alias: Some(device_alias(address, k)),
             ..metric(&m.name, m.datatype, v.clone(), ts)
         };
-        if def.is_some() && m.is_channel() {
+        (m.is_channel(), one)
+    });
+    with_instance(d, def, metrics, true, ts)
+}
+
+/// `metrics` (each marked whether it is a channel) in order; with a
+/// definition the channels go into one instance of it, in the place of
+/// the first channel.
+fn with_instance(
+    d: &Device,
+    def: Option<&Definition>,
+    metrics: impl Iterator<Item = (bool, Metric)>,
+    birth: bool,
+    ts: u64,
+) -> Vec<Metric> {
+    let mut out = vec![];
+    let mut channels = vec![];
+    let mut at = None;
+    for (is_channel, one) in metrics {
+        if def.is_some() && is_channel {
             at.get_or_insert(out.len());
             channels.push(one);
         } else {
@@ -198,7 +214,7 @@ pub fn birth(
         }
     }
     if let (Some(def), Some(at)) = (def, at) {
-        out.insert(at, instance(d, def, channels, true, ts));
+        out.insert(at, instance(d, def, channels, birth, ts));
     }
     out
 }
@@ -213,23 +229,12 @@ pub fn data(
     ts: u64,
 ) -> Vec<Metric> {
     let address = d.info.layout.address;
-    let mut out = vec![];
-    let mut channels = vec![];
-    let mut at = None;
-    for (k, v) in changed {
+    let metrics = changed.into_iter().map(|(k, v)| {
         let m = &d.metrics[k];
         let one = data_metric(device_alias(address, k), m.datatype, v, ts);
-        if def.is_some() && m.is_channel() {
-            at.get_or_insert(out.len());
-            channels.push(one);
-        } else {
-            out.push(one);
-        }
-    }
-    if let (Some(def), Some(at)) = (def, at) {
-        out.insert(at, instance(d, def, channels, false, ts));
-    }
-    out
+        (m.is_channel(), one)
+    });
+    with_instance(d, def, metrics, false, ts)
 }
 
 /// The metrics of a DCMD to device `address` with each instance of its
