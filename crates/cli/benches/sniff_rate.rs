@@ -94,6 +94,8 @@ fn cpu_time(pid: u32) -> Duration {
 struct Run {
     sent: usize,
     decoded: u64,
+    /// The sniffer's last line (its codec counters).
+    summary: String,
     wire: Duration,
     cpu: Duration,
     wall: Duration,
@@ -162,7 +164,12 @@ fn sniff_run(a: &Path, b: &Path, json: bool, n: usize, quiet: Duration, ready: &
         if json {
             l.contains("\"t_us\"") && !l.contains("\"event\"")
         } else {
-            l.starts_with(' ') || l.as_bytes().first().is_some_and(u8::is_ascii_digit)
+            // `<µs> SD2 …`, `<µs> SC …`; not the statistics' station
+            // rows (`    3 slave  data_exchange …`) or `!! ` lines.
+            let mut w = l.split_whitespace();
+            w.next()
+                .is_some_and(|t| t.bytes().all(|b| b.is_ascii_digit()))
+                && w.next().is_some_and(|f| f.starts_with("SD") || f == "SC")
         }
     };
     // One exchange first: the sniffer is reading once it prints it.
@@ -193,6 +200,7 @@ fn sniff_run(a: &Path, b: &Path, json: bool, n: usize, quiet: Duration, ready: &
     let cpu = cpu_time(sniff.pid()) - cpu0;
     drop(writer.join().unwrap());
     let out = sniff.stop();
+    let summary = out.stdout.lines().last().unwrap_or("").to_string();
     // The summary line counts what the codec framed (warm-up included).
     let decoded = out
         .stdout
@@ -214,6 +222,7 @@ fn sniff_run(a: &Path, b: &Path, json: bool, n: usize, quiet: Duration, ready: &
     Run {
         sent,
         decoded,
+        summary,
         wire,
         cpu,
         wall,
@@ -246,11 +255,19 @@ fn main() {
         Ok("all") | Err(_) => &[Source::Socat, Source::Bus],
         Ok(other) => panic!("SOURCE={other}: use socat, bus or all"),
     };
+    let mut notes = vec![];
     println!("| source | mode | sent | decoded | lost | bus overruns (bytes) | 12 Mbit/s line time (s) | wall (s) | telegrams/s | × the line | CPU (s) | CPU µs / telegram | decodable / s on one core | bus CPU (s) |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &source in sources {
         for json in [true, false] {
             let r = run(source, json, n);
+            if r.decoded < r.sent as u64 {
+                notes.push(format!(
+                    "lost in `{}`: the sniffer's {}",
+                    if json { "--json" } else { "--plain" },
+                    r.summary
+                ));
+            }
             let per = r.cpu.as_secs_f64() * 1e6 / r.decoded.max(1) as f64;
             let (overruns, bus_cpu) = match r.bus {
                 Some((o, c)) => (o.to_string(), format!("{:.2}", c.as_secs_f64())),
@@ -282,6 +299,9 @@ fn main() {
                 bus_cpu
             );
         }
+    }
+    for n in notes {
+        println!("{n}");
     }
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!("load average at the end: {}", load.trim());
