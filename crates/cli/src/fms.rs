@@ -91,6 +91,10 @@ enum Op {
     Read {
         /// Object index.
         index: u16,
+        /// One element of an array or record (1-based) instead of the
+        /// whole object.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=255))]
+        subindex: Option<u8>,
     },
     /// Write a value (hex, e.g. `00 20 00` or `002000`) to an object.
     Write {
@@ -99,6 +103,10 @@ enum Op {
         /// The value, hex.
         #[arg(value_name = "HEX", required = true)]
         data: Vec<String>,
+        /// Write one element of an array or record (1-based); the
+        /// others stay.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=255))]
+        subindex: Option<u8>,
     },
 }
 
@@ -129,7 +137,7 @@ impl Op {
                     index: 1,
                 }),
             ],
-            Op::Read { index } => vec![
+            Op::Read { index, subindex } => vec![
                 Request::GetOd(GetOdRequest {
                     long_form: true,
                     from_index: false,
@@ -137,10 +145,14 @@ impl Op {
                 }),
                 Request::Read {
                     index: *index,
-                    subindex: None,
+                    subindex: *subindex,
                 },
             ],
-            Op::Write { index, data } => {
+            Op::Write {
+                index,
+                data,
+                subindex,
+            } => {
                 let data = profibus_fdl::wire::parse_hex(&data.join(" "))?;
                 if data.is_empty() {
                     bail!("write: no bytes to write");
@@ -155,7 +167,7 @@ impl Op {
                 }
                 vec![Request::Write {
                     index: *index,
-                    subindex: None,
+                    subindex: *subindex,
                     data,
                 }]
             }
@@ -288,7 +300,7 @@ pub fn run(args: Args) -> Result<()> {
                 other => args.service_failed("Get-OD", other),
             }
         }
-        Op::Read { index } => {
+        Op::Read { index, subindex } => {
             let desc = match result(&results, 0)? {
                 Ok(Response::GetOd { descriptions, .. }) => descriptions
                     .first()
@@ -297,24 +309,40 @@ pub fn run(args: Args) -> Result<()> {
                 _ => None,
             };
             match result(&results, 1)? {
-                Ok(Response::Read(data)) => args.print_read(*index, desc.as_ref(), data),
-                other => args.service_failed(&format!("Read index {index}"), other),
+                Ok(Response::Read(data)) => args.print_read(*index, *subindex, desc.as_ref(), data),
+                other => args.service_failed(&format!("Read {}", at(*index, *subindex)), other),
             }
         }
-        Op::Write { index, data } => match result(&results, 0)? {
+        Op::Write {
+            index,
+            data,
+            subindex,
+        } => match result(&results, 0)? {
             Ok(Response::Write) => {
                 let data = profibus_fdl::wire::parse_hex(&data.join(" "))?;
+                let mut fields = json!({"index": index, "data": Hex(&data).to_string()});
+                if let Some(s) = subindex {
+                    fields["subindex"] = (*s).into();
+                }
                 args.print(
-                    json!({"index": index, "data": Hex(&data).to_string()}),
-                    format!("index {index}: ok (wrote {})", Hex(&data)),
+                    fields,
+                    format!("{}: ok (wrote {})", at(*index, *subindex), Hex(&data)),
                 )
             }
-            other => args.service_failed(&format!("Write index {index}"), other),
+            other => args.service_failed(&format!("Write {}", at(*index, *subindex)), other),
         },
     }
 }
 
 type Confirmation = std::result::Result<Response, ServiceError>;
+
+/// `index 2041`, `index 2041 subindex 3`.
+fn at(index: u16, subindex: Option<u8>) -> String {
+    match subindex {
+        Some(s) => format!("index {index} subindex {s}"),
+        None => format!("index {index}"),
+    }
+}
 
 /// The confirmation of the `i`-th request.
 fn result(results: &[(Request, Confirmation)], i: usize) -> Result<&Confirmation> {
@@ -392,16 +420,26 @@ impl Args {
         bail!("{why}")
     }
 
-    fn print_read(&self, index: u16, desc: Option<&Description>, data: &[u8]) -> Result<()> {
+    fn print_read(
+        &self,
+        index: u16,
+        subindex: Option<u8>,
+        desc: Option<&Description>,
+        data: &[u8],
+    ) -> Result<()> {
         let ty = desc.map(|d| type_name(&HashMap::new(), d.data_type));
-        let value = desc
-            .zip(ty.as_deref())
-            .and_then(|(d, t)| d.decode_value(t, data));
+        let value = desc.zip(ty.as_deref()).and_then(|(d, t)| match subindex {
+            Some(_) => d.decode_element(t, data),
+            None => d.decode_value(t, data),
+        });
         let mut fields = json!({
             "index": index,
             "length": data.len(),
             "data": Hex(data).to_string(),
         });
+        if let Some(s) = subindex {
+            fields["subindex"] = s.into();
+        }
         let mut what = Vec::new();
         if let Some(d) = desc {
             if let Some(n) = &d.name {
@@ -423,7 +461,7 @@ impl Args {
         if let Some(v) = &value {
             fields["value"] = serde_json::from_str(v).unwrap_or_else(|_| v.clone().into());
         }
-        let mut text = format!("index {index}");
+        let mut text = at(index, subindex);
         if !what.is_empty() {
             text.push_str(&format!(" ({})", what.join(", ")));
         }

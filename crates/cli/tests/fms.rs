@@ -513,6 +513,100 @@ fn monitor_follows_the_fms_services_of_a_client_beside_data_exchange() {
     assert!(mon.terminate(Duration::from_secs(10)).success());
 }
 
+/// `dpctl fms read|write INDEX --subindex N` on a mixed-mode BK3000:
+/// one octet of a channel object (Array of Unsigned8: 1 the status or
+/// control byte, 2… the data), the other elements kept by a Write; a
+/// subindex beyond the array is refused as FMS refuses an impermissible
+/// subindex (class 6 code 5), a read-only object stays read-only.
+#[test]
+fn subindex_reads_and_writes_one_element_of_a_channel_object() {
+    let bus = Bus::start(2, &[]);
+    let (_s, mut control, mut events) = coupler(&bus.link(1), 5, "mixed");
+    writeln!(control, "set 1.KL3102.1 2.5").unwrap();
+    control.flush().unwrap();
+    assert!(events.wait_for("pinned to 2.500 V", WAIT), "{:?}", events.1);
+    let link = bus.link(0);
+    let whole = bytes(&ok_json(&fms(&link, 5, &["--json", "read", "2020"]))["data"]);
+    assert_eq!(whole.len(), 3);
+    for s in 1..=3 {
+        let sub = s.to_string();
+        let e = ok_json(&fms(
+            &link,
+            5,
+            &["--json", "read", "2020", "--subindex", &sub],
+        ));
+        assert_eq!(e["subindex"], s, "{e}");
+        assert_eq!(bytes(&e["data"]), [whole[s - 1]], "{e}");
+        assert_eq!(e["value"], whole[s - 1], "one Unsigned8: {e}");
+        assert_eq!(e["name"], "1.KL3102.1 input");
+    }
+    let text = fms(&link, 5, &["read", "2020", "--subindex", "2"]);
+    assert_eq!(
+        text.stdout.trim(),
+        format!(
+            "station 5: index 2020 subindex 2 (1.KL3102.1 input, Array of Unsigned8): {:02X} = {}",
+            whole[1], whole[1]
+        ),
+        "{text:?}"
+    );
+
+    // Write the whole KL4002 channel, then only its low data byte.
+    let w = fms(&link, 5, &["write", "2041", "00 20 00"]);
+    assert!(w.status.success(), "{w:?}");
+    let w = fms(&link, 5, &["write", "2041", "FF", "--subindex", "3"]);
+    assert_eq!(
+        w.stdout.trim(),
+        "station 5: index 2041 subindex 3: ok (wrote FF)",
+        "{w:?}"
+    );
+    let back = ok_json(&fms(&link, 5, &["--json", "read", "2041"]));
+    assert_eq!(back["data"], "00 20 FF", "{back}");
+    assert!(
+        events.wait_for("2.KL4002.1=2.578 V", WAIT),
+        "the terminal output did not follow: {:?}",
+        events.1
+    );
+
+    // Errors in words.
+    let e = fms(&link, 5, &["read", "2020", "--subindex", "4"]);
+    assert!(!e.status.success());
+    assert_eq!(
+        e.stderr.trim(),
+        "dpctl: station 5: Read index 2020 subindex 4: object attribute inconsistent \
+         (class 6, code 5, additional code 0)"
+    );
+    let e = fms(
+        &link,
+        5,
+        &["--json", "write", "2041", "01 02", "--subindex", "1"],
+    );
+    let v: Value = serde_json::from_str(e.stdout.trim()).unwrap();
+    assert_eq!(
+        (&v["error_class"], &v["error_code"]),
+        (&Value::from(6), &Value::from(10)),
+        "{v}"
+    );
+    let e = fms(&link, 5, &["write", "2020", "00", "--subindex", "1"]);
+    assert!(
+        e.stderr
+            .contains("Write index 2020 subindex 1: object access denied"),
+        "{e:?}"
+    );
+    let e = run_dpctl(&[
+        "fms",
+        "--port",
+        "/nonexistent",
+        "--station",
+        "5",
+        "read",
+        "2020",
+        "--subindex",
+        "0",
+    ]);
+    assert!(!e.status.success());
+    assert!(e.stderr.contains("--subindex"), "{e:?}");
+}
+
 #[test]
 fn usage_errors_are_one_line() {
     let e = run_dpctl(&[

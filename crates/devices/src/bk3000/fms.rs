@@ -49,8 +49,9 @@ use profibus_dp::fms::lli::{FmsApplication, RelationshipType};
 use profibus_dp::fms::od::{Description, OdHeader};
 use profibus_dp::fms::pdu::{
     GetOdRequest, IdentifyResponse, InitiateRequest, InitiateResponse, Request, Response,
-    ServiceError, StatusResponse, ACCESS_DENIED, ACCESS_OBJECT_NON_EXISTENT, ACCESS_TYPE_CONFLICT,
-    ERROR_CLASS_ACCESS, ERROR_CLASS_OD, LOGICAL_READY, OD_INVALID_INDEX, PHYSICAL_OPERATIONAL,
+    ServiceError, StatusResponse, ACCESS_ATTRIBUTE_INCONSISTENT, ACCESS_DENIED,
+    ACCESS_OBJECT_NON_EXISTENT, ACCESS_TYPE_CONFLICT, ERROR_CLASS_ACCESS, ERROR_CLASS_OD,
+    LOGICAL_READY, OD_INVALID_INDEX, PHYSICAL_OPERATIONAL,
 };
 use profibus_fdl::Instant;
 
@@ -418,6 +419,25 @@ impl ObjectDictionary {
         .encode()
     }
 
+    /// Where element `subindex` (1-based) of the object at `index` lies
+    /// in its value. The channel objects are Arrays of Unsigned8 (our
+    /// reading of p.62–63), so an element is one octet: subindex 1 is
+    /// the status (control) byte, 2… the data bytes. The manual says
+    /// nothing of subindex access; a subindex beyond the array, or of
+    /// an object that is no array, is refused as FMS does an
+    /// impermissible subindex: class 6 code 5, object attribute
+    /// inconsistent ([`ACCESS_ATTRIBUTE_INCONSISTENT`]).
+    pub fn element(&self, index: u16, subindex: u8) -> Result<usize, ServiceError> {
+        let o = self.get(index).ok_or_else(Self::not_there)?;
+        if o.code != ObjectCode::Array || subindex == 0 || subindex > o.length {
+            return Err(ServiceError::new(
+                ERROR_CLASS_ACCESS,
+                ACCESS_ATTRIBUTE_INCONSISTENT,
+            ));
+        }
+        Ok(subindex as usize - 1)
+    }
+
     fn not_there() -> ServiceError {
         ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_OBJECT_NON_EXISTENT)
     }
@@ -572,14 +592,14 @@ impl FmsApplication for FmsServer<'_> {
             Request::Read { index, subindex } => {
                 let v = self.od.read(*index, self.inputs, self.outputs)?;
                 match subindex {
-                    None => Ok(Response::Read(v)),
-                    Some(s) => v
-                        .get(*s as usize - 1)
-                        .map(|b| Response::Read(vec![*b]))
-                        .ok_or(ServiceError::new(
-                            ERROR_CLASS_ACCESS,
-                            ACCESS_OBJECT_NON_EXISTENT,
-                        )),
+                    // Subindex 0: the whole object (as a Write's 0).
+                    None | Some(0) => Ok(Response::Read(v)),
+                    Some(s) => {
+                        let at = self.od.element(*index, *s)?;
+                        Ok(Response::Read(
+                            v.get(at).map(|b| vec![*b]).unwrap_or_default(),
+                        ))
+                    }
                 }
             }
             Request::Write {
@@ -591,7 +611,31 @@ impl FmsApplication for FmsServer<'_> {
                 self.written = true;
                 Ok(Response::Write)
             }
-            Request::Write { .. } => Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_DENIED)),
+            Request::Write {
+                index,
+                subindex: Some(s),
+                data,
+            } => {
+                // One element: the object's other elements stay.
+                let o = self
+                    .od
+                    .get(*index)
+                    .ok_or_else(ObjectDictionary::not_there)?;
+                if o.access != Access::ReadWrite {
+                    return Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_DENIED));
+                }
+                let at = self.od.element(*index, *s)?;
+                if data.len() != 1 {
+                    return Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT));
+                }
+                let mut v = self.od.read(*index, self.inputs, self.outputs)?;
+                if let Some(b) = v.get_mut(at) {
+                    *b = data[0];
+                }
+                self.od.write(*index, &v, self.outputs)?;
+                self.written = true;
+                Ok(Response::Write)
+            }
             Request::GetOd(g) => self.od.get_od(g, GET_OD_ROOM),
         }
     }
@@ -746,6 +790,82 @@ mod tests {
         assert_eq!(kbl(FmsMode::from_register16(0)), []);
         assert_eq!(kbl(FmsMode::from_register16(1)).len(), 2);
         assert_eq!(kbl(FmsMode::from_register16(2)).len(), 8);
+    }
+
+    #[test]
+    fn a_subindex_reads_and_writes_one_element_of_a_channel_array() {
+        let (strip, image) = strip();
+        let od = ObjectDictionary::new(&strip, &image, None);
+        let inputs: Vec<u8> = (0..image.in_len as u8).map(|i| 0x10 + i).collect();
+        let mut outputs = vec![0u8; image.out_len];
+        let whole_in = od.read(2020, &inputs, &outputs).unwrap();
+        let whole_out = od.read(2041, &inputs, &outputs).unwrap();
+        assert_eq!((whole_in.len(), whole_out.len()), (3, 3));
+        let mut app = FmsServer {
+            od: &od,
+            inputs: &inputs,
+            outputs: &mut outputs,
+            written: false,
+        };
+        let now = Instant::ZERO;
+        let read = |index, subindex| Request::Read { index, subindex };
+        let write = |index, subindex, data: &[u8]| Request::Write {
+            index,
+            subindex,
+            data: data.to_vec(),
+        };
+        for s in 1..=3u8 {
+            assert_eq!(
+                app.confirmed(now, &read(2020, Some(s))),
+                Ok(Response::Read(vec![whole_in[s as usize - 1]]))
+            );
+        }
+        // Subindex 0 is the whole object, as without one.
+        assert_eq!(
+            app.confirmed(now, &read(2020, Some(0))),
+            Ok(Response::Read(whole_in.clone()))
+        );
+        // Element 3 of the KL4002 channel: the low data byte; the others
+        // stay.
+        assert_eq!(
+            app.confirmed(now, &write(2041, Some(3), &[0x7F])),
+            Ok(Response::Write)
+        );
+        assert!(app.written);
+        assert_eq!(
+            app.confirmed(now, &read(2041, None)),
+            Ok(Response::Read(vec![whole_out[0], whole_out[1], 0x7F]))
+        );
+        let inconsistent = Err(ServiceError::new(
+            ERROR_CLASS_ACCESS,
+            ACCESS_ATTRIBUTE_INCONSISTENT,
+        ));
+        // Beyond the array, or of an object that is no array.
+        assert_eq!(app.confirmed(now, &read(2020, Some(4))), inconsistent);
+        assert_eq!(
+            app.confirmed(now, &write(2041, Some(4), &[1])),
+            inconsistent
+        );
+        assert_eq!(
+            app.confirmed(now, &read(types::UNSIGNED8, Some(1))),
+            Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_DENIED))
+        );
+        // One octet per element; read-only stays read-only.
+        assert_eq!(
+            app.confirmed(now, &write(2041, Some(2), &[1, 2])),
+            Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT))
+        );
+        assert_eq!(
+            app.confirmed(now, &write(2020, Some(2), &[1])),
+            Err(ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_DENIED))
+        );
+        assert_eq!(
+            app.confirmed(now, &read(2999, Some(1))),
+            Err(ServiceError::new(
+                ERROR_CLASS_ACCESS,
+                ACCESS_OBJECT_NON_EXISTENT
+            ))
+        );
     }
 
     #[test]

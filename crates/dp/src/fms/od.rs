@@ -231,6 +231,17 @@ impl Description {
         })
     }
 
+    /// The value of one element of this object (a Read or Write with a
+    /// subindex) in words, by its data type: like [`Description::decode_value`]
+    /// of a simple variable of the element type.
+    pub fn decode_element(&self, type_name: &str, data: &[u8]) -> Option<String> {
+        Description {
+            code: ObjectCode::SimpleVariable as u8,
+            ..self.clone()
+        }
+        .decode_value(type_name, data)
+    }
+
     /// The value of this object in words, by its data type (`type_name`
     /// gives the name of a type index: the OD's own type descriptions,
     /// else [`standard_type`]). `None` when the type is not one of the

@@ -338,6 +338,13 @@ pub const ACCESS_OBJECT_NON_EXISTENT: u8 = 7;
 pub const ACCESS_DENIED: u8 = 2;
 /// Access error: type or length of the value do not fit the object.
 pub const ACCESS_TYPE_CONFLICT: u8 = 10;
+/// Access error: object attribute inconsistent — a service parameter the
+/// object does not allow, e.g. a subindex it has no element for. Class 6
+/// code 5 with this meaning is confirmed for INTERBUS PCP, FMS's subset
+/// with the same error coding, by two manuals: Bürkert Type 8644 p.87
+/// ("an impermissible sub-index") and Nidec SI-Interbus p.57 (sub-index
+/// zero access error); for PROFIBUS-FMS itself (unverified).
+pub const ACCESS_ATTRIBUTE_INCONSISTENT: u8 = 5;
 /// Service error: parameter inconsistent.
 pub const SERVICE_PARAMETER_INCONSISTENT: u8 = 3;
 /// OD error: index out of the dictionary (Get-OD).
@@ -359,6 +366,7 @@ impl ServiceError {
             (ERROR_CLASS_ACCESS, ACCESS_OBJECT_NON_EXISTENT) => "object does not exist",
             (ERROR_CLASS_ACCESS, ACCESS_DENIED) => "object access denied",
             (ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT) => "type or length conflict",
+            (ERROR_CLASS_ACCESS, ACCESS_ATTRIBUTE_INCONSISTENT) => "object attribute inconsistent",
             (ERROR_CLASS_ACCESS, _) => "access error",
             (ERROR_CLASS_SERVICE, SERVICE_PARAMETER_INCONSISTENT) => "parameter inconsistent",
             (ERROR_CLASS_SERVICE, _) => "service error",

@@ -564,11 +564,19 @@ impl FmsWatch {
 
     /// The value in words, when the object's description was seen.
     fn value_of(&self, station: u8, request: &Request, data: &[u8]) -> Option<String> {
-        let (Request::Read { index, .. } | Request::Write { index, .. }) = request else {
+        let (Request::Read { index, subindex }
+        | Request::Write {
+            index, subindex, ..
+        }) = request
+        else {
             return None;
         };
         let d = self.od.get(&station)?.get(index)?;
-        d.decode_value(&self.type_name(station, d.data_type), data)
+        let t = self.type_name(station, d.data_type);
+        match subindex {
+            Some(s) if *s > 0 => d.decode_element(&t, data),
+            _ => d.decode_value(&t, data),
+        }
     }
 }
 
