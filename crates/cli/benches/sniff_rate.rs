@@ -2,30 +2,38 @@
 //! `dpctl bus` (issue 31): does it keep up, and what does a telegram cost?
 //!
 //! Run with `cargo bench -p dpctl --bench sniff_rate` (cargo builds dpctl
-//! in the bench profile first; needs socat). A synthetic DP segment is
-//! written as fast as the sniffer takes it into one end of a socat pty
-//! pair (flow-controlled: nothing is lost, the sniffer sets the pace):
+//! in the bench profile first; needs socat). A synthetic DP segment —
 //! master 2 polls slaves 3 … 34 with Data_Exchange (4 bytes each way,
 //! FCB alternating, inputs changing), its token to itself after every 32
-//! exchanges, no idle time between telegrams. `dpctl sniff --baud 12M
-//! --stats 1` reads the other end, once with `--json` and once with plain
-//! lines, its output read by this process.
+//! exchanges, no idle time between telegrams — reaches `dpctl sniff
+//! --baud 12M --stats 1`, once with `--json` and once with plain lines,
+//! its output read by this process, from one of two sources:
 //!
-//! Printed per mode: telegrams sent and decoded (equal: nothing lost),
-//! the time a 12 Mbit/s line needs for them (11 bit per character, no
-//! idle), the wall time the sniffer took, its rate against the line's,
-//! its CPU time (user + system, from /proc), CPU µs per telegram and the
-//! rate one core could decode at that cost. (`dpctl bus --baud 12M` is
-//! not used: it delivers its paced bytes in bursts larger than a pty's
-//! buffer and counts overruns even with `cat` reading.)
+//! - `socat`: written as fast as the sniffer takes it into one end of a
+//!   socat pty pair (flow-controlled: nothing is lost, the sniffer sets
+//!   the pace; shows what the sniffer could do above the line's rate);
+//! - `bus`: written into station 0 of `dpctl bus --baud 12M`, the sniffer
+//!   on station 1: the bus paces it at 12 Mbit/s (the wall time cannot
+//!   beat the line's) and drops what the sniffer does not take in time
+//!   (its backlog: one second of line), so telegrams lost and the bus's
+//!   overruns show whether the sniffer keeps up with a saturated line.
 //!
-//! Environment: `TELEGRAMS` (default 600000, a multiple of 66).
+//! Printed per source and mode, as a Markdown table: telegrams sent,
+//! decoded and lost, the bus's overruns (bytes), the time a 12 Mbit/s
+//! line needs for them (11 bit per character, no idle), the wall time
+//! the sniffer took, its rate against the line's, its CPU time (user +
+//! system, from /proc), CPU µs per telegram, the rate one core could
+//! decode at that cost, and the bus's own CPU time.
+//!
+//! Environment: `TELEGRAMS` (default 600000, a multiple of 66); `SOURCE`
+//! = `socat`, `bus` or `all` (default `all`).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use common::{dpctl, make_raw, open_tty, pty_pair, Proc, TempDir};
+use common::{counter, dpctl, make_raw, open_tty, pty_pair, Bus, Proc, TempDir};
 use std::io::Write;
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -89,21 +97,67 @@ struct Run {
     wire: Duration,
     cpu: Duration,
     wall: Duration,
+    /// With `dpctl bus`: its overruns (bytes) and CPU time.
+    bus: Option<(u64, Duration)>,
 }
 
-fn run(json: bool, n: usize) -> Run {
-    let dir = TempDir::new("sniff-rate");
-    let (a, b) = (dir.path("a"), dir.path("b"));
-    let socat = pty_pair(&a, &b);
+/// Where the segment comes from.
+#[derive(Clone, Copy, PartialEq)]
+enum Source {
+    Socat,
+    Bus,
+}
+
+fn run(source: Source, json: bool, n: usize) -> Run {
+    match source {
+        Source::Socat => {
+            let dir = TempDir::new("sniff-rate");
+            let (a, b) = (dir.path("a"), dir.path("b"));
+            let socat = pty_pair(&a, &b);
+            let r = sniff_run(&a, &b, json, n, Duration::from_secs(30), &|| {});
+            drop(socat);
+            r
+        }
+        Source::Bus => {
+            let bus = Bus::start(2, &["--baud", "12M"]);
+            let cpu0 = cpu_time(bus.proc.pid());
+            // Lost telegrams never come: stop waiting 5 s after the last.
+            let ready = || bus.wait_connected(2);
+            let mut r = sniff_run(
+                &bus.link(0),
+                &bus.link(1),
+                json,
+                n,
+                Duration::from_secs(5),
+                &ready,
+            );
+            let cpu = cpu_time(bus.proc.pid()) - cpu0;
+            let out = bus.stop();
+            let last = out
+                .stderr
+                .lines()
+                .rfind(|l| l.starts_with("dpctl bus: transmissions"))
+                .expect("the bus's counters at exit");
+            let overruns = counter(last, "overruns ").expect("overruns in the bus's counters");
+            r.bus = Some((overruns, cpu));
+            r
+        }
+    }
+}
+
+/// Write the segment into `a`, sniff `b`; `ready` returns when both have
+/// their port open; `quiet` without a telegram line ends the wait.
+fn sniff_run(a: &Path, b: &Path, json: bool, n: usize, quiet: Duration, ready: &dyn Fn()) -> Run {
     let mut cmd = Command::new(dpctl());
     cmd.arg("sniff")
         .arg("--port")
-        .arg(&b)
+        .arg(b)
         .args(["--baud", "12M", "--stats", "1"])
         .arg(if json { "--json" } else { "--plain" });
     let sniff = Proc::spawn_captured(cmd);
-    let mut tx = open_tty(&a);
+    let mut tx = open_tty(a);
     make_raw(&tx);
+    ready();
     let is_telegram = |l: &str| {
         if json {
             l.contains("\"t_us\"") && !l.contains("\"event\"")
@@ -124,17 +178,21 @@ fn run(json: bool, n: usize) -> Run {
         tx
     });
     let mut seen = 0;
+    let mut last = t0;
     while seen < sent {
-        match sniff.stdout_line(Duration::from_secs(30)) {
-            Some(l) => seen += usize::from(is_telegram(&l)),
+        match sniff.stdout_line(quiet) {
+            Some(l) if is_telegram(&l) => {
+                seen += 1;
+                last = Instant::now();
+            }
+            Some(_) => {}
             None => break,
         }
     }
-    let wall = t0.elapsed();
+    let wall = last - t0;
     let cpu = cpu_time(sniff.pid()) - cpu0;
     drop(writer.join().unwrap());
     let out = sniff.stop();
-    drop(socat);
     // The summary line counts what the codec framed (warm-up included).
     let decoded = out
         .stdout
@@ -159,6 +217,7 @@ fn run(json: bool, n: usize) -> Run {
         wire,
         cpu,
         wall,
+        bus: None,
     }
 }
 
@@ -181,27 +240,49 @@ fn main() {
         ceiling,
         65.0 * BAUD as f64 / ((64 * 13 + 3) as f64 * CHAR_BITS as f64)
     );
-    println!("| mode | sent | decoded | 12 Mbit/s line time (s) | wall (s) | telegrams/s | × the line | CPU (s) | CPU µs / telegram | decodable / s on one core |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
-    for json in [true, false] {
-        let r = run(json, n);
-        let per = r.cpu.as_secs_f64() * 1e6 / r.sent as f64;
-        println!(
-            "| {} | {} | {} | {:.2} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} |",
-            if json {
-                "--json --stats 1"
-            } else {
-                "--plain --stats 1"
-            },
-            r.sent,
-            r.decoded,
-            r.wire.as_secs_f64(),
-            r.wall.as_secs_f64(),
-            r.sent as f64 / r.wall.as_secs_f64(),
-            r.wire.as_secs_f64() / r.wall.as_secs_f64(),
-            r.cpu.as_secs_f64(),
-            per,
-            1e6 / per
-        );
+    let sources: &[Source] = match std::env::var("SOURCE").as_deref() {
+        Ok("socat") => &[Source::Socat],
+        Ok("bus") => &[Source::Bus],
+        Ok("all") | Err(_) => &[Source::Socat, Source::Bus],
+        Ok(other) => panic!("SOURCE={other}: use socat, bus or all"),
+    };
+    println!("| source | mode | sent | decoded | lost | bus overruns (bytes) | 12 Mbit/s line time (s) | wall (s) | telegrams/s | × the line | CPU (s) | CPU µs / telegram | decodable / s on one core | bus CPU (s) |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for &source in sources {
+        for json in [true, false] {
+            let r = run(source, json, n);
+            let per = r.cpu.as_secs_f64() * 1e6 / r.decoded.max(1) as f64;
+            let (overruns, bus_cpu) = match r.bus {
+                Some((o, c)) => (o.to_string(), format!("{:.2}", c.as_secs_f64())),
+                None => ("–".into(), "–".into()),
+            };
+            println!(
+                "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} | {} |",
+                if source == Source::Bus {
+                    "`dpctl bus --baud 12M`"
+                } else {
+                    "socat pty pair"
+                },
+                if json {
+                    "`--json --stats 1`"
+                } else {
+                    "`--plain --stats 1`"
+                },
+                r.sent,
+                r.decoded,
+                r.sent as u64 - r.decoded.min(r.sent as u64),
+                overruns,
+                r.wire.as_secs_f64(),
+                r.wall.as_secs_f64(),
+                r.decoded as f64 / r.wall.as_secs_f64(),
+                r.wire.as_secs_f64() / r.wall.as_secs_f64(),
+                r.cpu.as_secs_f64(),
+                per,
+                1e6 / per,
+                bus_cpu
+            );
+        }
     }
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!("load average at the end: {}", load.trim());
 }

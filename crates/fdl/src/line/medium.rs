@@ -49,7 +49,10 @@
 //! exactly `Baud::B19200.chars_to_duration(2000)`. With
 //! [`Medium::with_whole_transmissions`] each transmission is delivered in
 //! one piece when its last character has arrived instead (for receivers
-//! that run behind a scheduler; see there).
+//! that run behind a scheduler; see there); one longer than
+//! [`WHOLE_MAX`] characters (a station sending without a pause for longer
+//! than any telegram) goes out in pieces of at least [`WHOLE_MAX`]
+//! characters as they arrive, each ending where a telegram ends.
 //!
 //! A station that starts while another one is sending either garbles the
 //! line ([`Collisions::Garble`], as on a real line: the overlapping
@@ -75,6 +78,7 @@ use crate::rng::{splitmix64, Rng};
 use crate::time::Instant;
 use crate::timing::Baud;
 use crate::wire::consts::BITS_PER_CHAR;
+use crate::wire::frame_len;
 use alloc::collections::VecDeque;
 use bytes::Bytes;
 use core::fmt;
@@ -82,6 +86,22 @@ use core::fmt;
 /// Longest noise burst in characters; burst lengths are uniform in
 /// `1..=NOISE_BURST_MAX`.
 pub const NOISE_BURST_MAX: u64 = 16;
+
+/// With [`Medium::with_whole_transmissions`]: the longest transmission
+/// delivered in one piece at its end. Longer than any telegram (255
+/// characters) and a token gathered with one. A longer transmission is
+/// delivered in pieces as it crosses the wire, so that a receiver's
+/// buffer (a pty holds about 12 KiB) never has to take more than the line
+/// carried since the last piece, however long the station sends: a piece
+/// is due when the first telegram that ends at least this many characters
+/// after the last piece has arrived, and takes every whole telegram that
+/// has arrived by then. Pieces end where telegrams end (framed by their
+/// start delimiters and lengths, [`frame_len`]; a byte that starts no
+/// telegram is a unit of its own), so a receiver framing by idle time
+/// never sees a pause inside a telegram even when the driver delivers
+/// late; a telegram cut off by the end of the transmission ends the
+/// piece there.
+pub const WHOLE_MAX: usize = 512;
 
 const BITS: u64 = BITS_PER_CHAR as u64;
 /// Flag in a carried character: lost on the way (drop).
@@ -260,15 +280,49 @@ impl Tx {
     fn end(&self, baud: Baud) -> Instant {
         self.char_start(baud, self.chars.len())
     }
-    /// End of the next character to deliver (of the last one when
-    /// delivering whole transmissions).
+    /// End of the next character to deliver (of the last one of the next
+    /// piece when delivering whole transmissions; see [`WHOLE_MAX`]).
     fn next_event(&self, baud: Baud, whole: bool) -> Option<Instant> {
+        if self.delivered >= self.chars.len() {
+            return None;
+        }
         let k = if whole {
-            self.chars.len().checked_sub(1)?
+            self.piece_end() - 1
         } else {
             self.delivered
         };
-        (self.delivered < self.chars.len()).then(|| self.char_end(baud, k))
+        Some(self.char_end(baud, k))
+    }
+
+    /// Where the telegram (or garbage byte) at character `k` ends; `None`
+    /// when the transmission ends inside it (so far).
+    fn unit_end(&self, k: usize) -> Option<usize> {
+        let mut head = [0u8; 3];
+        let n = (self.chars.len() - k).min(3);
+        for (h, &c) in head.iter_mut().zip(&self.chars[k..k + n]) {
+            *h = c as u8;
+        }
+        let len = match frame_len(&head[..n]) {
+            // An SD2 header not seen whole yet.
+            Ok(_) if head[0] == crate::wire::consts::SD2 && n < 3 => return None,
+            Ok(len) => len,
+            Err(_) => 1,
+        };
+        (k + len <= self.chars.len()).then_some(k + len)
+    }
+
+    /// End of the next piece of a whole-transmission delivery: the end of
+    /// the first telegram that ends at least [`WHOLE_MAX`] characters
+    /// after the last piece, or the transmission's end.
+    fn piece_end(&self) -> usize {
+        let mut k = self.delivered;
+        while k < self.delivered + WHOLE_MAX {
+            match self.unit_end(k) {
+                Some(e) => k = e,
+                None => return self.chars.len(),
+            }
+        }
+        k.min(self.chars.len())
     }
 }
 
@@ -346,7 +400,10 @@ impl Medium {
     /// `station::active::ActiveConfig::whole_telegrams`; the simulator
     /// does this with `sim::SimBus::with_whole_transmissions`). On virtual time (the
     /// simulator) every receiver is on time and character-wise delivery
-    /// is exact.
+    /// is exact. A transmission longer than [`WHOLE_MAX`] characters is
+    /// delivered in pieces as it arrives (see there), so a receiver gets
+    /// a station that sends without a pause at the line's rate, not in one
+    /// burst at its end.
     pub fn with_whole_transmissions(mut self) -> Medium {
         self.whole = true;
         self
@@ -503,12 +560,22 @@ impl Medium {
             let whole = self.whole;
             let tx = &mut self.txs[i];
             let mut end = if whole {
-                tx.chars.len()
+                tx.piece_end()
             } else {
                 tx.delivered + 1
             };
-            while end < tx.chars.len() && tx.char_end(baud, end) <= limit {
-                end += 1;
+            if whole {
+                // And every whole telegram that has arrived since.
+                while let Some(e) = (end < tx.chars.len()).then(|| tx.unit_end(end)).flatten() {
+                    if tx.char_end(baud, e - 1) > limit {
+                        break;
+                    }
+                    end = e;
+                }
+            } else {
+                while end < tx.chars.len() && tx.char_end(baud, end) <= limit {
+                    end += 1;
+                }
             }
             let at = tx.char_end(baud, end - 1);
             let range = tx.delivered..end;
@@ -663,6 +730,7 @@ impl Medium {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wire::consts::MAX_TELEGRAM_LEN;
     use core::time::Duration;
 
     fn drain(m: &mut Medium, until: Instant) -> Vec<Delivery> {
@@ -781,6 +849,72 @@ mod tests {
         let d = m.poll_delivery(Instant::NEVER).unwrap();
         assert_eq!(d.at, t + b.chars_to_duration(3));
         assert_eq!(m.poll_timeout(), None);
+    }
+
+    /// SD2 telegrams of 1 to 60 data bytes, back to back, and the
+    /// offsets where each ends.
+    fn telegrams(n: usize) -> (Vec<u8>, Vec<usize>) {
+        let (mut out, mut ends) = (vec![], vec![]);
+        for i in 0..n {
+            let data: Vec<u8> = (0..1 + i % 60).map(|k| (i * 7 + k) as u8).collect();
+            let le = data.len() as u8 + 3;
+            let mut t = vec![0x68, le, le, 0x68, 3, 2, 0x5D];
+            t.extend_from_slice(&data);
+            let fcs = t[4..].iter().fold(0u8, |a, b| a.wrapping_add(*b));
+            t.extend_from_slice(&[fcs, 0x16]);
+            out.extend(t);
+            ends.push(out.len());
+        }
+        (out, ends)
+    }
+
+    #[test]
+    fn a_transmission_longer_than_whole_max_arrives_in_whole_telegrams_as_it_crosses() {
+        let b = Baud::B12000000;
+        let mut m = Medium::new(2, MediumConfig::paced(b)).with_whole_transmissions();
+        // About 150 000 characters written at once: one transmission of
+        // 0.14 s.
+        let (data, ends) = telegrams(4000);
+        m.transmit(Instant::ZERO, 0, &data);
+        let ds = drain(&mut m, Instant::NEVER);
+        let all: Vec<u8> = ds.iter().flat_map(|d| d.bytes.to_vec()).collect();
+        assert_eq!(all, data);
+        let mut count = 0;
+        for (k, d) in ds.iter().enumerate() {
+            count += d.bytes.len();
+            // Each piece when its last character has crossed, ending where
+            // a telegram ends; at least WHOLE_MAX long (but the last), and
+            // at most a telegram longer when polled on time.
+            assert_eq!(d.at, at(b.chars_to_duration(count as u64)));
+            assert!(ends.binary_search(&count).is_ok(), "piece ends at {count}");
+            assert!(d.bytes.len() < WHOLE_MAX + MAX_TELEGRAM_LEN);
+            if k + 1 < ds.len() {
+                assert!(d.bytes.len() >= WHOLE_MAX);
+            }
+        }
+        // A late poll gets every whole telegram that has arrived, in one
+        // piece; the rest still follows in pieces.
+        let t0 = at(Duration::from_secs(1));
+        m.transmit(t0, 0, &data);
+        let late = t0 + b.chars_to_duration(3000);
+        let d = m.poll_delivery(late).unwrap();
+        let upto = ends[ends.partition_point(|&e| e <= 3000) - 1];
+        assert_eq!(&d.bytes[..], &data[..upto]);
+        assert!(m.poll_delivery(late).is_none());
+        let next = ends[ends.partition_point(|&e| e < upto + WHOLE_MAX)];
+        assert_eq!(
+            m.poll_timeout(),
+            Some(t0 + b.chars_to_duration(next as u64))
+        );
+        // A transmission cut inside a telegram: the piece ends there.
+        let t1 = at(Duration::from_secs(2));
+        m = Medium::new(2, MediumConfig::paced(b)).with_whole_transmissions();
+        assert!(ends.binary_search(&1000).is_err());
+        m.transmit(t1, 0, &data[..1000]);
+        let ds = drain(&mut m, Instant::NEVER);
+        assert_eq!(ds.last().unwrap().at, t1 + b.chars_to_duration(1000));
+        assert_eq!(ds.iter().map(|d| d.bytes.len()).sum::<usize>(), 1000);
+        assert_eq!(m.stats().transmissions, 1);
     }
 
     #[test]

@@ -32,9 +32,25 @@
 //! A pty whose end is not open (or was closed by a restarting process)
 //! reads EIO and polls HUP. The hub then stops delivering to it, throws
 //! away what it had queued, checks every few milliseconds whether a
-//! process opened it again, and carries on. A station that does not read
-//! for so long that its pty fills up loses bytes (counted as overruns)
-//! instead of stalling the bus.
+//! process opened it again, and carries on.
+//!
+//! # Readers that fall behind
+//!
+//! A pty takes only about 12 KiB (Linux 6.x; 11 ms of a 12 Mbit/s line).
+//! What a station's pty does not take is kept for it in a backlog, like
+//! the receive buffer of a serial adapter's driver, and handed on as the
+//! station reads; the hub never waits for a station, so a slow or
+//! stopped reader delays neither the line nor the other stations. The
+//! backlog holds [`BACKLOG_TIME`] of the line (one second: longer than a
+//! busy machine stops a process that keeps up on average), at least
+//! [`BACKLOG_MIN`]; [`UNPACED_BACKLOG`] on an unpaced line, which has no
+//! rate. Only a station that falls further behind than that loses
+//! bytes: the newest ones, as a full receive FIFO does, counted as
+//! overruns (a warning names the station once per episode). Long
+//! transmissions reach the backlog in pieces
+//! ([`profibus_fdl::line::medium::WHOLE_MAX`]), so
+//! a station that sends without a pause is handed on at the line's rate,
+//! not in one burst at its end.
 //!
 //! # Driving it
 //!
@@ -54,6 +70,9 @@ use profibus_fdl::codec::CodecStats;
 use profibus_fdl::line::medium::{Medium, MediumConfig, MediumStats};
 use profibus_fdl::line::tap::{Tap, TapEvent};
 use profibus_fdl::time::Instant;
+use profibus_fdl::timing::Baud;
+use profibus_fdl::wire::consts::BITS_PER_CHAR;
+use std::collections::VecDeque;
 use std::fmt;
 use std::io::{self, Write};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
@@ -65,8 +84,29 @@ use std::time::Duration;
 const IDLE_GAP: Duration = Duration::from_millis(5);
 /// How often ptys without a process are checked for a new one.
 const RECONNECT_CHECK: Duration = Duration::from_millis(5);
-/// Bytes queued for a station that does not read before it loses bytes.
-const MAX_QUEUED: usize = 1 << 20;
+/// How far behind the paced line a station's reading may fall before it
+/// loses bytes (see the module docs).
+pub const BACKLOG_TIME: Duration = Duration::from_secs(1);
+/// The smallest backlog of a station on a paced line (at low rates one
+/// second of line is less than a pty holds).
+pub const BACKLOG_MIN: usize = 64 << 10;
+/// A station's backlog on an unpaced line.
+pub const UNPACED_BACKLOG: usize = 1 << 20;
+
+/// The backlog bound in bytes for a line at `baud` (`None`: unpaced),
+/// covering `time` of it.
+fn backlog_bound(baud: Option<Baud>, time: Duration) -> usize {
+    match baud {
+        None => UNPACED_BACKLOG,
+        Some(b) => {
+            let chars =
+                time.as_nanos() * u128::from(b.bps()) / (BITS_PER_CHAR as u128 * 1_000_000_000);
+            usize::try_from(chars)
+                .unwrap_or(usize::MAX)
+                .max(BACKLOG_MIN)
+        }
+    }
+}
 
 /// Why a hub could not be set up or run.
 #[derive(Debug, thiserror::Error)]
@@ -100,7 +140,8 @@ pub enum HubError {
 pub struct HubStats {
     /// Bytes handed to stations (counted once per receiving station).
     pub delivered_bytes: u64,
-    /// Bytes lost because a station did not read.
+    /// Bytes lost because a station fell further behind than its backlog
+    /// holds (see the module docs).
     pub overrun_bytes: u64,
     /// Times a process opened a station's pty.
     pub connects: u64,
@@ -157,7 +198,7 @@ struct Station {
     /// A process has the pty open.
     connected: bool,
     /// Bytes the pty did not take yet.
-    queued: Vec<u8>,
+    backlog: Backlog,
 }
 
 type Recorder = PcapWriter<Box<dyn Write + Send>>;
@@ -223,7 +264,7 @@ impl Hub {
                 link: link.clone(),
                 tty,
                 connected: false,
-                queued: Vec::new(),
+                backlog: Backlog::new(backlog_bound(medium.baud, BACKLOG_TIME)),
             };
             // Pushed first, so that a failure removes the links made so far.
             stations.push(st);
@@ -261,6 +302,21 @@ impl Hub {
     pub fn record(&mut self, sink: Box<dyn Write + Send>, epoch: Duration) -> Result<(), HubError> {
         self.pcap = Some(PcapWriter::new(sink, epoch).map_err(HubError::Pcap)?);
         Ok(())
+    }
+
+    /// Let each station fall `line_time` behind the paced line before it
+    /// loses bytes (default [`BACKLOG_TIME`]; at least [`BACKLOG_MIN`]
+    /// bytes; no effect unpaced).
+    pub fn set_backlog(&mut self, line_time: Duration) {
+        let bound = backlog_bound(self.medium.config().baud, line_time);
+        for s in &mut self.stations {
+            s.backlog.bound = bound;
+        }
+    }
+
+    /// The bytes each station's backlog holds at most.
+    pub fn backlog_bytes(&self) -> usize {
+        self.stations.first().map_or(0, |s| s.backlog.bound)
     }
 
     /// The stations' links and the pty ends they point to, by index.
@@ -362,7 +418,7 @@ impl Hub {
             .filter(|(_, s)| s.connected)
         {
             let mut ev = PollFlags::POLLIN;
-            if !s.queued.is_empty() {
+            if !s.backlog.is_empty() {
                 ev |= PollFlags::POLLOUT;
             }
             fds.push(PollFd::new(s.master.as_fd(), ev));
@@ -382,7 +438,7 @@ impl Hub {
         for (k, &i) in index.iter().enumerate() {
             let ev = revents[first + k];
             if ev.contains(PollFlags::POLLOUT) {
-                flush_queue(&mut self.stations[i]);
+                flush_backlog(&mut self.stations[i]);
             }
             if ev.intersects(PollFlags::POLLIN | PollFlags::POLLHUP | PollFlags::POLLERR) {
                 self.read_station(i)?;
@@ -573,48 +629,116 @@ fn disconnect(s: &mut Station) {
         tracing::debug!(link = %s.link.display(), "station disconnected");
     }
     s.connected = false;
-    s.queued.clear();
+    s.backlog.clear();
     let _ = termios::tcflush(&s.master, termios::FlushArg::TCOFLUSH);
 }
 
-/// Write `bytes` to a station's pty, queueing what it does not take.
+/// Write `bytes` to a station's pty, keeping what it does not take.
 fn deliver(s: &mut Station, bytes: &[u8], stats: &mut HubStats) {
     stats.delivered_bytes += bytes.len() as u64;
-    if !s.queued.is_empty() {
-        flush_queue(s);
-    }
-    let mut rest = bytes;
-    if s.queued.is_empty() {
-        match nix::unistd::write(&s.master, bytes) {
-            Ok(k) => rest = &bytes[k..],
-            Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
-            Err(_) => {
-                disconnect(s);
-                return;
+    let master = &s.master;
+    match s.backlog.put(&mut |b| nix::unistd::write(master, b), bytes) {
+        Ok(0) => {}
+        Ok(lost) => {
+            // Warned once until the backlog is empty again.
+            if !std::mem::replace(&mut s.backlog.warned, true) {
+                tracing::warn!(
+                    link = %s.link.display(),
+                    backlog = s.backlog.bound,
+                    "station fell behind the line by more than its backlog: losing bytes"
+                );
             }
+            stats.overrun_bytes += lost;
         }
-    }
-    if !rest.is_empty() {
-        let room = MAX_QUEUED.saturating_sub(s.queued.len());
-        let take = rest.len().min(room);
-        s.queued.extend_from_slice(&rest[..take]);
-        stats.overrun_bytes += (rest.len() - take) as u64;
+        Err(_) => disconnect(s),
     }
 }
 
-fn flush_queue(s: &mut Station) {
-    while !s.queued.is_empty() {
-        match nix::unistd::write(&s.master, &s.queued) {
-            Ok(k) => {
-                s.queued.drain(..k);
-            }
-            Err(Errno::EINTR) => {}
-            Err(Errno::EAGAIN) => return,
-            Err(_) => {
-                disconnect(s);
-                return;
+fn flush_backlog(s: &mut Station) {
+    let master = &s.master;
+    if s.backlog
+        .flush(&mut |b| nix::unistd::write(master, b))
+        .is_err()
+    {
+        disconnect(s);
+    }
+}
+
+/// A station's receive backlog: the bytes its pty has not taken yet, in
+/// order, at most `bound` of them. Sans-IO: the pty is a write function
+/// that takes a prefix of what it is given (a short write), or fails with
+/// `EAGAIN` when full.
+#[derive(Debug)]
+struct Backlog {
+    queued: VecDeque<u8>,
+    bound: usize,
+    /// A loss was warned about since the backlog was last empty.
+    warned: bool,
+}
+
+impl Backlog {
+    fn new(bound: usize) -> Backlog {
+        Backlog {
+            queued: VecDeque::new(),
+            bound,
+            warned: false,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.queued.is_empty()
+    }
+
+    fn clear(&mut self) {
+        self.queued.clear();
+        self.warned = false;
+    }
+
+    /// Hand `bytes` on after what is queued: write what the pty takes,
+    /// keep the rest up to the bound; the bytes that did not fit (the
+    /// newest). An error other than `EAGAIN`/`EINTR` is the writer's (the
+    /// station is gone).
+    fn put(
+        &mut self,
+        write: &mut dyn FnMut(&[u8]) -> Result<usize, Errno>,
+        bytes: &[u8],
+    ) -> Result<u64, Errno> {
+        self.flush(write)?;
+        let mut rest = bytes;
+        if self.queued.is_empty() {
+            while !rest.is_empty() {
+                match write(rest) {
+                    Ok(0) | Err(Errno::EAGAIN) => break,
+                    Ok(k) => rest = &rest[k..],
+                    Err(Errno::EINTR) => {}
+                    Err(e) => return Err(e),
+                }
             }
         }
+        let room = self.bound.saturating_sub(self.queued.len());
+        let take = rest.len().min(room);
+        self.queued.extend(&rest[..take]);
+        if self.queued.is_empty() {
+            self.warned = false;
+        }
+        Ok((rest.len() - take) as u64)
+    }
+
+    /// Write as much of the queue as the pty takes.
+    fn flush(&mut self, write: &mut dyn FnMut(&[u8]) -> Result<usize, Errno>) -> Result<(), Errno> {
+        while !self.queued.is_empty() {
+            let (front, _) = self.queued.as_slices();
+            match write(front) {
+                Ok(0) | Err(Errno::EAGAIN) => return Ok(()),
+                Ok(k) => {
+                    self.queued.drain(..k);
+                }
+                Err(Errno::EINTR) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        self.warned = false;
+        Ok(())
     }
 }
 
@@ -629,6 +753,8 @@ mod tests {
     /// A hub in a thread of this process, polled until dropped.
     struct Running {
         stop: Arc<AtomicBool>,
+        /// The counters after the latest round.
+        status: Arc<std::sync::Mutex<Option<HubStatus>>>,
         thread: Option<std::thread::JoinHandle<HubStatus>>,
         links: Vec<PathBuf>,
     }
@@ -636,18 +762,32 @@ mod tests {
     impl Running {
         /// A hub of two stations with their links in `dir`.
         fn start(dir: &Path, medium: MediumConfig) -> Running {
-            let links: Vec<PathBuf> = (0..2).map(|i| dir.join(format!("hub-{i}"))).collect();
+            Running::with(dir, medium, 2, |_| {})
+        }
+
+        /// A hub of `n` stations, set up by `setup`.
+        fn with(
+            dir: &Path,
+            medium: MediumConfig,
+            n: usize,
+            setup: impl FnOnce(&mut Hub),
+        ) -> Running {
+            let links: Vec<PathBuf> = (0..n).map(|i| dir.join(format!("hub-{i}"))).collect();
             let mut hub = Hub::open(&links, medium).unwrap();
+            setup(&mut hub);
             let stop = Arc::new(AtomicBool::new(false));
-            let s = stop.clone();
+            let status = Arc::new(std::sync::Mutex::new(None));
+            let (s, st) = (stop.clone(), status.clone());
             let thread = std::thread::spawn(move || {
                 while !s.load(Ordering::Relaxed) {
                     hub.poll(None, Some(Duration::from_millis(2))).unwrap();
+                    *st.lock().unwrap() = Some(hub.status());
                 }
                 hub.finish().unwrap()
             });
             Running {
                 stop,
+                status,
                 thread: Some(thread),
                 links,
             }
@@ -659,6 +799,20 @@ mod tests {
                 .write(true)
                 .open(&self.links[i])
                 .unwrap()
+        }
+
+        /// Wait until the counters satisfy `f`.
+        fn wait_status(&self, what: &str, f: impl Fn(&HubStatus) -> bool) -> HubStatus {
+            let t0 = std::time::Instant::now();
+            loop {
+                if let Some(s) = *self.status.lock().unwrap() {
+                    if f(&s) {
+                        return s;
+                    }
+                    assert!(t0.elapsed() < Duration::from_secs(30), "{what}: {s}");
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
         }
 
         fn stop(mut self) -> HubStatus {
@@ -726,5 +880,163 @@ mod tests {
         assert!(links.iter().all(|l| std::fs::read_link(l).is_ok()));
         hub.stop();
         assert!(links.iter().all(|l| std::fs::symlink_metadata(l).is_err()));
+    }
+
+    /// A fake pty: takes at most `room` bytes (what its reader has not
+    /// read yet counts against it), at most `per_write` at a time, and
+    /// fails every `eintr_every`th call with EINTR.
+    struct FakePty {
+        read: Vec<u8>,
+        held: Vec<u8>,
+        room: usize,
+        per_write: usize,
+        calls: usize,
+        eintr_every: usize,
+    }
+
+    impl FakePty {
+        fn new(room: usize, per_write: usize) -> FakePty {
+            FakePty {
+                read: vec![],
+                held: vec![],
+                room,
+                per_write,
+                calls: 0,
+                eintr_every: 0,
+            }
+        }
+        fn write(&mut self, b: &[u8]) -> Result<usize, Errno> {
+            self.calls += 1;
+            if self.eintr_every > 0 && self.calls.is_multiple_of(self.eintr_every) {
+                return Err(Errno::EINTR);
+            }
+            let k = b.len().min(self.per_write).min(self.room - self.held.len());
+            if k == 0 {
+                return Err(Errno::EAGAIN);
+            }
+            self.held.extend_from_slice(&b[..k]);
+            Ok(k)
+        }
+        /// The reader takes everything the pty holds.
+        fn drain(&mut self) {
+            self.read.append(&mut self.held);
+        }
+    }
+
+    fn stream(n: usize) -> Vec<u8> {
+        (0..n).map(|i| (i * 31 + i / 251) as u8).collect()
+    }
+
+    #[test]
+    fn a_reader_that_falls_behind_within_the_backlog_and_catches_up_loses_nothing() {
+        let data = stream(50_000);
+        let mut pty = FakePty::new(1200, 700);
+        pty.eintr_every = 5;
+        let mut b = Backlog::new(20_000);
+        let mut lost = 0;
+        for (k, chunk) in data.chunks(333).enumerate() {
+            lost += b.put(&mut |x| pty.write(x), chunk).unwrap();
+            // The reader stops for the first 18 000 bytes (1 200 in its
+            // pty, the rest in the backlog), then reads now and then.
+            if k * 333 > 18_000 && k.is_multiple_of(2) {
+                pty.drain();
+                b.flush(&mut |x| pty.write(x)).unwrap();
+            }
+        }
+        while !b.is_empty() {
+            pty.drain();
+            b.flush(&mut |x| pty.write(x)).unwrap();
+        }
+        pty.drain();
+        assert_eq!(lost, 0);
+        assert!(pty.read == data, "bytes changed or reordered");
+    }
+
+    #[test]
+    fn a_reader_that_never_reads_loses_only_what_exceeds_its_backlog() {
+        let data = stream(100_000);
+        let mut stalled = FakePty::new(4096, usize::MAX);
+        let mut fine = FakePty::new(4096, 1000);
+        let (mut bs, mut bf) = (Backlog::new(10_000), Backlog::new(10_000));
+        let (mut lost_s, mut lost_f) = (0, 0);
+        for chunk in data.chunks(512) {
+            // Every put returns at once, however full the stalled pty is.
+            lost_s += bs.put(&mut |x| stalled.write(x), chunk).unwrap();
+            lost_f += bf.put(&mut |x| fine.write(x), chunk).unwrap();
+            fine.drain();
+        }
+        while !bf.is_empty() {
+            fine.drain();
+            bf.flush(&mut |x| fine.write(x)).unwrap();
+        }
+        fine.drain();
+        assert_eq!((lost_f, &fine.read[..]), (0, &data[..]));
+        // The stalled one kept the oldest bytes (its pty's 4 096 and the
+        // backlog's 10 000) and lost the newest, counted.
+        assert_eq!(lost_s, 100_000 - 4096 - 10_000);
+        while !bs.is_empty() {
+            stalled.drain();
+            bs.flush(&mut |x| stalled.write(x)).unwrap();
+        }
+        stalled.drain();
+        assert_eq!(stalled.read, &data[..14_096]);
+        // A gone station's error ends the put.
+        let e = bs.put(&mut |_| Err(Errno::EIO), &[1, 2, 3]).unwrap_err();
+        assert_eq!(e, Errno::EIO);
+    }
+
+    #[test]
+    fn the_backlog_covers_a_second_of_the_line_and_at_least_64_kib() {
+        let second = Duration::from_secs(1);
+        // 12 Mbit/s: 1 090 909 characters a second.
+        assert_eq!(backlog_bound(Some(Baud::B12000000), second), 1_090_909);
+        assert_eq!(backlog_bound(Some(Baud::B1500000), second), 136_363);
+        assert_eq!(backlog_bound(Some(Baud::B19200), second), BACKLOG_MIN);
+        assert_eq!(backlog_bound(None, second), UNPACED_BACKLOG);
+    }
+
+    /// Real ptys at 12 Mbit/s: a station that never reads loses bytes
+    /// once it is a backlog behind, and neither delays nor starves a
+    /// station that reads. The writer waits for the reading station to
+    /// have each chunk before it writes the next, so that station is never
+    /// more than a chunk (16 KiB, far less than its backlog) behind,
+    /// however loaded the machine.
+    #[test]
+    fn a_stalled_station_loses_its_overrun_and_the_others_get_everything() {
+        let dir = tempfile::tempdir().unwrap();
+        let hub = Running::with(dir.path(), MediumConfig::paced(Baud::B12000000), 3, |h| {
+            h.set_backlog(Duration::ZERO);
+            assert_eq!(h.backlog_bytes(), BACKLOG_MIN);
+        });
+        let (mut a, mut b, mut stalled) = (hub.open(0), hub.open(1), hub.open(2));
+        hub.wait_status("connected", |s| s.connected == 3);
+        let data = stream(512 << 10);
+        let mut got = Vec::with_capacity(data.len());
+        let mut buf = vec![0u8; 1 << 16];
+        for chunk in data.chunks(16 << 10) {
+            a.write_all(chunk).unwrap();
+            let want = got.len() + chunk.len();
+            while got.len() < want {
+                let n = b.read(&mut buf).unwrap();
+                got.extend_from_slice(&buf[..n]);
+            }
+        }
+        assert!(got == data, "the reading station lost or reordered bytes");
+        // Both stations had every delivery handed to them.
+        let total = data.len() as u64;
+        let s = hub.wait_status("delivered", |s| s.hub.delivered_bytes == 2 * total);
+        let overrun = s.hub.overrun_bytes;
+        assert!(overrun > 0 && overrun <= total - BACKLOG_MIN as u64, "{s}");
+        // The stalled station still gets what it kept: the oldest bytes.
+        let keep = (total - overrun) as usize;
+        let mut kept = Vec::with_capacity(keep);
+        while kept.len() < keep {
+            let n = stalled.read(&mut buf).unwrap();
+            kept.extend_from_slice(&buf[..n]);
+        }
+        assert!(kept == data[..keep], "the stalled station's bytes changed");
+        drop((a, b, stalled));
+        let end = hub.stop();
+        assert_eq!(end.hub.overrun_bytes, overrun, "{end}");
     }
 }
