@@ -64,7 +64,8 @@ pub struct Args {
     latency: Option<f64>,
     #[command(flatten)]
     rts: RtsArg,
-    /// Print one JSON object.
+    /// Print one JSON object (after one per Information-Report the
+    /// server sent during the run).
     #[arg(long, global = true)]
     json: bool,
     #[command(subcommand)]
@@ -229,6 +230,21 @@ pub fn run(args: Args) -> Result<()> {
     }
     let n = args.station;
     let run = done.run;
+    // What the server published while the run waited: a line each,
+    // before the service's result.
+    for r in &run.reports {
+        if args.json {
+            let mut o = Map::new();
+            o.insert("station".into(), n.into());
+            o.insert("lsap".into(), args.lsap.into());
+            o.insert("service".into(), "information_report".into());
+            o.insert("index".into(), r.index.into());
+            o.insert("data".into(), Hex(&r.data).to_string().into());
+            crate::out::outln!("{}", common::json_line(&o))?;
+        } else {
+            crate::out::outln!("station {n}: {r}")?;
+        }
+    }
     if !done.had_token {
         return args.fail(format!(
             "master {addr} was not taken into the token ring within {:.1} s \

@@ -322,17 +322,25 @@ impl Printer {
                     return Ok(());
                 };
                 let mut what = TelegramSummary::new(t, &bytes);
+                let (dp, fms) = match self.exchanges.decode_layer(&t) {
+                    Some(Layer::Dp(dp)) => (Some(dp), None),
+                    Some(Layer::Fms(fms)) => {
+                        what.service_sap = Some("FMS");
+                        (None, Some(*fms))
+                    }
+                    None => (None, None),
+                };
                 if let Some(live) = &mut self.live {
-                    live.view_mut().telegram(at, &bytes, what.to_string());
-                } else {
-                    let (dp, fms) = match self.exchanges.decode_layer(&t) {
-                        Some(Layer::Dp(dp)) => (Some(dp), None),
-                        Some(Layer::Fms(fms)) => {
-                            what.service_sap = Some("FMS");
-                            (None, Some(*fms))
+                    // The live list: FMS telegrams with their LLI/FMS
+                    // PDUs in words first, then the FDL header.
+                    match &fms {
+                        Some(f) => {
+                            live.view_mut()
+                                .fms_telegram(at, &bytes, format!("{f} | {what}"))
                         }
-                        None => (None, None),
-                    };
+                        None => live.view_mut().telegram(at, &bytes, what.to_string()),
+                    }
+                } else {
                     if self.json {
                         let seen = Seen {
                             t_us,

@@ -404,6 +404,60 @@ fn omega_follows(s: &str) -> bool {
     }
 }
 
+/// Sniff's live list shows an FMS telegram with its LLI/FMS PDUs in
+/// words (issue 35), service `FMS`: `dpctl fms read` on a mixed-mode
+/// BK3000, the list filtered to station 5.
+#[test]
+fn sniff_lists_fms_telegrams_in_words() {
+    let bus = Bus::start(3, &[]);
+    let mut coupler = Proc::spawn(
+        "dpctl slave (bk3000, fms=mixed)",
+        Command::new(dpctl())
+            .args(["slave", "--baud", "1.5M", "--json", "--addr", "5"])
+            .args(["--device", "bk3000", "--terminals", "KL3102,KL4002,KL9010"])
+            .args(["--device-opt", "fms=mixed", "--port"])
+            .arg(bus.link(1))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null()),
+    );
+    let _events = common::started(&mut coupler, WAIT);
+    let port = bus.link_str(2);
+    let t = Tmux::start(&["sniff", "--port", &port, "--baud", "1.5M"]);
+    t.wait_for(&["dpctl sniff", "stations"]);
+    t.keys(&["a"]);
+    t.type_text("5");
+    t.keys(&["Enter"]);
+    t.wait_for(&["filter: address 5"]);
+    let link = bus.link_str(0);
+    let read = common::run_dpctl(&[
+        "fms",
+        "--port",
+        &link,
+        "--station",
+        "5",
+        "--addr",
+        "3",
+        "--baud",
+        "1.5M",
+        "--latency",
+        "100",
+        "read",
+        "2020",
+    ]);
+    assert!(read.status.success(), "{read:?}");
+    // The meaning first (the column is narrow), the service `FMS`.
+    let s = t.wait_for(&[
+        "FMS Read.req invoke",
+        "index 2020 | SD2 3→5",
+        "FMS Read.resp invoke",
+        "LLI Abort",
+    ]);
+    let req = line_with(&s, "FMS Read.req");
+    assert!(!req.contains("MSAC_C2"), "{req}");
+    t.keys(&["q"]);
+    t.wait_for(&["[exit 0]"]);
+}
+
 #[test]
 fn sniff_lists_telegrams_with_filters_and_station_statistics() {
     let bus = Bus::start(3, &[]);

@@ -136,6 +136,26 @@ impl SniffView {
         self.paused
     }
 
+    /// A telegram of an FMS connection (`profibus_dp::pdu::decode::Layer::Fms`)
+    /// seen at `at`: counted like [`SniffView::telegram`], listed with
+    /// the service `FMS` (a response `FMS` and its status) instead of
+    /// the SAP's DP name, and `text` (the LLI/FMS PDUs in words first,
+    /// so a narrow column still shows them).
+    pub fn fms_telegram(&mut self, at: Instant, bytes: &[u8], text: impl Into<String>) {
+        self.telegram(at, bytes, text);
+        let service = match Telegram::parse(bytes) {
+            Ok((Telegram::Data(d), _)) => match d.fc {
+                FunctionCode::Response { status, .. } => format!("FMS {}", status.mnemonic()),
+                FunctionCode::Request { .. } => "FMS".into(),
+            },
+            Ok((Telegram::ShortAck, _)) => "FMS short ack".into(),
+            _ => return,
+        };
+        if let Some(e) = self.entries.back_mut() {
+            e.service = service;
+        }
+    }
+
     /// A telegram seen at `at`; `text` describes it (as `dpctl decode`
     /// does). Bytes that do not parse are taken as skipped.
     pub fn telegram(&mut self, at: Instant, bytes: &[u8], text: impl Into<String>) {
@@ -527,6 +547,28 @@ mod tests {
         tick(v, response(8, 2, ResponseStatus::Rs), "SD2 8→2 RS refused");
         tick(v, emit(Telegram::Token { da: 2, sa: 2 }), "SD4 token 2→2");
         v.skipped(at, skipped_text("bad FCS", &[0x68, 0x01]));
+    }
+
+    #[test]
+    fn fms_telegrams_are_listed_as_fms_with_their_meaning_first() {
+        let mut v = SniffView::new("dpctl sniff");
+        let at = Instant::ZERO + Duration::from_micros(100);
+        v.fms_telegram(
+            at,
+            &request(3, 5, Some(40)),
+            "FMS Read.req invoke 1 index 2020 | SD2 3→5 SRD_HIGH DSAP=40 (FMS)",
+        );
+        v.fms_telegram(
+            at,
+            &response(5, 3, ResponseStatus::Dl),
+            "FMS Read.resp invoke 1 data 01 02 | SD2 5→3 DL",
+        );
+        let s = screen(&v);
+        let req = s.lines().find(|l| l.contains("Read.req")).expect(&s);
+        assert!(req.contains(" FMS ") && !req.contains("MSAC_C2 "), "{req}");
+        let res = s.lines().find(|l| l.contains("Read.resp")).expect(&s);
+        assert!(res.contains("FMS DL"), "{res}");
+        assert_eq!(v.station(5).unwrap().responses, 1);
     }
 
     #[test]

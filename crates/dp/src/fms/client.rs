@@ -170,6 +170,28 @@ fn status_words(s: ResponseStatus) -> &'static str {
     }
 }
 
+/// An Information-Report the server sent during a run (unconfirmed: the
+/// server publishes an object's value).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InformationReport {
+    /// Object index.
+    pub index: u16,
+    /// The value.
+    pub data: Vec<u8>,
+}
+
+/// `information report: index 2020: 00 CB 03`.
+impl core::fmt::Display for InformationReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "information report: index {}: ", self.index)?;
+        let hex: Vec<String> = self.data.iter().map(|b| format!("{b:02X}")).collect();
+        f.write_str(&hex.join(" "))
+    }
+}
+
+/// Information-Reports kept at most per run (the oldest go first).
+const MAX_REPORTS: usize = 1000;
+
 /// A run of confirmed requests on one connection: connect, each request
 /// after the previous one's confirmation, then release. A Get-OD "from
 /// index on" whose response says more follow is asked again from the
@@ -188,6 +210,9 @@ pub struct FmsRun {
     pub results: Vec<(Request, Result<Response, ServiceError>)>,
     /// Why the run failed, if it did.
     pub error: Option<FmsRunError>,
+    /// Information-Reports received while the run waited, in order
+    /// (at most the last 1000).
+    pub reports: Vec<InformationReport>,
     done: bool,
 }
 
@@ -202,6 +227,7 @@ impl FmsRun {
             paging: false,
             results: Vec::new(),
             error: None,
+            reports: Vec::new(),
             done: false,
         }
     }
@@ -299,7 +325,13 @@ impl FmsRun {
         lli.handle_timeout(now);
         for ev in lli.take_events() {
             match ev {
-                ClientEvent::Connected(_) | ClientEvent::InformationReport { .. } => {}
+                ClientEvent::Connected(_) => {}
+                ClientEvent::InformationReport { index, data } => {
+                    if self.reports.len() >= MAX_REPORTS {
+                        self.reports.remove(0);
+                    }
+                    self.reports.push(InformationReport { index, data });
+                }
                 ClientEvent::Refused(code) => {
                     self.error = Some(FmsRunError::Refused(code));
                     self.done = true;
@@ -386,6 +418,59 @@ mod tests {
                 descriptions,
             })
         }
+    }
+
+    #[test]
+    fn information_reports_received_while_waiting_are_kept_in_order() {
+        use super::super::lli::LliPdu;
+        use super::super::pdu::FmsPdu;
+        let mut m = FmsMaster::new(5, 40, Some(Duration::from_millis(500)));
+        let mut s = LliServer::new(40, RelationshipType::Msaz, None);
+        let mut run = FmsRun::new(vec![Request::Identify, Request::Status]);
+        let mut t = Instant::ZERO;
+        let mut reported = 0;
+        // The server's answer held back while a report goes first.
+        let mut held: Option<Option<Vec<u8>>> = None;
+        for _ in 0..50 {
+            run.tick(&mut m, t);
+            let lli = m.lli();
+            if let Some(du) = lli.next_srd(t) {
+                let reply = match held.take() {
+                    // The client polls for its confirmation.
+                    Some(r) => r,
+                    None => {
+                        let r = s.on_srd(t, 3, CLIENT_LSAP, &du, &mut Paged);
+                        if lli.is_open() && reported < 2 {
+                            // A report comes before each answer.
+                            reported += 1;
+                            held = Some(r);
+                            LliPdu::Data(FmsPdu::InformationReport {
+                                index: 2019 + reported,
+                                data: vec![0, reported as u8],
+                            })
+                            .to_vec()
+                        } else {
+                            r
+                        }
+                    }
+                };
+                lli.on_reply(t, reply.as_deref());
+            }
+            t += Duration::from_millis(1);
+            if run.is_done() {
+                break;
+            }
+        }
+        assert!(run.is_done(), "{run:?}");
+        assert_eq!(run.results.len(), 2, "the answers still count: {run:?}");
+        let got: Vec<String> = run.reports.iter().map(|r| r.to_string()).collect();
+        assert_eq!(
+            got,
+            [
+                "information report: index 2020: 00 01",
+                "information report: index 2021: 00 02"
+            ]
+        );
     }
 
     #[test]

@@ -346,7 +346,7 @@ impl FmsWatch {
             }
             LliPdu::Data(p) => {
                 self.seen(c);
-                if let Some(e) = self.data(at, c, p) {
+                if let Some(e) = self.data(at, c, p, request) {
                     if e.invoke_id.is_some() {
                         self.count(c, &e);
                     }
@@ -411,7 +411,16 @@ impl FmsWatch {
         s.last = Some(e.short());
     }
 
-    fn data(&mut self, at: Instant, c: Connection, p: &FmsPdu) -> Option<FmsEvent> {
+    /// An FMS PDU on `c`; `request`: it went client → server. Requests
+    /// count only that way, confirmations only the other.
+    fn data(&mut self, at: Instant, c: Connection, p: &FmsPdu, request: bool) -> Option<FmsEvent> {
+        let confirmation = matches!(
+            p,
+            FmsPdu::Response { .. } | FmsPdu::Error { .. } | FmsPdu::Reject { .. }
+        );
+        if (request && confirmation) || (!request && matches!(p, FmsPdu::Request { .. })) {
+            return None;
+        }
         match p {
             FmsPdu::Request { invoke_id, request } => {
                 if self.outstanding.len() >= MAX_KEPT {
@@ -763,6 +772,46 @@ mod tests {
             assert_eq!(j["data"], "00 CB 03");
             assert_eq!(j["time"], 0.007);
             assert_eq!(j["type"], "Unsigned8");
+        }
+    }
+
+    proptest::proptest! {
+        /// Any data units on an FMS connection, either way, in any
+        /// order: no panic, and every service event is one the line
+        /// asked for (its invoke ID was in a request seen before).
+        #[test]
+        fn garbage_on_an_fms_connection_never_panics(
+            stream in proptest::collection::vec(
+                (proptest::bool::ANY, proptest::collection::vec(proptest::num::u8::ANY, 0..24)),
+                0..120,
+            )
+        ) {
+            let mut w = FmsWatch::default();
+            let mut asked = std::collections::BTreeSet::new();
+            for (i, (request, du)) in stream.into_iter().enumerate() {
+                // A type octet of the LLI or FMS now and then.
+                let mut du = du;
+                if let Some(b) = du.first_mut() {
+                    *b = [1, 2, 3, 4, 5, 6, 7, 8, 0x10, 0x11, 0x12, 0x13, *b][*b as usize % 13];
+                }
+                let bytes = if request { srd(&du) } else { answer(&du) };
+                if request {
+                    if let Ok(LliPdu::Data(FmsPdu::Request { invoke_id, .. })) = LliPdu::parse(&du) {
+                        asked.insert(invoke_id);
+                    }
+                }
+                let (t, _) = Telegram::parse(&bytes).unwrap();
+                for e in w.observe(Instant::from_nanos(i as u64 * 1000), &t) {
+                    if let (Some(id), false) = (e.invoke_id, e.service == "Reject") {
+                        proptest::prop_assert!(asked.contains(&id), "{e:?}");
+                    }
+                    let _ = e.to_string();
+                }
+            }
+            for c in w.connections_of(SERVER) {
+                proptest::prop_assert!(c.errors <= c.services);
+                let _ = c.to_string();
+            }
         }
     }
 
