@@ -601,6 +601,19 @@ impl Medium {
         }
     }
 
+    /// End on the wire of what station `from` has written so far, while
+    /// it is still sending (paced lines; `None` when it is not). A driver
+    /// that stops taking bytes from a station that is far ahead makes it
+    /// wait for the line as a UART's full transmit FIFO does.
+    pub fn sending_until(&self, from: usize) -> Option<Instant> {
+        let baud = self.cfg.baud?;
+        self.txs
+            .iter()
+            .filter(|t| t.from == Some(from))
+            .map(|t| t.end(baud))
+            .max()
+    }
+
     /// End of the current transmission (of the last one queued, with
     /// [`Collisions::Serialize`]); in the past when the line is idle.
     pub fn busy_until(&self) -> Instant {

@@ -50,7 +50,10 @@
 //! transmissions reach the backlog in pieces
 //! ([`profibus_fdl::line::medium::WHOLE_MAX`]), so
 //! a station that sends without a pause is handed on at the line's rate,
-//! not in one burst at its end.
+//! not in one burst at its end. A station cannot write faster than the
+//! paced line either: the hub reads no more from one that is
+//! [`WRITE_AHEAD`] ahead of the wire, so its pty fills and its writes
+//! wait, as with a serial port's full transmit buffer.
 //!
 //! # Driving it
 //!
@@ -92,6 +95,13 @@ pub const BACKLOG_TIME: Duration = Duration::from_secs(1);
 pub const BACKLOG_MIN: usize = 64 << 10;
 /// A station's backlog on an unpaced line.
 pub const UNPACED_BACKLOG: usize = 1 << 20;
+/// How far ahead of the paced line a station may write: the hub reads no
+/// more from a station whose bytes already fill the line for this long,
+/// so its pty fills and its writes wait, as on a serial port whose
+/// transmit buffer is full (a station cannot send faster than the line,
+/// and the hub's memory stays bounded). Long enough that a hub woken late
+/// still reads the rest before the line runs dry.
+pub const WRITE_AHEAD: Duration = Duration::from_millis(100);
 
 /// The backlog bound in bytes for a line at `baud` (`None`: unpaced),
 /// covering `time` of it.
@@ -402,6 +412,19 @@ impl Hub {
         if self.tap.pending() > 0 {
             consider(self.idle_at());
         }
+        // Stations far ahead of the line: read them again when it has
+        // carried enough.
+        let ahead: Vec<bool> = (0..self.stations.len())
+            .map(|i| match self.medium.sending_until(i) {
+                Some(end) if end > now + WRITE_AHEAD => {
+                    consider(Instant::from_nanos(
+                        end.as_nanos() - WRITE_AHEAD.as_nanos() as u64,
+                    ));
+                    true
+                }
+                _ => false,
+            })
+            .collect();
         let timeout =
             deadline.map(|d| TimeSpec::from_duration(d.saturating_duration_since(self.now())));
 
@@ -417,7 +440,11 @@ impl Hub {
             .enumerate()
             .filter(|(_, s)| s.connected)
         {
-            let mut ev = PollFlags::POLLIN;
+            let mut ev = if ahead[i] {
+                PollFlags::empty()
+            } else {
+                PollFlags::POLLIN
+            };
             if !s.backlog.is_empty() {
                 ev |= PollFlags::POLLOUT;
             }
@@ -993,6 +1020,32 @@ mod tests {
         assert_eq!(backlog_bound(Some(Baud::B1500000), second), 136_363);
         assert_eq!(backlog_bound(Some(Baud::B19200), second), BACKLOG_MIN);
         assert_eq!(backlog_bound(None, second), UNPACED_BACKLOG);
+    }
+
+    /// A station cannot write faster than the paced line: the hub stops
+    /// reading it once it is [`WRITE_AHEAD`] ahead, so its writes wait.
+    /// Only a lower bound on the time is asserted (a loaded machine only
+    /// makes it longer).
+    #[test]
+    fn a_station_writing_faster_than_the_line_waits_for_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let b12 = Baud::B12000000;
+        let hub = Running::start(dir.path(), MediumConfig::paced(b12));
+        let mut a = hub.open(0);
+        hub.wait_status("connected", |s| s.connected == 1);
+        let data = stream(1_500_000);
+        let t0 = std::time::Instant::now();
+        a.write_all(&data).unwrap();
+        let took = t0.elapsed();
+        // All but what may be ahead (WRITE_AHEAD of line, the pty's
+        // buffer, one read of the hub) crossed the wire first.
+        let ahead = backlog_bound(Some(b12), WRITE_AHEAD) + (64 << 10);
+        let least = b12.chars_to_duration((data.len() - ahead) as u64);
+        assert!(
+            took >= least,
+            "wrote 1.5 MB in {took:?}, the line needs {least:?}"
+        );
+        hub.wait_status("carried", |s| s.medium.chars == data.len() as u64);
     }
 
     /// Real ptys at 12 Mbit/s: a station that never reads loses bytes
