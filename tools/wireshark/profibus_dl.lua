@@ -604,7 +604,8 @@ local ABORT_REASONS = {
   [2] = "protocol error", [3] = "Initiate refused",
 }
 local FMS_ERRORS = {
-  [6] = { [7] = "object does not exist", [2] = "object access denied", [10] = "type or length conflict",
+  [6] = { [7] = "object does not exist", [3] = "object access denied", [10] = "type or length conflict",
+          [2] = "hardware fault", [5] = "object attribute inconsistent", [6] = "object access unsupported",
           any = "access error" },
   [5] = { [3] = "parameter inconsistent", any = "service error" },
   [7] = { [1] = "index not in the object dictionary", any = "object dictionary error" },

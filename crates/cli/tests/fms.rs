@@ -258,7 +258,7 @@ fn fms_reads_writes_and_lists_a_bk3000_while_its_master_keeps_data_exchange() {
     assert!(!e.status.success());
     assert_eq!(
         e.stderr.trim(),
-        "dpctl: station 5: Write index 2020: object access denied (class 6, code 2, additional code 0)"
+        "dpctl: station 5: Write index 2020: object access denied (class 6, code 3, additional code 0)"
     );
     let e = fms(&link, 5, &["--json", "read", "2999"]);
     assert!(!e.status.success());

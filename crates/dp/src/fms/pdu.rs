@@ -334,8 +334,18 @@ pub const ERROR_CLASS_OD: u8 = 7;
 pub const ERROR_CLASS_SERVICE: u8 = 5;
 /// Access error: object does not exist (unverified value).
 pub const ACCESS_OBJECT_NON_EXISTENT: u8 = 7;
-/// Access error: object access denied (read-only, write-only).
-pub const ACCESS_DENIED: u8 = 2;
+/// Access error: hardware fault — the object could not be reached.
+/// Class 6 code 2 as in the INTERBUS PCP manuals below (FMS's subset
+/// with the same error coding).
+pub const ACCESS_HARDWARE_FAULT: u8 = 2;
+/// Access error: object access denied (read-only, write-only). Class 6
+/// code 3 as in two INTERBUS PCP manuals (Bürkert Type 8644 p.83,
+/// "Object Access Denied 06h / 03h"; Nidec SI-Interbus p.57); for
+/// PROFIBUS-FMS itself (unverified).
+pub const ACCESS_DENIED: u8 = 3;
+/// Access error: object access unsupported — the service does not
+/// apply to the object (Bürkert Type 8644 p.83, 06h / 06h).
+pub const ACCESS_UNSUPPORTED: u8 = 6;
 /// Access error: type or length of the value do not fit the object.
 pub const ACCESS_TYPE_CONFLICT: u8 = 10;
 /// Access error: object attribute inconsistent — a service parameter the
@@ -365,6 +375,8 @@ impl ServiceError {
         match (self.class, self.code) {
             (ERROR_CLASS_ACCESS, ACCESS_OBJECT_NON_EXISTENT) => "object does not exist",
             (ERROR_CLASS_ACCESS, ACCESS_DENIED) => "object access denied",
+            (ERROR_CLASS_ACCESS, ACCESS_HARDWARE_FAULT) => "hardware fault",
+            (ERROR_CLASS_ACCESS, ACCESS_UNSUPPORTED) => "object access unsupported",
             (ERROR_CLASS_ACCESS, ACCESS_TYPE_CONFLICT) => "type or length conflict",
             (ERROR_CLASS_ACCESS, ACCESS_ATTRIBUTE_INCONSISTENT) => "object attribute inconsistent",
             (ERROR_CLASS_ACCESS, _) => "access error",
@@ -1165,10 +1177,10 @@ mod tests {
             service: Service::Write,
             error: ServiceError::new(ERROR_CLASS_ACCESS, ACCESS_DENIED),
         };
-        round(e.clone(), &[3, 6, 3, 6, 2, 0, 0]);
+        round(e.clone(), &[3, 6, 3, 6, 3, 0, 0]);
         assert_eq!(
             e.to_string(),
-            "FMS Write error id 6: object access denied (class 6, code 2, additional code 0)"
+            "FMS Write error id 6: object access denied (class 6, code 3, additional code 0)"
         );
         round(
             FmsPdu::Reject {
