@@ -57,25 +57,6 @@ fn bus_file(dir: &TempDir) -> PathBuf {
     p
 }
 
-/// The next status line of `dpctl master --json` that satisfies `ok`.
-fn status(lines: &mut Lines, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-    let end = Instant::now() + WAIT;
-    let mut seen = 0;
-    loop {
-        while seen < lines.1.len() {
-            let l = lines.1[seen].clone();
-            seen += 1;
-            if let Ok(v) = serde_json::from_str::<Value>(&l) {
-                if v["event"] == "status" && ok(&v) {
-                    return v;
-                }
-            }
-        }
-        assert!(Instant::now() < end, "timed out waiting for {what}");
-        lines.next_line(Duration::from_millis(100));
-    }
-}
-
 /// `dpctl fms --port LINK --addr 3 --baud 1.5M … ARGS`.
 fn fms(link: &Path, station: u8, args: &[&str]) -> common::Output {
     let link = link.display().to_string();
@@ -93,6 +74,11 @@ fn fms(link: &Path, station: u8, args: &[&str]) -> common::Output {
         "--latency",
         "100",
     ];
+    // Joining the ring of a loaded machine's `dpctl master` can take
+    // longer than the default 20 s.
+    if !args.contains(&"--timeout") {
+        all.extend_from_slice(&["--timeout", "60"]);
+    }
     all.extend_from_slice(args);
     run_dpctl(&all)
 }
@@ -150,7 +136,7 @@ fn fms_reads_writes_and_lists_a_bk3000_while_its_master_keeps_data_exchange() {
                 .as_f64()
                 .is_some_and(|x| (x + 1.25).abs() < 0.01)
     };
-    let dx0 = status(&mut lines, "data exchange with pinned inputs", pinned);
+    let dx0 = lines.status_from(&mut 0, "data exchange with pinned inputs", pinned);
     let dx0 = slave_of(&dx0, 5)["data_exchanges"].as_u64().unwrap();
     let link = bus.link(0);
 
@@ -160,7 +146,7 @@ fn fms_reads_writes_and_lists_a_bk3000_while_its_master_keeps_data_exchange() {
     // 2-3, no status byte, so it reads 0).
     let r1 = ok_json(&fms(&link, 5, &["--json", "read", "2020"]));
     let r2 = ok_json(&fms(&link, 5, &["--json", "read", "2022"]));
-    let seen = status(&mut lines, "a status after the reads", pinned);
+    let seen = lines.status_from(&mut 0, "a status after the reads", pinned);
     let dx_inputs = bytes(&slave_of(&seen, 5)["inputs"]);
     let (c1, c2) = (bytes(&r1["data"]), bytes(&r2["data"]));
     assert_eq!(c1.len(), 3, "{r1}");
@@ -293,7 +279,7 @@ fn fms_reads_writes_and_lists_a_bk3000_while_its_master_keeps_data_exchange() {
     );
 
     // The class-1 master kept its slave all along.
-    let v = status(&mut lines, "data exchange goes on", |v| {
+    let v = lines.status_from(&mut 0, "data exchange goes on", |v| {
         slave_of(v, 5)["data_exchanges"].as_u64().unwrap() > dx0 + 20
     });
     assert_eq!(slave_of(&v, 5)["state"], "data_exchange");
@@ -365,7 +351,7 @@ fn monitor_follows_the_fms_services_of_a_client_beside_data_exchange() {
             .stderr(Stdio::null()),
     );
     let mut lines = Lines::from(&mut m);
-    status(&mut lines, "data exchange", |v| {
+    lines.status_from(&mut 0, "data exchange", |v| {
         slave_of(v, 5)["state"] == "data_exchange"
     });
     let link = bus.link(0);

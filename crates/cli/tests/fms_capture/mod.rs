@@ -13,12 +13,10 @@ use crate::common::{dpctl, started, Bus, Proc, TempDir};
 use profibus::dp::fms::client::default_initiate;
 use profibus::dp::fms::lli::{LliPdu, ABORT_USER};
 use profibus::dp::fms::pdu::{FmsPdu, GetOdRequest, Request};
-use profibus::fdl::wire::frame_len;
 use profibus::fdl::{DataTelegram, FunctionCode, RequestKind, Telegram};
-use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The coupler's station address and FMS LSAP (KBL entry 1, mixed mode).
 pub const SERVER: u8 = 5;
@@ -43,21 +41,16 @@ pub struct Capture {
 
 /// The FMS client's end of the bus: SRD low requests with the FCB rule.
 struct Client {
-    f: std::fs::File,
+    line: crate::common::RawStation,
     fcb: Option<bool>,
 }
 
 impl Client {
     fn open(p: &Path) -> Client {
-        use std::os::unix::fs::OpenOptionsExt;
-        let f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits() | nix::libc::O_NOCTTY)
-            .open(p)
-            .unwrap_or_else(|e| panic!("open {}: {e}", p.display()));
-        crate::common::make_raw(&f);
-        Client { f, fcb: None }
+        Client {
+            line: crate::common::RawStation::open(p),
+            fcb: None,
+        }
     }
 
     /// SRD low to the coupler's LSAP with `du`; the answer's data unit
@@ -75,28 +68,11 @@ impl Client {
         };
         let t = DataTelegram::new(SERVER, CLIENT, fc, du)
             .with_saps(Some(SERVER_LSAP), Some(CLIENT_LSAP));
-        self.f
-            .write_all(&Telegram::Data(t).to_vec().unwrap())
-            .unwrap();
-        let end = Instant::now() + Duration::from_secs(10);
-        let mut buf = vec![];
-        let mut chunk = [0u8; 256];
-        while Instant::now() < end {
-            match self.f.read(&mut chunk) {
-                Ok(n) if n > 0 => buf.extend_from_slice(&chunk[..n]),
-                _ => std::thread::sleep(Duration::from_millis(1)),
-            }
-            if let Ok(len) = frame_len(&buf) {
-                if buf.len() >= len {
-                    return match Telegram::parse(&buf[..len]) {
-                        Ok((Telegram::Data(d), _)) => d.data.to_vec(),
-                        Ok((Telegram::ShortAck, _)) => vec![],
-                        other => panic!("answer to {du:02X?}: {buf:02X?} {other:?}"),
-                    };
-                }
-            }
+        let req = Telegram::Data(t).to_vec().unwrap();
+        match self.line.exchange(&req, Duration::from_secs(10)) {
+            Some((_, _, data)) => data,
+            None => vec![],
         }
-        panic!("no answer to {du:02X?} within 10 s (heard {buf:02X?})");
     }
 
     /// A confirmed FMS request; the answer's FMS PDU.
