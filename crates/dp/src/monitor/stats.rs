@@ -424,6 +424,8 @@ struct Pending {
     dsap: Option<u8>,
     end: Instant,
     expects_reply: bool,
+    /// An SRD without SAPs: Data_Exchange (not an FDL status request).
+    data_exchange: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -644,16 +646,21 @@ impl Stats {
                 dsap,
                 end,
                 expects_reply: false,
+                data_exchange: false,
             });
             return;
         }
         let expects_reply = kind.expects_reply();
+        let data_exchange = dsap.is_none()
+            && d.ssap.is_none()
+            && matches!(kind, RequestKind::SrdLow | RequestKind::SrdHigh);
         self.pending = Some(Pending {
             initiator: master,
             responder: slave,
             dsap,
             end,
             expects_reply,
+            data_exchange,
         });
         let retry = {
             let t = self.track(slave);
@@ -683,9 +690,6 @@ impl Stats {
             (true, Some(sap::CHK_CFG)) => (0, 0, 1),
             _ => (0, 0, 0),
         };
-        let data_exchange = dsap.is_none()
-            && d.ssap.is_none()
-            && matches!(kind, RequestKind::SrdLow | RequestKind::SrdHigh);
         let mut cycle = None;
         let mut restart = false;
         {
@@ -763,10 +767,10 @@ impl Stats {
             if let Some(l) = t.last.as_mut() {
                 l.answered = true;
             }
-            if p.dsap.is_none() && !negative {
+            if p.data_exchange && !negative {
                 t.dp_state = Some(SlaveState::DataExchange);
                 t.in_dx = true;
-            } else if p.dsap.is_none() && status == Some(profibus_fdl::wire::ResponseStatus::Rs) {
+            } else if p.data_exchange && status == Some(profibus_fdl::wire::ResponseStatus::Rs) {
                 // Data_Exchange refused: the slave is not parameterised
                 // (it restarted).
                 restart = std::mem::take(&mut t.in_dx);
@@ -1009,6 +1013,27 @@ mod tests {
         // the Slave_Diag.
         l.data(7000, S, M, req(true, true), Some(sap::SET_PRM), &[0x88]);
         assert_eq!(l.station(S).retries, 1);
+    }
+
+    #[test]
+    fn an_answered_fdl_status_request_is_no_data_exchange() {
+        let mut l = Line::new();
+        // A live-list poll (FDL_Status) answered: the station answers,
+        // but no master has it in Data_Exchange.
+        l.data(
+            0,
+            S,
+            M,
+            FunctionCode::request(RequestKind::FdlStatus),
+            None,
+            &[],
+        );
+        l.send(100, Telegram::Data(DataTelegram::new(M, S, resp(), &[])));
+        let s = l.station(S);
+        assert_eq!((s.role, s.dp_state), (Some(Role::Slave), None));
+        // Data_Exchange is.
+        l.dx(1000, true);
+        assert_eq!(l.station(S).dp_state, Some(SlaveState::DataExchange));
     }
 
     #[test]
