@@ -7,13 +7,11 @@
 mod common;
 
 use common::*;
-use profibus::fdl::wire::frame_len;
 use profibus::fdl::{DataTelegram, FunctionCode, Telegram};
 use serde_json::Value;
-use std::io::{Read, Write};
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const GEN_IDENT: [u8; 2] = [0x0D, 0xCE];
 
@@ -23,44 +21,8 @@ fn request(da: u8, fc: u8, saps: Option<(u8, u8)>, data: &[u8]) -> Vec<u8> {
     Telegram::Data(t).to_vec().unwrap()
 }
 
-/// The master's end of the pty pair (blocking reads with a deadline).
-struct Line {
-    f: std::fs::File,
-}
-
-impl Line {
-    fn open(p: &Path) -> Line {
-        use std::os::unix::fs::OpenOptionsExt;
-        let f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
-            .open(p)
-            .unwrap();
-        Line { f }
-    }
-
-    /// Send `req`, return the answer (empty when none comes in `wait`).
-    fn ask(&mut self, req: &[u8], wait: Duration) -> Vec<u8> {
-        self.f.write_all(req).unwrap();
-        let end = Instant::now() + wait;
-        let mut buf = vec![];
-        let mut chunk = [0u8; 256];
-        while Instant::now() < end {
-            match self.f.read(&mut chunk) {
-                Ok(n) if n > 0 => buf.extend_from_slice(&chunk[..n]),
-                _ => std::thread::sleep(Duration::from_millis(1)),
-            }
-            if let Ok(len) = frame_len(&buf) {
-                if buf.len() >= len {
-                    buf.truncate(len);
-                    return buf;
-                }
-            }
-        }
-        buf
-    }
-}
+/// The master's end of the pty pair.
+type Line = RawStation;
 
 fn diag(line: &mut Line, addr: u8) -> Vec<u8> {
     let r = line.ask(
@@ -113,7 +75,7 @@ fn baud_search_locks_on_a_valid_telegram_and_searches_again_after_the_watchdog()
     let (a, b) = (dir.path("m"), dir.path("s"));
     let _socat = pty_pair(&a, &b);
     let (mut slave, mut out) = start_slave(&b, &["--addr", "5", "--baud", "search"]);
-    let mut line = Line::open(&a);
+    let mut line = RawStation::open(&a);
     // Garbage and a token do not lock the search; nothing is answered.
     assert!(line
         .ask(
@@ -183,7 +145,7 @@ fn set_slave_add_persists_in_the_address_file() {
     let file = dir.path("address.txt");
     let file_s = file.to_str().unwrap().to_string();
     let (mut slave, mut out) = start_slave(&b, &["--addr", "7", "--address-file", &file_s]);
-    let mut line = Line::open(&a);
+    let mut line = RawStation::open(&a);
     diag(&mut line, 7);
     // Set_Slave_Add to 21 with No_Add_Chg: SC from the old address.
     let r = line.ask(

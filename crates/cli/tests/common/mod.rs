@@ -634,15 +634,14 @@ impl RawStation {
         RawStation { f }
     }
 
-    /// Write the telegram `req`, then read its answer within `timeout`;
-    /// panics on no answer or on anything but a data telegram or a short
-    /// acknowledge.
-    pub fn exchange(&mut self, req: &[u8], timeout: Duration) -> Answer {
+    /// Write `req`, then read until one whole telegram has come or
+    /// `wait` has passed: its bytes (what came so far, maybe nothing,
+    /// when none did).
+    pub fn ask(&mut self, req: &[u8], wait: Duration) -> Vec<u8> {
         use profibus::fdl::wire::frame_len;
-        use profibus::fdl::Telegram;
         use std::io::Write;
         self.f.write_all(req).unwrap();
-        let end = Instant::now() + timeout;
+        let end = Instant::now() + wait;
         let mut buf = vec![];
         let mut chunk = [0u8; 256];
         while Instant::now() < end {
@@ -652,15 +651,26 @@ impl RawStation {
             }
             if let Ok(len) = frame_len(&buf) {
                 if buf.len() >= len {
-                    return match Telegram::parse(&buf[..len]) {
-                        Ok((Telegram::Data(d), _)) => Some((d.dsap, d.ssap, d.data.to_vec())),
-                        Ok((Telegram::ShortAck, _)) => None,
-                        other => panic!("answer to {req:02X?}: {buf:02X?} {other:?}"),
-                    };
+                    buf.truncate(len);
+                    return buf;
                 }
             }
         }
-        panic!("no answer to {req:02X?} within {timeout:?} (heard {buf:02X?})");
+        buf
+    }
+
+    /// Write the telegram `req`, then read its answer within `timeout`;
+    /// panics on no answer or on anything but a data telegram or a short
+    /// acknowledge.
+    pub fn exchange(&mut self, req: &[u8], timeout: Duration) -> Answer {
+        use profibus::fdl::Telegram;
+        let buf = self.ask(req, timeout);
+        match Telegram::parse(&buf) {
+            Ok((Telegram::Data(d), _)) => Some((d.dsap, d.ssap, d.data.to_vec())),
+            Ok((Telegram::ShortAck, _)) => None,
+            _ if buf.is_empty() => panic!("no answer to {req:02X?} within {timeout:?}"),
+            other => panic!("answer to {req:02X?}: {buf:02X?} {other:?}"),
+        }
     }
 }
 
